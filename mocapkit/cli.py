@@ -1,0 +1,176 @@
+"""The ``mocapkit`` command line.
+
+    mocapkit synth ntu --out DIR [--classes N] [--subjects S] [--seed K] [--set KEY=VALUE ...]
+    mocapkit prepare ntu --src DIR --out DIR [--workers N] [--skip-bad] [--missing-list FILE]
+    mocapkit train [experiment=NAME] data.root=CACHE [Hydra overrides ...]
+    mocapkit eval ckpt_path=RUN/best.ckpt [overrides ...]
+    mocapkit export ckpt_path=RUN/best.ckpt [out=FILE] [overrides ...]
+    mocapkit predict --onnx FILE SKELETON [SKELETON ...]
+
+Heavy libraries are imported inside each command, so ``predict`` runs with
+onnxruntime and numpy alone.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+
+
+def _split_kv(items: list[str], key: str) -> tuple[str | None, list[str]]:
+    """Pull ``key=value`` out of Hydra-style overrides; return (value, the rest)."""
+    value, rest = None, []
+    for item in items:
+        if item.startswith(key + "="):
+            value = item.split("=", 1)[1]
+        else:
+            rest.append(item)
+    return value, rest
+
+
+def cmd_synth_ntu(args: argparse.Namespace) -> None:
+    import json
+
+    from mocapkit.datasets.synthetic_ntu import NTUSynthConfig, synthesize_ntu
+
+    fields = {f.name: f for f in dataclasses.fields(NTUSynthConfig)}
+    values = {}
+    for item in args.set or []:
+        if "=" not in item:
+            raise SystemExit(f"--set {item!r}: expected KEY=VALUE")
+        key, raw = item.split("=", 1)
+        if key not in fields:
+            raise SystemExit(f"--set {key}: unknown synthesis option; known: {', '.join(sorted(fields))}")
+        values[key] = json.loads(raw) if raw[:1] in "[{0123456789-.tfn" else raw
+        if isinstance(values[key], list):
+            values[key] = tuple(values[key])
+    for option, name in (("classes", "num_classes"), ("subjects", "num_subjects"), ("seed", "seed"),
+                         ("setups", "setups"), ("cameras", "cameras"), ("replications", "replications")):
+        value = getattr(args, option)
+        if value is not None:
+            values[name] = tuple(value) if isinstance(value, list) else value
+    config = NTUSynthConfig(**values)
+    files = synthesize_ntu(args.out, config, workers=args.workers, progress=not args.quiet)
+    print(f"[mocapkit] wrote {len(files)} .skeleton files to {args.out}")
+
+
+def cmd_prepare_ntu(args: argparse.Namespace) -> None:
+    from mocapkit.datasets.ntu_prepare import prepare_ntu
+
+    report = prepare_ntu(args.src, args.out, workers=args.workers, skip_bad=args.skip_bad,
+                         missing_list=args.missing_list, max_bodies=args.max_bodies,
+                         denoise_spread=args.denoise_spread, progress=not args.quiet)
+    print(f"[mocapkit] prepared cache in {args.out}")
+    print(report.summary() if hasattr(report, "summary") else report)
+
+
+def cmd_train(overrides: list[str]) -> None:
+    from mocapkit.train.config import compose_config
+    from mocapkit.train.training import resume_config, train
+
+    resume, _ = _split_kv(overrides, "resume")
+    cfg = resume_config(resume, overrides) if resume else compose_config(overrides)
+    train(cfg)
+
+
+def cmd_eval(overrides: list[str]) -> None:
+    from mocapkit.train.evaluate import evaluate
+
+    ckpt, rest = _split_kv(overrides, "ckpt_path")
+    if not ckpt:
+        raise SystemExit("mocapkit eval: ckpt_path=PATH is required")
+    evaluate(ckpt, rest)
+
+
+def cmd_export(overrides: list[str]) -> None:
+    from mocapkit.train.export_onnx import export_checkpoint
+
+    ckpt, rest = _split_kv(overrides, "ckpt_path")
+    out, rest = _split_kv(rest, "out")
+    if not ckpt:
+        raise SystemExit("mocapkit export: ckpt_path=PATH is required")
+    export_checkpoint(ckpt, out, rest)
+
+
+def cmd_predict(args: argparse.Namespace) -> None:
+    from mocapkit.train.predict import predict_files, print_predictions
+
+    print_predictions(predict_files(args.onnx, args.files, top=args.top))
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="mocapkit", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    synth = sub.add_parser("synth", help="write a synthetic stand-in dataset in a real format")
+    synth_sub = synth.add_subparsers(dest="dataset", required=True)
+    ntu = synth_sub.add_parser("ntu", help="NTU RGB+D-style .skeleton files")
+    ntu.add_argument("--out", required=True, help="output folder")
+    ntu.add_argument("--classes", type=int, help="number of action classes")
+    ntu.add_argument("--subjects", type=int, help="number of subjects (P001..)")
+    ntu.add_argument("--seed", type=int, help="random seed (the output is a function of it)")
+    ntu.add_argument("--setups", type=int, nargs="+", help="setup IDs (camera height/distance)")
+    ntu.add_argument("--cameras", type=int, nargs="+", help="camera IDs (views)")
+    ntu.add_argument("--replications", type=int, nargs="+", help="replication IDs")
+    ntu.add_argument("--set", action="append", metavar="KEY=VALUE",
+                     help="any other synthesis option (difficulty knobs), repeatable")
+    ntu.add_argument("--workers", type=int, default=1)
+    ntu.add_argument("--quiet", action="store_true", help="no progress bar")
+    ntu.set_defaults(func=cmd_synth_ntu)
+
+    prepare = sub.add_parser("prepare", help="parse a dataset folder into a memory-mappable cache")
+    prepare_sub = prepare.add_subparsers(dest="dataset", required=True)
+    pntu = prepare_sub.add_parser("ntu", help="a folder tree of NTU .skeleton files")
+    pntu.add_argument("--src", required=True, help="folder of .skeleton files (searched recursively)")
+    pntu.add_argument("--out", required=True, help="cache folder to write")
+    pntu.add_argument("--workers", type=int, default=1, help="parallel parser processes")
+    pntu.add_argument("--skip-bad", action="store_true", help="skip malformed files (each is listed in the report)")
+    pntu.add_argument("--missing-list", help="official list of samples with missing skeletons to leave out")
+    pntu.add_argument("--max-bodies", type=int, default=2, help="bodies kept per sample (most motion first)")
+    pntu.add_argument("--denoise-spread", action="store_true", help="drop non-human 'bodies' by their spread")
+    pntu.add_argument("--quiet", action="store_true", help="no progress bar")
+    pntu.set_defaults(func=cmd_prepare_ntu)
+
+    for name, help_text in (("train", "train a model (Hydra overrides)"),
+                            ("eval", "evaluate a checkpoint: ckpt_path=PATH [overrides]"),
+                            ("export", "export a checkpoint to ONNX: ckpt_path=PATH [out=FILE]")):
+        p = sub.add_parser(name, help=help_text)
+        p.add_argument("overrides", nargs="*", help="key=value overrides")
+
+    predict = sub.add_parser("predict", help="classify .skeleton files with an exported ONNX model")
+    predict.add_argument("--onnx", required=True, help="model written by `mocapkit export`")
+    predict.add_argument("--top", type=int, default=5, help="classes printed per file")
+    predict.add_argument("files", nargs="+", help=".skeleton files")
+    predict.set_defaults(func=cmd_predict)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = build_parser()
+    # train / eval / export take free-form Hydra overrides, which argparse must not interpret.
+    if argv and argv[0] in ("train", "eval", "export") and not ({"-h", "--help"} & set(argv[1:])):
+        handler = {"train": cmd_train, "eval": cmd_eval, "export": cmd_export}[argv[0]]
+        return _run(handler, argv[1:])
+    args = parser.parse_args(argv)
+    return _run(args.func, args)
+
+
+def _run(handler, arg) -> int:
+    from mocapkit.datasets.ntu_skeleton import SkeletonFormatError
+
+    try:
+        from mocapkit.train.config import ConfigError
+    except ImportError:  # pragma: no cover - only without hydra installed
+        ConfigError = ValueError
+    try:
+        handler(arg)
+    except (SkeletonFormatError, ConfigError, FileNotFoundError) as exc:
+        print(f"mocapkit: error: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,97 @@
+"""Classification metrics, confusion matrices and their plots.
+
+Everything takes plain arrays, so any model's predictions (PyTorch, ONNX
+Runtime or a classical method) are reported the same way.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from sklearn.metrics import confusion_matrix
+
+
+def topk_accuracy(scores: np.ndarray, labels: np.ndarray, k: int) -> float:
+    """Fraction of samples whose label is among the ``k`` highest scores. ``scores``: ``[N, C]``."""
+    k = min(k, scores.shape[1])
+    top = np.argpartition(-scores, kth=k - 1, axis=1)[:, :k]
+    return float((top == labels[:, None]).any(axis=1).mean())
+
+
+def classification_report(scores: np.ndarray, labels: np.ndarray, groups: dict[str, np.ndarray] | None = None,
+                          class_names: list[str] | None = None) -> dict:
+    """Top-1, top-5, mean-class accuracy, per-class accuracy, per-group accuracy and the confusion matrix.
+
+    Args:
+        scores: ``[N, C]`` logits or probabilities.
+        labels: ``[N]`` 0-based true classes.
+        groups: optional ``{"subject": [N] ids, ...}``; each gives a ``per_<name>`` accuracy table.
+        class_names: ``C`` names (default ``"class_<k>"``).
+    """
+    scores = np.asarray(scores, dtype=np.float64)
+    labels = np.asarray(labels, dtype=np.int64)
+    if scores.ndim != 2 or len(scores) != len(labels):
+        raise ValueError(f"scores must be [N, C] and labels [N], got {scores.shape} and {labels.shape}")
+    if len(labels) == 0:
+        raise ValueError("no samples to evaluate")
+    num_classes = scores.shape[1]
+    names = list(class_names) if class_names else [f"class_{k}" for k in range(num_classes)]
+    predictions = scores.argmax(1)
+    confusion = confusion_matrix(labels, predictions, labels=np.arange(num_classes))
+    support = confusion.sum(1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        recall = np.diag(confusion) / support
+    present = support > 0
+    report = {
+        "num_samples": int(len(labels)),
+        "num_classes": int(num_classes),
+        "top1": float((predictions == labels).mean()),
+        "top5": topk_accuracy(scores, labels, 5),
+        "mean_class_accuracy": float(recall[present].mean()),
+        "chance": float(1.0 / max(1, present.sum())),
+        "per_class": {names[k]: {"accuracy": float(recall[k]), "support": int(support[k])}
+                      for k in range(num_classes) if present[k]},
+        "confusion_matrix": confusion.tolist(),
+        "class_names": names,
+    }
+    for group_name, ids in (groups or {}).items():
+        ids = np.asarray(ids)
+        report[f"per_{group_name}"] = {
+            str(g): {"accuracy": float((predictions[ids == g] == labels[ids == g]).mean()), "support": int((ids == g).sum())}
+            for g in np.unique(ids)
+        }
+    return report
+
+
+def plot_confusion_matrix(confusion: np.ndarray, class_names: list[str], path: str | Path,
+                          title: str = "Confusion matrix", normalize: bool = True) -> Path:
+    """Save a confusion-matrix heat map (rows = true class, normalised per row by default) as PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    confusion = np.asarray(confusion, dtype=np.float64)
+    shown = confusion / np.maximum(confusion.sum(1, keepdims=True), 1) if normalize else confusion
+    n = len(class_names)
+    side = min(24, max(5, 0.35 * n + 2))
+    fig, ax = plt.subplots(figsize=(side, side * 0.9))
+    im = ax.imshow(shown, cmap="Blues", vmin=0, vmax=1 if normalize else None)
+    ax.set_xticks(range(n), class_names, rotation=90, fontsize=8)
+    ax.set_yticks(range(n), class_names, fontsize=8)
+    ax.set_xlabel("predicted")
+    ax.set_ylabel("true")
+    ax.set_title(title)
+    if n <= 30:
+        for i in range(n):
+            for j in range(n):
+                if confusion[i, j]:
+                    ax.text(j, i, f"{shown[i, j]:.2f}" if normalize else int(confusion[i, j]), ha="center",
+                            va="center", fontsize=6, color="white" if shown[i, j] > 0.5 else "black")
+    fig.colorbar(im, ax=ax, fraction=0.046)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path

@@ -1,0 +1,1 @@
+"""Lightning modules and the train / eval / export / predict entry points."""

@@ -1,0 +1,66 @@
+"""``mocapkit train``: fit a model with Lightning from a Hydra config.
+
+Each run writes to ``<output_root>/<experiment_name>/<run>/``::
+
+    config.yaml       the resolved configuration
+    last.ckpt         the latest checkpoint (resume with ``resume=<this file>``)
+    best.ckpt         the checkpoint with the best validation accuracy
+    tensorboard/      TensorBoard logs
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import lightning as L
+from hydra.utils import instantiate
+from lightning.pytorch.callbacks import LearningRateMonitor, ModelCheckpoint
+from lightning.pytorch.loggers import TensorBoardLogger
+from omegaconf import DictConfig
+
+from mocapkit.train.action_module import ActionRecognitionModule
+from mocapkit.train.config import ConfigError, load_run_config, new_run_dir, save_run_config
+
+
+def build_datamodule(cfg: DictConfig):
+    """The data module of ``cfg.data`` (its ``_target_``), seeded with ``cfg.seed``."""
+    return instantiate(cfg.data, seed=cfg.seed)
+
+
+def resume_config(resume: str | Path, overrides: list[str]) -> DictConfig:
+    """The config of the run that ``resume`` (a ``last.ckpt``) belongs to, with ``overrides`` applied."""
+    resume = Path(resume)
+    if not resume.is_file():
+        raise ConfigError(f"resume={resume}: no such checkpoint")
+    overrides = [o for o in overrides if not o.startswith("resume=")]
+    cfg = load_run_config(resume.parent, overrides)
+    cfg.resume = str(resume)
+    return cfg
+
+
+def train(cfg: DictConfig) -> Path:
+    """Train as configured; return the run folder."""
+    L.seed_everything(cfg.seed, workers=True)
+    run_dir = Path(cfg.resume).parent if cfg.resume else new_run_dir(cfg)
+    datamodule = build_datamodule(cfg)
+    counts = datamodule.sample_counts()
+    if counts["train"] == 0 or counts["val"] == 0:
+        raise ConfigError(f"split {cfg.data.split!r} of {cfg.data.root} leaves {counts}: "
+                          "training and validation both need samples")
+    module = ActionRecognitionModule(model=cfg.model, optimizer=cfg.optimizer, scheduler=cfg.scheduler or None,
+                                     num_classes=datamodule.num_classes, class_names=datamodule.class_names,
+                                     label_smoothing=cfg.label_smoothing)
+    save_run_config(cfg, run_dir)
+    checkpoint = ModelCheckpoint(dirpath=run_dir, filename="best", monitor="val/acc", mode="max",
+                                 save_last=True, enable_version_counter=False)
+    trainer = L.Trainer(**cfg.trainer, deterministic=cfg.deterministic, default_root_dir=run_dir,
+                        logger=TensorBoardLogger(save_dir=str(run_dir), name="tensorboard", version=""),
+                        callbacks=[checkpoint, LearningRateMonitor(logging_interval="epoch")])
+    print(f"[mocapkit] run folder: {run_dir}")
+    print(f"[mocapkit] samples: {counts} (split {cfg.data.split}), {datamodule.num_classes} classes")
+    trainer.fit(module, datamodule=datamodule, ckpt_path=cfg.resume)
+    print(f"[mocapkit] wrote {run_dir / 'config.yaml'}")
+    print(f"[mocapkit] wrote {run_dir / 'last.ckpt'}")
+    print(f"[mocapkit] wrote {checkpoint.best_model_path or run_dir / 'best.ckpt'} "
+          f"(best val/acc {float(checkpoint.best_model_score or 0):.4f})")
+    print(f"[mocapkit] TensorBoard logs: tensorboard --logdir {run_dir / 'tensorboard'}")
+    return run_dir
