@@ -52,11 +52,15 @@ class EnergyVGG(nn.Module):
             nn.Linear(hidden, hidden), nn.ReLU(inplace=True), nn.Dropout(dropout),
             nn.Linear(hidden, num_classes),
         )
-        for layer in self.classifier:
-            if isinstance(layer, nn.Linear):
-                # MatConvNet's "improved Xavier": Gaussian, std sqrt(2 / fan_out) (spec §5.2)
-                nn.init.kaiming_normal_(layer.weight, mode="fan_out", nonlinearity="relu")
-                nn.init.zeros_(layer.bias)
+        linears = [m for m in self.classifier if isinstance(m, nn.Linear)]
+        for layer in linears[:-1]:
+            # hidden layers: MatConvNet's "improved Xavier", Gaussian with std sqrt(2 / fan_out) (spec §5.2)
+            nn.init.kaiming_normal_(layer.weight, mode="fan_out", nonlinearity="relu")
+            nn.init.zeros_(layer.bias)
+        # output layer: N(0, 0.01) as torchvision's VGG; fan-out scaling would give logits of std ~1
+        # per hidden unit, i.e. a huge initial loss with few classes
+        nn.init.normal_(linears[-1].weight, 0.0, 0.01)
+        nn.init.zeros_(linears[-1].bias)
 
     def forward(self, images: torch.Tensor) -> torch.Tensor:
         x = self.pool(self.features(images))
