@@ -61,7 +61,7 @@ def cmd_prepare_ntu(args: argparse.Namespace) -> None:
                          missing_list=args.missing_list, max_bodies=args.max_bodies,
                          denoise_spread=args.denoise_spread, progress=not args.quiet)
     print(f"[mocapkit] prepared cache in {args.out}")
-    print(report.summary() if hasattr(report, "summary") else report)
+    print(report.to_text())
 
 
 def cmd_train(overrides: list[str]) -> None:

@@ -106,7 +106,7 @@ class NTUDataModule(L.LightningDataModule):
         self.cache = NTUCache(self.root)
         train, test = split_indices(self.cache, split, train_subjects=self.train_subjects,
                                     test_subjects=self.test_subjects)
-        self.train_idx, self.val_idx = validation_split(train, self.cache.subjects[train], val_fraction=val_fraction,
+        self.train_idx, self.val_idx = validation_split(train, self.cache.subjects, val_fraction=val_fraction,
                                                         seed=seed, by_subject=val_by_subject)
         self.test_idx = test
 

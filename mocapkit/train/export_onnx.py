@@ -63,10 +63,10 @@ def export_onnx(model: torch.nn.Module, out: str | Path, class_names: list[str] 
         warnings.simplefilter("ignore")
         # optimize=False: onnxscript's graph optimiser left this graph out of topological
         # order (rejected by onnx.checker) when we tried it; the unoptimised graph is correct.
-        torch.onnx.export(model, (trace_input,), str(out), input_names=["skeletons"], output_names=["logits"],
-                          dynamic_shapes={"skeletons": {0: batch, 2: frames}}, dynamo=True,
-                          opset_version=opset, optimize=False, verbose=False)
-    proto = onnx.load(str(out))
+        program = torch.onnx.export(model, (trace_input,), None, input_names=["skeletons"], output_names=["logits"],
+                                    dynamic_shapes={"skeletons": {0: batch, 2: frames}}, dynamo=True,
+                                    opset_version=opset, optimize=False, verbose=False)
+    proto = program.model_proto  # weights inline: one self-contained file (VGG16 is ~0.5 GB, under protobuf's 2 GB)
     meta = {"class_names": json.dumps(class_names or []),
             "input": f"skeletons float32 [batch, {bodies}, frames, {joints}, 3], metres, zeros where a body is absent",
             "output": "logits float32 [batch, classes]", "producer": "mocapkit"}
