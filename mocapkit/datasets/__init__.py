@@ -1,5 +1,12 @@
-"""Datasets: file formats, synthetic generators, evaluation protocols and data modules."""
+"""Datasets: file formats, synthetic generators, evaluation protocols and data modules.
+
+The data modules (Lightning) live in their own modules and are imported from there,
+e.g. ``from mocapkit.datasets.ntu_datamodule import NTUDataModule``, so that the
+format readers stay importable without torch.
+"""
 from mocapkit.datasets.layouts import NTU25, SkeletonLayout
+from mocapkit.datasets.ntu_cache import NTUCache
+from mocapkit.datasets.ntu_prepare import PrepareReport, prepare_ntu
 from mocapkit.datasets.ntu_skeleton import (
     BodySelection,
     NTUSampleName,
@@ -12,9 +19,11 @@ from mocapkit.datasets.ntu_skeleton import (
     sequence_from_positions,
     write_skeleton,
 )
+from mocapkit.datasets.protocols import SPLITS, split_indices, split_summary, validation_split
 
 __all__ = [
-    "NTU25", "SkeletonLayout", "BodySelection", "NTUSampleName", "SkeletonFormatError", "SkeletonSequence",
-    "parse_ntu_name", "read_missing_list", "read_skeleton", "select_main_bodies", "sequence_from_positions",
-    "write_skeleton",
+    "NTU25", "SkeletonLayout", "NTUCache", "PrepareReport", "prepare_ntu", "BodySelection", "NTUSampleName",
+    "SkeletonFormatError", "SkeletonSequence", "parse_ntu_name", "read_missing_list", "read_skeleton",
+    "select_main_bodies", "sequence_from_positions", "write_skeleton", "SPLITS", "split_indices", "split_summary",
+    "validation_split",
 ]

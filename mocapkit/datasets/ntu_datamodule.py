@@ -116,7 +116,10 @@ class NTUDataModule(L.LightningDataModule):
 
     @property
     def class_names(self) -> list[str]:
-        return list(self.cache.class_names)
+        """Names from the cache (``classes.txt`` of the source), else ``A001``, ``A002``, ..."""
+        if self.cache.class_names:
+            return list(self.cache.class_names)
+        return [f"A{k + 1:03d}" for k in range(self.num_classes)]
 
     def sample_counts(self) -> dict[str, int]:
         return {"train": len(self.train_idx), "val": len(self.val_idx), "test": len(self.test_idx)}

@@ -20,6 +20,7 @@ option drops non-human "bodies" by their spread).
 """
 from __future__ import annotations
 
+import io
 import os
 import re
 from dataclasses import dataclass, field
@@ -48,8 +49,12 @@ class SkeletonFormatError(ValueError):
     def __init__(self, path: str | os.PathLike, line: int | None, message: str):
         self.path = str(path)
         self.line = line
+        self.detail = message
         where = f"{self.path}, line {line}" if line is not None else self.path
         super().__init__(f"{where}: {message}")
+
+    def __reduce__(self):  # picklable, so worker processes can send it back
+        return (type(self), (self.path, self.line, self.detail))
 
 
 @dataclass(frozen=True)
@@ -274,13 +279,11 @@ def _to_floats(lines: list[bytes], width: int) -> np.ndarray | None:
     """All ``lines`` as one float64 ``[len(lines), width]`` array, or None if any line is off."""
     if not lines:
         return np.zeros((0, width))
-    tokens = b" ".join(lines).split()
-    if len(tokens) != len(lines) * width:
-        return None
-    try:
-        return np.array(tokens, dtype=np.float64).reshape(len(lines), width)
+    try:  # numpy's C text parser; blank lines are skipped by loadtxt, so the shape check catches them
+        values = np.loadtxt(io.BytesIO(b"\n".join(lines)), dtype=np.float64, ndmin=2, comments=None)
     except ValueError:
         return None
+    return values if values.shape == (len(lines), width) else None
 
 
 def _raise_bad_line(lines, indices, width, source, what):
