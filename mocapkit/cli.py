@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import os
 import sys
 
 
@@ -166,8 +167,11 @@ def _run(handler, arg) -> int:
         ConfigError = ValueError
     try:
         handler(arg)
-    except (SkeletonFormatError, ConfigError, FileNotFoundError) as exc:
+    except (SkeletonFormatError, ConfigError, FileNotFoundError, ValueError) as exc:
+        if os.environ.get("MOCAPKIT_DEBUG"):
+            raise
         print(f"mocapkit: error: {exc}", file=sys.stderr)
+        print("(set MOCAPKIT_DEBUG=1 for the traceback)", file=sys.stderr)
         return 2
     return 0
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import lightning as L
+from hydra.errors import InstantiationException
 from hydra.utils import instantiate
 from lightning.pytorch.callbacks import LearningRateMonitor, ModelCheckpoint
 from lightning.pytorch.loggers import TensorBoardLogger
@@ -19,11 +20,21 @@ from omegaconf import DictConfig
 
 from mocapkit.train.action_module import ActionRecognitionModule
 from mocapkit.train.config import ConfigError, load_run_config, new_run_dir, save_run_config
+from mocapkit.train.epoch_summary import EpochSummary
 
 
 def build_datamodule(cfg: DictConfig):
-    """The data module of ``cfg.data`` (its ``_target_``), seeded with ``cfg.seed``."""
-    return instantiate(cfg.data, seed=cfg.seed)
+    """The data module of ``cfg.data`` (its ``_target_``), seeded with ``cfg.seed``.
+
+    Errors raised by the data module (a missing folder, an unknown split) are
+    re-raised as they are, without Hydra's wrapper, so their message reaches the user.
+    """
+    try:
+        return instantiate(cfg.data, seed=cfg.seed)
+    except InstantiationException as exc:
+        if isinstance(exc.__cause__, Exception):
+            raise exc.__cause__ from None
+        raise
 
 
 def resume_config(resume: str | Path, overrides: list[str]) -> DictConfig:
@@ -51,10 +62,13 @@ def train(cfg: DictConfig) -> Path:
                                      label_smoothing=cfg.label_smoothing)
     save_run_config(cfg, run_dir)
     checkpoint = ModelCheckpoint(dirpath=run_dir, filename="best", monitor="val/acc", mode="max",
-                                 save_last=True, enable_version_counter=False)
+                                 enable_version_counter=False)
+    # A second, unmonitored callback rewrites last.ckpt every epoch: Lightning's save_last only
+    # refreshes it in epochs where the monitored checkpoint was saved.
+    last = ModelCheckpoint(dirpath=run_dir, filename="last", save_top_k=1, enable_version_counter=False)
     trainer = L.Trainer(**cfg.trainer, deterministic=cfg.deterministic, default_root_dir=run_dir,
                         logger=TensorBoardLogger(save_dir=str(run_dir), name="tensorboard", version=""),
-                        callbacks=[checkpoint, LearningRateMonitor(logging_interval="epoch")])
+                        callbacks=[checkpoint, last, LearningRateMonitor(logging_interval="epoch"), EpochSummary()])
     print(f"[mocapkit] run folder: {run_dir}")
     print(f"[mocapkit] samples: {counts} (split {cfg.data.split}), {datamodule.num_classes} classes")
     trainer.fit(module, datamodule=datamodule, ckpt_path=cfg.resume)
