@@ -20,8 +20,10 @@ from mocapkit.datasets.ntu_skeleton import (
     write_skeleton,
 )
 
-SAMPLES = Path(__file__).resolve().parents[1].parent / "shared" / "samples" / "ntu_skeleton"
-needs_samples = pytest.mark.skipif(not SAMPLES.is_dir(), reason=f"real NTU samples not found at {SAMPLES}")
+from shared_data import NTU_SAMPLES as SAMPLES
+from shared_data import needs
+
+needs_samples = needs(SAMPLES)
 
 REAL = ["S001C001P001R001A011", "S001C003P008R002A058", "S003C001P015R001A034"]
 THREE_BODY = "S005C002P002R002A050"

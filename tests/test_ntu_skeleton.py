@@ -17,8 +17,10 @@ from mocapkit.datasets.ntu_skeleton import (
     write_skeleton,
 )
 
-SAMPLES = Path(__file__).resolve().parents[1].parent / "shared" / "samples" / "ntu_skeleton"
-needs_samples = pytest.mark.skipif(not SAMPLES.is_dir(), reason=f"real NTU samples not found at {SAMPLES}")
+from shared_data import NTU_SAMPLES as SAMPLES
+from shared_data import needs
+
+needs_samples = needs(SAMPLES)
 
 # From shared/samples/SOURCES.md: frames and distinct body IDs per file.
 EXPECTED = {

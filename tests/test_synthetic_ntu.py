@@ -143,7 +143,6 @@ def test_subjects_differ_in_body_size():
 
 
 def test_two_person_classes_have_two_interacting_bodies():
-    config = NTUSynthConfig(**CLEAN)
     for action in range(1, 21):
         seq = synthesize_sample(NTUSampleName(1, 1, 1, 1, action), NTUSynthConfig(num_classes=20, **CLEAN))
         assert seq.num_bodies == (2 if ACTIONS[action - 1].two_person else 1), ACTIONS[action - 1].name

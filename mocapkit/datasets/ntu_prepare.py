@@ -235,7 +235,7 @@ def prepare_ntu(src: str | os.PathLike, out: str | os.PathLike, workers: int = 1
         if cursor < capacity:  # some files were skipped as malformed after the pre-pass
             _shrink_rows(positions_path, cursor)
     except BaseException:  # leave no half-written multi-gigabyte array behind
-        positions = None
+        positions = None  # noqa: F841  (drops the memmap so the file can go)
         positions_path.unlink(missing_ok=True)
         raise
 
