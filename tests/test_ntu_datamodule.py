@@ -1,0 +1,72 @@
+"""Augmentation invariants and the data module's splits over a prepared cache."""
+import numpy as np
+import pytest
+import torch
+
+from mocapkit.datasets.ntu_datamodule import NTUDataModule, pad_collate, uniform_frame_indices
+from mocapkit.datasets.ntu_prepare import prepare_ntu
+from mocapkit.datasets.skeleton_augment import SkeletonAugment
+from mocapkit.datasets.synthetic_ntu import NTUSynthConfig, synthesize_ntu
+
+
+def test_augment_keeps_absent_bodies_zero_and_is_rigid():
+    torch.manual_seed(0)
+    x = torch.randn(2, 40, 25, 3) + torch.tensor([0.0, 0.0, 3.0])
+    x[1] = 0.0            # second body absent
+    x[0, 30:] = 0.0       # padding frames
+    out = SkeletonAugment(rotate_deg=45, crop=(0.5, 0.9), min_frames=8)(x)
+    assert 8 <= out.shape[1] <= 36
+    assert (out[1] == 0).all()
+    present = out[0].abs().sum((-1, -2)) > 0
+    assert present.sum() >= 1 and (out[0][~present] == 0).all()
+    # rotation about the vertical axis: heights unchanged, pairwise distances unchanged
+    start = next(s for s in range(0, 41 - out.shape[1]) if torch.allclose(out[0, :, :, 1], x[0, s:s + out.shape[1], :, 1], atol=1e-5))
+    a, b = x[0, start:start + out.shape[1]][present], out[0][present]
+    assert torch.allclose(torch.cdist(a, a), torch.cdist(b, b), atol=1e-4)
+
+
+def test_uniform_frame_indices_and_collate_padding():
+    assert list(uniform_frame_indices(5, 10)) == [0, 1, 2, 3, 4]
+    idx = uniform_frame_indices(100, 10)
+    assert len(idx) == 10 and idx[0] == 0 and idx[-1] == 99
+    items = [{"skeleton": torch.ones(2, t, 25, 3), "label": t, "index": t, "subject": 1} for t in (3, 7)]
+    batch = pad_collate(items)
+    assert batch["skeletons"].shape == (2, 2, 7, 25, 3)
+    assert batch["lengths"].tolist() == [3, 7]
+    assert (batch["skeletons"][0, :, 3:] == 0).all()
+
+
+@pytest.fixture(scope="module")
+def cache(tmp_path_factory):
+    root = tmp_path_factory.mktemp("dm")
+    config = NTUSynthConfig(num_classes=3, num_subjects=10, setups=(1,), cameras=(1, 2), replications=(1,),
+                            length_scale=0.5)
+    synthesize_ntu(root / "synth", config, progress=False)
+    prepare_ntu(root / "synth", root / "cache", progress=False)
+    return root / "cache"
+
+
+def test_cross_subject_split_never_validates_or_trains_on_test_subjects(cache):
+    dm = NTUDataModule(str(cache), split="ntu60_xsub", val_fraction=0.2)
+    subjects = dm.cache.subjects
+    train, val, test = (set(subjects[i].tolist()) for i in (dm.train_idx, dm.val_idx, dm.test_idx))
+    assert test == {3, 6, 7, 10}
+    assert train | val == {1, 2, 4, 5, 8, 9} and not train & val
+    assert dm.class_names == (cache.parent / "synth" / "classes.txt").read_text().split("\n")[:3]
+    batch = next(iter(dm.train_dataloader()))
+    assert batch["skeletons"].shape[1:] == (2, batch["skeletons"].shape[2], 25, 3)
+
+
+def test_cross_view_and_custom_splits(cache):
+    dm = NTUDataModule(str(cache), split="ntu60_xview")
+    assert set(dm.cache.cameras[dm.test_idx].tolist()) == {1}
+    assert set(dm.cache.cameras[np.concatenate([dm.train_idx, dm.val_idx])].tolist()) == {2}
+    dm = NTUDataModule(str(cache), split="custom", train_subjects=[1, 2, 3], test_subjects=[9, 10])
+    assert set(dm.cache.subjects[dm.test_idx].tolist()) == {9, 10}
+
+
+def test_missing_root_is_named(tmp_path):
+    with pytest.raises(ValueError, match="data.root"):
+        NTUDataModule(None)
+    with pytest.raises(FileNotFoundError, match="nowhere"):
+        NTUDataModule(str(tmp_path / "nowhere"))
