@@ -62,7 +62,7 @@ def main() -> None:
     print("|---|---:|---:|---:|---:|---:|")
     for r in rows:
         print(f"| {r['model']} | {r['batch']} | {r['params_M']:.1f} | {r['step_s']:.3f} | {r['samples_per_s']:.1f} "
-              f"| {r['energy_share']:.0%} |")
+              f"| {r['energy_share']:.1%} |")
     print(f"\nratio default / faithful (batch 2, the thesis's mini-batch): "
           f"{rows[0]['samples_per_s'] / rows[1]['samples_per_s']:.1f}x")
 

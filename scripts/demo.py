@@ -39,7 +39,7 @@ def main() -> None:
     timings = {}
     start = time.time()
     if not (SYNTH / "synth_config.json").exists():
-        timings["synth"] = run("synth", "ntu", "--out", str(SYNTH), "--classes", "12", "--subjects", "10",
+        timings["synth"] = run("synth", "ntu", "--out", str(SYNTH), "--classes", "12", "--subjects", "20",
                                "--seed", "0", "--workers", "2")
     if not (CACHE / "meta.json").exists():
         timings["prepare"] = run("prepare", "ntu", "--src", str(SYNTH), "--out", str(CACHE), "--workers", "2",
