@@ -103,3 +103,14 @@ def test_malformed_file_stops_prepare_with_file_and_line(tmp_path, capsys):
     assert main(["prepare", "ntu", "--src", str(src), "--out", str(tmp_path / "out"), "--quiet"]) == 2
     err = capsys.readouterr().err
     assert "S001C001P001R001A001.skeleton" in err and "line" in err
+
+
+def test_same_seed_deterministic_runs_give_identical_weights(workspace):
+    states = []
+    for name in ("det_a", "det_b"):
+        assert main(train_overrides(workspace, f"run_name={name}", "trainer.max_epochs=1", "deterministic=true",
+                                    "seed=7")) == 0
+        states.append(torch.load(workspace / "runs" / "ntu_energy_vgg" / name / "last.ckpt", weights_only=False))
+    a, b = (s["state_dict"] for s in states)
+    assert a.keys() == b.keys()
+    assert all(torch.equal(a[k], b[k]) for k in a)

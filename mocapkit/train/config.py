@@ -14,8 +14,7 @@ from datetime import datetime
 from pathlib import Path
 
 from hydra import compose, initialize_config_dir
-from omegaconf import DictConfig, OmegaConf
-from omegaconf.errors import ConfigKeyError
+from omegaconf import DictConfig, OmegaConf, open_dict
 
 #: The configs folder: ``$MOCAPKIT_CONFIG_DIR`` or ``configs/`` at the repository root.
 CONFIG_DIR = Path(os.environ.get("MOCAPKIT_CONFIG_DIR", Path(__file__).resolve().parents[2] / "configs"))
@@ -50,31 +49,19 @@ def apply_overrides(cfg: DictConfig, overrides: list[str]) -> DictConfig:
     for item in overrides:
         if "=" not in item:
             raise ConfigError(f"override {item!r} is not of the form key=value")
-        key, _ = item.split("=", 1)
-        add = key.startswith("+")
-        if add:
-            item = item[1:]
+        key, value = item.split("=", 1)
+        if key.startswith("+"):
             key = key[1:]
-        if not add and OmegaConf.select(cfg, key, default="__missing__") == "__missing__":
+            with open_dict(cfg):
+                cfg.merge_with_dotlist([f"{key}={value}"])
+            continue
+        if OmegaConf.select(cfg, key, default=_ABSENT) is _ABSENT:
             raise ConfigError(f"unknown config key {key!r} (use +{key}=... to add a new key)")
-        try:
-            with _open_struct(cfg, add):
-                cfg.merge_with_dotlist([item])
-        except ConfigKeyError as exc:
-            raise ConfigError(f"unknown config key {key!r}: {exc}") from exc
+        cfg.merge_with_dotlist([item])
     return cfg
 
 
-class _open_struct:
-    def __init__(self, cfg: DictConfig, enabled: bool):
-        self.cfg, self.enabled = cfg, enabled
-
-    def __enter__(self):
-        if self.enabled:
-            OmegaConf.set_struct(self.cfg, False)
-
-    def __exit__(self, *exc):
-        OmegaConf.set_struct(self.cfg, True)
+_ABSENT = object()
 
 
 def load_run_config(run_dir: str | Path, overrides: list[str] | None = None) -> DictConfig:

@@ -9,6 +9,7 @@ Each run writes to ``<output_root>/<experiment_name>/<run>/``::
 """
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import lightning as L
@@ -69,6 +70,8 @@ def train(cfg: DictConfig) -> Path:
     trainer = L.Trainer(**cfg.trainer, deterministic=cfg.deterministic, default_root_dir=run_dir,
                         logger=TensorBoardLogger(save_dir=str(run_dir), name="tensorboard", version=""),
                         callbacks=[checkpoint, last, LearningRateMonitor(logging_interval="epoch"), EpochSummary()])
+    # the run folder already holds config.yaml, by design
+    warnings.filterwarnings("ignore", message=r"Checkpoint directory .* exists and is not empty")
     print(f"[mocapkit] run folder: {run_dir}")
     print(f"[mocapkit] samples: {counts} (split {cfg.data.split}), {datamodule.num_classes} classes")
     trainer.fit(module, datamodule=datamodule, ckpt_path=cfg.resume)
