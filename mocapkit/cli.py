@@ -60,7 +60,8 @@ def cmd_prepare_ntu(args: argparse.Namespace) -> None:
 
     report = prepare_ntu(args.src, args.out, workers=args.workers, skip_bad=args.skip_bad,
                          missing_list=args.missing_list, max_bodies=args.max_bodies,
-                         denoise_spread=args.denoise_spread, progress=not args.quiet)
+                         denoise_spread=args.denoise_spread, min_body_frames=args.min_body_frames,
+                         progress=not args.quiet)
     print(f"[mocapkit] prepared cache in {args.out}")
     print(report.to_text())
 
@@ -130,6 +131,8 @@ def build_parser() -> argparse.ArgumentParser:
     pntu.add_argument("--missing-list", help="official list of samples with missing skeletons to leave out")
     pntu.add_argument("--max-bodies", type=int, default=2, help="bodies kept per sample (most motion first)")
     pntu.add_argument("--denoise-spread", action="store_true", help="drop non-human 'bodies' by their spread")
+    pntu.add_argument("--min-body-frames", type=int, default=1,
+                      help="drop bodies seen in fewer frames (pyskl uses 12)")
     pntu.add_argument("--quiet", action="store_true", help="no progress bar")
     pntu.set_defaults(func=cmd_prepare_ntu)
 
