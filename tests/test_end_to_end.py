@@ -50,6 +50,7 @@ def test_resume_continues_where_it_stopped(run_dir, tmp_path):
     steps_before = torch.load(copy / "last.ckpt", weights_only=False)["global_step"]
     assert main(["train", f"resume={copy / 'last.ckpt'}", "trainer.max_epochs=3"]) == 0
     state = torch.load(copy / "last.ckpt", weights_only=False)
+    assert state["lr_schedulers"][0]["T_max"] == 3  # the cosine schedule follows the new length
     assert state["epoch"] == 2
     assert state["global_step"] == steps_before * 3 // 2  # one more epoch of the same number of batches
 

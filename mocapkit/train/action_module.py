@@ -64,6 +64,13 @@ class ActionRecognitionModule(L.LightningModule):
         return {"logits": self(batch["skeletons"]), "labels": batch["labels"], "indices": batch["indices"],
                 "subjects": batch["subjects"]}
 
+    def on_load_checkpoint(self, checkpoint: dict) -> None:
+        """On resume, the schedule's configured parameters (e.g. ``T_max``) come from the current
+        config, its progress (``last_epoch``, learning rates) from the checkpoint."""
+        configured = {k: v for k, v in (self.hparams.scheduler or {}).items() if not k.startswith("_")}
+        for state in checkpoint.get("lr_schedulers", []):
+            state.update({k: v for k, v in configured.items() if k in state})
+
     def configure_optimizers(self):
         optimizer = instantiate(self.hparams.optimizer)(params=self.parameters())
         if not self.hparams.scheduler:

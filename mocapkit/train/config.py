@@ -20,6 +20,7 @@ from omegaconf import DictConfig, OmegaConf, open_dict
 CONFIG_DIR = Path(os.environ.get("MOCAPKIT_CONFIG_DIR", Path(__file__).resolve().parents[2] / "configs"))
 
 RUN_CONFIG = "config.yaml"
+RUN_CONFIG_UNRESOLVED = "config.unresolved.yaml"
 
 
 class ConfigError(ValueError):
@@ -65,10 +66,17 @@ _ABSENT = object()
 
 
 def load_run_config(run_dir: str | Path, overrides: list[str] | None = None) -> DictConfig:
-    """The resolved config saved in ``run_dir``, with ``overrides`` applied."""
-    path = Path(run_dir) / RUN_CONFIG
+    """The config saved in ``run_dir``, with ``overrides`` applied.
+
+    It is read from the unresolved copy when there is one, so interpolations stay
+    live: ``trainer.max_epochs=50`` on resume also moves ``scheduler.T_max``.
+    """
+    run_dir = Path(run_dir)
+    path = run_dir / RUN_CONFIG_UNRESOLVED
     if not path.is_file():
-        raise ConfigError(f"{path} not found: is {run_dir} a mocapkit run folder?")
+        path = run_dir / RUN_CONFIG
+    if not path.is_file():
+        raise ConfigError(f"{run_dir / RUN_CONFIG} not found: is {run_dir} a mocapkit run folder?")
     return apply_overrides(OmegaConf.load(path), overrides or [])
 
 
@@ -84,6 +92,8 @@ def new_run_dir(cfg: DictConfig) -> Path:
 
 
 def save_run_config(cfg: DictConfig, run_dir: Path) -> Path:
+    """Write ``config.yaml`` (resolved, to read) and ``config.unresolved.yaml`` (to reload)."""
     path = Path(run_dir) / RUN_CONFIG
     OmegaConf.save(cfg, path, resolve=True)
+    OmegaConf.save(cfg, Path(run_dir) / RUN_CONFIG_UNRESOLVED, resolve=False)
     return path
