@@ -69,3 +69,65 @@ NTU25 = SkeletonLayout(
         1, 7, 7, 11, 11,
     ),
 )
+
+
+#: MSR Action3D's own 20-joint order (shared/samples/SOURCES.md, section msr3d), rooted at HipCenter.
+#: Left/right within each pair follow the usual reading of the dataset (Vemulapalli et al.'s
+#: skeleton code); the MSR reader's tests check the sides against the data.
+MSR20 = SkeletonLayout(
+    name="msr20",
+    joint_names=(
+        "ShoulderLeft", "ShoulderRight", "ShoulderCenter", "Spine", "HipLeft", "HipRight", "HipCenter",
+        "ElbowLeft", "ElbowRight", "WristLeft", "WristRight", "HandLeft", "HandRight",
+        "KneeLeft", "KneeRight", "AnkleLeft", "AnkleRight", "FootLeft", "FootRight", "Head",
+    ),
+    parents=(2, 2, 3, 6, 6, 6, -1, 0, 1, 7, 8, 9, 10, 4, 5, 13, 14, 15, 16, 2),
+)
+
+#: The CMU / HDM05 ASF skeleton with 31 joints (root plus 30 bones), in the usual ASF order.
+CMU31 = SkeletonLayout(
+    name="cmu31",
+    joint_names=(
+        "root", "lhipjoint", "lfemur", "ltibia", "lfoot", "ltoes",
+        "rhipjoint", "rfemur", "rtibia", "rfoot", "rtoes",
+        "lowerback", "upperback", "thorax", "lowerneck", "upperneck", "head",
+        "lclavicle", "lhumerus", "lradius", "lwrist", "lhand", "lfingers", "lthumb",
+        "rclavicle", "rhumerus", "rradius", "rwrist", "rhand", "rfingers", "rthumb",
+    ),
+    parents=(
+        -1, 0, 1, 2, 3, 4,
+        0, 6, 7, 8, 9,
+        0, 11, 12, 13, 14, 15,
+        13, 17, 18, 19, 20, 21, 20,
+        13, 24, 25, 26, 27, 28, 27,
+    ),
+)
+
+#: Body landmarks shared across layouts: landmark -> joint name in each layout. A joint's
+#: position in an ASF skeleton is the *end* of the bone of that name (e.g. CMU ``lfemur`` ends
+#: at the left knee), which is what forward kinematics returns for that joint.
+LANDMARKS: dict[str, dict[str, str]] = {
+    "ntu25": {
+        "pelvis": "SpineBase", "spine": "SpineMid", "neck": "SpineShoulder", "head": "Head",
+        "l_shoulder": "ShoulderLeft", "l_elbow": "ElbowLeft", "l_wrist": "WristLeft", "l_hand": "HandLeft",
+        "r_shoulder": "ShoulderRight", "r_elbow": "ElbowRight", "r_wrist": "WristRight", "r_hand": "HandRight",
+        "l_hip": "HipLeft", "l_knee": "KneeLeft", "l_ankle": "AnkleLeft", "l_foot": "FootLeft",
+        "r_hip": "HipRight", "r_knee": "KneeRight", "r_ankle": "AnkleRight", "r_foot": "FootRight",
+    },
+    "msr20": {
+        "pelvis": "HipCenter", "spine": "Spine", "neck": "ShoulderCenter", "head": "Head",
+        "l_shoulder": "ShoulderLeft", "l_elbow": "ElbowLeft", "l_wrist": "WristLeft", "l_hand": "HandLeft",
+        "r_shoulder": "ShoulderRight", "r_elbow": "ElbowRight", "r_wrist": "WristRight", "r_hand": "HandRight",
+        "l_hip": "HipLeft", "l_knee": "KneeLeft", "l_ankle": "AnkleLeft", "l_foot": "FootLeft",
+        "r_hip": "HipRight", "r_knee": "KneeRight", "r_ankle": "AnkleRight", "r_foot": "FootRight",
+    },
+    "cmu31": {
+        "pelvis": "root", "spine": "upperback", "neck": "lowerneck", "head": "head",
+        "l_shoulder": "lclavicle", "l_elbow": "lhumerus", "l_wrist": "lradius", "l_hand": "lhand",
+        "r_shoulder": "rclavicle", "r_elbow": "rhumerus", "r_wrist": "rradius", "r_hand": "rhand",
+        "l_hip": "lhipjoint", "l_knee": "lfemur", "l_ankle": "ltibia", "l_foot": "lfoot",
+        "r_hip": "rhipjoint", "r_knee": "rfemur", "r_ankle": "rtibia", "r_foot": "rfoot",
+    },
+}
+
+LAYOUTS = {layout.name: layout for layout in (NTU25, MSR20, CMU31)}

@@ -124,6 +124,19 @@ class NTUDataModule(L.LightningDataModule):
     def sample_counts(self) -> dict[str, int]:
         return {"train": len(self.train_idx), "val": len(self.val_idx), "test": len(self.test_idx)}
 
+    def describe(self) -> dict:
+        """The split for reports: its name, the subjects on each side and the sample counts.
+
+        Every data module used with ``mocapkit train`` / ``eval`` provides this, together with
+        ``num_classes``, ``class_names``, ``sample_counts()`` and the three data loaders.
+        """
+        subjects = self.cache.subjects
+        return {"split": self.split, "data_root": str(self.root),
+                "train_subjects": sorted(set(subjects[self.train_idx].tolist())),
+                "val_subjects": sorted(set(subjects[self.val_idx].tolist())),
+                "test_subjects": sorted(set(subjects[self.test_idx].tolist())),
+                "sample_counts": self.sample_counts()}
+
     def dataset(self, part: str) -> SkeletonDataset:
         """The ``"train"``, ``"val"`` or ``"test"`` part (augmentation only on train)."""
         indices = {"train": self.train_idx, "val": self.val_idx, "test": self.test_idx}[part]

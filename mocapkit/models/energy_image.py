@@ -29,7 +29,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from mocapkit.datasets.layouts import NTU25, SkeletonLayout
+from mocapkit.datasets.layouts import LANDMARKS, LAYOUTS, NTU25, SkeletonLayout
 
 #: Planes as (horizontal axis, vertical axis) over (x, y, z); vertical axes grow upwards.
 PLANES = {"xy": (0, 1), "zy": (2, 1), "xz": (0, 2)}
@@ -39,7 +39,8 @@ class EnergyImage(nn.Module):
     """Skeletons ``[N, M, T, J, 3]`` (metres, zeros where a body is absent) → images ``[N, 3, size, size]``.
 
     Args:
-        layout: skeleton topology; gives the bones and the default reference joints.
+        layout: skeleton topology or its name (``"ntu25"``, ``"msr20"``, ``"cmu31"``); gives the bones
+            and, through the shared body landmarks, the default reference joints.
         size: grid resolution in pixels (64 for the CPU default, 224 for the thesis configuration).
         extent: half-width of the grid in body-size units (spine lengths), or in metres when ``scale=False``.
         bone_samples: points sampled along each bone in addition to the joints (0 = joints only).
@@ -49,11 +50,12 @@ class EnergyImage(nn.Module):
         scale: divide by the mean spine length of body 0 (``True``) or keep metres (``False``).
         align: rotate about the vertical axis so body 0's mean hip line is parallel to x.
         center_joint: joint whose first-frame position of body 0 is the origin (default: the layout root).
-        spine: ``(lower, upper)`` joints whose distance is the body size (default SpineBase→SpineShoulder).
-        hips: ``(left, right)`` joints used by ``align``.
+        spine: ``(lower, upper)`` joints whose distance is the body size (default: pelvis → neck landmarks,
+            SpineBase → SpineShoulder on NTU-25).
+        hips: ``(left, right)`` joints used by ``align`` (default: the hip landmarks).
     """
 
-    def __init__(self, layout: SkeletonLayout = NTU25, size: int = 64, extent: float = 3.0,
+    def __init__(self, layout: SkeletonLayout | str = NTU25, size: int = 64, extent: float = 3.0,
                  bone_samples: int = 0, splat: str = "bilinear", smoothing: float = 0.0,
                  temporal_weighting: str = "none", scale: bool = True, align: bool = False,
                  center_joint: int | None = None, spine: tuple[int, int] | None = None,
@@ -66,6 +68,10 @@ class EnergyImage(nn.Module):
         if size < 4 or extent <= 0 or bone_samples < 0 or smoothing < 0:
             raise ValueError(f"invalid energy image geometry: size={size}, extent={extent}, "
                              f"bone_samples={bone_samples}, smoothing={smoothing}")
+        if isinstance(layout, str):
+            if layout not in LAYOUTS:
+                raise ValueError(f"unknown skeleton layout {layout!r}; known: {sorted(LAYOUTS)}")
+            layout = LAYOUTS[layout]
         self.layout = layout
         self.size = int(size)
         self.extent = float(extent)
@@ -76,8 +82,11 @@ class EnergyImage(nn.Module):
         self.scale = bool(scale)
         self.align = bool(align)
         self.center_joint = layout.parents.index(-1) if center_joint is None else int(center_joint)
-        self.spine = tuple(spine) if spine is not None else (layout.index("SpineBase"), layout.index("SpineShoulder"))
-        self.hips = tuple(hips) if hips is not None else (layout.index("HipLeft"), layout.index("HipRight"))
+        landmark = LANDMARKS.get(layout.name, {})
+        if (spine is None or hips is None) and not landmark:
+            raise ValueError(f"layout {layout.name!r} has no landmark table: give spine=(lower, upper) and hips=(left, right)")
+        self.spine = tuple(spine) if spine is not None else (layout.index(landmark["pelvis"]), layout.index(landmark["neck"]))
+        self.hips = tuple(hips) if hips is not None else (layout.index(landmark["l_hip"]), layout.index(landmark["r_hip"]))
         bones = torch.tensor(layout.bones, dtype=torch.long).reshape(-1, 2)
         self.register_buffer("bone_child", bones[:, 0].clone(), persistent=False)
         self.register_buffer("bone_parent", bones[:, 1].clone(), persistent=False)

@@ -42,22 +42,13 @@ def evaluate(ckpt_path: str | Path, overrides: list[str] | None = None) -> dict:
     module = ActionRecognitionModule.load_from_checkpoint(ckpt_path, map_location="cpu")
     loader = datamodule.test_dataloader() if part == "test" else datamodule.val_dataloader()
     out = predict_logits(module, loader, cfg)
-    cache = datamodule.cache
     report = classification_report(out["logits"], out["labels"], groups={"subject": out["subjects"]},
                                    class_names=module.hparams.class_names or None)
-    report.update({
-        "checkpoint": str(ckpt_path),
-        "data_root": str(cfg.data.root),
-        "split": cfg.data.split,
-        "part": part,
-        "train_subjects": sorted(set(cache.subjects[datamodule.train_idx].tolist())),
-        "test_subjects": sorted(set(cache.subjects[datamodule.test_idx].tolist())),
-        "sample_counts": datamodule.sample_counts(),
-    })
+    report.update({"checkpoint": str(ckpt_path), "part": part, **datamodule.describe()})
     out_dir = Path(cfg.eval.out_dir) if cfg.eval.out_dir else run_dir / "eval"
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "metrics.json").write_text(json.dumps(report, indent=2))
-    title = f"{cfg.experiment_name}: {cfg.data.split} {part}, top-1 {report['top1']:.1%}"
+    title = f"{cfg.experiment_name}: {report['split']} {part}, top-1 {report['top1']:.1%}"
     plot_confusion_matrix(np.array(report["confusion_matrix"]), report["class_names"],
                           out_dir / "confusion_matrix.png", title=title)
     (out_dir / "summary.md").write_text(summary_table(report))

@@ -56,7 +56,7 @@ def train(cfg: DictConfig) -> Path:
     datamodule = build_datamodule(cfg)
     counts = datamodule.sample_counts()
     if counts["train"] == 0 or counts["val"] == 0:
-        raise ConfigError(f"split {cfg.data.split!r} of {cfg.data.root} leaves {counts}: "
+        raise ConfigError(f"split {datamodule.describe()['split']!r} leaves {counts}: "
                           "training and validation both need samples")
     module = ActionRecognitionModule(model=cfg.model, optimizer=cfg.optimizer, scheduler=cfg.scheduler or None,
                                      num_classes=datamodule.num_classes, class_names=datamodule.class_names,
@@ -73,7 +73,7 @@ def train(cfg: DictConfig) -> Path:
     # the run folder already holds config.yaml, by design
     warnings.filterwarnings("ignore", message=r"Checkpoint directory .* exists and is not empty")
     print(f"[mocapkit] run folder: {run_dir}")
-    print(f"[mocapkit] samples: {counts} (split {cfg.data.split}), {datamodule.num_classes} classes")
+    print(f"[mocapkit] samples: {counts} (split {datamodule.describe()['split']}), {datamodule.num_classes} classes")
     trainer.fit(module, datamodule=datamodule, ckpt_path=cfg.resume)
     print(f"[mocapkit] wrote {run_dir / 'config.yaml'}")
     print(f"[mocapkit] wrote {run_dir / 'last.ckpt'}")
