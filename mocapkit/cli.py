@@ -5,7 +5,7 @@
     mocapkit train [experiment=NAME] data.root=CACHE [Hydra overrides ...]
     mocapkit eval ckpt_path=RUN/best.ckpt [overrides ...]
     mocapkit export ckpt_path=RUN/best.ckpt [out=FILE] [overrides ...]
-    mocapkit predict --onnx FILE SKELETON [SKELETON ...]
+    mocapkit predict --onnx FILE MOTION_FILE [MOTION_FILE ...]
 
 Heavy libraries are imported inside each command, so ``predict`` runs with
 onnxruntime and numpy alone.
@@ -142,10 +142,10 @@ def build_parser() -> argparse.ArgumentParser:
         p = sub.add_parser(name, help=help_text)
         p.add_argument("overrides", nargs="*", help="key=value overrides")
 
-    predict = sub.add_parser("predict", help="classify .skeleton files with an exported ONNX model")
+    predict = sub.add_parser("predict", help="classify motion files with an exported ONNX model")
     predict.add_argument("--onnx", required=True, help="model written by `mocapkit export`")
     predict.add_argument("--top", type=int, default=5, help="classes printed per file")
-    predict.add_argument("files", nargs="+", help=".skeleton files")
+    predict.add_argument("files", nargs="+", help="motion files (.skeleton, or any format read_motion reads)")
     predict.set_defaults(func=cmd_predict)
     return parser
 

@@ -115,6 +115,11 @@ class EnergyImageClassifier(nn.Module):
         self.register_buffer("mean", torch.tensor(IMAGENET_MEAN).view(1, 3, 1, 1), persistent=False)
         self.register_buffer("std", torch.tensor(IMAGENET_STD).view(1, 3, 1, 1), persistent=False)
 
+    @property
+    def layout(self):
+        """The skeleton layout the model expects (joints and their order)."""
+        return self.energy.layout
+
     def images(self, skeletons: torch.Tensor) -> torch.Tensor:
         """The energy images ``[N, 3, H, W]`` in ``[0, 1]``."""
         return self.energy(skeletons)

@@ -1,7 +1,9 @@
-"""``mocapkit predict --onnx FILE SKELETON...``: classify ``.skeleton`` files with onnxruntime alone.
+"""``mocapkit predict --onnx FILE MOTION...``: classify motion files with onnxruntime alone.
 
-No PyTorch is imported: this is the deployment path. Files are read with the
-numpy reader, reduced to the two main bodies, and fed to the exported model.
+No PyTorch is imported: this is the deployment path. NTU ``.skeleton`` files
+are reduced to their two main bodies; other formats are read with
+``read_motion`` and mapped onto the model's skeleton layout (stored in the
+ONNX metadata) when they use another one.
 """
 from __future__ import annotations
 
@@ -20,17 +22,28 @@ def softmax(logits: np.ndarray) -> np.ndarray:
     return e / e.sum(axis=-1, keepdims=True)
 
 
+def model_input(path: str | Path, layout: str) -> np.ndarray:
+    """One file as the model's input ``[1, bodies, frames, joints, 3]`` (float32, metres, zeros = absent)."""
+    if Path(path).suffix == ".skeleton":
+        return select_main_bodies(read_skeleton(path), max_bodies=2).positions[None]
+    from mocapkit.datasets.layouts import LAYOUTS
+    from mocapkit.datasets.motion_io import read_motion
+
+    motion = read_motion(path)
+    if motion.layout_name != layout:
+        motion = motion.map_layout(LAYOUTS[layout])
+    return motion.filled(0.0)[None, None]
+
+
 def predict_files(onnx_path: str | Path, files: list[str | Path], top: int = 5) -> list[dict]:
     """Top ``top`` classes per file: ``[{"file", "top": [(name, probability), ...]}]``."""
     session = ort.InferenceSession(str(onnx_path), providers=["CPUExecutionProvider"])
     meta = session.get_modelmeta().custom_metadata_map
     class_names = json.loads(meta.get("class_names", "[]"))
-    bodies = session.get_inputs()[0].shape[1]
-    bodies = bodies if isinstance(bodies, int) else 2
+    layout = meta.get("layout", "ntu25")
     results = []
     for path in files:
-        selection = select_main_bodies(read_skeleton(path), max_bodies=bodies)
-        logits = session.run(None, {"skeletons": selection.positions[None]})[0][0]
+        logits = session.run(None, {"skeletons": model_input(path, layout)})[0][0]
         probs = softmax(logits)
         order = np.argsort(-probs)[:top]
         names = [class_names[k] if k < len(class_names) else f"A{k + 1:03d}" for k in order]
