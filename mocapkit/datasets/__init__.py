@@ -4,7 +4,10 @@ The data modules (Lightning) live in their own modules and are imported from the
 e.g. ``from mocapkit.datasets.ntu_datamodule import NTUDataModule``, so that the
 format readers stay importable without torch.
 """
-from mocapkit.datasets.layouts import NTU25, SkeletonLayout
+from mocapkit.datasets.c3d import C3DFormatError, read_c3d, write_c3d
+from mocapkit.datasets.layouts import CMU31, LAYOUTS, MSR20, NTU25, SkeletonLayout
+from mocapkit.datasets.motion import Motion
+from mocapkit.datasets.motion_io import read_motion, write_motion
 from mocapkit.datasets.ntu_cache import NTUCache
 from mocapkit.datasets.ntu_prepare import PrepareReport, prepare_ntu
 from mocapkit.datasets.ntu_skeleton import (
@@ -22,7 +25,8 @@ from mocapkit.datasets.ntu_skeleton import (
 from mocapkit.datasets.protocols import SPLITS, split_indices, split_summary, validation_split
 
 __all__ = [
-    "NTU25", "SkeletonLayout", "NTUCache", "PrepareReport", "prepare_ntu", "BodySelection", "NTUSampleName",
+    "Motion", "read_motion", "write_motion", "C3DFormatError", "read_c3d", "write_c3d",
+    "CMU31", "LAYOUTS", "MSR20", "NTU25", "SkeletonLayout", "NTUCache", "PrepareReport", "prepare_ntu", "BodySelection", "NTUSampleName",
     "SkeletonFormatError", "SkeletonSequence", "parse_ntu_name", "read_missing_list", "read_skeleton",
     "select_main_bodies", "sequence_from_positions", "write_skeleton", "SPLITS", "split_indices", "split_summary",
     "validation_split",

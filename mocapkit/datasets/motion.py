@@ -59,7 +59,7 @@ class Motion:
             self.parents = tuple(int(p) for p in self.parents)
             if len(self.parents) != joints or any(p >= joints or p < -1 for p in self.parents):
                 raise ValueError(f"{self._label()}: parents must give one index in [-1, {joints}) per joint")
-        if not self.fps or self.fps <= 0:
+        if not (self.fps > 0):  # also rejects NaN
             raise ValueError(f"{self._label()}: frame rate must be positive, got {self.fps}")
         if self.up_axis not in AXES:
             raise ValueError(f"{self._label()}: up_axis must be x, y or z, got {self.up_axis!r}")
@@ -67,10 +67,13 @@ class Motion:
         if self.missing is None:
             self.missing = nan
         else:
-            self.missing = np.asarray(self.missing, dtype=bool) | nan
-            if self.missing.shape != (frames, joints):
-                raise ValueError(f"{self._label()}: missing must be [{frames}, {joints}], got {list(self.missing.shape)}")
-            self.positions[self.missing] = np.nan
+            missing = np.asarray(self.missing, dtype=bool)
+            if missing.shape != (frames, joints):
+                raise ValueError(f"{self._label()}: missing must be [{frames}, {joints}], got {list(missing.shape)}")
+            self.missing = missing | nan
+            if self.missing.any():
+                self.positions = self.positions.copy()  # never write NaN into the caller's array
+                self.positions[self.missing] = np.nan
         if self.rotations is not None:
             self.rotations = np.asarray(self.rotations, dtype=np.float32)
             if self.rotations.shape != (frames, joints, 3, 3):
@@ -115,7 +118,7 @@ class Motion:
 
     def select(self, joints: list[str] | list[int]) -> Motion:
         """Only ``joints`` (names or indices), in that order; parents are kept where they are selected."""
-        idx = [self.index(j) if isinstance(j, str) else int(j) for j in joints]
+        idx = [self.index(j) if isinstance(j, str) else int(j) % self.num_joints for j in joints]
         parents = None
         if self.parents is not None:
             where = {old: new for new, old in enumerate(idx)}
@@ -124,7 +127,8 @@ class Motion:
                 parents = None  # the selection is not a tree any more
         return replace(self, positions=self.positions[:, idx], joint_names=tuple(self.joint_names[i] for i in idx),
                        parents=parents, missing=self.missing[:, idx],
-                       rotations=None if self.rotations is None else self.rotations[:, idx], layout_name=None)
+                       rotations=None if self.rotations is None else self.rotations[:, idx], layout_name=None,
+                       metadata=dict(self.metadata))
 
     def resample(self, fps: float) -> Motion:
         """Linear interpolation in time to ``fps`` frames per second (over the same duration).
@@ -135,7 +139,10 @@ class Motion:
         if fps <= 0:
             raise ValueError(f"fps must be positive, got {fps}")
         if self.num_frames < 2 or fps == self.fps:
-            return replace(self, rotations=None if fps != self.fps else self.rotations)
+            same = fps == self.fps
+            return replace(self, positions=self.positions.copy(), missing=self.missing.copy(),
+                           rotations=self.rotations if same else None, fps=self.fps if same else float(fps),
+                           metadata=dict(self.metadata))
         count = int(np.floor(self.duration * fps + 1e-6)) + 1
         t = np.arange(count) * (self.fps / fps)           # positions in source frames
         lo = np.clip(np.floor(t).astype(np.int64), 0, self.num_frames - 1)
@@ -143,12 +150,13 @@ class Motion:
         w = (t - lo).astype(np.float32)[:, None, None]
         positions = self.filled()[lo] * (1 - w) + self.filled()[hi] * w
         missing = self.missing[lo] | (self.missing[hi] & (w[:, :, 0] > 0))
-        return replace(self, positions=positions, missing=missing, fps=float(fps), rotations=None)
+        return replace(self, positions=positions, missing=missing, fps=float(fps), rotations=None,
+                       metadata=dict(self.metadata))
 
     def root_centered(self, root: str | int | None = None) -> Motion:
         """Positions relative to the root joint (default: the hierarchy's root, else joint 0) in every frame."""
         r = self._joint(root, default=self.parents.index(-1) if self.parents else 0)
-        return replace(self, positions=self.positions - self.positions[:, r:r + 1])
+        return replace(self, positions=self.positions - self.positions[:, r:r + 1], metadata=dict(self.metadata))
 
     def torso_aligned(self, left_hip: str | int, right_hip: str | int, root: str | int | None = None) -> Motion:
         """Root-centred and turned about the up axis so that, in every frame, the hip line
