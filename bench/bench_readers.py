@@ -1,0 +1,227 @@
+"""Benchmark: motion-file reader throughput, mocapkit's readers against plain readers, in one run.
+
+For every format in :data:`CASES` whose mocapkit reader exists, both readers read
+the same real sample files (``shared/samples/<format>`` next to the repository),
+their results are checked to agree, and files/s, frames/s and the ratio are
+printed as a Markdown table. Timings are the best of ``--repeat`` rounds, the two
+readers interleaved in every round so that other load on the machine hits both.
+
+The *plain* reader of a format is written the usual way of public repositories
+(e.g. PyMO / bvh-python for BVH): ``readline``, ``split()`` and one ``float()`` per
+value, and forward kinematics as Python loops over frames and joints with small
+numpy matrices. It is part of this file, so the comparison is reproducible.
+
+Adding a format (ASF/AMC, C3D, MSR Action3D) is one :class:`Case` in :data:`CASES`:
+the sample glob, the import path of our reader, a plain reader, and how to get
+``[frames, joints, 3]`` metres from each for the agreement check. Cases whose
+reader module is not there yet are listed as skipped.
+
+Usage: ``python bench/bench_readers.py [--repeat 3] [--copies 3] [--formats bvh] [--src DIR]``
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import os
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+DEFAULT_SRC = Path(__file__).resolve().parents[1].parent / "shared" / "samples"
+
+
+# --------------------------------------------------------------------------- plain readers
+
+
+def plain_read_bvh(path: str | Path, scale: float = 1.0) -> np.ndarray:
+    """A plain BVH reader: per-line parsing, ``float()`` per value, per-frame per-joint FK in Python.
+
+    Returns float64 ``[frames, joints, 3]`` positions (file units × ``scale``), End Sites
+    excluded, with the same conventions as :func:`mocapkit.datasets.bvh.read_bvh`
+    (intrinsic rotations in channel order, position channels replace the OFFSET).
+    """
+    names, parents, offsets, channels = [], [], [], []
+    stack: list[int] = []
+    in_end = False
+    with open(path, "r") as f:
+        for line in f:
+            tok = line.split()
+            if not tok:
+                continue
+            key = tok[0]
+            if key in ("ROOT", "JOINT"):
+                names.append(" ".join(tok[1:]))
+                parents.append(stack[-1] if stack else -1)
+                offsets.append([0.0, 0.0, 0.0])
+                channels.append([])
+                stack.append(len(names) - 1)
+            elif key == "End":
+                in_end = True
+            elif key == "OFFSET":
+                if not in_end:
+                    offsets[stack[-1]] = [float(v) for v in tok[1:4]]
+            elif key == "CHANNELS":
+                channels[stack[-1]] = tok[2:2 + int(tok[1])]
+            elif key == "}":
+                if in_end:
+                    in_end = False
+                else:
+                    stack.pop()
+            elif key == "MOTION":
+                break
+        num_frames = int(f.readline().split()[1])
+        f.readline()  # Frame Time
+        frames = []
+        for _ in range(num_frames):
+            frames.append([float(v) for v in f.readline().split()])
+
+    def axis_matrix(axis: str, deg: float) -> np.ndarray:
+        a = np.radians(deg)
+        c, s = np.cos(a), np.sin(a)
+        if axis == "X":
+            return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+        if axis == "Y":
+            return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+        return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+
+    out = np.zeros((num_frames, len(names), 3))
+    for t, values in enumerate(frames):
+        k = 0
+        glob = [None] * len(names)
+        for j in range(len(names)):
+            rot = np.eye(3)
+            trans = np.array(offsets[j], dtype=float)
+            for ch in channels[j]:
+                v = values[k]
+                k += 1
+                if ch.endswith("position"):
+                    trans["XYZ".index(ch[0])] = v
+                else:
+                    rot = rot @ axis_matrix(ch[0], v)
+            p = parents[j]
+            if p < 0:
+                glob[j] = rot
+                out[t, j] = trans
+            else:
+                glob[j] = glob[p] @ rot
+                out[t, j] = out[t, p] + glob[p] @ trans
+    return out * scale
+
+
+# --------------------------------------------------------------------------- cases
+
+
+@dataclass
+class Case:
+    """One format to benchmark.
+
+    Attributes:
+        fmt: label, e.g. ``"bvh"``.
+        pattern: glob of sample files under ``--src`` (e.g. ``"bvh/*.bvh"``).
+        ours: ``"module:function"`` of the mocapkit reader (imported lazily; missing -> skipped).
+        plain: the plain reader, ``path -> anything``.
+        ours_positions: ``our result -> [frames, joints, 3]`` metres, for the agreement check.
+        plain_positions: ``(path, our result, plain result) -> [frames, joints, 3]`` metres.
+        frames: ``our result -> number of frames``.
+        atol: agreement tolerance in metres.
+    """
+
+    fmt: str
+    pattern: str
+    ours: str
+    plain: Callable
+    ours_positions: Callable
+    plain_positions: Callable
+    frames: Callable
+    atol: float = 1e-5
+
+
+def _bvh_plain_positions(path, ours, plain):
+    return plain * ours.metadata["scale"]  # the plain reader has no unit inference: reuse the decision
+
+
+CASES: list[Case] = [
+    Case("bvh", "bvh/*.bvh", "mocapkit.datasets.bvh:read_bvh", plain_read_bvh,
+         ours_positions=lambda m: m.positions, plain_positions=_bvh_plain_positions,
+         frames=lambda m: m.num_frames),
+    # Hooks: add a Case when the reader lands, with a plain reader above, e.g.
+    # Case("asf/amc", "asf_amc/**/*.amc", "mocapkit.datasets.asf_amc:read_amc", plain_read_amc, ...),
+    # Case("c3d", "c3d/*.c3d", "mocapkit.datasets.c3d:read_c3d", plain_read_c3d, ...),
+    # Case("msr3d", "msr3d/*_skeleton3D.txt", "mocapkit.datasets.msr_action3d:read_msr", plain_read_msr, ...),
+]
+
+
+def _load(spec: str):
+    module, _, name = spec.partition(":")
+    try:
+        return getattr(importlib.import_module(module), name)
+    except (ImportError, AttributeError):
+        return None
+
+
+def best_of(tasks: dict[str, Callable], repeat: int) -> dict[str, float]:
+    """``{name: best wall seconds}`` over ``repeat`` interleaved rounds."""
+    best = {name: float("inf") for name in tasks}
+    for _ in range(repeat):
+        for name, task in tasks.items():
+            t = time.perf_counter()
+            task()
+            best[name] = min(best[name], time.perf_counter() - t)
+    return best
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--src", type=Path, default=DEFAULT_SRC, help="the shared samples folder")
+    parser.add_argument("--repeat", type=int, default=3, help="rounds; the best is reported")
+    parser.add_argument("--copies", type=int, default=1, help="read every file this many times per round")
+    parser.add_argument("--formats", nargs="*", default=None, help="only these formats (default: all)")
+    args = parser.parse_args(argv)
+
+    rows, skipped = [], []
+    for case in CASES:
+        if args.formats and case.fmt not in args.formats:
+            continue
+        ours = _load(case.ours)
+        files = sorted(args.src.glob(case.pattern))
+        if ours is None:
+            skipped.append(f"{case.fmt}: reader {case.ours} not available")
+            continue
+        if not files:
+            skipped.append(f"{case.fmt}: no files match {args.src / case.pattern}")
+            continue
+        frames = 0
+        for f in files:  # agreement first: the speeds mean nothing otherwise (also warms the page cache)
+            mine = ours(f)
+            theirs = case.plain_positions(f, mine, case.plain(f))
+            np.testing.assert_allclose(case.ours_positions(mine), theirs, rtol=0, atol=case.atol, err_msg=str(f))
+            frames += case.frames(mine)
+        work = files * args.copies
+        best = best_of({"plain": lambda plain=case.plain, work=work: [plain(f) for f in work],
+                        "ours": lambda ours=ours, work=work: [ours(f) for f in work]}, args.repeat)
+        n, nf = len(work), frames * args.copies
+        rows.append((case.fmt, len(files), n, nf, best["plain"], best["ours"]))
+
+    load = os.getloadavg()[0]
+    print(f"\nbest of {args.repeat} rounds; {os.cpu_count()} CPUs, load average {load:.2f}\n")
+    print("| format | files (reads) | frames | reader | s | files/s | frames/s | ours vs plain |")
+    print("|---|---:|---:|---|---:|---:|---:|---:|")
+    for fmt, nfiles, n, nf, plain, mine in rows:
+        print(f"| {fmt} | {nfiles} ({n}) | {nf} | plain | {plain:.3f} | {n / plain:.1f} | {nf / plain:.0f} | |")
+        print(f"| {fmt} | {nfiles} ({n}) | {nf} | mocapkit | {mine:.3f} | {n / mine:.1f} | {nf / mine:.0f} "
+              f"| **{plain / mine:.1f}x** |")
+    for s in skipped:
+        print(f"skipped: {s}")
+    if not rows:
+        print("nothing measured (no reader or no sample files)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
