@@ -1,6 +1,8 @@
 """The ``mocapkit`` command line.
 
     mocapkit synth ntu --out DIR [--classes N] [--subjects S] [--seed K] [--set KEY=VALUE ...]
+    mocapkit synth hdm05 --out DIR [--classes NAME ...] [--actors bd bk ...] [--seed K]
+    mocapkit render FILE --out anim.gif [--strip]
     mocapkit prepare ntu --src DIR --out DIR [--workers N] [--skip-bad] [--missing-list FILE]
     mocapkit train [experiment=NAME] data.root=CACHE [Hydra overrides ...]
     mocapkit eval ckpt_path=RUN/best.ckpt [overrides ...]
@@ -53,6 +55,33 @@ def cmd_synth_ntu(args: argparse.Namespace) -> None:
     config = NTUSynthConfig(**values)
     files = synthesize_ntu(args.out, config, workers=args.workers, progress=not args.quiet)
     print(f"[mocapkit] wrote {len(files)} .skeleton files to {args.out}")
+
+
+def cmd_synth_hdm05(args: argparse.Namespace) -> None:
+    from mocapkit.datasets.synthetic_hdm05 import HDM05SynthConfig, synthesize_hdm05
+
+    values = {}
+    if args.classes:
+        values["classes"] = tuple(args.classes)
+    if args.actors:
+        values["actors"] = tuple(args.actors)
+    for name in ("seed", "clips_per_actor"):
+        if getattr(args, name) is not None:
+            values[name] = getattr(args, name)
+    files = synthesize_hdm05(args.out, HDM05SynthConfig(**values), progress=not args.quiet)
+    print(f"[mocapkit] wrote {len(files)} .amc clips (and one .asf per actor) to {args.out}")
+
+
+def cmd_render(args: argparse.Namespace) -> None:
+    from mocapkit.datasets.render import render_file
+
+    options = {k: v for k, v in (("view", args.view), ("fps", args.fps), ("n", args.frames)) if v is not None}
+    if not args.strip:
+        options.pop("n", None)
+    else:
+        options.pop("fps", None)
+    out = render_file(args.file, args.out, strip=args.strip, **options)
+    print(f"[mocapkit] wrote {out}")
 
 
 def cmd_prepare_ntu(args: argparse.Namespace) -> None:
@@ -120,6 +149,24 @@ def build_parser() -> argparse.ArgumentParser:
     ntu.add_argument("--workers", type=int, default=1)
     ntu.add_argument("--quiet", action="store_true", help="no progress bar")
     ntu.set_defaults(func=cmd_synth_ntu)
+
+    hdm = synth_sub.add_parser("hdm05", help="HDM05-style ASF/AMC clips (<class>_<actor>_<nnn>.amc)")
+    hdm.add_argument("--out", required=True, help="output folder")
+    hdm.add_argument("--classes", nargs="+", help="HDM05 class names (default: a set exercising the merges)")
+    hdm.add_argument("--actors", nargs="+", help="actors among bd bk dg mm tr (default: all five)")
+    hdm.add_argument("--clips-per-actor", dest="clips_per_actor", type=int, help="takes per class and actor")
+    hdm.add_argument("--seed", type=int, help="random seed (the output is a function of it)")
+    hdm.add_argument("--quiet", action="store_true", help="no progress bar")
+    hdm.set_defaults(func=cmd_synth_hdm05)
+
+    render = sub.add_parser("render", help="draw a motion file as an animation (.gif, .mp4) or a PNG strip")
+    render.add_argument("file", help="any supported motion file (.skeleton, .amc, .bvh, .c3d, MSR .txt)")
+    render.add_argument("--out", required=True, help="anim.gif, anim.mp4 (needs ffmpeg) or strip.png")
+    render.add_argument("--strip", action="store_true", help="write a PNG strip of evenly spaced frames")
+    render.add_argument("--frames", type=int, help="frames in the strip (default 8)")
+    render.add_argument("--view", choices=["3d", "front", "side", "top"], help="projection (default 3d)")
+    render.add_argument("--fps", type=float, help="animation frame rate (default: at most 15)")
+    render.set_defaults(func=cmd_render)
 
     prepare = sub.add_parser("prepare", help="parse a dataset folder into a memory-mappable cache")
     prepare_sub = prepare.add_subparsers(dest="dataset", required=True)

@@ -91,3 +91,16 @@ def test_config_validation():
         HDM05SynthConfig(actors=("zz",))
     with pytest.raises(ValueError):
         HDM05SynthConfig(clips_per_actor=0)
+
+
+def test_every_default_class_stays_human_sized(tmp_path):
+    """Each motion template keeps the body on or near the floor (jumps and hops lift it < 0.5 m)."""
+    from mocapkit.datasets.synthetic_hdm05 import DEFAULT_CLASSES
+
+    paths = synthesize_hdm05(tmp_path, HDM05SynthConfig(actors=("tr",), clips_per_actor=1, seed=1), progress=False)
+    assert len(paths) == len(DEFAULT_CLASSES)
+    for p in paths:
+        pos = read_amc(p).positions
+        feet = pos[:, [CMU31.index(j) for j in ("lfoot", "ltoes", "rfoot", "rtoes")], 1].min(1)
+        assert feet.min() > -0.01 and feet.max() < 0.5, p.name
+        assert pos[..., 1].max() < 2.6, p.name

@@ -389,10 +389,10 @@ def _clip(cls: str, skel: AsfSkeleton, style: ActorStyle, rng: np.random.Generat
         lift = 0.08 * np.abs(np.sin(2 * np.pi * u)) * on
     elif stem == "clap":
         high = "AboveHead" in c65
-        lift = (160.0 if high else 75.0) * env
+        raise_deg = (160.0 if high else 75.0) * env     # arm elevation (degrees), not the root's lift
         beat = np.sin(np.pi * (u % 1.0)) ** 2 * on
         for s in "lr":
-            P.shoulder(s, lift, 25.0 * (1 - beat) * env, twist=0.0)
+            P.shoulder(s, raise_deg, 25.0 * (1 - beat) * env, twist=0.0)
             P.elbow(s, (20.0 if high else 45.0) * env)
             P.add(s + "humerus", "ry", (35.0 if s == "l" else -35.0) * beat)
     elif stem == "rotate":
