@@ -114,6 +114,91 @@ def plain_read_bvh(path: str | Path, scale: float = 1.0) -> np.ndarray:
     return out * scale
 
 
+def plain_read_amc(path: str | Path) -> np.ndarray:
+    """A plain AMC reader in the style of the common CMU parsers: per-line parsing, ``float()``
+    per value, then FK per frame and per bone with small numpy matrices (``L = C·M·C⁻¹``).
+
+    The ASF is parsed with mocapkit's ``read_asf`` (the benchmark times the AMC and the FK).
+    Returns float64 ``[frames, joints, 3]`` metres: root, then the bones in ASF order.
+    """
+    from mocapkit.datasets.asf_amc import find_asf, read_asf
+
+    skel = read_asf(find_asf(path))
+    to_rad = np.pi / 180.0 if skel.units.get("angle", "deg") == "deg" else 1.0
+    metres = skel.metres_per_unit
+
+    def axis_matrix(axis: str, angle: float) -> np.ndarray:
+        c, s = np.cos(angle), np.sin(angle)
+        if axis == "x":
+            return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+        if axis == "y":
+            return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+        return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+
+    def euler(axes, angles) -> np.ndarray:  # fixed axes, first named applied first
+        m = np.eye(3)
+        for a, v in zip(axes, angles):
+            m = axis_matrix(a.lower()[-1], v * to_rad) @ m
+        return m
+
+    frames: list[dict] = []
+    with open(path, "r", encoding="latin-1") as f:
+        for line in f:
+            tok = line.split()
+            if not tok or tok[0].startswith(("#", ":")):
+                continue
+            if tok[0].isdigit():
+                frames.append({})
+            else:
+                frames[-1][tok[0]] = [float(v) for v in tok[1:]]
+    bones = {b.name: b for b in skel.bones}
+    parent = {child: par for par, children in skel.hierarchy.items() for child in children}
+    names = ["root"] + [b.name for b in skel.bones]
+    out = np.zeros((len(frames), len(names), 3))
+    c_root = euler(skel.root_axis, skel.root_orientation)
+    for t, values in enumerate(frames):
+        root = dict(zip(skel.root_order, values["root"]))
+        m_root = euler([k for k in skel.root_order if k[0] == "R"], [root[k] for k in skel.root_order if k[0] == "R"])
+        rot = {"root": c_root @ m_root @ c_root.T}
+        pos = {"root": (skel.root_position + np.array([root.get(k, 0.0) for k in ("TX", "TY", "TZ")])) * metres}
+        for name in names[1:]:
+            b = bones[name]
+            c = euler(b.axis_order, b.axis)
+            m = euler(b.dof, values.get(name, [])) if b.dof else np.eye(3)
+            rot[name] = rot[parent[name]] @ c @ m @ c.T
+            pos[name] = pos[parent[name]] + rot[name] @ (b.direction * b.length * metres)
+        out[t] = [pos[n] for n in names]
+    return out
+
+
+def plain_read_msr(path: str | Path) -> np.ndarray:
+    """A plain MSR Action3D reader: per-line ``split()`` and ``float()``, 20 rows a frame."""
+    rows = []
+    with open(path) as f:
+        for line in f:
+            tok = line.split()
+            if tok:
+                rows.append([float(v) for v in tok])
+    return np.array(rows)[:, :3].reshape(-1, 20, 3)
+
+
+def plain_read_c3d(path: str | Path) -> np.ndarray:
+    """The pure-Python ``c3d`` package's frame loop (the usual alternative to a compiled reader),
+    metres; invalid points (negative residual) as NaN."""
+    import c3d  # optional: pip install c3d
+
+    with open(path, "rb") as handle:
+        reader = c3d.Reader(handle)
+        units = reader.get("POINT").get("UNITS").string_value.strip().lower()
+        scale = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}.get(units, 1e-3)
+        frames = []
+        for _, points, _ in reader.read_frames():
+            xyz = points[:, :3] * scale
+            xyz[points[:, 3] < 0] = np.nan
+            frames.append(xyz)
+    return np.array(frames)
+
+
 # --------------------------------------------------------------------------- cases
 
 
@@ -150,11 +235,24 @@ CASES: list[Case] = [
     Case("bvh", "bvh/*.bvh", "mocapkit.datasets.bvh:read_bvh", plain_read_bvh,
          ours_positions=lambda m: m.positions, plain_positions=_bvh_plain_positions,
          frames=lambda m: m.num_frames),
-    # Hooks: add a Case when the reader lands, with a plain reader above, e.g.
-    # Case("asf/amc", "asf_amc/**/*.amc", "mocapkit.datasets.asf_amc:read_amc", plain_read_amc, ...),
-    # Case("c3d", "c3d/*.c3d", "mocapkit.datasets.c3d:read_c3d", plain_read_c3d, ...),
-    # Case("msr3d", "msr3d/*_skeleton3D.txt", "mocapkit.datasets.msr_action3d:read_msr", plain_read_msr, ...),
+    Case("asf/amc", "asf_amc/**/*.amc", "mocapkit.datasets.asf_amc:read_amc", plain_read_amc,
+         ours_positions=lambda m: m.positions, plain_positions=lambda path, ours, plain: plain,
+         frames=lambda m: m.num_frames),
+    Case("msr3d", "msr3d/*_skeleton3D.txt", "mocapkit.datasets.msr_action3d:read_msr_skeleton", plain_read_msr,
+         # ours marks all-zero joints missing; the raw file has zeros
+         ours_positions=lambda m: m.filled(0.0), plain_positions=lambda path, ours, plain: plain,
+         frames=lambda m: m.num_frames),
+    Case("c3d", "c3d/*.c3d", "mocapkit.datasets.c3d:read_c3d", plain_read_c3d,
+         ours_positions=lambda m: np.nan_to_num(m.positions, nan=0.0),
+         plain_positions=lambda path, ours, plain: np.nan_to_num(_c3d_like_ours(ours, plain), nan=0.0),
+         frames=lambda m: m.num_frames, atol=1e-4),
 ]
+
+
+def _c3d_like_ours(ours, plain: np.ndarray) -> np.ndarray:
+    """The plain reader's points restricted to the markers ours keeps, with ours' gap rule."""
+    plain = plain[:, : ours.num_joints]
+    return np.where(ours.missing[..., None], np.nan, plain)
 
 
 def _load(spec: str):
@@ -192,6 +290,11 @@ def main(argv: list[str] | None = None) -> int:
         files = sorted(args.src.glob(case.pattern))
         if ours is None:
             skipped.append(f"{case.fmt}: reader {case.ours} not available")
+            continue
+        try:
+            case.plain(files[0]) if files else None
+        except ImportError as exc:
+            skipped.append(f"{case.fmt}: plain reader needs {exc.name} (pip install {exc.name})")
             continue
         if not files:
             skipped.append(f"{case.fmt}: no files match {args.src / case.pattern}")
