@@ -1,0 +1,223 @@
+"""A spatial-temporal graph convolution network (ST-GCN family) for any skeleton layout.
+
+Yan, Xiong & Lin, "Spatial temporal graph convolutional networks for skeleton-based
+action recognition", AAAI 2018, sized for CPU and built from a layout's ``parents``,
+so the same code runs on NTU-25, MSR-20 and CMU-31 skeletons.
+
+* **Graph.** The bones of the kinematic tree plus self-loops, symmetrically normalised,
+  ``Â = D^-1/2 (A + I) D^-1/2``, and split by Yan et al.'s spatial partitioning into three
+  ``[J, J]`` matrices: *self* (the diagonal), *inward* (each joint gathers from its parent,
+  the neighbour nearer the root/centre) and *outward* (from its children). The three sum to
+  the symmetric ``Â``; inward is outward transposed. Each block also learns an additive
+  correction of the three matrices (initialised to zero; ``adaptive``).
+* **Input.** Skeletons ``[N, M, T, J, 3]`` as the data modules give them (zeros where a body or
+  frame is absent). Optional pre-normalisation inside the model: centre on the root joint of
+  body 0 in its first present frame (``center``), divide by the mean pelvis-neck length
+  (``scale``). Input streams (``streams``) are concatenated as channels: ``joint`` positions,
+  ``velocity`` (frame differences) and ``bone`` vectors (joint minus parent).
+* **Padding.** Features at absent frames are zeroed after every layer and the temporal pooling is
+  a mean over present frames only, so zero-padded frames do not change the output (in eval mode).
+* **Persons.** Each body goes through the network; the pooled features are averaged over the
+  bodies that are present.
+"""
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from mocapkit.datasets.layouts import LANDMARKS, LAYOUTS, SkeletonLayout
+
+STREAMS = ("joint", "velocity", "bone")
+
+
+def _layout(layout: SkeletonLayout | str) -> SkeletonLayout:
+    if isinstance(layout, SkeletonLayout):
+        return layout
+    if layout not in LAYOUTS:
+        raise ValueError(f"unknown skeleton layout {layout!r}; known: {sorted(LAYOUTS)}")
+    return LAYOUTS[layout]
+
+
+def spatial_adjacency(layout: SkeletonLayout | str) -> torch.Tensor:
+    """The partitioned, symmetric-normalised adjacency ``[3, J, J]`` (self, inward, outward) of a layout.
+
+    ``A[k, i, j]`` is the weight with which joint ``i`` gathers joint ``j`` in partition ``k``:
+    ``A[1, i, parent(i)]`` and ``A[2, parent(j), j]`` are ``1 / sqrt(d_i d_j)`` with ``d`` the degree
+    including the self-loop; ``A[0]`` is the diagonal ``1 / d_i``. ``A.sum(0)`` is symmetric.
+    """
+    layout = _layout(layout)
+    j = layout.num_joints
+    adj = torch.eye(j)
+    for child, parent in layout.bones:
+        adj[child, parent] = adj[parent, child] = 1.0
+    d = adj.sum(1).rsqrt()
+    norm = d[:, None] * adj * d[None, :]
+    inward = torch.zeros(j, j)
+    for child, parent in layout.bones:
+        inward[child, parent] = 1.0
+    outward = inward.T
+    return torch.stack((norm * torch.eye(j), norm * inward, norm * outward))
+
+
+class GraphConv(nn.Module):
+    """Spatial graph convolution over ``K`` partitions: ``[N, C, T, J]`` → ``[N, C', T, J]``."""
+
+    def __init__(self, in_channels: int, out_channels: int, adjacency: torch.Tensor, adaptive: bool = True):
+        super().__init__()
+        self.k = adjacency.shape[0]
+        self.register_buffer("adjacency", adjacency.clone())
+        self.correction = nn.Parameter(torch.zeros_like(adjacency)) if adaptive else None
+        self.conv = nn.Conv2d(in_channels, out_channels * self.k, kernel_size=1)
+        self.out_channels = out_channels
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        n, _, t, j = x.shape
+        a = self.adjacency if self.correction is None else self.adjacency + self.correction
+        y = self.conv(x).view(n, self.k, self.out_channels, t, j)
+        return torch.einsum("nkctj,kij->ncti", y, a)
+
+
+class STGCNBlock(nn.Module):
+    """Graph convolution → BN → ReLU → temporal convolution (stride) → BN, plus a residual, → ReLU."""
+
+    def __init__(self, in_channels: int, out_channels: int, adjacency: torch.Tensor, stride: int = 1,
+                 kernel_size: int = 9, dropout: float = 0.0, residual: bool = True, adaptive: bool = True):
+        super().__init__()
+        self.gcn = GraphConv(in_channels, out_channels, adjacency, adaptive)
+        self.bn1 = nn.BatchNorm2d(out_channels)
+        pad = (kernel_size - 1) // 2
+        self.tcn = nn.Conv2d(out_channels, out_channels, (kernel_size, 1), (stride, 1), (pad, 0))
+        self.bn2 = nn.BatchNorm2d(out_channels)
+        self.dropout = nn.Dropout(dropout)
+        self.stride = stride
+        if not residual:
+            self.residual = None
+        elif in_channels == out_channels and stride == 1:
+            self.residual = nn.Identity()
+        else:
+            self.residual = nn.Sequential(nn.Conv2d(in_channels, out_channels, 1, (stride, 1)),
+                                          nn.BatchNorm2d(out_channels))
+
+    def forward(self, x: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """``x`` ``[N, C, T, J]`` (zero at absent frames), ``mask`` ``[N, 1, T, 1]`` → both downsampled."""
+        y = F.relu(self.bn1(self.gcn(x))) * mask
+        y = self.dropout(self.bn2(self.tcn(y)))
+        out_mask = mask[:, :, :: self.stride]
+        if self.residual is not None:
+            y = y + self.residual(x)
+        return F.relu(y) * out_mask, out_mask
+
+
+class STGCN(nn.Module):
+    """Skeletons ``[N, M, T, J, in_channels]`` (zeros = absent) → logits ``[N, num_classes]``.
+
+    Args:
+        layout: a :class:`SkeletonLayout` or its name (``"ntu25"``, ``"msr20"``, ``"cmu31"``).
+        num_classes: output classes.
+        in_channels: coordinates per joint (3).
+        channels: output channels of each block (CPU-sized default: 64, 64, 128, 128).
+        strides: temporal stride of each block.
+        kernel_size: temporal kernel (frames).
+        streams: input features concatenated as channels, any of ``joint``, ``velocity``, ``bone``.
+        center: subtract the root joint of body 0 in its first present frame.
+        scale: divide by the mean pelvis-neck length of body 0 (needs the layout's landmarks).
+        adaptive: learn an additive correction of the adjacency in each block.
+        dropout: dropout inside blocks; ``head_dropout``: before the classifier.
+    """
+
+    def __init__(self, layout: SkeletonLayout | str, num_classes: int, in_channels: int = 3,
+                 channels: tuple[int, ...] = (64, 64, 128, 128), strides: tuple[int, ...] = (1, 1, 2, 1),
+                 kernel_size: int = 9, streams: tuple[str, ...] = ("joint",), center: bool = True,
+                 scale: bool = False, adaptive: bool = True, dropout: float = 0.0, head_dropout: float = 0.0):
+        super().__init__()
+        self.layout = _layout(layout)
+        streams = tuple(streams)
+        unknown = [s for s in streams if s not in STREAMS]
+        if unknown or not streams:
+            raise ValueError(f"unknown input streams {unknown or streams}; choose from {STREAMS}")
+        if len(channels) != len(strides) or not channels:
+            raise ValueError(f"channels {list(channels)} and strides {list(strides)} must have the same, non-zero length")
+        self.num_joints = self.layout.num_joints
+        self.in_channels = in_channels
+        self.streams = streams
+        self.center, self.scale = bool(center), bool(scale)
+        self.root = self.layout.parents.index(-1)
+        landmarks = LANDMARKS.get(self.layout.name)
+        if self.scale and not landmarks:
+            raise ValueError(f"scale=True needs the body landmarks of layout {self.layout.name!r}")
+        self.spine = (self.layout.index(landmarks["pelvis"]), self.layout.index(landmarks["neck"])) if landmarks else None
+        parents = [p if p >= 0 else j for j, p in enumerate(self.layout.parents)]
+        self.register_buffer("parents", torch.tensor(parents, dtype=torch.long), persistent=False)
+        features = in_channels * len(streams)
+        self.data_bn = nn.BatchNorm1d(features * self.num_joints)
+        adjacency = spatial_adjacency(self.layout)
+        blocks, c_in = [], features
+        for k, (c_out, stride) in enumerate(zip(channels, strides)):
+            blocks.append(STGCNBlock(c_in, c_out, adjacency, stride, kernel_size, dropout,
+                                     residual=k > 0, adaptive=adaptive))
+            c_in = c_out
+        self.blocks = nn.ModuleList(blocks)
+        self.head_dropout = nn.Dropout(head_dropout)
+        self.fc = nn.Linear(c_in, num_classes)
+        self.num_classes = num_classes
+
+    # ------------------------------------------------------------------ steps
+
+    def normalize(self, x: torch.Tensor, present: torch.Tensor) -> torch.Tensor:
+        """Centre (and scale) as configured; absent frames stay zero. ``[N, M, T, J, C]``."""
+        if not (self.center or self.scale):
+            return x
+        body0 = present[:, 0].to(x.dtype)                                             # [N, T]
+        if self.center:
+            first = torch.argmax(body0, dim=1).view(-1, 1, 1).expand(-1, 1, x.shape[-1])
+            origin = torch.gather(x[:, 0, :, self.root, :], 1, first)                 # [N, 1, C]
+            x = x - origin.view(-1, 1, 1, 1, x.shape[-1])
+        if self.scale:
+            lower, upper = self.spine
+            raw = x[:, 0, :, upper, :] - x[:, 0, :, lower, :]                          # centring cancels
+            length = (raw.norm(dim=-1) * body0).sum(1) / body0.sum(1).clamp(min=1.0)  # [N]
+            x = x / length.clamp(min=1e-3).view(-1, 1, 1, 1, 1)
+        return x * present[..., None, None].to(x.dtype)
+
+    def features(self, x: torch.Tensor, present: torch.Tensor) -> torch.Tensor:
+        """The input streams concatenated: ``[N, M, T, J, C]`` → ``[N, M, T, J, C * len(streams)]``."""
+        out = []
+        for stream in self.streams:
+            if stream == "joint":
+                out.append(x)
+            elif stream == "bone":
+                out.append(x - x[:, :, :, self.parents])
+            else:  # velocity: forward difference, zero where either frame is absent and at the last frame
+                both = (present[:, :, 1:] & present[:, :, :-1])[..., None, None].to(x.dtype)
+                diff = (x[:, :, 1:] - x[:, :, :-1]) * both
+                out.append(torch.cat((diff, torch.zeros_like(x[:, :, :1])), dim=2))
+        return torch.cat(out, dim=-1)
+
+    def forward(self, skeletons: torch.Tensor) -> torch.Tensor:
+        n, m, t, j, c = skeletons.shape
+        present = skeletons.abs().sum(dim=(-1, -2)) > 0                               # [N, M, T]
+        x = self.features(self.normalize(skeletons, present), present)
+        c = x.shape[-1]
+        # data BN over (joint, channel), as in ST-GCN; padded frames are re-zeroed below
+        x = x.permute(0, 1, 3, 4, 2).reshape(n * m, j * c, t)
+        x = self.data_bn(x).view(n * m, j, c, t).permute(0, 2, 3, 1)                  # [NM, C, T, J]
+        mask = present.reshape(n * m, 1, t, 1).to(x.dtype)
+        x = x * mask
+        for block in self.blocks:
+            x, mask = block(x, mask)
+        pooled = (x.sum(dim=(2, 3)) / (mask.sum(dim=(2, 3)) * j).clamp(min=1.0))      # [NM, C]
+        pooled = pooled.view(n, m, -1)
+        body = present.any(dim=2).to(x.dtype).unsqueeze(-1)                           # [N, M, 1]
+        pooled = (pooled * body).sum(1) / body.sum(1).clamp(min=1.0)
+        return self.fc(self.head_dropout(pooled))
+
+
+def stgcn(num_classes: int, layout: SkeletonLayout | str = "ntu25", in_channels: int = 3,
+          channels: tuple[int, ...] | list[int] = (64, 64, 128, 128),
+          strides: tuple[int, ...] | list[int] = (1, 1, 2, 1), kernel_size: int = 9,
+          streams: tuple[str, ...] | list[str] = ("joint",), center: bool = True, scale: bool = False,
+          adaptive: bool = True, dropout: float = 0.0, head_dropout: float = 0.0) -> STGCN:
+    """Hydra builder of :class:`STGCN` (``configs/model/stgcn.yaml``); lists are accepted for tuples."""
+    return STGCN(layout, num_classes, in_channels, tuple(channels), tuple(strides), kernel_size, tuple(streams),
+                 center, scale, adaptive, dropout, head_dropout)

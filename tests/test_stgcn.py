@@ -1,0 +1,104 @@
+"""The ST-GCN-family graph network: adjacency from a layout, shapes, padding invariance, learning, ONNX."""
+import numpy as np
+import pytest
+import torch
+
+from mocapkit.datasets.layouts import CMU31, MSR20, NTU25
+from mocapkit.models.stgcn import STGCN, spatial_adjacency, stgcn
+
+
+@pytest.mark.parametrize("layout", [MSR20, NTU25, CMU31], ids=lambda l: l.name)
+def test_adjacency_is_symmetric_normalised_and_matches_the_bones(layout):
+    a = spatial_adjacency(layout)
+    j = layout.num_joints
+    assert a.shape == (3, j, j)
+    full = a.sum(0)
+    torch.testing.assert_close(full, full.T)
+    torch.testing.assert_close(a[1], a[2].T)
+    edges = {tuple(sorted(b)) for b in layout.bones}
+    degree = torch.ones(j)
+    for c, p in layout.bones:
+        degree[c] += 1
+        degree[p] += 1
+    expected = torch.diag(1.0 / degree)
+    for c, p in layout.bones:
+        expected[c, p] = expected[p, c] = 1.0 / torch.sqrt(degree[c] * degree[p])
+    torch.testing.assert_close(full, expected)
+    off = {(i, k) for i, k in zip(*np.nonzero(full.numpy())) if i < k}
+    assert off == edges
+    # inward: each joint gathers from its parent; outward: from its children
+    for c, p in layout.bones:
+        assert a[1, c, p] > 0 and a[2, p, c] > 0 and a[1, p, c] == 0
+    assert torch.equal(a[0], torch.diag(torch.diagonal(a[0])))
+    # the symmetric normalisation: the largest eigenvalue of D^-1/2 (A+I) D^-1/2 is 1
+    assert torch.linalg.eigvalsh(full).max() == pytest.approx(1.0, abs=1e-5)
+
+
+@pytest.mark.parametrize("layout,bodies", [("msr20", 1), ("ntu25", 2), ("cmu31", 1)])
+def test_forward_shapes(layout, bodies):
+    model = stgcn(7, layout=layout, streams=["joint", "velocity", "bone"], scale=True)
+    x = torch.randn(3, bodies, 30, model.num_joints, 3)
+    assert model(x).shape == (3, 7)
+    assert STGCN(MSR20, 4)(torch.randn(2, 1, 12, 20, 3)).shape == (2, 4)   # a SkeletonLayout works too
+    with pytest.raises(ValueError, match="unknown skeleton layout"):
+        stgcn(3, layout="kinect15")
+
+
+def test_zero_padded_frames_and_absent_bodies_do_not_change_the_output():
+    torch.manual_seed(0)
+    model = stgcn(5, layout="ntu25", streams=["joint", "velocity", "bone"], scale=True, dropout=0.2).eval()
+    x = torch.randn(4, 2, 37, 25, 3) * 0.3 + torch.tensor([0.0, 0.0, 3.0])
+    x[:, 1] = 0.0                                                  # second body absent
+    x[2, :, 21:] = 0.0                                             # a shorter sample
+    with torch.no_grad():
+        ref = model(x)
+        padded = model(torch.cat([x, torch.zeros(4, 2, 26, 25, 3)], dim=2))
+        one_body = model(x[:, :1])
+        alone = model(x[2:3, :, :21])
+    torch.testing.assert_close(padded, ref, atol=1e-5, rtol=1e-5)
+    torch.testing.assert_close(one_body, ref, atol=1e-5, rtol=1e-5)
+    torch.testing.assert_close(alone, ref[2:3], atol=1e-5, rtol=1e-5)
+
+
+def test_centering_makes_it_translation_invariant():
+    torch.manual_seed(1)
+    model = stgcn(3, layout="msr20", scale=True).eval()
+    x = torch.randn(2, 1, 16, 20, 3)
+    with torch.no_grad():
+        torch.testing.assert_close(model(x + torch.tensor([0.5, -0.2, 2.0])), model(x), atol=1e-4, rtol=1e-4)
+
+
+def test_it_learns_a_toy_two_class_problem():
+    """Class 0 raises the right wrist, class 1 the left one; random lengths, zero padding."""
+    torch.manual_seed(0)
+    n, t = 64, 20
+    x = torch.randn(n, 1, t, 20, 3) * 0.02 + torch.tensor([0.0, 0.0, 2.5])
+    labels = torch.arange(n) % 2
+    ramp = torch.linspace(0, 0.5, t)
+    for i in range(n):
+        wrist = MSR20.index("WristRight") if labels[i] == 0 else MSR20.index("WristLeft")
+        x[i, 0, :, wrist, 1] += ramp
+        x[i, 0, int(torch.randint(12, t + 1, ())):] = 0.0
+    model = stgcn(2, layout="msr20", channels=[32, 32], strides=[1, 2], kernel_size=3)
+    opt = torch.optim.Adam(model.parameters(), lr=3e-3)
+    for _ in range(40):
+        loss = torch.nn.functional.cross_entropy(model(x), labels)
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+    model.eval()
+    with torch.no_grad():
+        assert (model(x).argmax(1) == labels).float().mean() > 0.95
+
+
+def test_onnx_export_on_msr20_one_body(tmp_path):
+    """`mocapkit export`'s function takes the joint count from ``model.layout``; bodies and frames are dynamic."""
+    pytest.importorskip("onnxruntime")
+    from mocapkit.train.export_onnx import export_onnx
+
+    model = stgcn(4, layout="msr20", streams=["joint", "velocity", "bone"], scale=True,
+                  channels=[16, 16], strides=[2, 1])
+    report = export_onnx(model, tmp_path / "gcn.onnx", class_names=list("abcd"), trace_shape=(2, 32),
+                         check_shape=(3, 41))
+    assert report["layout"] == "msr20" and report["traced_shape"][3] == 20
+    assert report["max_abs_diff"] < 1e-4 and report["same_top1"]
