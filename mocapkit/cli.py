@@ -209,7 +209,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _run(handler, arg) -> int:
-    from mocapkit.datasets.ntu_skeleton import SkeletonFormatError
+    from mocapkit.datasets.format_errors import MotionFormatError
 
     try:
         from mocapkit.train.config import ConfigError
@@ -217,7 +217,7 @@ def _run(handler, arg) -> int:
         ConfigError = ValueError
     try:
         handler(arg)
-    except (SkeletonFormatError, ConfigError, FileNotFoundError, ValueError) as exc:
+    except (MotionFormatError, ConfigError, FileNotFoundError, ValueError) as exc:
         if os.environ.get("MOCAPKIT_DEBUG"):
             raise
         print(f"mocapkit: error: {exc}", file=sys.stderr)

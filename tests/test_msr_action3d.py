@@ -46,7 +46,7 @@ def test_reader_shapes_units_and_missing(tmp_path):
 
 def test_row_count_not_multiple_of_20_names_file_and_line(tmp_path):
     path = _write(tmp_path / "a01_s01_e01_skeleton3D.txt", np.ones((47, 4)))
-    with pytest.raises(MSRFormatError, match=r"a01_s01_e01_skeleton3D\.txt: line 41: .*47 rows, not a multiple of 20"):
+    with pytest.raises(MSRFormatError, match=r"a01_s01_e01_skeleton3D\.txt, line 41: .*47 rows, not a multiple of 20"):
         read_msr_skeleton(path)
 
 
@@ -181,7 +181,7 @@ def test_listing_excludes_defective_files_with_reasons(tmp_path):
         _write(tmp_path / f"{name}_skeleton3D.txt", np.c_[rng.normal(size=(60, 3)), np.ones(60)])
     _write(tmp_path / "a02_s01_e01_skeleton3D.txt", np.zeros((40, 4)))
     _write(tmp_path / "a03_s01_e01_skeleton3D.txt", np.ones((30, 4)))
-    with pytest.raises(MSRFormatError, match="a03_s01_e01_skeleton3D.txt: line 21"):
+    with pytest.raises(MSRFormatError, match="a03_s01_e01_skeleton3D.txt, line 21"):
         MSRAction3D(tmp_path)
     data = MSRAction3D(tmp_path, skip_bad=True)
     assert data.listed == 4 and len(data) == 2 and data.names == ["a01_s01_e01", "a01_s02_e01"]

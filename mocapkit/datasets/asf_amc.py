@@ -66,6 +66,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from mocapkit.datasets.format_errors import MotionFormatError
 from mocapkit.datasets.layouts import CMU31
 from mocapkit.datasets.motion import Motion
 
@@ -75,37 +76,12 @@ ROTATION_DOFS = ("rx", "ry", "rz")
 ROOT_CHANNELS = ("TX", "TY", "TZ", "RX", "RY", "RZ")
 
 
-class AsfFormatError(ValueError):
+class AsfFormatError(MotionFormatError):
     """A malformed ASF file. The message names the file and the 1-based line."""
 
-    def __init__(self, path: str | os.PathLike, line: int | None, message: str):
-        self.path = str(path)
-        self.line = line
-        self.detail = message
-        where = f"{self.path}, line {line}" if line is not None else self.path
-        super().__init__(f"{where}: {message}")
 
-    def __reduce__(self):
-        return (type(self), (self.path, self.line, self.detail))
-
-
-class AmcFormatError(ValueError):
+class AmcFormatError(MotionFormatError):
     """A malformed AMC file (or one that does not fit its ASF). Names the file, 1-based line and frame."""
-
-    def __init__(self, path: str | os.PathLike, line: int | None, message: str, frame: int | None = None):
-        self.path = str(path)
-        self.line = line
-        self.frame = frame
-        self.detail = message
-        where = self.path
-        if line is not None:
-            where += f", line {line}"
-        if frame is not None:
-            where += f" (frame {frame})"
-        super().__init__(f"{where}: {message}")
-
-    def __reduce__(self):
-        return (type(self), (self.path, self.line, self.detail, self.frame))
 
 
 # --------------------------------------------------------------------------- data

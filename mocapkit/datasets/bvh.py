@@ -77,6 +77,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mocapkit.datasets.format_errors import MotionFormatError
 from mocapkit.datasets.motion import Motion
 
 #: Metres per file unit for the named units accepted by ``read_bvh(units=...)``.
@@ -98,18 +99,8 @@ _FRAMES_RE = re.compile(rb"^\s*Frames\s*:\s*(\S+)\s*$", re.IGNORECASE)
 _FRAME_TIME_RE = re.compile(rb"^\s*Frame\s+Time\s*:\s*(\S+)\s*$", re.IGNORECASE)
 
 
-class BvhFormatError(ValueError):
+class BvhFormatError(MotionFormatError):
     """A malformed ``.bvh`` file. The message names the file and the 1-based line."""
-
-    def __init__(self, path: str | os.PathLike, line: int | None, message: str):
-        self.path = str(path)
-        self.line = line
-        self.detail = message
-        where = f"{self.path}, line {line}" if line is not None else self.path
-        super().__init__(f"{where}: {message}")
-
-    def __reduce__(self):  # picklable, so worker processes can send it back
-        return (type(self), (self.path, self.line, self.detail))
 
 
 @dataclass

@@ -35,6 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mocapkit.datasets.format_errors import MotionFormatError
 from mocapkit.datasets.motion import AXES, Motion
 
 #: Metres per unit for the POINT:UNITS values understood.
@@ -43,17 +44,13 @@ UNIT_SCALE = {"mm": 1e-3, "cm": 1e-2, "dm": 1e-1, "m": 1.0}
 _PROCESSORS = {84: "intel", 85: "dec", 86: "mips"}
 
 
-class C3DFormatError(ValueError):
+class C3DFormatError(MotionFormatError):
     """A C3D file that cannot be read. The message names the file (and the frame where known)."""
 
     def __init__(self, path: str | os.PathLike, message: str, frame: int | None = None):
-        self.path = str(path)
-        self.frame = frame
-        self.detail = message
-        where = f"{self.path}, frame {frame}" if frame is not None else self.path
-        super().__init__(f"{where}: {message}")
+        super().__init__(path, None, message, frame)
 
-    def __reduce__(self):  # picklable, so worker processes can send it back
+    def __reduce__(self):
         return (type(self), (self.path, self.detail, self.frame))
 
 

@@ -42,6 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mocapkit.datasets.format_errors import MotionFormatError
 from mocapkit.datasets.layouts import MSR20
 from mocapkit.datasets.motion import Motion
 
@@ -77,7 +78,7 @@ MSR_SPLITS = ("cross_subject", "random_half")
 _NAME = re.compile(r"^a(\d+)_s(\d+)_e(\d+)_skeleton(3D)?\.txt$", re.IGNORECASE)
 
 
-class MSRFormatError(ValueError):
+class MSRFormatError(MotionFormatError):
     """A malformed MSR Action3D skeleton file; the message names the file and the line."""
 
 
@@ -114,25 +115,25 @@ def _parse_rows(path: Path, text: str) -> np.ndarray:
         if not fields:
             continue
         if len(fields) != 4:
-            raise MSRFormatError(f"{path}: line {number}: expected 4 numbers (x y z c), got {len(fields)}: {line.strip()!r}")
+            raise MSRFormatError(path, number, f"expected 4 numbers (x y z c), got {len(fields)}: {line.strip()!r}")
         try:
             rows.append([float(f) for f in fields])
         except ValueError:
-            raise MSRFormatError(f"{path}: line {number}: not a number in {line.strip()!r}") from None
+            raise MSRFormatError(path, number, f"not a number in {line.strip()!r}") from None
         numbers.append(number)
     if not rows:
-        raise MSRFormatError(f"{path}: line 1: the file holds no skeleton rows")
+        raise MSRFormatError(path, 1, "the file holds no skeleton rows")
     if len(rows) % JOINTS_PER_FRAME:
         complete = len(rows) // JOINTS_PER_FRAME
         first_of_partial = numbers[complete * JOINTS_PER_FRAME]
         raise MSRFormatError(
-            f"{path}: line {first_of_partial}: frame {complete + 1} is incomplete: the file has {len(rows)} rows, "
+            path, first_of_partial, f"frame {complete + 1} is incomplete: the file has {len(rows)} rows, "
             f"not a multiple of {JOINTS_PER_FRAME} (the last {len(rows) % JOINTS_PER_FRAME} rows, from line "
             f"{first_of_partial} on, are left over)")
     values = np.asarray(rows, dtype=np.float64)
     bad = ~np.isfinite(values).all(axis=1)
     if bad.any():
-        raise MSRFormatError(f"{path}: line {numbers[int(np.argmax(bad))]}: non-finite value")
+        raise MSRFormatError(path, numbers[int(np.argmax(bad))], "non-finite value")
     return values
 
 

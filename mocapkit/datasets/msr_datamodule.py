@@ -19,7 +19,12 @@ import numpy as np
 import torch
 from torch.utils.data import DataLoader, Dataset
 
-from mocapkit.datasets.msr_action3d import ACTION_NAMES, MSRAction3D, msr_split_indices, subset_actions
+from mocapkit.datasets.msr_action3d import (
+    ACTION_NAMES,
+    MSRAction3D,
+    msr_split_indices,
+    subset_actions,
+)
 from mocapkit.datasets.ntu_datamodule import pad_collate, uniform_frame_indices
 from mocapkit.datasets.protocols import validation_split
 from mocapkit.datasets.skeleton_augment import SkeletonAugment

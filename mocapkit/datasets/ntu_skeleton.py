@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mocapkit.datasets.format_errors import MotionFormatError
 from mocapkit.datasets.layouts import NTU25
 
 NUM_JOINTS = 25
@@ -43,18 +44,8 @@ BODY_INFO_FIELDS = (
 _NAME_RE = re.compile(r"S(\d{3})C(\d{3})P(\d{3})R(\d{3})A(\d{3})")
 
 
-class SkeletonFormatError(ValueError):
+class SkeletonFormatError(MotionFormatError):
     """A malformed ``.skeleton`` file. The message names the file and the 1-based line."""
-
-    def __init__(self, path: str | os.PathLike, line: int | None, message: str):
-        self.path = str(path)
-        self.line = line
-        self.detail = message
-        where = f"{self.path}, line {line}" if line is not None else self.path
-        super().__init__(f"{where}: {message}")
-
-    def __reduce__(self):  # picklable, so worker processes can send it back
-        return (type(self), (self.path, self.line, self.detail))
 
 
 @dataclass(frozen=True)
