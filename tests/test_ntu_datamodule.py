@@ -3,7 +3,8 @@ import numpy as np
 import pytest
 import torch
 
-from mocapkit.datasets.ntu_datamodule import NTUDataModule, pad_collate, uniform_frame_indices
+from mocapkit.datasets.ntu_datamodule import NTUDataModule
+from mocapkit.datasets.skeleton_datamodule import pad_collate, uniform_frame_indices
 from mocapkit.datasets.ntu_prepare import prepare_ntu
 from mocapkit.datasets.skeleton_augment import SkeletonAugment
 from mocapkit.datasets.synthetic_ntu import NTUSynthConfig, synthesize_ntu

@@ -14,10 +14,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import lightning as L
 import numpy as np
 import torch
-from torch.utils.data import DataLoader, Dataset
+from torch.utils.data import Dataset
 
 from mocapkit.datasets.msr_action3d import (
     ACTION_NAMES,
@@ -25,9 +24,12 @@ from mocapkit.datasets.msr_action3d import (
     msr_split_indices,
     subset_actions,
 )
-from mocapkit.datasets.ntu_datamodule import pad_collate, uniform_frame_indices
 from mocapkit.datasets.protocols import validation_split
 from mocapkit.datasets.skeleton_augment import SkeletonAugment
+from mocapkit.datasets.skeleton_datamodule import (
+    SkeletonDataModule,
+    uniform_frame_indices,
+)
 
 
 class MSRSkeletonDataset(Dataset):
@@ -55,7 +57,7 @@ class MSRSkeletonDataset(Dataset):
         return {"skeleton": seq, "label": int(self.labels[i]), "index": i, "subject": int(self.data.subjects[i])}
 
 
-class MSRAction3DDataModule(L.LightningDataModule):
+class MSRAction3DDataModule(SkeletonDataModule):
     """Train / validation / test loaders for one MSR Action3D protocol.
 
     Args:
@@ -115,18 +117,12 @@ class MSRAction3DDataModule(L.LightningDataModule):
     def class_names(self) -> list[str]:
         return [f"a{a:02d} {ACTION_NAMES[a - 1]}" for a in self.actions]
 
-    def sample_counts(self) -> dict[str, int]:
-        return {"train": len(self.train_idx), "val": len(self.val_idx), "test": len(self.test_idx)}
-
     def describe(self) -> dict:
         """The protocol for reports: split, subset, subjects on each side, sample counts, exclusions."""
         subjects = self.data.subjects
         return {"split": self.split if not self.subset else f"{self.subset}_{self.split}",
                 "subset": self.subset, "actions": list(self.actions), "data_root": str(self.root),
-                "train_subjects": sorted(set(subjects[self.train_idx].tolist())),
-                "val_subjects": sorted(set(subjects[self.val_idx].tolist())),
-                "test_subjects": sorted(set(subjects[self.test_idx].tolist())),
-                "sample_counts": self.sample_counts(), "excluded": dict(self.data.excluded)}
+                "excluded": dict(self.data.excluded), **self.split_description(subjects)}
 
     def dataset(self, part: str) -> MSRSkeletonDataset:
         """The ``"train"``, ``"val"`` or ``"test"`` part (augmentation only on train), built once."""
@@ -136,17 +132,3 @@ class MSRAction3DDataModule(L.LightningDataModule):
                                                       self.augment if part == "train" else None,
                                                       self.drop_missing_frames)
         return self._datasets[part]
-
-    def _loader(self, part: str, shuffle: bool) -> DataLoader:
-        return DataLoader(self.dataset(part), batch_size=self.batch_size if part == "train" else self.eval_batch_size,
-                          shuffle=shuffle, num_workers=self.num_workers, collate_fn=pad_collate,
-                          persistent_workers=self.num_workers > 0, drop_last=False)
-
-    def train_dataloader(self) -> DataLoader:
-        return self._loader("train", shuffle=True)
-
-    def val_dataloader(self) -> DataLoader:
-        return self._loader("val", shuffle=False)
-
-    def test_dataloader(self) -> DataLoader:
-        return self._loader("test", shuffle=False)

@@ -1,34 +1,21 @@
 """Lightning data module over a prepared NTU-style cache (``mocapkit prepare ntu``).
 
-Batches are dicts::
-
-    skeletons  float32 [B, M, T, 25, 3]   metres; zero-padded to the longest sample in the batch
-    labels     int64   [B]                0-based action
-    lengths    int64   [B]                frames before padding
-    indices    int64   [B]                sample index in the cache
-    subjects   int64   [B]
-
-Padding frames are all zero, which every model here treats as "no body".
+Batches are the dicts of :mod:`mocapkit.datasets.skeleton_datamodule`
+(``skeletons`` ``[B, 2, T, 25, 3]`` zero-padded, ``labels``, ``lengths``,
+``indices``, ``subjects``).
 """
 from __future__ import annotations
 
 from pathlib import Path
 
-import lightning as L
 import numpy as np
 import torch
-from torch.utils.data import DataLoader, Dataset
+from torch.utils.data import Dataset
 
 from mocapkit.datasets.ntu_cache import NTUCache
 from mocapkit.datasets.protocols import split_indices, validation_split
 from mocapkit.datasets.skeleton_augment import SkeletonAugment
-
-
-def uniform_frame_indices(length: int, max_frames: int) -> np.ndarray:
-    """Indices of ``min(length, max_frames)`` frames spread evenly over ``length`` frames."""
-    if length <= max_frames:
-        return np.arange(length)
-    return np.linspace(0, length - 1, max_frames).round().astype(np.int64)
+from mocapkit.datasets.skeleton_datamodule import SkeletonDataModule, uniform_frame_indices
 
 
 class SkeletonDataset(Dataset):
@@ -55,23 +42,7 @@ class SkeletonDataset(Dataset):
                 "subject": int(self.cache.subjects[i])}
 
 
-def pad_collate(items: list[dict]) -> dict:
-    """Stack samples of different lengths, zero-padding the frame axis."""
-    longest = max(it["skeleton"].shape[1] for it in items)
-    first = items[0]["skeleton"]
-    skeletons = first.new_zeros((len(items), first.shape[0], longest) + tuple(first.shape[2:]))
-    for b, it in enumerate(items):
-        skeletons[b, :, : it["skeleton"].shape[1]] = it["skeleton"]
-    return {
-        "skeletons": skeletons,
-        "labels": torch.tensor([it["label"] for it in items]),
-        "lengths": torch.tensor([it["skeleton"].shape[1] for it in items]),
-        "indices": torch.tensor([it["index"] for it in items]),
-        "subjects": torch.tensor([it["subject"] for it in items]),
-    }
-
-
-class NTUDataModule(L.LightningDataModule):
+class NTUDataModule(SkeletonDataModule):
     """Train / validation / test loaders for one evaluation protocol.
 
     Args:
@@ -121,37 +92,11 @@ class NTUDataModule(L.LightningDataModule):
             return list(self.cache.class_names)
         return [f"A{k + 1:03d}" for k in range(self.num_classes)]
 
-    def sample_counts(self) -> dict[str, int]:
-        return {"train": len(self.train_idx), "val": len(self.val_idx), "test": len(self.test_idx)}
-
     def describe(self) -> dict:
-        """The split for reports: its name, the subjects on each side and the sample counts.
-
-        Every data module used with ``mocapkit train`` / ``eval`` provides this, together with
-        ``num_classes``, ``class_names``, ``sample_counts()`` and the three data loaders.
-        """
-        subjects = self.cache.subjects
-        return {"split": self.split, "data_root": str(self.root),
-                "train_subjects": sorted(set(subjects[self.train_idx].tolist())),
-                "val_subjects": sorted(set(subjects[self.val_idx].tolist())),
-                "test_subjects": sorted(set(subjects[self.test_idx].tolist())),
-                "sample_counts": self.sample_counts()}
+        """The split for reports: its name, the subjects on each side and the sample counts."""
+        return {"split": self.split, "data_root": str(self.root), **self.split_description(self.cache.subjects)}
 
     def dataset(self, part: str) -> SkeletonDataset:
         """The ``"train"``, ``"val"`` or ``"test"`` part (augmentation only on train)."""
         indices = {"train": self.train_idx, "val": self.val_idx, "test": self.test_idx}[part]
         return SkeletonDataset(self.cache, indices, self.max_frames, self.augment if part == "train" else None)
-
-    def _loader(self, part: str, shuffle: bool) -> DataLoader:
-        return DataLoader(self.dataset(part), batch_size=self.batch_size if part == "train" else self.eval_batch_size,
-                          shuffle=shuffle, num_workers=self.num_workers, collate_fn=pad_collate,
-                          persistent_workers=self.num_workers > 0, drop_last=False)
-
-    def train_dataloader(self) -> DataLoader:
-        return self._loader("train", shuffle=True)
-
-    def val_dataloader(self) -> DataLoader:
-        return self._loader("val", shuffle=False)
-
-    def test_dataloader(self) -> DataLoader:
-        return self._loader("test", shuffle=False)
