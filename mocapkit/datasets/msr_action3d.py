@@ -45,6 +45,7 @@ import numpy as np
 from mocapkit.datasets.format_errors import MotionFormatError
 from mocapkit.datasets.layouts import MSR20
 from mocapkit.datasets.motion import Motion
+from mocapkit.datasets.protocols import subject_masks
 
 log = logging.getLogger(__name__)
 
@@ -281,20 +282,10 @@ def msr_split_indices(data, split: str = "cross_subject", subset: str | None = N
     actions, subjects = _ints(data, "actions"), _ints(data, "subjects")
     in_subset = np.isin(actions, subset_actions(subset)) if subset else np.ones(len(actions), dtype=bool)
     if split == "cross_subject":
-        train_set = {int(s) for s in (train_subjects if train_subjects is not None else CROSS_SUBJECT_TRAIN)}
-        test_set = {int(s) for s in (test_subjects if test_subjects is not None else CROSS_SUBJECT_TEST)}
-        if not train_set or not test_set:
-            raise ValueError("cross_subject: train_subjects and test_subjects must both be non-empty")
-        overlap = sorted(train_set & test_set)
-        if overlap:
-            raise ValueError(f"cross_subject: subjects {overlap} are in both train_subjects and test_subjects")
-        present = set(np.unique(subjects).tolist())
-        for name, chosen in (("train_subjects", train_set), ("test_subjects", test_set)):
-            absent = sorted(chosen - present)
-            if absent:
-                raise ValueError(f"cross_subject: {name} lists subjects {absent} that have no samples")
-        train = in_subset & np.isin(subjects, sorted(train_set))
-        test = in_subset & np.isin(subjects, sorted(test_set))
+        train, test = subject_masks(subjects, CROSS_SUBJECT_TRAIN if train_subjects is None else train_subjects,
+                                    CROSS_SUBJECT_TEST if test_subjects is None else test_subjects,
+                                    label="cross_subject")
+        train, test = in_subset & train, in_subset & test
         return np.flatnonzero(train), np.flatnonzero(test)
     if train_subjects is not None or test_subjects is not None:
         raise ValueError("train_subjects / test_subjects are only used by split='cross_subject'")

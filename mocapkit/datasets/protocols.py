@@ -73,28 +73,34 @@ def split_indices(data, split: str, train_subjects: Iterable[int] | None = None,
         train = _array(data, "setups") % 2 == 0
         test = ~train
     else:
-        train, test = _custom_masks(_array(data, "subjects"), train_subjects, test_subjects)
+        train, test = subject_masks(_array(data, "subjects"), train_subjects, test_subjects)
     return np.flatnonzero(train), np.flatnonzero(test)
 
 
-def _custom_masks(subjects: np.ndarray, train_subjects, test_subjects) -> tuple[np.ndarray, np.ndarray]:
+def subject_masks(subjects: np.ndarray, train_subjects, test_subjects,
+                  label: str = "split='custom'") -> tuple[np.ndarray, np.ndarray]:
+    """Boolean masks of the samples of ``train_subjects`` and of ``test_subjects``.
+
+    Both lists are required, non-empty, disjoint, and every listed subject must have samples;
+    errors name the list (``label`` names the split in the messages).
+    """
     absent = [name for name, value in (("train_subjects", train_subjects), ("test_subjects", test_subjects))
               if value is None]
     if absent:
-        raise ValueError(f"split='custom' needs both subject lists; missing: {', '.join(absent)}")
+        raise ValueError(f"{label} needs both subject lists; missing: {', '.join(absent)}")
     train_set = {int(s) for s in train_subjects}
     test_set = {int(s) for s in test_subjects}
     for name, chosen in (("train_subjects", train_set), ("test_subjects", test_set)):
         if not chosen:
-            raise ValueError(f"split='custom': {name} is empty")
+            raise ValueError(f"{label}: {name} is empty")
     overlap = sorted(train_set & test_set)
     if overlap:
-        raise ValueError(f"split='custom': subjects {overlap} are in both train_subjects and test_subjects")
+        raise ValueError(f"{label}: subjects {overlap} are in both train_subjects and test_subjects")
     present = set(np.unique(subjects).tolist())
     for name, chosen in (("train_subjects", train_set), ("test_subjects", test_set)):
         without = sorted(chosen - present)
         if without:
-            raise ValueError(f"split='custom': {name} lists subjects {without} that have no samples")
+            raise ValueError(f"{label}: {name} lists subjects {without} that have no samples")
     return np.isin(subjects, sorted(train_set)), np.isin(subjects, sorted(test_set))
 
 
