@@ -39,6 +39,13 @@ class ActionRecognitionModule(L.LightningModule):
                                    "label_smoothing": label_smoothing})
         self.model = instantiate(model, num_classes=num_classes)
 
+    @classmethod
+    def from_config(cls, cfg: DictConfig, datamodule) -> ActionRecognitionModule:
+        """The module for a composed training config and its data module (``num_classes``, ``class_names``)."""
+        return cls(model=cfg.model, optimizer=cfg.optimizer, scheduler=cfg.scheduler or None,
+                   num_classes=datamodule.num_classes, class_names=datamodule.class_names,
+                   label_smoothing=cfg.label_smoothing)
+
     def forward(self, skeletons: torch.Tensor) -> torch.Tensor:
         return self.model(skeletons)
 

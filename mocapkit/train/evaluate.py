@@ -1,8 +1,10 @@
 """``mocapkit eval``: evaluate a checkpoint on the held-out part of its split.
 
-Writes ``metrics.json`` (top-1, top-5, mean-class accuracy, per-class and
-per-subject accuracy, the split and the sample counts), ``confusion_matrix.png``
-and a short ``summary.md`` to ``<run>/eval/`` (or ``eval.out_dir``).
+:func:`evaluate` reloads the run's config and hands over to its task's evaluation
+(:mod:`mocapkit.train.tasks`); everything goes to ``<run>/eval/`` (or ``eval.out_dir``).
+For action recognition (:func:`evaluate_action`) that is ``metrics.json`` (top-1,
+top-5, mean-class accuracy, per-class and per-subject accuracy, the split and the
+sample counts), ``confusion_matrix.png`` and a short ``summary.md``.
 """
 from __future__ import annotations
 
@@ -17,6 +19,7 @@ from omegaconf import DictConfig, OmegaConf
 from mocapkit.evaluation import classification_report, plot_confusion_matrix
 from mocapkit.train.action_module import ActionRecognitionModule
 from mocapkit.train.config import ConfigError, load_run_config
+from mocapkit.train.tasks import get_task
 from mocapkit.train.training import build_datamodule
 
 
@@ -29,34 +32,40 @@ def predict_logits(module: ActionRecognitionModule, loader, cfg: DictConfig) -> 
 
 
 def evaluate(ckpt_path: str | Path, overrides: list[str] | None = None) -> dict:
-    """Evaluate ``ckpt_path`` (its run's config plus ``overrides``); return the metrics dict."""
+    """Evaluate ``ckpt_path`` (its run's config plus ``overrides``) as its task does; return the report."""
     ckpt_path = Path(ckpt_path)
     if not ckpt_path.is_file():
         raise ConfigError(f"ckpt_path={ckpt_path}: no such checkpoint")
     run_dir = ckpt_path.parent
     cfg = load_run_config(run_dir, overrides)
-    part = cfg.eval.part
-    if part not in ("test", "val"):
-        raise ConfigError(f"eval.part must be 'test' or 'val', got {part!r}")
+    if cfg.eval.part not in ("test", "val"):
+        raise ConfigError(f"eval.part must be 'test' or 'val', got {cfg.eval.part!r}")
+    task = get_task(cfg.get("task") or "action")  # runs from before tasks existed are action runs
     datamodule = build_datamodule(cfg)
-    module = ActionRecognitionModule.load_from_checkpoint(ckpt_path, map_location="cpu")
+    module = task.module_class().load_from_checkpoint(ckpt_path, map_location="cpu")
+    out_dir = Path(cfg.eval.out_dir) if cfg.eval.out_dir else run_dir / "eval"
+    out_dir.mkdir(parents=True, exist_ok=True)
+    report = {"checkpoint": str(ckpt_path), **task.evaluate_fn()(module, datamodule, cfg, out_dir)}
+    OmegaConf.save(cfg, out_dir / "eval_config.yaml", resolve=True)
+    return report
+
+
+def evaluate_action(module: ActionRecognitionModule, datamodule, cfg: DictConfig, out_dir: Path) -> dict:
+    """Top-1/top-5/mean-class/per-class/per-subject accuracy on ``cfg.eval.part``; writes the report files."""
+    part = cfg.eval.part
     loader = datamodule.test_dataloader() if part == "test" else datamodule.val_dataloader()
     out = predict_logits(module, loader, cfg)
     report = classification_report(out["logits"], out["labels"], groups={"subject": out["subjects"]},
                                    class_names=module.hparams.class_names or None)
-    report.update({"checkpoint": str(ckpt_path), "part": part, **datamodule.describe()})
-    out_dir = Path(cfg.eval.out_dir) if cfg.eval.out_dir else run_dir / "eval"
-    out_dir.mkdir(parents=True, exist_ok=True)
+    report.update({"part": part, **datamodule.describe()})
     (out_dir / "metrics.json").write_text(json.dumps(report, indent=2))
     title = f"{cfg.experiment_name}: {report['split']} {part}, top-1 {report['top1']:.1%}"
     plot_confusion_matrix(np.array(report["confusion_matrix"]), report["class_names"],
                           out_dir / "confusion_matrix.png", title=title)
     (out_dir / "summary.md").write_text(summary_table(report))
-    OmegaConf.save(cfg, out_dir / "eval_config.yaml", resolve=True)
     print(summary_table(report))
-    print(f"[mocapkit] wrote {out_dir / 'metrics.json'}")
-    print(f"[mocapkit] wrote {out_dir / 'confusion_matrix.png'}")
-    print(f"[mocapkit] wrote {out_dir / 'summary.md'}")
+    for name in ("metrics.json", "confusion_matrix.png", "summary.md"):
+        print(f"[mocapkit] wrote {out_dir / name}")
     return report
 
 

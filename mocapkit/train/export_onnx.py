@@ -23,6 +23,7 @@ import torch
 
 from mocapkit.train.action_module import ActionRecognitionModule
 from mocapkit.train.config import ConfigError, load_run_config
+from mocapkit.train.tasks import get_task
 
 
 class ParityError(RuntimeError):
@@ -106,17 +107,24 @@ def export_onnx(model: torch.nn.Module, out: str | Path, class_names: list[str] 
     return report
 
 
+def export_action_module(module: ActionRecognitionModule, target: Path, export_cfg) -> dict:
+    """Export a skeleton classifier with the ``export`` config node (opset, trace/check shapes, tolerances)."""
+    return export_onnx(module.model, target, class_names=module.hparams.class_names, opset=export_cfg.opset,
+                       trace_shape=(export_cfg.trace_batch, export_cfg.trace_frames),
+                       check_shape=(export_cfg.check_batch, export_cfg.check_frames),
+                       atol=export_cfg.atol, rtol=export_cfg.rtol)
+
+
 def export_checkpoint(ckpt_path: str | Path, out: str | None = None, overrides: list[str] | None = None) -> dict:
-    """``mocapkit export ckpt_path=... [out=FILE] [export.KEY=...]``."""
+    """``mocapkit export ckpt_path=... [out=FILE] [export.KEY=...]``: export as the run's task does."""
     ckpt_path = Path(ckpt_path)
     if not ckpt_path.is_file():
         raise ConfigError(f"ckpt_path={ckpt_path}: no such checkpoint")
-    cfg = load_run_config(ckpt_path.parent, overrides).export
-    module = ActionRecognitionModule.load_from_checkpoint(ckpt_path, map_location="cpu")
-    target = Path(out or cfg.out or ckpt_path.parent / "model.onnx")
-    report = export_onnx(module.model, target, class_names=module.hparams.class_names, opset=cfg.opset,
-                         trace_shape=(cfg.trace_batch, cfg.trace_frames), check_shape=(cfg.check_batch, cfg.check_frames),
-                         atol=cfg.atol, rtol=cfg.rtol)
+    cfg = load_run_config(ckpt_path.parent, overrides)
+    task = get_task(cfg.get("task") or "action")
+    module = task.module_class().load_from_checkpoint(ckpt_path, map_location="cpu")
+    target = Path(out or cfg.export.out or ckpt_path.parent / "model.onnx")
+    report = task.export_fn()(module, target, cfg.export)
     (target.parent / (target.stem + ".parity.json")).write_text(json.dumps(report, indent=2))
     print(f"[mocapkit] wrote {target} (onnx.checker passed)")
     print(f"[mocapkit] parity on {[c['shape'] for c in report['checks']]} (traced with {report['traced_shape']}): "

@@ -19,9 +19,9 @@ from lightning.pytorch.callbacks import LearningRateMonitor, ModelCheckpoint
 from lightning.pytorch.loggers import TensorBoardLogger
 from omegaconf import DictConfig
 
-from mocapkit.train.action_module import ActionRecognitionModule
 from mocapkit.train.config import ConfigError, load_run_config, new_run_dir, save_run_config
 from mocapkit.train.epoch_summary import EpochSummary
+from mocapkit.train.tasks import get_task
 
 
 def build_datamodule(cfg: DictConfig):
@@ -58,9 +58,7 @@ def train(cfg: DictConfig) -> Path:
     if counts["train"] == 0 or counts["val"] == 0:
         raise ConfigError(f"split {datamodule.describe()['split']!r} leaves {counts}: "
                           "training and validation both need samples")
-    module = ActionRecognitionModule(model=cfg.model, optimizer=cfg.optimizer, scheduler=cfg.scheduler or None,
-                                     num_classes=datamodule.num_classes, class_names=datamodule.class_names,
-                                     label_smoothing=cfg.label_smoothing)
+    module = get_task(cfg.task).module_class().from_config(cfg, datamodule)
     save_run_config(cfg, run_dir)
     checkpoint = ModelCheckpoint(dirpath=run_dir, filename="best", monitor="val/acc", mode="max",
                                  enable_version_counter=False)
@@ -73,7 +71,8 @@ def train(cfg: DictConfig) -> Path:
     # the run folder already holds config.yaml, by design
     warnings.filterwarnings("ignore", message=r"Checkpoint directory .* exists and is not empty")
     print(f"[mocapkit] run folder: {run_dir}")
-    print(f"[mocapkit] samples: {counts} (split {datamodule.describe()['split']}), {datamodule.num_classes} classes")
+    print(f"[mocapkit] task {cfg.task}, samples: {counts} (split {datamodule.describe()['split']}), "
+          f"{len(datamodule.class_names)} classes")
     trainer.fit(module, datamodule=datamodule, ckpt_path=cfg.resume)
     print(f"[mocapkit] wrote {run_dir / 'config.yaml'}")
     print(f"[mocapkit] wrote {run_dir / 'last.ckpt'}")
