@@ -1,0 +1,118 @@
+"""The prepared Gait Energy Image cache (written by ``mocapkit prepare casia-b``).
+
+A cache folder holds::
+
+    geis.npy      uint8 [N, H, W]: GEI pixel values × 255 (a GEI is a mean of binary
+                  silhouettes, so 0 = never foreground, 255 = always), memory-mappable
+    index.npz     per GEI, int64 [N]: subjects (1-based), conditions (0 nm, 1 bg, 2 cl),
+                  sequences (1-based repetition), views (degrees), cycles (0-based cycle
+                  within its sequence; 0 when one GEI per sequence), frames (silhouettes
+                  averaged); str [N] names ("001/nm-01/090")
+    meta.json     format/version, height, width, per ("cycle" | "sequence"), source,
+                  counts and options; written last (a folder without it is unfinished)
+    report.json / report.txt   every skipped sequence and why
+
+:func:`write_gei_cache` writes one, :class:`GEICache` reads it.
+"""
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+CACHE_FORMAT = "mocapkit-gei-cache"
+CACHE_VERSION = 1
+GEIS_FILE, INDEX_FILE, META_FILE = "geis.npy", "index.npz", "meta.json"
+INDEX_KEYS = ("names", "subjects", "conditions", "sequences", "views", "cycles", "frames")
+
+
+def write_gei_cache(out: str | os.PathLike, geis: np.ndarray, index: dict[str, np.ndarray], meta: dict) -> Path:
+    """Write a cache folder.
+
+    Args:
+        out: the folder (created).
+        geis: float in [0, 1] or uint8, ``[N, H, W]``.
+        index: arrays of length N for every key in :data:`INDEX_KEYS`.
+        meta: extra metadata (``per``, ``source``, options); format, version and sizes are added.
+    """
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    geis = np.asarray(geis)
+    if geis.ndim != 3:
+        raise ValueError(f"geis must be [N, H, W], got shape {geis.shape}")
+    if geis.dtype != np.uint8:
+        if not np.isfinite(geis).all() or geis.min() < 0 or geis.max() > 1:
+            raise ValueError("float GEIs must be finite and in [0, 1]")
+        geis = np.round(geis * 255).astype(np.uint8)
+    missing = [k for k in INDEX_KEYS if k not in index]
+    if missing:
+        raise KeyError(f"index is missing {missing}")
+    for key in INDEX_KEYS:
+        if len(index[key]) != len(geis):
+            raise ValueError(f"index[{key!r}] has {len(index[key])} entries for {len(geis)} GEIs")
+    (out / META_FILE).unlink(missing_ok=True)  # unfinished until meta.json is rewritten
+    np.save(out / GEIS_FILE, geis)
+    np.savez(out / INDEX_FILE, names=np.asarray(index["names"], dtype=str),
+             **{k: np.asarray(index[k], dtype=np.int64) for k in INDEX_KEYS if k != "names"})
+    full_meta = {"format": CACHE_FORMAT, "version": CACHE_VERSION, "num_geis": int(len(geis)),
+                 "height": int(geis.shape[1]), "width": int(geis.shape[2]), **meta}
+    (out / META_FILE).write_text(json.dumps(full_meta, indent=2), encoding="utf-8")
+    return out
+
+
+class GEICache:
+    """A prepared GEI cache folder.
+
+    Attributes:
+        names, subjects, conditions, sequences, views, cycles, frames: numpy arrays of length ``len(cache)``
+            (see the module docstring).
+        meta: the parsed ``meta.json``.
+        height, width: GEI size in pixels.
+    """
+
+    def __init__(self, root: str | os.PathLike):
+        self.root = Path(root)
+        if not self.root.is_dir():
+            raise FileNotFoundError(f"GEI cache folder {self.root} does not exist")
+        for required in (META_FILE, INDEX_FILE, GEIS_FILE):
+            if not (self.root / required).is_file():
+                raise FileNotFoundError(f"{self.root} is not a prepared GEI cache: {required} is missing "
+                                        f"(run `mocapkit prepare casia-b --src ... --out {self.root}`)")
+        self.meta = json.loads((self.root / META_FILE).read_text(encoding="utf-8"))
+        if self.meta.get("format") != CACHE_FORMAT or self.meta.get("version") != CACHE_VERSION:
+            raise ValueError(f"{self.root / META_FILE}: cache format {self.meta.get('format')!r} version "
+                             f"{self.meta.get('version')!r}, expected {CACHE_FORMAT!r} version {CACHE_VERSION}; "
+                             "prepare the cache again")
+        with np.load(self.root / INDEX_FILE, allow_pickle=False) as index:
+            absent = [k for k in INDEX_KEYS if k not in index.files]
+            if absent:
+                raise KeyError(f"{self.root / INDEX_FILE}: missing arrays {absent}")
+            for key in INDEX_KEYS:
+                setattr(self, key, index[key])
+        self.height, self.width = int(self.meta["height"]), int(self.meta["width"])
+        self._geis: np.ndarray | None = None  # memmap, opened lazily per process
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+    def __repr__(self) -> str:
+        return (f"GEICache({str(self.root)!r}: {len(self)} GEIs of {self.height}x{self.width}, "
+                f"{len(np.unique(self.subjects))} subjects, per {self.meta.get('per')})")
+
+    def __getstate__(self) -> dict:
+        state = dict(self.__dict__)
+        state["_geis"] = None  # workers reopen the memmap
+        return state
+
+    @property
+    def all_geis(self) -> np.ndarray:
+        """Read-only memmap, uint8 ``[N, H, W]`` (divide by 255 for [0, 1])."""
+        if self._geis is None:
+            self._geis = np.load(self.root / GEIS_FILE, mmap_mode="r")
+        return self._geis
+
+    def gei(self, i: int) -> np.ndarray:
+        """GEI ``i`` as float32 ``[H, W]`` in [0, 1]."""
+        return self.all_geis[i].astype(np.float32) / 255.0
