@@ -2,8 +2,11 @@
 
     mocapkit synth ntu --out DIR [--classes N] [--subjects S] [--seed K] [--set KEY=VALUE ...]
     mocapkit synth hdm05 --out DIR [--classes NAME ...] [--actors bd bk ...] [--seed K]
+    mocapkit synth casia-b --out DIR [--subjects S] [--frames F] [--size H] [--seed K] [--workers N]
     mocapkit render FILE --out anim.gif [--strip]
     mocapkit prepare ntu --src DIR --out DIR [--workers N] [--skip-bad] [--missing-list FILE]
+    mocapkit prepare casia-b --src DIR --out DIR [--size 64x44|124x124] [--per cycle|sequence] [--skip-bad]
+    mocapkit gait-report --data GEI_CACHE --out DIR [--protocols ...] [Hydra overrides ...]
     mocapkit train [experiment=NAME] data.root=CACHE [Hydra overrides ...]
     mocapkit eval ckpt_path=RUN/best.ckpt [overrides ...]
     mocapkit export ckpt_path=RUN/best.ckpt [out=FILE] [overrides ...]
@@ -70,6 +73,19 @@ def cmd_synth_hdm05(args: argparse.Namespace) -> None:
             values[name] = getattr(args, name)
     files = synthesize_hdm05(args.out, HDM05SynthConfig(**values), progress=not args.quiet)
     print(f"[mocapkit] wrote {len(files)} .amc clips (and one .asf per actor) to {args.out}")
+
+
+def cmd_synth_casia_b(args: argparse.Namespace) -> None:
+    from mocapkit.datasets.synthetic_casia_b import (
+        CasiaBSynthConfig,
+        synthesize_casia_b,
+    )
+
+    values = {name: getattr(args, option) for option, name in
+              (("subjects", "num_subjects"), ("frames", "frames"), ("size", "height"), ("seed", "seed"))
+              if getattr(args, option) is not None}
+    folders = synthesize_casia_b(args.out, CasiaBSynthConfig(**values), progress=not args.quiet, workers=args.workers)
+    print(f"[mocapkit] wrote {len(folders)} silhouette sequences (CASIA-B layout) to {args.out}")
 
 
 def cmd_render(args: argparse.Namespace) -> None:
@@ -158,6 +174,16 @@ def build_parser() -> argparse.ArgumentParser:
     hdm.add_argument("--seed", type=int, help="random seed (the output is a function of it)")
     hdm.add_argument("--quiet", action="store_true", help="no progress bar")
     hdm.set_defaults(func=cmd_synth_hdm05)
+
+    casia = synth_sub.add_parser("casia-b", help="CASIA-B-style silhouette PNGs (<subject>/<cond>-<nn>/<view>/)")
+    casia.add_argument("--out", required=True, help="output folder")
+    casia.add_argument("--subjects", type=int, help="number of subjects (001..; default 8)")
+    casia.add_argument("--frames", type=int, help="frames per sequence (default 40)")
+    casia.add_argument("--size", type=int, help="image height in pixels (width = 4/3 of it; default 64)")
+    casia.add_argument("--seed", type=int, help="random seed (the output is a function of it)")
+    casia.add_argument("--workers", type=int, default=1, help="parallel processes (same output)")
+    casia.add_argument("--quiet", action="store_true", help="no progress bar")
+    casia.set_defaults(func=cmd_synth_casia_b)
 
     render = sub.add_parser("render", help="draw a motion file as an animation (.gif, .mp4) or a PNG strip")
     render.add_argument("file", help="any supported motion file (.skeleton, .amc, .bvh, .c3d, MSR .txt)")
