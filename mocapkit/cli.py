@@ -111,6 +111,16 @@ def cmd_prepare_ntu(args: argparse.Namespace) -> None:
     print(report.to_text())
 
 
+def cmd_prepare_casia_b(args: argparse.Namespace) -> None:
+    from mocapkit.datasets.casia_b_prepare import parse_gei_size, prepare_casia_b
+
+    report = prepare_casia_b(args.src, args.out, size=parse_gei_size(args.size), per=args.per,
+                             skip_bad=args.skip_bad, workers=args.workers, subjects=args.subjects,
+                             fallback_period=args.fallback_period, progress=not args.quiet)
+    print(f"[mocapkit] prepared GEI cache in {args.out}")
+    print(report.to_text())
+
+
 def cmd_train(overrides: list[str]) -> None:
     from mocapkit.train.config import compose_config
     from mocapkit.train.training import resume_config, train
@@ -208,6 +218,21 @@ def build_parser() -> argparse.ArgumentParser:
                       help="drop bodies seen in fewer frames (pyskl uses 12)")
     pntu.add_argument("--quiet", action="store_true", help="no progress bar")
     pntu.set_defaults(func=cmd_prepare_ntu)
+
+    pcb = prepare_sub.add_parser("casia-b", help="CASIA-B silhouette folders -> Gait Energy Images")
+    pcb.add_argument("--src", required=True, help="root of <subject>/<condition>-<nn>/<view>/<frame>.png")
+    pcb.add_argument("--out", required=True, help="GEI cache folder to write")
+    pcb.add_argument("--size", default="64x44",
+                     help="GEI HxW: 64x44 (OpenGait's convention, default) or 124x124 (the thesis network)")
+    pcb.add_argument("--per", choices=["cycle", "sequence"], default="cycle",
+                     help="one GEI per detected gait cycle (default) or per sequence")
+    pcb.add_argument("--fallback-period", dest="fallback_period", type=int,
+                     help="frames per cycle to use where no period is detected (each use is reported)")
+    pcb.add_argument("--subjects", type=int, nargs="+", help="only these subject IDs")
+    pcb.add_argument("--workers", type=int, default=1, help="parallel processes")
+    pcb.add_argument("--skip-bad", action="store_true", help="skip bad sequences (each is listed in the report)")
+    pcb.add_argument("--quiet", action="store_true", help="no progress bar")
+    pcb.set_defaults(func=cmd_prepare_casia_b)
 
     for name, help_text in (("train", "train a model (Hydra overrides)"),
                             ("eval", "evaluate a checkpoint: ckpt_path=PATH [overrides]"),
