@@ -121,6 +121,13 @@ def cmd_prepare_casia_b(args: argparse.Namespace) -> None:
     print(report.to_text())
 
 
+def cmd_gait_report(args: argparse.Namespace) -> None:
+    from mocapkit.train.gait_report import gait_report
+
+    gait_report(args.data, args.out, protocols=tuple(args.protocols), experiments=tuple(args.experiments),
+                overrides=tuple(args.overrides), seed=args.seed, include_pca_lda=not args.no_pca_lda)
+
+
 def cmd_train(overrides: list[str]) -> None:
     from mocapkit.train.config import compose_config
     from mocapkit.train.training import resume_config, train
@@ -239,6 +246,19 @@ def build_parser() -> argparse.ArgumentParser:
                             ("export", "export a checkpoint to ONNX: ckpt_path=PATH [out=FILE]")):
         p = sub.add_parser(name, help=help_text)
         p.add_argument("overrides", nargs="*", help="key=value overrides")
+
+    report = sub.add_parser("gait-report", help="multi-task CNN, single-task CNN and GEI+PCA+LDA side by side "
+                                                "under the closed-set and cross-subject CASIA-B protocols")
+    report.add_argument("--data", required=True, help="GEI cache (mocapkit prepare casia-b --out ...)")
+    report.add_argument("--out", required=True, help="report folder (runs go to OUT/runs)")
+    report.add_argument("--protocols", nargs="+", default=["closed_set", "cross_subject"],
+                        choices=["closed_set", "cross_subject"])
+    report.add_argument("--experiments", nargs="+", default=["casiab_multitask", "casiab_single_subject"],
+                        help="Hydra experiments to train (task: gait)")
+    report.add_argument("--seed", type=int, default=0, help="run seed")
+    report.add_argument("--no-pca-lda", dest="no_pca_lda", action="store_true", help="skip the classical baseline")
+    report.add_argument("overrides", nargs="*", help="Hydra overrides for every run, e.g. trainer.max_epochs=30")
+    report.set_defaults(func=cmd_gait_report)
 
     predict = sub.add_parser("predict", help="classify motion files with an exported ONNX model")
     predict.add_argument("--onnx", required=True, help="model written by `mocapkit export`")

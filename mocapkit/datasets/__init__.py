@@ -14,7 +14,25 @@ from mocapkit.datasets.asf_amc import (
 )
 from mocapkit.datasets.bvh import BvhFormatError, read_bvh, write_bvh
 from mocapkit.datasets.c3d import C3DFormatError, read_c3d, write_c3d
+from mocapkit.datasets.casia_b import (
+    CONDITIONS,
+    VIEWS,
+    GaitSequence,
+    GaitSequenceKey,
+    SilhouetteFormatError,
+    list_casia_b,
+    read_sequence,
+    read_silhouette,
+)
+from mocapkit.datasets.casia_b_prepare import prepare_casia_b
 from mocapkit.datasets.format_errors import MotionFormatError
+from mocapkit.datasets.gei import (
+    GaitSequenceError,
+    gait_energy_images,
+    gait_period,
+    normalize_silhouettes,
+)
+from mocapkit.datasets.gei_cache import GEICache
 from mocapkit.datasets.layouts import CMU31, LAYOUTS, MSR20, NTU25, SkeletonLayout
 from mocapkit.datasets.motion import Motion
 from mocapkit.datasets.motion_io import read_motion, write_motion
@@ -40,11 +58,56 @@ from mocapkit.datasets.protocols import (
 )
 
 __all__ = [
-    "Motion", "MotionFormatError", "read_motion", "write_motion", "C3DFormatError", "read_c3d", "write_c3d",
-    "AmcFormatError", "AsfFormatError", "read_amc", "read_asf", "write_amc", "write_asf",
-    "BvhFormatError", "read_bvh", "write_bvh",
-    "CMU31", "LAYOUTS", "MSR20", "NTU25", "SkeletonLayout", "NTUCache", "PrepareReport", "prepare_ntu", "BodySelection", "NTUSampleName",
-    "SkeletonFormatError", "SkeletonSequence", "parse_ntu_name", "read_missing_list", "read_skeleton",
-    "select_main_bodies", "sequence_from_positions", "write_skeleton", "SPLITS", "split_indices", "split_summary",
+    "CMU31",
+    "CONDITIONS",
+    "LAYOUTS",
+    "MSR20",
+    "NTU25",
+    "SPLITS",
+    "VIEWS",
+    "AmcFormatError",
+    "AsfFormatError",
+    "BodySelection",
+    "BvhFormatError",
+    "C3DFormatError",
+    "GEICache",
+    "GaitSequence",
+    "GaitSequenceError",
+    "GaitSequenceKey",
+    "Motion",
+    "MotionFormatError",
+    "NTUCache",
+    "NTUSampleName",
+    "PrepareReport",
+    "SilhouetteFormatError",
+    "SkeletonFormatError",
+    "SkeletonLayout",
+    "SkeletonSequence",
+    "gait_energy_images",
+    "gait_period",
+    "list_casia_b",
+    "normalize_silhouettes",
+    "parse_ntu_name",
+    "prepare_casia_b",
+    "prepare_ntu",
+    "read_amc",
+    "read_asf",
+    "read_bvh",
+    "read_c3d",
+    "read_missing_list",
+    "read_motion",
+    "read_sequence",
+    "read_silhouette",
+    "read_skeleton",
+    "select_main_bodies",
+    "sequence_from_positions",
+    "split_indices",
+    "split_summary",
     "validation_split",
+    "write_amc",
+    "write_asf",
+    "write_bvh",
+    "write_c3d",
+    "write_motion",
+    "write_skeleton",
 ]

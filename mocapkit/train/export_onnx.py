@@ -127,6 +127,9 @@ def export_checkpoint(ckpt_path: str | Path, out: str | None = None, overrides: 
     report = task.export_fn()(module, target, cfg.export)
     (target.parent / (target.stem + ".parity.json")).write_text(json.dumps(report, indent=2))
     print(f"[mocapkit] wrote {target} (onnx.checker passed)")
-    print(f"[mocapkit] parity on {[c['shape'] for c in report['checks']]} (traced with {report['traced_shape']}): "
-          f"max |onnxruntime - torch| = {report['max_abs_diff']:.2e}, same top-1: {report['same_top1']}")
+    diff = report["max_abs_diff"]  # one number, or one per output for multi-output models
+    diff = max(diff.values()) if isinstance(diff, dict) else diff
+    print(f"[mocapkit] parity on {report['checked_shape']} (traced with {report['traced_shape']}): "
+          f"max |onnxruntime - torch| = {diff:.2e}, same top-1: {report['same_top1']}")
+    print(f"[mocapkit] wrote {target.parent / (target.stem + '.parity.json')}")
     return report

@@ -1,0 +1,151 @@
+"""Lightning module for gait recognition from GEIs: the joint multi-task loss of thesis §6.1.
+
+The loss is ``Σ_task weight_task · CE(logits_task, label_task)`` over the tasks the model has
+(subject, view, condition; equal weights by default, spec §5.1 [rec]). Batches come from
+:class:`~mocapkit.datasets.gait_datamodule.GaitDataModule`. Samples whose subject label is -1
+(test subjects of the cross-subject protocol, outside the label space) add nothing to the subject
+loss or accuracy. The network, optimiser and schedule are Hydra configs stored in the checkpoint's
+hyper-parameters, so ``GaitRecognitionModule.load_from_checkpoint(path)`` rebuilds the exact model.
+
+Logged: ``{stage}/loss`` (the joint loss), ``{stage}/{task}_loss``, ``{stage}/acc`` (subject accuracy,
+the checkpoint monitor; the first task's accuracy for a model without a subject head), ``{stage}/view_acc`` and ``{stage}/condition_acc`` when those tasks exist.
+"""
+from __future__ import annotations
+
+import lightning as L
+import torch
+import torch.nn.functional as F
+from hydra.utils import instantiate
+from omegaconf import DictConfig, OmegaConf
+
+#: The batch key holding each task's labels.
+TASK_LABELS = {"subject": "subjects", "view": "views", "condition": "conditions"}
+#: Batch keys copied into every ``predict_step`` output.
+PREDICT_KEYS = ("subjects", "subject_ids", "views", "conditions", "sequences", "indices")
+
+
+def _as_dict(cfg) -> dict:
+    return OmegaConf.to_container(cfg, resolve=True) if isinstance(cfg, DictConfig) else dict(cfg)
+
+
+class GaitRecognitionModule(L.LightningModule):
+    """Joint cross-entropy training of a multi-task gait network (GEIs ``[B, 1, H, W]`` → ``{task: logits}``).
+
+    Args:
+        model: Hydra config of the network; ``num_subjects``, ``num_views``, ``num_conditions`` and
+            ``input_size`` are passed at instantiation. The network returns a dict with a logits tensor
+            per task in ``model.tasks`` and ``"embedding"``.
+        optimizer: Hydra config of a ``torch.optim`` optimiser with ``_partial_: true``.
+        num_subjects, num_views, num_conditions: classes of the subject, view and condition tasks.
+        scheduler: Hydra config of a ``torch.optim.lr_scheduler`` with ``_partial_: true``, or None.
+        task_weights: task → loss weight (default 1 for every task of the model); weights of tasks the
+            model lacks are ignored.
+        subject_names: the subject label space for reports and ONNX metadata (e.g. ``["001", ...]``).
+        label_smoothing: cross-entropy label smoothing (all tasks).
+        input_size: ``(H, W)`` of the GEIs.
+    """
+
+    def __init__(self, model: dict, optimizer: dict, num_subjects: int, num_views: int, num_conditions: int,
+                 scheduler: dict | None = None, task_weights: dict | None = None,
+                 subject_names: list[str] | None = None, label_smoothing: float = 0.0,
+                 input_size: tuple[int, int] | list[int] = (124, 124)):
+        super().__init__()
+        model, optimizer = _as_dict(model), _as_dict(optimizer)
+        scheduler = _as_dict(scheduler) if scheduler else None
+        task_weights = _as_dict(task_weights) if task_weights is not None else None
+        unknown = sorted(set(task_weights or {}) - set(TASK_LABELS))
+        if unknown:
+            raise ValueError(f"task_weights: unknown tasks {unknown}; tasks are {list(TASK_LABELS)}")
+        self.save_hyperparameters({"model": model, "optimizer": optimizer, "scheduler": scheduler,
+                                   "num_subjects": num_subjects, "num_views": num_views,
+                                   "num_conditions": num_conditions, "task_weights": task_weights,
+                                   "subject_names": list(subject_names) if subject_names is not None else None,
+                                   "label_smoothing": label_smoothing, "input_size": list(input_size)})
+        self.model = instantiate(model, num_subjects=num_subjects, num_views=num_views,
+                                 num_conditions=num_conditions, input_size=list(input_size))
+        self.tasks: tuple[str, ...] = tuple(self.model.tasks)
+        self.task_weights = {t: float((task_weights or {}).get(t, 1.0)) for t in self.tasks}
+        #: the task whose accuracy is logged as ``acc`` (the checkpoint monitor): subject when the model has it
+        self.primary_task = "subject" if "subject" in self.tasks else self.tasks[0]
+
+    @classmethod
+    def from_config(cls, cfg: DictConfig, datamodule) -> GaitRecognitionModule:
+        """The module of a composed ``train.yaml`` config for a :class:`GaitDataModule` (label spaces, GEI size)."""
+        return cls(model=cfg.model, optimizer=cfg.optimizer, scheduler=cfg.get("scheduler") or None,
+                   num_subjects=datamodule.num_subjects, num_views=datamodule.num_views,
+                   num_conditions=datamodule.num_conditions, task_weights=cfg.get("task_weights"),
+                   subject_names=datamodule.subject_names, label_smoothing=cfg.get("label_smoothing", 0.0),
+                   input_size=(datamodule.height, datamodule.width))
+
+    def forward(self, geis: torch.Tensor) -> dict[str, torch.Tensor]:
+        return self.model(geis)
+
+    def task_losses(self, outputs: dict[str, torch.Tensor], batch: dict) -> dict[str, torch.Tensor]:
+        """Cross-entropy per task; the subject loss skips samples labelled -1 (absent when all are)."""
+        losses = {}
+        for task in self.tasks:
+            labels = batch[TASK_LABELS[task]]
+            known = labels >= 0
+            if not bool(known.any()):
+                continue
+            losses[task] = F.cross_entropy(outputs[task][known], labels[known],
+                                           label_smoothing=self.hparams.label_smoothing)
+        return losses
+
+    def joint_loss(self, losses: dict[str, torch.Tensor]) -> torch.Tensor:
+        """``Σ weight_task · loss_task`` over the tasks present in ``losses``."""
+        return sum(self.task_weights[task] * loss for task, loss in losses.items())
+
+    def _step(self, batch: dict, stage: str) -> torch.Tensor | None:
+        outputs = self(batch["geis"])
+        losses = self.task_losses(outputs, batch)
+        if not losses:  # nothing labelled, e.g. a cross-subject test batch of a subject-only model
+            return None
+        loss = self.joint_loss(losses)
+        on_step, size = stage == "train", len(batch["geis"])
+        self.log(f"{stage}/loss", loss, on_step=on_step, on_epoch=True, prog_bar=True, batch_size=size)
+        for task, task_loss in losses.items():
+            self.log(f"{stage}/{task}_loss", task_loss, on_step=False, on_epoch=True, batch_size=size)
+            labels = batch[TASK_LABELS[task]]
+            known = labels >= 0
+            acc = (outputs[task][known].argmax(1) == labels[known]).float().mean()
+            names = ["acc"] if task == "subject" else [f"{task}_acc"] + (["acc"] if task == self.primary_task else [])
+            for name in names:
+                self.log(f"{stage}/{name}", acc, on_step=False, on_epoch=True, prog_bar=name == "acc",
+                         batch_size=int(known.sum()))
+        return loss
+
+    def training_step(self, batch: dict, batch_idx: int) -> torch.Tensor:
+        loss = self._step(batch, "train")
+        if loss is None:
+            raise ValueError("a training batch has no labelled sample: training needs subject labels ≥ 0")
+        return loss
+
+    def validation_step(self, batch: dict, batch_idx: int) -> None:
+        self._step(batch, "val")
+
+    def test_step(self, batch: dict, batch_idx: int) -> None:
+        self._step(batch, "test")
+
+    def predict_step(self, batch: dict, batch_idx: int) -> dict:
+        """``{"embedding": [B, 512], "<task>_logits": ..., and the batch's subjects, subject_ids, views,
+        conditions, sequences, indices}`` — what the gait evaluation consumes."""
+        outputs = self(batch["geis"])
+        result = {"embedding": outputs["embedding"]}
+        result.update({f"{task}_logits": outputs[task] for task in self.tasks})
+        result.update({key: batch[key] for key in PREDICT_KEYS})
+        return result
+
+    def on_load_checkpoint(self, checkpoint: dict) -> None:
+        """On resume, the schedule's configured parameters (e.g. ``T_max``) come from the current
+        config, its progress (``last_epoch``, learning rates) from the checkpoint."""
+        configured = {k: v for k, v in (self.hparams.scheduler or {}).items() if not k.startswith("_")}
+        for state in checkpoint.get("lr_schedulers", []):
+            state.update({k: v for k, v in configured.items() if k in state})
+
+    def configure_optimizers(self):
+        optimizer = instantiate(self.hparams.optimizer)(params=self.parameters())
+        if not self.hparams.scheduler:
+            return optimizer
+        scheduler = instantiate(self.hparams.scheduler)(optimizer=optimizer)
+        return {"optimizer": optimizer, "lr_scheduler": {"scheduler": scheduler, "interval": "epoch"}}

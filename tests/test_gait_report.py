@@ -1,0 +1,127 @@
+"""evaluate_gait with a module whose answers are known, the report tables, and `gait_report` end to end (slow)."""
+from __future__ import annotations
+
+import json
+
+import lightning as L
+import pytest
+import torch
+import torch.nn.functional as F
+from omegaconf import OmegaConf
+
+from mocapkit.classical.gei_pca_lda import run_gei_pca_lda
+from mocapkit.datasets.casia_b import VIEWS
+from mocapkit.train.evaluate_gait import evaluate_gait
+from mocapkit.train.gait_report import gait_report, per_view_panels, report_markdown
+from tests.test_gei_pca_lda import make_tiny_gei_cache
+
+CFG = OmegaConf.create({"trainer": {"accelerator": "cpu", "enable_progress_bar": False}, "experiment_name": "oracle"})
+
+
+class OracleGaitModule(L.LightningModule):
+    """Answers from the batch's labels: the subject is always right except at 90°, the view always,
+    the condition never; the embedding is the one-hot subject ID (every rank-1 match is right)."""
+
+    def __init__(self, num_subjects: int):
+        super().__init__()
+        self.num_subjects = num_subjects
+
+    def predict_step(self, batch: dict, batch_idx: int) -> dict:
+        subjects = batch["subjects"].clamp(min=0)
+        wrong_at_90 = torch.where(batch["views"] == VIEWS.index(90), (subjects + 1) % self.num_subjects, subjects)
+        return {"embedding": F.one_hot(batch["subject_ids"], 32).float(),
+                "subject_logits": F.one_hot(wrong_at_90, self.num_subjects).float(),
+                "view_logits": F.one_hot(batch["views"], 11).float(),
+                "condition_logits": F.one_hot((batch["conditions"] + 1) % 3, 3).float(),
+                **{k: batch[k] for k in ("subjects", "subject_ids", "views", "conditions", "sequences", "indices")}}
+
+
+@pytest.fixture(scope="module")
+def tiny_cache(tmp_path_factory):
+    return make_tiny_gei_cache(tmp_path_factory.mktemp("gei") / "cache", num_subjects=6, height=24, width=16)
+
+
+def _datamodule(cache, protocol):
+    from mocapkit.datasets.gait_datamodule import GaitDataModule
+
+    return GaitDataModule(str(cache.root), protocol=protocol, val_fraction=0.1, eval_batch_size=64)
+
+
+def test_evaluate_gait_closed_set_writes_the_table(tiny_cache, tmp_path):
+    datamodule = _datamodule(tiny_cache, "closed_set")
+    report = evaluate_gait(OracleGaitModule(datamodule.num_subjects), datamodule, CFG, tmp_path, ckpt_path="x.ckpt")
+    closed = report["closed_set"]
+    assert report["checkpoint"] == "x.ckpt" and report["protocol"] == "closed_set"
+    assert report["tasks"] == ["subject", "view", "condition"]
+    assert closed["num_geis"] == datamodule.sample_counts()["test"] == 6 * 11 * 3
+    subject = closed["tasks"]["subject"]
+    assert subject["per_view"]["90"] == 0.0 and subject["per_view"]["0"] == 1.0
+    assert subject["accuracy"] == pytest.approx(10 / 11)
+    assert closed["tasks"]["view"]["accuracy"] == 1.0 and closed["tasks"]["condition"]["accuracy"] == 0.0
+    saved = json.loads((tmp_path / "metrics.json").read_text())
+    assert saved["closed_set"] == closed and saved["test_subjects"] == [1, 2, 3, 4, 5, 6]
+    assert "| 90° | 0.00 | 100.00 | 0.00 |" in (tmp_path / "summary.md").read_text()
+    assert (tmp_path / "per_view.png").stat().st_size > 1000
+
+
+def test_evaluate_gait_cross_subject_ranks_embeddings(tiny_cache, tmp_path):
+    datamodule = _datamodule(tiny_cache, "cross_subject")
+    report = evaluate_gait(OracleGaitModule(datamodule.num_subjects), datamodule, CFG, tmp_path)
+    assert "checkpoint" not in report and report["test_subjects"] == [5, 6]
+    cross = report["cross_view"]
+    assert cross["metric"] == "euc" and cross["aggregate"] == "sequence"
+    assert all(cross["conditions"][c]["mean"] == 1.0 for c in ("nm", "bg", "cl"))
+    assert cross["conditions"]["nm"]["num_probes"] == 2 * 2 * 11
+    unseen = report["view_condition_on_test_subjects"]
+    assert set(unseen["tasks"]) == {"view", "condition"} and unseen["tasks"]["view"]["accuracy"] == 1.0
+    summary = (tmp_path / "summary.md").read_text()
+    assert "| NM | " + " | ".join(["100.00"] * 11) + " | 100.00 | 100.00 | 0/121 |" in summary
+
+
+def test_report_tables_side_by_side(tiny_cache, tmp_path):
+    closed_dm, cross_dm = _datamodule(tiny_cache, "closed_set"), _datamodule(tiny_cache, "cross_subject")
+    oracle = {"experiment": "casiab_multitask", "run_dir": "runs/x", "train_seconds": 12.0, "max_epochs": 2}
+    result = {"data_root": str(tiny_cache.root), "seed": 0, "overrides": [], "elapsed_seconds": 20, "protocols": {
+        "closed_set": {"casiab_multitask": {**oracle, "report": evaluate_gait(
+            OracleGaitModule(closed_dm.num_subjects), closed_dm, CFG, tmp_path / "a")},
+            "gei_pca_lda": run_gei_pca_lda(tiny_cache, "closed_set")},
+        "cross_subject": {"casiab_multitask": {**oracle, "report": evaluate_gait(
+            OracleGaitModule(cross_dm.num_subjects), cross_dm, CFG, tmp_path / "b")},
+            "gei_pca_lda": run_gei_pca_lda(tiny_cache, "cross_subject")}}}
+    text = report_markdown(result)
+    header = next(line for line in text.splitlines() if line.startswith("| Probe | multi-task CNN: identify subject"))
+    assert header.split(" | ")[1:5] == ["multi-task CNN: identify subject", "multi-task CNN: predict view",
+                                        "multi-task CNN: predict condition", "GEI+PCA+LDA: identify subject"]
+    assert "| 90° | 0.00 | 100.00 | 0.00 | " in text and "| 95.80 | 99.63 | 97.11 |" in text
+    assert "| NM | 100.00 | " in text and "| 89.9 | 95.8 | 90.5 |" in text
+    assert "| cross_subject | multi-task CNN | 12 s | 2 | runs/x |" in text
+    assert "real CASIA-B" in text
+    panels = per_view_panels(result)
+    assert list(panels["closed set: subject accuracy per view"]) == ["multi-task CNN", "GEI+PCA+LDA"]
+    assert panels["closed set: subject accuracy per view"]["multi-task CNN"]["90"] == 0.0
+
+
+@pytest.mark.slow
+def test_gait_report_end_to_end(tmp_path):
+    """Trains both CNN experiments for 2 epochs under both protocols on a tiny 64×44 cache (OpenGait's
+    size, the smallest Table 6.1's trunk takes; needs the gait module, data module and `task: gait` configs)."""
+    pytest.importorskip("mocapkit.train.gait_module")
+    cache = make_tiny_gei_cache(tmp_path / "cache", num_subjects=4, height=64, width=44)
+    result = gait_report(cache.root, tmp_path / "report",
+                         overrides=["trainer.max_epochs=2", "trainer.enable_progress_bar=false",
+                                    "trainer.accelerator=cpu", "data.batch_size=16"])
+    for protocol in ("closed_set", "cross_subject"):
+        assert list(result["protocols"][protocol]) == ["casiab_multitask", "casiab_single_subject", "gei_pca_lda"]
+    multi = result["protocols"]["closed_set"]["casiab_multitask"]
+    assert set(multi["report"]["closed_set"]["tasks"]) == {"subject", "view", "condition"}
+    assert multi["report"]["checkpoint"].endswith("best.ckpt")
+    single = result["protocols"]["closed_set"]["casiab_single_subject"]
+    assert list(single["report"]["closed_set"]["tasks"]) == ["subject"]
+    cross = result["protocols"]["cross_subject"]["casiab_multitask"]["report"]["cross_view"]
+    assert cross["conditions"]["nm"]["missing_cells"] == [] and 0.0 <= cross["conditions"]["nm"]["mean"] <= 1.0
+    out = tmp_path / "report"
+    assert json.loads((out / "report.json").read_text())["protocols"].keys() == {"closed_set", "cross_subject"}
+    text = (out / "report.md").read_text()
+    assert "## Closed set" in text and "## Cross subject" in text and "single-task CNN" in text
+    assert (out / "per_view.png").stat().st_size > 1000
+    assert (out / "runs" / "casiab_multitask" / "closed_set-seed0" / "eval" / "metrics.json").is_file()
