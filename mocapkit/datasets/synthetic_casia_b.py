@@ -55,6 +55,10 @@ CAMERA_DISTANCE_M = 8.0
 MIN_DEPTH_M = 2.0
 #: Camera height in metres; the image's vertical centre.
 CAMERA_HEIGHT_M = 0.9
+#: Downward tilt of every camera (degrees). CASIA-B's cameras look slightly down on the walkway; the tilt
+#: is what tells view θ from 180° − θ in a silhouette: without it (level orthographic cameras) the two
+#: silhouettes are mirror images of a left-right symmetric walker, and their GEIs coincide.
+CAMERA_TILT_DEG = 15.0
 #: A 1.75 m person is this fraction of the image height at the track centre.
 PERSON_HEIGHT_FRACTION = 0.62
 #: The raster's field is clipped below at minus this many pixels (outside the body).
@@ -455,11 +459,17 @@ def pixels_per_metre(height: int) -> float:
 
 
 def project(points: np.ndarray, scale: np.ndarray, view: float, height: int, width: int) -> np.ndarray:
-    """World points ``[T, ..., 3]`` to pixel coordinates ``[T, ..., 2]`` (x right, y down) with per-frame ``scale``."""
-    right, _ = camera_axes(view)
+    """World points ``[T, ..., 3]`` to pixel coordinates ``[T, ..., 2]`` (x right, y down) with per-frame ``scale``.
+
+    The camera is tilted down by :data:`CAMERA_TILT_DEG`: its up axis is ``cos(tilt)·z + sin(tilt)·forward``,
+    so of two points at the same height the one farther along the viewing direction is drawn higher.
+    """
+    right, forward = camera_axes(view)
     s = scale.reshape((-1,) + (1,) * (points.ndim - 2))
     u = points @ right
-    return np.stack([width / 2 + s * u, height / 2 - s * (points[..., 2] - CAMERA_HEIGHT_M)], axis=-1)
+    tilt = np.radians(CAMERA_TILT_DEG)
+    up = (points[..., 2] - CAMERA_HEIGHT_M) * np.cos(tilt) + (points @ forward) * np.sin(tilt)
+    return np.stack([width / 2 + s * u, height / 2 - s * up], axis=-1)
 
 
 def project_capsules(capsules: Capsules, view: float, height: int, width: int
