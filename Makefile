@@ -24,6 +24,11 @@ bench: $(STAMP)
 	$(PY) bench/bench_skeleton_parse.py
 	$(PY) bench/bench_training.py
 	$(PY) bench/bench_onnx_latency.py
+	$(PY) bench/bench_readers.py
+	$(PY) bench/bench_casia_b_render.py
+	$(PY) bench/bench_gei.py
+	$(PY) bench/bench_gait_training.py
+	$(PY) bench/bench_nmf.py
 
 clean:
 	rm -rf .demo build *.egg-info
