@@ -33,7 +33,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from mocapkit.datasets.layouts import LANDMARKS, LAYOUTS, SkeletonLayout
+from mocapkit.datasets.layouts import LANDMARKS, SkeletonLayout, get_layout
 
 
 def _check_window(window: int, stride: int | None) -> tuple[int, int]:
@@ -78,17 +78,9 @@ def feature_dim(num_joints: int, frames_per_clip: int = 10) -> int:
     return 2 * frames_per_clip * num_joints * 3
 
 
-def _layout(layout: SkeletonLayout | str) -> SkeletonLayout:
-    if isinstance(layout, SkeletonLayout):
-        return layout
-    if layout not in LAYOUTS:
-        raise ValueError(f"unknown skeleton layout {layout!r}; known: {sorted(LAYOUTS)}")
-    return LAYOUTS[layout]
-
-
 def body_joints(layout: SkeletonLayout | str) -> tuple[int, int, int]:
     """``(root, pelvis, neck)`` joint indices of a layout: the origin and the body-size segment."""
-    layout = _layout(layout)
+    layout = get_layout(layout)
     landmarks = LANDMARKS.get(layout.name)
     if not landmarks:
         raise ValueError(f"clip features need the pelvis and neck landmarks of layout {layout.name!r}")
@@ -107,7 +99,7 @@ def normalise_sequence(positions: np.ndarray, layout: SkeletonLayout | str = "ms
         ValueError: wrong shape, non-finite values, or no tracked joint at all.
     """
     positions = np.asarray(positions, dtype=np.float32)
-    layout = _layout(layout)
+    layout = get_layout(layout)
     if positions.ndim != 3 or positions.shape[1:] != (layout.num_joints, 3):
         raise ValueError(f"positions must be [frames, {layout.num_joints}, 3] for layout {layout.name!r}, "
                          f"got {list(positions.shape)}")
@@ -178,7 +170,7 @@ class ClipFeatures(torch.nn.Module):
     def __init__(self, layout: SkeletonLayout | str = "msr20", window: int = 30, stride: int | None = None,
                  frames_per_clip: int = 10):
         super().__init__()
-        self.layout = _layout(layout)
+        self.layout = get_layout(layout)
         self.window, self.stride = _check_window(window, stride)
         self.frames_per_clip = int(frames_per_clip)
         self.root, self.pelvis, self.neck = body_joints(self.layout)

@@ -131,3 +131,12 @@ LANDMARKS: dict[str, dict[str, str]] = {
 }
 
 LAYOUTS = {layout.name: layout for layout in (NTU25, MSR20, CMU31)}
+
+
+def get_layout(layout: SkeletonLayout | str) -> SkeletonLayout:
+    """``layout`` itself, or the layout of that name in :data:`LAYOUTS` (``"ntu25"``, ``"msr20"``, ``"cmu31"``)."""
+    if isinstance(layout, SkeletonLayout):
+        return layout
+    if layout not in LAYOUTS:
+        raise ValueError(f"unknown skeleton layout {layout!r}; known: {sorted(LAYOUTS)}")
+    return LAYOUTS[layout]

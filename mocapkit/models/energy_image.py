@@ -29,7 +29,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from mocapkit.datasets.layouts import LANDMARKS, LAYOUTS, NTU25, SkeletonLayout
+from mocapkit.datasets.layouts import LANDMARKS, NTU25, SkeletonLayout, get_layout
 
 #: Planes as (horizontal axis, vertical axis) over (x, y, z); vertical axes grow upwards.
 PLANES = {"xy": (0, 1), "zy": (2, 1), "xz": (0, 2)}
@@ -68,11 +68,7 @@ class EnergyImage(nn.Module):
         if size < 4 or extent <= 0 or bone_samples < 0 or smoothing < 0:
             raise ValueError(f"invalid energy image geometry: size={size}, extent={extent}, "
                              f"bone_samples={bone_samples}, smoothing={smoothing}")
-        if isinstance(layout, str):
-            if layout not in LAYOUTS:
-                raise ValueError(f"unknown skeleton layout {layout!r}; known: {sorted(LAYOUTS)}")
-            layout = LAYOUTS[layout]
-        self.layout = layout
+        self.layout = get_layout(layout)
         self.size = int(size)
         self.extent = float(extent)
         self.bone_samples = int(bone_samples)

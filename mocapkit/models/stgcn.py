@@ -26,17 +26,9 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from mocapkit.datasets.layouts import LANDMARKS, LAYOUTS, SkeletonLayout
+from mocapkit.datasets.layouts import LANDMARKS, SkeletonLayout, get_layout
 
 STREAMS = ("joint", "velocity", "bone")
-
-
-def _layout(layout: SkeletonLayout | str) -> SkeletonLayout:
-    if isinstance(layout, SkeletonLayout):
-        return layout
-    if layout not in LAYOUTS:
-        raise ValueError(f"unknown skeleton layout {layout!r}; known: {sorted(LAYOUTS)}")
-    return LAYOUTS[layout]
 
 
 def spatial_adjacency(layout: SkeletonLayout | str) -> torch.Tensor:
@@ -46,7 +38,7 @@ def spatial_adjacency(layout: SkeletonLayout | str) -> torch.Tensor:
     ``A[1, i, parent(i)]`` and ``A[2, parent(j), j]`` are ``1 / sqrt(d_i d_j)`` with ``d`` the degree
     including the self-loop; ``A[0]`` is the diagonal ``1 / d_i``. ``A.sum(0)`` is symmetric.
     """
-    layout = _layout(layout)
+    layout = get_layout(layout)
     j = layout.num_joints
     adj = torch.eye(j)
     for child, parent in layout.bones:
@@ -131,7 +123,7 @@ class STGCN(nn.Module):
                  kernel_size: int = 9, streams: tuple[str, ...] = ("joint",), center: bool = True,
                  scale: bool = False, adaptive: bool = True, dropout: float = 0.0, head_dropout: float = 0.0):
         super().__init__()
-        self.layout = _layout(layout)
+        self.layout = get_layout(layout)
         streams = tuple(streams)
         unknown = [s for s in streams if s not in STREAMS]
         if unknown or not streams:

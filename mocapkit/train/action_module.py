@@ -12,12 +12,14 @@ import torch.nn.functional as F
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
+from mocapkit.train.optimization import ConfiguredOptimization
+
 
 def _as_dict(cfg) -> dict:
     return OmegaConf.to_container(cfg, resolve=True) if isinstance(cfg, DictConfig) else dict(cfg)
 
 
-class ActionRecognitionModule(L.LightningModule):
+class ActionRecognitionModule(ConfiguredOptimization, L.LightningModule):
     """Cross-entropy training of ``model`` (skeletons ``[B, M, T, J, 3]`` → logits ``[B, C]``).
 
     Args:
@@ -70,17 +72,3 @@ class ActionRecognitionModule(L.LightningModule):
     def predict_step(self, batch: dict, batch_idx: int) -> dict:
         return {"logits": self(batch["skeletons"]), "labels": batch["labels"], "indices": batch["indices"],
                 "subjects": batch["subjects"]}
-
-    def on_load_checkpoint(self, checkpoint: dict) -> None:
-        """On resume, the schedule's configured parameters (e.g. ``T_max``) come from the current
-        config, its progress (``last_epoch``, learning rates) from the checkpoint."""
-        configured = {k: v for k, v in (self.hparams.scheduler or {}).items() if not k.startswith("_")}
-        for state in checkpoint.get("lr_schedulers", []):
-            state.update({k: v for k, v in configured.items() if k in state})
-
-    def configure_optimizers(self):
-        optimizer = instantiate(self.hparams.optimizer)(params=self.parameters())
-        if not self.hparams.scheduler:
-            return optimizer
-        scheduler = instantiate(self.hparams.scheduler)(optimizer=optimizer)
-        return {"optimizer": optimizer, "lr_scheduler": {"scheduler": scheduler, "interval": "epoch"}}

@@ -18,6 +18,8 @@ import torch.nn.functional as F
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
+from mocapkit.train.optimization import ConfiguredOptimization
+
 #: The batch key holding each task's labels.
 TASK_LABELS = {"subject": "subjects", "view": "views", "condition": "conditions"}
 #: Batch keys copied into every ``predict_step`` output.
@@ -28,7 +30,7 @@ def _as_dict(cfg) -> dict:
     return OmegaConf.to_container(cfg, resolve=True) if isinstance(cfg, DictConfig) else dict(cfg)
 
 
-class GaitRecognitionModule(L.LightningModule):
+class GaitRecognitionModule(ConfiguredOptimization, L.LightningModule):
     """Joint cross-entropy training of a multi-task gait network (GEIs ``[B, 1, H, W]`` → ``{task: logits}``).
 
     Args:
@@ -135,17 +137,3 @@ class GaitRecognitionModule(L.LightningModule):
         result.update({f"{task}_logits": outputs[task] for task in self.tasks})
         result.update({key: batch[key] for key in PREDICT_KEYS})
         return result
-
-    def on_load_checkpoint(self, checkpoint: dict) -> None:
-        """On resume, the schedule's configured parameters (e.g. ``T_max``) come from the current
-        config, its progress (``last_epoch``, learning rates) from the checkpoint."""
-        configured = {k: v for k, v in (self.hparams.scheduler or {}).items() if not k.startswith("_")}
-        for state in checkpoint.get("lr_schedulers", []):
-            state.update({k: v for k, v in configured.items() if k in state})
-
-    def configure_optimizers(self):
-        optimizer = instantiate(self.hparams.optimizer)(params=self.parameters())
-        if not self.hparams.scheduler:
-            return optimizer
-        scheduler = instantiate(self.hparams.scheduler)(optimizer=optimizer)
-        return {"optimizer": optimizer, "lr_scheduler": {"scheduler": scheduler, "interval": "epoch"}}
