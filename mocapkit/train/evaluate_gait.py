@@ -44,6 +44,9 @@ def evaluate_gait(module: L.LightningModule, datamodule, cfg: DictConfig, out_di
                   ckpt_path: str | Path | None = None) -> dict:
     """Evaluate a gait module on ``datamodule.test_dataloader()`` under ``datamodule.protocol``.
 
+    With ``eval.part=val`` the validation side (training subjects' held-out sequences) is scored
+    instead, as closed-set classification under either protocol.
+
     Args:
         module: a :class:`~mocapkit.train.gait_module.GaitRecognitionModule` (or anything whose
             ``predict_step`` returns its keys: ``embedding``, ``<task>_logits``, ``subjects``,
@@ -61,17 +64,20 @@ def evaluate_gait(module: L.LightningModule, datamodule, cfg: DictConfig, out_di
     """
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    out = predict_gait(module, datamodule.test_dataloader(), cfg)
-    protocol = datamodule.protocol
+    part = str(cfg.get("eval", {}).get("part", "test") or "test")
+    loader = datamodule.val_dataloader() if part == "val" else datamodule.test_dataloader()
+    out = predict_gait(module, loader, cfg)
+    # the validation side holds training subjects' sequences under both protocols: closed-set classification
+    protocol = "closed_set" if part == "val" else datamodule.protocol
     name = str(cfg.get("experiment_name", "gait"))
-    report: dict = {"experiment": name, "protocol": protocol,
+    report: dict = {"experiment": name, "protocol": datamodule.protocol, "part": part,
                     "tasks": [k[: -len("_logits")] for k in out if k.endswith("_logits")], **datamodule.describe()}
     if ckpt_path is not None:  # (mocapkit.train.evaluate.evaluate adds it itself)
         report["checkpoint"] = str(ckpt_path)
     if protocol == "closed_set":
         closed = closed_set_report(out)
         report["closed_set"] = closed
-        summary = closed_set_markdown(closed, f"{name}: closed-set accuracy (%) on {closed['num_geis']} test GEIs")
+        summary = closed_set_markdown(closed, f"{name}: closed-set accuracy (%) on {closed['num_geis']} {part} GEIs")
         series = {task: entry["per_view"] for task, entry in closed["tasks"].items()}
         plot_title = f"{name}: closed-set accuracy per probe view"
     elif protocol == "cross_subject":
