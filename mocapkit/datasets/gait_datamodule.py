@@ -27,7 +27,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import lightning as L
 import numpy as np
 import torch
 from torch.utils.data import DataLoader, Dataset
@@ -35,6 +34,7 @@ from torch.utils.data import DataLoader, Dataset
 from mocapkit.datasets.casia_b import CONDITIONS, VIEWS
 from mocapkit.datasets.gait_protocols import PROTOCOLS, closed_set_split, cross_subject_subjects
 from mocapkit.datasets.gei_cache import GEICache
+from mocapkit.datasets.split_datamodule import SplitDataModule
 
 
 class GEIShift:
@@ -138,7 +138,7 @@ def sequence_validation_split(train_idx: np.ndarray, sequence_keys: np.ndarray, 
     return train_idx[~in_val], train_idx[in_val]
 
 
-class GaitDataModule(L.LightningDataModule):
+class GaitDataModule(SplitDataModule):
     """Train / validation / test loaders over a GEI cache for one CASIA-B protocol.
 
     Args:
@@ -158,6 +158,8 @@ class GaitDataModule(L.LightningDataModule):
         num_subjects, subject_names (= class_names): the subject label space. num_views, num_conditions.
         height, width: GEI size.
     """
+
+    collate_fn = staticmethod(gei_collate)
 
     def __init__(self, root: str, protocol: str = "closed_set", holdout_seed: int = 0,
                  num_train_subjects: int | None = None, val_fraction: float = 0.1, batch_size: int = 32,
@@ -248,23 +250,16 @@ class GaitDataModule(L.LightningDataModule):
 
     # ------------------------------------------------------------------ reports
 
-    def sample_counts(self) -> dict[str, int]:
-        return {"train": len(self.train_idx), "val": len(self.val_idx), "test": len(self.test_idx)}
-
     def describe(self) -> dict:
         """The protocol for reports: split name, subjects on each side, label space, sample counts."""
         if self.protocol == "closed_set":
             split = f"casia-b closed_set (holdout seed {self.holdout_seed})"
         else:
             split = f"casia-b cross_subject ({len(self.train_subjects)} train / {len(self.test_subjects)} test subjects)"
-        subjects = self.cache.subjects
         return {"split": split, "protocol": self.protocol, "data_root": str(self.root),
                 "per": self.cache.meta.get("per"), "gei_size": [self.height, self.width],
-                "train_subjects": sorted(set(subjects[self.train_idx].tolist())),
-                "val_subjects": sorted(set(subjects[self.val_idx].tolist())),
-                "test_subjects": sorted(set(subjects[self.test_idx].tolist())),
-                "label_space": self.subject_names, "views": list(VIEWS), "conditions": list(CONDITIONS),
-                "sample_counts": self.sample_counts()}
+                **self.split_description(self.cache.subjects),
+                "label_space": self.subject_names, "views": list(VIEWS), "conditions": list(CONDITIONS)}
 
     # ------------------------------------------------------------------ loaders
 
@@ -276,20 +271,6 @@ class GaitDataModule(L.LightningDataModule):
             self._datasets[part] = GEIDataset(geis, indices, self.subject_labels, self.cache,
                                               self.augment if part == "train" else None)
         return self._datasets[part]
-
-    def _loader(self, part: str, shuffle: bool) -> DataLoader:
-        return DataLoader(self.dataset(part), batch_size=self.batch_size if part == "train" else self.eval_batch_size,
-                          shuffle=shuffle, num_workers=self.num_workers, collate_fn=gei_collate,
-                          persistent_workers=self.num_workers > 0, drop_last=False)
-
-    def train_dataloader(self) -> DataLoader:
-        return self._loader("train", shuffle=True)
-
-    def val_dataloader(self) -> DataLoader:
-        return self._loader("val", shuffle=False)
-
-    def test_dataloader(self) -> DataLoader:
-        return self._loader("test", shuffle=False)
 
     def predict_dataloader(self) -> DataLoader:
         """The test part (what ``trainer.predict`` embeds for the gallery/probe evaluation)."""

@@ -1,9 +1,5 @@
-"""What every skeleton data module shares: batching, padding, loaders and the split description.
-
-A data module used with ``mocapkit train`` / ``eval`` sets ``train_idx``, ``val_idx``,
-``test_idx`` (sample indices), ``batch_size``, ``eval_batch_size`` and ``num_workers``,
-and implements ``dataset(part)``, ``num_classes``, ``class_names`` and ``describe()``
-(which can start from :meth:`SkeletonDataModule.split_description`). Batches are dicts::
+"""What every skeleton data module shares: frame sampling and padded batches (loaders and the split
+description come from :class:`~mocapkit.datasets.split_datamodule.SplitDataModule`). Batches are dicts::
 
     skeletons  float32 [B, M, T, J, 3]   metres; zero-padded to the longest sample in the batch
     labels     int64   [B]               0-based class
@@ -15,10 +11,10 @@ Padding frames are all zero, which every model here treats as "no body".
 """
 from __future__ import annotations
 
-import lightning as L
 import numpy as np
 import torch
-from torch.utils.data import DataLoader
+
+from mocapkit.datasets.split_datamodule import SplitDataModule
 
 
 def uniform_frame_indices(length: int, max_frames: int) -> np.ndarray:
@@ -44,39 +40,7 @@ def pad_collate(items: list[dict]) -> dict:
     }
 
 
-class SkeletonDataModule(L.LightningDataModule):
-    """Base class: loaders over ``dataset(part)`` for ``part`` in train / val / test."""
+class SkeletonDataModule(SplitDataModule):
+    """Base class of the skeleton data modules: batches padded by :func:`pad_collate`."""
 
-    train_idx: np.ndarray
-    val_idx: np.ndarray
-    test_idx: np.ndarray
-    batch_size: int
-    eval_batch_size: int
-    num_workers: int
-
-    def dataset(self, part: str):  # pragma: no cover - implemented by subclasses
-        raise NotImplementedError
-
-    def sample_counts(self) -> dict[str, int]:
-        return {"train": len(self.train_idx), "val": len(self.val_idx), "test": len(self.test_idx)}
-
-    def split_description(self, subjects: np.ndarray) -> dict:
-        """Subjects on each side of the split (``subjects``: per-sample IDs) and the sample counts."""
-        return {"train_subjects": sorted(set(subjects[self.train_idx].tolist())),
-                "val_subjects": sorted(set(subjects[self.val_idx].tolist())),
-                "test_subjects": sorted(set(subjects[self.test_idx].tolist())),
-                "sample_counts": self.sample_counts()}
-
-    def _loader(self, part: str, shuffle: bool) -> DataLoader:
-        return DataLoader(self.dataset(part), batch_size=self.batch_size if part == "train" else self.eval_batch_size,
-                          shuffle=shuffle, num_workers=self.num_workers, collate_fn=pad_collate,
-                          persistent_workers=self.num_workers > 0, drop_last=False)
-
-    def train_dataloader(self) -> DataLoader:
-        return self._loader("train", shuffle=True)
-
-    def val_dataloader(self) -> DataLoader:
-        return self._loader("val", shuffle=False)
-
-    def test_dataloader(self) -> DataLoader:
-        return self._loader("test", shuffle=False)
+    collate_fn = staticmethod(pad_collate)
