@@ -22,13 +22,13 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-import time
-from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from timing import best_of  # noqa: E402  (bench/timing.py, beside this script)
 
 from mocapkit.datasets.casia_b import CONDITIONS, VIEWS
 from mocapkit.datasets.synthetic_casia_b import (
@@ -72,17 +72,6 @@ def plain_render_walk(subject, views, condition: str, frames: int, height: int, 
             masks[t] = np.asarray(image)
         out.append(masks)
     return out
-
-
-def best_of(tasks: dict[str, Callable], repeat: int) -> dict[str, float]:
-    """``{name: best wall seconds}`` over ``repeat`` interleaved rounds."""
-    best = {name: float("inf") for name in tasks}
-    for _ in range(repeat):
-        for name, task in tasks.items():
-            t = time.perf_counter()
-            task()
-            best[name] = min(best[name], time.perf_counter() - t)
-    return best
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -19,14 +19,14 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-import time
-from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 from PIL import Image
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from timing import best_of  # noqa: E402  (bench/timing.py, beside this script)
 
 from mocapkit.datasets.casia_b import VIEWS
 from mocapkit.datasets.casia_b_prepare import parse_gei_size
@@ -63,17 +63,6 @@ def render_sequences(count: int, frames: int, height: int = 240, seed: int = 0) 
         view = VIEWS[(3 + 2 * i) % len(VIEWS)]
         out.append(render_walk(draw_subject(seed, 1 + i % 8), view, "nm", frames, height, rng, walk=draw_walk(rng)))
     return out
-
-
-def best_of(tasks: dict[str, Callable], repeat: int) -> dict[str, float]:
-    """``{name: best wall seconds}`` over ``repeat`` interleaved rounds."""
-    best = {name: float("inf") for name in tasks}
-    for _ in range(repeat):
-        for name, task in tasks.items():
-            t = time.perf_counter()
-            task()
-            best[name] = min(best[name], time.perf_counter() - t)
-    return best
 
 
 def main(argv: list[str] | None = None) -> int:

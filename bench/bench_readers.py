@@ -24,7 +24,6 @@ import argparse
 import importlib
 import os
 import sys
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -32,6 +31,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from timing import best_of  # noqa: E402  (bench/timing.py, beside this script)
 
 DEFAULT_SRC = Path(__file__).resolve().parents[1].parent / "shared" / "samples"
 
@@ -261,17 +262,6 @@ def _load(spec: str):
         return getattr(importlib.import_module(module), name)
     except (ImportError, AttributeError):
         return None
-
-
-def best_of(tasks: dict[str, Callable], repeat: int) -> dict[str, float]:
-    """``{name: best wall seconds}`` over ``repeat`` interleaved rounds."""
-    best = {name: float("inf") for name in tasks}
-    for _ in range(repeat):
-        for name, task in tasks.items():
-            t = time.perf_counter()
-            task()
-            best[name] = min(best[name], time.perf_counter() - t)
-    return best
 
 
 def main(argv: list[str] | None = None) -> int:
