@@ -47,6 +47,15 @@ def example_skeletons(batch: int, frames: int, bodies: int = 2, joints: int = 25
     return x
 
 
+def save_checked_onnx(proto: onnx.ModelProto, meta: dict[str, str], out: Path) -> None:
+    """Add ``meta`` as the model's metadata, run ``onnx.checker`` (full check) and write ``out``."""
+    for key, value in meta.items():
+        entry = proto.metadata_props.add()
+        entry.key, entry.value = key, value
+    onnx.checker.check_model(proto, full_check=True)
+    onnx.save(proto, str(out))
+
+
 def export_onnx(model: torch.nn.Module, out: str | Path, class_names: list[str] | None = None, opset: int = 18,
                 trace_shape: tuple[int, int] = (2, 64), check_shape: tuple[int, int] = (3, 97),
                 atol: float = 1e-4, rtol: float = 1e-3) -> dict:
@@ -81,11 +90,7 @@ def export_onnx(model: torch.nn.Module, out: str | Path, class_names: list[str] 
             "joint_names": json.dumps(list(layout.joint_names) if layout is not None else []),
             "input": f"skeletons float32 [batch, bodies, frames, {joints}, 3], metres, zeros where a body is absent",
             "output": "logits float32 [batch, classes]", "producer": "mocapkit"}
-    for key, value in meta.items():
-        entry = proto.metadata_props.add()
-        entry.key, entry.value = key, value
-    onnx.checker.check_model(proto, full_check=True)
-    onnx.save(proto, str(out))
+    save_checked_onnx(proto, meta, out)
 
     session = ort.InferenceSession(str(out), providers=["CPUExecutionProvider"])
     checks = []

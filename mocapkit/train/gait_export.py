@@ -15,13 +15,12 @@ import warnings
 from pathlib import Path
 
 import numpy as np
-import onnx
 import onnxruntime as ort
 import torch
 from torch import nn
 
 from mocapkit.datasets.casia_b import CONDITIONS, VIEWS
-from mocapkit.train.export_onnx import ParityError
+from mocapkit.train.export_onnx import ParityError, save_checked_onnx
 
 
 class _OutputTuple(nn.Module):
@@ -78,11 +77,7 @@ def export_gait_onnx(model: nn.Module, out: str | Path, subject_names: list[str]
             "conditions": json.dumps(list(CONDITIONS)), "tasks": json.dumps(list(model.tasks)),
             "input": f"geis float32 [batch, 1, {height}, {width}], Gait Energy Image pixel values in [0, 1]",
             "outputs": json.dumps(names), "producer": "mocapkit"}
-    for key, value in meta.items():
-        entry = proto.metadata_props.add()
-        entry.key, entry.value = key, value
-    onnx.checker.check_model(proto, full_check=True)
-    onnx.save(proto, str(out))
+    save_checked_onnx(proto, meta, out)
 
     session = ort.InferenceSession(str(out), providers=["CPUExecutionProvider"])
     check_input = example_geis(check_batch, height, width, seed=1)
