@@ -1,6 +1,6 @@
 """Benchmark: the synthetic CASIA-B silhouette renderer against a plain PIL rasteriser, same scenes, in one run.
 
-The scene is what :func:`mocapkit.datasets.synthetic_casia_b.synthesize_casia_b` renders per walk:
+The scene is what :func:`mocapkit.datasets.synthetic.casia_b.synthesize_casia_b` renders per walk:
 one subject's posed capsule body (:func:`body_capsules`) seen from all 11 views, ``--frames``
 frames each, for ``--subjects`` subjects and the three conditions. Both rasterisers get the
 same projected capsules (:func:`project_capsules`), so only the rasterisation differs:
@@ -30,8 +30,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from timing import best_of  # noqa: E402  (bench/timing.py, beside this script)
 
-from mocapkit.datasets.casia_b import CONDITIONS, VIEWS
-from mocapkit.datasets.synthetic_casia_b import (
+from mocapkit.datasets.formats.casia_b import CONDITIONS, VIEWS
+from mocapkit.datasets.synthetic.casia_b import (
     SegmentationNoise,
     WalkVariation,
     body_capsules,

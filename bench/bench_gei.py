@@ -1,7 +1,7 @@
 """Benchmark: GEI building throughput, mocapkit's batched builder against a per-frame PIL loop, in one run.
 
 Both build one GEI per sequence (``per="sequence"``: normalise every silhouette, then average)
-from the same in-memory sequences, rendered by :mod:`mocapkit.datasets.synthetic_casia_b` at
+from the same in-memory sequences, rendered by :mod:`mocapkit.datasets.synthetic.casia_b` at
 CASIA-B's 320x240 (no PNG decoding in the timing), and their GEIs are checked to agree first.
 The mocapkit builder is also timed with ``per="cycle"`` (period detection + per-cycle means).
 
@@ -28,10 +28,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from timing import best_of  # noqa: E402  (bench/timing.py, beside this script)
 
-from mocapkit.datasets.casia_b import VIEWS
-from mocapkit.datasets.casia_b_prepare import parse_gei_size
-from mocapkit.datasets.gei import gait_energy_images
-from mocapkit.datasets.synthetic_casia_b import draw_subject, draw_walk, render_walk
+from mocapkit.datasets.formats.casia_b import VIEWS
+from mocapkit.datasets.casia_b.prepare import parse_gei_size
+from mocapkit.datasets.casia_b.gei import gait_energy_images
+from mocapkit.datasets.synthetic.casia_b import draw_subject, draw_walk, render_walk
 
 
 def plain_gei(frames: np.ndarray, height: int = 64, width: int = 44, min_foreground: float = 0.001) -> np.ndarray:

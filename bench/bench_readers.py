@@ -44,7 +44,7 @@ def plain_read_bvh(path: str | Path, scale: float = 1.0) -> np.ndarray:
     """A plain BVH reader: per-line parsing, ``float()`` per value, per-frame per-joint FK in Python.
 
     Returns float64 ``[frames, joints, 3]`` positions (file units × ``scale``), End Sites
-    excluded, with the same conventions as :func:`mocapkit.datasets.bvh.read_bvh`
+    excluded, with the same conventions as :func:`mocapkit.datasets.formats.bvh.read_bvh`
     (intrinsic rotations in channel order, position channels replace the OFFSET).
     """
     names, parents, offsets, channels = [], [], [], []
@@ -122,7 +122,7 @@ def plain_read_amc(path: str | Path) -> np.ndarray:
     The ASF is parsed with mocapkit's ``read_asf`` (the benchmark times the AMC and the FK).
     Returns float64 ``[frames, joints, 3]`` metres: root, then the bones in ASF order.
     """
-    from mocapkit.datasets.asf_amc import find_asf, read_asf
+    from mocapkit.datasets.formats.asf_amc import find_asf, read_asf
 
     skel = read_asf(find_asf(path))
     to_rad = np.pi / 180.0 if skel.units.get("angle", "deg") == "deg" else 1.0
@@ -233,17 +233,17 @@ def _bvh_plain_positions(path, ours, plain):
 
 
 CASES: list[Case] = [
-    Case("bvh", "bvh/*.bvh", "mocapkit.datasets.bvh:read_bvh", plain_read_bvh,
+    Case("bvh", "bvh/*.bvh", "mocapkit.datasets.formats.bvh:read_bvh", plain_read_bvh,
          ours_positions=lambda m: m.positions, plain_positions=_bvh_plain_positions,
          frames=lambda m: m.num_frames),
-    Case("asf/amc", "asf_amc/**/*.amc", "mocapkit.datasets.asf_amc:read_amc", plain_read_amc,
+    Case("asf/amc", "asf_amc/**/*.amc", "mocapkit.datasets.formats.asf_amc:read_amc", plain_read_amc,
          ours_positions=lambda m: m.positions, plain_positions=lambda path, ours, plain: plain,
          frames=lambda m: m.num_frames),
-    Case("msr3d", "msr3d/*_skeleton3D.txt", "mocapkit.datasets.msr_action3d:read_msr_skeleton", plain_read_msr,
+    Case("msr3d", "msr3d/*_skeleton3D.txt", "mocapkit.datasets.formats.msr_action3d:read_msr_skeleton", plain_read_msr,
          # ours marks all-zero joints missing; the raw file has zeros
          ours_positions=lambda m: m.filled(0.0), plain_positions=lambda path, ours, plain: plain,
          frames=lambda m: m.num_frames),
-    Case("c3d", "c3d/*.c3d", "mocapkit.datasets.c3d:read_c3d", plain_read_c3d,
+    Case("c3d", "c3d/*.c3d", "mocapkit.datasets.formats.c3d:read_c3d", plain_read_c3d,
          ours_positions=lambda m: np.nan_to_num(m.positions, nan=0.0),
          plain_positions=lambda path, ours, plain: np.nan_to_num(_c3d_like_ours(ours, plain), nan=0.0),
          frames=lambda m: m.num_frames, atol=1e-4),

@@ -32,8 +32,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from mocapkit.datasets.ntu_prepare import prepare_ntu  # noqa: E402
-from mocapkit.datasets.ntu_skeleton import read_skeleton  # noqa: E402
+from mocapkit.datasets.ntu.prepare import prepare_ntu  # noqa: E402
+from mocapkit.datasets.formats.ntu_skeleton import read_skeleton  # noqa: E402
 
 DEFAULT_SRC = Path(__file__).resolve().parents[1].parent / "shared" / "samples" / "ntu_skeleton"
 

@@ -37,7 +37,7 @@ def _split_kv(items: list[str], key: str) -> tuple[str | None, list[str]]:
 def cmd_synth_ntu(args: argparse.Namespace) -> None:
     import json
 
-    from mocapkit.datasets.synthetic_ntu import NTUSynthConfig, synthesize_ntu
+    from mocapkit.datasets.synthetic.ntu import NTUSynthConfig, synthesize_ntu
 
     fields = {f.name: f for f in dataclasses.fields(NTUSynthConfig)}
     values = {}
@@ -61,7 +61,7 @@ def cmd_synth_ntu(args: argparse.Namespace) -> None:
 
 
 def cmd_synth_hdm05(args: argparse.Namespace) -> None:
-    from mocapkit.datasets.synthetic_hdm05 import HDM05SynthConfig, synthesize_hdm05
+    from mocapkit.datasets.synthetic.hdm05 import HDM05SynthConfig, synthesize_hdm05
 
     values = {}
     if args.classes:
@@ -76,7 +76,7 @@ def cmd_synth_hdm05(args: argparse.Namespace) -> None:
 
 
 def cmd_synth_casia_b(args: argparse.Namespace) -> None:
-    from mocapkit.datasets.synthetic_casia_b import (
+    from mocapkit.datasets.synthetic.casia_b import (
         CasiaBSynthConfig,
         synthesize_casia_b,
     )
@@ -89,7 +89,7 @@ def cmd_synth_casia_b(args: argparse.Namespace) -> None:
 
 
 def cmd_render(args: argparse.Namespace) -> None:
-    from mocapkit.datasets.render import render_file
+    from mocapkit.visualization.render import render_file
 
     options = {k: v for k, v in (("view", args.view), ("fps", args.fps), ("n", args.frames)) if v is not None}
     if not args.strip:
@@ -101,7 +101,7 @@ def cmd_render(args: argparse.Namespace) -> None:
 
 
 def cmd_prepare_ntu(args: argparse.Namespace) -> None:
-    from mocapkit.datasets.ntu_prepare import prepare_ntu
+    from mocapkit.datasets.ntu.prepare import prepare_ntu
 
     report = prepare_ntu(args.src, args.out, workers=args.workers, skip_bad=args.skip_bad,
                          missing_list=args.missing_list, max_bodies=args.max_bodies,
@@ -112,7 +112,7 @@ def cmd_prepare_ntu(args: argparse.Namespace) -> None:
 
 
 def cmd_prepare_casia_b(args: argparse.Namespace) -> None:
-    from mocapkit.datasets.casia_b_prepare import parse_gei_size, prepare_casia_b
+    from mocapkit.datasets.casia_b.prepare import parse_gei_size, prepare_casia_b
 
     report = prepare_casia_b(args.src, args.out, size=parse_gei_size(args.size), per=args.per,
                              skip_bad=args.skip_bad, workers=args.workers, subjects=args.subjects,
@@ -122,7 +122,7 @@ def cmd_prepare_casia_b(args: argparse.Namespace) -> None:
 
 
 def cmd_gait_report(args: argparse.Namespace) -> None:
-    from mocapkit.train.gait_report import gait_report
+    from mocapkit.evaluation.gait_report import gait_report
 
     gait_report(args.data, args.out, protocols=tuple(args.protocols), experiments=tuple(args.experiments),
                 overrides=tuple(args.overrides), seed=args.seed, include_pca_lda=not args.no_pca_lda)
@@ -138,7 +138,7 @@ def cmd_train(overrides: list[str]) -> None:
 
 
 def cmd_eval(overrides: list[str]) -> None:
-    from mocapkit.train.evaluate import evaluate
+    from mocapkit.evaluation.evaluate import evaluate
 
     ckpt, rest = _split_kv(overrides, "ckpt_path")
     if not ckpt:
@@ -147,7 +147,7 @@ def cmd_eval(overrides: list[str]) -> None:
 
 
 def cmd_export(overrides: list[str]) -> None:
-    from mocapkit.train.export_onnx import export_checkpoint
+    from mocapkit.deploy.export import export_checkpoint
 
     ckpt, rest = _split_kv(overrides, "ckpt_path")
     out, rest = _split_kv(rest, "out")
@@ -157,7 +157,7 @@ def cmd_export(overrides: list[str]) -> None:
 
 
 def cmd_predict(args: argparse.Namespace) -> None:
-    from mocapkit.train.predict import predict_files, print_predictions
+    from mocapkit.deploy.predict import predict_files, print_predictions
 
     print_predictions(predict_files(args.onnx, args.files, top=args.top))
 
@@ -280,7 +280,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _run(handler, arg) -> int:
-    from mocapkit.datasets.format_errors import MotionFormatError
+    from mocapkit.datasets.formats.errors import MotionFormatError
 
     try:
         from mocapkit.train.config import ConfigError

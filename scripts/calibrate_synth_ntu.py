@@ -29,8 +29,8 @@ from sklearn.pipeline import make_pipeline
 from sklearn.preprocessing import StandardScaler
 from sklearn.svm import SVC
 
-from mocapkit.datasets.ntu_skeleton import read_skeleton, select_main_bodies
-from mocapkit.datasets.synthetic_ntu import NTUSynthConfig, perform, sample_names, synthesize_ntu, synthesize_sample
+from mocapkit.datasets.formats.ntu_skeleton import read_skeleton, select_main_bodies
+from mocapkit.datasets.synthetic.ntu import NTUSynthConfig, perform, sample_names, synthesize_ntu, synthesize_sample
 
 TRAIN_SUBJECTS = (1, 2, 4, 5, 8, 9)
 TEST_SUBJECTS = (3, 6, 7, 10)
@@ -115,8 +115,8 @@ SWEEP = [
 def cache_baseline(root: str, split: str = "ntu60_xsub") -> float:
     """Logistic-regression held-out accuracy on a prepared cache (same features, the cache's
     kept bodies; all training-side subjects train, the split's test subjects test)."""
-    from mocapkit.datasets.ntu_cache import NTUCache
-    from mocapkit.datasets.protocols import split_indices
+    from mocapkit.datasets.ntu.cache import NTUCache
+    from mocapkit.datasets.ntu.splits import split_indices
 
     cache = NTUCache(root)
     feats = []

@@ -2,11 +2,11 @@
 
 The thesis's recognition protocol (§6.3.4, spec §5.3, §8 items 35-37), once per protocol and seed:
 
-1. split the sequences (:func:`~mocapkit.datasets.msr_action3d.msr_split_indices`): ``random_half`` = a seeded
+1. split the sequences (:func:`~mocapkit.datasets.msr_action3d.dataset.msr_split_indices`): ``random_half`` = a seeded
    random half of each action trains (the thesis's protocol; seed = the run seed), ``cross_subject`` = odd
    subjects train (fixed; the seed then only moves the clusterers' and classifiers' initialisation);
 2. cut every sequence into clips of each ``--windows`` length M, stride M/2, and encode each clip as non-negative
-   sign-split normalised coordinates of ``--frames-per-clip`` frames (:mod:`mocapkit.datasets.clips`); for the NMF
+   sign-split normalised coordinates of ``--frames-per-clip`` frames (:mod:`mocapkit.features.clips`); for the NMF
    family, centre the clips on the mean **training** clip and sign-split again
    (:class:`~mocapkit.classical.bag_of_words.ClipConditioner`, ``--conditioning centre``): without it one
    "mean pose" component wins the arg-max of most clips and GNMF / NMC used 7-25 of 100 words;
@@ -25,7 +25,7 @@ The thesis's recognition protocol (§6.3.4, spec §5.3, §8 items 35-37), once p
    NMI (**arithmetic** normalisation, scikit-learn's default) and ARI;
 6. ``layer``: the end-to-end model of :mod:`mocapkit.models.clip_bow`, trained with
    ``compose_config(["experiment=msr3d_nmf_layer", "data.split=<protocol>", "data.split_seed=<seed>", ...])``
-   and :func:`~mocapkit.train.training.train`, scored with :func:`~mocapkit.train.evaluate.evaluate` (top-1 of
+   and :func:`~mocapkit.train.training.train`, scored with :func:`~mocapkit.evaluation.evaluate.evaluate` (top-1 of
    ``best.ckpt`` on the same test sequences). It trains on 90 % of the training sequences (10 % select the
    checkpoint) and, like every run of the data module, sees sequences longer than 128 frames subsampled to 128
    (one of 566); its clip words are the arg-max of its soft assignments.
@@ -57,8 +57,9 @@ if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
 from mocapkit.classical.bag_of_words import BagOfWordsClassifier  # noqa: E402
-from mocapkit.datasets.clips import sequence_clip_features  # noqa: E402
-from mocapkit.datasets.msr_action3d import MSRAction3D, msr_split_indices  # noqa: E402
+from mocapkit.features.clips import sequence_clip_features  # noqa: E402
+from mocapkit.datasets.msr_action3d.dataset import MSRAction3D  # noqa: E402
+from mocapkit.datasets.msr_action3d.splits import msr_split_indices  # noqa: E402
 from mocapkit.evaluation.clustering import NMI_NORMALISATION, clustering_report  # noqa: E402
 
 METHODS = ("kmeans", "nmf", "onmf", "gnmf", "nmc", "layer")
@@ -179,7 +180,7 @@ def select_parameters(method: str, features: np.ndarray, owner: np.ndarray, labe
 
 def quick_subset(root: Path, target: Path) -> Path:
     """Copy the ``--quick`` files (actions :data:`QUICK_ACTIONS`, subjects, takes; those present) into ``target``."""
-    from mocapkit.datasets.msr_action3d import parse_msr_name
+    from mocapkit.datasets.formats.msr_action3d import parse_msr_name
 
     if target.exists():
         shutil.rmtree(target)
@@ -250,7 +251,7 @@ def run_layer(root: Path, out: Path, protocol: str, seed: int, window: int, stri
 
     from mocapkit.train.action_module import ActionRecognitionModule
     from mocapkit.train.config import compose_config
-    from mocapkit.train.evaluate import evaluate
+    from mocapkit.evaluation.evaluate import evaluate
     from mocapkit.train.training import train as train_model
 
     overrides = ["experiment=msr3d_nmf_layer", f"data.root={root}", f"data.split={protocol}",

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from shared_data import SHARED, needs
 
-from mocapkit.datasets.asf_amc import (
+from mocapkit.datasets.formats.asf_amc import (
     AmcFormatError,
     AsfFormatError,
     AsfSkeleton,
@@ -18,7 +18,7 @@ from mocapkit.datasets.asf_amc import (
     write_amc,
     write_asf,
 )
-from mocapkit.datasets.layouts import CMU31
+from mocapkit.datasets.formats.layouts import CMU31
 
 ASF_AMC = SHARED / "samples" / "asf_amc"
 HDM_AMC = ASF_AMC / "hdm05" / "HDM_dg_06-03_03_120.amc"
@@ -245,7 +245,7 @@ def _toy_skeleton(angle="deg", length=0.45) -> AsfSkeleton:
     hip leg
   end
 """
-    from mocapkit.datasets.asf_amc import parse_asf_text
+    from mocapkit.datasets.formats.asf_amc import parse_asf_text
 
     return parse_asf_text(text.replace("\n", "\r\n"), source="toy.asf")
 

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from mocapkit.datasets.bvh import (
+from mocapkit.datasets.formats.bvh import (
     UNITS,
     BvhFormatError,
     infer_scale,
@@ -11,7 +11,7 @@ from mocapkit.datasets.bvh import (
     read_bvh,
     write_bvh,
 )
-from mocapkit.datasets.motion import Motion
+from mocapkit.datasets.formats.motion import Motion
 from tests.shared_data import SHARED, needs
 
 BVH_DIR = SHARED / "samples" / "bvh"

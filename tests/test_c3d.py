@@ -1,11 +1,11 @@
-"""C3D reading and writing (mocapkit.datasets.c3d), on synthetic files and on every real sample."""
+"""C3D reading and writing (mocapkit.datasets.formats.c3d), on synthetic files and on every real sample."""
 import pickle
 
 import numpy as np
 import pytest
 
-from mocapkit.datasets.c3d import C3DFormatError, read_c3d, write_c3d
-from mocapkit.datasets.motion import Motion
+from mocapkit.datasets.formats.c3d import C3DFormatError, read_c3d, write_c3d
+from mocapkit.datasets.formats.motion import Motion
 from tests.shared_data import SHARED, needs
 
 C3D = SHARED / "samples" / "c3d"

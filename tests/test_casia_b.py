@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from mocapkit.datasets.casia_b import (
+from mocapkit.datasets.formats.casia_b import (
     GaitSequence,
     GaitSequenceKey,
     SilhouetteFormatError,

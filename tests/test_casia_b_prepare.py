@@ -9,15 +9,15 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from mocapkit.datasets.casia_b import (
+from mocapkit.datasets.formats.casia_b import (
     GaitSequenceKey,
     SilhouetteFormatError,
     list_casia_b,
     read_sequence,
 )
-from mocapkit.datasets.casia_b_prepare import parse_gei_size, prepare_casia_b
-from mocapkit.datasets.gei import GaitSequenceError, gait_energy_images
-from mocapkit.datasets.gei_cache import GEICache
+from mocapkit.datasets.casia_b.prepare import parse_gei_size, prepare_casia_b
+from mocapkit.datasets.casia_b.gei import GaitSequenceError, gait_energy_images
+from mocapkit.datasets.casia_b.cache import GEICache
 from tests.test_gei import walking_silhouettes
 
 FRAMES = 60

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 import torch
 
-from mocapkit.datasets.clips import (
+from mocapkit.features.clips import (
     ClipFeatures,
     clip_count,
     clip_features,
@@ -12,7 +12,7 @@ from mocapkit.datasets.clips import (
     feature_dim,
     sequence_clip_features,
 )
-from mocapkit.datasets.layouts import MSR20
+from mocapkit.datasets.formats.layouts import MSR20
 
 
 def _sequence(frames: int, seed: int = 0) -> np.ndarray:

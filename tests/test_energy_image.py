@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 import torch
 
-from mocapkit.datasets.layouts import NTU25
+from mocapkit.datasets.formats.layouts import NTU25
 from mocapkit.models import EnergyImage
 
 
@@ -111,7 +111,7 @@ def test_bad_options_and_shapes_are_rejected():
 
 def test_energy_image_exports_to_onnx_with_dynamic_batch_and_frames(tmp_path):
     ort = pytest.importorskip("onnxruntime")
-    from mocapkit.train.export_onnx import example_skeletons
+    from mocapkit.deploy.export import example_skeletons
 
     energy = EnergyImage(size=32, bone_samples=1, align=True).eval()
     path = tmp_path / "energy.onnx"

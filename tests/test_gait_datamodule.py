@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 import torch
 
-from mocapkit.datasets.casia_b import CONDITIONS, SEQUENCES_PER_CONDITION, VIEWS
-from mocapkit.datasets.gait_datamodule import GaitDataModule, GEIShift
-from mocapkit.datasets.gei_cache import write_gei_cache
+from mocapkit.datasets.formats.casia_b import CONDITIONS, SEQUENCES_PER_CONDITION, VIEWS
+from mocapkit.datasets.casia_b.datamodule import GaitDataModule, GEIShift
+from mocapkit.datasets.casia_b.cache import write_gei_cache
 
 
 def write_synthetic_gei_cache(root, num_subjects: int = 6, height: int = 64, width: int = 44, cycles: int = 1,

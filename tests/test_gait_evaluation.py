@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from mocapkit.datasets.casia_b import VIEWS
+from mocapkit.datasets.formats.casia_b import VIEWS
 from mocapkit.evaluation.gait import (closed_set_markdown, closed_set_report, cross_view_markdown, cross_view_rank1,
                                       plot_per_view, plot_per_view_panels)
 

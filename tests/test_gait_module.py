@@ -10,10 +10,10 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-from mocapkit.datasets.gait_datamodule import GaitDataModule
+from mocapkit.datasets.casia_b.datamodule import GaitDataModule
 from mocapkit.train.config import compose_config
-from mocapkit.train.export_onnx import ParityError
-from mocapkit.train.gait_export import export_gait_module, export_gait_onnx
+from mocapkit.deploy.export import ParityError
+from mocapkit.deploy.gait_export import export_gait_module, export_gait_onnx
 from mocapkit.train.gait_module import GaitRecognitionModule
 from tests.test_gait_datamodule import write_synthetic_gei_cache
 

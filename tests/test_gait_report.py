@@ -10,9 +10,9 @@ import torch.nn.functional as F
 from omegaconf import OmegaConf
 
 from mocapkit.classical.gei_pca_lda import run_gei_pca_lda
-from mocapkit.datasets.casia_b import VIEWS
-from mocapkit.train.evaluate_gait import evaluate_gait
-from mocapkit.train.gait_report import gait_report, per_view_panels, report_markdown
+from mocapkit.datasets.formats.casia_b import VIEWS
+from mocapkit.evaluation.evaluate_gait import evaluate_gait
+from mocapkit.evaluation.gait_report import gait_report, per_view_panels, report_markdown
 from tests.test_gei_pca_lda import make_tiny_gei_cache
 
 CFG = OmegaConf.create({"trainer": {"accelerator": "cpu", "enable_progress_bar": False}, "experiment_name": "oracle"})
@@ -42,7 +42,7 @@ def tiny_cache(tmp_path_factory):
 
 
 def _datamodule(cache, protocol):
-    from mocapkit.datasets.gait_datamodule import GaitDataModule
+    from mocapkit.datasets.casia_b.datamodule import GaitDataModule
 
     return GaitDataModule(str(cache.root), protocol=protocol, val_fraction=0.1, eval_batch_size=64)
 

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from mocapkit.classical.gei_pca_lda import GEIPCALDA, run_gei_pca_lda
-from mocapkit.datasets.casia_b import CONDITIONS, VIEWS
-from mocapkit.datasets.gei_cache import GEICache, write_gei_cache
+from mocapkit.datasets.formats.casia_b import CONDITIONS, VIEWS
+from mocapkit.datasets.casia_b.cache import GEICache, write_gei_cache
 
 SEQUENCES = [(0, s) for s in range(1, 7)] + [(1, 1), (1, 2), (2, 1), (2, 2)]  # (condition, repetition)
 

@@ -2,20 +2,9 @@
 import numpy as np
 import pytest
 
-from mocapkit.datasets import hdm05
-from mocapkit.datasets.hdm05 import (
-    ACTORS,
-    HDM05ClipName,
-    class_index_map,
-    class_names,
-    class_table,
-    k_actors_train,
-    labels,
-    leave_one_actor_out,
-    merge_25,
-    merge_65,
-    parse_clip_name,
-)
+from mocapkit.datasets.hdm05 import classes as hdm05
+from mocapkit.datasets.hdm05.classes import ACTORS, HDM05ClipName, class_index_map, class_names, class_table, labels, merge_25, merge_65, parse_clip_name
+from mocapkit.datasets.hdm05.splits import k_actors_train, leave_one_actor_out
 
 
 def test_clip_names():

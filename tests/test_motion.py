@@ -1,9 +1,9 @@
-"""The Motion container (mocapkit.datasets.motion): constructor checks and views."""
+"""The Motion container (mocapkit.datasets.formats.motion): constructor checks and views."""
 import numpy as np
 import pytest
 
-from mocapkit.datasets.layouts import LANDMARKS, MSR20, NTU25, SkeletonLayout
-from mocapkit.datasets.motion import Motion
+from mocapkit.datasets.formats.layouts import LANDMARKS, MSR20, NTU25, SkeletonLayout
+from mocapkit.datasets.formats.motion import Motion
 
 
 def _ntu(frames=11, fps=100.0, seed=0, up_axis="y", **kw) -> Motion:

@@ -1,19 +1,19 @@
-"""read_motion / write_motion: format dispatch by file name (mocapkit.datasets.motion_io)."""
+"""read_motion / write_motion: format dispatch by file name (mocapkit.datasets.formats.motion_io)."""
 import numpy as np
 import pytest
 
-from mocapkit.datasets import motion_io
-from mocapkit.datasets.c3d import C3DFormatError
-from mocapkit.datasets.layouts import NTU25
-from mocapkit.datasets.motion import Motion
-from mocapkit.datasets.motion_io import (
+from mocapkit.datasets.formats import motion_io
+from mocapkit.datasets.formats.c3d import C3DFormatError
+from mocapkit.datasets.formats.layouts import NTU25
+from mocapkit.datasets.formats.motion import Motion
+from mocapkit.datasets.formats.motion_io import (
     FormatUnavailableError,
     UnsupportedFormatError,
     motion_format,
     read_motion,
     write_motion,
 )
-from mocapkit.datasets.ntu_skeleton import (
+from mocapkit.datasets.formats.ntu_skeleton import (
     read_skeleton,
     sequence_from_positions,
     write_skeleton,
@@ -55,7 +55,7 @@ def test_missing_reader_module_names_the_format(monkeypatch, tmp_path):
 
 
 def test_missing_reader_function(monkeypatch):
-    monkeypatch.setitem(motion_io.FORMATS, "c3d", ("C3D (.c3d)", "mocapkit.datasets.c3d", "read_nothing", None))
+    monkeypatch.setitem(motion_io.FORMATS, "c3d", ("C3D (.c3d)", "mocapkit.datasets.formats.c3d", "read_nothing", None))
     with pytest.raises(FormatUnavailableError, match="does not define"):
         read_motion("x.c3d")
 
@@ -155,7 +155,7 @@ def test_ntu_real_samples():
 
 @needs(SAMPLES / "bvh")
 def test_bvh_dispatch():
-    bvh = pytest.importorskip("mocapkit.datasets.bvh")
+    bvh = pytest.importorskip("mocapkit.datasets.formats.bvh")
     path = SAMPLES / "bvh" / "cmu_131_01.bvh"
     m = read_motion(path)
     assert isinstance(m, Motion) and m.parents is not None
@@ -164,7 +164,7 @@ def test_bvh_dispatch():
 
 @needs(SAMPLES / "asf_amc")
 def test_amc_dispatch_finds_asf_and_accepts_asf_option():
-    asf_amc = pytest.importorskip("mocapkit.datasets.asf_amc")
+    asf_amc = pytest.importorskip("mocapkit.datasets.formats.asf_amc")
     amc = SAMPLES / "asf_amc" / "cmu_01" / "test.amc"
     m = read_motion(amc)
     assert isinstance(m, Motion) and m.parents is not None
@@ -176,7 +176,7 @@ def test_amc_dispatch_finds_asf_and_accepts_asf_option():
 @needs(SAMPLES / "msr3d")
 @pytest.mark.parametrize("name", ["a01_s01_e01_skeleton3D.txt", "a01_s01_e01_skeleton.txt"])
 def test_msr_dispatch(name):
-    msr = pytest.importorskip("mocapkit.datasets.msr_action3d")
+    msr = pytest.importorskip("mocapkit.datasets.formats.msr_action3d")
     path = SAMPLES / "msr3d" / name
     m = read_motion(path)
     assert isinstance(m, Motion) and m.num_joints == 20
@@ -185,7 +185,7 @@ def test_msr_dispatch(name):
 
 @needs(SAMPLES / "bvh")
 def test_bvh_write_dispatch(tmp_path):
-    pytest.importorskip("mocapkit.datasets.bvh")
+    pytest.importorskip("mocapkit.datasets.formats.bvh")
     m = read_motion(SAMPLES / "bvh" / "cmu_131_01.bvh")
     write_motion(tmp_path / "w.bvh", m)
     r = read_motion(tmp_path / "w.bvh")
@@ -195,7 +195,7 @@ def test_bvh_write_dispatch(tmp_path):
 
 @needs(SAMPLES / "asf_amc")
 def test_amc_write_dispatch(tmp_path):
-    pytest.importorskip("mocapkit.datasets.asf_amc")
+    pytest.importorskip("mocapkit.datasets.formats.asf_amc")
     amc = SAMPLES / "asf_amc" / "cmu_01" / "test.amc"
     m = read_motion(amc)
     write_motion(tmp_path / "w.amc", m)

@@ -3,15 +3,10 @@ import numpy as np
 import pytest
 import torch
 
-from mocapkit.datasets.layouts import MSR20
-from mocapkit.datasets.msr_action3d import (
-    ACTION_SUBSETS,
-    MSRAction3D,
-    MSRFormatError,
-    msr_split_indices,
-    parse_msr_name,
-    read_msr_skeleton,
-)
+from mocapkit.datasets.formats.layouts import MSR20
+from mocapkit.datasets.msr_action3d.dataset import ACTION_SUBSETS, MSRAction3D
+from mocapkit.datasets.formats.msr_action3d import MSRFormatError, parse_msr_name, read_msr_skeleton
+from mocapkit.datasets.msr_action3d.splits import msr_split_indices
 from tests.shared_data import SHARED, needs
 
 MSR_ROOT = SHARED / "data" / "msr_action3d"
@@ -154,7 +149,7 @@ def test_random_half_per_class_is_seeded(dataset):
 
 @needs(MSR_ROOT)
 def test_datamodule_contract():
-    from mocapkit.datasets.msr_datamodule import MSRAction3DDataModule
+    from mocapkit.datasets.msr_action3d.datamodule import MSRAction3DDataModule
 
     dm = MSRAction3DDataModule(MSR_ROOT, subset="AS1", batch_size=8, max_frames=32, seed=1,
                                augment={"rotate_deg": 10.0, "crop": [0.8, 1.0]})

@@ -3,11 +3,11 @@ import numpy as np
 import pytest
 import torch
 
-from mocapkit.datasets.ntu_datamodule import NTUDataModule
-from mocapkit.datasets.skeleton_datamodule import pad_collate, uniform_frame_indices
-from mocapkit.datasets.ntu_prepare import prepare_ntu
-from mocapkit.datasets.skeleton_augment import SkeletonAugment
-from mocapkit.datasets.synthetic_ntu import NTUSynthConfig, synthesize_ntu
+from mocapkit.datasets.ntu.datamodule import NTUDataModule
+from mocapkit.datasets.datamodule import pad_collate, uniform_frame_indices
+from mocapkit.datasets.ntu.prepare import prepare_ntu
+from mocapkit.datasets.augment import SkeletonAugment
+from mocapkit.datasets.synthetic.ntu import NTUSynthConfig, synthesize_ntu
 
 
 def test_augment_keeps_absent_bodies_zero_and_is_rigid():

@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mocapkit.datasets.ntu_cache import NTUCache
-from mocapkit.datasets.ntu_prepare import prepare_ntu
-from mocapkit.datasets.ntu_skeleton import (
+from mocapkit.datasets.ntu.cache import NTUCache
+from mocapkit.datasets.ntu.prepare import prepare_ntu
+from mocapkit.datasets.formats.ntu_skeleton import (
     SkeletonFormatError,
     parse_ntu_name,
     read_skeleton,

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mocapkit.datasets.ntu_skeleton import (
+from mocapkit.datasets.formats.ntu_skeleton import (
     SkeletonFormatError,
     parse_ntu_name,
     read_missing_list,

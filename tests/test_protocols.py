@@ -6,15 +6,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from mocapkit.datasets.protocols import (
-    NTU60_XSUB_TRAIN_SUBJECTS,
-    NTU120_XSUB_TRAIN_SUBJECTS,
-    SPLITS,
-    format_split_summary,
-    split_indices,
-    split_summary,
-    validation_split,
-)
+from mocapkit.datasets.ntu.splits import NTU120_XSUB_TRAIN_SUBJECTS, NTU60_XSUB_TRAIN_SUBJECTS, SPLITS, format_split_summary, split_indices, split_summary
+from mocapkit.datasets.splits import validation_split
 
 
 @pytest.fixture(scope="module")
@@ -147,9 +140,9 @@ def test_summary(grid):
 
 
 def test_works_on_a_prepared_cache(tmp_path):
-    from mocapkit.datasets.ntu_cache import NTUCache
-    from mocapkit.datasets.ntu_prepare import prepare_ntu
-    from mocapkit.datasets.ntu_skeleton import sequence_from_positions, write_skeleton
+    from mocapkit.datasets.ntu.cache import NTUCache
+    from mocapkit.datasets.ntu.prepare import prepare_ntu
+    from mocapkit.datasets.formats.ntu_skeleton import sequence_from_positions, write_skeleton
 
     src = tmp_path / "src"
     src.mkdir()

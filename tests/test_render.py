@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 from PIL import Image, ImageChops
 
-from mocapkit.datasets.layouts import NTU25
-from mocapkit.datasets.motion import Motion
-from mocapkit.datasets.render import (
+from mocapkit.datasets.formats.layouts import NTU25
+from mocapkit.datasets.formats.motion import Motion
+from mocapkit.visualization.render import (
     RenderError,
     as_motions,
     frame_indices,
@@ -133,9 +133,9 @@ def test_render_file_goes_through_read_motion(tmp_path, monkeypatch):
         calls.append(path)
         return walker(frames=16)
 
-    fake = types.ModuleType("mocapkit.datasets.motion_io")
+    fake = types.ModuleType("mocapkit.datasets.formats.motion_io")
     fake.read_motion = read_motion
-    monkeypatch.setitem(sys.modules, "mocapkit.datasets.motion_io", fake)
+    monkeypatch.setitem(sys.modules, "mocapkit.datasets.formats.motion_io", fake)
     out = render_file("clip.bvh", tmp_path / "c.gif", step=8, size=1.5, dpi=40)
     assert calls == ["clip.bvh"] and Image.open(out).n_frames == 2
     out = render_file("clip.bvh", tmp_path / "c.png", strip=True, n=3, panel_size=1.0, dpi=50)
@@ -144,7 +144,7 @@ def test_render_file_goes_through_read_motion(tmp_path, monkeypatch):
 
 @needs(BVH_DIR)
 def test_real_bvh_strip(tmp_path):
-    from mocapkit.datasets.bvh import read_bvh
+    from mocapkit.datasets.formats.bvh import read_bvh
 
     m = read_bvh(BVH_DIR / "test_mocapbank.bvh", end_sites=True)
     out = render_strip(m, tmp_path / "bvh.png", n=4, view="front", panel_size=1.5, dpi=60)
@@ -156,8 +156,8 @@ NTU_TWO_PEOPLE = SHARED / "samples" / "ntu_skeleton" / "S001C003P008R002A058.ske
 
 @needs(NTU_TWO_PEOPLE)
 def test_real_two_person_ntu_through_read_motion(tmp_path):
-    pytest.importorskip("mocapkit.datasets.motion_io")
-    from mocapkit.datasets.motion_io import read_motion
+    pytest.importorskip("mocapkit.datasets.formats.motion_io")
+    from mocapkit.datasets.formats.motion_io import read_motion
 
     m = read_motion(NTU_TWO_PEOPLE)
     people = as_motions(m)
@@ -171,6 +171,6 @@ def test_real_two_person_ntu_through_read_motion(tmp_path):
 
 @needs(BVH_DIR)
 def test_real_bvh_gif_through_read_motion(tmp_path):
-    pytest.importorskip("mocapkit.datasets.motion_io")
+    pytest.importorskip("mocapkit.datasets.formats.motion_io")
     out = render_file(BVH_DIR / "test_freebvh.bvh", tmp_path / "f.gif", fps=5, view="front", size=1.5, dpi=50)
     assert Image.open(out).n_frames == len(frame_indices(69, 30.0, fps=5)) == 12

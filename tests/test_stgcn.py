@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 import torch
 
-from mocapkit.datasets.layouts import CMU31, MSR20, NTU25
+from mocapkit.datasets.formats.layouts import CMU31, MSR20, NTU25
 from mocapkit.models.stgcn import STGCN, spatial_adjacency, stgcn
 
 
@@ -94,7 +94,7 @@ def test_it_learns_a_toy_two_class_problem():
 def test_onnx_export_on_msr20_one_body(tmp_path):
     """`mocapkit export`'s function takes the joint count from ``model.layout``; bodies and frames are dynamic."""
     pytest.importorskip("onnxruntime")
-    from mocapkit.train.export_onnx import export_onnx
+    from mocapkit.deploy.export import export_onnx
 
     model = stgcn(4, layout="msr20", streams=["joint", "velocity", "bone"], scale=True,
                   channels=[16, 16], strides=[2, 1])

@@ -6,13 +6,13 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from mocapkit.datasets.casia_b import (
+from mocapkit.datasets.formats.casia_b import (
     GaitSequenceKey,
     list_casia_b,
     parse_sequence_folder,
     read_sequence,
 )
-from mocapkit.datasets.synthetic_casia_b import (
+from mocapkit.datasets.synthetic.casia_b import (
     BAG_STYLES,
     CasiaBSynthConfig,
     SegmentationNoise,
@@ -90,7 +90,7 @@ def test_same_seed_gives_identical_bytes_for_any_workers(small_set, tmp_path):
 
 def test_written_frames_equal_render_walk(small_set):
     """The data set is exactly what the public renderer gives for the same generators."""
-    from mocapkit.datasets.synthetic_casia_b import _VIEW, _WALK, _rng
+    from mocapkit.datasets.synthetic.casia_b import _VIEW, _WALK, _rng
 
     out, _ = small_set
     config = CasiaBSynthConfig(**SMALL)

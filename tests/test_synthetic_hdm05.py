@@ -2,10 +2,10 @@
 import numpy as np
 import pytest
 
-from mocapkit.datasets.asf_amc import read_amc, read_asf
-from mocapkit.datasets.hdm05 import labels, parse_clip_name
-from mocapkit.datasets.layouts import CMU31
-from mocapkit.datasets.synthetic_hdm05 import (
+from mocapkit.datasets.formats.asf_amc import read_amc, read_asf
+from mocapkit.datasets.hdm05.classes import labels, parse_clip_name
+from mocapkit.datasets.formats.layouts import CMU31
+from mocapkit.datasets.synthetic.hdm05 import (
     DEFAULT_CLASSES,
     HDM05SynthConfig,
     actor_skeleton,
@@ -95,7 +95,7 @@ def test_config_validation():
 
 def test_every_default_class_stays_human_sized(tmp_path):
     """Each motion template keeps the body on or near the floor (jumps and hops lift it < 0.5 m)."""
-    from mocapkit.datasets.synthetic_hdm05 import DEFAULT_CLASSES
+    from mocapkit.datasets.synthetic.hdm05 import DEFAULT_CLASSES
 
     paths = synthesize_hdm05(tmp_path, HDM05SynthConfig(actors=("tr",), clips_per_actor=1, seed=1), progress=False)
     assert len(paths) == len(DEFAULT_CLASSES)

@@ -1,4 +1,4 @@
-"""Tests for the synthetic NTU stand-in (mocapkit.datasets.synthetic_ntu) and its FK model."""
+"""Tests for the synthetic NTU stand-in (mocapkit.datasets.synthetic.ntu) and its FK model."""
 from __future__ import annotations
 
 import json
@@ -6,10 +6,10 @@ import json
 import numpy as np
 import pytest
 
-from mocapkit.datasets import kinematics as kin
-from mocapkit.datasets.layouts import NTU25
-from mocapkit.datasets.ntu_skeleton import NTUSampleName, parse_ntu_name, read_skeleton, select_main_bodies
-from mocapkit.datasets.synthetic_ntu import (
+from mocapkit.datasets.synthetic import kinematics as kin
+from mocapkit.datasets.formats.layouts import NTU25
+from mocapkit.datasets.formats.ntu_skeleton import NTUSampleName, parse_ntu_name, read_skeleton, select_main_bodies
+from mocapkit.datasets.synthetic.ntu import (
     ACTIONS,
     NTUSynthConfig,
     class_names,

@@ -18,7 +18,7 @@ are coded one by one against the fixed components.
 Two optional steps, both fitted on the training clips only:
 
 * **conditioning** (:class:`ClipConditioner`): recover the signed coordinates from the sign-split features of
-  :mod:`mocapkit.datasets.clips`, subtract the mean training clip, sign-split again and optionally scale every
+  :mod:`mocapkit.features.clips`, subtract the mean training clip, sign-split again and optionally scale every
   clip to unit ℓ2 norm. Without centring, every clip shares the standing pose, one "mean pose" component takes
   the arg-max of most clips and the histograms collapse onto a few words; centred components encode deviations
   from the mean clip (the usual NMF-clustering practice of conditioning the data, cf. Cai et al. 2011, who
@@ -45,7 +45,7 @@ ASSIGNMENTS = ("hard", "soft")
 class ClipConditioner(TransformerMixin, BaseEstimator):
     """Centre sign-split clip features on the mean training clip and sign-split them again: ``[n, 2h] → [n, 2h]``.
 
-    Input: the non-negative features of :func:`~mocapkit.datasets.clips.clip_features`, ``[x⁺, x⁻]`` with ``h``
+    Input: the non-negative features of :func:`~mocapkit.features.clips.clip_features`, ``[x⁺, x⁻]`` with ``h``
     columns each, so that the signed clip is ``x = x⁺ − x⁻``. Output: ``[max(x − m, 0), max(m − x, 0)]`` with
     ``m [h]`` = the mean signed training clip (``centre=False``: ``m = 0``, the input unchanged), each row then
     divided by its ℓ2 norm when ``unit_norm`` (an all-zero row stays zero). Output is non-negative, as NMF needs.

@@ -25,8 +25,8 @@ from sklearn.neighbors import KNeighborsClassifier
 from sklearn.pipeline import Pipeline
 from sklearn.utils.validation import check_is_fitted
 
-from mocapkit.datasets.casia_b import VIEWS
-from mocapkit.datasets.gait_protocols import PROTOCOLS, closed_set_split, cross_subject_subjects
+from mocapkit.datasets.formats.casia_b import VIEWS
+from mocapkit.datasets.casia_b.splits import PROTOCOLS, closed_set_split, cross_subject_subjects
 from mocapkit.evaluation.gait import closed_set_report, cross_view_rank1
 
 #: Upper bound on the default number of PCA components.
@@ -139,7 +139,7 @@ class GEIPCALDA(ClassifierMixin, TransformerMixin, BaseEstimator):
 def run_gei_pca_lda(cache, protocol: str, holdout_seed: int = 0, num_train_subjects: int | None = None,
                     n_pca: int | None = None, n_lda: int | None = None, metric: str = "euc",
                     aggregate: str = "sequence") -> dict:
-    """GEI+PCA+LDA on a :class:`~mocapkit.datasets.gei_cache.GEICache` under one protocol.
+    """GEI+PCA+LDA on a :class:`~mocapkit.datasets.casia_b.cache.GEICache` under one protocol.
 
     Args:
         cache: the GEI cache.

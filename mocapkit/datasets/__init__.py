@@ -1,10 +1,25 @@
-"""Datasets: file formats, synthetic generators, evaluation protocols and data modules.
+"""Datasets, by concern. Nothing imported here needs torch; the data modules are imported from
+their packages (e.g. ``from mocapkit.datasets.ntu.datamodule import NTUDataModule``).
 
-The data modules (Lightning) live in their own modules and are imported from there,
-e.g. ``from mocapkit.datasets.ntu_datamodule import NTUDataModule``, so that the
-format readers stay importable without torch.
+==================  =====================================================================
+package / module    what it holds
+==================  =====================================================================
+``formats``         the :class:`Motion` container, ``read_motion`` / ``write_motion``, one
+                    reader/writer per file format, skeleton layouts, the format errors
+``synthetic``       stand-in generators written in the real formats (NTU, HDM05, CASIA-B)
+``ntu``             NTU RGB+D preparation, cache, X-Sub/X-View/X-Set splits, data module
+``msr_action3d``    MSR Action3D data set, its protocols, data module
+``hdm05``           HDM05 class labellings and cross-actor splits
+``casia_b``         Gait Energy Images, GEI cache, the two gait protocols, data module
+``splits``          subject lists and validation hold-outs shared by every protocol
+``datamodule``      the Lightning data-module bases (split + loaders; padded skeleton batches)
+``augment``         skeleton training augmentation
+==================  =====================================================================
+
+This module re-exports the public API: the readers and writers, the caches and the preparation
+functions.
 """
-from mocapkit.datasets.asf_amc import (
+from mocapkit.datasets.formats.asf_amc import (
     AmcFormatError,
     AsfFormatError,
     read_amc,
@@ -12,9 +27,9 @@ from mocapkit.datasets.asf_amc import (
     write_amc,
     write_asf,
 )
-from mocapkit.datasets.bvh import BvhFormatError, read_bvh, write_bvh
-from mocapkit.datasets.c3d import C3DFormatError, read_c3d, write_c3d
-from mocapkit.datasets.casia_b import (
+from mocapkit.datasets.formats.bvh import BvhFormatError, read_bvh, write_bvh
+from mocapkit.datasets.formats.c3d import C3DFormatError, read_c3d, write_c3d
+from mocapkit.datasets.formats.casia_b import (
     CONDITIONS,
     VIEWS,
     GaitSequence,
@@ -24,21 +39,21 @@ from mocapkit.datasets.casia_b import (
     read_sequence,
     read_silhouette,
 )
-from mocapkit.datasets.casia_b_prepare import prepare_casia_b
-from mocapkit.datasets.format_errors import MotionFormatError
-from mocapkit.datasets.gei import (
+from mocapkit.datasets.casia_b.prepare import prepare_casia_b
+from mocapkit.datasets.formats.errors import MotionFormatError
+from mocapkit.datasets.casia_b.gei import (
     GaitSequenceError,
     gait_energy_images,
     gait_period,
     normalize_silhouettes,
 )
-from mocapkit.datasets.gei_cache import GEICache
-from mocapkit.datasets.layouts import CMU31, LAYOUTS, MSR20, NTU25, SkeletonLayout
-from mocapkit.datasets.motion import Motion
-from mocapkit.datasets.motion_io import read_motion, write_motion
-from mocapkit.datasets.ntu_cache import NTUCache
-from mocapkit.datasets.ntu_prepare import PrepareReport, prepare_ntu
-from mocapkit.datasets.ntu_skeleton import (
+from mocapkit.datasets.casia_b.cache import GEICache
+from mocapkit.datasets.formats.layouts import CMU31, LAYOUTS, MSR20, NTU25, SkeletonLayout
+from mocapkit.datasets.formats.motion import Motion
+from mocapkit.datasets.formats.motion_io import read_motion, write_motion
+from mocapkit.datasets.ntu.cache import NTUCache
+from mocapkit.datasets.ntu.prepare import PrepareReport, prepare_ntu
+from mocapkit.datasets.formats.ntu_skeleton import (
     BodySelection,
     NTUSampleName,
     SkeletonFormatError,
@@ -50,12 +65,8 @@ from mocapkit.datasets.ntu_skeleton import (
     sequence_from_positions,
     write_skeleton,
 )
-from mocapkit.datasets.protocols import (
-    SPLITS,
-    split_indices,
-    split_summary,
-    validation_split,
-)
+from mocapkit.datasets.ntu.splits import SPLITS, split_indices, split_summary
+from mocapkit.datasets.splits import validation_split
 
 __all__ = [
     "CMU31",

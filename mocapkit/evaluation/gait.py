@@ -26,8 +26,8 @@ from pathlib import Path
 import numpy as np
 from sklearn.metrics import pairwise_distances
 
-from mocapkit.datasets.casia_b import CONDITIONS, VIEWS
-from mocapkit.datasets.gait_protocols import gallery_probe_masks
+from mocapkit.datasets.formats.casia_b import CONDITIONS, VIEWS
+from mocapkit.datasets.casia_b.splits import gallery_probe_masks
 
 #: The classification tasks of the multi-task network: name → (logits key, label key).
 TASKS: dict[str, tuple[str, str]] = {"subject": ("subject_logits", "subjects"), "view": ("view_logits", "views"),

@@ -1,12 +1,12 @@
 """End-to-end NMF bag of clip words: skeletons → clip features → NMF layer → soft words → classifier.
 
 A trainable version of the thesis's recognition pipeline (§6.3.4, spec §5.3), built from the same
-clip definition as the classical pipeline (:mod:`mocapkit.datasets.clips`):
+clip definition as the classical pipeline (:mod:`mocapkit.features.clips`):
 
 1. **Clips.** Body 0 of skeletons ``[B, M, T, J, 3]`` (metres, zeros where absent or padded) is cut
    into windows of ``window`` frames with stride ``stride`` and each clip encoded as the
    non-negative sign-split normalised coordinates of ``frames_per_clip`` frames
-   (:class:`~mocapkit.datasets.clips.ClipFeatures`). Sequences shorter than a window are edge-padded
+   (:class:`~mocapkit.features.clips.ClipFeatures`). Sequences shorter than a window are edge-padded
    inside the model, so any length ≥ 1 frame works (the ONNX export uses ≥ 2).
 2. **Clip encoder.** ``Linear → ReLU → Linear → softplus``: a non-negative ``encoder_hidden``-vector
    per clip (NMF needs non-negative input).
@@ -28,8 +28,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from mocapkit.datasets.clips import ClipFeatures
-from mocapkit.datasets.layouts import LAYOUTS, SkeletonLayout
+from mocapkit.features.clips import ClipFeatures
+from mocapkit.datasets.formats.layouts import LAYOUTS, SkeletonLayout
 from mocapkit.models.nmf_layer import NMFLayer
 
 

@@ -29,7 +29,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from mocapkit.datasets.layouts import LANDMARKS, NTU25, SkeletonLayout, get_layout
+from mocapkit.datasets.formats.layouts import LANDMARKS, NTU25, SkeletonLayout, get_layout
 
 #: Planes as (horizontal axis, vertical axis) over (x, y, z); vertical axes grow upwards.
 PLANES = {"xy": (0, 1), "zy": (2, 1), "xz": (0, 2)}

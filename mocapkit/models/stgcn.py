@@ -26,7 +26,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from mocapkit.datasets.layouts import LANDMARKS, SkeletonLayout, get_layout
+from mocapkit.datasets.formats.layouts import LANDMARKS, SkeletonLayout, get_layout
 
 STREAMS = ("joint", "velocity", "bone")
 

@@ -2,7 +2,7 @@
 
 The loss is ``Σ_task weight_task · CE(logits_task, label_task)`` over the tasks the model has
 (subject, view, condition; equal weights by default, spec §5.1 [rec]). Batches come from
-:class:`~mocapkit.datasets.gait_datamodule.GaitDataModule`. Samples whose subject label is -1
+:class:`~mocapkit.datasets.casia_b.datamodule.GaitDataModule`. Samples whose subject label is -1
 (test subjects of the cross-subject protocol, outside the label space) add nothing to the subject
 loss or accuracy. The network, optimiser and schedule are Hydra configs stored in the checkpoint's
 hyper-parameters, so ``GaitRecognitionModule.load_from_checkpoint(path)`` rebuilds the exact model.

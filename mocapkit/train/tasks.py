@@ -47,11 +47,11 @@ class Task:
 
 TASKS: dict[str, Task] = {
     "action": Task(module="mocapkit.train.action_module.ActionRecognitionModule",
-                   evaluate="mocapkit.train.evaluate.evaluate_action",
-                   export="mocapkit.train.export_onnx.export_action_module"),
+                   evaluate="mocapkit.evaluation.evaluate.evaluate_action",
+                   export="mocapkit.deploy.export.export_action_module"),
     "gait": Task(module="mocapkit.train.gait_module.GaitRecognitionModule",
-                 evaluate="mocapkit.train.evaluate_gait.evaluate_gait",
-                 export="mocapkit.train.gait_export.export_gait_module"),
+                 evaluate="mocapkit.evaluation.evaluate_gait.evaluate_gait",
+                 export="mocapkit.deploy.gait_export.export_gait_module"),
 }
 
 

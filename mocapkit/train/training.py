@@ -20,7 +20,7 @@ from lightning.pytorch.loggers import TensorBoardLogger
 from omegaconf import DictConfig
 
 from mocapkit.train.config import ConfigError, load_run_config, new_run_dir, save_run_config
-from mocapkit.train.epoch_summary import EpochSummary
+from mocapkit.train.callbacks import EpochSummary
 from mocapkit.train.tasks import get_task
 
 

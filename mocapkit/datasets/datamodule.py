@@ -1,0 +1,94 @@
+"""The data-module base of ``mocapkit train`` / ``eval`` and what every skeleton data module shares.
+
+:class:`SplitDataModule` holds a train / val / test split and its loaders. A subclass sets
+``train_idx``, ``val_idx``, ``test_idx`` (sample indices), ``batch_size``, ``eval_batch_size`` and
+``num_workers``, names its batch ``collate_fn``, and implements ``dataset(part)``,
+``label_spaces()`` (the keyword arguments its LightningModule needs: class counts and names) and
+``describe()`` (which can start from :meth:`SplitDataModule.split_description`).
+
+:class:`SkeletonDataModule` adds frame sampling and padded batches. Skeleton batches are dicts::
+
+    skeletons  float32 [B, M, T, J, 3]   metres; zero-padded to the longest sample in the batch
+    labels     int64   [B]               0-based class
+    lengths    int64   [B]               frames before padding
+    indices    int64   [B]               sample index in the data set
+    subjects   int64   [B]
+
+Padding frames are all zero, which every model here treats as "no body". The GEI data module
+(:mod:`mocapkit.datasets.casia_b.datamodule`) builds on :class:`SplitDataModule` directly.
+"""
+from __future__ import annotations
+
+import lightning as L
+import numpy as np
+import torch
+from torch.utils.data import DataLoader
+
+
+class SplitDataModule(L.LightningDataModule):
+    """Loaders over ``dataset(part)`` for ``part`` in train / val / test, batched with ``collate_fn``."""
+
+    train_idx: np.ndarray
+    val_idx: np.ndarray
+    test_idx: np.ndarray
+    batch_size: int
+    eval_batch_size: int
+    num_workers: int
+    collate_fn = None  # a subclass sets its batch collation (staticmethod)
+
+    def dataset(self, part: str):  # pragma: no cover - implemented by subclasses
+        raise NotImplementedError
+
+    def sample_counts(self) -> dict[str, int]:
+        return {"train": len(self.train_idx), "val": len(self.val_idx), "test": len(self.test_idx)}
+
+    def split_description(self, subjects: np.ndarray) -> dict:
+        """Subjects on each side of the split (``subjects``: per-sample IDs) and the sample counts."""
+        return {"train_subjects": sorted(set(subjects[self.train_idx].tolist())),
+                "val_subjects": sorted(set(subjects[self.val_idx].tolist())),
+                "test_subjects": sorted(set(subjects[self.test_idx].tolist())),
+                "sample_counts": self.sample_counts()}
+
+    def _loader(self, part: str, shuffle: bool) -> DataLoader:
+        return DataLoader(self.dataset(part), batch_size=self.batch_size if part == "train" else self.eval_batch_size,
+                          shuffle=shuffle, num_workers=self.num_workers, collate_fn=self.collate_fn,
+                          persistent_workers=self.num_workers > 0, drop_last=False)
+
+    def train_dataloader(self) -> DataLoader:
+        return self._loader("train", shuffle=True)
+
+    def val_dataloader(self) -> DataLoader:
+        return self._loader("val", shuffle=False)
+
+    def test_dataloader(self) -> DataLoader:
+        return self._loader("test", shuffle=False)
+
+
+
+def uniform_frame_indices(length: int, max_frames: int) -> np.ndarray:
+    """Indices of ``min(length, max_frames)`` frames spread evenly over ``length`` frames."""
+    if length <= max_frames:
+        return np.arange(length)
+    return np.linspace(0, length - 1, max_frames).round().astype(np.int64)
+
+
+def pad_collate(items: list[dict]) -> dict:
+    """Stack samples (``skeleton`` ``[M, T, J, 3]``, ``label``, ``index``, ``subject``), zero-padding the frame axis."""
+    longest = max(it["skeleton"].shape[1] for it in items)
+    first = items[0]["skeleton"]
+    skeletons = first.new_zeros((len(items), first.shape[0], longest) + tuple(first.shape[2:]))
+    for b, it in enumerate(items):
+        skeletons[b, :, : it["skeleton"].shape[1]] = it["skeleton"]
+    return {
+        "skeletons": skeletons,
+        "labels": torch.tensor([it["label"] for it in items]),
+        "lengths": torch.tensor([it["skeleton"].shape[1] for it in items]),
+        "indices": torch.tensor([it["index"] for it in items]),
+        "subjects": torch.tensor([it["subject"] for it in items]),
+    }
+
+
+class SkeletonDataModule(SplitDataModule):
+    """Base class of the skeleton data modules: batches padded by :func:`pad_collate`."""
+
+    collate_fn = staticmethod(pad_collate)

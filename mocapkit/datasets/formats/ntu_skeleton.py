@@ -1,0 +1,477 @@
+"""NTU RGB+D ``.skeleton`` files: reading, writing, file names and body selection.
+
+The text format (field-anchors §1.2)::
+
+    framecount
+    per frame:  bodycount                       (0 allowed)
+      per body: bodyID clipedEdges handLeftConfidence handLeftState
+                handRightConfidence handRightState isResticted leanX leanY trackingState
+                jointCount                      (25)
+        per joint: x y z depthX depthY colorX colorY orientW orientX orientY orientZ trackingState
+
+Both CRLF and LF line ends are accepted. Every field is kept; body IDs are
+64-bit tracking IDs and are kept exact as Python ints.
+
+Bodies are grouped into *tracks* by body ID across frames: ``positions`` is
+``[tracks, frames, 25, 3]`` with zeros where a track is absent in a frame.
+:func:`select_main_bodies` reduces the tracks to the (at most) two actors used
+for training, following the dataset authors' advice (most motion wins; an
+option drops non-human "bodies" by their spread).
+"""
+from __future__ import annotations
+
+import io
+import os
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from mocapkit.datasets.formats.errors import MotionFormatError
+from mocapkit.datasets.formats.layouts import NTU25
+
+NUM_JOINTS = 25
+JOINT_FIELDS = 12
+BODY_FIELDS = 10
+
+#: Names of the 10 per-body values, in file order (``isResticted`` spelt as in the SDK dump).
+BODY_INFO_FIELDS = (
+    "body_id", "clipped_edges", "hand_left_confidence", "hand_left_state",
+    "hand_right_confidence", "hand_right_state", "is_restricted", "lean_x", "lean_y", "tracking_state",
+)
+
+_NAME_RE = re.compile(r"S(\d{3})C(\d{3})P(\d{3})R(\d{3})A(\d{3})")
+
+
+class SkeletonFormatError(MotionFormatError):
+    """A malformed ``.skeleton`` file. The message names the file and the 1-based line."""
+
+
+@dataclass(frozen=True)
+class NTUSampleName:
+    """The fields of an NTU sample name ``SsssCcccPpppRrrrAaaa`` (all 1-based as written)."""
+
+    setup: int
+    camera: int
+    subject: int
+    replication: int
+    action: int
+
+    @property
+    def label(self) -> int:
+        """0-based class index (``action - 1``)."""
+        return self.action - 1
+
+    def __str__(self) -> str:
+        return (f"S{self.setup:03d}C{self.camera:03d}P{self.subject:03d}"
+                f"R{self.replication:03d}A{self.action:03d}")
+
+
+def parse_ntu_name(name: str | os.PathLike) -> NTUSampleName:
+    """Parse ``S001C002P003R001A004`` (optionally a path or with ``.skeleton``)."""
+    stem = Path(name).name
+    match = _NAME_RE.search(stem)
+    if match is None:
+        raise ValueError(f"{stem!r} is not an NTU sample name of the form SsssCcccPpppRrrrAaaa")
+    return NTUSampleName(*(int(g) for g in match.groups()))
+
+
+@dataclass
+class SkeletonSequence:
+    """Everything in one ``.skeleton`` file, grouped into per-body tracks.
+
+    Shapes use ``B`` = number of distinct body IDs (tracks), ``T`` = frames,
+    ``J`` = 25 joints. Entries where a track is absent in a frame are zero.
+
+    Attributes:
+        name: file stem (e.g. ``S001C001P001R001A011``); parsed fields via :attr:`sample`.
+        body_ids: ``B`` 64-bit tracking IDs (exact Python ints), in order of first appearance.
+        joints: float64 ``[B, T, J, 12]``, the 12 per-joint values exactly as read
+            (x y z in metres; depth x/y and colour x/y in pixels; orientation w x y z; tracking state).
+        body_info: float64 ``[B, T, 9]``, the body line without the ID
+            (``BODY_INFO_FIELDS[1:]``).
+        slot: int16 ``[B, T]``, position of the body within its frame's list, ``-1`` if absent.
+            Keeps the writer's output in the original order.
+    """
+
+    name: str
+    body_ids: list[int]
+    joints: np.ndarray
+    body_info: np.ndarray
+    slot: np.ndarray
+
+    @property
+    def num_frames(self) -> int:
+        return int(self.slot.shape[1])
+
+    @property
+    def num_bodies(self) -> int:
+        return len(self.body_ids)
+
+    @property
+    def present(self) -> np.ndarray:
+        """bool ``[B, T]``: track ``b`` is in frame ``t``."""
+        return self.slot >= 0
+
+    @property
+    def positions(self) -> np.ndarray:
+        """float32 ``[B, T, 25, 3]`` camera-space joint positions in metres."""
+        return self.joints[..., 0:3].astype(np.float32)
+
+    @property
+    def depth_xy(self) -> np.ndarray:
+        """float32 ``[B, T, 25, 2]`` pixel positions in the 512×424 depth frame."""
+        return self.joints[..., 3:5].astype(np.float32)
+
+    @property
+    def color_xy(self) -> np.ndarray:
+        """float32 ``[B, T, 25, 2]`` pixel positions in the 1920×1080 colour frame."""
+        return self.joints[..., 5:7].astype(np.float32)
+
+    @property
+    def orientation(self) -> np.ndarray:
+        """float32 ``[B, T, 25, 4]`` joint orientation quaternions ``(w, x, y, z)``."""
+        return self.joints[..., 7:11].astype(np.float32)
+
+    @property
+    def joint_tracking_state(self) -> np.ndarray:
+        """int8 ``[B, T, 25]``: 0 not tracked, 1 inferred, 2 tracked."""
+        return self.joints[..., 11].astype(np.int8)
+
+    @property
+    def sample(self) -> NTUSampleName:
+        """Setup, camera, subject, replication and action parsed from :attr:`name`."""
+        return parse_ntu_name(self.name)
+
+    @property
+    def layout(self):
+        return NTU25
+
+    def body_field(self, field_name: str) -> np.ndarray:
+        """``[B, T]`` values of one body-line field, e.g. ``"lean_x"`` or ``"tracking_state"``."""
+        if field_name == "body_id":
+            raise KeyError("body IDs are per track: use .body_ids")
+        return self.body_info[..., BODY_INFO_FIELDS.index(field_name) - 1]
+
+
+# --------------------------------------------------------------------------- reading
+
+
+def read_skeleton(path: str | os.PathLike) -> SkeletonSequence:
+    """Read one NTU ``.skeleton`` file.
+
+    Raises:
+        SkeletonFormatError: truncated, non-numeric, wrong counts or empty; the
+            message names the file and the line.
+    """
+    path = Path(path)
+    try:
+        text = path.read_bytes()
+    except OSError as exc:
+        raise SkeletonFormatError(path, None, f"cannot read file ({exc.strerror})") from exc
+    return parse_skeleton_text(text, name=path.name, source=path)
+
+
+def parse_skeleton_text(text: bytes | str, name: str = "<memory>", source: str | os.PathLike | None = None) -> SkeletonSequence:
+    """Parse the content of a ``.skeleton`` file (see :func:`read_skeleton`).
+
+    The fast path splits the text into lines once, walks only the count lines in
+    Python, and converts all joint lines with a single numpy call. Any
+    inconsistency falls back to a line-by-line check that reports the line.
+    """
+    source = source if source is not None else name
+    if isinstance(text, str):
+        text = text.encode()
+    lines = text.splitlines()  # handles \r\n and \n
+    stem = Path(name).name
+    if stem.endswith(".skeleton"):
+        stem = stem[: -len(".skeleton")]
+    if not lines or not lines[0].strip():
+        raise SkeletonFormatError(source, 1, "empty file: expected the frame count")
+
+    num_frames = _parse_count(lines, 0, source, "frame count")
+    # Walk the structure: collect (frame, slot, body line index) for every body.
+    entries: list[tuple[int, int, int]] = []
+    i = 1
+    n_lines = len(lines)
+    for t in range(num_frames):
+        if i >= n_lines:
+            raise SkeletonFormatError(source, i + 1, f"file ends before frame {t + 1} of {num_frames}")
+        nb = _parse_count(lines, i, source, f"body count of frame {t + 1}")
+        i += 1
+        for s in range(nb):
+            if i + 1 >= n_lines:
+                raise SkeletonFormatError(source, min(i + 1, n_lines) + 1, f"file ends inside body {s + 1} of frame {t + 1}")
+            nj = _parse_count(lines, i + 1, source, "joint count")
+            if nj != NUM_JOINTS:
+                raise SkeletonFormatError(source, i + 2, f"joint count is {nj}, expected {NUM_JOINTS}")
+            if i + 2 + NUM_JOINTS > n_lines:
+                raise SkeletonFormatError(source, n_lines + 1, f"file ends inside the joints of body {s + 1} of frame {t + 1}")
+            entries.append((t, s, i))
+            i += 2 + NUM_JOINTS
+    trailing = [k for k in range(i, n_lines) if lines[k].strip()]
+    if trailing:
+        raise SkeletonFormatError(source, trailing[0] + 1, f"unexpected content after the last of {num_frames} frames")
+
+    n_entries = len(entries)
+    body_lines = [lines[e[2]] for e in entries]
+    joint_lines = [lines[e[2] + 2 + j] for e in entries for j in range(NUM_JOINTS)]
+    joint_values = _to_floats(joint_lines, JOINT_FIELDS)
+    if joint_values is None:
+        _raise_bad_line(lines, [e[2] + 2 + j for e in entries for j in range(NUM_JOINTS)], JOINT_FIELDS, source, "joint")
+    info_tokens = [ln.split() for ln in body_lines]
+    bad = [k for k, tok in enumerate(info_tokens) if len(tok) != BODY_FIELDS]
+    if bad:
+        k = bad[0]
+        raise SkeletonFormatError(source, entries[k][2] + 1, f"body line has {len(info_tokens[k])} values, expected {BODY_FIELDS}")
+    try:
+        ids = [int(tok[0]) for tok in info_tokens]
+        info_values = np.array([tok[1:] for tok in info_tokens], dtype=np.float64).reshape(n_entries, BODY_FIELDS - 1)
+    except ValueError:
+        _raise_bad_body_line(lines, [e[2] for e in entries], source)
+
+    # Group by body ID, in order of first appearance.
+    track_of: dict[int, int] = {}
+    for body_id in ids:
+        track_of.setdefault(body_id, len(track_of))
+    n_tracks = len(track_of)
+    joints = np.zeros((n_tracks, num_frames, NUM_JOINTS, JOINT_FIELDS), dtype=np.float64)
+    body_info = np.zeros((n_tracks, num_frames, BODY_FIELDS - 1), dtype=np.float64)
+    slot = np.full((n_tracks, num_frames), -1, dtype=np.int16)
+    if n_entries:
+        tr = np.fromiter((track_of[b] for b in ids), dtype=np.int64, count=n_entries)
+        fr = np.fromiter((e[0] for e in entries), dtype=np.int64, count=n_entries)
+        sl = np.fromiter((e[1] for e in entries), dtype=np.int16, count=n_entries)
+        if np.any(slot[tr, fr] >= 0) or len(set(zip(tr.tolist(), fr.tolist()))) != n_entries:
+            dup = _first_duplicate(tr, fr)
+            raise SkeletonFormatError(source, entries[dup][2] + 1, f"body ID {ids[dup]} appears twice in frame {entries[dup][0] + 1}")
+        joints[tr, fr] = joint_values.reshape(n_entries, NUM_JOINTS, JOINT_FIELDS)
+        body_info[tr, fr] = info_values
+        slot[tr, fr] = sl
+    if not np.isfinite(joints).all():
+        k = int(np.argwhere(~np.isfinite(joint_values.reshape(-1, JOINT_FIELDS)).any(1))[0, 0])
+        raise SkeletonFormatError(source, entries[k // NUM_JOINTS][2] + 3 + k % NUM_JOINTS, "non-finite joint value")
+    return SkeletonSequence(name=stem, body_ids=list(track_of), joints=joints, body_info=body_info, slot=slot)
+
+
+def _parse_count(lines: list[bytes], i: int, source, what: str) -> int:
+    raw = lines[i].strip()
+    try:
+        value = int(raw)
+    except ValueError:
+        raise SkeletonFormatError(source, i + 1, f"expected an integer {what}, found {raw[:40]!r}") from None
+    if value < 0:
+        raise SkeletonFormatError(source, i + 1, f"negative {what} {value}")
+    return value
+
+
+def _to_floats(lines: list[bytes], width: int) -> np.ndarray | None:
+    """All ``lines`` as one float64 ``[len(lines), width]`` array, or None if any line is off."""
+    if not lines:
+        return np.zeros((0, width))
+    try:  # numpy's C text parser; blank lines are skipped by loadtxt, so the shape check catches them
+        values = np.loadtxt(io.BytesIO(b"\n".join(lines)), dtype=np.float64, ndmin=2, comments=None)
+    except ValueError:
+        return None
+    return values if values.shape == (len(lines), width) else None
+
+
+def _raise_bad_line(lines, indices, width, source, what):
+    for k in indices:
+        tok = lines[k].split()
+        if len(tok) != width:
+            raise SkeletonFormatError(source, k + 1, f"{what} line has {len(tok)} values, expected {width}")
+        for v in tok:
+            try:
+                float(v)
+            except ValueError:
+                raise SkeletonFormatError(source, k + 1, f"non-numeric {what} value {v.decode(errors='replace')!r}") from None
+    raise SkeletonFormatError(source, None, f"unparseable {what} lines")  # pragma: no cover - defensive
+
+
+def _raise_bad_body_line(lines, indices, source):
+    for k in indices:
+        tok = lines[k].split()
+        try:
+            int(tok[0])
+            [float(v) for v in tok[1:]]
+        except ValueError:
+            raise SkeletonFormatError(source, k + 1, f"non-numeric body line {lines[k].decode(errors='replace')[:60]!r}") from None
+    raise SkeletonFormatError(source, None, "unparseable body lines")  # pragma: no cover - defensive
+
+
+def _first_duplicate(tracks: np.ndarray, frames: np.ndarray) -> int:
+    seen = set()
+    for k, key in enumerate(zip(tracks.tolist(), frames.tolist())):
+        if key in seen:
+            return k
+        seen.add(key)
+    return 0  # pragma: no cover - only called when a duplicate exists
+
+
+# --------------------------------------------------------------------------- writing
+
+
+def write_skeleton(path: str | os.PathLike, seq: SkeletonSequence, newline: str = "\r\n") -> None:
+    """Write ``seq`` as a ``.skeleton`` file that :func:`read_skeleton` reads back identically.
+
+    Values are printed with 7 significant digits (``%.7G``), the precision of the
+    Kinect SDK dumps, so a file read and written again is byte-identical to the
+    original apart from the line ends. ``newline`` defaults to CRLF like NTU.
+    """
+    B, T = seq.slot.shape
+    if seq.joints.shape != (B, T, NUM_JOINTS, JOINT_FIELDS):
+        raise ValueError(f"joints must be [{B}, {T}, 25, 12], got {list(seq.joints.shape)}")
+    if not np.isfinite(seq.joints).all():
+        raise ValueError(f"{path}: sequence {seq.name} has non-finite joint values")
+    # Format every joint line of every present body in one go (the writer is on the synthesis hot path).
+    order = np.argsort(np.where(seq.slot >= 0, seq.slot, np.iinfo(np.int16).max), axis=0, kind="stable")  # [B, T]
+    counts = (seq.slot >= 0).sum(0)
+    rows_b = [order[k, t] for t in range(T) for k in range(counts[t])]
+    rows_t = [t for t in range(T) for _ in range(counts[t])]
+    jvals = seq.joints[rows_b, rows_t].reshape(-1, JOINT_FIELDS) if rows_b else np.zeros((0, JOINT_FIELDS))
+    joint_text = _format_rows(jvals, "%.7G " * (JOINT_FIELDS - 1) + "%d")
+    info = seq.body_info[rows_b, rows_t] if rows_b else np.zeros((0, BODY_FIELDS - 1))
+    info_fmt = " ".join(["%d"] * 6 + ["%.7G"] * 2 + ["%d"])
+    out = [str(T)]
+    k = 0
+    for t in range(T):
+        out.append(str(int(counts[t])))
+        for _ in range(counts[t]):
+            out.append(f"{seq.body_ids[rows_b[k]]} " + info_fmt % tuple(info[k]))
+            out.append(str(NUM_JOINTS))
+            out.extend(joint_text[k * NUM_JOINTS:(k + 1) * NUM_JOINTS])
+            k += 1
+    Path(path).write_text(newline.join(out) + newline, encoding="ascii", newline="")
+
+
+def _format_rows(values: np.ndarray, fmt: str) -> list[str]:
+    if len(values) == 0:
+        return []
+    return [fmt % tuple(r) for r in values.tolist()]
+
+
+def sequence_from_positions(name: str, positions: np.ndarray, body_ids: list[int] | None = None,
+                            present: np.ndarray | None = None) -> SkeletonSequence:
+    """Build a :class:`SkeletonSequence` from 3-D positions alone (e.g. for synthetic data).
+
+    Args:
+        positions: ``[B, T, 25, 3]`` metres, camera space.
+        body_ids: one ID per track (defaults to Kinect-like 17-digit IDs).
+        present: bool ``[B, T]``; defaults to frames where the body is not all zero.
+
+    The depth and colour pixel coordinates are projected with Kinect v2-like
+    intrinsics, orientations are identity and every joint is "tracked" (2).
+    """
+    positions = np.asarray(positions, dtype=np.float64)
+    B, T = positions.shape[:2]
+    if positions.shape[2:] != (NUM_JOINTS, 3):
+        raise ValueError(f"positions must be [B, T, 25, 3], got {list(positions.shape)}")
+    if present is None:
+        present = np.abs(positions).sum(axis=(2, 3)) > 0
+    if body_ids is None:
+        body_ids = [72057594037927936 + 1000 + b for b in range(B)]
+    joints = np.zeros((B, T, NUM_JOINTS, JOINT_FIELDS))
+    joints[..., 0:3] = positions
+    z = np.maximum(positions[..., 2], 0.1)
+    joints[..., 3] = 256.0 + 365.0 * positions[..., 0] / z   # depth camera, ~365 px focal length
+    joints[..., 4] = 212.0 - 365.0 * positions[..., 1] / z
+    joints[..., 5] = 960.0 + 1060.0 * positions[..., 0] / z  # colour camera, ~1060 px focal length
+    joints[..., 6] = 540.0 - 1060.0 * positions[..., 1] / z
+    joints[..., 7] = 1.0
+    joints[..., 11] = 2
+    joints[~present] = 0.0
+    body_info = np.zeros((B, T, BODY_FIELDS - 1))
+    body_info[..., 8] = 2  # body trackingState
+    body_info[~present] = 0.0
+    slot = np.where(present, np.cumsum(present, axis=0) - 1, -1).astype(np.int16)
+    return SkeletonSequence(name=name, body_ids=list(body_ids), joints=joints, body_info=body_info, slot=slot)
+
+
+# --------------------------------------------------------------------------- body selection
+
+
+@dataclass
+class BodySelection:
+    """Which tracks :func:`select_main_bodies` kept and why the others were dropped.
+
+    Attributes:
+        positions: float32 ``[max_bodies, T, 25, 3]``, kept tracks first (most motion first), zero padded.
+        kept: indices into the sequence's tracks.
+        dropped: ``{track index: reason}`` for every track not kept.
+    """
+
+    positions: np.ndarray
+    kept: list[int]
+    dropped: dict[int, str] = field(default_factory=dict)
+
+
+def body_motion(positions: np.ndarray, present: np.ndarray) -> np.ndarray:
+    """Sum over x, y, z of the joint-position variance over each track's present frames (NTU FAQ).
+
+    Args:
+        positions: ``[B, T, 25, 3]``; present: bool ``[B, T]``. Returns ``[B]``.
+    """
+    out = np.zeros(len(positions))
+    for b in range(len(positions)):
+        p = positions[b][present[b]]
+        if len(p) > 1:
+            out[b] = p.reshape(len(p), -1, 3).var(axis=0).sum()
+    return out
+
+
+def spread_noise_ratio(positions: np.ndarray, present: np.ndarray, ratio: float = 0.8) -> np.ndarray:
+    """Fraction of each track's frames whose x-spread exceeds ``ratio`` × y-spread, ``[B]``.
+
+    Non-human "bodies" (chairs, tables) are wider than tall; pyskl drops a track
+    when this fraction is at least 0.69754.
+    """
+    spread = positions.max(axis=2) - positions.min(axis=2)  # [B, T, 3]
+    wide = spread[..., 0] > ratio * spread[..., 1]
+    n = np.maximum(present.sum(1), 1)
+    return (wide & present).sum(1) / n
+
+
+def select_main_bodies(seq: SkeletonSequence, max_bodies: int = 2, denoise_spread: bool = False,
+                       spread_threshold: float = 0.69754, min_frames: int = 1) -> BodySelection:
+    """Keep the ``max_bodies`` tracks with the most motion; report every other one.
+
+    Args:
+        max_bodies: tracks kept (2 for NTU training).
+        denoise_spread: drop tracks that are wider than tall in at least
+            ``spread_threshold`` of their frames (non-human detections).
+        min_frames: drop tracks present in fewer frames (pyskl uses 12).
+    """
+    positions = seq.positions
+    present = seq.present
+    dropped: dict[int, str] = {}
+    candidates = []
+    noise = spread_noise_ratio(positions, present) if denoise_spread else None
+    for b in range(seq.num_bodies):
+        n = int(present[b].sum())
+        if n < min_frames:
+            dropped[b] = f"present in {n} frames (< {min_frames})"
+        elif noise is not None and noise[b] >= spread_threshold:
+            dropped[b] = f"spread denoising: wider than tall in {noise[b]:.0%} of its frames"
+        else:
+            candidates.append(b)
+    motion = body_motion(positions, present)
+    candidates.sort(key=lambda b: -motion[b])
+    kept = candidates[:max_bodies]
+    for b in candidates[max_bodies:]:
+        dropped[b] = f"less motion ({motion[b]:.4g}) than the {max_bodies} kept tracks"
+    out = np.zeros((max_bodies,) + positions.shape[1:], dtype=np.float32)
+    for k, b in enumerate(kept):
+        out[k] = positions[b]
+    return BodySelection(positions=out, kept=kept, dropped=dropped)
+
+
+def read_missing_list(path: str | os.PathLike) -> set[str]:
+    """Sample names in an official "samples with missing skeletons" list (prose header lines skipped)."""
+    names = set()
+    for line in Path(path).read_text(encoding="utf-8", errors="replace").splitlines():
+        match = _NAME_RE.fullmatch(line.strip())
+        if match:
+            names.add(line.strip())
+    return names

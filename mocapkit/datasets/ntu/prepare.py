@@ -1,0 +1,404 @@
+"""Turn a folder of NTU ``.skeleton`` files into a memory-mappable training cache.
+
+:func:`prepare_ntu` parses every file once (in parallel) and writes, into ``out/``:
+
+``positions.npy``
+    float32 ``[total_frames, max_bodies, 25, 3]``, joint positions in metres
+    (camera space). All samples are concatenated along the first axis: sample
+    ``i`` is rows ``offsets[i] : offsets[i] + lengths[i]``. Bodies are those
+    kept by :func:`~mocapkit.datasets.formats.ntu_skeleton.select_main_bodies`, most
+    motion first; a body absent in a frame (or a missing second body) is zeros.
+``index.npz``
+    one entry per sample, in sorted-name order: ``names`` (str), ``offsets``,
+    ``lengths`` (frames), ``labels`` (0-based action), ``subjects``,
+    ``cameras``, ``setups``, ``replications`` (int64, 1-based as in the name).
+``meta.json``
+    format version, source folder, counts, ``max_bodies``, the options used,
+    ``num_classes`` and ``class_names`` (from ``src/classes.txt`` if present,
+    line k = action k+1, else null). Written last: a folder without it is not a
+    finished cache.
+``report.json`` / ``report.txt``
+    every file left out and why (missing-skeleton list, malformed with file and
+    line, bad name, duplicate name), every sample where bodies were dropped
+    (which body IDs and why), samples where no body was kept, and totals.
+
+Frames are **not trimmed**: ``lengths[i]`` is always the frame count written in
+the file, so frames in which no kept body is present are rows of zeros. This
+keeps the cache a faithful copy of the files (frame ``t`` of the cache is frame
+``t`` of the ``.skeleton``) and lets the array be sized exactly by a cheap
+pre-pass; temporal cropping belongs to the training transforms.
+
+Memory: the pre-pass reads only the first line (frame count) of each file to
+allocate ``positions.npy`` with :func:`numpy.lib.format.open_memmap`; workers
+then parse one file at a time and send back only the selected bodies, which
+the main process writes into the memmap. Peak memory is a few files' worth,
+whatever the number of files (full NTU-120: 114,480 files, ~5 GB on disk).
+"""
+from __future__ import annotations
+
+import json
+import os
+import time
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from multiprocessing import Pool
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from mocapkit.datasets.formats.ntu_skeleton import (
+    NUM_JOINTS,
+    SkeletonFormatError,
+    parse_ntu_name,
+    read_missing_list,
+    read_skeleton,
+    select_main_bodies,
+)
+
+#: Version of the on-disk layout written here and expected by :class:`~mocapkit.datasets.ntu.cache.NTUCache`.
+CACHE_FORMAT = "mocapkit-ntu-cache"
+CACHE_VERSION = 1
+
+POSITIONS_FILE = "positions.npy"
+INDEX_FILE = "index.npz"
+META_FILE = "meta.json"
+REPORT_JSON = "report.json"
+REPORT_TXT = "report.txt"
+
+
+@dataclass
+class PrepareReport:
+    """What :func:`prepare_ntu` did; also written to ``report.json`` and ``report.txt``.
+
+    Attributes:
+        out: the cache folder.
+        files_found: ``.skeleton`` files under the source folder.
+        samples_written: samples in the cache.
+        total_frames: rows of ``positions.npy``.
+        skipped: one dict per file left out: ``{"file", "name", "reason", "message"}``
+            with ``reason`` one of ``"missing_list"``, ``"malformed"``, ``"bad_name"``,
+            ``"duplicate_name"``.
+        dropped_bodies: one dict per sample where bodies were dropped:
+            ``{"name", "kept_body_ids", "dropped": [{"body_id", "reason"}, ...]}``.
+        empty_samples: names of samples written with no body at all (all zeros).
+        seconds: wall-clock time of the whole run.
+    """
+
+    out: str
+    files_found: int = 0
+    samples_written: int = 0
+    total_frames: int = 0
+    skipped: list[dict] = field(default_factory=list)
+    dropped_bodies: list[dict] = field(default_factory=list)
+    empty_samples: list[str] = field(default_factory=list)
+    seconds: float = 0.0
+
+    def count(self, reason: str) -> int:
+        """Number of skipped files with this ``reason``."""
+        return sum(1 for s in self.skipped if s["reason"] == reason)
+
+    def totals(self) -> dict:
+        return {
+            "files_found": self.files_found,
+            "samples_written": self.samples_written,
+            "total_frames": self.total_frames,
+            "skipped_missing_list": self.count("missing_list"),
+            "skipped_malformed": self.count("malformed"),
+            "skipped_bad_name": self.count("bad_name"),
+            "skipped_duplicate_name": self.count("duplicate_name"),
+            "samples_with_dropped_bodies": len(self.dropped_bodies),
+            "empty_samples": len(self.empty_samples),
+            "seconds": round(self.seconds, 3),
+        }
+
+    def to_dict(self) -> dict:
+        return {"out": self.out, "totals": self.totals(), "skipped": self.skipped,
+                "dropped_bodies": self.dropped_bodies, "empty_samples": self.empty_samples}
+
+    def to_text(self) -> str:
+        """The human-readable ``report.txt``."""
+        lines = [f"NTU preparation report for {self.out}", ""]
+        lines += [f"{key:>28}: {value}" for key, value in self.totals().items()]
+        lines += ["", f"Skipped files ({len(self.skipped)}):"]
+        lines += [f"  [{s['reason']}] {s['file']}: {s['message']}" for s in self.skipped] or ["  none"]
+        lines += ["", f"Samples with dropped bodies ({len(self.dropped_bodies)}):"]
+        for d in self.dropped_bodies:
+            lines.append(f"  {d['name']}: kept {d['kept_body_ids']}")
+            lines += [f"      dropped body {x['body_id']}: {x['reason']}" for x in d["dropped"]]
+        if not self.dropped_bodies:
+            lines.append("  none")
+        lines += ["", f"Samples with no body kept, stored as zeros ({len(self.empty_samples)}):"]
+        lines += [f"  {name}" for name in self.empty_samples] or ["  none"]
+        return "\n".join(lines) + "\n"
+
+
+def prepare_ntu(src: str | os.PathLike, out: str | os.PathLike, workers: int = 1, skip_bad: bool = False,
+                missing_list: str | os.PathLike | Iterable[str] | None = None, max_bodies: int = 2,
+                denoise_spread: bool = False, min_body_frames: int = 1, progress: bool = True) -> PrepareReport:
+    """Parse every ``.skeleton`` file under ``src`` (recursively) into a cache in ``out``.
+
+    Args:
+        src: folder searched recursively for ``*.skeleton`` files named ``SsssCcccPpppRrrrAaaa``.
+            An optional ``src/classes.txt`` (line k = name of action k+1) gives ``class_names``.
+        out: cache folder (created; an existing cache there is replaced).
+        workers: parsing processes (1 = parse in this process).
+        skip_bad: record malformed files and bad names in the report and go on,
+            instead of raising at the first one.
+        missing_list: path of an official "samples with missing skeletons" list, or
+            an iterable of sample names; those samples are left out.
+        max_bodies: bodies kept per sample (``positions.npy`` axis 1).
+        denoise_spread, min_body_frames: passed to ``select_main_bodies``
+            (``min_frames``); pyskl uses ``True`` and 12.
+        progress: show a tqdm progress bar.
+
+    Returns:
+        The :class:`PrepareReport` (also written to ``out/report.json`` and ``out/report.txt``).
+
+    Raises:
+        FileNotFoundError: ``src`` does not exist, or holds no ``.skeleton`` file.
+        SkeletonFormatError: the first malformed file (names file and line), unless ``skip_bad``.
+        ValueError: a file name that is not an NTU sample name, or the same sample twice, unless ``skip_bad``.
+    """
+    started = time.perf_counter()
+    src, out = Path(src), Path(out)
+    if workers < 1:
+        raise ValueError(f"workers must be >= 1, got {workers}")
+    if max_bodies < 1:
+        raise ValueError(f"max_bodies must be >= 1, got {max_bodies}")
+    report = PrepareReport(out=str(out))
+
+    files = _find_files(src)
+    report.files_found = len(files)
+    files = _check_names(files, skip_bad, report)
+    missing = _load_missing(missing_list)
+    missing_source = (str(missing_list) if isinstance(missing_list, (str, os.PathLike))
+                      else None if missing_list is None else f"{len(missing)} names given by the caller")
+    kept_files = []
+    for path in files:
+        if path.stem in missing:
+            report.skipped.append({"file": str(path), "name": path.stem, "reason": "missing_list",
+                                   "message": "listed as a sample with missing skeletons"})
+        else:
+            kept_files.append(path)
+    files = kept_files
+    class_names = _read_class_names(src)
+
+    out.mkdir(parents=True, exist_ok=True)
+    for stale in (META_FILE, INDEX_FILE, POSITIONS_FILE):  # a half-written cache must never look finished
+        (out / stale).unlink(missing_ok=True)
+
+    # Pre-pass: frame counts from the first lines size the memmap. A file whose first
+    # line is unusable gets 0 rows here; its worker then raises the authoritative error.
+    heads = tqdm(files, desc="reading frame counts", unit="file", disable=not progress)
+    expected = np.array([_frame_count_or_zero(p) for p in heads], dtype=np.int64)
+    capacity = int(expected.sum())
+    positions_path = out / POSITIONS_FILE
+    positions = np.lib.format.open_memmap(positions_path, mode="w+", dtype=np.float32,
+                                          shape=(capacity, max_bodies, NUM_JOINTS, 3))
+    options = {"max_bodies": max_bodies, "denoise_spread": denoise_spread, "min_body_frames": min_body_frames}
+    jobs = [(str(p), options) for p in files]
+    rows: dict[str, list] = {k: [] for k in ("names", "offsets", "lengths", "labels", "subjects",
+                                             "cameras", "setups", "replications")}
+    cursor = 0
+    try:
+        with _parallel_map(_parse_one, jobs, workers) as results, \
+                tqdm(total=len(jobs), desc="parsing .skeleton", unit="file", disable=not progress) as bar:
+            for path, frames, result in zip(files, expected, results):
+                bar.update(1)
+                if "error" in result:
+                    error = result["error"]
+                    if not skip_bad:
+                        raise error
+                    report.skipped.append({"file": str(path), "name": path.stem, "reason": "malformed",
+                                           "message": str(error)})
+                    continue
+                block = result["positions"]  # [max_bodies, T, 25, 3]
+                length = block.shape[1]
+                if length != frames:  # cannot happen: the parser checks the same first line
+                    raise RuntimeError(f"{path}: {length} frames parsed but the pre-pass read {frames}")
+                positions[cursor:cursor + length] = block.transpose(1, 0, 2, 3)
+                sample = parse_ntu_name(path.stem)
+                for key, value in (("names", path.stem), ("offsets", cursor), ("lengths", length),
+                                   ("labels", sample.label), ("subjects", sample.subject),
+                                   ("cameras", sample.camera), ("setups", sample.setup),
+                                   ("replications", sample.replication)):
+                    rows[key].append(value)
+                cursor += length
+                if result["dropped"]:
+                    report.dropped_bodies.append({"name": path.stem, "kept_body_ids": result["kept_body_ids"],
+                                                  "dropped": result["dropped"]})
+                if not result["kept_body_ids"]:
+                    report.empty_samples.append(path.stem)
+        positions.flush()
+        del positions
+        if cursor < capacity:  # some files were skipped as malformed after the pre-pass
+            _shrink_rows(positions_path, cursor)
+    except BaseException:  # leave no half-written multi-gigabyte array behind
+        positions = None  # noqa: F841  (drops the memmap so the file can go)
+        positions_path.unlink(missing_ok=True)
+        raise
+
+    index = {k: np.asarray(v, dtype=np.int64) for k, v in rows.items() if k != "names"}
+    index["names"] = np.asarray(rows["names"], dtype="<U20")
+    np.savez(out / INDEX_FILE, **index)
+
+    report.samples_written = len(rows["names"])
+    report.total_frames = cursor
+    report.seconds = time.perf_counter() - started
+    (out / REPORT_JSON).write_text(json.dumps(report.to_dict(), indent=1) + "\n", encoding="utf-8")
+    (out / REPORT_TXT).write_text(report.to_text(), encoding="utf-8")
+    labels = index["labels"]
+    meta = {
+        "format": CACHE_FORMAT,
+        "version": CACHE_VERSION,
+        "source": str(src.resolve()),
+        "num_samples": report.samples_written,
+        "total_frames": cursor,
+        "max_bodies": max_bodies,
+        "num_joints": NUM_JOINTS,
+        "num_classes": _num_classes(class_names, labels),
+        "class_names": class_names,
+        "options": {**options, "skip_bad": skip_bad, "workers": workers, "missing_list": missing_source},
+        "totals": report.totals(),
+        "frames_trimmed": False,
+    }
+    (out / META_FILE).write_text(json.dumps(meta, indent=1) + "\n", encoding="utf-8")
+    return report
+
+
+# --------------------------------------------------------------------------- steps of prepare_ntu
+
+
+def _find_files(src: Path) -> list[Path]:
+    if not src.is_dir():
+        raise FileNotFoundError(f"NTU source folder {src} does not exist or is not a folder")
+    files = sorted(src.rglob("*.skeleton"), key=lambda p: (p.name, str(p)))
+    if not files:
+        raise FileNotFoundError(f"no .skeleton files found under {src} (searched recursively)")
+    return files
+
+
+def _check_names(files: list[Path], skip_bad: bool, report: PrepareReport) -> list[Path]:
+    """Keep files whose stem is exactly an NTU sample name, each name once."""
+    good: dict[str, Path] = {}
+    for path in files:
+        try:
+            name_ok = str(parse_ntu_name(path.stem)) == path.stem
+        except ValueError:
+            name_ok = False
+        if not name_ok:
+            message = f"{path}: file name is not an NTU sample name SsssCcccPpppRrrrAaaa.skeleton"
+            if not skip_bad:
+                raise ValueError(message)
+            report.skipped.append({"file": str(path), "name": path.stem, "reason": "bad_name", "message": message})
+        elif path.stem in good:
+            message = f"{path}: sample {path.stem} already read from {good[path.stem]}"
+            if not skip_bad:
+                raise ValueError(message)
+            report.skipped.append({"file": str(path), "name": path.stem, "reason": "duplicate_name",
+                                   "message": message})
+        else:
+            good[path.stem] = path
+    return list(good.values())
+
+
+def _load_missing(missing_list) -> set[str]:
+    if missing_list is None:
+        return set()
+    if isinstance(missing_list, (str, os.PathLike)):
+        if not Path(missing_list).is_file():
+            raise FileNotFoundError(f"missing-skeleton list {missing_list} does not exist")
+        return read_missing_list(missing_list)
+    return {Path(str(n)).stem for n in missing_list}
+
+
+def _read_class_names(src: Path) -> list[str] | None:
+    path = src / "classes.txt"
+    if not path.is_file():
+        return None
+    names = [line.strip() for line in path.read_text(encoding="utf-8").splitlines()]
+    while names and not names[-1]:
+        names.pop()
+    for k, name in enumerate(names):
+        if not name:
+            raise ValueError(f"{path}, line {k + 1}: empty class name")
+    return names
+
+
+def _num_classes(class_names: list[str] | None, labels: np.ndarray) -> int:
+    """len(class_names) if given, else 60 (NTU-60) or 120 if any action is above 60."""
+    if class_names is not None:
+        if len(labels) and labels.max() >= len(class_names):
+            raise ValueError(f"classes.txt names {len(class_names)} actions but action A{labels.max() + 1:03d} occurs")
+        return len(class_names)
+    return 120 if len(labels) and labels.max() >= 60 else 60
+
+
+def _frame_count_or_zero(path: Path) -> int:
+    """The frame count on the first line, or 0 if it is unusable (the parser will say why)."""
+    try:
+        with open(path, "rb") as f:
+            first = f.readline(64)
+        count = int(first.strip())
+        size = path.stat().st_size
+    except (OSError, ValueError):
+        return 0
+    # Each frame takes at least 2 bytes ("0\n"): a larger count is a corrupt header, not a reason
+    # to allocate gigabytes.
+    return count if 0 <= count and 2 * count <= size else 0
+
+
+def _parse_one(job: tuple[str, dict]) -> dict:
+    """Worker: read one file and select its main bodies. Returns plain picklable values."""
+    path, options = job
+    try:
+        seq = read_skeleton(path)
+    except SkeletonFormatError as exc:
+        return {"error": exc}
+    selection = select_main_bodies(seq, max_bodies=options["max_bodies"], denoise_spread=options["denoise_spread"],
+                                   min_frames=options["min_body_frames"])
+    return {
+        "positions": selection.positions,
+        "kept_body_ids": [seq.body_ids[b] for b in selection.kept],
+        "dropped": [{"body_id": seq.body_ids[b], "reason": reason} for b, reason in sorted(selection.dropped.items())],
+    }
+
+
+class _parallel_map:
+    """``with _parallel_map(fn, jobs, workers) as results:`` iterates ``fn(job)`` in order.
+
+    One worker maps in this process; more use a ``multiprocessing.Pool`` with ``imap``
+    (order kept, results streamed) and a chunk size that keeps workers busy without
+    holding many results in memory. Leaving the block terminates the pool.
+    """
+
+    def __init__(self, fn, jobs: list, workers: int):
+        self.fn, self.jobs, self.workers = fn, jobs, workers
+        self.pool = None
+
+    def __enter__(self):
+        if self.workers == 1:
+            return map(self.fn, self.jobs)
+        self.pool = Pool(self.workers)
+        chunksize = max(1, min(16, len(self.jobs) // (self.workers * 8)))
+        return self.pool.imap(self.fn, self.jobs, chunksize=chunksize)
+
+    def __exit__(self, *exc_info):
+        if self.pool is not None:
+            self.pool.terminate()
+            self.pool.join()
+        return False
+
+
+def _shrink_rows(path: Path, rows: int) -> None:
+    """Keep only the first ``rows`` rows of the ``.npy`` at ``path`` (copied in chunks, then renamed)."""
+    old = np.load(path, mmap_mode="r")
+    tmp = path.with_name(path.name + ".tmp")
+    new = np.lib.format.open_memmap(tmp, mode="w+", dtype=old.dtype, shape=(rows,) + old.shape[1:])
+    step = 65536
+    for start in range(0, rows, step):
+        new[start:start + step] = old[start:min(start + step, rows)]
+    new.flush()
+    del new, old
+    os.replace(tmp, path)

@@ -1,0 +1,2 @@
+"""Motion features computed from joint positions: the clip windows and clip features of the
+NMF bag-of-words pipeline (``clips``)."""
