@@ -1,0 +1,130 @@
+"""The one contract of every motion refiner, classical or learned.
+
+A refiner is a scikit-learn estimator (parameters stored untouched in ``__init__``, learned state
+in attributes ending in ``_``) with two methods:
+
+``fit(motions)``
+    learn from clean training motions (a sequence of :class:`~mocapkit.datasets.formats.motion.Motion`
+    of one skeleton layout); a no-op for methods that need no training data. Returns ``self``.
+``refine(motion) -> Motion``
+    a new Motion in which every entry that ``motion.missing`` marks is filled and, for the robust
+    methods, every outlier the method detects is repaired. Observed entries that the method does
+    not flag come back **bit-identical**; frames or joints it cannot fill (a marker missing in every
+    frame, gaps beyond what the method can do) stay missing and are listed in
+    ``out.metadata["refinement"]["unfilled"]``, never invented silently.
+
+Subclasses implement :meth:`MotionRefiner._refine_matrix` on the frames × (3·joints) matrix, in
+float64 metres, and set ``requires_fit = True`` when ``fit`` must come first. The shared checks
+(finite observed values, at least one observed entry, fitted layout) live here.
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import replace
+
+import numpy as np
+from sklearn.base import BaseEstimator
+from sklearn.exceptions import NotFittedError
+
+from mocapkit.datasets.formats.motion import Motion
+
+
+class RefinementError(ValueError):
+    """A motion a refiner cannot work on; the message names the motion (file), markers and frames."""
+
+
+def motion_matrix(motion: Motion) -> tuple[np.ndarray, np.ndarray]:
+    """``motion`` as the matrix of the theses' low-rank methods.
+
+    Returns:
+        ``(X, observed)``: float64 ``[frames, 3·joints]`` metres (joint-major: columns ``3j, 3j+1, 3j+2``
+        are x, y, z of joint ``j``; 0 where missing) and bool ``[frames, 3·joints]``, True where observed.
+    """
+    frames, joints = motion.positions.shape[:2]
+    observed = np.repeat(~motion.missing, 3, axis=1)
+    X = np.where(observed, motion.positions.reshape(frames, 3 * joints), 0.0).astype(np.float64)
+    return X, observed
+
+
+def check_motion(motion: Motion, min_frames: int = 1, what: str = "refine") -> None:
+    """Reject what no refiner can work on, naming the file, markers and frames.
+
+    Raises:
+        RefinementError: fewer than ``min_frames`` frames, no observed entry at all, or NaN / Inf
+            in an entry that is not marked missing (Motion turns NaN into missing; Inf stays).
+    """
+    label = motion.source or motion.name or "motion"
+    if not isinstance(motion, Motion):
+        raise TypeError(f"{what}: expected a Motion, got {type(motion).__name__}")
+    if motion.num_frames < min_frames:
+        raise RefinementError(f"{label}: {motion.num_frames} frames, {what} needs at least {min_frames}")
+    if motion.missing.all():
+        raise RefinementError(f"{label}: every entry is missing, nothing to refine from")
+    bad = ~np.isfinite(motion.positions).all(axis=2) & ~motion.missing
+    if bad.any():
+        frame, joint = np.argwhere(bad)[0]
+        raise RefinementError(f"{label}: non-finite value at frame {frame} of marker {motion.joint_names[joint]!r} "
+                              f"({int(bad.sum())} such entries); mark them missing (NaN) or remove them")
+
+
+class MotionRefiner(BaseEstimator):
+    """Base class of the refiners: input checks, the matrix view and the merge of observed entries."""
+
+    #: True when :meth:`fit` must be called before :meth:`refine` (data-driven methods).
+    requires_fit: bool = False
+    #: Fewest frames the method can work on.
+    min_frames: int = 2
+
+    def fit(self, motions: Sequence[Motion] | None = None, y=None) -> MotionRefiner:
+        """Learn from clean ``motions`` (all of one layout); records ``joint_names_``. A no-op otherwise."""
+        motions = list(motions or [])
+        if self.requires_fit and not motions:
+            raise ValueError(f"{type(self).__name__}.fit needs at least one training motion")
+        if motions:
+            names = motions[0].joint_names
+            for m in motions[1:]:
+                if m.joint_names != names:
+                    raise RefinementError(f"{m.source or m.name}: joints {list(m.joint_names)[:4]}... differ from the "
+                                          f"first training motion's; fit one refiner per skeleton layout")
+            self.joint_names_ = names
+        self._fit_matrices([motion_matrix(m) for m in motions]) if motions else None
+        return self
+
+    def _fit_matrices(self, data: list[tuple[np.ndarray, np.ndarray]]) -> None:
+        """Learn from ``[(X, observed), ...]`` (see :func:`motion_matrix`); data-driven methods override."""
+
+    def refine(self, motion: Motion) -> Motion:
+        """``motion`` with its missing entries filled (and detected outliers repaired); see the module docstring."""
+        check_motion(motion, self.min_frames, what=type(self).__name__)
+        if self.requires_fit:
+            if not hasattr(self, "joint_names_"):
+                raise NotFittedError(f"{type(self).__name__} is not fitted: call fit(training_motions) first")
+            if tuple(motion.joint_names) != tuple(self.joint_names_):
+                absent = [n for n in self.joint_names_ if n not in motion.joint_names]
+                raise RefinementError(f"{motion.source or motion.name}: {type(self).__name__} was fitted on another "
+                                      f"skeleton layout (missing joints: {absent[:8]}{'...' if len(absent) > 8 else ''})")
+        X, observed = motion_matrix(motion)
+        filled, repaired = self._refine_matrix(X, observed)
+        frames, joints = motion.positions.shape[:2]
+        filled = np.asarray(filled, dtype=np.float64).reshape(frames, joints, 3)
+        repaired = np.zeros((frames, joints), bool) if repaired is None else np.asarray(repaired, bool)
+        still_missing = motion.missing & ~np.isfinite(filled).all(axis=2)
+        replace_mask = (motion.missing | repaired) & ~still_missing
+        positions = motion.positions.copy()
+        positions[replace_mask] = filled[replace_mask].astype(np.float32)
+        positions[still_missing] = np.nan
+        unfilled = {motion.joint_names[j]: int(still_missing[:, j].sum()) for j in np.flatnonzero(still_missing.any(0))}
+        report = {"method": type(self).__name__, "filled": int((motion.missing & ~still_missing).sum()),
+                  "repaired": int((repaired & ~motion.missing).sum()), "unfilled": unfilled}
+        return replace(motion, positions=positions, missing=still_missing,
+                       metadata={**motion.metadata, "refinement": report})
+
+    def _refine_matrix(self, X: np.ndarray, observed: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """Fill ``X`` (float64 ``[frames, 3·joints]``, 0 where not ``observed``).
+
+        Returns:
+            ``(filled, repaired)``: the completed matrix (NaN where the method cannot fill) and a bool
+            ``[frames, joints]`` mask of observed entries the method flags as outliers and replaces
+            (None for methods that only fill gaps).
+        """
+        raise NotImplementedError
