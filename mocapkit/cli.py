@@ -23,17 +23,6 @@ import os
 import sys
 
 
-def _split_kv(items: list[str], key: str) -> tuple[str | None, list[str]]:
-    """Pull ``key=value`` out of Hydra-style overrides; return (value, the rest)."""
-    value, rest = None, []
-    for item in items:
-        if item.startswith(key + "="):
-            value = item.split("=", 1)[1]
-        else:
-            rest.append(item)
-    return value, rest
-
-
 def cmd_synth_ntu(args: argparse.Namespace) -> None:
     import json
 
@@ -122,25 +111,28 @@ def cmd_prepare_casia_b(args: argparse.Namespace) -> None:
 
 
 def cmd_gait_report(args: argparse.Namespace) -> None:
-    from mocapkit.evaluation.gait_report import gait_report
+    from mocapkit.evaluation.compare import gait_report  # `compare gait` with these options
 
     gait_report(args.data, args.out, protocols=tuple(args.protocols), experiments=tuple(args.experiments),
                 overrides=tuple(args.overrides), seed=args.seed, include_pca_lda=not args.no_pca_lda)
 
 
 def cmd_train(overrides: list[str]) -> None:
-    from mocapkit.train.config import compose_config
-    from mocapkit.train.training import resume_config, train
+    from mocapkit.train.config import pop_override
+    from mocapkit.train.training import main, resume_config, train
 
-    resume, _ = _split_kv(overrides, "resume")
-    cfg = resume_config(resume, overrides) if resume else compose_config(overrides)
-    train(cfg)
+    resume, rest = pop_override(overrides, "resume")
+    if resume:  # continue a run in its own folder, from its saved config
+        train(resume_config(resume, rest))
+    else:
+        main(overrides)
 
 
 def cmd_eval(overrides: list[str]) -> None:
     from mocapkit.evaluation.evaluate import evaluate
+    from mocapkit.train.config import pop_override
 
-    ckpt, rest = _split_kv(overrides, "ckpt_path")
+    ckpt, rest = pop_override(overrides, "ckpt_path")
     if not ckpt:
         raise SystemExit("mocapkit eval: ckpt_path=PATH is required")
     evaluate(ckpt, rest)
@@ -148,9 +140,10 @@ def cmd_eval(overrides: list[str]) -> None:
 
 def cmd_export(overrides: list[str]) -> None:
     from mocapkit.deploy.export import export_checkpoint
+    from mocapkit.train.config import pop_override
 
-    ckpt, rest = _split_kv(overrides, "ckpt_path")
-    out, rest = _split_kv(rest, "out")
+    ckpt, rest = pop_override(overrides, "ckpt_path")
+    out, rest = pop_override(rest, "out")  # short for export.out
     if not ckpt:
         raise SystemExit("mocapkit export: ckpt_path=PATH is required")
     export_checkpoint(ckpt, out, rest)
@@ -275,6 +268,10 @@ def main(argv: list[str] | None = None) -> int:
     if argv and argv[0] in ("train", "eval", "export") and not ({"-h", "--help"} & set(argv[1:])):
         handler = {"train": cmd_train, "eval": cmd_eval, "export": cmd_export}[argv[0]]
         return _run(handler, argv[1:])
+    if argv and argv[0] == "compare":  # `mocapkit compare NAME [overrides]`: Hydra overrides, like train
+        from mocapkit.evaluation.compare import cli_main
+
+        return _run(cli_main, argv[1:])
     args = parser.parse_args(argv)
     return _run(args.func, args)
 

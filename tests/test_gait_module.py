@@ -12,6 +12,7 @@ import torch.nn.functional as F
 
 from mocapkit.datasets.casia_b.datamodule import GaitDataModule
 from mocapkit.train.config import compose_config
+from mocapkit.train.training import build, build_datamodule
 from mocapkit.deploy.export import ParityError
 from mocapkit.deploy.gait_export import export_gait_module, export_gait_onnx
 from mocapkit.train.gait_module import GaitRecognitionModule
@@ -89,11 +90,12 @@ def test_predict_step_returns_the_evaluation_keys():
     assert {k for k in single if k.endswith("_logits")} == {"subject_logits"}
 
 
-def test_from_config_composes_the_experiments(cache_root):
+def test_the_experiments_build_the_module_from_its_target(cache_root):
     cfg = compose_config(["experiment=casiab_multitask", f"data.root={cache_root}"])
     assert cfg.task == "gait" and cfg.data.protocol == "closed_set"
-    dm = GaitDataModule(**{k: v for k, v in cfg.data.items() if not k.startswith("_")})
-    module = GaitRecognitionModule.from_config(cfg, dm)
+    dm = build_datamodule(cfg)
+    module = build(cfg.module, **dm.label_spaces())
+    assert type(module) is GaitRecognitionModule
     assert module.tasks == ("subject", "view", "condition") and module.model.input_size == (64, 44)
     assert module.hparams.subject_names == ["001", "002", "003", "004", "005", "006"]
     assert module.task_weights == {"subject": 1.0, "view": 1.0, "condition": 1.0}
@@ -101,8 +103,8 @@ def test_from_config_composes_the_experiments(cache_root):
     assert isinstance(opt["optimizer"], torch.optim.AdamW) and opt["optimizer"].defaults["lr"] == 1e-3
     cfg = compose_config(["experiment=casiab_single_subject", f"data.root={cache_root}",
                           "data.protocol=cross_subject"])
-    dm = GaitDataModule(**{k: v for k, v in cfg.data.items() if not k.startswith("_")})
-    single = GaitRecognitionModule.from_config(cfg, dm)
+    dm = build_datamodule(cfg)
+    single = build(cfg.module, **dm.label_spaces())
     assert single.tasks == ("subject",) and single.model.num_classes == {"subject": 4}
 
 

@@ -12,7 +12,7 @@ from torch.utils.data import DataLoader, TensorDataset
 from mocapkit.models.clip_bow import ClipNMFBagOfWords, clip_nmf_bow
 from mocapkit.models.nmf_layer import NMFLayer
 from mocapkit.train.action_module import ActionRecognitionModule
-from mocapkit.deploy.export import example_skeletons, export_onnx
+from mocapkit.deploy.skeleton_export import example_skeletons, export_onnx
 
 
 def _data(batch=3, n=12, d=8, k=4, seed=0):

@@ -89,6 +89,13 @@ def pad_collate(items: list[dict]) -> dict:
 
 
 class SkeletonDataModule(SplitDataModule):
-    """Base class of the skeleton data modules: batches padded by :func:`pad_collate`."""
+    """Base class of the skeleton data modules: batches padded by :func:`pad_collate`.
+
+    A subclass provides ``num_classes`` and ``class_names``.
+    """
 
     collate_fn = staticmethod(pad_collate)
+
+    def label_spaces(self) -> dict:
+        """What the action LightningModule needs from the data: ``num_classes`` and ``class_names``."""
+        return {"num_classes": self.num_classes, "class_names": list(self.class_names)}

@@ -21,23 +21,13 @@ from pathlib import Path
 
 import lightning as L
 import numpy as np
-import torch
 from omegaconf import DictConfig
 
 from mocapkit.datasets.formats.casia_b import VIEWS
+from mocapkit.evaluation.evaluate import predict_outputs
 from mocapkit.evaluation.gait import (closed_set_markdown, closed_set_report, cross_view_markdown, cross_view_rank1,
                                       plot_per_view)
 
-
-def predict_gait(module: L.LightningModule, loader, cfg: DictConfig) -> dict[str, np.ndarray]:
-    """Run ``module.predict_step`` over ``loader``; every output key concatenated as numpy (``[N, ...]``)."""
-    trainer = L.Trainer(accelerator=cfg.trainer.accelerator, devices=1, logger=False,
-                        enable_progress_bar=bool(cfg.trainer.get("enable_progress_bar", False)),
-                        enable_checkpointing=False)
-    batches = trainer.predict(module, dataloaders=loader)
-    if not batches:
-        raise ValueError("the test loader is empty: no GEIs to evaluate")
-    return {key: torch.cat([b[key] for b in batches]).cpu().numpy() for key in batches[0]}
 
 
 def evaluate_gait(module: L.LightningModule, datamodule, cfg: DictConfig, out_dir: Path,
@@ -66,7 +56,7 @@ def evaluate_gait(module: L.LightningModule, datamodule, cfg: DictConfig, out_di
     out_dir.mkdir(parents=True, exist_ok=True)
     part = str(cfg.get("eval", {}).get("part", "test") or "test")
     loader = datamodule.val_dataloader() if part == "val" else datamodule.test_dataloader()
-    out = predict_gait(module, loader, cfg)
+    out = predict_outputs(module, loader, cfg)
     # the validation side holds training subjects' sequences under both protocols: closed-set classification
     protocol = "closed_set" if part == "val" else datamodule.protocol
     name = str(cfg.get("experiment_name", "gait"))

@@ -1,41 +1,48 @@
-"""``mocapkit train``: fit a model with Lightning from a Hydra config.
+"""``mocapkit train``: fit a LightningModule as a Hydra config describes it.
 
-Each run writes to ``<output_root>/<experiment_name>/<run>/``::
+Everything is built from ``_target_`` entries of the composed config (``configs/train.yaml``):
+the data module (``data``), the LightningModule (``module``, given the data module's
+``label_spaces()``), the ``trainer``, its ``callbacks`` and ``logger``. Each run writes to
+``<output_root>/<experiment_name>/<run_name>/``::
 
-    config.yaml       the resolved configuration
-    last.ckpt         the latest checkpoint (resume with ``resume=<this file>``)
-    best.ckpt         the checkpoint with the best validation accuracy
-    tensorboard/      TensorBoard logs
+    config.yaml          the resolved configuration
+    .hydra/config.yaml   the unresolved one (eval / export / resume compose it again)
+    last.ckpt            the latest checkpoint (resume with ``resume=<this file>``)
+    best.ckpt            the checkpoint with the best validation accuracy (val/acc)
+    tensorboard/         TensorBoard logs
 """
 from __future__ import annotations
 
+import sys
 import warnings
 from pathlib import Path
 
+import hydra
 import lightning as L
+from hydra.core.hydra_config import HydraConfig
 from hydra.errors import InstantiationException
 from hydra.utils import instantiate
-from lightning.pytorch.callbacks import LearningRateMonitor, ModelCheckpoint
-from lightning.pytorch.loggers import TensorBoardLogger
-from omegaconf import DictConfig
+from lightning.pytorch.callbacks import ModelCheckpoint
+from omegaconf import DictConfig, open_dict
 
-from mocapkit.train.config import ConfigError, load_run_config, new_run_dir, save_run_config
-from mocapkit.train.callbacks import EpochSummary
-from mocapkit.train.tasks import get_task
+from mocapkit.train.config import (CONFIG_DIR, ConfigError, compose_config, load_run_config, prepare_run_dir,
+                                   save_run_config)
 
 
-def build_datamodule(cfg: DictConfig):
-    """The data module of ``cfg.data`` (its ``_target_``), seeded with ``cfg.seed``.
-
-    Errors raised by the data module (a missing folder, an unknown split) are
-    re-raised as they are, without Hydra's wrapper, so their message reaches the user.
-    """
+def build(node: DictConfig, **kwargs):
+    """``instantiate(node, **kwargs)``; an error raised by the target itself (a missing folder, an
+    unknown split) is re-raised as it is, without Hydra's wrapper, so its message reaches the user."""
     try:
-        return instantiate(cfg.data, seed=cfg.seed)
+        return instantiate(node, **kwargs)
     except InstantiationException as exc:
         if isinstance(exc.__cause__, Exception):
             raise exc.__cause__ from None
         raise
+
+
+def build_datamodule(cfg: DictConfig):
+    """The data module of ``cfg.data``, seeded with ``cfg.seed``."""
+    return build(cfg.data, seed=cfg.seed)
 
 
 def resume_config(resume: str | Path, overrides: list[str]) -> DictConfig:
@@ -43,40 +50,86 @@ def resume_config(resume: str | Path, overrides: list[str]) -> DictConfig:
     resume = Path(resume)
     if not resume.is_file():
         raise ConfigError(f"resume={resume}: no such checkpoint")
-    overrides = [o for o in overrides if not o.startswith("resume=")]
     cfg = load_run_config(resume.parent, overrides)
-    cfg.resume = str(resume)
+    with open_dict(cfg):
+        cfg.resume = str(resume)
+        cfg.run_dir = str(resume.parent)
     return cfg
 
 
 def train(cfg: DictConfig) -> Path:
     """Train as configured; return the run folder."""
     L.seed_everything(cfg.seed, workers=True)
-    run_dir = Path(cfg.resume).parent if cfg.resume else new_run_dir(cfg)
+    run_dir = Path(cfg.resume).parent if cfg.resume else prepare_run_dir(cfg)
+    # saved before anything is instantiated: instantiate resolves interpolations it follows in place
+    save_run_config(cfg, run_dir)
     datamodule = build_datamodule(cfg)
     counts = datamodule.sample_counts()
     if counts["train"] == 0 or counts["val"] == 0:
         raise ConfigError(f"split {datamodule.describe()['split']!r} leaves {counts}: "
                           "training and validation both need samples")
-    module = get_task(cfg.task).module_class().from_config(cfg, datamodule)
-    save_run_config(cfg, run_dir)
-    checkpoint = ModelCheckpoint(dirpath=run_dir, filename="best", monitor="val/acc", mode="max",
-                                 enable_version_counter=False)
-    # A second, unmonitored callback rewrites last.ckpt every epoch: Lightning's save_last only
-    # refreshes it in epochs where the monitored checkpoint was saved.
-    last = ModelCheckpoint(dirpath=run_dir, filename="last", save_top_k=1, enable_version_counter=False)
-    trainer = L.Trainer(**cfg.trainer, deterministic=cfg.deterministic, default_root_dir=run_dir,
-                        logger=TensorBoardLogger(save_dir=str(run_dir), name="tensorboard", version=""),
-                        callbacks=[checkpoint, last, LearningRateMonitor(logging_interval="epoch"), EpochSummary()])
+    module = build(cfg.module, **datamodule.label_spaces())
+    callbacks = [build(node) for node in (cfg.get("callbacks") or {}).values() if node]
+    loggers = [build(node) for node in (cfg.get("logger") or {}).values() if node]
+    trainer = build(cfg.trainer, callbacks=callbacks, logger=loggers or False, deterministic=cfg.deterministic,
+                    default_root_dir=str(run_dir))
     # the run folder already holds config.yaml, by design
     warnings.filterwarnings("ignore", message=r"Checkpoint directory .* exists and is not empty")
     print(f"[mocapkit] run folder: {run_dir}")
     print(f"[mocapkit] task {cfg.task}, samples: {counts} (split {datamodule.describe()['split']}), "
           f"{len(datamodule.class_names)} classes")
     trainer.fit(module, datamodule=datamodule, ckpt_path=cfg.resume)
-    print(f"[mocapkit] wrote {run_dir / 'config.yaml'}")
-    print(f"[mocapkit] wrote {run_dir / 'last.ckpt'}")
-    print(f"[mocapkit] wrote {checkpoint.best_model_path or run_dir / 'best.ckpt'} "
-          f"(best val/acc {float(checkpoint.best_model_score or 0):.4f})")
-    print(f"[mocapkit] TensorBoard logs: tensorboard --logdir {run_dir / 'tensorboard'}")
+    if trainer.is_global_zero:
+        print(f"[mocapkit] wrote {run_dir / 'config.yaml'}")
+        for callback in callbacks:
+            if isinstance(callback, ModelCheckpoint) and callback.monitor:
+                print(f"[mocapkit] wrote {callback.best_model_path} "
+                      f"(best {callback.monitor} {float(callback.best_model_score or 0):.4f})")
+            elif isinstance(callback, ModelCheckpoint) and callback.last_model_path:
+                print(f"[mocapkit] wrote {callback.last_model_path}")
+        if loggers:
+            print(f"[mocapkit] logs: tensorboard --logdir {run_dir}")
     return run_dir
+
+
+#: ``sys.argv`` as the user typed it, restored inside the task (see :func:`main`).
+_ARGV: list[str] = []
+#: Errors of the jobs of one ``main`` call, raised once Hydra has returned (so the CLI can name them).
+_JOB_ERRORS: list[Exception] = []
+#: Errors a job reports to the user as one line (the CLI's exit code 2); anything else is a bug and propagates.
+USER_ERRORS = (ConfigError, FileNotFoundError, ValueError)
+
+
+@hydra.main(config_path=str(CONFIG_DIR), config_name="train", version_base="1.3")
+def _hydra_task(cfg: DictConfig) -> None:
+    # Lightning's DDP launcher re-runs sys.argv in each extra process: give it the user's command line
+    # (with the subcommand), not the overrides-only one Hydra parsed.
+    sys.argv[:] = _ARGV
+    with open_dict(cfg):  # a sweep job's folder is Hydra's, not the single-run default
+        cfg.run_dir = HydraConfig.get().runtime.output_dir
+    try:
+        train(cfg)
+    except USER_ERRORS as exc:
+        _JOB_ERRORS.append(exc)
+        if HydraConfig.get().mode.name == "MULTIRUN":
+            print(f"[mocapkit] job {HydraConfig.get().job.override_dirname} failed: {exc}", file=sys.stderr)
+
+
+def main(overrides: list[str]) -> None:
+    """``mocapkit train OVERRIDES``: Hydra's command line (``-m`` sweeps, ``--cfg job``, ``--help``).
+
+    A single run's overrides are composed once beforehand, so that an unknown key or a bad value is
+    reported as a :class:`ConfigError` naming it; the first failed job's error is raised after Hydra returns.
+    """
+    flags = [o for o in overrides if o.startswith("-")]
+    if not flags:
+        compose_config(overrides)
+    _ARGV[:] = sys.argv
+    _JOB_ERRORS.clear()
+    sys.argv[:] = ["mocapkit train", *overrides]
+    try:
+        _hydra_task()
+    finally:
+        sys.argv[:] = _ARGV
+    if _JOB_ERRORS:
+        raise _JOB_ERRORS[0]
