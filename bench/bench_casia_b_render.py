@@ -21,14 +21,11 @@ from __future__ import annotations
 
 import argparse
 import os
-import sys
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from timing import best_of  # noqa: E402  (bench/timing.py, beside this script)
+from timing import best_of  # bench/timing.py, beside this script
 
 from mocapkit.datasets.formats.casia_b import CONDITIONS, VIEWS
 from mocapkit.datasets.synthetic.casia_b import (

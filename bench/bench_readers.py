@@ -23,16 +23,14 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
-import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from timing import best_of  # noqa: E402  (bench/timing.py, beside this script)
+from timing import best_of  # bench/timing.py, beside this script
 
 DEFAULT_SRC = Path(__file__).resolve().parents[1].parent / "shared" / "samples"
 

@@ -23,17 +23,15 @@ import argparse
 import os
 import resource
 import shutil
-import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from mocapkit.datasets.ntu.prepare import prepare_ntu  # noqa: E402
-from mocapkit.datasets.formats.ntu_skeleton import read_skeleton  # noqa: E402
+from mocapkit.datasets.ntu.prepare import prepare_ntu
+from mocapkit.datasets.formats.ntu_skeleton import read_skeleton
 
 DEFAULT_SRC = Path(__file__).resolve().parents[1].parent / "shared" / "samples" / "ntu_skeleton"
 

@@ -209,7 +209,7 @@ def test_dropped_frames_keep_the_sequence_clock():
 
 @pytest.mark.parametrize("subject, view", [(1, 90), (2, 90), (3, 36), (4, 144), (5, 72)])
 def test_the_period_of_a_synthetic_casia_b_walk_is_within_one_frame(subject, view):
-    synthetic = pytest.importorskip("mocapkit.datasets.synthetic.casia_b")
+    from mocapkit.datasets.synthetic import casia_b as synthetic
     params = synthetic.draw_subject(0, subject)
     rng = np.random.default_rng(100 * subject + view)
     walk = synthetic.draw_walk(rng)

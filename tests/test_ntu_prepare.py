@@ -20,8 +20,8 @@ from mocapkit.datasets.formats.ntu_skeleton import (
     write_skeleton,
 )
 
-from shared_data import NTU_SAMPLES as SAMPLES
-from shared_data import needs
+from tests.shared_data import NTU_SAMPLES as SAMPLES
+from tests.shared_data import needs
 
 needs_samples = needs(SAMPLES)
 

@@ -156,7 +156,6 @@ NTU_TWO_PEOPLE = SHARED / "samples" / "ntu_skeleton" / "S001C003P008R002A058.ske
 
 @needs(NTU_TWO_PEOPLE)
 def test_real_two_person_ntu_through_read_motion(tmp_path):
-    pytest.importorskip("mocapkit.datasets.formats.motion_io")
     from mocapkit.datasets.formats.motion_io import read_motion
 
     m = read_motion(NTU_TWO_PEOPLE)
@@ -171,6 +170,5 @@ def test_real_two_person_ntu_through_read_motion(tmp_path):
 
 @needs(BVH_DIR)
 def test_real_bvh_gif_through_read_motion(tmp_path):
-    pytest.importorskip("mocapkit.datasets.formats.motion_io")
     out = render_file(BVH_DIR / "test_freebvh.bvh", tmp_path / "f.gif", fps=5, view="front", size=1.5, dpi=50)
     assert Image.open(out).n_frames == len(frame_indices(69, 30.0, fps=5)) == 12

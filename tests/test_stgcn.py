@@ -93,7 +93,6 @@ def test_it_learns_a_toy_two_class_problem():
 
 def test_onnx_export_on_msr20_one_body(tmp_path):
     """`mocapkit export`'s function takes the joint count from ``model.layout``; bodies and frames are dynamic."""
-    pytest.importorskip("onnxruntime")
     from mocapkit.deploy.skeleton_export import export_onnx
 
     model = stgcn(4, layout="msr20", streams=["joint", "velocity", "bone"], scale=True,

@@ -552,7 +552,7 @@ class GNMF(_GraphRegularised):
 
 
 class NMC(_GraphRegularised):
-    """The thesis's NMF-based motion clustering (Algorithm 6, §6.3) with the corrected updates (spec §5.3 [fix]).
+    """The thesis's NMF-based motion clustering (Algorithm 6, §6.3) with corrected updates (below).
 
     ``min ‖X − WH‖² + lambda1 ‖W‖² + lambda2 tr(Wᵀ L W)``  s.t. ``W, H ≥ 0``, ``H Hᵀ = I``  (thesis (6.3) with
     ``W = Gᵀ``, ``H = Zᵀ``; ``L = D − S`` over the samples). Per iteration, in the thesis's order:

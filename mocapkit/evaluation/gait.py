@@ -35,7 +35,7 @@ TASKS: dict[str, tuple[str, str]] = {"subject": ("subject_logits", "subjects"), 
 #: Column titles of thesis Table 6.2.
 TASK_TITLES = {"subject": "Identify subject", "view": "Predict view", "condition": "Predict condition"}
 #: Thesis Table 6.2 (real CASIA-B, 124 subjects, the thesis's own hold-out), accuracy in %.
-#: Keys: views in degrees, the conditions, and ``"average"`` (as printed; see spec §8.33).
+#: Keys: views in degrees, the conditions, and ``"average"`` (as printed; the thesis's averages are inconsistent, see closed_set_report).
 THESIS_TABLE_6_2: dict[str, dict[str, float]] = {
     "subject": {"0": 96.09, "18": 98.68, "36": 97.82, "54": 94.94, "72": 95.80, "90": 95.80, "108": 95.23,
                 "126": 95.80, "144": 94.08, "162": 94.37, "180": 96.09, "nm": 99.35, "bg": 91.47, "cl": 93.82,
@@ -90,7 +90,7 @@ def closed_set_report(predictions: dict[str, np.ndarray]) -> dict:
         the accuracy by voting over a sequence's cycles (the sum of their logits), since the thesis tests on videos.
 
     Averages are over test GEIs (and over test videos for ``per_sequence``). The thesis's printed
-    averages are not consistent with its own rows (spec §8.33: the subject average 95.88 is the mean
+    averages are not consistent with its own rows (the subject average 95.88 is the mean
     over views, the mean over nm/bg/cl is 94.88); we do not reproduce either convention and report the
     plain mean over test samples, so "average" = the overall accuracy.
     """
@@ -179,7 +179,7 @@ def closed_set_markdown(report: dict, title: str = "Closed-set accuracy (%)", re
     lines.append("")
     lines.append(f"{report['num_geis']} test GEIs in {report['num_sequences']} test sequences "
                  f"(GEIs per {report['per']}); averages are over test samples "
-                 "(the thesis's printed averages are inconsistent, spec §8.33).")
+                 "(the thesis's printed averages are inconsistent with its rows).")
     return "\n".join(lines) + "\n"
 
 

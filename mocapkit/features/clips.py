@@ -1,9 +1,9 @@
-"""Sliding-window clips of a skeleton sequence and their non-negative features (thesis §6.3, spec §5.3).
+"""Sliding-window clips of a skeleton sequence and their non-negative features (Wang 2017 thesis §6.3).
 
 The recognition pipeline of the thesis cuts each sequence of ``S`` frames into overlapping
 clips of ``M`` frames with stride ``M/2``, clusters the clips and describes a sequence by the
-histogram of its clips' clusters. The spec fixes the details the thesis leaves open (§8, items
-35-37) and this module implements them once, in numpy (:func:`clip_features`, the reference,
+histogram of its clips' clusters. The thesis leaves the clip features, the clip count and the normalisation open; the choices below
+are ours (each stated where it is made), implemented once, in numpy (:func:`clip_features`, the reference,
 used by the classical pipeline) and in torch (:func:`clip_features_torch`, batched and
 ONNX-exportable, used inside :mod:`mocapkit.models.clip_bow`); the tests check that both agree.
 

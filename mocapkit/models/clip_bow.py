@@ -1,6 +1,6 @@
 """End-to-end NMF bag of clip words: skeletons → clip features → NMF layer → soft words → classifier.
 
-A trainable version of the thesis's recognition pipeline (§6.3.4, spec §5.3), built from the same
+A trainable version of the thesis's recognition pipeline (Wang 2017 thesis §6.3.4), built from the same
 clip definition as the classical pipeline (:mod:`mocapkit.features.clips`):
 
 1. **Clips.** Body 0 of skeletons ``[B, M, T, J, 3]`` (metres, zeros where absent or padded) is cut

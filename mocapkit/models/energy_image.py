@@ -1,7 +1,7 @@
 """The "3D energy image": skeleton sequences → time-averaged occupancy maps on three planes.
 
 Thesis §6.2 names a "motion histogram map / 3D energy image" but gives no
-recipe. This module implements **our reconstruction** (spec digest §5.2):
+recipe. This module implements **our reconstruction**:
 
 1. Normalise: centre every body on the spine base of body 0 in its first
    present frame, divide by body size (the mean spine length of body 0), and

@@ -54,7 +54,7 @@ class EnergyVGG(nn.Module):
         )
         linears = [m for m in self.classifier if isinstance(m, nn.Linear)]
         for layer in linears[:-1]:
-            # hidden layers: MatConvNet's "improved Xavier", Gaussian with std sqrt(2 / fan_out) (spec §5.2)
+            # hidden layers: MatConvNet's "improved Xavier", Gaussian with std sqrt(2 / fan_out) (the thesis trained with MatConvNet)
             nn.init.kaiming_normal_(layer.weight, mode="fan_out", nonlinearity="relu")
             nn.init.zeros_(layer.bias)
         # output layer: N(0, 0.01) as torchvision's VGG; fan-out scaling would give logits of std ~1

@@ -11,7 +11,7 @@ connected layer and one small head per task::
     flatten → FC-512 (shared, "embedding") → per task: FC-128 → logits
               subject [B, num_subjects], view [B, 11], condition [B, 3]
 
-The thesis leaves the nonlinearity and the LRN constants open (spec §5.1 / §8 item 32);
+The thesis leaves the nonlinearity and the LRN constants open (Wang 2017 thesis §6.1);
 we use ReLU and AlexNet's LRN (size 5, α = 1e-4, β = 0.75, k = 2), and dropout 0.5 after
 every fully connected layer but the logits. The softmax lives in the loss. Any input size
 whose feature maps stay non-empty works, e.g. OpenGait's 64×44 (flatten size 40·3·1 = 120).
@@ -28,7 +28,7 @@ from torch import nn
 TASKS: tuple[str, ...] = ("subject", "view", "condition")
 #: Table 6.1's trunk: (name, output channels, kernel size) of each convolution.
 CONV_STAGES: tuple[tuple[str, int, int], ...] = (("c1", 24, 11), ("c2", 32, 6), ("c3", 40, 5))
-#: AlexNet's local response normalisation constants (spec §5.1 [rec]).
+#: AlexNet's local response normalisation constants (Krizhevsky et al. 2012), our choice.
 LRN_SIZE, LRN_ALPHA, LRN_BETA, LRN_K = 5, 1e-4, 0.75, 2.0
 
 

@@ -2,7 +2,7 @@
 
 Geng et al., "Is Attention Better Than Matrix Decomposition?", ICLR 2021 (Hamburger) run a few
 NMF multiplicative updates (MU) as a layer and back-propagate through the **last step only**
-("one-step gradient"), which avoids the unstable gradients of deep unrolling (field-anchors §5).
+("one-step gradient"), which avoids the unstable gradients of deep unrolling.
 This layer does the same for items as rows (scikit-learn orientation):
 
 * **Input** ``x`` ``[batch, n, d]``, non-negative (negative values are clamped to 0): ``n`` items per

@@ -1,6 +1,6 @@
 """Acclaim ASF (skeleton) and AMC (joint angles per frame) files: reading, forward kinematics, writing.
 
-Format (field-anchors §2): ``#`` starts a comment, commas and parentheses count as
+Format (Acclaim ASF/AMC as the CMU and HDM05 releases write it): ``#`` starts a comment, commas and parentheses count as
 whitespace, keywords start with ``:``. The ASF holds ``:version``, ``:name``,
 ``:units`` (``mass``, ``length`` multiplier, ``angle deg|rad``), ``:documentation``
 (free text up to the next ``:`` keyword), ``:root`` (``order``, ``axis``,
@@ -18,7 +18,7 @@ Lengths: an ASF ``length`` multiplier ``k`` means one file unit is ``1/k`` inch
 lengths and the root translation in the AMC are in these units;
 :attr:`AsfSkeleton.metres_per_unit` converts them (``unit_scale`` overrides it).
 
-Forward kinematics (the CMU-parser convention, field-anchors §2). For every bone
+Forward kinematics (the convention of the CMU mocap parsers). For every bone
 ``b`` with parent ``p``::
 
     C_b = Euler(axis angles, axis order)            # fixed-axis rotations, first letter first

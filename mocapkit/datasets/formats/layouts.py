@@ -48,7 +48,7 @@ class SkeletonLayout:
             raise KeyError(f"layout {self.name!r} has no joint {name!r}") from None
 
 
-#: Kinect v2 / NTU RGB+D 25-joint layout (field-anchors §1.2). The parents follow
+#: Kinect v2 / NTU RGB+D 25-joint layout (Shahroudy et al. 2016). The parents follow
 #: the CTR-GCN bone list, rooted at SpineBase.
 NTU25 = SkeletonLayout(
     name="ntu25",

@@ -1,6 +1,6 @@
 """NTU RGB+D ``.skeleton`` files: reading, writing, file names and body selection.
 
-The text format (field-anchors §1.2)::
+The text format (Shahroudy et al. 2016; the release's reader script)::
 
     framecount
     per frame:  bodycount                       (0 allowed)

@@ -1,6 +1,6 @@
 """HDM05: clip names, the 130 / 65 / 25 class labellings and cross-actor splits.
 
-HDM05 (Müller et al. 2007, field-anchors §2) has five actors ``bd bk dg mm tr``,
+HDM05 (Müller et al. 2007) has five actors ``bd bk dg mm tr``,
 120 Hz ASF/AMC and C3D files, and a "cuts" subset of clips in **130** motion
 classes, named ``<class>_<actor>_<nnn>`` (the official files:
 ``HDM_<actor>_<class>_<nnn>_120.amc``). The class tables live in

@@ -26,7 +26,7 @@ ACTION_NAMES: tuple[str, ...] = (
 #: a bag of 3D points", CVPR-W 2010, Table 1 (AS1 / AS2 / AS3). The same lists are used by the public
 #: re-implementations we checked (several independent Python loaders hold
 #: ``AS1 = [2, 3, 5, 6, 10, 13, 18, 20]``, ``AS2 = [1, 4, 7, 8, 9, 11, 12, 14]``,
-#: ``AS3 = [6, 14, 15, 16, 17, 18, 19, 20]``), and field-anchors §2 names the protocol.
+#: ``AS3 = [6, 14, 15, 16, 17, 18, 19, 20]``).
 ACTION_SUBSETS: dict[str, tuple[int, ...]] = {
     "AS1": (2, 3, 5, 6, 10, 13, 18, 20),
     "AS2": (1, 4, 7, 8, 9, 11, 12, 14),

@@ -1,6 +1,6 @@
 """MSR Action3D evaluation protocols.
 
-Protocols (field-anchors §2):
+Protocols (Li, Zhang & Liu 2010; Wang et al. 2012):
 
 * ``cross_subject``: subjects 1, 3, 5, 7, 9 train, 2, 4, 6, 8, 10 test (configurable);
 * ``random_half``: a seeded random half of each action's sequences trains, the rest

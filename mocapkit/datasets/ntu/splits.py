@@ -6,7 +6,7 @@ them. ``data`` is anything with ``subjects`` / ``cameras`` / ``setups`` arrays
 :class:`~mocapkit.datasets.ntu.cache.NTUCache`, a ``dict`` or any object with
 those attributes. Only the arrays a split needs must be present.
 
-Protocol facts (field-anchors §1.1):
+Protocol facts (Shahroudy et al. 2016; Liu et al. 2019 for NTU-120):
 
 * NTU-60 uses setups S001–S017 only; the ``ntu60_*`` splits ignore samples from
   later setups, so they can be computed on an NTU-120 cache too.
