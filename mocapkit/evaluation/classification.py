@@ -1,26 +1,49 @@
 """Classification metrics, confusion matrices and their plots.
 
 Everything takes plain arrays, so any model's predictions (PyTorch, ONNX
-Runtime or a classical method) are reported the same way.
+Runtime or a classical method) are reported the same way. The accuracies come from
+scikit-learn (``accuracy_score``, ``top_k_accuracy_score``, ``balanced_accuracy_score``,
+``confusion_matrix``); the per-class and per-group tables are read off them.
 """
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
-from sklearn.metrics import confusion_matrix
+from sklearn.metrics import (
+    accuracy_score,
+    balanced_accuracy_score,
+    confusion_matrix,
+    top_k_accuracy_score,
+)
 
 
 def topk_accuracy(scores: np.ndarray, labels: np.ndarray, k: int) -> float:
-    """Fraction of samples whose label is among the ``k`` highest scores. ``scores``: ``[N, C]``."""
-    k = min(k, scores.shape[1])
-    top = np.argpartition(-scores, kth=k - 1, axis=1)[:, :k]
-    return float((top == labels[:, None]).any(axis=1).mean())
+    """Fraction of samples whose label is among the ``k`` highest scores. ``scores``: ``[N, C]``.
+
+    ``k`` is capped at ``C`` (top-``C`` is 1). Ties go to the lower class index, as ``argmax`` does,
+    so top-1 is the accuracy of ``scores.argmax(1)`` and top-k never falls below it.
+    """
+    scores, labels = np.asarray(scores), np.asarray(labels)
+    num_classes = scores.shape[1]
+    k = min(k, num_classes)
+    if k == num_classes:
+        return 1.0
+    if k == 1:  # also the two-class case, which top_k_accuracy_score only takes as one score column
+        return float(accuracy_score(labels, scores.argmax(1)))
+    # scikit-learn ranks tied scores by descending class index; on reversed columns (and labels) that
+    # is ascending original index, the argmax order
+    return float(top_k_accuracy_score(num_classes - 1 - labels, scores[:, ::-1], k=k,
+                                      labels=np.arange(num_classes)))
 
 
 def classification_report(scores: np.ndarray, labels: np.ndarray, groups: dict[str, np.ndarray] | None = None,
                           class_names: list[str] | None = None) -> dict:
     """Top-1, top-5, mean-class accuracy, per-class accuracy, per-group accuracy and the confusion matrix.
+
+    Mean-class accuracy is the mean of the per-class accuracies (recalls) over the classes present in
+    ``labels`` (scikit-learn's balanced accuracy); ``chance`` is 1 / the number of those classes.
 
     Args:
         scores: ``[N, C]`` logits or probabilities.
@@ -42,12 +65,15 @@ def classification_report(scores: np.ndarray, labels: np.ndarray, groups: dict[s
     with np.errstate(invalid="ignore", divide="ignore"):
         recall = np.diag(confusion) / support
     present = support > 0
+    with warnings.catch_warnings():  # classes predicted but absent from labels are left out, as meant
+        warnings.filterwarnings("ignore", message="y_pred contains classes not in y_true")
+        mean_class = balanced_accuracy_score(labels, predictions)
     report = {
-        "num_samples": int(len(labels)),
+        "num_samples": len(labels),
         "num_classes": int(num_classes),
-        "top1": float((predictions == labels).mean()),
+        "top1": float(accuracy_score(labels, predictions)),
         "top5": topk_accuracy(scores, labels, 5),
-        "mean_class_accuracy": float(recall[present].mean()),
+        "mean_class_accuracy": float(mean_class),
         "chance": float(1.0 / max(1, present.sum())),
         "per_class": {names[k]: {"accuracy": float(recall[k]), "support": int(support[k])}
                       for k in range(num_classes) if present[k]},
@@ -57,7 +83,8 @@ def classification_report(scores: np.ndarray, labels: np.ndarray, groups: dict[s
     for group_name, ids in (groups or {}).items():
         ids = np.asarray(ids)
         report[f"per_{group_name}"] = {
-            str(g): {"accuracy": float((predictions[ids == g] == labels[ids == g]).mean()), "support": int((ids == g).sum())}
+            str(g): {"accuracy": float(accuracy_score(labels[ids == g], predictions[ids == g])),
+                     "support": int((ids == g).sum())}
             for g in np.unique(ids)
         }
     return report

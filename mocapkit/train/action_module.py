@@ -3,6 +3,11 @@
 The network, optimiser and learning-rate schedule are Hydra configs
 (``_target_`` dicts) stored in the checkpoint's hyper-parameters, so
 ``ActionRecognitionModule.load_from_checkpoint(path)`` rebuilds the exact model.
+
+Accuracies are ``torchmetrics`` metric objects, one per stage, logged as objects: Lightning
+accumulates them over the epoch, synchronises them across processes (DDP) and resets them, so
+``val/acc`` — the checkpoint monitor — is the accuracy over the whole validation set, not over
+one process's shard. Losses are logged with ``sync_dist=True`` for the same reason.
 """
 from __future__ import annotations
 
@@ -11,8 +16,13 @@ import torch
 import torch.nn.functional as F
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
+from torch import nn
+from torchmetrics.classification import MulticlassAccuracy
 
 from mocapkit.train.optimization import ConfiguredOptimization
+
+#: Stages with their own accuracy metric (each is accumulated, synchronised and reset per epoch).
+STAGES = ("train", "val", "test")
 
 
 def _as_dict(cfg) -> dict:
@@ -40,13 +50,11 @@ class ActionRecognitionModule(ConfiguredOptimization, L.LightningModule):
                                    "num_classes": num_classes, "class_names": class_names,
                                    "label_smoothing": label_smoothing})
         self.model = instantiate(model, num_classes=num_classes)
+        #: ``<stage>_acc`` → top-1 accuracy over the epoch (micro: correct / samples). Not keyed by stage
+        #: alone: ``train`` is taken by ``nn.Module.train``.
+        self.accuracy = nn.ModuleDict({f"{stage}_acc": MulticlassAccuracy(num_classes, average="micro")
+                                       for stage in STAGES})
 
-    @classmethod
-    def from_config(cls, cfg: DictConfig, datamodule) -> ActionRecognitionModule:
-        """The module for a composed training config and its data module (``num_classes``, ``class_names``)."""
-        return cls(model=cfg.model, optimizer=cfg.optimizer, scheduler=cfg.scheduler or None,
-                   num_classes=datamodule.num_classes, class_names=datamodule.class_names,
-                   label_smoothing=cfg.label_smoothing)
 
     def forward(self, skeletons: torch.Tensor) -> torch.Tensor:
         return self.model(skeletons)
@@ -54,10 +62,12 @@ class ActionRecognitionModule(ConfiguredOptimization, L.LightningModule):
     def _step(self, batch: dict, stage: str) -> torch.Tensor:
         logits = self(batch["skeletons"])
         loss = F.cross_entropy(logits, batch["labels"], label_smoothing=self.hparams.label_smoothing)
-        acc = (logits.argmax(1) == batch["labels"]).float().mean()
+        accuracy = self.accuracy[f"{stage}_acc"]
+        accuracy.update(logits.detach(), batch["labels"])
         on_step = stage == "train"
-        self.log(f"{stage}/loss", loss, on_step=on_step, on_epoch=True, prog_bar=True, batch_size=len(logits))
-        self.log(f"{stage}/acc", acc, on_step=False, on_epoch=True, prog_bar=True, batch_size=len(logits))
+        self.log(f"{stage}/loss", loss, on_step=on_step, on_epoch=True, prog_bar=True, batch_size=len(logits),
+                 sync_dist=True)
+        self.log(f"{stage}/acc", accuracy, on_step=False, on_epoch=True, prog_bar=True)
         return loss
 
     def training_step(self, batch: dict, batch_idx: int) -> torch.Tensor:

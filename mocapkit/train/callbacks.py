@@ -13,6 +13,8 @@ class EpochSummary(L.Callback):
         self._start = time.time()
 
     def on_train_epoch_end(self, trainer: L.Trainer, module: L.LightningModule) -> None:
+        if not trainer.is_global_zero:  # one line per epoch, not one per process
+            return
         # Lightning 2 calls this after the epoch's validation, so both sets of metrics are here
         metrics = trainer.callback_metrics
         shown = "  ".join(f"{k} {float(metrics[k]):.4f}" for k in ("train/loss_epoch", "train/acc", "val/loss", "val/acc")

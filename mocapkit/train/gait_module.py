@@ -9,6 +9,10 @@ hyper-parameters, so ``GaitRecognitionModule.load_from_checkpoint(path)`` rebuil
 
 Logged: ``{stage}/loss`` (the joint loss), ``{stage}/{task}_loss``, ``{stage}/acc`` (subject accuracy,
 the checkpoint monitor; the first task's accuracy for a model without a subject head), ``{stage}/view_acc`` and ``{stage}/condition_acc`` when those tasks exist.
+The accuracies are ``torchmetrics`` metric objects (``ignore_index=-1``), one per stage and name,
+logged as objects: Lightning accumulates them over the epoch, synchronises them across processes
+(DDP) and resets them, so ``val/acc`` is the accuracy over the whole validation set. Losses are
+logged with ``sync_dist=True``.
 """
 from __future__ import annotations
 
@@ -17,6 +21,8 @@ import torch
 import torch.nn.functional as F
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
+from torch import nn
+from torchmetrics.classification import MulticlassAccuracy
 
 from mocapkit.train.optimization import ConfiguredOptimization
 
@@ -24,6 +30,8 @@ from mocapkit.train.optimization import ConfiguredOptimization
 TASK_LABELS = {"subject": "subjects", "view": "views", "condition": "conditions"}
 #: Batch keys copied into every ``predict_step`` output.
 PREDICT_KEYS = ("subjects", "subject_ids", "views", "conditions", "sequences", "indices")
+#: Stages with their own accuracy metrics (each is accumulated, synchronised and reset per epoch).
+STAGES = ("train", "val", "test")
 
 
 def _as_dict(cfg) -> dict:
@@ -69,15 +77,22 @@ class GaitRecognitionModule(ConfiguredOptimization, L.LightningModule):
         self.task_weights = {t: float((task_weights or {}).get(t, 1.0)) for t in self.tasks}
         #: the task whose accuracy is logged as ``acc`` (the checkpoint monitor): subject when the model has it
         self.primary_task = "subject" if "subject" in self.tasks else self.tasks[0]
+        #: logged accuracy name → its task: ``acc`` (the primary task), ``view_acc``, ``condition_acc``
+        self.metric_tasks: dict[str, str] = {name: task for task, name in self._accuracy_names()}
+        classes = {"subject": num_subjects, "view": num_views, "condition": num_conditions}
+        #: ``<stage>_<name>`` → top-1 accuracy over the epoch (micro; samples labelled -1 are left out).
+        #: (Not keyed by stage alone: ``train`` is taken by ``nn.Module.train``.)
+        self.accuracy = nn.ModuleDict({
+            f"{stage}_{name}": MulticlassAccuracy(int(classes[task]), average="micro", ignore_index=-1)
+            for stage in STAGES for name, task in self.metric_tasks.items()})
 
-    @classmethod
-    def from_config(cls, cfg: DictConfig, datamodule) -> GaitRecognitionModule:
-        """The module of a composed ``train.yaml`` config for a :class:`GaitDataModule` (label spaces, GEI size)."""
-        return cls(model=cfg.model, optimizer=cfg.optimizer, scheduler=cfg.get("scheduler") or None,
-                   num_subjects=datamodule.num_subjects, num_views=datamodule.num_views,
-                   num_conditions=datamodule.num_conditions, task_weights=cfg.get("task_weights"),
-                   subject_names=datamodule.subject_names, label_smoothing=cfg.get("label_smoothing", 0.0),
-                   input_size=(datamodule.height, datamodule.width))
+    def _accuracy_names(self) -> list[tuple[str, str]]:
+        """``(task, logged name)`` pairs: ``acc`` for the primary task, ``<task>_acc`` for view and condition."""
+        pairs = []
+        for task in self.tasks:
+            names = ["acc"] if task == "subject" else [f"{task}_acc"] + (["acc"] if task == self.primary_task else [])
+            pairs += [(task, name) for name in names]
+        return pairs
 
     def forward(self, geis: torch.Tensor) -> dict[str, torch.Tensor]:
         return self.model(geis)
@@ -105,16 +120,17 @@ class GaitRecognitionModule(ConfiguredOptimization, L.LightningModule):
             return None
         loss = self.joint_loss(losses)
         on_step, size = stage == "train", len(batch["geis"])
-        self.log(f"{stage}/loss", loss, on_step=on_step, on_epoch=True, prog_bar=True, batch_size=size)
+        self.log(f"{stage}/loss", loss, on_step=on_step, on_epoch=True, prog_bar=True, batch_size=size,
+                 sync_dist=True)
         for task, task_loss in losses.items():
-            self.log(f"{stage}/{task}_loss", task_loss, on_step=False, on_epoch=True, batch_size=size)
-            labels = batch[TASK_LABELS[task]]
-            known = labels >= 0
-            acc = (outputs[task][known].argmax(1) == labels[known]).float().mean()
-            names = ["acc"] if task == "subject" else [f"{task}_acc"] + (["acc"] if task == self.primary_task else [])
-            for name in names:
-                self.log(f"{stage}/{name}", acc, on_step=False, on_epoch=True, prog_bar=name == "acc",
-                         batch_size=int(known.sum()))
+            self.log(f"{stage}/{task}_loss", task_loss, on_step=False, on_epoch=True, batch_size=size,
+                     sync_dist=True)
+        for name, task in self.metric_tasks.items():
+            if task not in losses:  # no labelled sample of this task in the batch
+                continue
+            metric = self.accuracy[f"{stage}_{name}"]
+            metric.update(outputs[task].detach(), batch[TASK_LABELS[task]])
+            self.log(f"{stage}/{name}", metric, on_step=False, on_epoch=True, prog_bar=name == "acc")
         return loss
 
     def training_step(self, batch: dict, batch_idx: int) -> torch.Tensor:
