@@ -15,18 +15,14 @@ import lightning as L
 import torch
 import torch.nn.functional as F
 from hydra.utils import instantiate
-from omegaconf import DictConfig, OmegaConf
 from torch import nn
 from torchmetrics.classification import MulticlassAccuracy
 
-from mocapkit.train.optimization import ConfiguredOptimization
+from mocapkit.train.optimization import ConfiguredOptimization, as_plain_dict
 
 #: Stages with their own accuracy metric (each is accumulated, synchronised and reset per epoch).
 STAGES = ("train", "val", "test")
 
-
-def _as_dict(cfg) -> dict:
-    return OmegaConf.to_container(cfg, resolve=True) if isinstance(cfg, DictConfig) else dict(cfg)
 
 
 class ActionRecognitionModule(ConfiguredOptimization, L.LightningModule):
@@ -44,8 +40,8 @@ class ActionRecognitionModule(ConfiguredOptimization, L.LightningModule):
     def __init__(self, model: dict, optimizer: dict, num_classes: int, scheduler: dict | None = None,
                  class_names: list[str] | None = None, label_smoothing: float = 0.0):
         super().__init__()
-        model, optimizer = _as_dict(model), _as_dict(optimizer)
-        scheduler = _as_dict(scheduler) if scheduler is not None else None
+        model, optimizer = as_plain_dict(model), as_plain_dict(optimizer)
+        scheduler = as_plain_dict(scheduler) if scheduler is not None else None
         self.save_hyperparameters({"model": model, "optimizer": optimizer, "scheduler": scheduler,
                                    "num_classes": num_classes, "class_names": class_names,
                                    "label_smoothing": label_smoothing})

@@ -1,7 +1,7 @@
 """Lightning module for gait recognition from GEIs: the joint multi-task loss of thesis §6.1.
 
 The loss is ``Σ_task weight_task · CE(logits_task, label_task)`` over the tasks the model has
-(subject, view, condition; equal weights by default, spec §5.1 [rec]). Batches come from
+(subject, view, condition; equal weights by default; the thesis gives no weights). Batches come from
 :class:`~mocapkit.datasets.casia_b.datamodule.GaitDataModule`. Samples whose subject label is -1
 (test subjects of the cross-subject protocol, outside the label space) add nothing to the subject
 loss or accuracy. The network, optimiser and schedule are Hydra configs stored in the checkpoint's
@@ -20,11 +20,10 @@ import lightning as L
 import torch
 import torch.nn.functional as F
 from hydra.utils import instantiate
-from omegaconf import DictConfig, OmegaConf
 from torch import nn
 from torchmetrics.classification import MulticlassAccuracy
 
-from mocapkit.train.optimization import ConfiguredOptimization
+from mocapkit.train.optimization import ConfiguredOptimization, as_plain_dict
 
 #: The batch key holding each task's labels.
 TASK_LABELS = {"subject": "subjects", "view": "views", "condition": "conditions"}
@@ -33,9 +32,6 @@ PREDICT_KEYS = ("subjects", "subject_ids", "views", "conditions", "sequences", "
 #: Stages with their own accuracy metrics (each is accumulated, synchronised and reset per epoch).
 STAGES = ("train", "val", "test")
 
-
-def _as_dict(cfg) -> dict:
-    return OmegaConf.to_container(cfg, resolve=True) if isinstance(cfg, DictConfig) else dict(cfg)
 
 
 class GaitRecognitionModule(ConfiguredOptimization, L.LightningModule):
@@ -60,9 +56,9 @@ class GaitRecognitionModule(ConfiguredOptimization, L.LightningModule):
                  subject_names: list[str] | None = None, label_smoothing: float = 0.0,
                  input_size: tuple[int, int] | list[int] = (124, 124)):
         super().__init__()
-        model, optimizer = _as_dict(model), _as_dict(optimizer)
-        scheduler = _as_dict(scheduler) if scheduler else None
-        task_weights = _as_dict(task_weights) if task_weights is not None else None
+        model, optimizer = as_plain_dict(model), as_plain_dict(optimizer)
+        scheduler = as_plain_dict(scheduler) if scheduler else None
+        task_weights = as_plain_dict(task_weights) if task_weights is not None else None
         unknown = sorted(set(task_weights or {}) - set(TASK_LABELS))
         if unknown:
             raise ValueError(f"task_weights: unknown tasks {unknown}; tasks are {list(TASK_LABELS)}")

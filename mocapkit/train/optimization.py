@@ -7,6 +7,12 @@ makes resumed runs keep the *configured* schedule parameters (e.g. a longer ``T_
 from __future__ import annotations
 
 from hydra.utils import instantiate
+from omegaconf import DictConfig, OmegaConf
+
+
+def as_plain_dict(cfg) -> dict:
+    """A config node (DictConfig or mapping) as a plain, resolved dict: what a checkpoint stores in its hyper-parameters."""
+    return OmegaConf.to_container(cfg, resolve=True) if isinstance(cfg, DictConfig) else dict(cfg)
 
 
 class ConfiguredOptimization:
