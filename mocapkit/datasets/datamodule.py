@@ -24,6 +24,8 @@ import numpy as np
 import torch
 from torch.utils.data import DataLoader
 
+from mocapkit.datasets.augment import SkeletonAugment
+
 
 class SplitDataModule(L.LightningDataModule):
     """Loaders over ``dataset(part)`` for ``part`` in train / val / test, batched with ``collate_fn``."""
@@ -95,6 +97,20 @@ class SkeletonDataModule(SplitDataModule):
     """
 
     collate_fn = staticmethod(pad_collate)
+
+    def _set_loading(self, batch_size: int, eval_batch_size: int | None, num_workers: int, max_frames: int,
+                     augment: dict | None) -> None:
+        """Set the loader options every skeleton data module takes.
+
+        ``eval_batch_size`` None means ``batch_size``; longer samples are subsampled to ``max_frames``
+        frames; ``augment`` holds keyword arguments of :class:`SkeletonAugment` for the training set
+        (None or empty: off).
+        """
+        self.batch_size = batch_size
+        self.eval_batch_size = eval_batch_size or batch_size
+        self.num_workers = num_workers
+        self.max_frames = max_frames
+        self.augment = SkeletonAugment(**augment) if augment else None
 
     def label_spaces(self) -> dict:
         """What the action LightningModule needs from the data: ``num_classes`` and ``class_names``."""

@@ -22,9 +22,11 @@ from pathlib import Path
 
 import numpy as np
 
+from mocapkit.datasets.cache_files import INDEX_FILE, META_FILE, PreparedCache
+
 CACHE_FORMAT = "mocapkit-gei-cache"
 CACHE_VERSION = 1
-GEIS_FILE, INDEX_FILE, META_FILE = "geis.npy", "index.npz", "meta.json"
+GEIS_FILE = "geis.npy"
 INDEX_KEYS = ("names", "subjects", "conditions", "sequences", "views", "cycles", "frames")
 
 
@@ -62,8 +64,8 @@ def write_gei_cache(out: str | os.PathLike, geis: np.ndarray, index: dict[str, n
     return out
 
 
-class GEICache:
-    """A prepared GEI cache folder.
+class GEICache(PreparedCache):
+    """A prepared GEI cache folder (opened and checked as :class:`~mocapkit.datasets.cache_files.PreparedCache`).
 
     Attributes:
         names, subjects, conditions, sequences, views, cycles, frames: numpy arrays of length ``len(cache)``
@@ -72,46 +74,18 @@ class GEICache:
         height, width: GEI size in pixels.
     """
 
-    def __init__(self, root: str | os.PathLike):
-        self.root = Path(root)
-        if not self.root.is_dir():
-            raise FileNotFoundError(f"GEI cache folder {self.root} does not exist")
-        for required in (META_FILE, INDEX_FILE, GEIS_FILE):
-            if not (self.root / required).is_file():
-                raise FileNotFoundError(f"{self.root} is not a prepared GEI cache: {required} is missing "
-                                        f"(run `mocapkit prepare casia-b --src ... --out {self.root}`)")
-        self.meta = json.loads((self.root / META_FILE).read_text(encoding="utf-8"))
-        if self.meta.get("format") != CACHE_FORMAT or self.meta.get("version") != CACHE_VERSION:
-            raise ValueError(f"{self.root / META_FILE}: cache format {self.meta.get('format')!r} version "
-                             f"{self.meta.get('version')!r}, expected {CACHE_FORMAT!r} version {CACHE_VERSION}; "
-                             "prepare the cache again")
-        with np.load(self.root / INDEX_FILE, allow_pickle=False) as index:
-            absent = [k for k in INDEX_KEYS if k not in index.files]
-            if absent:
-                raise KeyError(f"{self.root / INDEX_FILE}: missing arrays {absent}")
-            for key in INDEX_KEYS:
-                setattr(self, key, index[key])
-        self.height, self.width = int(self.meta["height"]), int(self.meta["width"])
-        self._geis: np.ndarray | None = None  # memmap, opened lazily per process
+    _KIND, _COMMAND, _FORMAT, _VERSION = "GEI", "casia-b", CACHE_FORMAT, CACHE_VERSION
+    _INDEX_KEYS, _ARRAY_FILE, _ARRAY_ATTR = INDEX_KEYS, GEIS_FILE, "_geis"
 
-    def __len__(self) -> int:
-        return len(self.names)
+    def __init__(self, root: str | os.PathLike):
+        super().__init__(root)
+        self.height, self.width = int(self.meta["height"]), int(self.meta["width"])
 
     def __repr__(self) -> str:
         return (f"GEICache({str(self.root)!r}: {len(self)} GEIs of {self.height}x{self.width}, "
                 f"{len(np.unique(self.subjects))} subjects, per {self.meta.get('per')})")
 
-    def __getstate__(self) -> dict:
-        state = dict(self.__dict__)
-        state["_geis"] = None  # workers reopen the memmap
-        return state
-
-    @property
-    def all_geis(self) -> np.ndarray:
-        """Read-only memmap, uint8 ``[N, H, W]`` (divide by 255 for [0, 1])."""
-        if self._geis is None:
-            self._geis = np.load(self.root / GEIS_FILE, mmap_mode="r")
-        return self._geis
+    all_geis = property(PreparedCache._array, doc="Read-only memmap, uint8 ``[N, H, W]`` (divide by 255 for [0, 1]).")
 
     def gei(self, i: int) -> np.ndarray:
         """GEI ``i`` as float32 ``[H, W]`` in [0, 1]."""

@@ -15,15 +15,12 @@ main process (full CASIA-B at 124×124 with ~3 cycles per sequence: ~40k GEIs, ~
 """
 from __future__ import annotations
 
-import json
 import os
 import time
 from dataclasses import dataclass, field
-from multiprocessing import Pool
 from pathlib import Path
 
 import numpy as np
-from tqdm import tqdm
 
 from mocapkit.datasets.formats.casia_b import SilhouetteFormatError, list_casia_b, read_sequence
 from mocapkit.datasets.casia_b.gei import (
@@ -33,9 +30,9 @@ from mocapkit.datasets.casia_b.gei import (
     gait_energy_images,
 )
 from mocapkit.datasets.casia_b.cache import INDEX_KEYS, META_FILE, write_gei_cache
+from mocapkit.datasets.parallel import parallel_map
+from mocapkit.datasets.prepare_report import REPORT_JSON, REPORT_TXT, PrepareReportBase  # noqa: F401  (re-exported)
 
-REPORT_JSON = "report.json"
-REPORT_TXT = "report.txt"
 #: Reasons a sequence is skipped (``GEIPrepareReport.skipped[i]["reason"]``).
 SKIP_REASONS = ("unreadable", "no_frames", "no_period", "too_short")
 
@@ -49,7 +46,7 @@ def parse_gei_size(text: str) -> tuple[int, int]:
 
 
 @dataclass
-class GEIPrepareReport:
+class GEIPrepareReport(PrepareReportBase):
     """What :func:`prepare_casia_b` did; also written to ``report.json`` and ``report.txt``.
 
     Attributes:
@@ -84,10 +81,6 @@ class GEIPrepareReport:
     fallback_period: list[str] = field(default_factory=list)
     seconds: float = 0.0
 
-    def count(self, reason: str) -> int:
-        """Number of skipped sequences with this ``reason``."""
-        return sum(1 for s in self.skipped if s["reason"] == reason)
-
     def totals(self) -> dict:
         return {
             "sequences_found": self.sequences_found,
@@ -117,20 +110,17 @@ class GEIPrepareReport:
                 f"{len(self.listing_problems)} listing problems; {len(self.missing)} expected sequences missing; "
                 f"{len(self.fallback_period)} with the fallback period; details in {Path(self.out) / REPORT_TXT}")
 
-    def to_text(self) -> str:
-        """The human-readable ``report.txt``."""
-        lines = [f"CASIA-B GEI preparation report for {self.out}", f"source: {self.source}",
-                 f"GEI size {self.size[0]}x{self.size[1]}, one per {self.per}", ""]
-        lines += [f"{key:>28}: {value}" for key, value in self.totals().items()]
-        lines += ["", f"Skipped sequences ({len(self.skipped)}):"]
-        lines += [f"  [{s['reason']}] {s['sequence']}: {s['message']}" for s in self.skipped] or ["  none"]
-        lines += ["", f"Listing problems ({len(self.listing_problems)}):"]
-        lines += [f"  {p}" for p in self.listing_problems] or ["  none"]
-        lines += ["", f"Missing sequences, subject/condition-nn/view ({len(self.missing)}):"]
-        lines += [f"  {m}" for m in self.missing] or ["  none"]
-        lines += ["", f"Sequences with the fallback period, no period detected ({len(self.fallback_period)}):"]
-        lines += [f"  {m}" for m in self.fallback_period] or ["  none"]
-        return "\n".join(lines) + "\n"
+    def _text_title(self) -> list[str]:
+        return [f"CASIA-B GEI preparation report for {self.out}", f"source: {self.source}",
+                f"GEI size {self.size[0]}x{self.size[1]}, one per {self.per}"]
+
+    def _text_sections(self) -> list[tuple[str, int, list[str]]]:
+        listed = (("Listing problems", self.listing_problems),
+                  ("Missing sequences, subject/condition-nn/view", self.missing),
+                  ("Sequences with the fallback period, no period detected", self.fallback_period))
+        return [("Skipped sequences", len(self.skipped),
+                 [f"  [{s['reason']}] {s['sequence']}: {s['message']}" for s in self.skipped]),
+                *((heading, len(items), [f"  {item}" for item in items]) for heading, items in listed)]
 
 
 def prepare_casia_b(src: str | os.PathLike, out: str | os.PathLike, size: tuple[int, int] = OPENGAIT_SIZE,
@@ -183,10 +173,9 @@ def prepare_casia_b(src: str | os.PathLike, out: str | os.PathLike, size: tuple[
     rows: dict[str, list] = {key: [] for key in INDEX_KEYS}
     blocks: list[np.ndarray] = []
     jobs = [(seq, size, per, fallback_period) for seq in listing.sequences]
-    with _parallel_map(_build_one, jobs, workers) as results, \
-            tqdm(total=len(jobs), desc="building GEIs", unit="seq", disable=not progress) as bar:
+    with parallel_map(_build_one, jobs, workers, max_chunksize=8, desc="building GEIs", unit="seq",
+                      progress=progress) as results:
         for seq, result in zip(listing.sequences, results):
-            bar.update(1)
             if "error" in result:
                 if not skip_bad:
                     raise result["error"]
@@ -211,7 +200,7 @@ def prepare_casia_b(src: str | os.PathLike, out: str | os.PathLike, size: tuple[
     out.mkdir(parents=True, exist_ok=True)
     (out / META_FILE).unlink(missing_ok=True)  # an older cache there must not look finished beside this report
     report.seconds = time.perf_counter() - started
-    _write_report(out, report)
+    report.write(out)
     if not blocks:
         raise RuntimeError(f"no GEI could be built from the {len(jobs)} sequences under {src}; "
                            f"see {out / REPORT_TXT}")
@@ -223,7 +212,7 @@ def prepare_casia_b(src: str | os.PathLike, out: str | os.PathLike, size: tuple[
             "counts": report.totals()}
     write_gei_cache(out, np.concatenate(blocks), index, meta)
     report.seconds = time.perf_counter() - started
-    _write_report(out, report)  # with the final time
+    report.write(out)  # with the final time
     if progress:
         print(report.summary())
     return report
@@ -246,33 +235,3 @@ def _build_one(job) -> dict:
         return {"error": GaitSequenceError(f"{seq.folder}: {exc}", exc.reason), "reason": exc.reason}
     return {"geis": np.round(geis * 255).astype(np.uint8), "frames": info.frames_per_gei.tolist(),
             "frames_read": len(frames), "fallback": per == "cycle" and not info.period_detected}
-
-
-def _write_report(out: Path, report: GEIPrepareReport) -> None:
-    (out / REPORT_JSON).write_text(json.dumps(report.to_dict(), indent=1) + "\n", encoding="utf-8")
-    (out / REPORT_TXT).write_text(report.to_text(), encoding="utf-8")
-
-
-class _parallel_map:
-    """``with _parallel_map(fn, jobs, workers) as results:`` iterates ``fn(job)`` in order.
-
-    One worker maps in this process; more use a ``multiprocessing.Pool`` with ``imap``
-    (order kept, results streamed). Leaving the block terminates the pool.
-    """
-
-    def __init__(self, fn, jobs: list, workers: int):
-        self.fn, self.jobs, self.workers = fn, jobs, workers
-        self.pool = None
-
-    def __enter__(self):
-        if self.workers == 1:
-            return map(self.fn, self.jobs)
-        self.pool = Pool(self.workers)
-        chunksize = max(1, min(8, len(self.jobs) // (self.workers * 8)))
-        return self.pool.imap(self.fn, self.jobs, chunksize=chunksize)
-
-    def __exit__(self, *exc_info):
-        if self.pool is not None:
-            self.pool.terminate()
-            self.pool.join()
-        return False

@@ -427,29 +427,22 @@ def _parse_motion(lines: list[bytes], motion_line: int, num_channels: int, sourc
     if rest_of_motion:
         raise BvhFormatError(source, motion_line + 1, "unexpected text after MOTION")
 
-    def next_nonblank(k):
+    def header_value(k, pattern, expected, convert, what):
+        """``(line, value)`` of the first non-blank line from ``k`` (0-based), matched by ``pattern``."""
         while k < n_lines and not lines[k].strip():
             k += 1
-        return k
+        m = pattern.match(lines[k]) if k < n_lines else None
+        if m is None:
+            raise BvhFormatError(source, k + 1, f"expected '{expected}'")
+        try:
+            return k, convert(m.group(1))
+        except ValueError:
+            raise BvhFormatError(source, k + 1, f"{what} {m.group(1).decode(errors='replace')!r}") from None
 
-    k = next_nonblank(k)
-    m = _FRAMES_RE.match(lines[k]) if k < n_lines else None
-    if m is None:
-        raise BvhFormatError(source, k + 1, "expected 'Frames: <count>'")
-    try:
-        num_frames = int(m.group(1))
-    except ValueError:
-        raise BvhFormatError(source, k + 1, f"non-integer frame count {m.group(1).decode(errors='replace')!r}") from None
+    k, num_frames = header_value(k, _FRAMES_RE, "Frames: <count>", int, "non-integer frame count")
     if num_frames < 0:
         raise BvhFormatError(source, k + 1, f"negative frame count {num_frames}")
-    k = next_nonblank(k + 1)
-    m = _FRAME_TIME_RE.match(lines[k]) if k < n_lines else None
-    if m is None:
-        raise BvhFormatError(source, k + 1, "expected 'Frame Time: <seconds>'")
-    try:
-        frame_time = float(m.group(1))
-    except ValueError:
-        raise BvhFormatError(source, k + 1, f"non-numeric frame time {m.group(1).decode(errors='replace')!r}") from None
+    k, frame_time = header_value(k + 1, _FRAME_TIME_RE, "Frame Time: <seconds>", float, "non-numeric frame time")
     if not (math.isfinite(frame_time) and frame_time > 0):
         raise BvhFormatError(source, k + 1, f"frame time must be positive, got {frame_time}")
     first = k + 1

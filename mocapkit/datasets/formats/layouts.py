@@ -103,24 +103,20 @@ CMU31 = SkeletonLayout(
     ),
 )
 
+#: Limb landmarks of both Kinect layouts (v2 ``ntu25`` and v1 ``msr20`` name the limb joints alike).
+_KINECT_LIMBS = {
+    "l_shoulder": "ShoulderLeft", "l_elbow": "ElbowLeft", "l_wrist": "WristLeft", "l_hand": "HandLeft",
+    "r_shoulder": "ShoulderRight", "r_elbow": "ElbowRight", "r_wrist": "WristRight", "r_hand": "HandRight",
+    "l_hip": "HipLeft", "l_knee": "KneeLeft", "l_ankle": "AnkleLeft", "l_foot": "FootLeft",
+    "r_hip": "HipRight", "r_knee": "KneeRight", "r_ankle": "AnkleRight", "r_foot": "FootRight",
+}
+
 #: Body landmarks shared across layouts: landmark -> joint name in each layout. A joint's
 #: position in an ASF skeleton is the *end* of the bone of that name (e.g. CMU ``lfemur`` ends
 #: at the left knee), which is what forward kinematics returns for that joint.
 LANDMARKS: dict[str, dict[str, str]] = {
-    "ntu25": {
-        "pelvis": "SpineBase", "spine": "SpineMid", "neck": "SpineShoulder", "head": "Head",
-        "l_shoulder": "ShoulderLeft", "l_elbow": "ElbowLeft", "l_wrist": "WristLeft", "l_hand": "HandLeft",
-        "r_shoulder": "ShoulderRight", "r_elbow": "ElbowRight", "r_wrist": "WristRight", "r_hand": "HandRight",
-        "l_hip": "HipLeft", "l_knee": "KneeLeft", "l_ankle": "AnkleLeft", "l_foot": "FootLeft",
-        "r_hip": "HipRight", "r_knee": "KneeRight", "r_ankle": "AnkleRight", "r_foot": "FootRight",
-    },
-    "msr20": {
-        "pelvis": "HipCenter", "spine": "Spine", "neck": "ShoulderCenter", "head": "Head",
-        "l_shoulder": "ShoulderLeft", "l_elbow": "ElbowLeft", "l_wrist": "WristLeft", "l_hand": "HandLeft",
-        "r_shoulder": "ShoulderRight", "r_elbow": "ElbowRight", "r_wrist": "WristRight", "r_hand": "HandRight",
-        "l_hip": "HipLeft", "l_knee": "KneeLeft", "l_ankle": "AnkleLeft", "l_foot": "FootLeft",
-        "r_hip": "HipRight", "r_knee": "KneeRight", "r_ankle": "AnkleRight", "r_foot": "FootRight",
-    },
+    "ntu25": {"pelvis": "SpineBase", "spine": "SpineMid", "neck": "SpineShoulder", "head": "Head", **_KINECT_LIMBS},
+    "msr20": {"pelvis": "HipCenter", "spine": "Spine", "neck": "ShoulderCenter", "head": "Head", **_KINECT_LIMBS},
     "cmu31": {
         "pelvis": "root", "spine": "upperback", "neck": "lowerneck", "head": "head",
         "l_shoulder": "lclavicle", "l_elbow": "lhumerus", "l_wrist": "lradius", "l_hand": "lhand",

@@ -77,6 +77,20 @@ def parse_ntu_name(name: str | os.PathLike) -> NTUSampleName:
     return NTUSampleName(*(int(g) for g in match.groups()))
 
 
+def _joint_values(start: int, stop: int | None, doc: str, dtype=np.float32) -> property:
+    """A read-only :class:`SkeletonSequence` property documented by ``doc``: a ``dtype`` copy of some joint values.
+
+    The values are ``joints[..., start:stop]``, or the single column ``joints[..., start]`` when ``stop`` is None.
+    """
+    columns = start if stop is None else slice(start, stop)
+
+    def get(self) -> np.ndarray:
+        return self.joints[..., columns].astype(dtype)
+
+    get.__doc__ = doc
+    return property(get, doc=doc)
+
+
 @dataclass
 class SkeletonSequence:
     """Everything in one ``.skeleton`` file, grouped into per-body tracks.
@@ -114,30 +128,13 @@ class SkeletonSequence:
         """bool ``[B, T]``: track ``b`` is in frame ``t``."""
         return self.slot >= 0
 
-    @property
-    def positions(self) -> np.ndarray:
-        """float32 ``[B, T, 25, 3]`` camera-space joint positions in metres."""
-        return self.joints[..., 0:3].astype(np.float32)
-
-    @property
-    def depth_xy(self) -> np.ndarray:
-        """float32 ``[B, T, 25, 2]`` pixel positions in the 512×424 depth frame."""
-        return self.joints[..., 3:5].astype(np.float32)
-
-    @property
-    def color_xy(self) -> np.ndarray:
-        """float32 ``[B, T, 25, 2]`` pixel positions in the 1920×1080 colour frame."""
-        return self.joints[..., 5:7].astype(np.float32)
-
-    @property
-    def orientation(self) -> np.ndarray:
-        """float32 ``[B, T, 25, 4]`` joint orientation quaternions ``(w, x, y, z)``."""
-        return self.joints[..., 7:11].astype(np.float32)
-
-    @property
-    def joint_tracking_state(self) -> np.ndarray:
-        """int8 ``[B, T, 25]``: 0 not tracked, 1 inferred, 2 tracked."""
-        return self.joints[..., 11].astype(np.int8)
+    # The 12 per-joint values by meaning (columns ``start:stop`` of ``joints``), each a converted copy.
+    positions = _joint_values(0, 3, "float32 ``[B, T, 25, 3]`` camera-space joint positions in metres.")
+    depth_xy = _joint_values(3, 5, "float32 ``[B, T, 25, 2]`` pixel positions in the 512×424 depth frame.")
+    color_xy = _joint_values(5, 7, "float32 ``[B, T, 25, 2]`` pixel positions in the 1920×1080 colour frame.")
+    orientation = _joint_values(7, 11, "float32 ``[B, T, 25, 4]`` joint orientation quaternions ``(w, x, y, z)``.")
+    joint_tracking_state = _joint_values(11, None, "int8 ``[B, T, 25]``: 0 not tracked, 1 inferred, 2 tracked.",
+                                         dtype=np.int8)
 
     @property
     def sample(self) -> NTUSampleName:

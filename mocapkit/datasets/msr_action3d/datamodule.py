@@ -86,11 +86,7 @@ class MSRAction3DDataModule(SkeletonDataModule):
             raise ValueError(f"MSR Action3D skeletons use the msr20 layout, got data.layout={layout!r}")
         self.root = Path(root)
         self.split, self.subset = split, subset
-        self.batch_size = batch_size
-        self.eval_batch_size = eval_batch_size or batch_size
-        self.num_workers = num_workers
-        self.max_frames = max_frames
-        self.augment = SkeletonAugment(**augment) if augment else None
+        self._set_loading(batch_size, eval_batch_size, num_workers, max_frames, augment)
         self.drop_missing_frames = drop_missing_frames
         self.layout = layout
         self.seed = seed

@@ -69,11 +69,7 @@ class NTUDataModule(SkeletonDataModule):
         self.test_subjects = list(test_subjects) if test_subjects is not None else None
         self.val_fraction = val_fraction
         self.val_by_subject = val_by_subject
-        self.batch_size = batch_size
-        self.eval_batch_size = eval_batch_size or batch_size
-        self.num_workers = num_workers
-        self.max_frames = max_frames
-        self.augment = SkeletonAugment(**augment) if augment else None
+        self._set_loading(batch_size, eval_batch_size, num_workers, max_frames, augment)
         self.seed = seed
         self.cache = NTUCache(self.root)
         train, test = split_indices(self.cache, split, train_subjects=self.train_subjects,

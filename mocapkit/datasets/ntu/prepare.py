@@ -41,12 +41,12 @@ import os
 import time
 from collections.abc import Iterable
 from dataclasses import dataclass, field
-from multiprocessing import Pool
 from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
 
+from mocapkit.datasets.cache_files import INDEX_FILE, META_FILE
 from mocapkit.datasets.formats.ntu_skeleton import (
     NUM_JOINTS,
     SkeletonFormatError,
@@ -55,20 +55,20 @@ from mocapkit.datasets.formats.ntu_skeleton import (
     read_skeleton,
     select_main_bodies,
 )
+from mocapkit.datasets.parallel import parallel_map
+from mocapkit.datasets.prepare_report import REPORT_JSON, REPORT_TXT, PrepareReportBase  # noqa: F401  (re-exported)
 
 #: Version of the on-disk layout written here and expected by :class:`~mocapkit.datasets.ntu.cache.NTUCache`.
 CACHE_FORMAT = "mocapkit-ntu-cache"
 CACHE_VERSION = 1
 
 POSITIONS_FILE = "positions.npy"
-INDEX_FILE = "index.npz"
-META_FILE = "meta.json"
-REPORT_JSON = "report.json"
-REPORT_TXT = "report.txt"
+#: Arrays of ``index.npz``, one entry per sample.
+INDEX_KEYS = ("names", "offsets", "lengths", "labels", "subjects", "cameras", "setups", "replications")
 
 
 @dataclass
-class PrepareReport:
+class PrepareReport(PrepareReportBase):
     """What :func:`prepare_ntu` did; also written to ``report.json`` and ``report.txt``.
 
     Attributes:
@@ -94,10 +94,6 @@ class PrepareReport:
     empty_samples: list[str] = field(default_factory=list)
     seconds: float = 0.0
 
-    def count(self, reason: str) -> int:
-        """Number of skipped files with this ``reason``."""
-        return sum(1 for s in self.skipped if s["reason"] == reason)
-
     def totals(self) -> dict:
         return {
             "files_found": self.files_found,
@@ -116,21 +112,19 @@ class PrepareReport:
         return {"out": self.out, "totals": self.totals(), "skipped": self.skipped,
                 "dropped_bodies": self.dropped_bodies, "empty_samples": self.empty_samples}
 
-    def to_text(self) -> str:
-        """The human-readable ``report.txt``."""
-        lines = [f"NTU preparation report for {self.out}", ""]
-        lines += [f"{key:>28}: {value}" for key, value in self.totals().items()]
-        lines += ["", f"Skipped files ({len(self.skipped)}):"]
-        lines += [f"  [{s['reason']}] {s['file']}: {s['message']}" for s in self.skipped] or ["  none"]
-        lines += ["", f"Samples with dropped bodies ({len(self.dropped_bodies)}):"]
+    def _text_title(self) -> list[str]:
+        return [f"NTU preparation report for {self.out}"]
+
+    def _text_sections(self) -> list[tuple[str, int, list[str]]]:
+        dropped = []
         for d in self.dropped_bodies:
-            lines.append(f"  {d['name']}: kept {d['kept_body_ids']}")
-            lines += [f"      dropped body {x['body_id']}: {x['reason']}" for x in d["dropped"]]
-        if not self.dropped_bodies:
-            lines.append("  none")
-        lines += ["", f"Samples with no body kept, stored as zeros ({len(self.empty_samples)}):"]
-        lines += [f"  {name}" for name in self.empty_samples] or ["  none"]
-        return "\n".join(lines) + "\n"
+            dropped.append(f"  {d['name']}: kept {d['kept_body_ids']}")
+            dropped += [f"      dropped body {x['body_id']}: {x['reason']}" for x in d["dropped"]]
+        return [("Skipped files", len(self.skipped),
+                 [f"  [{s['reason']}] {s['file']}: {s['message']}" for s in self.skipped]),
+                ("Samples with dropped bodies", len(self.dropped_bodies), dropped),
+                ("Samples with no body kept, stored as zeros", len(self.empty_samples),
+                 [f"  {name}" for name in self.empty_samples])]
 
 
 def prepare_ntu(src: str | os.PathLike, out: str | os.PathLike, workers: int = 1, skip_bad: bool = False,
@@ -198,14 +192,12 @@ def prepare_ntu(src: str | os.PathLike, out: str | os.PathLike, workers: int = 1
                                           shape=(capacity, max_bodies, NUM_JOINTS, 3))
     options = {"max_bodies": max_bodies, "denoise_spread": denoise_spread, "min_body_frames": min_body_frames}
     jobs = [(str(p), options) for p in files]
-    rows: dict[str, list] = {k: [] for k in ("names", "offsets", "lengths", "labels", "subjects",
-                                             "cameras", "setups", "replications")}
+    rows: dict[str, list] = {k: [] for k in INDEX_KEYS}
     cursor = 0
     try:
-        with _parallel_map(_parse_one, jobs, workers) as results, \
-                tqdm(total=len(jobs), desc="parsing .skeleton", unit="file", disable=not progress) as bar:
+        with parallel_map(_parse_one, jobs, workers, max_chunksize=16, desc="parsing .skeleton", unit="file",
+                          progress=progress) as results:
             for path, frames, result in zip(files, expected, results):
-                bar.update(1)
                 if "error" in result:
                     error = result["error"]
                     if not skip_bad:
@@ -246,8 +238,7 @@ def prepare_ntu(src: str | os.PathLike, out: str | os.PathLike, workers: int = 1
     report.samples_written = len(rows["names"])
     report.total_frames = cursor
     report.seconds = time.perf_counter() - started
-    (out / REPORT_JSON).write_text(json.dumps(report.to_dict(), indent=1) + "\n", encoding="utf-8")
-    (out / REPORT_TXT).write_text(report.to_text(), encoding="utf-8")
+    report.write(out)
     labels = index["labels"]
     meta = {
         "format": CACHE_FORMAT,
@@ -363,32 +354,6 @@ def _parse_one(job: tuple[str, dict]) -> dict:
         "kept_body_ids": [seq.body_ids[b] for b in selection.kept],
         "dropped": [{"body_id": seq.body_ids[b], "reason": reason} for b, reason in sorted(selection.dropped.items())],
     }
-
-
-class _parallel_map:
-    """``with _parallel_map(fn, jobs, workers) as results:`` iterates ``fn(job)`` in order.
-
-    One worker maps in this process; more use a ``multiprocessing.Pool`` with ``imap``
-    (order kept, results streamed) and a chunk size that keeps workers busy without
-    holding many results in memory. Leaving the block terminates the pool.
-    """
-
-    def __init__(self, fn, jobs: list, workers: int):
-        self.fn, self.jobs, self.workers = fn, jobs, workers
-        self.pool = None
-
-    def __enter__(self):
-        if self.workers == 1:
-            return map(self.fn, self.jobs)
-        self.pool = Pool(self.workers)
-        chunksize = max(1, min(16, len(self.jobs) // (self.workers * 8)))
-        return self.pool.imap(self.fn, self.jobs, chunksize=chunksize)
-
-    def __exit__(self, *exc_info):
-        if self.pool is not None:
-            self.pool.terminate()
-            self.pool.join()
-        return False
 
 
 def _shrink_rows(path: Path, rows: int) -> None:

@@ -34,9 +34,8 @@ fields, so the PNGs are byte-identical for any ``workers`` and any subset of the
 from __future__ import annotations
 
 import json
-import multiprocessing
 import os
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -47,6 +46,8 @@ from mocapkit.datasets.formats.casia_b import (
     VIEWS,
     GaitSequenceKey,
 )
+from mocapkit.datasets.parallel import write_all
+from mocapkit.datasets.synthetic.config import FieldCheck, SynthConfig
 
 FPS = 25.0
 #: Camera distance in metres (weak perspective: one scale per frame, from the pelvis depth).
@@ -69,8 +70,29 @@ BAG_STYLES = ("shoulder bag", "backpack", "hand bag")
 # --------------------------------------------------------------------------- configuration
 
 
+@dataclass(frozen=True)
+class SegmentationNoise:
+    """Background-subtraction artefacts added to a clean rendering (see :func:`apply_segmentation_noise`)."""
+
+    hole_rate: float = 0.001
+    edge_noise: float = 0.6
+    shadow_prob: float = 0.2
+    empty_frame_prob: float = 0.01
+    partial_frame_prob: float = 0.01
+
+    def validate(self) -> None:
+        for name in ("hole_rate", "shadow_prob", "empty_frame_prob", "partial_frame_prob"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and 0.0 <= value <= 1.0):
+                raise ValueError(f"{name} = {value!r}: must be a probability in [0, 1]")
+        if not (np.isfinite(self.edge_noise) and 0.0 <= self.edge_noise <= 3.0):
+            raise ValueError(f"edge_noise = {self.edge_noise!r}: must be in [0, 3] pixels")
+        if self.empty_frame_prob + self.partial_frame_prob > 0.5:
+            raise ValueError("empty_frame_prob + partial_frame_prob must be at most 0.5 (most frames must be usable)")
+
+
 @dataclass
-class CasiaBSynthConfig:
+class CasiaBSynthConfig(SynthConfig):
     """What :func:`synthesize_casia_b` generates: every (subject, condition-nn, view), ``frames`` PNGs each.
 
     Data set shape:
@@ -96,11 +118,11 @@ class CasiaBSynthConfig:
     views: tuple[int, ...] = VIEWS
     conditions: dict[str, int] = field(default_factory=lambda: dict(SEQUENCES_PER_CONDITION))
     seed: int = 0
-    hole_rate: float = 0.001
-    edge_noise: float = 0.6
-    shadow_prob: float = 0.2
-    empty_frame_prob: float = 0.01
-    partial_frame_prob: float = 0.01
+    hole_rate: float = SegmentationNoise.hole_rate
+    edge_noise: float = SegmentationNoise.edge_noise
+    shadow_prob: float = SegmentationNoise.shadow_prob
+    empty_frame_prob: float = SegmentationNoise.empty_frame_prob
+    partial_frame_prob: float = SegmentationNoise.partial_frame_prob
 
     def __post_init__(self) -> None:
         self.views = tuple(int(v) for v in self.views)
@@ -118,22 +140,15 @@ class CasiaBSynthConfig:
 
     def validate(self) -> None:
         """Raise ``ValueError`` naming the first bad field."""
-        def bad(name, why):
-            raise ValueError(f"CasiaBSynthConfig.{name} = {getattr(self, name)!r}: {why}")
-
-        if not isinstance(self.num_subjects, (int, np.integer)) or not 1 <= self.num_subjects <= 999:
-            bad("num_subjects", "must be an integer in 1..999")
-        if not isinstance(self.frames, (int, np.integer)) or not 1 <= self.frames <= 10000:
-            bad("frames", "must be an integer in 1..10000")
-        if not isinstance(self.height, (int, np.integer)) or not 16 <= self.height <= 1024:
-            bad("height", "must be an integer in 16..1024 pixels")
-        if not self.views or len(set(self.views)) != len(self.views) or not set(self.views) <= set(VIEWS):
-            bad("views", f"must be a non-empty tuple of distinct values from {VIEWS}")
-        if not self.conditions or not set(self.conditions) <= set(CONDITIONS) or not all(
-                isinstance(n, (int, np.integer)) and 1 <= n <= 99 for n in self.conditions.values()):
-            bad("conditions", f"must map conditions from {CONDITIONS} to counts in 1..99")
-        if not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
-            bad("seed", "must be a non-negative integer")
+        check = FieldCheck(self)
+        check.integer("num_subjects", 1, 999)
+        check.integer("frames", 1, 10000)
+        check.integer("height", 16, 1024, " pixels")
+        check.distinct("views", lambda v: v in VIEWS, f"must be a non-empty tuple of distinct values from {VIEWS}")
+        check.require(bool(self.conditions) and set(self.conditions) <= set(CONDITIONS) and all(
+            isinstance(n, (int, np.integer)) and 1 <= n <= 99 for n in self.conditions.values()),
+            "conditions", f"must map conditions from {CONDITIONS} to counts in 1..99")
+        check.seed()
         self.noise.validate()
 
     def sequence_keys(self) -> list[GaitSequenceKey]:
@@ -141,39 +156,6 @@ class CasiaBSynthConfig:
         return sorted(GaitSequenceKey(s, c, n, v) for s in range(1, self.num_subjects + 1)
                       for c in CONDITIONS if c in self.conditions for n in range(1, self.conditions[c] + 1)
                       for v in self.views)
-
-    def to_dict(self) -> dict:
-        """JSON-ready dict (tuples become lists)."""
-        return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
-
-    @classmethod
-    def from_dict(cls, d: dict) -> CasiaBSynthConfig:
-        """Inverse of :meth:`to_dict`; unknown keys are an error."""
-        unknown = sorted(set(d) - {f.name for f in fields(cls)})
-        if unknown:
-            raise ValueError(f"unknown CasiaBSynthConfig fields: {unknown}")
-        return cls(**d)
-
-
-@dataclass(frozen=True)
-class SegmentationNoise:
-    """Background-subtraction artefacts added to a clean rendering (see :func:`apply_segmentation_noise`)."""
-
-    hole_rate: float = 0.001
-    edge_noise: float = 0.6
-    shadow_prob: float = 0.2
-    empty_frame_prob: float = 0.01
-    partial_frame_prob: float = 0.01
-
-    def validate(self) -> None:
-        for name in ("hole_rate", "shadow_prob", "empty_frame_prob", "partial_frame_prob"):
-            value = getattr(self, name)
-            if not (np.isfinite(value) and 0.0 <= value <= 1.0):
-                raise ValueError(f"{name} = {value!r}: must be a probability in [0, 1]")
-        if not (np.isfinite(self.edge_noise) and 0.0 <= self.edge_noise <= 3.0):
-            raise ValueError(f"edge_noise = {self.edge_noise!r}: must be in [0, 3] pixels")
-        if self.empty_frame_prob + self.partial_frame_prob > 0.5:
-            raise ValueError("empty_frame_prob + partial_frame_prob must be at most 0.5 (most frames must be usable)")
 
 
 # --------------------------------------------------------------------------- subjects and walks
@@ -736,17 +718,6 @@ def synthesize_casia_b(out: str | os.PathLike, config: CasiaBSynthConfig | None 
         "as CASIA-B results.\n\nconfig:\n" + json.dumps(config.to_dict(), indent=2) + "\n", encoding="utf-8")
     jobs = [(str(out), config, s, c, n) for s in range(1, config.num_subjects + 1)
             for c in CONDITIONS if c in config.conditions for n in range(1, config.conditions[c] + 1)]
-
-    from tqdm import tqdm
-    bar = tqdm(total=len(jobs) * len(config.views), desc="synthesizing CASIA-B", unit="seq", disable=not progress)
-    try:
-        if workers == 1:
-            for job in jobs:
-                bar.update(len(_write_walk(job)))
-        else:
-            with multiprocessing.Pool(workers) as pool:
-                for written in pool.imap_unordered(_write_walk, jobs):
-                    bar.update(len(written))
-    finally:
-        bar.close()
+    write_all(_write_walk, jobs, workers, total=len(jobs) * len(config.views), desc="synthesizing CASIA-B",
+              unit="seq", progress=progress)
     return [out / key.name for key in config.sequence_keys()]

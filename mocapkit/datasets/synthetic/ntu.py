@@ -33,14 +33,15 @@ regression on root-centred, time-pooled joint statistics; see
 from __future__ import annotations
 
 import json
-import multiprocessing
 import os
-from dataclasses import asdict, dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from mocapkit.datasets.parallel import write_all
 from mocapkit.datasets.synthetic import kinematics as kin
+from mocapkit.datasets.synthetic.config import FieldCheck, SynthConfig
 from mocapkit.datasets.synthetic.kinematics import DOF_NAMES, J
 from mocapkit.datasets.formats.ntu_skeleton import (
     NTUSampleName,
@@ -59,7 +60,7 @@ _KINECT_ID_BASE = 72057594037927936  # 2**56: real Kinect v2 tracking IDs are ju
 
 
 @dataclass
-class NTUSynthConfig:
+class NTUSynthConfig(SynthConfig):
     """What :func:`synthesize_ntu` generates. One file per (setup, camera, subject, replication, action).
 
     Dataset shape:
@@ -125,50 +126,24 @@ class NTUSynthConfig:
 
     def validate(self) -> None:
         """Raise ``ValueError`` naming the first bad field."""
-        def bad(name, why):
-            raise ValueError(f"NTUSynthConfig.{name} = {getattr(self, name)!r}: {why}")
-
-        if not isinstance(self.num_classes, (int, np.integer)) or not 1 <= self.num_classes <= len(ACTIONS):
-            bad("num_classes", f"must be an integer in 1..{len(ACTIONS)}")
-        if not isinstance(self.num_subjects, (int, np.integer)) or not 1 <= self.num_subjects <= 999:
-            bad("num_subjects", "must be an integer in 1..999")
+        check = FieldCheck(self)
+        check.integer("num_classes", 1, len(ACTIONS))
+        check.integer("num_subjects", 1, 999)
         for name in ("setups", "replications"):
-            values = getattr(self, name)
-            if not values or len(set(values)) != len(values) or not all(
-                    isinstance(v, (int, np.integer)) and 1 <= v <= 999 for v in values):
-                bad(name, "must be a non-empty tuple of distinct integers in 1..999")
-        if not self.cameras or len(set(self.cameras)) != len(self.cameras) or not set(self.cameras) <= {1, 2, 3}:
-            bad("cameras", "must be a non-empty tuple of distinct values from (1, 2, 3)")
-        if not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
-            bad("seed", "must be a non-negative integer")
-        for name in ("style_noise", "sample_noise", "tempo_spread", "amplitude_spread", "difficulty", "jitter_m",
-                     "facing_spread_deg"):
-            value = getattr(self, name)
-            if not np.isfinite(value) or value < 0:
-                bad(name, "must be a finite number >= 0")
-        for name in ("drop_frame_prob", "extra_body_prob"):
-            if not 0.0 <= getattr(self, name) <= 1.0:
-                bad(name, "must be a probability in [0, 1]")
-        if self.drop_frame_prob > 0.5:
-            bad("drop_frame_prob", "must be at most 0.5 (the body must be seen in most frames)")
+            check.distinct(name, lambda v: isinstance(v, (int, np.integer)) and 1 <= v <= 999,
+                           "must be a non-empty tuple of distinct integers in 1..999")
+        check.distinct("cameras", lambda v: v in (1, 2, 3),
+                       "must be a non-empty tuple of distinct values from (1, 2, 3)")
+        check.seed()
+        check.non_negative("style_noise", "sample_noise", "tempo_spread", "amplitude_spread", "difficulty", "jitter_m",
+                           "facing_spread_deg")
+        check.probability("drop_frame_prob", "extra_body_prob")
+        check.require(self.drop_frame_prob <= 0.5, "drop_frame_prob",
+                      "must be at most 0.5 (the body must be seen in most frames)")
         lo, hi = self.height_range_m if len(self.height_range_m) == 2 else (0, -1)
-        if not 1.0 <= lo <= hi <= 2.3:
-            bad("height_range_m", "must be (low, high) with 1.0 <= low <= high <= 2.3 metres")
-        if not 0.1 <= self.length_scale <= 5.0:
-            bad("length_scale", "must be in [0.1, 5]")
-
-    def to_dict(self) -> dict:
-        """JSON-ready dict (tuples become lists)."""
-        return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
-
-    @classmethod
-    def from_dict(cls, d: dict) -> "NTUSynthConfig":
-        """Inverse of :meth:`to_dict`, e.g. for a ``synth_config.json``; unknown keys are an error."""
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(f"unknown NTUSynthConfig fields: {unknown}")
-        return cls(**d)
+        check.require(1.0 <= lo <= hi <= 2.3, "height_range_m",
+                      "must be (low, high) with 1.0 <= low <= high <= 2.3 metres")
+        check.require(0.1 <= self.length_scale <= 5.0, "length_scale", "must be in [0.1, 5]")
 
 
 # --------------------------------------------------------------------------- the actions
@@ -704,17 +679,6 @@ def synthesize_ntu(out_dir: str | os.PathLike, config: NTUSynthConfig = NTUSynth
         groups.setdefault((n.setup, n.subject, n.replication, n.action), []).append(n)
     jobs = [(str(out), config, names) for names in groups.values()]
     total = sum(len(names) for names in groups.values())
-
-    from tqdm import tqdm
-    bar = tqdm(total=total, desc="synthesizing NTU", unit="file", disable=not progress)
-    try:
-        if workers == 1:
-            for job in jobs:
-                bar.update(len(_write_group(job)))
-        else:
-            with multiprocessing.Pool(workers) as pool:
-                for written in pool.imap_unordered(_write_group, jobs, chunksize=4):
-                    bar.update(len(written))
-    finally:
-        bar.close()
+    write_all(_write_group, jobs, workers, total=total, desc="synthesizing NTU", unit="file", progress=progress,
+              chunksize=4)
     return [out / f"{n}.skeleton" for n in sample_names(config)]
