@@ -18,6 +18,8 @@ from sklearn.metrics import (
     top_k_accuracy_score,
 )
 
+from mocapkit.evaluation.plots import pyplot, save_figure
+
 
 def topk_accuracy(scores: np.ndarray, labels: np.ndarray, k: int) -> float:
     """Fraction of samples whose label is among the ``k`` highest scores. ``scores``: ``[N, C]``.
@@ -93,10 +95,7 @@ def classification_report(scores: np.ndarray, labels: np.ndarray, groups: dict[s
 def plot_confusion_matrix(confusion: np.ndarray, class_names: list[str], path: str | Path,
                           title: str = "Confusion matrix", normalize: bool = True) -> Path:
     """Save a confusion-matrix heat map (rows = true class, normalised per row by default) as PNG."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     confusion = np.asarray(confusion, dtype=np.float64)
     shown = confusion / np.maximum(confusion.sum(1, keepdims=True), 1) if normalize else confusion
@@ -116,9 +115,4 @@ def plot_confusion_matrix(confusion: np.ndarray, class_names: list[str], path: s
                     ax.text(j, i, f"{shown[i, j]:.2f}" if normalize else int(confusion[i, j]), ha="center",
                             va="center", fontsize=6, color="white" if shown[i, j] > 0.5 else "black")
     fig.colorbar(im, ax=ax, fraction=0.046)
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=120)

@@ -26,8 +26,9 @@ from pathlib import Path
 import numpy as np
 from sklearn.metrics import pairwise_distances
 
-from mocapkit.datasets.formats.casia_b import CONDITIONS, VIEWS
 from mocapkit.datasets.casia_b.splits import gallery_probe_masks
+from mocapkit.datasets.formats.casia_b import CONDITIONS, VIEWS
+from mocapkit.evaluation.plots import pyplot, save_figure
 
 #: The classification tasks of the multi-task network: name → (logits key, label key).
 TASKS: dict[str, tuple[str, str]] = {"subject": ("subject_logits", "subjects"), "view": ("view_logits", "views"),
@@ -310,10 +311,7 @@ def plot_per_view_panels(panels: dict[str, dict[str, dict]], path: str | Path, t
             one subplot per panel, one line per method; missing/None points are gaps.
         path: the PNG to write.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     if not panels:
         raise ValueError("panels is empty: nothing to plot")
@@ -332,12 +330,7 @@ def plot_per_view_panels(panels: dict[str, dict[str, dict]], path: str | Path, t
         ax.legend(fontsize=8)
     if title:
         fig.suptitle(title)
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=110)
 
 
 def plot_per_view(series: dict[str, dict], path: str | Path, title: str = "Accuracy per view") -> Path:
