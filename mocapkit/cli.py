@@ -149,6 +149,14 @@ def cmd_export(overrides: list[str]) -> None:
     export_checkpoint(ckpt, out, rest)
 
 
+def cmd_refine(args: argparse.Namespace) -> None:
+    from mocapkit.refinement.apply import refine_file
+
+    report = refine_file(args.input, args.output, args.method, overrides=tuple(args.set),
+                         train=tuple(args.train), skip_bad=args.skip_bad, repair_outliers=args.repair_outliers)
+    print(report.to_text())
+
+
 def cmd_predict(args: argparse.Namespace) -> None:
     from mocapkit.deploy.predict import predict_files, print_predictions
 
@@ -252,6 +260,22 @@ def build_parser() -> argparse.ArgumentParser:
     report.add_argument("--no-pca-lda", dest="no_pca_lda", action="store_true", help="skip the classical baseline")
     report.add_argument("overrides", nargs="*", help="Hydra overrides for every run, e.g. trainer.max_epochs=30")
     report.set_defaults(func=cmd_gait_report)
+
+    refine = sub.add_parser("refine", help="fill the gaps of a motion file (C3D in, C3D out: only the gaps change)")
+    refine.add_argument("input", help="any motion file read_motion reads (.c3d, .amc, .bvh, .skeleton, MSR .txt)")
+    refine.add_argument("output", help="OUT.c3d (markers; from a C3D only the filled samples change) or OUT.npz")
+    refine.add_argument("--method", required=True, help="configs/refiner/NAME.yaml: linear, pchip, pca, svt, lrmf, "
+                                                        "trnn, psc, filter-bases, dynammo")
+    refine.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="a parameter of the method (Hydra syntax), repeatable")
+    refine.add_argument("--train", action="append", default=[], metavar="PATH",
+                        help="clean training motions (file or folder) for data-driven methods, repeatable")
+    refine.add_argument("--repair-outliers", dest="repair_outliers", action="store_true",
+                        help="also replace the observed samples a robust method flags as outliers "
+                             "(default: only the gaps are filled)")
+    refine.add_argument("--skip-bad", dest="skip_bad", action="store_true",
+                        help="skip unreadable training files (each is reported)")
+    refine.set_defaults(func=cmd_refine)
 
     predict = sub.add_parser("predict", help="classify motion files with an exported ONNX model")
     predict.add_argument("--onnx", required=True, help="model written by `mocapkit export`")

@@ -1,0 +1,526 @@
+"""Refine a motion file: what ``mocapkit refine IN OUT --method NAME [--set key=value ...] [--train PATH ...]`` runs.
+
+The refiners are declared once, as Hydra configs: ``configs/refiner/<NAME>.yaml`` = ``{_target_: the
+MotionRefiner class, its parameters with their defaults}`` (``linear``, ``pchip``, ``pca``, ``svt``, ``lrmf``,
+``trnn``, ``psc``, ``filter-bases``, ``dynammo``); :func:`build_refiner` composes ``configs/refiner.yaml`` with
+``refiner=NAME`` and the ``--set`` overrides (Hydra's grammar) and instantiates the node. The benchmark builds its
+refiners from the same files.
+
+:func:`refine_file` reads anything :func:`~mocapkit.datasets.formats.motion_io.read_motion` reads, fits the
+refiner on the ``--train`` motions (required when ``refiner.requires_fit``; used when given otherwise, e.g. the
+optional clean frames of PCA), refines and writes:
+
+**C3D in, C3D out** (the everyday case: a Vicon or Qualisys export with gaps). The file is not re-encoded from
+the Motion. The source is opened with ``ezc3d`` and only the samples the refiner changed (filled gaps, and the
+observed samples a robust method repaired as outliers) are overwritten: coordinates converted back to the file's
+``POINT:UNITS`` at the same marker index (``read_c3d`` keeps the file's marker order; a ``Subject:`` prefix it
+strips changes names, not indices), residual 0 (valid: in C3D a zero residual marks a computed, not measured,
+point) and an empty camera mask. Everything else is kept:
+
+- *float storage* (``POINT:SCALE < 0``, what current systems write): ezc3d's C++ writer writes the modified file.
+  Every other sample comes back bit-identical (coordinates, residuals, camera masks), and so do the labels
+  (``LABELS`` padded beyond ``POINT:USED`` too), rate, units, analog data, events and every parameter, except
+  that ezc3d adds an ``EZC3D`` parameter group (its version), recomputes ``POINT:DATA_START``, and writes
+  Intel byte order (a DEC or MIPS file comes back as Intel floats with the same values).
+- *integer storage* (``POINT:SCALE > 0``, e.g. ``Eb015pi.c3d``): ezc3d cannot write it faithfully. It always
+  writes float storage, so every observed coordinate (read as ``int16 · scale`` in double precision) is rounded
+  to float32 (up to 1e-4 mm on Eb015pi) and the camera masks of invalid samples are cleared. Such files are
+  therefore patched in place instead: a byte copy of the source in which only the 4 int16 words of each changed
+  sample are rewritten (coordinates ``round(value / scale)``, residual word 0). Filled values are quantised to
+  the file's scale (0.083 mm on Eb015pi); a value outside int16 range is an error naming marker and frame.
+
+Either way the written file is read back with ezc3d and checked (every unchanged sample identical to the
+source, every changed sample valid and at its value) before it replaces the output path.
+
+Samples the refiner could not fill (leading/trailing gaps for the interpolations, a marker missing in every
+frame) are left as they were in the source (invalid, or the all-zero coordinates some writers use for gaps,
+which ``read_c3d`` reads as missing) and reported.
+
+**Anything else** (AMC, BVH, NTU, MSR joint positions, or C3D to ``.npz``): ``.c3d`` out writes the refined
+positions with :func:`~mocapkit.datasets.formats.c3d.write_c3d` (labels = joint names, millimetres, still-missing
+samples invalid), so ``read_motion`` reads them back on the same layout; ``.npz`` out holds ``positions`` float32
+``[frames, joints, 3]`` metres (NaN where still missing), ``missing`` and ``filled`` (bool ``[frames, joints]``),
+``joint_names`` and ``fps``.
+
+The :class:`RefineReport` lists, per marker with gaps, the samples filled, the longest gap filled (frames and
+seconds), the samples repaired, and the samples left missing with their frames and the reason. Bad input (every
+sample missing, NaN/Inf in observed entries, a take shorter than the method needs, a data-driven refiner applied
+to another skeleton layout, unreadable files) raises a ``ValueError`` subclass whose message names the file.
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import inspect
+import os
+import struct
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from mocapkit.datasets.formats.motion import Motion
+from mocapkit.refinement.base import MotionRefiner
+
+#: Output suffixes :func:`refine_file` writes.
+OUTPUT_SUFFIXES = (".c3d", ".npz")
+
+
+class RefineError(ValueError):
+    """A refine run that cannot go on (bad output name, unusable training data, a write that failed its check)."""
+
+
+# --------------------------------------------------------------------------- the registry (Hydra configs)
+
+
+def _config_dir() -> Path:
+    from mocapkit.train.config import CONFIG_DIR
+
+    return Path(CONFIG_DIR)
+
+
+def refiner_names() -> list[str]:
+    """The method names: the files ``configs/refiner/<NAME>.yaml``."""
+    return sorted(p.stem for p in (_config_dir() / "refiner").glob("*.yaml"))
+
+
+def _override(method: str, item: str, keys: Sequence[str], target: str) -> str:
+    """``key=value`` (``--set``) as the override ``refiner.key=value``; unknown keys fail naming the key."""
+    if "=" not in item:
+        raise _config_error(f"--set {item!r}: expected KEY=VALUE")
+    key, value = item.split("=", 1)
+    prefix = key[:len(key) - len(key.lstrip("+~"))]
+    key = key[len(prefix):]
+    key = key.removeprefix("refiner.")
+    top = key.split(".", 1)[0]
+    if not prefix and top not in keys:
+        raise _config_error(f"--set {item}: refiner {method!r} ({target}) has no parameter {top!r}; its parameters: "
+                            f"{', '.join(keys) or '(none)'}")
+    return f"{prefix}refiner.{key}={value}"
+
+
+def _config_error(message: str) -> Exception:
+    from mocapkit.train.config import ConfigError
+
+    return ConfigError(message)
+
+
+def refiner_config(method: str, overrides: Sequence[str] = ()):
+    """The composed ``refiner`` node (an OmegaConf DictConfig) of ``method`` with ``--set`` style ``overrides``.
+
+    Raises:
+        ConfigError: an unknown method (the message lists the known names), an unknown key (named, with the
+            method's parameters), or an override Hydra cannot parse.
+    """
+    from mocapkit.train.config import compose_config
+
+    names = refiner_names()
+    if method not in names:
+        raise _config_error(f"unknown refiner method {method!r}; known: {', '.join(names)} "
+                            f"(configs/refiner/NAME.yaml in {_config_dir()})")
+    base = compose_config([f"refiner={method}"], config_name="refiner").refiner
+    keys = [str(k) for k in base if not str(k).startswith("_")]
+    target = str(base.get("_target_", "?"))
+    extra = [_override(method, item, keys, target) for item in overrides]
+    if not extra:
+        return base
+    from mocapkit.train.config import ConfigError
+
+    try:
+        return compose_config([f"refiner={method}", *extra], config_name="refiner").refiner
+    except ConfigError as exc:  # Hydra's messages are multi-line and name the override as rewritten
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc.__cause__).__name__
+        raise _config_error(f"--set {' '.join(overrides)}: {first}") from exc
+
+
+def build_refiner(method: str, overrides: Sequence[str] = ()) -> MotionRefiner:
+    """Instantiate ``configs/refiner/<method>.yaml`` with the ``--set`` style ``overrides``.
+
+    Raises:
+        ConfigError: see :func:`refiner_config`; also a class that cannot be imported or built from the
+            parameters (the message names the method and the class), or one that is not a MotionRefiner.
+    """
+    from hydra.utils import instantiate
+
+    cfg = refiner_config(method, overrides)
+    target = str(cfg.get("_target_", "?"))
+    try:
+        refiner = instantiate(cfg, _convert_="all")
+    except Exception as exc:  # Hydra wraps import and constructor errors in InstantiationException
+        cause = exc.__cause__ or exc
+        raise _config_error(f"refiner {method!r}: cannot build {target}: {cause}") from exc
+    if not isinstance(refiner, MotionRefiner):
+        raise _config_error(f"refiner {method!r}: {target} is a {type(refiner).__name__}, not a MotionRefiner")
+    return refiner
+
+
+# --------------------------------------------------------------------------- the report
+
+
+@dataclass
+class MarkerReport:
+    """What happened to one marker (joint) that had gaps or repairs. Frames are 0-based indices into the take."""
+
+    name: str
+    index: int
+    missing: int                                  # samples missing in the input
+    filled: int                                   # of those, filled
+    longest_gap: int                              # longest run of consecutive filled frames
+    repaired: int = 0                             # observed samples replaced as outliers (robust methods)
+    #: (first, last, reason), inclusive; reason: "leading" / "trailing" (before the first / after the last
+    #: observation), "missing in every frame" or "interior, not filled by the method"
+    unfilled: list[tuple[int, int, str]] = field(default_factory=list)
+
+    @property
+    def left_missing(self) -> int:
+        return sum(last - first + 1 for first, last, _ in self.unfilled)
+
+
+@dataclass
+class RefineReport:
+    """The outcome of :func:`refine_file` (``to_text()`` is what ``mocapkit refine`` prints)."""
+
+    source: str
+    output: str
+    method: str
+    refiner: str                                  # class name
+    fps: float
+    frames: int
+    markers: list[MarkerReport]                   # markers with gaps or repairs, in file order
+    training: list[str] = field(default_factory=list)           # training files used
+    skipped: list[tuple[str, str]] = field(default_factory=list)  # (training file, why) with --skip-bad
+    write_mode: str = ""                          # how the output was written
+    hint: str = ""
+
+    @property
+    def filled(self) -> int:
+        return sum(m.filled for m in self.markers)
+
+    @property
+    def missing(self) -> int:
+        return sum(m.missing for m in self.markers)
+
+    @property
+    def left_missing(self) -> dict[str, list[tuple[int, int, str]]]:
+        """``{marker: [(first, last, reason), ...]}`` of the samples still missing."""
+        return {m.name: m.unfilled for m in self.markers if m.unfilled}
+
+    def to_text(self) -> str:
+        lines = [f"{self.source}: {self.frames} frames at {self.fps:g} fps; method {self.method} ({self.refiner})"]
+        if self.training:
+            lines.append(f"trained on {len(self.training)} motion file(s)")
+        lines += [f"skipped training file {path}: {why}" for path, why in self.skipped]
+        width = max([len(m.name) for m in self.markers] + [1])
+        gapped = [m for m in self.markers if m.missing]
+        for m in gapped:
+            line = (f"{m.name:<{width}}  filled {m.filled} samples, longest gap {m.longest_gap} frames "
+                    f"({m.longest_gap / self.fps:.3f} s)")
+            if m.repaired:
+                line += f"; repaired {m.repaired} outlier samples"
+            if m.unfilled:
+                line += f"; {m.left_missing} left missing"
+            lines.append(line)
+        for m in self.markers:
+            if m.repaired and not m.missing:
+                lines.append(f"{m.name:<{width}}  repaired {m.repaired} outlier samples")
+        lines.append(f"filled {self.filled} of {self.missing} missing samples in {len(gapped)} markers")
+        left = [m for m in self.markers if m.unfilled]
+        if left:
+            lines.append(f"left missing ({sum(m.left_missing for m in left)} samples; frames are 0-based, inclusive; "
+                         f"leading/trailing: before the first / after the last observation of the marker):")
+            for m in left:
+                runs = [f"{a}-{b} ({why})" if a != b else f"{a} ({why})" for a, b, why in m.unfilled]
+                if len(runs) > 8:
+                    runs = runs[:8] + [f"... {len(runs) - 8} more"]
+                lines.append(f"  {m.name:<{width}}  {m.left_missing} samples: frames {', '.join(runs)}")
+            if self.hint:
+                lines.append(f"  ({self.hint})")
+        elif gapped:
+            lines.append("nothing left missing")
+        lines.append(f"wrote {self.output}" + (f" ({self.write_mode})" if self.write_mode else ""))
+        return "\n".join(lines)
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """``[(first, last), ...]`` (inclusive) of the runs of True in a 1-D bool array."""
+    edges = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+    return [(a, b - 1) for a, b in zip(np.flatnonzero(edges == 1).tolist(), np.flatnonzero(edges == -1).tolist())]
+
+
+def _report_markers(before: Motion, after: Motion, changed: np.ndarray) -> list[MarkerReport]:
+    frames = before.num_frames
+    filled = before.missing & ~after.missing
+    repaired = changed & ~before.missing
+    out = []
+    for j in np.flatnonzero(before.missing.any(axis=0) | repaired.any(axis=0)):
+        seen = np.flatnonzero(~before.missing[:, j])
+        unfilled = []
+        for a, b in _runs(after.missing[:, j]):
+            if seen.size == 0:
+                why = "missing in every frame"
+            elif a == 0:
+                why = "leading"
+            elif b == frames - 1:
+                why = "trailing"
+            else:
+                why = "interior, not filled by the method"
+            unfilled.append((a, b, why))
+        longest = max([b - a + 1 for a, b in _runs(filled[:, j])] + [0])
+        out.append(MarkerReport(name=before.joint_names[j], index=int(j), missing=int(before.missing[:, j].sum()),
+                                filled=int(filled[:, j].sum()), longest_gap=longest,
+                                repaired=int(repaired[:, j].sum()), unfilled=unfilled))
+    return out
+
+
+# --------------------------------------------------------------------------- training data
+
+
+def _is_motion_file(path: Path) -> bool:
+    from mocapkit.datasets.formats.motion_io import (
+        UnsupportedFormatError,
+        motion_format,
+    )
+
+    try:
+        motion_format(path)
+    except UnsupportedFormatError:
+        return False
+    return True
+
+
+def load_training(paths: Sequence[str | os.PathLike], skip_bad: bool = False
+                  ) -> tuple[list[Motion], list[str], list[tuple[str, str]]]:
+    """Read the ``--train`` paths: files, or folders searched (recursively) for files ``read_motion`` reads.
+
+    Returns:
+        ``(motions, files read, [(file, why), ...] skipped)``.
+
+    Raises:
+        FileNotFoundError: a path that does not exist.
+        RefineError: a folder without motion files; an unreadable file (named) unless ``skip_bad``; nothing
+            readable at all.
+    """
+    from mocapkit.datasets.formats.motion_io import read_motion
+
+    files: list[Path] = []
+    for raw in paths:
+        path = Path(raw)
+        if path.is_dir():
+            found = sorted(p for p in path.rglob("*") if p.is_file() and _is_motion_file(p))
+            if not found:
+                raise RefineError(f"--train {path}: no motion files in this folder (looked for .c3d, .amc, .bvh, "
+                                  f".skeleton, MSR *_skeleton3D.txt)")
+            files += found
+        elif path.is_file():
+            files.append(path)
+        else:
+            raise FileNotFoundError(f"--train {path}: no such file or folder")
+    motions, used, skipped = [], [], []
+    for path in files:
+        try:
+            motions.append(read_motion(path))
+            used.append(str(path))
+        except Exception as exc:  # any reader error: reported (--skip-bad) or re-raised naming the file
+            why = f"{type(exc).__name__}: {exc}"
+            if not skip_bad:
+                message = str(exc) if str(path) in str(exc) else f"{path}: {why}"
+                raise RefineError(f"cannot read training file: {message} (--skip-bad skips unreadable files)") \
+                    from exc
+            skipped.append((str(path), why))
+    if not motions:
+        raise RefineError(f"--train: none of the {len(files)} training file(s) could be read")
+    return motions, used, skipped
+
+
+# --------------------------------------------------------------------------- refining
+
+
+def refine_motion(refiner: MotionRefiner, motion: Motion) -> tuple[Motion, np.ndarray]:
+    """``refiner.refine(motion)`` and the bool ``[frames, joints]`` mask of the samples it changed
+    (filled gaps and repaired observed samples)."""
+    out = refiner.refine(motion)
+    filled = motion.missing & ~out.missing
+    with np.errstate(invalid="ignore"):
+        repaired = ~motion.missing & ~out.missing & (out.positions != motion.positions).any(axis=2)
+    return out, filled | repaired
+
+
+def refine_file(src: str | os.PathLike, out: str | os.PathLike, method: str, overrides: Sequence[str] = (),
+                train: Sequence[str | os.PathLike] = (), skip_bad: bool = False,
+                repair_outliers: bool = False) -> RefineReport:
+    """Refine the motion file ``src`` with the refiner ``method`` and write ``out`` (``.c3d`` or ``.npz``).
+
+    See the module docstring for what is written. ``overrides`` are ``key=value`` parameters of the method
+    (``--set``); ``train`` are files or folders of clean motions of the same layout (``--train``); ``skip_bad``
+    skips unreadable training files (each is reported) instead of failing. ``repair_outliers`` also writes
+    the observed samples a robust method (LRMF, TrNN, PSC, filter bases) flags as outliers; by default only
+    the gaps are filled and every observed sample is written unchanged.
+
+    Raises:
+        ConfigError: unknown method or parameter.
+        RefineError: an unsupported output suffix (the supported ones are listed), a method that needs
+            training data without ``train``, unusable training data, a failed write check.
+        RefinementError: a motion the refiner cannot work on (named: every sample missing, non-finite
+            observed values, too few frames, another skeleton layout than the training data).
+        MotionFormatError and its subclasses: an unreadable input file.
+    """
+    from mocapkit.datasets.formats.motion_io import motion_format, read_motion
+
+    src, out = Path(src), Path(out)
+    suffix = out.suffix.lower()
+    if suffix not in OUTPUT_SUFFIXES:
+        raise RefineError(f"{out}: cannot write {suffix or 'a file without suffix'}; supported outputs: "
+                          f"{', '.join(OUTPUT_SUFFIXES)} (C3D markers, or NumPy positions)")
+    refiner = build_refiner(method, overrides)
+    if refiner.requires_fit and not train:
+        raise RefineError(f"refiner {method!r} ({type(refiner).__name__}) is data-driven and needs training motions: "
+                          f"pass --train PATH (files or folders of clean motions of the layout of {src.name})")
+    if not src.is_file():
+        raise FileNotFoundError(f"{src}: no such file")
+    motion = read_motion(src)
+    used, skipped = [], []
+    if train:
+        motions, used, skipped = load_training(train, skip_bad=skip_bad)
+        refiner.fit(motions)
+    refined, changed = refine_motion(refiner, motion)
+    if not repair_outliers:  # the everyday case: fill the gaps, keep every observed sample as it was
+        changed = changed & motion.missing
+        kept = np.where(motion.missing[..., None], refined.positions, motion.positions)
+        refined = dataclasses.replace(refined, positions=kept, missing=refined.missing)
+
+    out.parent.mkdir(parents=True, exist_ok=True)
+    if suffix == ".c3d" and motion_format(src) == "c3d":
+        mode = patch_c3d(src, out, motion, refined, changed)
+    elif suffix == ".c3d":
+        from mocapkit.datasets.formats.c3d import write_c3d
+
+        write_c3d(out, refined)
+        mode = "joint positions as C3D markers, mm"
+    else:
+        _write_npz(out, refined, motion.missing & ~refined.missing)
+        mode = "positions in metres, NaN where missing"
+    hint = ""
+    if "extrapolate" in inspect.signature(type(refiner).__init__).parameters and \
+            getattr(refiner, "extrapolate", None) is None:
+        hint = f"{method} does not extrapolate: --set extrapolate=hold holds the nearest observed value there"
+    return RefineReport(source=str(src), output=str(out), method=method, refiner=type(refiner).__name__,
+                        fps=float(motion.fps), frames=motion.num_frames,
+                        markers=_report_markers(motion, refined, changed), training=used, skipped=skipped,
+                        write_mode=mode, hint=hint)
+
+
+def _write_npz(path: Path, motion: Motion, filled: np.ndarray) -> None:
+    positions = motion.positions.astype(np.float32)
+    positions[motion.missing] = np.nan
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        with open(tmp, "wb") as fh:
+            np.savez(fh, positions=positions, missing=motion.missing, filled=filled,
+                     joint_names=np.asarray(motion.joint_names, dtype=str), fps=np.float64(motion.fps))
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
+# --------------------------------------------------------------------------- C3D in, C3D out
+
+
+def patch_c3d(src: Path, out: Path, motion: Motion, refined: Motion, changed: np.ndarray) -> str:
+    """Write ``src`` to ``out`` with only the ``changed`` samples replaced by ``refined`` (module docstring).
+
+    ``motion`` is ``read_c3d(src)``: its marker ``j`` is the file's point ``j``. Returns a short description of
+    the write (float storage through ezc3d, or integer storage patched in place).
+    """
+    import ezc3d
+
+    from mocapkit.datasets.formats.c3d import UNIT_SCALE
+
+    source = ezc3d.c3d(str(src))
+    points = source["data"]["points"]
+    if points.shape[1] != motion.num_joints or points.shape[2] != motion.num_frames:
+        raise RefineError(f"{src}: ezc3d sees {points.shape[1]} markers x {points.shape[2]} frames, the motion "
+                          f"{motion.num_joints} x {motion.num_frames}; cannot map the samples back")
+    units = str(motion.source_units).strip().lower()
+    frames, joints = np.nonzero(changed)                      # [n] each
+    values = refined.positions[frames, joints].astype(np.float64) / UNIT_SCALE[units]     # [n, 3] file units
+    if not np.isfinite(values).all():
+        raise RefineError(f"{src}: the refiner returned non-finite values for samples it reports as filled")
+    scale = float(np.asarray(source["parameters"]["POINT"]["SCALE"]["value"]).ravel()[0])
+    tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp.c3d")
+    try:
+        if scale > 0:
+            mode = _patch_integer(src, tmp, source, motion, frames, joints, values, scale)
+        else:
+            data = source.c3d_swig.data()
+            for f, j, (x, y, z) in zip(frames.tolist(), joints.tolist(), values.tolist()):
+                point = data.frame(f).points().point(j)
+                point.x(x)
+                point.y(y)
+                point.z(z)
+                point.residual(0.0)
+                point.cameraMask([False] * 7)
+            source.c3d_swig.write(str(tmp))
+            mode = "C3D rewritten by ezc3d; only the changed samples differ"
+        _verify(src, tmp, frames, joints, values, abs(scale))
+        os.replace(tmp, out)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+    return mode
+
+
+def _patch_integer(src: Path, dst: Path, source, motion: Motion, frames: np.ndarray, joints: np.ndarray,
+                   values: np.ndarray, scale: float) -> str:
+    """Integer storage: a byte copy of ``src`` with the 4 int16 words of each changed sample rewritten."""
+    raw = bytearray(src.read_bytes())
+    processor = motion.metadata.get("processor", "intel")
+    endian = ">" if processor == "mips" else "<"
+    n_points, n_frames = source["data"]["points"].shape[1:]
+    analogs = source["data"]["analogs"]
+    per_frame = analogs.shape[1] * (analogs.shape[2] // n_frames) if n_frames else 0
+    header_points, header_analog = struct.unpack(endian + "2H", bytes(raw[2:6]))
+    if header_points != n_points or header_analog != per_frame:
+        raise RefineError(f"{src}: integer storage and the header's {header_points} markers / {header_analog} "
+                          f"analog samples per frame disagree with the data ({n_points} / {per_frame}); "
+                          f"cannot patch it safely")
+    start = int(np.asarray(source["parameters"]["POINT"]["DATA_START"]["value"]).ravel()[0])
+    frame_bytes = 2 * (4 * n_points + per_frame)
+    if (start - 1) * 512 + n_frames * frame_bytes > len(raw):
+        raise RefineError(f"{src}: the data section is shorter than POINT:DATA_START and the frame size imply")
+    words = np.rint(values / scale)
+    bad = np.abs(words) > 32767
+    if bad.any():
+        k = int(np.argmax(bad.any(axis=1)))
+        raise RefineError(f"{src}: filled value of marker {motion.joint_names[joints[k]]!r} at frame {frames[k]} "
+                          f"is outside the int16 range of this integer-storage file (POINT:SCALE {scale:g})")
+    for f, j, (x, y, z) in zip(frames.tolist(), joints.tolist(), words.astype(int).tolist()):
+        offset = (start - 1) * 512 + f * frame_bytes + j * 8
+        raw[offset:offset + 8] = struct.pack(endian + "4h", x, y, z, 0)
+    dst.write_bytes(bytes(raw))
+    return (f"integer storage (POINT:SCALE {scale:g}) patched in place, filled values quantised to it; "
+            f"ezc3d would rewrite it as float storage")
+
+
+def _verify(src: Path, written: Path, frames: np.ndarray, joints: np.ndarray, values: np.ndarray,
+            scale: float) -> None:
+    """Read both files with ezc3d: unchanged samples identical, changed ones valid and at ``values``."""
+    import ezc3d
+
+    a, b = ezc3d.c3d(str(src)), ezc3d.c3d(str(written))
+    pa, pb = a["data"]["points"][:3], b["data"]["points"][:3]
+    ra, rb = a["data"]["meta_points"]["residuals"][0], b["data"]["meta_points"]["residuals"][0]
+    if pa.shape != pb.shape:
+        raise RefineError(f"{written}: written with {pb.shape[1:]} markers x frames, the source has {pa.shape[1:]}")
+    keep = np.ones(pa.shape[1:], bool)
+    keep[joints, frames] = False
+    same = np.array_equal(pa[:, keep], pb[:, keep], equal_nan=True) and np.array_equal(ra[keep], rb[keep])
+    got = pb[:, joints, frames].T
+    ok = np.isfinite(got).all() and (rb[joints, frames] >= 0).all() and \
+        np.allclose(got, values, rtol=1e-6, atol=max(scale, 1e-6))
+    if not (same and ok):
+        raise RefineError(f"{src}: the C3D written for it did not read back as intended "
+                          f"({'unchanged samples differ' if not same else 'filled samples differ'}); nothing written")
+    if not np.array_equal(a["data"]["analogs"], b["data"]["analogs"], equal_nan=True):
+        raise RefineError(f"{src}: the analog data of the written C3D differ from the source; nothing written")
