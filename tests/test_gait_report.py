@@ -1,4 +1,5 @@
-"""evaluate_gait with a module whose answers are known, the report tables, and `gait_report` end to end (slow)."""
+"""evaluate_gait with a module whose answers are known, the gait comparison's side-by-side tables, and
+`mocapkit gait-report` (an alias of `mocapkit compare gait`) end to end."""
 from __future__ import annotations
 
 import json
@@ -9,10 +10,10 @@ import torch
 import torch.nn.functional as F
 from omegaconf import OmegaConf
 
-from mocapkit.classical.gei_pca_lda import run_gei_pca_lda
+from mocapkit.classical.gei_pca_lda import GEIPCALDA
 from mocapkit.datasets.formats.casia_b import VIEWS
+from mocapkit.evaluation.compare.gait import GaitBenchmark, closed_set_table, cross_subject_tables, per_view_panels
 from mocapkit.evaluation.evaluate_gait import evaluate_gait
-from mocapkit.evaluation.gait_report import gait_report, per_view_panels, report_markdown
 from tests.test_gei_pca_lda import make_tiny_gei_cache
 
 CFG = OmegaConf.create({"trainer": {"accelerator": "cpu", "enable_progress_bar": False}, "experiment_name": "oracle"})
@@ -80,48 +81,59 @@ def test_evaluate_gait_cross_subject_ranks_embeddings(tiny_cache, tmp_path):
 
 def test_report_tables_side_by_side(tiny_cache, tmp_path):
     closed_dm, cross_dm = _datamodule(tiny_cache, "closed_set"), _datamodule(tiny_cache, "cross_subject")
-    oracle = {"experiment": "casiab_multitask", "run_dir": "runs/x", "train_seconds": 12.0, "max_epochs": 2}
-    result = {"data_root": str(tiny_cache.root), "seed": 0, "overrides": [], "elapsed_seconds": 20, "protocols": {
-        "closed_set": {"casiab_multitask": {**oracle, "report": evaluate_gait(
-            OracleGaitModule(closed_dm.num_subjects), closed_dm, CFG, tmp_path / "a")},
-            "gei_pca_lda": run_gei_pca_lda(tiny_cache, "closed_set")},
-        "cross_subject": {"casiab_multitask": {**oracle, "report": evaluate_gait(
-            OracleGaitModule(cross_dm.num_subjects), cross_dm, CFG, tmp_path / "b")},
-            "gei_pca_lda": run_gei_pca_lda(tiny_cache, "cross_subject")}}}
-    text = report_markdown(result)
+    benchmark = GaitBenchmark(str(tiny_cache.root))
+    oracle_closed = evaluate_gait(OracleGaitModule(closed_dm.num_subjects), closed_dm, CFG, tmp_path / "a")
+    oracle_cross = evaluate_gait(OracleGaitModule(cross_dm.num_subjects), cross_dm, CFG, tmp_path / "b")
+    pca_closed = benchmark.evaluate_estimator(GEIPCALDA(), benchmark.split("closed_set", 0))["detail"]
+    pca_cross = benchmark.evaluate_estimator(GEIPCALDA(), benchmark.split("cross_subject", 0))["detail"]
+    text = closed_set_table({"multi-task CNN": oracle_closed["closed_set"], "GEI+PCA+LDA": pca_closed["closed_set"]})
     header = next(line for line in text.splitlines() if line.startswith("| Probe | multi-task CNN: identify subject"))
     assert header.split(" | ")[1:5] == ["multi-task CNN: identify subject", "multi-task CNN: predict view",
                                         "multi-task CNN: predict condition", "GEI+PCA+LDA: identify subject"]
     assert "| 90° | 0.00 | 100.00 | 0.00 | " in text and "| 95.80 | 99.63 | 97.11 |" in text
+    text = cross_subject_tables({"multi-task CNN": oracle_cross["cross_view"], "GEI+PCA+LDA": pca_cross["cross_view"]})
     assert "| NM | 100.00 | " in text and "| 89.9 | 95.8 | 90.5 |" in text
-    assert "| cross_subject | multi-task CNN | 12 s | 2 | runs/x |" in text
-    assert "real CASIA-B" in text
-    panels = per_view_panels(result)
+    cells = [{"protocol": "closed_set", "label": "multi-task CNN", "detail": oracle_closed},
+             {"protocol": "closed_set", "label": "GEI+PCA+LDA", "detail": pca_closed},
+             {"protocol": "cross_subject", "label": "multi-task CNN", "detail": oracle_cross}]
+    panels = per_view_panels({"protocols": ["closed_set", "cross_subject"], "cells": cells})
     assert list(panels["closed set: subject accuracy per view"]) == ["multi-task CNN", "GEI+PCA+LDA"]
     assert panels["closed set: subject accuracy per view"]["multi-task CNN"]["90"] == 0.0
+    assert list(panels["cross subject: NM rank-1 per probe view (identical view excluded)"]) == ["multi-task CNN"]
 
 
 @pytest.mark.slow
 def test_gait_report_end_to_end(tmp_path):
-    """Trains both CNN experiments for 2 epochs under both protocols on a tiny 64×44 cache (OpenGait's
-    size, the smallest Table 6.1's trunk takes; needs the gait module, data module and `task: gait` configs)."""
-    pytest.importorskip("mocapkit.train.gait_module")
+    """`mocapkit gait-report` = `compare gait`: the multi-task CNN (1 epoch) and GEI+PCA+LDA under both protocols on
+    a tiny 64×44 cache (OpenGait's size, the smallest Table 6.1's trunk takes), with the old options."""
+    from mocapkit.cli import main as cli
+
     cache = make_tiny_gei_cache(tmp_path / "cache", num_subjects=4, height=64, width=44)
-    result = gait_report(cache.root, tmp_path / "report",
-                         overrides=["trainer.max_epochs=2", "trainer.enable_progress_bar=false",
-                                    "trainer.accelerator=cpu", "data.batch_size=16"])
-    for protocol in ("closed_set", "cross_subject"):
-        assert list(result["protocols"][protocol]) == ["casiab_multitask", "casiab_single_subject", "gei_pca_lda"]
-    multi = result["protocols"]["closed_set"]["casiab_multitask"]
-    assert set(multi["report"]["closed_set"]["tasks"]) == {"subject", "view", "condition"}
-    assert multi["report"]["checkpoint"].endswith("best.ckpt")
-    single = result["protocols"]["closed_set"]["casiab_single_subject"]
-    assert list(single["report"]["closed_set"]["tasks"]) == ["subject"]
-    cross = result["protocols"]["cross_subject"]["casiab_multitask"]["report"]["cross_view"]
-    assert cross["conditions"]["nm"]["missing_cells"] == [] and 0.0 <= cross["conditions"]["nm"]["mean"] <= 1.0
     out = tmp_path / "report"
-    assert json.loads((out / "report.json").read_text())["protocols"].keys() == {"closed_set", "cross_subject"}
-    text = (out / "report.md").read_text()
-    assert "## Closed set" in text and "## Cross subject" in text and "single-task CNN" in text
+    assert cli(["gait-report", "--data", str(cache.root), "--out", str(out), "--seed", "1",
+                "--experiments", "casiab_multitask", "--", "trainer.max_epochs=1", "trainer.enable_progress_bar=false",
+                "trainer.accelerator=cpu", "data.batch_size=16", "data.holdout_seed=2"]) == 0
+    result = json.loads((out / "results.json").read_text())
+    assert result["seeds"] == [1] and result["benchmark"]["holdout_seed"] == 2       # the split follows the override
+    for protocol in ("closed_set", "cross_subject"):
+        cells = {c["method"]: c for c in result["cells"] if c["protocol"] == protocol}
+        assert list(cells) == ["casiab_multitask", "gei_pca_lda"]
+        assert len({c["test_sha1"] for c in cells.values()}) == 1
+    multi = next(c for c in result["cells"] if c["method"] == "casiab_multitask" and c["protocol"] == "closed_set")
+    assert set(multi["detail"]["closed_set"]["tasks"]) == {"subject", "view", "condition"}
+    assert multi["detail"]["checkpoint"].endswith("best.ckpt") and multi["max_epochs"] == 1
+    assert "data.holdout_seed=2" in multi["overrides"]
+    cross = next(c for c in result["cells"] if c["method"] == "casiab_multitask" and c["protocol"] == "cross_subject")
+    nm = cross["detail"]["cross_view"]["conditions"]["nm"]
+    assert nm["missing_cells"] == [] and 0.0 <= nm["mean"] <= 1.0
+    text = (out / "results.md").read_text()
+    assert "### closed_set" in text and "### cross_subject" in text and "multi-task CNN: predict view" in text
+    assert "Closed set (thesis Table 6.2 protocol)" in text and "Cross subject (OpenGait protocol)" in text
     assert (out / "per_view.png").stat().st_size > 1000
-    assert (out / "runs" / "casiab_multitask" / "closed_set-seed0" / "eval" / "metrics.json").is_file()
+    assert (out / "runs" / "casiab_multitask" / "casiab_multitask_closed_set_seed1" / "eval" / "metrics.json").is_file()
+    # --no-pca-lda and --protocols / --experiments select cells
+    assert cli(["gait-report", "--data", str(cache.root), "--out", str(tmp_path / "small"), "trainer.max_epochs=1",
+                "--no-pca-lda", "--protocols", "closed_set", "--experiments", "casiab_single_subject"]) == 0
+    small = json.loads((tmp_path / "small" / "results.json").read_text())
+    assert [(c["method"], c["protocol"]) for c in small["cells"]] == [("casiab_single_subject", "closed_set")]
+    assert list(small["cells"][0]["detail"]["closed_set"]["tasks"]) == ["subject"]

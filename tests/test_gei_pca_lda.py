@@ -1,12 +1,18 @@
-"""GEI+PCA+LDA: separable synthetic GEIs, clamped dimensions, and both protocols on a tiny GEI cache."""
+"""GEI+PCA+LDA: separable synthetic GEIs, clamped dimensions, the scikit-learn contract, and both protocols on a
+tiny GEI cache through the comparison runner's gait benchmark (the split code the CNN data module uses)."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
+from sklearn.base import clone
+from sklearn.exceptions import NotFittedError
+from sklearn.model_selection import GridSearchCV
+from sklearn.pipeline import Pipeline
+from sklearn.preprocessing import FunctionTransformer
 
-from mocapkit.classical.gei_pca_lda import GEIPCALDA, run_gei_pca_lda
-from mocapkit.datasets.formats.casia_b import CONDITIONS, VIEWS
+from mocapkit.classical.gei_pca_lda import GEIPCALDA
 from mocapkit.datasets.casia_b.cache import GEICache, write_gei_cache
+from mocapkit.datasets.formats.casia_b import CONDITIONS, VIEWS
 
 SEQUENCES = [(0, s) for s in range(1, 7)] + [(1, 1), (1, 2), (2, 1), (2, 2)]  # (condition, repetition)
 
@@ -93,22 +99,47 @@ def test_bad_input_is_named():
         GEIPCALDA(n_pca=0).fit(X, y)
 
 
+def test_is_a_scikit_learn_estimator():
+    X, y = _blobs(5, 8, 40, seed=4)
+    model = GEIPCALDA(n_pca=12, metric="cos", random_state=3)
+    assert model.get_params() == {"n_pca": 12, "n_lda": None, "metric": "cos", "random_state": 3}
+    twin = clone(model)
+    assert twin is not model and twin.get_params() == model.get_params()
+    assert GEIPCALDA(metric="l2").metric == "l2" and GEIPCALDA(n_pca=-1).n_pca == -1  # untouched until fit
+    assert model.set_params(n_lda=2) is model and model.n_lda == 2
+    for call in (model.predict, model.transform, model.decision_function):
+        with pytest.raises(NotFittedError):
+            call(X)
+    pipe = Pipeline([("scale", FunctionTransformer(lambda a: a * 2.0)), ("gei", GEIPCALDA())]).fit(X, y)
+    assert (pipe.predict(X) == y).mean() == 1.0
+    search = GridSearchCV(GEIPCALDA(), {"n_pca": [2, 10]}, cv=2).fit(X, y)
+    assert search.best_params_["n_pca"] in (2, 10) and search.best_estimator_.n_pca_ == search.best_params_["n_pca"]
+    fitted = GEIPCALDA().fit(X, y)
+    with pytest.raises(ValueError, match="fitted on 40"):
+        fitted.predict(X[:, :30])
+
+
 def test_both_protocols_on_a_tiny_cache(tmp_path):
+    from mocapkit.evaluation.compare.gait import GaitBenchmark
+
     cache = make_tiny_gei_cache(tmp_path / "cache", cycles=2)
-    closed = run_gei_pca_lda(cache, "closed_set", holdout_seed=0)
-    report = closed["report"]
-    assert closed["test_geis"] == 10 * 11 * 3 * 2 and closed["train_geis"] == len(cache) - closed["test_geis"]
+    benchmark = GaitBenchmark(str(cache.root), metric="cos")
+    split = benchmark.split("closed_set", seed=0)
+    closed = benchmark.evaluate_estimator(GEIPCALDA(), split)
+    report = closed["detail"]["closed_set"]
+    assert len(split.test) == 10 * 11 * 3 * 2 and len(split.train) == len(cache) - len(split.test)
     assert report["per"] == "cycle" and report["num_sequences"] == 10 * 11 * 3
     assert list(report["tasks"]) == ["subject"]
-    assert report["tasks"]["subject"]["accuracy"] >= 0.9  # chance 0.1
+    assert closed["metrics"]["subject_accuracy"] == report["tasks"]["subject"]["accuracy"] >= 0.9  # chance 0.1
     assert set(report["tasks"]["subject"]["per_view"]) == {str(v) for v in VIEWS}
     assert report["tasks"]["subject"]["per_sequence"]["accuracy"] >= report["tasks"]["subject"]["accuracy"] - 0.05
 
-    cross = run_gei_pca_lda(cache, "cross_subject", metric="cos")
-    assert cross["train_subjects"] == [1, 2, 3, 4, 5, 6] and cross["test_subjects"] == [7, 8, 9, 10]
-    assert cross["n_lda"] == 5 and cross["report"]["metric"] == "cos" and cross["report"]["aggregate"] == "sequence"
-    nm = cross["report"]["conditions"]["nm"]
+    split = benchmark.split("cross_subject", seed=0)
+    assert split.info["train_subjects"] == [1, 2, 3, 4, 5, 6] and split.info["test_subjects"] == [7, 8, 9, 10]
+    cross = benchmark.evaluate_estimator(GEIPCALDA(metric="cos"), split)
+    assert cross["detail"]["n_lda_"] == 5 and cross["detail"]["cross_view"]["metric"] == "cos"
+    nm = cross["detail"]["cross_view"]["conditions"]["nm"]
     assert nm["missing_cells"] == [] and nm["num_probes"] == 4 * 2 * 11
-    assert nm["mean"] >= 0.6  # unseen subjects, chance 0.25
+    assert cross["metrics"]["rank1_nm"] == nm["mean"] >= 0.6  # unseen subjects, chance 0.25
     with pytest.raises(ValueError, match="protocol='loo'"):
-        run_gei_pca_lda(cache, "loo")
+        benchmark.split("loo", 0)

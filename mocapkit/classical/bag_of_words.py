@@ -1,6 +1,6 @@
 """Bag of clip words: condition the clips, cluster them, describe each sequence by a histogram, classify.
 
-The recognition pipeline of the thesis (§6.3.4; spec §5.3): a clusterer (k-means, or an NMF
+The recognition pipeline of the thesis (§6.3.4): a clusterer (k-means, or an NMF
 variant whose word is the arg-max of a clip's code row) is fitted on the *training* clips only;
 new clips get the word of their nearest centre (``predict``) or the arg-max of their code with the
 components fixed (``transform``); each sequence becomes the histogram of its clips' words, divided
@@ -26,6 +26,14 @@ Two optional steps, both fitted on the training clips only:
 * **assignment**: ``"hard"`` = the thesis's histogram of arg-max words; ``"soft"`` = the mean of the clips'
   ℓ1-normalised code rows (:func:`code_histograms`), with the codes of ``transform`` (components fixed) for
   training and test clips alike. Centroid models (k-means) have one-hot codes, so soft equals hard for them.
+
+Every class here is a scikit-learn estimator: parameters are stored untouched in ``__init__`` and checked in
+``fit`` (``check_array`` / ``check_non_negative``), fitted attributes end in ``_``, and using a model before
+``fit`` raises ``sklearn.exceptions.NotFittedError``. The sample is a **sequence**: :class:`SequenceClips`
+turns skeleton sequences ``[T_i, J, 3]`` into per-sequence clip features ``[n_clips_i, d]`` and
+:class:`BagOfWordsClassifier` takes a list of those with one label per sequence, so the whole recognition
+pipeline is ``Pipeline([("clips", SequenceClips(...)), ("bow", BagOfWordsClassifier(...))])`` and
+``GridSearchCV`` can tune e.g. ``bow__clusterer__n_components`` with folds over sequences.
 """
 from __future__ import annotations
 
@@ -33,10 +41,12 @@ import copy
 import time
 
 import numpy as np
-from sklearn.base import BaseEstimator, TransformerMixin, clone
+from sklearn.base import BaseEstimator, ClassifierMixin, TransformerMixin, clone
 from sklearn.linear_model import LogisticRegression
 from sklearn.model_selection import GridSearchCV, StratifiedKFold
 from sklearn.svm import LinearSVC
+from sklearn.utils.multiclass import check_classification_targets
+from sklearn.utils.validation import check_array, check_is_fitted, check_non_negative, column_or_1d
 
 CLASSIFIERS = ("logistic", "linear_svc")
 ASSIGNMENTS = ("hard", "soft")
@@ -59,17 +69,13 @@ class ClipConditioner(TransformerMixin, BaseEstimator):
         self.centre = centre
         self.unit_norm = unit_norm
 
-    def _signed(self, X) -> np.ndarray:
-        X = np.asarray(X, dtype=np.float64)
-        if X.ndim != 2 or X.shape[0] == 0 or X.shape[1] == 0 or X.shape[1] % 2:
-            raise ValueError(f"ClipConditioner needs sign-split features [n_clips, 2h] (n_clips >= 1, an even "
-                             f"number of columns), got shape {X.shape}")
-        if not np.isfinite(X).all():
-            row = int(np.flatnonzero(~np.isfinite(X).all(1))[0])
-            raise ValueError(f"ClipConditioner: features contain NaN or inf (first at clip {row})")
-        if X.min() < 0:
-            raise ValueError(f"ClipConditioner: sign-split features must be non-negative, min is {X.min():.4g} "
-                             f"(clip {int(np.argmin(X.min(1)))})")
+    @staticmethod
+    def _signed(X) -> np.ndarray:
+        X = check_array(X, dtype=np.float64, input_name="ClipConditioner features")
+        if X.shape[1] % 2:
+            raise ValueError(f"ClipConditioner needs sign-split features [n_clips, 2h] (an even number of "
+                             f"columns), got shape {X.shape}")
+        check_non_negative(X, "ClipConditioner (sign-split features must be non-negative)")
         half = X.shape[1] // 2
         return X[:, :half] - X[:, half:]
 
@@ -82,8 +88,7 @@ class ClipConditioner(TransformerMixin, BaseEstimator):
 
     def transform(self, X) -> np.ndarray:
         """Conditioned features ``[n, 2h]`` (float64, non-negative)."""
-        if not hasattr(self, "mean_"):
-            raise RuntimeError("this ClipConditioner is not fitted yet; call fit first")
+        check_is_fitted(self, "mean_")
         signed = self._signed(X)
         if signed.shape[1] != len(self.mean_):
             raise ValueError(f"X has {2 * signed.shape[1]} features but the conditioner was fitted with "
@@ -93,6 +98,76 @@ class ClipConditioner(TransformerMixin, BaseEstimator):
         if self.unit_norm:
             out /= np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-12)
         return out
+
+
+class SequenceClips(TransformerMixin, BaseEstimator):
+    """Skeleton sequences → their clip features, one array per sequence (:mod:`mocapkit.features.clips`).
+
+    ``transform(X)``: ``X`` = a sequence of ``n`` arrays ``[T_i, J, 3]`` (metres; all-zero joints = untracked)
+    → a list of ``n`` float32 arrays ``[n_clips_i, d]`` with ``d = 2 · frames_per_clip · J · 3`` (sign-split,
+    non-negative), ``n_clips_i = ⌊(T_i − window)/stride⌋ + 1`` (1 when ``T_i < window``). Stateless: ``fit``
+    only checks the parameters.
+
+    Args:
+        window: clip length ``M`` in frames. stride: frames between clip starts (None: ``M // 2``).
+        frames_per_clip: frames sampled per clip. layout: the skeleton layout name (e.g. ``"msr20"``).
+    """
+
+    def __init__(self, window: int = 30, stride: int | None = None, frames_per_clip: int = 10,
+                 layout: str = "msr20"):
+        self.window = window
+        self.stride = stride
+        self.frames_per_clip = frames_per_clip
+        self.layout = layout
+
+    def fit(self, X=None, y=None) -> SequenceClips:
+        """Check the parameters (``window`` ≥ 2 without a stride, ``frames_per_clip`` ≥ 1, a known layout)."""
+        from mocapkit.datasets.formats.layouts import get_layout
+        from mocapkit.features.clips import clip_count
+
+        clip_count(1, self.window, self.stride)                     # raises naming a bad window / stride
+        if int(self.frames_per_clip) < 1:
+            raise ValueError(f"frames_per_clip must be at least 1, got {self.frames_per_clip}")
+        self.layout_ = get_layout(self.layout)
+        self.n_features_out_ = 2 * int(self.frames_per_clip) * self.layout_.num_joints * 3
+        return self
+
+    def transform(self, X) -> list[np.ndarray]:
+        """Clip features ``[n_clips_i, d]`` of every sequence of ``X``."""
+        from mocapkit.features.clips import clip_features
+
+        check_is_fitted(self, "layout_")
+        out = []
+        for i, positions in enumerate(X):
+            positions = np.asarray(positions)
+            if positions.ndim != 3 or positions.shape[1:] != (self.layout_.num_joints, 3):
+                raise ValueError(f"sequence {i}: expected [frames, {self.layout_.num_joints}, 3] positions of the "
+                                 f"{self.layout} layout, got shape {positions.shape}")
+            try:
+                out.append(clip_features(positions, self.window, self.stride, self.frames_per_clip, self.layout_))
+            except ValueError as exc:
+                raise ValueError(f"sequence {i}: {exc}") from exc
+        return out
+
+
+def stack_clips(X, name: str = "X") -> tuple[np.ndarray, np.ndarray]:
+    """Per-sequence clip features → ``(clips [sum n_clips_i, d], sequence_of_clip [sum n_clips_i])``.
+
+    ``X``: a sequence of ``n`` arrays ``[n_clips_i, d]`` (each with at least one clip, equal ``d``), or one
+    ``[n, n_clips, d]`` array. The clips are checked with ``check_array`` (finite, numeric; the dtype is kept)
+    and ``check_non_negative`` (sign-split features; NMF needs them ≥ 0).
+    """
+    sequences = [np.asarray(x) for x in X]
+    if not sequences:
+        raise ValueError(f"{name} holds no sequences")
+    for i, clips in enumerate(sequences):
+        if clips.ndim != 2 or len(clips) == 0 or clips.shape[1] != sequences[0].shape[1]:
+            raise ValueError(f"{name}[{i}] must be a [n_clips, d] array with at least one clip and "
+                             f"d = {sequences[0].shape[-1]} like {name}[0], got shape {clips.shape}")
+    clips = check_array(np.concatenate(sequences), dtype="numeric", input_name=f"{name} (clip features)")
+    check_non_negative(clips, f"BagOfWordsClassifier ({name} clip features)")
+    owner = np.repeat(np.arange(len(sequences)), [len(c) for c in sequences])
+    return clips, owner
 
 
 def word_histograms(words, sequence_of_clip, n_sequences: int, n_words: int) -> np.ndarray:
@@ -193,11 +268,19 @@ def make_classifier(kind: str = "logistic", random_state: int = 0):
     raise ValueError(f"unknown classifier {kind!r}; choose from {CLASSIFIERS}")
 
 
-class BagOfWordsClassifier:
+class BagOfWordsClassifier(ClassifierMixin, BaseEstimator):
     """(Conditioner →) clusterer → per-sequence histograms → linear classifier with cross-validated ``C``.
+
+    The samples are sequences: ``fit(X, y)`` takes ``X`` = a sequence of ``n`` clip-feature arrays
+    ``[n_clips_i, d]`` (non-negative, e.g. from :class:`SequenceClips`) and ``y [n]``, one label per sequence.
 
     Args:
         clusterer: an unfitted scikit-learn-style clusterer (cloned on ``fit``), or a fitted one with ``prefit``.
+        classifier: ``"logistic"`` or ``"linear_svc"``.
+        Cs: the grid of ``C`` values searched.
+        cv: folds of the stratified cross-validation over training *sequences* (capped by the
+            smallest class size; with fewer than 2 per class the first ``C`` ≥ 1 is used without CV).
+        random_state: seeds the classifier and the folds.
         assignment: ``"hard"`` (the thesis: histogram of arg-max words, training words = the fit's ``labels_``)
             or ``"soft"`` (:func:`code_histograms` of the ``transform`` codes, training and test clips alike).
         conditioner: an optional transformer applied to the clips before the clusterer (e.g.
@@ -205,56 +288,66 @@ class BagOfWordsClassifier:
         prefit: use ``clusterer`` (and ``conditioner``) as already fitted on the training clips (e.g. the
             ``clusterer_`` of a hard model, to read the same clustering with soft histograms without refitting);
             the training words are then recomputed with ``assign_words``.
-        classifier: ``"logistic"`` or ``"linear_svc"``.
-        Cs: the grid of ``C`` values searched.
-        cv: folds of the stratified cross-validation over training *sequences* (capped by the
-            smallest class size; with fewer than 2 per class the first ``C`` ≥ 1 is used without CV).
-        random_state: seeds the classifier and the folds.
 
-    Attributes after ``fit``: ``conditioner_`` (None without one), ``clusterer_``, ``classifier_``, ``best_C_``,
-    ``train_words_``, ``n_words_``, ``cluster_time_``, ``classifier_time_`` (seconds).
+    Attributes after ``fit``: ``conditioner_`` (None without one), ``clusterer_``, ``classifier_``, ``classes_``,
+    ``best_C_``, ``n_features_in_`` (``d``), ``train_words_`` ``[n_clips]`` and ``train_clip_sequence_``
+    ``[n_clips]`` (the training clips' words and the index of their sequence in ``X``), ``n_words_``,
+    ``cluster_time_``, ``classifier_time_`` (seconds).
     """
 
     def __init__(self, clusterer, classifier: str = "logistic", Cs=(0.1, 1.0, 10.0, 100.0), cv: int = 3,
                  random_state: int = 0, assignment: str = "hard", conditioner=None, prefit: bool = False):
-        if assignment not in ASSIGNMENTS:
-            raise ValueError(f"assignment must be one of {ASSIGNMENTS}, got {assignment!r}")
         self.clusterer = clusterer
+        self.classifier = classifier
+        self.Cs = Cs
+        self.cv = cv
+        self.random_state = random_state
         self.assignment = assignment
         self.conditioner = conditioner
         self.prefit = prefit
-        self.classifier = classifier
-        self.Cs = tuple(Cs)
-        self.cv = cv
-        self.random_state = random_state
 
-    def fit(self, X: np.ndarray, sequence_of_clip: np.ndarray, y: np.ndarray) -> "BagOfWordsClassifier":
-        """Fit on clips ``X [n_clips, d]`` of sequences ``sequence_of_clip`` (0..n_seq-1) with labels ``y [n_seq]``."""
-        y = np.asarray(y)
+    def fit(self, X, y) -> BagOfWordsClassifier:
+        """Fit on the clips of ``n`` training sequences ``X`` (``[n_clips_i, d]`` each) with labels ``y [n]``."""
+        if self.assignment not in ASSIGNMENTS:
+            raise ValueError(f"assignment must be one of {ASSIGNMENTS}, got {self.assignment!r}")
+        if self.classifier not in CLASSIFIERS:
+            raise ValueError(f"unknown classifier {self.classifier!r}; choose from {CLASSIFIERS}")
+        Cs = [float(c) for c in self.Cs]
+        if not Cs or min(Cs) <= 0:
+            raise ValueError(f"Cs must be a non-empty list of positive values, got {self.Cs!r}")
+        clips, owner = stack_clips(X)
+        y = column_or_1d(y, warn=True)
+        check_classification_targets(y)
+        if len(y) != owner[-1] + 1:
+            raise ValueError(f"y has {len(y)} labels for {owner[-1] + 1} sequences in X")
         start = time.perf_counter()
         if self.prefit:
+            check_is_fitted(self.clusterer)
             self.conditioner_, self.clusterer_ = self.conditioner, self.clusterer
-            X = X if self.conditioner_ is None else self.conditioner_.transform(X)
-            self.train_words_ = assign_words(self.clusterer_, X)
+            clips = clips if self.conditioner_ is None else self.conditioner_.transform(clips)
+            self.train_words_ = assign_words(self.clusterer_, clips)
         else:
             self.conditioner_ = None if self.conditioner is None else _clone(self.conditioner)
-            X = X if self.conditioner_ is None else self.conditioner_.fit_transform(X)
+            clips = clips if self.conditioner_ is None else self.conditioner_.fit_transform(clips)
             self.clusterer_ = _clone(self.clusterer)
-            self.train_words_ = fit_words(self.clusterer_, X)
+            self.train_words_ = fit_words(self.clusterer_, clips)
         self.cluster_time_ = time.perf_counter() - start
         self.n_words_ = n_words_of(self.clusterer_)
-        histograms = self._histograms(X, sequence_of_clip, len(y), self.train_words_)
+        self.n_features_in_ = int(clips.shape[1])
+        self.train_clip_sequence_ = owner
+        histograms = self._histograms(clips, owner, len(y), self.train_words_)
         start = time.perf_counter()
         base = make_classifier(self.classifier, self.random_state)
-        folds = min(self.cv, int(np.bincount(np.unique(y, return_inverse=True)[1]).min()))
+        folds = min(int(self.cv), int(np.bincount(np.unique(y, return_inverse=True)[1]).min()))
         if folds >= 2:
-            search = GridSearchCV(base, {"C": list(self.Cs)}, cv=StratifiedKFold(folds, shuffle=True,
-                                                                                   random_state=self.random_state))
+            search = GridSearchCV(base, {"C": Cs}, cv=StratifiedKFold(folds, shuffle=True,
+                                                                       random_state=self.random_state))
             search.fit(histograms, y)
             self.classifier_, self.best_C_ = search.best_estimator_, float(search.best_params_["C"])
         else:
-            self.best_C_ = float(next((c for c in self.Cs if c >= 1.0), self.Cs[-1]))
+            self.best_C_ = float(next((c for c in Cs if c >= 1.0), Cs[-1]))
             self.classifier_ = clone(base).set_params(C=self.best_C_).fit(histograms, y)
+        self.classes_ = self.classifier_.classes_
         self.classifier_time_ = time.perf_counter() - start
         return self
 
@@ -264,16 +357,21 @@ class BagOfWordsClassifier:
         words = assign_words(self.clusterer_, X_conditioned) if words is None else words
         return word_histograms(words, sequence_of_clip, n_sequences, self.n_words_)
 
-    def histograms(self, X: np.ndarray, sequence_of_clip: np.ndarray, n_sequences: int) -> np.ndarray:
-        """Histograms ``[n_sequences, n_words]`` of new clips (conditioned and coded with the fitted models)."""
-        X = X if self.conditioner_ is None else self.conditioner_.transform(X)
-        return self._histograms(X, sequence_of_clip, n_sequences)
+    def histograms(self, X) -> np.ndarray:
+        """Histograms ``[n, n_words_]`` of ``n`` new sequences ``X`` (conditioned and coded with the fitted models)."""
+        check_is_fitted(self, "classifier_")
+        clips, owner = stack_clips(X)
+        if clips.shape[1] != self.n_features_in_:
+            raise ValueError(f"X has clips of {clips.shape[1]} features, the model was fitted on {self.n_features_in_}")
+        clips = clips if self.conditioner_ is None else self.conditioner_.transform(clips)
+        return self._histograms(clips, owner, owner[-1] + 1)
 
-    def predict(self, X: np.ndarray, sequence_of_clip: np.ndarray, n_sequences: int) -> np.ndarray:
-        """Predicted labels ``[n_sequences]`` of the sequences whose clips are ``X``."""
-        return self.classifier_.predict(self.histograms(X, sequence_of_clip, n_sequences))
+    def predict(self, X) -> np.ndarray:
+        """Predicted labels ``[n]`` of the sequences ``X``."""
+        histograms = self.histograms(X)                  # checks the fit first (NotFittedError)
+        return self.classifier_.predict(histograms)
 
-    def score(self, X: np.ndarray, sequence_of_clip: np.ndarray, y: np.ndarray) -> float:
-        """Recognition accuracy on sequences with labels ``y``."""
-        y = np.asarray(y)
-        return float((self.predict(X, sequence_of_clip, len(y)) == y).mean())
+    def decision_function(self, X) -> np.ndarray:
+        """The linear classifier's scores ``[n, n_classes]`` (``[n]`` for two classes) of the sequences ``X``."""
+        histograms = self.histograms(X)
+        return self.classifier_.decision_function(histograms)

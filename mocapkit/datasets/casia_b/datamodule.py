@@ -32,7 +32,7 @@ import torch
 from torch.utils.data import DataLoader, Dataset
 
 from mocapkit.datasets.formats.casia_b import CONDITIONS, VIEWS
-from mocapkit.datasets.casia_b.splits import PROTOCOLS, closed_set_split, cross_subject_subjects, sequence_validation_split
+from mocapkit.datasets.casia_b.splits import PROTOCOLS, protocol_split, sequence_validation_split
 from mocapkit.datasets.casia_b.cache import GEICache
 from mocapkit.datasets.datamodule import SplitDataModule
 
@@ -170,19 +170,9 @@ class GaitDataModule(SplitDataModule):
         subjects = self.cache.subjects.astype(np.int64)
         ids = np.unique(subjects)
 
-        if protocol == "closed_set":
-            if len(ids) < 2:
-                raise ValueError(f"{self.root}: protocol=closed_set needs at least 2 subjects, the cache has {len(ids)}")
-            train, self.test_idx = closed_set_split(subjects, self.cache.conditions, self.cache.sequences,
-                                                    self.cache.views, seed=self.holdout_seed)
-            self.train_subjects, self.test_subjects = ids, ids
-        else:
-            if len(ids) < 3:
-                raise ValueError(f"{self.root}: protocol=cross_subject needs at least 3 subjects (1 to train, 2 to "
-                                 f"test), the cache has {len(ids)}")
-            self.train_subjects, self.test_subjects = cross_subject_subjects(subjects, num_train_subjects)
-            train = np.flatnonzero(np.isin(subjects, self.train_subjects))
-            self.test_idx = np.flatnonzero(np.isin(subjects, self.test_subjects))
+        # the one split code of every gait method, learned or classical (mocapkit.evaluation.compare uses it too)
+        train, self.test_idx, self.train_subjects, self.test_subjects = protocol_split(
+            self.cache, protocol, holdout_seed=self.holdout_seed, num_train_subjects=num_train_subjects)
         self.label_subjects = np.asarray(self.train_subjects, dtype=np.int64)   # the subject label space
 
         lookup = np.full(int(ids.max()) + 1, -1, dtype=np.int64)
@@ -222,6 +212,11 @@ class GaitDataModule(SplitDataModule):
     @property
     def class_names(self) -> list[str]:
         return self.subject_names
+
+    def label_spaces(self) -> dict:
+        """What the gait LightningModule needs from the data: label-space sizes, subject names, GEI size."""
+        return {"num_subjects": self.num_subjects, "num_views": self.num_views, "num_conditions": self.num_conditions,
+                "subject_names": self.subject_names, "input_size": [self.height, self.width]}
 
     # ------------------------------------------------------------------ reports
 

@@ -15,6 +15,8 @@ Cross subject (OpenGait's CASIA-B protocol, Yu et al. 2006 "LT" split)
 """
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from mocapkit.datasets.formats.casia_b import CONDITIONS, NUM_SUBJECTS
@@ -73,6 +75,55 @@ def cross_subject_subjects(available: np.ndarray, num_train: int | None = None) 
     return ids[:num_train], ids[num_train:]
 
 
+class ProtocolSplit(NamedTuple):
+    """The two sides of a CASIA-B protocol (see :func:`protocol_split`)."""
+
+    train_idx: np.ndarray       #: int64 [n_train], sorted GEI indices of the training side (validation included)
+    test_idx: np.ndarray        #: int64 [n_test], sorted GEI indices of the test side
+    train_subjects: np.ndarray  #: int64, sorted subject IDs with training GEIs (the label space)
+    test_subjects: np.ndarray   #: int64, sorted subject IDs with test GEIs
+
+
+def protocol_split(cache, protocol: str, holdout_seed: int = 0, num_train_subjects: int | None = None) -> ProtocolSplit:
+    """The train / test GEIs of ``protocol`` on a GEI cache: the one split code of the learned and classical methods.
+
+    Args:
+        cache: a :class:`~mocapkit.datasets.casia_b.cache.GEICache` (or anything with per-GEI ``subjects``,
+            ``conditions``, ``sequences``, ``views`` arrays; ``root`` names it in errors).
+        protocol: ``"closed_set"``: :func:`closed_set_split` drawn with ``holdout_seed``, every subject on both
+            sides; ``"cross_subject"``: every GEI of the :func:`cross_subject_subjects` training subjects trains,
+            every GEI of the others tests.
+        holdout_seed: ``closed_set`` only: the draw of the held-out sequences.
+        num_train_subjects: ``cross_subject`` only (None: 74 of 124, or the same share of a smaller cache).
+
+    Returns:
+        :class:`ProtocolSplit`. The training side still holds what a learned method keeps for validation
+        (:func:`sequence_validation_split` takes it from ``train_idx``); a classical method fits on all of it.
+
+    Raises:
+        ValueError: an unknown protocol, too few subjects for it, or ``num_train_subjects`` with ``closed_set``.
+    """
+    root = getattr(cache, "root", "the GEI cache")
+    if protocol not in PROTOCOLS:
+        raise ValueError(f"data.protocol={protocol!r} is unknown; choose one of {', '.join(PROTOCOLS)}")
+    if protocol != "cross_subject" and num_train_subjects is not None:
+        raise ValueError(f"data.num_train_subjects={num_train_subjects} is only used by protocol=cross_subject, "
+                         f"not {protocol!r}")
+    subjects = np.asarray(cache.subjects, dtype=np.int64)
+    ids = np.unique(subjects)
+    if protocol == "closed_set":
+        if len(ids) < 2:
+            raise ValueError(f"{root}: protocol=closed_set needs at least 2 subjects, the cache has {len(ids)}")
+        train, test = closed_set_split(subjects, cache.conditions, cache.sequences, cache.views, seed=holdout_seed)
+        return ProtocolSplit(train, test, ids, ids)
+    if len(ids) < 3:
+        raise ValueError(f"{root}: protocol=cross_subject needs at least 3 subjects (1 to train, 2 to test), "
+                         f"the cache has {len(ids)}")
+    train_subjects, test_subjects = cross_subject_subjects(subjects, num_train_subjects)
+    return ProtocolSplit(np.flatnonzero(np.isin(subjects, train_subjects)),
+                         np.flatnonzero(np.isin(subjects, test_subjects)), train_subjects, test_subjects)
+
+
 def gallery_probe_masks(conditions: np.ndarray, sequences: np.ndarray) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """Boolean masks of the gallery (``nm-01..04``) and of each probe set (``nm``, ``bg``, ``cl``).
 
@@ -85,6 +136,7 @@ def gallery_probe_masks(conditions: np.ndarray, sequences: np.ndarray) -> tuple[
         return (conditions == CONDITIONS.index(name)) & np.isin(sequences, spec[name])
 
     return mask(GALLERY, "nm"), {name: mask(PROBES, name) for name in PROBES}
+
 
 def sequence_validation_split(train_idx: np.ndarray, sequence_keys: np.ndarray, val_fraction: float,
                               seed: int) -> tuple[np.ndarray, np.ndarray]:

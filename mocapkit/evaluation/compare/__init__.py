@@ -1,0 +1,112 @@
+"""One comparison runner: a table of methods × protocols × seeds on one benchmark, the same splits and metrics.
+
+``mocapkit compare NAME [Hydra overrides ...]`` composes ``configs/compare.yaml`` with ``configs/compare/NAME.yaml``
+(:func:`main`), runs every cell and writes into ``out``::
+
+    results.json   every cell (metrics, detail report, test-set fingerprint, time, run folder or parameters),
+                   the splits (test indices per protocol and seed), the selection, the resolved config, the machine
+    results.md     mean ± sd over seeds per method × protocol, the benchmark's detail tables, every cell
+    summary.png    the first headline metric per method and protocol (mean ± sd); plus the benchmark's plots
+    runs/          the learned runs: runs/<experiment_name>/<method>_<protocol>_seed<seed>/ (checkpoints, eval/)
+
+Configuration schema (``configs/compare.yaml``; a comparison file sets the keys)::
+
+    name: gait                         # names the output folder (out: checkpoints/compare/${name})
+    benchmark: {_target_: mocapkit.evaluation.compare.gait.GaitBenchmark, root: ..., ...}
+    protocols: [closed_set, cross_subject]
+    seeds: [0, 1, 2]
+    methods:                           # KEY → one of:
+      cnn:   {label: ..., learned: {experiment: casiab_multitask, overrides: [trainer.max_epochs=80]}}
+      pca:   {label: ..., estimator: {_target_: mocapkit.classical.GEIPCALDA, n_pca: null},
+              params: {...},           # set_params after instantiation (nested names: step__param)
+              select: {stages: [{bow__clusterer__n_components: [100, 200]}, ...], cv: 3}   # or {reuse: KEY}
+              reseed: true}            # set every (nested) random_state to the cell's seed (default)
+    only: null                         # run only these method keys
+    learned_overrides: []              # Hydra overrides for every learned run, e.g. ['trainer.max_epochs=2']
+    templates: {}                      # estimator specs that methods interpolate: estimator: ${templates.X}
+
+A **learned** method is trained with :func:`mocapkit.train.training.train` on
+``experiment=<NAME>`` + the benchmark's :meth:`~Benchmark.learned_overrides` + ``seed``, ``output_root``,
+``run_name`` + its ``overrides`` + ``learned_overrides``, and scored with
+:func:`mocapkit.evaluation.evaluate.evaluate`; the runner rebuilds the run's data module and fails unless it
+tested exactly the benchmark's test samples. An **estimator** is instantiated fresh per cell, fitted on the
+training side and scored by the benchmark's :meth:`~Benchmark.evaluate_estimator`, with the same metric code.
+``select`` chooses hyper-parameters by cross-validation on the first seed's training side (see
+:meth:`~mocapkit.evaluation.compare.runner.Comparison.selected`).
+
+Benchmark interface (:class:`~mocapkit.evaluation.compare.base.Benchmark`; a new benchmark — refinement,
+retrieval — is a subclass named by ``benchmark._target_``, with no change to the runner)::
+
+    protocols: tuple[str, ...]                     the protocol names
+    split(protocol, seed) -> Split                 train / test sample indices (int64, sorted) + info
+    data(indices) -> (X, y)                        what estimators fit / predict on ([n] samples)
+    evaluate_estimator(estimator, split) -> {"metrics": {name: float}, "detail": ...}
+                                                   default: fit(X, y), accuracy of predict on the test side;
+                                                   e.g. a refinement benchmark calls fit(motions) / refine(motion)
+    learned_overrides(protocol, seed) -> [str]     (learned methods) Hydra overrides selecting data and split
+    evaluate_learned(report, run_dir, split) -> {"metrics", "detail"}   (learned methods)
+    headline(protocol) -> [metric]; markdown(results) -> str; plots(results, out) -> [Path]   (presentation)
+
+Benchmarks here: :class:`~mocapkit.evaluation.compare.gait.GaitBenchmark` (``configs/compare/gait.yaml``,
+``gei_pca_lda.yaml``) and :class:`~mocapkit.evaluation.compare.msr.MSRClipBenchmark` (``msr3d_nmf.yaml``).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+from mocapkit.evaluation.compare.base import Benchmark, ComparisonError, Split, indices_sha1
+from mocapkit.evaluation.compare.runner import Comparison, compose, main, run_comparison
+
+__all__ = ["Benchmark", "Comparison", "ComparisonError", "Split", "cli_main", "compose", "gait_report",
+           "indices_sha1", "main", "run_comparison"]
+
+USAGE = """usage: mocapkit compare NAME [key=value ...]
+
+Run configs/compare/NAME.yaml: every method x protocol x seed cell on the same splits, written to
+results.json, results.md and PNG plots in `out` (default checkpoints/compare/NAME).
+
+  mocapkit compare gei_pca_lda benchmark.root=data/casia_b16_gei
+  mocapkit compare gait benchmark.root=GEI seeds=[0,1,2] "learned_overrides=['trainer.max_epochs=80']"
+  mocapkit compare msr3d_nmf only=[kmeans_w30,nmc_w30] protocols=[cross_subject] seeds=[0]
+
+Keys: name, out, benchmark (_target_ + parameters), protocols, seeds, methods, only, learned_overrides.
+"""
+
+
+def cli_main(argv: list[str]) -> None:
+    """``mocapkit compare ...`` (the CLI hands over its arguments unparsed, as Hydra overrides)."""
+    if not argv or argv[0] in ("-h", "--help"):
+        print(USAGE)
+        return
+    main(argv)
+
+
+def gait_report(data_root, out_dir, protocols=("closed_set", "cross_subject"),
+                experiments=("casiab_multitask", "casiab_single_subject"), overrides=(), seed: int = 0,
+                include_pca_lda: bool = True) -> dict:
+    """``mocapkit gait-report``: ``compare gait`` with the old options (a thin alias).
+
+    ``overrides`` go to every learned run (``learned_overrides``); ``data.holdout_seed=`` /
+    ``data.num_train_subjects=`` among them also set the benchmark's split, as they did for the baseline.
+    Experiments that ``configs/compare/gait.yaml`` does not list are added as learned methods.
+    """
+    from omegaconf import OmegaConf, open_dict
+
+    cfg = compose(["gait", f"out={Path(out_dir)}", f"benchmark.root={Path(data_root)}", f"seeds=[{int(seed)}]"])
+    with open_dict(cfg):
+        cfg.protocols = list(protocols)
+        cfg.learned_overrides = list(overrides)
+        for item in overrides:
+            key, _, value = item.lstrip("+").partition("=")
+            if key in ("data.holdout_seed", "data.num_train_subjects"):
+                OmegaConf.update(cfg, f"benchmark.{key.split('.', 1)[1]}", None if value == "null" else int(value))
+        by_experiment = {m.learned.experiment: k for k, m in cfg.methods.items() if m.get("learned")}
+        only = []
+        for experiment in experiments:
+            if experiment not in by_experiment:
+                cfg.methods[experiment] = {"label": experiment, "learned": {"experiment": experiment}}
+                by_experiment[experiment] = experiment
+            only.append(by_experiment[experiment])
+        only += [k for k, m in cfg.methods.items() if m.get("estimator")] if include_pca_lda else []
+        cfg.only = only
+    return run_comparison(cfg)
