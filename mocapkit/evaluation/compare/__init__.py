@@ -48,7 +48,7 @@ retrieval — is a subclass named by ``benchmark._target_``, with no change to t
     headline(protocol) -> [metric]; markdown(results) -> str; plots(results, out) -> [Path]   (presentation)
 
 Benchmarks here: :class:`~mocapkit.evaluation.compare.gait.GaitBenchmark` (``configs/compare/gait.yaml``,
-``gei_pca_lda.yaml``) and :class:`~mocapkit.evaluation.compare.msr.MSRClipBenchmark` (``msr3d_nmf.yaml``).
+``gei_pca_lda.yaml``) and :class:`~mocapkit.evaluation.compare.msr.MSRActionBenchmark` (``msr3d_nmf.yaml``).
 """
 from __future__ import annotations
 

@@ -56,7 +56,7 @@ def subset_copy(root: Path, target: Path, actions=None, subjects=None, takes=Non
     return target
 
 
-class MSRClipBenchmark(Benchmark):
+class MSRActionBenchmark(Benchmark):
     """MSR Action3D skeleton sequences, protocols ``random_half`` and ``cross_subject``, recognition accuracy.
 
     Args:
