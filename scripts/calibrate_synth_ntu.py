@@ -8,12 +8,13 @@ test on {3, 6, 7, 10}; report accuracy for logistic regression and an RBF SVM.
 
 Usage::
 
-    PYTHONPATH=. python scripts/calibrate_synth_ntu.py                    # default config
-    PYTHONPATH=. python scripts/calibrate_synth_ntu.py --set difficulty=0.5 --set jitter_m=0.02
-    PYTHONPATH=. python scripts/calibrate_synth_ntu.py --sweep             # the knob table
-    PYTHONPATH=. python scripts/calibrate_synth_ntu.py --files /tmp/ntu   # write + read real files
+    python scripts/calibrate_synth_ntu.py                    # default config
+    python scripts/calibrate_synth_ntu.py --set difficulty=0.5 --set jitter_m=0.02
+    python scripts/calibrate_synth_ntu.py --sweep             # the knob table
+    python scripts/calibrate_synth_ntu.py --files /tmp/ntu   # write + read real files
 
-Samples are generated in memory with ``synthesize_sample`` (identical to the files up
+The same baseline on a prepared cache, beside the learned models:
+``mocapkit compare ntu_recognition benchmark.root=CACHE``. Samples are generated in memory with ``synthesize_sample`` (identical to the files up
 to their 7 printed digits) unless ``--files`` is given.
 """
 from __future__ import annotations
@@ -31,29 +32,16 @@ from sklearn.svm import SVC
 
 from mocapkit.datasets.formats.ntu_skeleton import read_skeleton, select_main_bodies
 from mocapkit.datasets.synthetic.ntu import NTUSynthConfig, perform, sample_names, synthesize_ntu, synthesize_sample
+from mocapkit.features.pooled import PooledJointStatistics
 
 TRAIN_SUBJECTS = (1, 2, 4, 5, 8, 9)
 TEST_SUBJECTS = (3, 6, 7, 10)
 
 
-def pooled_features(seq) -> np.ndarray:
-    """Root-centred, time-pooled joint statistics of the two main bodies, ``[600]``."""
-    sel = select_main_bodies(seq, max_bodies=2, denoise_spread=True, min_frames=12)
-    present = np.zeros((2, seq.num_frames), dtype=bool)
-    for k, b in enumerate(sel.kept):
-        present[k] = seq.present[b]
-    pos = sel.positions.astype(np.float64)                 # [2, T, 25, 3]
-    frames = present[0] if present[0].any() else np.ones(seq.num_frames, bool)
-    root = pos[0, :, 0:1]                                   # [T, 1, 3] body 0 SpineBase
-    feats = []
-    for k in range(2):
-        rel = (pos[k] - root)[frames & present[k]] if (present[k] & frames).any() else None
-        if rel is None:
-            feats.append(np.zeros(4 * 75))
-            continue
-        rel = rel.reshape(len(rel), 75)
-        feats.append(np.concatenate([rel.mean(0), rel.std(0), rel.min(0), rel.max(0)]))
-    return np.concatenate(feats)
+def main_bodies(seq) -> np.ndarray:
+    """The two main bodies ``[2, T, 25, 3]`` (pyskl rules), zeros where a body is not seen."""
+    return select_main_bodies(seq, max_bodies=2, denoise_spread=True, min_frames=12).positions
+
 
 
 def dataset(config: NTUSynthConfig, files: str | None = None):
@@ -73,7 +61,7 @@ def dataset(config: NTUSynthConfig, files: str | None = None):
                     cache[key] = perform(config, *key)
                 yield synthesize_sample(n, config, cache[key])
         seqs = gen()
-    X = np.stack([pooled_features(s) for s in seqs])
+    X = PooledJointStatistics(bodies=2).fit_transform([main_bodies(s) for s in seqs])
     y = np.array([n.action - 1 for n in names])
     subj = np.array([n.subject for n in names])
     return X, y, subj
@@ -112,34 +100,6 @@ SWEEP = [
 ]
 
 
-def cache_baseline(root: str, split: str = "ntu60_xsub") -> float:
-    """Logistic-regression held-out accuracy on a prepared cache (same features, the cache's
-    kept bodies; all training-side subjects train, the split's test subjects test)."""
-    from mocapkit.datasets.ntu.cache import NTUCache
-    from mocapkit.datasets.ntu.splits import split_indices
-
-    cache = NTUCache(root)
-    feats = []
-    for i in range(len(cache)):
-        pos = cache.positions(i).astype(np.float64)                 # [2, T, 25, 3]
-        present = np.abs(pos).sum(axis=(2, 3)) > 0                   # [2, T]
-        frames = present[0] if present[0].any() else np.ones(pos.shape[1], bool)
-        root = pos[0, :, 0:1]
-        parts = []
-        for k in range(2):
-            keep = frames & present[k]
-            if not keep.any():
-                parts.append(np.zeros(4 * 75))
-                continue
-            rel = (pos[k] - root)[keep].reshape(-1, 75)
-            parts.append(np.concatenate([rel.mean(0), rel.std(0), rel.min(0), rel.max(0)]))
-        feats.append(np.concatenate(parts))
-    x = np.array(feats)
-    train, test = split_indices(cache, split)
-    model = make_pipeline(StandardScaler(), LogisticRegression(C=0.1, max_iter=3000))
-    model.fit(x[train], cache.labels[train])
-    return float((model.predict(x[test]) == cache.labels[test]).mean())
-
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -147,11 +107,7 @@ def main() -> None:
                         help="override an NTUSynthConfig field (Python literal), repeatable")
     parser.add_argument("--sweep", action="store_true", help="run the knob table instead")
     parser.add_argument("--files", metavar="DIR", help="write real files to DIR ('tmp' for a temp dir) and read them")
-    parser.add_argument("--cache", metavar="DIR", help="instead: the baseline on a prepared cache (NTU-60 X-Sub split)")
     args = parser.parse_args()
-    if args.cache:
-        print(f"{args.cache}: logistic regression, held-out subjects: {cache_baseline(args.cache):.3f}")
-        return
     base = {}
     for item in args.set:
         key, _, value = item.partition("=")
