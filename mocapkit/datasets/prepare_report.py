@@ -11,6 +11,8 @@ import json
 from collections.abc import Iterable
 from pathlib import Path
 
+from mocapkit.io_atomic import atomic_write_text
+
 REPORT_JSON = "report.json"
 REPORT_TXT = "report.txt"
 
@@ -52,7 +54,7 @@ class PrepareReportBase:
         return "\n".join(lines) + "\n"
 
     def write(self, folder: str | Path) -> None:
-        """Write ``report.json`` and ``report.txt`` into ``folder`` (which must exist)."""
+        """Write ``report.json`` and ``report.txt`` into ``folder`` (which must exist), each atomically."""
         folder = Path(folder)
-        (folder / REPORT_JSON).write_text(json.dumps(self.to_dict(), indent=1) + "\n", encoding="utf-8")
-        (folder / REPORT_TXT).write_text(self.to_text(), encoding="utf-8")
+        atomic_write_text(folder / REPORT_JSON, json.dumps(self.to_dict(), indent=1) + "\n")
+        atomic_write_text(folder / REPORT_TXT, self.to_text())

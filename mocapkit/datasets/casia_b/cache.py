@@ -16,13 +16,21 @@ A cache folder holds::
 """
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
 
 import numpy as np
 
-from mocapkit.datasets.cache_files import INDEX_FILE, META_FILE, PreparedCache
+from mocapkit.datasets.cache_files import (
+    INDEX_FILE,
+    META_FILE,
+    CacheIntegrityError,
+    PreparedCache,
+    integrity_record,
+    save_npy_atomic,
+    save_npz_atomic,
+    write_meta,
+)
 
 CACHE_FORMAT = "mocapkit-gei-cache"
 CACHE_VERSION = 1
@@ -55,12 +63,13 @@ def write_gei_cache(out: str | os.PathLike, geis: np.ndarray, index: dict[str, n
         if len(index[key]) != len(geis):
             raise ValueError(f"index[{key!r}] has {len(index[key])} entries for {len(geis)} GEIs")
     (out / META_FILE).unlink(missing_ok=True)  # unfinished until meta.json is rewritten
-    np.save(out / GEIS_FILE, geis)
-    np.savez(out / INDEX_FILE, names=np.asarray(index["names"], dtype=str),
-             **{k: np.asarray(index[k], dtype=np.int64) for k in INDEX_KEYS if k != "names"})
+    save_npy_atomic(out / GEIS_FILE, geis)
+    save_npz_atomic(out / INDEX_FILE, names=np.asarray(index["names"], dtype=str),
+                    **{k: np.asarray(index[k], dtype=np.int64) for k in INDEX_KEYS if k != "names"})
     full_meta = {"format": CACHE_FORMAT, "version": CACHE_VERSION, "num_geis": int(len(geis)),
-                 "height": int(geis.shape[1]), "width": int(geis.shape[2]), **meta}
-    (out / META_FILE).write_text(json.dumps(full_meta, indent=2), encoding="utf-8")
+                 "height": int(geis.shape[1]), "width": int(geis.shape[2]), **meta,
+                 "integrity": integrity_record(out, GEIS_FILE, len(geis))}
+    write_meta(out, full_meta, indent=2)
     return out
 
 
@@ -80,6 +89,16 @@ class GEICache(PreparedCache):
     def __init__(self, root: str | os.PathLike):
         super().__init__(root)
         self.height, self.width = int(self.meta["height"]), int(self.meta["width"])
+
+    def _check_index(self, rows: int) -> None:
+        """One GEI per index entry, of the size meta.json records."""
+        path = self.root / GEIS_FILE
+        if rows != len(self.names):
+            raise CacheIntegrityError(path, f"{rows} GEIs for {len(self.names)} index entries")
+        shape = tuple(self._array_shape[1:])
+        expected = (self.meta.get("height"), self.meta.get("width"))
+        if shape != expected:
+            raise CacheIntegrityError(path, f"GEIs of {shape}, meta.json says height x width {expected}")
 
     def __repr__(self) -> str:
         return (f"GEICache({str(self.root)!r}: {len(self)} GEIs of {self.height}x{self.width}, "

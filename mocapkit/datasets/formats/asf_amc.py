@@ -69,6 +69,7 @@ from scipy.spatial.transform import Rotation
 from mocapkit.datasets.formats.errors import MotionFormatError
 from mocapkit.datasets.formats.layouts import CMU31
 from mocapkit.datasets.formats.motion import Motion
+from mocapkit.datasets.formats.safe_io import read_file_bytes
 
 INCH = 0.0254
 DEFAULT_FPS = 120.0
@@ -237,11 +238,8 @@ def _tokens(line: str) -> list[str]:
 
 
 def _read_text(path: Path, error) -> str:
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise error(path, None, f"cannot read file ({exc.strerror})") from exc
-    return data.decode("latin-1")
+    """The file as text: a regular file of at most ``safe_io.MAX_FILE_BYTES`` (special files are refused)."""
+    return read_file_bytes(path, lambda p, message: error(p, None, message)).decode("latin-1")
 
 
 def read_asf(path: str | os.PathLike) -> AsfSkeleton:
@@ -269,10 +267,15 @@ def parse_asf_text(text: str, source: str | os.PathLike = "<memory>") -> AsfSkel
     hier_lines: dict[str, int] = {}
 
     def num(tok: str, ln: int, what: str) -> float:
+        # NaN is never a value; +-inf only in limits (CMU writes "(-inf inf)" for free dofs);
+        # 1e309 overflows to inf and is refused like inf.
         try:
-            return float(tok)
+            value = float(tok)
         except ValueError:
             raise AsfFormatError(source, ln, f"non-numeric {what} {tok!r}") from None
+        if math.isnan(value) or (math.isinf(value) and what != "limit"):
+            raise AsfFormatError(source, ln, f"non-finite {what} {tok!r}")
+        return value
 
     def finish_bone(ln: int) -> None:
         nonlocal bone

@@ -79,6 +79,7 @@ import numpy as np
 
 from mocapkit.datasets.formats.errors import MotionFormatError
 from mocapkit.datasets.formats.motion import Motion
+from mocapkit.datasets.formats.safe_io import read_file_bytes
 
 #: Metres per file unit for the named units accepted by ``read_bvh(units=...)``.
 UNITS: dict[str, float] = {
@@ -183,10 +184,7 @@ def read_bvh(path: str | os.PathLike, scale: float | None = None, units: str | N
             the file and the 1-based line.
     """
     path = Path(path)
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise BvhFormatError(path, None, f"cannot read file ({exc.strerror})") from exc
+    data = read_file_bytes(path, lambda p, message: BvhFormatError(p, None, message))
     return parse_bvh_text(data, source=path, scale=scale, units=units, end_sites=end_sites,
                           position_mode=position_mode)
 

@@ -26,17 +26,29 @@ trajectories (``parents=None``):
 Damaged files raise :class:`C3DFormatError` naming the file: whatever ezc3d rejects
 (its message is included), and files whose data section is shorter than the frame range
 in their header (ezc3d itself silently returns the frames it could read).
+
+ezc3d trusts the file, and one wrong byte in the parameter section can crash it (SIGSEGV)
+or make it loop. :func:`validate_c3d` therefore checks, in pure Python and before ezc3d sees
+the file (~0.2-1 ms per file), that it is a regular file, the header, the parameter
+section's block count and processor type, every group/parameter record (name length, group
+id, exact offset to the next record, data type, dimensions x element size and description
+inside the section), POINT:USED / SCALE / RATE / DATA_START and ANALOG:USED / RATE against
+the header, and frames x (points x 4 + analog samples) x element size within the file.
+Errors name the file and the byte offset and parameter at fault.
 """
 from __future__ import annotations
 
+import math
 import os
 import struct
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from mocapkit.datasets.formats.errors import MotionFormatError
 from mocapkit.datasets.formats.motion import AXES, Motion
+from mocapkit.datasets.formats.safe_io import regular_file_size
 
 #: Metres per unit for the POINT:UNITS values understood.
 UNIT_SCALE = {"mm": 1e-3, "cm": 1e-2, "dm": 1e-1, "m": 1.0}
@@ -75,20 +87,14 @@ def read_c3d(path: str | os.PathLike, labels: list[str] | None = None, strip_pre
     import ezc3d
 
     path = Path(path)
-    try:
-        with open(path, "rb") as fh:
-            head = fh.read(512)
-    except OSError as exc:
-        raise C3DFormatError(path, f"cannot read file ({exc.strerror or exc})") from exc
-    if len(head) < 512:
-        raise C3DFormatError(path, f"not a C3D file: {len(head)} bytes, shorter than the 512-byte header")
-    if head[1] != 0x50:
-        raise C3DFormatError(path, f"not a C3D file: header byte 2 is {head[1]}, expected 80 (0x50)")
+    layout = validate_c3d(path)
     try:
         c3d = ezc3d.c3d(str(path))
     except Exception as exc:  # ezc3d raises OSError / RuntimeError / ValueError with its own words
-        raise C3DFormatError(path, f"ezc3d cannot read it: {exc}") from exc
-
+        raise C3DFormatError(path, f"ezc3d cannot read it ({type(exc).__name__}: {exc}) although the header and "
+                                   f"the {layout.records} parameter records "
+                                   f"(bytes {layout.section_start}-{layout.section_end - 1}) are well formed") from exc
+    head = layout.head
     params = c3d["parameters"]
     point = params.get("POINT")
     if point is None:
@@ -280,6 +286,285 @@ def _events(params, header) -> list[dict]:
     events = header.get("events", {})
     return [{"label": str(lab).strip(), "context": "", "time": float(t)}
             for lab, t in zip(events.get("events_label", ()), events.get("events_time", ())) if str(lab).strip()]
+
+
+# --------------------------------------------------------------------------- validation before ezc3d
+#
+# ezc3d trusts the file: a single wrong byte in the parameter section (a name length, a
+# record offset, a dimension, POINT:USED...) can make it read or write out of bounds and kill
+# the interpreter with SIGSEGV, or loop for minutes. validate_c3d() walks the header and every
+# parameter record in pure Python first and checks each count, offset and size against the
+# section and the file, so ezc3d only ever sees files whose structure is sound.
+
+#: Bytes per element of the parameter data types (-1 char, 1 byte, 2 int16, 4 float).
+_PARAM_TYPES = {-1: 1, 1: 1, 2: 2, 4: 4}
+#: Most analog samples per point frame accepted (ANALOG:RATE / POINT:RATE).
+MAX_ANALOG_RATIO = 1000
+
+
+@dataclass
+class C3DLayout:
+    """What :func:`validate_c3d` learnt about a file (byte offsets are 0-based)."""
+
+    head: bytes
+    size: int
+    processor: str
+    section_start: int
+    section_end: int
+    records: int
+    params: dict = field(default_factory=dict)   # (GROUP, PARAM) -> (type, dims, data bytes, record offset)
+    frames: int = 0
+    points: int = 0
+    analog_per_frame: int = 0
+    element_size: int = 4
+    data_start: int = 0
+
+
+def validate_c3d(path: str | os.PathLike) -> C3DLayout:
+    """Check the structure of a C3D file without the C3D library; raise :class:`C3DFormatError` if unsound.
+
+    Checked: the file is a regular file (links followed); the 512-byte header (parameter
+    block number, key byte 0x50, data start block, frame range); the parameter section
+    (block count and processor type 84/85/86, the section inside the file); every group and
+    parameter record (name length, group id, offset to the next record strictly forward and
+    inside the section, data type, dimensions x element size and description inside the
+    section, parameters belonging to a declared group); ``POINT:USED``, ``POINT:SCALE``,
+    ``POINT:RATE``, ``POINT:DATA_START``, ``ANALOG:USED``, ``ANALOG:RATE`` against the
+    header; and that frames x (points x 4 + analog samples) x element size bytes from the
+    data start fit in the file (a shorter file is reported as truncated, with the first
+    incomplete frame). Errors name the file and the byte offset (and parameter) at fault.
+    """
+    path = Path(path)
+    size = regular_file_size(path, lambda p, m: C3DFormatError(p, m))
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(512)
+            if len(head) < 512:
+                raise C3DFormatError(path, f"not a C3D file: {len(head)} bytes, shorter than the 512-byte header")
+            if head[1] != 0x50:
+                raise C3DFormatError(path, f"not a C3D file: header byte 2 is {head[1]}, expected 80 (0x50)")
+            if head[0] < 2:
+                raise C3DFormatError(path, f"header byte 1 (first parameter block) is {head[0]}; it must be 2 or more")
+            start = (head[0] - 1) * 512
+            fh.seek(start)
+            section_head = fh.read(4)
+            if len(section_head) < 4:
+                raise C3DFormatError(path, f"ezc3d cannot read it: the parameter section starts at byte {start}, "
+                                           f"beyond the end of the {size}-byte file")
+            n_blocks, proc_byte = section_head[2], section_head[3]
+            end = start + n_blocks * 512
+            fh.seek(start)
+            section = fh.read(n_blocks * 512)
+    except OSError as exc:
+        raise C3DFormatError(path, f"cannot read file ({exc.strerror or exc})") from exc
+    if proc_byte not in _PROCESSORS:
+        raise C3DFormatError(path, f"byte {start + 3}: processor type {proc_byte}, expected 84 (Intel), "
+                                   "85 (DEC) or 86 (MIPS)")
+    if n_blocks < 1:
+        raise C3DFormatError(path, f"byte {start + 2}: the parameter section has {n_blocks} blocks")
+    if len(section) < n_blocks * 512:
+        raise C3DFormatError(path, f"ezc3d cannot read it: the parameter section (byte {start}, {n_blocks} blocks "
+                                   f"of 512) extends past the end of the {size}-byte file")
+    processor = _PROCESSORS[proc_byte]
+    layout = C3DLayout(head=head, size=size, processor=processor, section_start=start, section_end=end, records=0)
+    _walk_parameters(path, section, start, layout)
+    _check_sizes(path, layout)
+    return layout
+
+
+def _walk_parameters(path: Path, section: bytes, base: int, layout: C3DLayout) -> None:
+    """Every group and parameter record of ``section`` (which starts at file byte ``base``)."""
+    big = layout.processor == "mips"
+    groups: dict[int, str] = {}
+    params: list[tuple[int, str, int, int, tuple, bytes]] = []   # (group id, name, offset, type, dims, data)
+    pos, limit = 4, len(section)
+    while True:
+        if pos + 2 > limit:
+            raise C3DFormatError(path, f"byte {base + pos}: the parameter records run past the end of the parameter "
+                                       f"section (byte {base + limit}) without a terminating record")
+        n_name = struct.unpack_from("b", section, pos)[0]
+        if n_name == 0:
+            break
+        gid = struct.unpack_from("b", section, pos + 1)[0]
+        where = f"byte {base + pos}"
+        if gid == 0:
+            raise C3DFormatError(path, f"{where}: parameter record with group id 0")
+        name_end = pos + 2 + abs(n_name)
+        if name_end + 2 > limit:
+            raise C3DFormatError(path, f"{where}: record name of {abs(n_name)} characters runs past the end of the "
+                                       f"parameter section")
+        name = section[pos + 2:name_end].decode("latin-1").strip().upper()
+        offset_at = name_end
+        offset = struct.unpack_from(">H" if big else "<H", section, offset_at)[0]
+        what = f"group {name}" if gid < 0 else f"parameter {groups.get(gid, f'(group id {gid})')}:{name}"
+        cursor = offset_at + 2
+        if gid < 0:
+            if -gid in groups:
+                raise C3DFormatError(path, f"{where}: {what} reuses group id {-gid} of group {groups[-gid]!r}")
+            groups[-gid] = name
+        else:
+            if cursor + 2 > limit:
+                raise C3DFormatError(path, f"{where}: {what} runs past the end of the parameter section")
+            ptype, n_dims = struct.unpack_from("bB", section, cursor)
+            if ptype not in _PARAM_TYPES:
+                raise C3DFormatError(path, f"byte {base + cursor}: {what} has data type {ptype}, expected -1 (char), "
+                                           "1 (byte), 2 (int16) or 4 (float)")
+            if n_dims > 7:
+                raise C3DFormatError(path, f"byte {base + cursor + 1}: {what} has {n_dims} dimensions (at most 7)")
+            cursor += 2
+            if cursor + n_dims > limit:
+                raise C3DFormatError(path, f"{where}: the dimensions of {what} run past the end of the parameter section")
+            dims = tuple(section[cursor:cursor + n_dims])
+            cursor += n_dims
+            count = 1
+            for d in dims:
+                count *= d
+            n_bytes = count * _PARAM_TYPES[ptype]
+            if cursor + n_bytes > limit:
+                raise C3DFormatError(path, f"byte {base + cursor}: {what} with dimensions {list(dims)} x "
+                                           f"{_PARAM_TYPES[ptype]} bytes ({n_bytes} bytes) runs past the end of the "
+                                           f"parameter section (byte {base + limit})")
+            params.append((gid, name, base + pos, ptype, dims, section[cursor:cursor + n_bytes]))
+            cursor += n_bytes
+        if cursor + 1 > limit:
+            raise C3DFormatError(path, f"{where}: {what} runs past the end of the parameter section")
+        n_desc = section[cursor]
+        cursor += 1 + n_desc
+        if cursor > limit:
+            raise C3DFormatError(path, f"{where}: the description of {what} runs past the end of the parameter section")
+        layout.records += 1
+        if offset == 0:  # the last record
+            break
+        nxt = offset_at + offset
+        if nxt != cursor:
+            raise C3DFormatError(path, f"byte {base + offset_at}: {what}: the offset to the next record ({offset}) "
+                                       f"points to byte {base + nxt}, but the record ends at byte {base + cursor}")
+        pos = nxt
+    for gid, name, at, ptype, dims, data in params:
+        if gid not in groups:
+            raise C3DFormatError(path, f"byte {at}: parameter {name!r} belongs to group id {gid}, which no group "
+                                       "record declares")
+        layout.params[(groups[gid], name)] = (ptype, dims, data, at)
+
+
+def _param_numbers(path: Path, layout: C3DLayout, group: str, name: str) -> list[float] | None:
+    """The numeric values of ``GROUP:NAME`` (ints as signed 16-bit, floats per processor), or None if absent."""
+    entry = layout.params.get((group, name))
+    if entry is None:
+        return None
+    ptype, _dims, data, at = entry
+    if ptype == -1:
+        raise C3DFormatError(path, f"byte {at}: {group}:{name} is text; a number was expected")
+    big = layout.processor == "mips"
+    if ptype == 1:
+        return [float(b) for b in data]
+    if ptype == 2:
+        return [float(v) for v in struct.unpack((">" if big else "<") + f"{len(data) // 2}h", data)]
+    return [_float(data[k:k + 4], layout.processor) for k in range(0, len(data), 4)]
+
+
+def _float(raw: bytes, processor: str) -> float:
+    if processor == "mips":
+        return struct.unpack(">f", raw)[0]
+    if processor == "dec":   # VAX F-float: swapped 16-bit words, exponent bias 2 higher
+        return struct.unpack("<f", raw[2:4] + raw[0:2])[0] / 4.0
+    return struct.unpack("<f", raw)[0]
+
+
+def _check_sizes(path: Path, layout: C3DLayout) -> None:
+    """Header and POINT/ANALOG parameters against each other and the file length."""
+    head, big, proc = layout.head, layout.processor == "mips", layout.processor
+    words = struct.unpack((">" if big else "<") + "256H", head)   # 1-based word k is words[k - 1]
+    h_points, h_analog, h_first, h_last = words[1], words[2], words[3], words[4]
+    h_scale = _float(head[12:16], proc)
+    h_data_start = words[8]
+    h_rate = _float(head[20:24], proc)
+
+    def one(group: str, name: str) -> float | None:
+        values = _param_numbers(path, layout, group, name)
+        return values[0] if values else None
+
+    def at(group: str, name: str) -> str:
+        entry = layout.params.get((group, name))
+        return f"byte {entry[3]} ({group}:{name})" if entry else f"{group}:{name}"
+
+    if ("POINT", "USED") not in layout.params and h_points:
+        raise C3DFormatError(path, f"no POINT:USED parameter although the header announces {h_points} points")
+    used = one("POINT", "USED")
+    points = h_points if used is None else int(used) & 0xFFFF   # > 32767 points are stored as unsigned words
+    if points != h_points:
+        raise C3DFormatError(path, f"{at('POINT', 'USED')}: {points} points, but header word 2 says {h_points}")
+    scale = one("POINT", "SCALE")
+    scale = h_scale if scale is None else scale
+    if not math.isfinite(scale) or not math.isfinite(h_scale):
+        raise C3DFormatError(path, f"{at('POINT', 'SCALE')}: the point scale factor is not finite")
+    element = 4 if (scale < 0 or h_scale < 0) else 2
+    rate = one("POINT", "RATE")
+    rate = h_rate if rate is None else rate
+    if not math.isfinite(rate) or rate < 0 or not math.isfinite(h_rate):
+        raise C3DFormatError(path, f"{at('POINT', 'RATE')}: point rate {rate} is not a finite non-negative number")
+
+    a_used = one("ANALOG", "USED")
+    channels = 0 if a_used is None else int(a_used) & 0xFFFF
+    a_rate = one("ANALOG", "RATE")
+    if a_rate is not None and (not math.isfinite(a_rate) or a_rate < 0):
+        raise C3DFormatError(path, f"{at('ANALOG', 'RATE')}: analog rate {a_rate} is not a finite non-negative number")
+    analog = h_analog
+    if channels:
+        if h_analog % channels:
+            raise C3DFormatError(path, f"{at('ANALOG', 'USED')}: {channels} channels, but header word 3 announces "
+                                       f"{h_analog} analog samples per frame, not a multiple of it")
+        ratio = h_analog // channels
+        if a_rate is not None and rate > 0:
+            expected_ratio = a_rate / rate
+            if expected_ratio > MAX_ANALOG_RATIO:
+                raise C3DFormatError(path, f"{at('ANALOG', 'RATE')}: {expected_ratio:g} analog samples per point "
+                                           f"frame (more than {MAX_ANALOG_RATIO})")
+            if ratio and abs(expected_ratio - ratio) > 0.5 + 1e-6 * ratio:
+                raise C3DFormatError(path, f"{at('ANALOG', 'RATE')}: ANALOG:RATE / POINT:RATE = {expected_ratio:g}, "
+                                           f"but the header stores {ratio} samples per channel and frame")
+    elif h_analog and a_used is not None:
+        raise C3DFormatError(path, f"{at('ANALOG', 'USED')}: 0 channels, but header word 3 announces {h_analog} "
+                                   "analog samples per frame")
+
+    ds = one("POINT", "DATA_START")
+    data_start = h_data_start if ds is None else int(ds) & 0xFFFF
+    if data_start != h_data_start:
+        raise C3DFormatError(path, f"{at('POINT', 'DATA_START')}: block {data_start}, but header word 9 says "
+                                   f"{h_data_start}")
+    first_free = layout.section_end // 512 + 1
+    if data_start < first_free:
+        raise C3DFormatError(path, f"header word 9: the data starts in block {data_start}, inside the header or the "
+                                   f"parameter section (which ends before block {first_free})")
+    frames = h_last - h_first + 1 if h_last >= h_first else 0
+    if h_last < h_first and not (h_last == 0 and h_first in (0, 1)):
+        raise C3DFormatError(path, f"header words 4-5: last frame {h_last} before first frame {h_first}")
+    # Long trials keep the real count in POINT:FRAMES or TRIAL:ACTUAL_START/END_FIELD (the header caps at 65535).
+    p_frames = one("POINT", "FRAMES")
+    if p_frames is not None:
+        frames = max(frames, int(p_frames) & 0xFFFF)
+    trial = [_param_numbers(path, layout, "TRIAL", k) for k in ("ACTUAL_START_FIELD", "ACTUAL_END_FIELD")]
+    if all(trial):
+        s, e = ([int(v) & 0xFFFF for v in values] for values in trial)
+        start = s[0] + (s[1] << 16 if len(s) > 1 else 0)
+        end = e[0] + (e[1] << 16 if len(e) > 1 else 0)
+        if end >= start > 0:
+            frames = max(frames, end - start + 1)
+    if frames and points + analog and not rate > 0:
+        raise C3DFormatError(path, f"{at('POINT', 'RATE')}: point rate is {rate} for {frames} frames of data")
+
+    frame_bytes = (points * 4 + analog) * element
+    begin = (data_start - 1) * 512
+    available = max(layout.size - begin, 0)
+    if frame_bytes and frames * frame_bytes > available:
+        complete = available // frame_bytes
+        raise C3DFormatError(path, f"truncated: the header announces {frames} frames but the data ends after "
+                                   f"{complete} (this frame is incomplete or absent): {frames} frames x "
+                                   f"({points} points x 4 + {analog} analog samples) x {element} bytes from byte "
+                                   f"{begin} need {begin + frames * frame_bytes} bytes, the file has {layout.size}",
+                             frame=complete + 1)
+    layout.frames, layout.points, layout.analog_per_frame = frames, points, analog
+    layout.element_size, layout.data_start = element, data_start
 
 
 # --------------------------------------------------------------------------- writing

@@ -39,6 +39,7 @@ import numpy as np
 from mocapkit.datasets.formats.errors import MotionFormatError
 from mocapkit.datasets.formats.layouts import MSR20
 from mocapkit.datasets.formats.motion import Motion
+from mocapkit.datasets.formats.safe_io import read_file_bytes
 
 JOINTS_PER_FRAME = 20
 FPS = 15.0
@@ -75,7 +76,10 @@ def parse_msr_name(path: str | Path) -> MSRSampleName:
 
 
 def _parse_rows(path: Path, text: str) -> np.ndarray:
-    """The ``[rows, 4]`` float array of a file; errors name the line (1-based, counting blank lines)."""
+    """The float32 ``[rows, 4]`` array of a file; errors name the line (1-based, counting blank lines).
+
+    NaN, infinite values and values beyond the float32 range are errors naming the line.
+    """
     lines = text.splitlines()
     rows, numbers = [], []
     for number, line in enumerate(lines, start=1):
@@ -101,8 +105,14 @@ def _parse_rows(path: Path, text: str) -> np.ndarray:
     values = np.asarray(rows, dtype=np.float64)
     bad = ~np.isfinite(values).all(axis=1)
     if bad.any():
-        raise MSRFormatError(path, numbers[int(np.argmax(bad))], "non-finite value")
-    return values
+        raise MSRFormatError(path, numbers[int(np.argmax(bad))], "non-finite value (NaN or infinite)")
+    # Positions are stored as float32: a value beyond its range would silently become inf.
+    big = (np.abs(values) > np.finfo(np.float32).max).any(axis=1)
+    if big.any():
+        row = int(np.argmax(big))
+        raise MSRFormatError(path, numbers[row], f"value {values[row][np.abs(values[row]) > np.finfo(np.float32).max][0]:g} "
+                                                 "is beyond the float32 range (about 3.4e38)")
+    return values.astype(np.float32)
 
 
 def read_msr_skeleton(path: str | Path, kind: str = "auto") -> Motion:
@@ -131,10 +141,11 @@ def read_msr_skeleton(path: str | Path, kind: str = "auto") -> Motion:
         kind = sample.kind if sample is not None else "real3d"
     if kind not in ("real3d", "screen"):
         raise ValueError(f"kind must be 'real3d', 'screen' or 'auto', got {kind!r}")
-    values = _parse_rows(path, path.read_text(encoding="ascii", errors="replace"))
+    text = read_file_bytes(path, lambda p, message: MSRFormatError(p, None, message))
+    values = _parse_rows(path, text.decode("ascii", errors="replace"))
     frames = values.reshape(-1, JOINTS_PER_FRAME, 4)
-    coords = frames[..., :3].astype(np.float32)
-    confidence = frames[..., 3].astype(np.float32)
+    coords = frames[..., :3]
+    confidence = frames[..., 3]
     missing = (coords == 0).all(axis=-1)
     all_zero = bool((frames == 0).all())
     metadata = {"confidence": confidence, "all_zero": all_zero, "coordinates": kind,

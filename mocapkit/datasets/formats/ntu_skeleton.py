@@ -9,8 +9,19 @@ The text format (Shahroudy et al. 2016; the release's reader script)::
                 jointCount                      (25)
         per joint: x y z depthX depthY colorX colorY orientW orientX orientY orientZ trackingState
 
-Both CRLF and LF line ends are accepted. Every field is kept; body IDs are
+CRLF, LF and CR-only line ends are accepted. Every field is kept; body IDs are
 64-bit tracking IDs and are kept exact as Python ints.
+
+Robustness (every damaged file raises :class:`SkeletonFormatError` naming the file and,
+where there is one, the line): only regular files are read (directories, FIFOs and devices
+such as a link to ``/dev/zero`` are refused by name) and at most
+:data:`~mocapkit.datasets.formats.safe_io.MAX_FILE_BYTES`; NaN and infinite values (``nan``,
+``inf``, ``1e309``) in joint lines *and* body lines are errors naming the line; the dense
+per-track arrays are bounded by the file size: a file whose distinct body IDs x frames
+would need more than :func:`track_memory_limit` bytes (``max(64 MiB, 32 x file size)``;
+every body entry takes at least 300 bytes of text, so real files stay far below it) is
+refused rather than allocated (a 1 MB file with a new body ID in every frame used to ask
+for gigabytes).
 
 Bodies are grouped into *tracks* by body ID across frames: ``positions`` is
 ``[tracks, frames, 25, 3]`` with zeros where a track is absent in a frame.
@@ -30,6 +41,7 @@ import numpy as np
 
 from mocapkit.datasets.formats.errors import MotionFormatError
 from mocapkit.datasets.formats.layouts import NTU25
+from mocapkit.datasets.formats.safe_io import read_file_bytes
 
 NUM_JOINTS = 25
 JOINT_FIELDS = 12
@@ -40,6 +52,18 @@ BODY_INFO_FIELDS = (
     "body_id", "clipped_edges", "hand_left_confidence", "hand_left_state",
     "hand_right_confidence", "hand_right_state", "is_restricted", "lean_x", "lean_y", "tracking_state",
 )
+
+#: Floor and factor of :func:`track_memory_limit`.
+TRACK_MEMORY_FLOOR = 64 << 20
+TRACK_MEMORY_FACTOR = 32
+#: Bytes the dense arrays take per (track, frame): joints, body info, slot.
+_BYTES_PER_TRACK_FRAME = NUM_JOINTS * JOINT_FIELDS * 8 + (BODY_FIELDS - 1) * 8 + 2
+
+
+def track_memory_limit(text_bytes: int) -> int:
+    """Most bytes :func:`parse_skeleton_text` allocates for the ``[tracks, frames, ...]`` arrays of a text this long."""
+    return max(TRACK_MEMORY_FLOOR, TRACK_MEMORY_FACTOR * int(text_bytes))
+
 
 _NAME_RE = re.compile(r"S(\d{3})C(\d{3})P(\d{3})R(\d{3})A(\d{3})")
 
@@ -163,10 +187,7 @@ def read_skeleton(path: str | os.PathLike) -> SkeletonSequence:
             message names the file and the line.
     """
     path = Path(path)
-    try:
-        text = path.read_bytes()
-    except OSError as exc:
-        raise SkeletonFormatError(path, None, f"cannot read file ({exc.strerror})") from exc
+    text = read_file_bytes(path, lambda p, message: SkeletonFormatError(p, None, message))
     return parse_skeleton_text(text, name=path.name, source=path)
 
 
@@ -180,7 +201,7 @@ def parse_skeleton_text(text: bytes | str, name: str = "<memory>", source: str |
     source = source if source is not None else name
     if isinstance(text, str):
         text = text.encode()
-    lines = text.splitlines()  # handles \r\n and \n
+    lines = text.splitlines()  # handles \r\n, \n and \r
     stem = Path(name).name
     if stem.endswith(".skeleton"):
         stem = stem[: -len(".skeleton")]
@@ -196,6 +217,8 @@ def parse_skeleton_text(text: bytes | str, name: str = "<memory>", source: str |
         if i >= n_lines:
             raise SkeletonFormatError(source, i + 1, f"file ends before frame {t + 1} of {num_frames}")
         nb = _parse_count(lines, i, source, f"body count of frame {t + 1}")
+        if nb > np.iinfo(np.int16).max:
+            raise SkeletonFormatError(source, i + 1, f"body count {nb} of frame {t + 1} is not plausible")
         i += 1
         for s in range(nb):
             if i + 1 >= n_lines:
@@ -217,6 +240,13 @@ def parse_skeleton_text(text: bytes | str, name: str = "<memory>", source: str |
     joint_values = _to_floats(joint_lines, JOINT_FIELDS)
     if joint_values is None:
         _raise_bad_line(lines, [e[2] + 2 + j for e in entries for j in range(NUM_JOINTS)], JOINT_FIELDS, source, "joint")
+    bad_rows = np.flatnonzero((~np.isfinite(joint_values)).any(axis=1))
+    if len(bad_rows):
+        k = int(bad_rows[0])
+        e = entries[k // NUM_JOINTS]
+        raise SkeletonFormatError(source, e[2] + 3 + k % NUM_JOINTS,
+                                  f"non-finite joint value (NaN or infinite) in joint {k % NUM_JOINTS + 1} of body "
+                                  f"{e[1] + 1} of frame {e[0] + 1}")
     info_tokens = [ln.split() for ln in body_lines]
     bad = [k for k, tok in enumerate(info_tokens) if len(tok) != BODY_FIELDS]
     if bad:
@@ -227,12 +257,24 @@ def parse_skeleton_text(text: bytes | str, name: str = "<memory>", source: str |
         info_values = np.array([tok[1:] for tok in info_tokens], dtype=np.float64).reshape(n_entries, BODY_FIELDS - 1)
     except ValueError:
         _raise_bad_body_line(lines, [e[2] for e in entries], source)
+    bad_rows = np.flatnonzero((~np.isfinite(info_values)).any(axis=1))
+    if len(bad_rows):
+        k = int(bad_rows[0])
+        raise SkeletonFormatError(source, entries[k][2] + 1, f"non-finite value (NaN or infinite) in the body line "
+                                                             f"of body {entries[k][1] + 1} of frame {entries[k][0] + 1}")
 
     # Group by body ID, in order of first appearance.
     track_of: dict[int, int] = {}
     for body_id in ids:
         track_of.setdefault(body_id, len(track_of))
     n_tracks = len(track_of)
+    needed = n_tracks * num_frames * _BYTES_PER_TRACK_FRAME
+    limit = track_memory_limit(len(text))
+    if needed > limit:
+        raise SkeletonFormatError(source, None, f"{n_tracks} distinct body IDs over {num_frames} frames would need "
+                                                f"{needed / 2**20:.0f} MiB of track arrays, more than the "
+                                                f"{limit / 2**20:.0f} MiB allowed for a {len(text)}-byte file "
+                                                "(max(64 MiB, 32 x file size)); the body IDs are damaged")
     joints = np.zeros((n_tracks, num_frames, NUM_JOINTS, JOINT_FIELDS), dtype=np.float64)
     body_info = np.zeros((n_tracks, num_frames, BODY_FIELDS - 1), dtype=np.float64)
     slot = np.full((n_tracks, num_frames), -1, dtype=np.int16)
@@ -246,9 +288,6 @@ def parse_skeleton_text(text: bytes | str, name: str = "<memory>", source: str |
         joints[tr, fr] = joint_values.reshape(n_entries, NUM_JOINTS, JOINT_FIELDS)
         body_info[tr, fr] = info_values
         slot[tr, fr] = sl
-    if not np.isfinite(joints).all():
-        k = int(np.argwhere(~np.isfinite(joint_values.reshape(-1, JOINT_FIELDS)).any(1))[0, 0])
-        raise SkeletonFormatError(source, entries[k // NUM_JOINTS][2] + 3 + k % NUM_JOINTS, "non-finite joint value")
     return SkeletonSequence(name=stem, body_ids=list(track_of), joints=joints, body_info=body_info, slot=slot)
 
 

@@ -12,7 +12,7 @@ import os
 
 import numpy as np
 
-from mocapkit.datasets.cache_files import PreparedCache
+from mocapkit.datasets.cache_files import CacheIntegrityError, PreparedCache
 from mocapkit.datasets.ntu.prepare import CACHE_FORMAT, CACHE_VERSION, INDEX_KEYS, POSITIONS_FILE
 
 
@@ -40,6 +40,20 @@ class NTUCache(PreparedCache):
         self.num_classes: int = int(self.meta["num_classes"])
         self.max_bodies: int = int(self.meta["max_bodies"])
 
+    def _check_index(self, rows: int) -> None:
+        """Every sample's rows ``offsets[i] : offsets[i] + lengths[i]`` lie inside ``positions.npy``."""
+        offsets, lengths = self.offsets.astype(np.int64), self.lengths.astype(np.int64)
+        bad = np.flatnonzero((offsets < 0) | (lengths < 0) | (offsets + lengths > rows))
+        if len(bad):
+            i = int(bad[0])
+            raise CacheIntegrityError(self.root / POSITIONS_FILE,
+                                      f"{len(bad)} samples point outside its {rows} rows, e.g. {self.names[i]} "
+                                      f"(rows {offsets[i]}..{offsets[i] + lengths[i] - 1}): the file lost rows or "
+                                      "does not belong to this index.npz")
+        total = self.meta.get("total_frames")
+        if isinstance(total, int) and total != rows:
+            raise CacheIntegrityError(self.root / POSITIONS_FILE, f"{rows} rows, meta.json says total_frames is {total}")
+
     def __repr__(self) -> str:
         return (f"NTUCache({str(self.root)!r}: {len(self)} samples, {int(self.lengths.sum())} frames, "
                 f"{self.num_classes} classes, max_bodies={self.max_bodies})")
@@ -51,12 +65,17 @@ class NTUCache(PreparedCache):
         """Joint positions of sample ``i``: a float32 copy ``[max_bodies, T_i, 25, 3]`` in metres.
 
         Bodies are ordered most motion first; absent bodies and frames are zeros.
+        Raises :class:`~mocapkit.datasets.cache_files.CacheIntegrityError` if the sample holds NaN.
         """
         if not -len(self) <= i < len(self):
             raise IndexError(f"sample index {i} out of range for a cache of {len(self)} samples")
         start, length = int(self.offsets[i]), int(self.lengths[i])
-        block = self.all_positions[start:start + length]  # [T, M, 25, 3]
-        return np.ascontiguousarray(block.transpose(1, 0, 2, 3))
+        block = np.ascontiguousarray(self.all_positions[start:start + length].transpose(1, 0, 2, 3))
+        if np.isnan(block).any():  # [M, T, 25, 3]
+            t = int(np.flatnonzero(np.isnan(block).any(axis=(0, 2, 3)))[0])
+            raise CacheIntegrityError(self.root / POSITIONS_FILE, f"sample {self.names[i]} holds NaN (row {start + t}, "
+                                                                  f"frame {t} of the sample)")
+        return block
 
     def index_of(self, name: str) -> int:
         """Position of the sample called ``name`` (KeyError if absent)."""

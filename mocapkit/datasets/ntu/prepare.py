@@ -36,7 +36,6 @@ whatever the number of files (full NTU-120: 114,480 files, ~5 GB on disk).
 """
 from __future__ import annotations
 
-import json
 import os
 import time
 from collections.abc import Iterable
@@ -46,7 +45,8 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from mocapkit.datasets.cache_files import INDEX_FILE, META_FILE
+from mocapkit.datasets.cache_files import INDEX_FILE, META_FILE, integrity_record, save_npz_atomic, write_meta
+from mocapkit.datasets.formats.errors import MotionFormatError
 from mocapkit.datasets.formats.ntu_skeleton import (
     NUM_JOINTS,
     SkeletonFormatError,
@@ -55,6 +55,7 @@ from mocapkit.datasets.formats.ntu_skeleton import (
     read_skeleton,
     select_main_bodies,
 )
+from mocapkit.datasets.formats.safe_io import regular_file_size
 from mocapkit.datasets.parallel import parallel_map
 from mocapkit.datasets.prepare_report import REPORT_JSON, REPORT_TXT, PrepareReportBase  # noqa: F401  (re-exported)
 
@@ -184,6 +185,7 @@ def prepare_ntu(src: str | os.PathLike, out: str | os.PathLike, workers: int = 1
 
     # Pre-pass: frame counts from the first lines size the memmap. A file whose first
     # line is unusable gets 0 rows here; its worker then raises the authoritative error.
+    # (Should a parsed file ever have more frames than its pre-pass count, the memmap grows.)
     heads = tqdm(files, desc="reading frame counts", unit="file", disable=not progress)
     expected = np.array([_frame_count_or_zero(p) for p in heads], dtype=np.int64)
     capacity = int(expected.sum())
@@ -194,6 +196,7 @@ def prepare_ntu(src: str | os.PathLike, out: str | os.PathLike, workers: int = 1
     jobs = [(str(p), options) for p in files]
     rows: dict[str, list] = {k: [] for k in INDEX_KEYS}
     cursor = 0
+    nan_rows = 0
     try:
         with parallel_map(_parse_one, jobs, workers, max_chunksize=16, desc="parsing .skeleton", unit="file",
                           progress=progress) as results:
@@ -207,9 +210,14 @@ def prepare_ntu(src: str | os.PathLike, out: str | os.PathLike, workers: int = 1
                     continue
                 block = result["positions"]  # [max_bodies, T, 25, 3]
                 length = block.shape[1]
-                if length != frames:  # cannot happen: the parser checks the same first line
-                    raise RuntimeError(f"{path}: {length} frames parsed but the pre-pass read {frames}")
+                if cursor + length > capacity:  # the pre-pass under-counted this file: make room
+                    positions.flush()
+                    del positions
+                    capacity = cursor + length + int(expected.sum()) // 4
+                    _resize_rows(positions_path, capacity)
+                    positions = np.lib.format.open_memmap(positions_path, mode="r+")
                 positions[cursor:cursor + length] = block.transpose(1, 0, 2, 3)
+                nan_rows += int(np.isnan(block).any(axis=(0, 2, 3)).sum())
                 sample = parse_ntu_name(path.stem)
                 for key, value in (("names", path.stem), ("offsets", cursor), ("lengths", length),
                                    ("labels", sample.label), ("subjects", sample.subject),
@@ -224,8 +232,8 @@ def prepare_ntu(src: str | os.PathLike, out: str | os.PathLike, workers: int = 1
                     report.empty_samples.append(path.stem)
         positions.flush()
         del positions
-        if cursor < capacity:  # some files were skipped as malformed after the pre-pass
-            _shrink_rows(positions_path, cursor)
+        if cursor != capacity:  # some files were skipped as malformed after the pre-pass
+            _resize_rows(positions_path, cursor)
     except BaseException:  # leave no half-written multi-gigabyte array behind
         positions = None  # noqa: F841  (drops the memmap so the file can go)
         positions_path.unlink(missing_ok=True)
@@ -233,7 +241,7 @@ def prepare_ntu(src: str | os.PathLike, out: str | os.PathLike, workers: int = 1
 
     index = {k: np.asarray(v, dtype=np.int64) for k, v in rows.items() if k != "names"}
     index["names"] = np.asarray(rows["names"], dtype="<U20")
-    np.savez(out / INDEX_FILE, **index)
+    save_npz_atomic(out / INDEX_FILE, **index)
 
     report.samples_written = len(rows["names"])
     report.total_frames = cursor
@@ -253,8 +261,9 @@ def prepare_ntu(src: str | os.PathLike, out: str | os.PathLike, workers: int = 1
         "options": {**options, "skip_bad": skip_bad, "workers": workers, "missing_list": missing_source},
         "totals": report.totals(),
         "frames_trimmed": False,
+        "integrity": integrity_record(out, POSITIONS_FILE, report.samples_written, nan_rows=nan_rows),
     }
-    (out / META_FILE).write_text(json.dumps(meta, indent=1) + "\n", encoding="utf-8")
+    write_meta(out, meta)
     return report
 
 
@@ -327,13 +336,21 @@ def _num_classes(class_names: list[str] | None, labels: np.ndarray) -> int:
 
 
 def _frame_count_or_zero(path: Path) -> int:
-    """The frame count on the first line, or 0 if it is unusable (the parser will say why)."""
+    """The frame count on the first line, or 0 if it is unusable (the parser will say why).
+
+    Only regular files are opened (a FIFO would block, a device never end). The first line
+    ends at LF, CR or CRLF, as for the parser; a first line longer than 4 KiB counts 0 here
+    (the memmap then grows if the parser accepts the file).
+    """
     try:
+        size = regular_file_size(path, lambda p, m: SkeletonFormatError(p, None, m))
         with open(path, "rb") as f:
-            first = f.readline(64)
-        count = int(first.strip())
-        size = path.stat().st_size
-    except (OSError, ValueError):
+            head = f.read(4096)
+        lines = head.splitlines()
+        if not lines or (len(lines) == 1 and len(head) == 4096):
+            return 0
+        count = int(lines[0].strip())
+    except (OSError, ValueError):  # SkeletonFormatError is a ValueError
         return 0
     # Each frame takes at least 2 bytes ("0\n"): a larger count is a corrupt header, not a reason
     # to allocate gigabytes.
@@ -345,10 +362,12 @@ def _parse_one(job: tuple[str, dict]) -> dict:
     path, options = job
     try:
         seq = read_skeleton(path)
-    except SkeletonFormatError as exc:
+        selection = select_main_bodies(seq, max_bodies=options["max_bodies"], denoise_spread=options["denoise_spread"],
+                                       min_frames=options["min_body_frames"])
+    except MotionFormatError as exc:
         return {"error": exc}
-    selection = select_main_bodies(seq, max_bodies=options["max_bodies"], denoise_spread=options["denoise_spread"],
-                                   min_frames=options["min_body_frames"])
+    except Exception as exc:  # noqa: BLE001 - one bad file must not end the batch (see --skip-bad)
+        return {"error": SkeletonFormatError(path, None, f"unexpected {type(exc).__name__} while reading: {exc}")}
     return {
         "positions": selection.positions,
         "kept_body_ids": [seq.body_ids[b] for b in selection.kept],
@@ -356,14 +375,15 @@ def _parse_one(job: tuple[str, dict]) -> dict:
     }
 
 
-def _shrink_rows(path: Path, rows: int) -> None:
-    """Keep only the first ``rows`` rows of the ``.npy`` at ``path`` (copied in chunks, then renamed)."""
+def _resize_rows(path: Path, rows: int) -> None:
+    """Give the ``.npy`` at ``path`` exactly ``rows`` rows: the first ones kept, new ones zero (copied in chunks, renamed)."""
     old = np.load(path, mmap_mode="r")
     tmp = path.with_name(path.name + ".tmp")
     new = np.lib.format.open_memmap(tmp, mode="w+", dtype=old.dtype, shape=(rows,) + old.shape[1:])
     step = 65536
-    for start in range(0, rows, step):
-        new[start:start + step] = old[start:min(start + step, rows)]
+    keep = min(rows, len(old))
+    for start in range(0, keep, step):
+        new[start:start + step] = old[start:min(start + step, keep)]
     new.flush()
     del new, old
     os.replace(tmp, path)
