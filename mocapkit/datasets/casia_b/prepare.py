@@ -233,5 +233,8 @@ def _build_one(job) -> dict:
         return {"error": exc, "reason": "unreadable"}
     except GaitSequenceError as exc:
         return {"error": GaitSequenceError(f"{seq.folder}: {exc}", exc.reason), "reason": exc.reason}
+    except Exception as exc:  # anything else one sequence raises must not stop the batch: reported as unreadable
+        return {"error": SilhouetteFormatError(seq.folder, None, f"{type(exc).__name__}: {exc}"),
+                "reason": "unreadable"}
     return {"geis": np.round(geis * 255).astype(np.uint8), "frames": info.frames_per_gei.tolist(),
             "frames_read": len(frames), "fallback": per == "cycle" and not info.period_detected}

@@ -424,6 +424,8 @@ def _section_line(skel: AsfSkeleton, section: str, tok: list[str], ln: int, sour
         for key, value in zip(tok[::2], tok[1::2]):
             key = key.lower()
             skel.units[key] = value.lower() if key == "angle" else num(value, ln, f"{key} unit")
+            if key == "length" and not skel.units[key] > 0:
+                raise AsfFormatError(source, ln, f"length unit must be positive, got {value}")
         return
     key, args = tok[0].lower(), tok[1:]
     if key == "order":
@@ -773,6 +775,9 @@ def parse_amc_text(text: str, skel: AsfSkeleton, source: str | os.PathLike = "<m
             if not rest:
                 if frame_numbers:
                     close_frame(ln)
+                if len(first.lstrip("+-")) > 18:  # beyond int64: no real frame number
+                    raise AmcFormatError(source, ln, f"frame number {first[:24]}... is out of range",
+                                         frame=len(frame_numbers) + 1)
                 frame_numbers.append(int(first))
                 current = []
                 frame_line = ln

@@ -125,6 +125,16 @@ def read_c3d(path: str | os.PathLike, labels: list[str] | None = None, strip_pre
     # ---- positions and gaps
     xyz = np.ascontiguousarray(np.transpose(data[:3], (2, 1, 0)), dtype=np.float64)   # [frames, markers, 3]
     invalid = ~np.isfinite(xyz).all(axis=2)
+    residuals = c3d["data"].get("meta_points", {}).get("residuals")
+    if residuals is not None and np.shape(residuals)[1:] == (n_markers, n_frames):
+        # ezc3d returns NaN for a negative (invalid) residual; a non-finite coordinate whose residual says
+        # "valid" is damaged data, not a gap: refuse it rather than turning it into one silently
+        damaged = invalid & (np.asarray(residuals[0]).T >= 0)
+        if damaged.any():
+            frame, marker = np.argwhere(damaged)[0]
+            raise C3DFormatError(path, f"non-finite coordinates of marker {full[marker]!r} marked valid (residual "
+                                       f">= 0) in {int(damaged.sum())} samples, the first at frame {frame + 1}",
+                                 frame=int(frame) + 1)
     zero = (xyz == 0.0).all(axis=2) & ~invalid if zero_as_missing else np.zeros_like(invalid)
     missing = invalid | zero
     positions = (xyz * UNIT_SCALE[units]).astype(np.float32)

@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from mocapkit.datasets.formats.errors import MotionFormatError
+from mocapkit.datasets.formats.safe_io import read_file_bytes
 
 #: Walking conditions, in label order (the condition task's classes).
 CONDITIONS: tuple[str, ...] = ("nm", "bg", "cl")
@@ -256,6 +257,9 @@ def list_casia_b(root: str | os.PathLike, subjects: Iterable[int] | None = None)
 # --------------------------------------------------------------------------- reading
 
 #: A frame is not a silhouette when more than this fraction of its pixels is clearly gray.
+#: Largest silhouette PNG read (bytes) and frame (pixels); CASIA-B frames are 320x240, a few KB each.
+MAX_SILHOUETTE_BYTES = 64 << 20
+MAX_SILHOUETTE_PIXELS = 4096 * 4096
 MAX_GRAY_FRACTION = 0.05
 #: "Clearly gray": strictly between these values (JPEG-like ringing near edges stays outside).
 GRAY_LOW, GRAY_HIGH = 32, 223
@@ -276,11 +280,19 @@ def read_silhouette(path: str | os.PathLike) -> np.ndarray:
         SilhouetteFormatError: the file cannot be decoded, or more than 5 % of its pixels are
             strictly between 32 and 223 (not a binary silhouette). ``frame`` is the file name's number.
     """
+    import io
+
     from PIL import Image, UnidentifiedImageError
 
     frame = frame_number(path)
+    data = read_file_bytes(path, lambda p, msg: SilhouetteFormatError(p, None, msg, frame=frame),
+                           max_bytes=MAX_SILHOUETTE_BYTES)
     try:
-        with Image.open(path) as image:
+        with Image.open(io.BytesIO(data)) as image:
+            if image.width * image.height > MAX_SILHOUETTE_PIXELS:
+                raise SilhouetteFormatError(path, None, f"{image.width}x{image.height} pixels: more than the "
+                                                        f"{MAX_SILHOUETTE_PIXELS} a silhouette frame may have",
+                                            frame=frame)
             image.load()
             if image.mode in ("I;16", "I;16B", "I;16L", "I"):
                 pixels = np.asarray(image, dtype=np.int64)
@@ -291,8 +303,10 @@ def read_silhouette(path: str | os.PathLike) -> np.ndarray:
                 raise SilhouetteFormatError(path, None, f"unsupported image mode {image.mode!r}", frame=frame)
     except SilhouetteFormatError:
         raise
-    except (OSError, SyntaxError, ValueError, UnidentifiedImageError, Image.DecompressionBombError) as exc:
-        raise SilhouetteFormatError(path, None, f"unreadable image: {exc}", frame=frame) from None
+    except (OSError, SyntaxError, ValueError, UnidentifiedImageError, Image.DecompressionBombError,
+            MemoryError) as exc:  # MemoryError: a damaged chunk length asking PIL for gigabytes
+        raise SilhouetteFormatError(path, None, f"unreadable image: {type(exc).__name__} {exc}",
+                                    frame=frame) from None
     if pixels.ndim != 2 or pixels.size == 0:
         raise SilhouetteFormatError(path, None, f"not a 2-D image (shape {pixels.shape})", frame=frame)
     gray = np.count_nonzero((pixels > GRAY_LOW) & (pixels < GRAY_HIGH)) / pixels.size
