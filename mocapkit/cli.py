@@ -12,6 +12,8 @@
     mocapkit export ckpt_path=RUN/best.ckpt [out=FILE] [overrides ...]
     mocapkit predict --onnx FILE MOTION_FILE [MOTION_FILE ...]
 
+Errors are one line (``mocapkit: error: ...``, exit code 2); ``mocapkit --debug COMMAND ...`` (or
+``MOCAPKIT_DEBUG=1``) shows the traceback instead.
 Heavy libraries are imported inside each command, so ``predict`` runs with
 onnxruntime and numpy alone.
 """
@@ -166,6 +168,8 @@ def cmd_predict(args: argparse.Namespace) -> None:
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="mocapkit", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--debug", action="store_true",
+                        help="show the traceback of an error (as MOCAPKIT_DEBUG=1 does)")
     sub = parser.add_subparsers(dest="command", required=True)
 
     synth = sub.add_parser("synth", help="write a synthetic stand-in dataset in a real format")
@@ -287,6 +291,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
+    global _DEBUG
+    _DEBUG = False
+    while argv and argv[0] == "--debug":  # the global flag, before the command
+        _DEBUG = True
+        argv.pop(0)
     parser = build_parser()
     # train / eval / export take free-form Hydra overrides, which argparse must not interpret.
     if argv and argv[0] in ("train", "eval", "export") and not ({"-h", "--help"} & set(argv[1:])):
@@ -300,20 +309,57 @@ def main(argv: list[str] | None = None) -> int:
     return _run(args.func, args)
 
 
-def _run(handler, arg) -> int:
+#: ``mocapkit --debug ...``: let errors propagate with their traceback (also ``MOCAPKIT_DEBUG=1``).
+_DEBUG = False
+
+
+def _debug() -> bool:
+    return _DEBUG or os.environ.get("MOCAPKIT_DEBUG", "") not in ("", "0")
+
+
+def _one_line(exc: BaseException) -> str:
+    """The error's message on one line (Hydra's and OmegaConf's span several)."""
+    lines = [line.strip() for line in str(exc).splitlines() if line.strip()]
+    text = "; ".join(lines) or type(exc).__name__
+    if isinstance(exc, OSError) and exc.filename is not None and str(exc.filename) not in text:
+        text = f"{exc.filename}: {text}"
+    return text if len(text) <= 2000 else text[:2000] + " ..."
+
+
+def _user_errors() -> tuple[type[BaseException], ...]:
+    """Errors reported as ``mocapkit: error: MESSAGE`` (exit code 2): their messages name the file, key or value."""
     from mocapkit.datasets.formats.errors import MotionFormatError
 
+    errors: list[type[BaseException]] = [MotionFormatError, OSError, ValueError]
     try:
         from mocapkit.train.config import ConfigError
+        errors.append(ConfigError)
     except ImportError:  # pragma: no cover - only without hydra installed
-        ConfigError = ValueError
+        pass
+    try:
+        from omegaconf.errors import OmegaConfBaseException
+        errors.append(OmegaConfBaseException)
+    except ImportError:  # pragma: no cover
+        pass
+    if "mocapkit.deploy.export" in sys.modules:
+        errors.append(sys.modules["mocapkit.deploy.export"].ParityError)
+    return tuple(errors)
+
+
+def _run(handler, arg) -> int:
+    """Run a command; an error is one line on stderr and exit code 2 (the traceback only with ``--debug``)."""
     try:
         handler(arg)
-    except (MotionFormatError, ConfigError, FileNotFoundError, ValueError) as exc:
-        if os.environ.get("MOCAPKIT_DEBUG"):
+    except (KeyboardInterrupt, SystemExit):
+        raise
+    except Exception as exc:
+        if _debug():
             raise
-        print(f"mocapkit: error: {exc}", file=sys.stderr)
-        print("(set MOCAPKIT_DEBUG=1 for the traceback)", file=sys.stderr)
+        if isinstance(exc, _user_errors()):
+            print(f"mocapkit: error: {_one_line(exc)}", file=sys.stderr)
+        else:  # not one of ours: still one line, with its type (a bug to report, with the --debug traceback)
+            print(f"mocapkit: error: {type(exc).__name__}: {_one_line(exc)} (unexpected)", file=sys.stderr)
+        print("(set MOCAPKIT_DEBUG=1 or run mocapkit --debug ... for the traceback)", file=sys.stderr)
         return 2
     return 0
 

@@ -6,7 +6,9 @@ LightningModule of ``module._target_`` and calls the exporter named by ``export.
 :func:`~mocapkit.deploy.gait_export.export_gait_module`). Every exporter writes the file with
 :func:`save_checked_onnx` (metadata, ``onnx.checker``) and compares onnxruntime with PyTorch on
 shapes other than those traced; a mismatch raises :class:`ParityError`. The parity figures go
-beside the model as ``<stem>.parity.json``.
+beside the model as ``<stem>.parity.json``. Both files are written atomically (a temporary file in the same
+folder, fsynced, then renamed: :mod:`mocapkit.io_atomic`), and the run's config and the checkpoint are
+vetted before anything is built (:mod:`mocapkit.train.safety`).
 """
 from __future__ import annotations
 
@@ -14,6 +16,8 @@ import json
 from pathlib import Path
 
 import onnx
+
+from mocapkit.io_atomic import atomic_path, atomic_write_text
 
 
 class ParityError(RuntimeError):
@@ -26,20 +30,27 @@ def save_checked_onnx(proto: onnx.ModelProto, meta: dict[str, str], out: Path) -
         entry = proto.metadata_props.add()
         entry.key, entry.value = key, value
     onnx.checker.check_model(proto, full_check=True)
-    onnx.save(proto, str(out))
+    with atomic_path(out) as tmp:  # a kill mid-write leaves the previous model
+        onnx.save(proto, str(tmp))
 
 
 def export_checkpoint(ckpt_path: str | Path, out: str | None = None, overrides: list[str] | None = None) -> dict:
     """``mocapkit export ckpt_path=... [out=FILE] [export.KEY=...]``: export as the run's task does."""
     from mocapkit.train.checkpoints import checkpoint_config, load_module
+    from mocapkit.train.config import ConfigError
     from mocapkit.train.training import build
 
     ckpt_path = Path(ckpt_path)
     cfg = checkpoint_config(ckpt_path, [o for o in overrides or [] if not o.startswith("ckpt_path=")])
-    module = load_module(cfg, ckpt_path)
     target = Path(out or cfg.export.out or ckpt_path.parent / "model.onnx")
+    key = "out" if out else "export.out"
+    if target.is_dir() or str(out or "").endswith(("/", "\\")):
+        raise ConfigError(f"{key}={target}: is a folder; expected the ONNX file to write, e.g. {target / 'model.onnx'}")
+    if target.parent.exists() and not target.parent.is_dir():
+        raise ConfigError(f"{key}={target}: {target.parent} is not a folder")
+    module = load_module(cfg, ckpt_path)
     report = build(cfg.export.exporter)(module, target, cfg.export)
-    (target.parent / (target.stem + ".parity.json")).write_text(json.dumps(report, indent=2))
+    atomic_write_text(target.parent / (target.stem + ".parity.json"), json.dumps(report, indent=2))
     print(f"[mocapkit] wrote {target} (onnx.checker passed)")
     diff = report["max_abs_diff"]  # one number, or one per output for multi-output models
     diff = max(diff.values()) if isinstance(diff, dict) else diff

@@ -4,6 +4,10 @@ No PyTorch is imported: this is the deployment path. NTU ``.skeleton`` files
 are reduced to their two main bodies; other formats are read with
 ``read_motion`` and mapped onto the model's skeleton layout (stored in the
 ONNX metadata) when they use another one.
+
+Only an ONNX file is ever loaded (never a checkpoint or a pickle); a file that is not an ONNX model,
+a model without a ``skeletons`` input, or a motion with non-finite coordinates is refused with a
+``ValueError`` naming the file.
 """
 from __future__ import annotations
 
@@ -31,19 +35,52 @@ def model_input(path: str | Path, layout: str) -> np.ndarray:
 
     motion = read_motion(path)
     if motion.layout_name != layout:
+        if layout not in LAYOUTS:
+            raise ValueError(f"the model's metadata names the skeleton layout {layout!r}; known: {', '.join(LAYOUTS)}")
         motion = motion.map_layout(LAYOUTS[layout])
     return motion.filled(0.0)[None, None]
 
 
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip()
+    return (text.splitlines()[0] if text else type(exc).__name__)[:300]
+
+
+def open_session(onnx_path: str | Path) -> ort.InferenceSession:
+    """An onnxruntime CPU session of ``onnx_path``; anything but a readable ONNX model is a one-line error."""
+    onnx_path = Path(onnx_path)
+    if not onnx_path.is_file():
+        raise FileNotFoundError(f"--onnx {onnx_path}: no such file")
+    try:
+        return ort.InferenceSession(str(onnx_path), providers=["CPUExecutionProvider"])
+    except Exception as exc:  # onnxruntime's InvalidProtobuf, Fail, ...
+        raise ValueError(f"--onnx {onnx_path}: not an ONNX model onnxruntime can load: {_first_line(exc)}") from exc
+
+
 def predict_files(onnx_path: str | Path, files: list[str | Path], top: int = 5) -> list[dict]:
     """Top ``top`` classes per file: ``[{"file", "top": [(name, probability), ...]}]``."""
-    session = ort.InferenceSession(str(onnx_path), providers=["CPUExecutionProvider"])
+    session = open_session(onnx_path)
     meta = session.get_modelmeta().custom_metadata_map
-    class_names = json.loads(meta.get("class_names", "[]"))
+    inputs = [i.name for i in session.get_inputs()]
+    if inputs != ["skeletons"]:
+        raise ValueError(f"--onnx {onnx_path}: expected a skeleton classifier with the one input 'skeletons' "
+                         f"(mocapkit export of an action run), got inputs {inputs}")
+    try:
+        class_names = [str(n) for n in json.loads(meta.get("class_names", "[]"))]
+    except (ValueError, TypeError) as exc:
+        raise ValueError(f"--onnx {onnx_path}: metadata class_names is not a JSON list of names") from exc
     layout = meta.get("layout", "ntu25")
     results = []
     for path in files:
-        logits = session.run(None, {"skeletons": model_input(path, layout)})[0][0]
+        x = np.asarray(model_input(path, layout), dtype=np.float32)
+        if not np.isfinite(x).all():
+            raise ValueError(f"{path}: the motion holds {int((~np.isfinite(x)).sum())} NaN or infinite coordinates; "
+                             "expected finite positions (absent joints as zeros)")
+        try:
+            logits = session.run(None, {"skeletons": x})[0][0]
+        except Exception as exc:  # a shape the model does not take (another layout's joint count, ...)
+            raise ValueError(f"{path}: the model {Path(onnx_path).name} cannot run on it "
+                             f"(input {list(x.shape)}): {_first_line(exc)}") from exc
         probs = softmax(logits)
         order = np.argsort(-probs)[:top]
         names = [class_names[k] if k < len(class_names) else f"A{k + 1:03d}" for k in order]

@@ -1,7 +1,8 @@
 """``mocapkit eval ckpt_path=RUN/best.ckpt [overrides]``: evaluate a checkpoint on the held-out part of its split.
 
 :func:`evaluate` composes the run's saved config again with the overrides (Hydra's grammar), builds
-the data module, loads the LightningModule class named by ``module._target_`` from the checkpoint,
+the data module, loads the LightningModule class named by ``module._target_`` from the checkpoint
+(the run's config and the checkpoint are vetted first: :mod:`mocapkit.train.safety`),
 and calls the evaluator named by ``eval.evaluator._target_`` (:func:`~mocapkit.evaluation.evaluate_action.evaluate_action`
 or :func:`~mocapkit.evaluation.evaluate_gait.evaluate_gait`). Everything goes to ``<run>/eval/``
 (or ``eval.out_dir``), with the config it ran with (``eval_config.yaml``).
@@ -15,6 +16,7 @@ import numpy as np
 import torch
 from omegaconf import DictConfig, OmegaConf
 
+from mocapkit.io_atomic import atomic_write_text
 from mocapkit.train.checkpoints import checkpoint_config, load_module
 from mocapkit.train.config import ConfigError
 from mocapkit.train.training import build, build_datamodule
@@ -38,11 +40,14 @@ def evaluate(ckpt_path: str | Path, overrides: list[str] | None = None) -> dict:
     cfg = checkpoint_config(ckpt_path, [o for o in overrides or [] if not o.startswith("ckpt_path=")])
     if cfg.eval.part not in ("test", "val"):
         raise ConfigError(f"eval.part must be 'test' or 'val', got {cfg.eval.part!r}")
+    module = load_module(cfg, ckpt_path)  # vets the checkpoint before the data is read
     datamodule = build_datamodule(cfg)
-    module = load_module(cfg, ckpt_path)
     out_dir = Path(cfg.eval.out_dir) if cfg.eval.out_dir else ckpt_path.parent / "eval"
-    out_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except (FileExistsError, NotADirectoryError) as exc:
+        raise ConfigError(f"eval.out_dir={out_dir}: not a folder ({exc.strerror})") from exc
     evaluator = build(cfg.eval.evaluator)
     report = {"checkpoint": str(ckpt_path), **evaluator(module, datamodule, cfg, out_dir)}
-    OmegaConf.save(cfg, out_dir / "eval_config.yaml", resolve=True)
+    atomic_write_text(out_dir / "eval_config.yaml", OmegaConf.to_yaml(cfg, resolve=True))
     return report

@@ -12,8 +12,12 @@ from pathlib import Path
 import numpy as np
 from omegaconf import DictConfig
 
-from mocapkit.evaluation.classification import classification_report, plot_confusion_matrix
+from mocapkit.evaluation.classification import (
+    classification_report,
+    plot_confusion_matrix,
+)
 from mocapkit.evaluation.evaluate import predict_outputs
+from mocapkit.io_atomic import atomic_write_text
 
 
 def evaluate_action(module, datamodule, cfg: DictConfig, out_dir: Path) -> dict:
@@ -24,11 +28,11 @@ def evaluate_action(module, datamodule, cfg: DictConfig, out_dir: Path) -> dict:
     report = classification_report(out["logits"], out["labels"], groups={"subject": out["subjects"]},
                                    class_names=module.hparams.class_names or None)
     report.update({"part": part, **datamodule.describe()})
-    (out_dir / "metrics.json").write_text(json.dumps(report, indent=2))
+    atomic_write_text(out_dir / "metrics.json", json.dumps(report, indent=2))
     title = f"{cfg.experiment_name}: {report['split']} {part}, top-1 {report['top1']:.1%}"
     plot_confusion_matrix(np.array(report["confusion_matrix"]), report["class_names"],
                           out_dir / "confusion_matrix.png", title=title)
-    (out_dir / "summary.md").write_text(summary_table(report))
+    atomic_write_text(out_dir / "summary.md", summary_table(report))
     print(summary_table(report))
     for name in ("metrics.json", "confusion_matrix.png", "summary.md"):
         print(f"[mocapkit] wrote {out_dir / name}")

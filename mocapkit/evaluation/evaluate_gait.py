@@ -25,9 +25,14 @@ from omegaconf import DictConfig
 
 from mocapkit.datasets.formats.casia_b import VIEWS
 from mocapkit.evaluation.evaluate import predict_outputs
-from mocapkit.evaluation.gait import (closed_set_markdown, closed_set_report, cross_view_markdown, cross_view_rank1,
-                                      plot_per_view)
-
+from mocapkit.evaluation.gait import (
+    closed_set_markdown,
+    closed_set_report,
+    cross_view_markdown,
+    cross_view_rank1,
+    plot_per_view,
+)
+from mocapkit.io_atomic import atomic_write_text
 
 
 def evaluate_gait(module: L.LightningModule, datamodule, cfg: DictConfig, out_dir: Path,
@@ -88,8 +93,8 @@ def evaluate_gait(module: L.LightningModule, datamodule, cfg: DictConfig, out_di
         plot_title = f"{name}: cross-subject rank-1 per probe view"
     else:
         raise ValueError(f"data.protocol={protocol!r}: expected closed_set or cross_subject")
-    (out_dir / "metrics.json").write_text(json.dumps(report, indent=2))
-    (out_dir / "summary.md").write_text(summary)
+    atomic_write_text(out_dir / "metrics.json", json.dumps(report, indent=2))
+    atomic_write_text(out_dir / "summary.md", summary)
     plot_per_view(series, out_dir / "per_view.png", plot_title)
     print(summary)
     for file in ("metrics.json", "summary.md", "per_view.png"):

@@ -143,8 +143,13 @@ def build_refiner(method: str, overrides: Sequence[str] = ()) -> MotionRefiner:
     """
     from hydra.utils import instantiate
 
+    from mocapkit.train.safety import REFINER_POLICY, check_targets
+
     cfg = refiner_config(method, overrides)
     target = str(cfg.get("_target_", "?"))
+    # every _target_ (nested ones too) must name a MotionRefiner class of mocapkit, before anything is built
+    source = f"refiner {method!r}" + (f" with --set {' '.join(overrides)}" if overrides else "")
+    check_targets(cfg, REFINER_POLICY, source, prefix="refiner")
     try:
         refiner = instantiate(cfg, _convert_="all")
     except Exception as exc:  # Hydra wraps import and constructor errors in InstantiationException

@@ -30,6 +30,17 @@ RUN_CONFIG = "config.yaml"
 RUN_CONFIG_UNRESOLVED = Path(".hydra") / "config.yaml"
 
 
+def _path_component(text) -> str:
+    """``text`` as one folder name: separators become ``_`` (a sweep job's folder is named by its overrides)."""
+    text = str(text).replace("/", "_").replace("\\", "_")
+    return "_" if text in (".", "..") else text
+
+
+# configs/train.yaml names each sweep job's folder ${mocapkit_path_component:${hydra:job.override_dirname}}
+if not OmegaConf.has_resolver("mocapkit_path_component"):
+    OmegaConf.register_new_resolver("mocapkit_path_component", _path_component)
+
+
 class ConfigError(ValueError):
     """A configuration problem; the message names the key or file."""
 
@@ -40,7 +51,7 @@ def _compose(config_dir: Path, config_name: str, overrides: list[str]) -> DictCo
         with initialize_config_dir(config_dir=str(config_dir.resolve()), version_base="1.3"):
             return compose(config_name=config_name, overrides=list(overrides))
     except Exception as exc:  # Hydra raises several types; all name the offending override
-        if type(exc).__module__.startswith(("hydra", "omegaconf")):
+        if type(exc).__module__.startswith(("hydra", "omegaconf", "yaml")):
             raise ConfigError(str(exc)) from exc
         raise
 
@@ -58,7 +69,16 @@ def load_run_config(run_dir: str | Path, overrides: list[str] | None = None) -> 
     path = run_dir / RUN_CONFIG_UNRESOLVED
     if not path.is_file():
         raise ConfigError(f"{path} not found: is {run_dir} a mocapkit run folder?")
-    return _compose(path.parent, path.stem, list(overrides or []))
+    try:
+        cfg = _compose(path.parent, path.stem, list(overrides or []))
+        if overrides:
+            check_override_types(list(overrides), _compose(path.parent, path.stem, []))
+    except ConfigError as exc:
+        raise ConfigError(f"{path}: {exc}") from exc
+    from mocapkit.train.safety import check_run_config
+
+    check_run_config(cfg, path)  # before anything in it is instantiated (mocapkit.train.safety.RUN_POLICY)
+    return cfg
 
 
 def pop_override(overrides: list[str], key: str) -> tuple[str | None, list[str]]:
@@ -83,9 +103,127 @@ def pop_override(overrides: list[str], key: str) -> tuple[str | None, list[str]]
     return value, rest
 
 
+#: The config keys that name one folder level of a run's path (``<output_root>/<experiment_name>/<run_name>``).
+NAME_KEYS = ("experiment_name", "run_name")
+
+
+def check_path_component(value, key: str) -> str:
+    """``value`` as one folder name, or a ConfigError naming ``key``: no separators, not ``.``/``..``, not empty."""
+    text = str(value)
+    bad = (not text.strip() or text in (".", "..") or "/" in text or "\\" in text or "\0" in text
+           or os.sep in text or (os.altsep and os.altsep in text) or Path(text).is_absolute())
+    if bad:
+        raise ConfigError(f"{key}={text!r}: expected a single folder name (no '/', '..' or absolute path); "
+                          f"runs are written under output_root/<experiment_name>/<run_name>")
+    return text
+
+
+def _check_creatable(folder: Path) -> None:
+    """Refuse a folder that cannot be created or written: its nearest existing ancestor must be a writable folder."""
+    existing = Path(os.path.abspath(folder))
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise ConfigError(f"run_dir={folder}: {existing} is a file, not a folder (check output_root)")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise ConfigError(f"run_dir={folder}: {existing} is not writable (check output_root)")
+
+
+def check_output_paths(cfg: DictConfig) -> Path:
+    """Refuse a run folder outside ``output_root`` or a run / experiment name that is not one folder name.
+
+    Returns the run folder. Called before anything is created (:func:`prepare_run_dir`, and by
+    :func:`mocapkit.train.training.main` for single runs and sweeps).
+    """
+    for key in NAME_KEYS:
+        if cfg.get(key) is not None:
+            check_path_component(cfg.get(key), key)
+    run_dir = Path(str(cfg.run_dir))
+    _check_creatable(run_dir)
+    root = cfg.get("output_root")
+    if root is not None:
+        root_abs, run_abs = Path(os.path.abspath(str(root))), Path(os.path.abspath(run_dir))
+        try:
+            inside = run_abs.resolve().is_relative_to(root_abs.resolve()) and run_abs.is_relative_to(root_abs)
+        except OSError:
+            inside = False
+        if not inside or run_abs == root_abs:
+            raise ConfigError(f"run_dir={run_dir}: the run folder must lie inside output_root={root} "
+                              f"(as <output_root>/<experiment_name>/<run_name>)")
+    return run_dir
+
+
+def check_override_names(overrides: list[str]) -> None:
+    """Check ``run_name`` / ``experiment_name`` overrides (every value of a sweep) as :func:`check_path_component`."""
+    parser = OverridesParser.create()
+    for item in overrides:
+        if item.startswith("-"):
+            continue
+        try:
+            parsed = parser.parse_override(item)
+        except Exception:  # Hydra reports it itself, naming the override
+            continue
+        if parsed.key_or_group not in NAME_KEYS or parsed.package is not None:
+            continue
+        values = (list(parsed.sweep_string_iterator()) if parsed.is_sweep_override()
+                  else [parsed.get_value_element_as_str()])
+        for value in values:
+            check_path_component(value, parsed.key_or_group)
+
+
+#: Keys whose default is a number but which also take a word (Lightning's ``devices=auto``).
+WORDS_ALSO = ("trainer.devices",)
+
+
+def _type_error(key: str, value, reference) -> str | None:
+    """Why ``value`` does not fit a key whose default is ``reference`` (None when it fits or cannot be told)."""
+    if reference is None or value is None or key in WORDS_ALSO:
+        return None
+    if isinstance(reference, bool):
+        return None if isinstance(value, bool) else "expected true or false"
+    if isinstance(reference, int) and isinstance(value, str):
+        return "expected an integer"
+    if isinstance(reference, float) and isinstance(value, str):
+        return "expected a number"
+    return None
+
+
+def check_override_types(overrides: list[str], reference: DictConfig, source: str = "override") -> None:
+    """Refuse an override whose value has the wrong type for its key, naming both (``trainer.max_epochs=abc``:
+    expected an integer). ``reference`` holds the defaults (the config without those overrides); every value
+    of a sweep is checked. Keys that are new, null by default, or not numbers / booleans are not checked."""
+    parser = OverridesParser.create()
+    for item in overrides:
+        if item.startswith("-"):
+            continue
+        try:
+            parsed = parser.parse_override(item)
+        except Exception:  # Hydra reports it itself
+            continue
+        if parsed.is_delete() or parsed.is_add() or parsed.package is not None or "." not in parsed.key_or_group \
+                and (CONFIG_DIR / parsed.key_or_group).is_dir():
+            continue
+        key = parsed.key_or_group
+        try:
+            ref = OmegaConf.select(reference, key, default=None, throw_on_missing=False)
+        except Exception:  # an interpolation that cannot be resolved here
+            continue
+        if ref is not None and not isinstance(ref, (bool, int, float)):
+            continue
+        try:
+            values = list(parsed.sweep_iterator()) if parsed.is_sweep_override() else [parsed.value()]
+        except Exception:
+            continue
+        for value in values:
+            problem = _type_error(key, value, ref)
+            if problem:
+                raise ConfigError(f"{source} {key}={value!r}: {problem} (the default is {ref!r})")
+
+
 def prepare_run_dir(cfg: DictConfig) -> Path:
-    """Pin ``cfg.run_dir`` (and ``run_name``) and create the folder; refuses a folder that holds a run."""
-    run_dir = Path(cfg.run_dir)
+    """Pin ``cfg.run_dir`` (and ``run_name``) and create the folder; refuses a folder that holds a run, and a
+    run folder outside ``output_root`` (:func:`check_output_paths`) before creating anything."""
+    run_dir = check_output_paths(cfg)
     if (run_dir / "last.ckpt").exists():
         raise ConfigError(f"{run_dir} already holds a run; continue it with resume={run_dir / 'last.ckpt'} "
                           "or choose another run_name")
@@ -98,8 +236,10 @@ def prepare_run_dir(cfg: DictConfig) -> Path:
 
 def save_run_config(cfg: DictConfig, run_dir: Path) -> Path:
     """Write ``config.yaml`` (resolved, to read) and ``.hydra/config.yaml`` (unresolved, to compose again)."""
+    from mocapkit.io_atomic import atomic_write_text
+
     path = Path(run_dir) / RUN_CONFIG
-    OmegaConf.save(cfg, path, resolve=True)
+    atomic_write_text(path, OmegaConf.to_yaml(cfg, resolve=True))
     (Path(run_dir) / RUN_CONFIG_UNRESOLVED).parent.mkdir(exist_ok=True)
-    OmegaConf.save(cfg, Path(run_dir) / RUN_CONFIG_UNRESOLVED, resolve=False)
+    atomic_write_text(Path(run_dir) / RUN_CONFIG_UNRESOLVED, OmegaConf.to_yaml(cfg, resolve=False))
     return path

@@ -25,8 +25,17 @@ from hydra.utils import instantiate
 from lightning.pytorch.callbacks import ModelCheckpoint
 from omegaconf import DictConfig, open_dict
 
-from mocapkit.train.config import (CONFIG_DIR, ConfigError, compose_config, load_run_config, prepare_run_dir,
-                                   save_run_config)
+from mocapkit.train.config import (
+    CONFIG_DIR,
+    ConfigError,
+    check_output_paths,
+    check_override_names,
+    check_override_types,
+    compose_config,
+    load_run_config,
+    prepare_run_dir,
+    save_run_config,
+)
 
 
 def build(node: DictConfig, **kwargs):
@@ -46,11 +55,18 @@ def build_datamodule(cfg: DictConfig):
 
 
 def resume_config(resume: str | Path, overrides: list[str]) -> DictConfig:
-    """The config of the run that ``resume`` (a ``last.ckpt``) belongs to, with ``overrides`` applied."""
+    """The config of the run that ``resume`` (a ``last.ckpt``) belongs to, with ``overrides`` applied.
+
+    Both the run's saved config and the checkpoint are vetted (:mod:`mocapkit.train.safety`) before
+    anything is built; a file that is not a checkpoint is refused naming it.
+    """
+    from mocapkit.train.checkpoints import load_checkpoint
+
     resume = Path(resume)
     if not resume.is_file():
         raise ConfigError(f"resume={resume}: no such checkpoint")
     cfg = load_run_config(resume.parent, overrides)
+    load_checkpoint(resume)  # read with weights_only=True and vetted; Lightning reads it again the same way
     with open_dict(cfg):
         cfg.resume = str(resume)
         cfg.run_dir = str(resume.parent)
@@ -58,7 +74,18 @@ def resume_config(resume: str | Path, overrides: list[str]) -> DictConfig:
 
 
 def train(cfg: DictConfig) -> Path:
-    """Train as configured; return the run folder."""
+    """Train as configured; return the run folder.
+
+    Every ``_target_`` of ``cfg`` is checked against :data:`mocapkit.train.safety.RUN_POLICY` first (a run
+    that ``eval`` / ``export`` / ``resume`` could not load again is refused before it starts); checkpoints
+    are written atomically (:class:`~mocapkit.train.checkpoint_io.AtomicCheckpointIO`).
+    """
+    from mocapkit.train.checkpoint_io import AtomicCheckpointIO
+    from mocapkit.train.config import RUN_CONFIG_UNRESOLVED
+    from mocapkit.train.safety import check_run_config
+
+    source = Path(cfg.resume).parent / RUN_CONFIG_UNRESOLVED if cfg.resume else "the training config"
+    check_run_config(cfg, source)
     L.seed_everything(cfg.seed, workers=True)
     run_dir = Path(cfg.resume).parent if cfg.resume else prepare_run_dir(cfg)
     # saved before anything is instantiated: instantiate resolves interpolations it follows in place
@@ -71,14 +98,15 @@ def train(cfg: DictConfig) -> Path:
     module = build(cfg.module, **datamodule.label_spaces())
     callbacks = [build(node) for node in (cfg.get("callbacks") or {}).values() if node]
     loggers = [build(node) for node in (cfg.get("logger") or {}).values() if node]
+    plugins = [*(cfg.trainer.get("plugins") or []), AtomicCheckpointIO()]
     trainer = build(cfg.trainer, callbacks=callbacks, logger=loggers or False, deterministic=cfg.deterministic,
-                    default_root_dir=str(run_dir))
+                    default_root_dir=str(run_dir), plugins=plugins)
     # the run folder already holds config.yaml, by design
     warnings.filterwarnings("ignore", message=r"Checkpoint directory .* exists and is not empty")
     print(f"[mocapkit] run folder: {run_dir}")
     print(f"[mocapkit] task {cfg.task}, samples: {counts} (split {datamodule.describe()['split']}), "
           f"{len(datamodule.class_names)} classes")
-    trainer.fit(module, datamodule=datamodule, ckpt_path=cfg.resume)
+    trainer.fit(module, datamodule=datamodule, ckpt_path=cfg.resume, weights_only=True)
     if trainer.is_global_zero:
         print(f"[mocapkit] wrote {run_dir / 'config.yaml'}")
         for callback in callbacks:
@@ -97,7 +125,7 @@ _ARGV: list[str] = []
 #: Errors of the jobs of one ``main`` call, raised once Hydra has returned (so the CLI can name them).
 _JOB_ERRORS: list[Exception] = []
 #: Errors a job reports to the user as one line (the CLI's exit code 2); anything else is a bug and propagates.
-USER_ERRORS = (ConfigError, FileNotFoundError, ValueError)
+USER_ERRORS = (ConfigError, OSError, ValueError)
 
 
 @hydra.main(config_path=str(CONFIG_DIR), config_name="train", version_base="1.3")
@@ -108,11 +136,55 @@ def _hydra_task(cfg: DictConfig) -> None:
     with open_dict(cfg):  # a sweep job's folder is Hydra's, not the single-run default
         cfg.run_dir = HydraConfig.get().runtime.output_dir
     try:
+        check_output_paths(cfg)  # a sweep job's folder (named by its overrides) stays under output_root too
         train(cfg)
-    except USER_ERRORS as exc:
+    except Exception as exc:  # raised by main() once Hydra returns: the CLI reports it on one line
         _JOB_ERRORS.append(exc)
         if HydraConfig.get().mode.name == "MULTIRUN":
             print(f"[mocapkit] job {HydraConfig.get().job.override_dirname} failed: {exc}", file=sys.stderr)
+            if not isinstance(exc, USER_ERRORS):  # a bug: stop the sweep
+                raise
+
+
+def _first_job(overrides: list[str]) -> list[str]:
+    """The overrides of a sweep's first job: every swept key at its first value, Hydra's flags left out."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    parser, job = OverridesParser.create(), []
+    for item in overrides:
+        if item.startswith("-"):
+            continue
+        try:
+            parsed = parser.parse_override(item)
+        except Exception as exc:
+            raise ConfigError(f"override {item!r}: {exc}") from exc
+        if not parsed.is_sweep_override():
+            job.append(item)
+            continue
+        prefix = "++" if parsed.is_force_add() else "+" if parsed.is_add() else ""
+        job.append(f"{prefix}{parsed.get_key_element()}={next(iter(parsed.sweep_string_iterator()))}")
+    return job
+
+
+def _reference_config(overrides: list[str]) -> DictConfig:
+    """The defaults the overrides' types are checked against: the config with only its group choices
+    (``experiment=...``, ``model=...``; the first value of a swept group) applied."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    parser, groups = OverridesParser.create(), []
+    for item in overrides:
+        if item.startswith("-"):
+            continue
+        try:
+            parsed = parser.parse_override(item)
+        except Exception:
+            continue
+        if "." in parsed.key_or_group or not (CONFIG_DIR / parsed.key_or_group).is_dir() or parsed.is_delete():
+            continue
+        value = next(iter(parsed.sweep_string_iterator())) if parsed.is_sweep_override() \
+            else parsed.get_value_element_as_str()
+        groups.append(f"{'+' if parsed.is_add() else ''}{parsed.key_or_group}={value}")
+    return compose_config(groups)
 
 
 def main(overrides: list[str]) -> None:
@@ -122,8 +194,12 @@ def main(overrides: list[str]) -> None:
     reported as a :class:`ConfigError` naming it; the first failed job's error is raised after Hydra returns.
     """
     flags = [o for o in overrides if o.startswith("-")]
+    check_override_names(overrides)  # before Hydra creates any folder (every value of a sweep)
     if not flags:
-        compose_config(overrides)
+        check_output_paths(compose_config(overrides))
+    elif {"-m", "--multirun"} & set(flags):  # a sweep: its first job composed, so a bad key is named here
+        check_output_paths(compose_config(_first_job(overrides)))
+    check_override_types(overrides, _reference_config(overrides))
     _ARGV[:] = sys.argv
     _JOB_ERRORS.clear()
     sys.argv[:] = ["mocapkit train", *overrides]

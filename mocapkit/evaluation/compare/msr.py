@@ -164,12 +164,11 @@ def learned_clip_words(run_dir: Path, sequences: list[np.ndarray]):
     """``(sequence index per clip, arg-max soft word per clip)`` of a run whose network has ``soft_words``
     (the end-to-end NMF layer), over ``sequences`` one at a time; None for other networks."""
     import torch
-    from hydra.utils import get_class
-    from omegaconf import OmegaConf
 
-    cfg = OmegaConf.load(run_dir / "config.yaml")
-    target = OmegaConf.select(cfg, "module._target_", default="mocapkit.train.action_module.ActionRecognitionModule")
-    module = get_class(target).load_from_checkpoint(run_dir / "best.ckpt", map_location="cpu").eval()
+    from mocapkit.train.checkpoints import checkpoint_config, load_module
+
+    checkpoint = Path(run_dir) / "best.ckpt"
+    module = load_module(checkpoint_config(checkpoint), checkpoint).eval()   # vetted, weights_only
     network = getattr(module, "model", None)
     if not hasattr(network, "soft_words"):
         return None
