@@ -1,6 +1,18 @@
-"""Classical (non-learned) methods, scikit-learn style: NMF solvers for motion clustering (thesis §6.3) and
-their sample graphs; the GEI + PCA + LDA gait baseline."""
-from mocapkit.classical.gei_pca_lda import GEIPCALDA, run_gei_pca_lda
+"""Classical (non-learned) methods, all scikit-learn estimators (parameters stored untouched in ``__init__``,
+input checks in ``fit``, fitted attributes ending in ``_``, ``NotFittedError`` before ``fit``): NMF solvers for
+motion clustering (thesis §6.3) and their sample graphs; the bag-of-clip-words classifier; the GEI + PCA + LDA
+gait baseline. :mod:`mocapkit.evaluation.compare` runs them beside the learned models on the same splits."""
+from mocapkit.classical.bag_of_words import BagOfWordsClassifier, ClipConditioner, SequenceClips
+from mocapkit.classical.dynammo import DynaMMo
+from mocapkit.classical.filter_bases import FilterBasesRefiner
+from mocapkit.classical.gap_filling import (
+    HoldLastValue,
+    LinearInterpolation,
+    PCAGapFilling,
+    PchipInterpolation,
+    SplineInterpolation,
+)
+from mocapkit.classical.gei_pca_lda import GEIPCALDA
 from mocapkit.classical.graphs import (
     combine_graphs,
     knn_graph,
@@ -9,19 +21,36 @@ from mocapkit.classical.graphs import (
     sparse_graph,
     split_laplacian,
 )
+from mocapkit.classical.lrmf import LRMF
 from mocapkit.classical.nmf import GNMF, NMC, NMF, OrthogonalNMF
+from mocapkit.classical.psc import PSCRefiner
+from mocapkit.classical.svt import SVTCompletion
+from mocapkit.classical.trnn import TrNN
 
 __all__ = [
     "GEIPCALDA",
     "GNMF",
+    "LRMF",
     "NMC",
     "NMF",
+    "BagOfWordsClassifier",
+    "ClipConditioner",
+    "DynaMMo",
+    "FilterBasesRefiner",
+    "HoldLastValue",
+    "LinearInterpolation",
     "OrthogonalNMF",
+    "PCAGapFilling",
+    "PSCRefiner",
+    "PchipInterpolation",
+    "SVTCompletion",
+    "SequenceClips",
+    "SplineInterpolation",
+    "TrNN",
     "combine_graphs",
     "knn_graph",
     "label_graph",
     "laplacian",
-    "run_gei_pca_lda",
     "sparse_graph",
     "split_laplacian",
 ]
