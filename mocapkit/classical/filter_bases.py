@@ -92,6 +92,7 @@ class FilterBasesRefiner(MotionRefiner):
     """
 
     requires_fit = True
+    fixed_sampling = True
 
     def __init__(self, window: int = 20, energy: float = 0.9999, n_bases: int | None = None, welsch_p: float = 0.03,
                  prior_weight: float = 0.1, max_iter: int = 50, tol: float = 1e-5, outlier_weight: float = 0.01,
@@ -114,20 +115,12 @@ class FilterBasesRefiner(MotionRefiner):
 
     def fit(self, motions: Sequence[Motion] | None = None, y=None) -> FilterBasesRefiner:
         """Learn the bases from clean ``motions`` (one layout, one frame rate, one up axis)."""
-        motions = list(motions or [])
-        if motions:
-            fps = {float(m.fps) for m in motions}
-            up = {m.up_axis for m in motions}
-            if len(fps) > 1 or len(up) > 1:
-                raise RefinementError(f"{type(self).__name__}.fit: training motions mix frame rates {sorted(fps)} "
-                                      f"or up axes {sorted(up)}; resample them to one rate first")
-            self.fps_, self.up_axis_ = fps.pop(), up.pop()
-            self.dilation_ = int(self.dilation) if self.dilation else max(1, round(self.fps_ / THESIS_FPS))
         if self.invariance not in ("heading", "translation", "none"):
             raise ValueError(f"invariance must be 'heading', 'translation' or 'none', got {self.invariance!r}")
         return super().fit(motions, y)
 
     def _fit_matrices(self, data: list[tuple[np.ndarray, np.ndarray]]) -> None:
+        self.dilation_ = int(self.dilation) if self.dilation else max(1, round(self.fps_ / THESIS_FPS))
         M, delta = int(self.window), self.dilation_
         L = data[0][0].shape[1]
         rows = []
@@ -168,13 +161,6 @@ class FilterBasesRefiner(MotionRefiner):
         return S.reshape(L * M, 3) / np.sqrt(L * M / 3)
 
     # ------------------------------------------------------------------ refine
-
-    def refine(self, motion: Motion) -> Motion:
-        """``motion`` with gaps filled and outliers repaired; it must have the training frame rate and up axis."""
-        if hasattr(self, "fps_") and (float(motion.fps) != self.fps_ or motion.up_axis != self.up_axis_):
-            raise RefinementError(f"{motion.source or motion.name}: {motion.fps:g} fps, {motion.up_axis}-up; "
-                                  f"{type(self).__name__} was fitted at {self.fps_:g} fps, {self.up_axis_}-up")
-        return super().refine(motion)
 
     def _refine_matrix(self, X: np.ndarray, observed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         T0, L = X.shape

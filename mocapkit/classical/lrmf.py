@@ -264,6 +264,14 @@ def _solve_right(A: torch.Tensor, G: torch.Tensor) -> torch.Tensor:
 
 # ----------------------------------------------------------------------------- the solver
 
+
+def ialm_multipliers(D: torch.Tensor, weight: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """The two Lagrange multipliers' start of the inexact ALM (Lin, Chen & Ma 2010), used by both thesis models:
+    ``Y1 = Y2 = D / max(‖D‖₂, ‖D‖_∞ / weight)`` (Algorithm 2 line 1 with α, Algorithm 3 line 1 with λ)."""
+    scale = max(float(torch.linalg.matrix_norm(D, ord=2)), float(D.abs().max()) / weight)
+    Y1 = D / scale
+    return Y1, Y1.clone()
+
 def lrmf(X: np.ndarray, observed: np.ndarray, width: int, alpha: float = 1.0, beta: float = 100.0,
          lambda1: float = 1e-5, lambda2: float = 1e-5, gamma: float = 1.4, lambda_max: float = 1e10,
          max_iter: int = 500, tol: float = 1e-4, random_state: int | None = 0, device="cpu",
@@ -295,9 +303,7 @@ def lrmf(X: np.ndarray, observed: np.ndarray, width: int, alpha: float = 1.0, be
     if norm_X == 0:
         raise ValueError("LRMF: every observed entry is 0, nothing to factorise")
     # Algorithm 2 line 1: Y1 = Y2 = Xᵀ / max(‖Xᵀ‖₂, ‖Xᵀ‖_∞/α)   [fix: IALM's scaling, not max(‖Xᵀ‖²_F, ‖Xᵀ‖_∞)]
-    scale = max(float(torch.linalg.matrix_norm(Xt, ord=2)), float(Xt.abs().max()) / alpha)
-    Y1 = Xt / scale
-    Y2 = Y1.clone()
+    Y1, Y2 = ialm_multipliers(Xt, alpha)
     gen = torch.Generator().manual_seed(0 if random_state is None else int(random_state))
     V = torch.rand(d, width, generator=gen, dtype=torch.float64).to(device=device, dtype=dtype)
     V = V / torch.linalg.matrix_norm(V)                    # V⁰ = rand(d, κ) / ‖·‖_F

@@ -126,6 +126,7 @@ class PSCRefiner(MotionRefiner):
     """
 
     requires_fit = True
+    fixed_sampling = True
 
     def __init__(self, window: int = 10, dilation: int = 1, n_atoms: int = 512, n_neighbors: int = 20,
                  llc_lambda: float = 1e-3, max_iter: int = 20, tol: float = 1e-4, dictionary_steps: int = 3,
@@ -155,12 +156,6 @@ class PSCRefiner(MotionRefiner):
         """Learn one masked dictionary per poselet from clean ``motions`` (one layout, frame rate, up axis)."""
         motions = list(motions or [])
         if motions:
-            fps = {float(m.fps) for m in motions}
-            up = {m.up_axis for m in motions}
-            if len(fps) > 1 or len(up) > 1:
-                raise RefinementError(f"{type(self).__name__}.fit: training motions mix frame rates {sorted(fps)} "
-                                      f"or up axes {sorted(up)}; resample them to one rate first")
-            self.fps_, self.up_axis_ = fps.pop(), up.pop()
             self._resolve_layout(motions[0].joint_names)
         return super().fit(motions, y)
 
@@ -193,13 +188,6 @@ class PSCRefiner(MotionRefiner):
         else:
             ref = None
         self.poselets_, self.reference_ = poselets, ref
-
-    def refine(self, motion: Motion) -> Motion:
-        """``motion`` with missing (and TDD-flagged) markers recovered; same frame rate and up axis as training."""
-        if hasattr(self, "fps_") and (float(motion.fps) != self.fps_ or motion.up_axis != self.up_axis_):
-            raise RefinementError(f"{motion.source or motion.name}: {motion.fps:g} fps, {motion.up_axis}-up; "
-                                  f"{type(self).__name__} was fitted at {self.fps_:g} fps, {self.up_axis_}-up")
-        return super().refine(motion)
 
     # ------------------------------------------------------------------ local coordinates
 

@@ -65,6 +65,7 @@ from mocapkit.classical.lrmf import (
     dct,
     drop_empty_columns,
     flag_outliers,
+    ialm_multipliers,
     idct,
     interpolate_gaps,
     lsj_rank,
@@ -122,9 +123,7 @@ def trnn(X: np.ndarray, observed: np.ndarray, truncation: int = 15, width: int |
     if norm_PD == 0:
         raise ValueError("TrNN: every observed entry is 0, nothing to complete")
     # Algorithm 3 line 1: Y1 = Y2 = D / max(‖D‖₂, ‖D‖_∞/λ); S = M = 0; R = randn(n, d)/‖·‖_F  [fix: not randn(m, n)]
-    scale = max(float(torch.linalg.matrix_norm(PD, ord=2)), float(PD.abs().max()) / lam)
-    Y1 = PD / scale
-    Y2 = Y1.clone()
+    Y1, Y2 = ialm_multipliers(PD, lam)
     S = torch.zeros_like(PD)
     M = torch.zeros_like(PD)
     gen = torch.Generator().manual_seed(0 if random_state is None else int(random_state))

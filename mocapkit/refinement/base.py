@@ -74,6 +74,9 @@ class MotionRefiner(BaseEstimator):
     requires_fit: bool = False
     #: Fewest frames the method can work on.
     min_frames: int = 2
+    #: True when the learned model depends on the frame rate and up axis (window-based data-driven methods):
+    #: ``fit`` then requires one of each (recorded as ``fps_``, ``up_axis_``) and ``refine`` checks them.
+    fixed_sampling: bool = False
 
     def fit(self, motions: Sequence[Motion] | None = None, y=None) -> MotionRefiner:
         """Learn from clean ``motions`` (all of one layout); records ``joint_names_``. A no-op otherwise."""
@@ -87,6 +90,12 @@ class MotionRefiner(BaseEstimator):
                     raise RefinementError(f"{m.source or m.name}: joints {list(m.joint_names)[:4]}... differ from the "
                                           f"first training motion's; fit one refiner per skeleton layout")
             self.joint_names_ = names
+            if self.fixed_sampling:
+                fps, up = {float(m.fps) for m in motions}, {m.up_axis for m in motions}
+                if len(fps) > 1 or len(up) > 1:
+                    raise RefinementError(f"{type(self).__name__}.fit: training motions mix frame rates {sorted(fps)} "
+                                          f"or up axes {sorted(up)}; resample them to one rate first")
+                self.fps_, self.up_axis_ = fps.pop(), up.pop()
         self._fit_matrices([motion_matrix(m) for m in motions]) if motions else None
         return self
 
@@ -103,6 +112,10 @@ class MotionRefiner(BaseEstimator):
                 absent = [n for n in self.joint_names_ if n not in motion.joint_names]
                 raise RefinementError(f"{motion.source or motion.name}: {type(self).__name__} was fitted on another "
                                       f"skeleton layout (missing joints: {absent[:8]}{'...' if len(absent) > 8 else ''})")
+        if self.fixed_sampling and hasattr(self, "fps_") and (float(motion.fps) != self.fps_
+                                                              or motion.up_axis != self.up_axis_):
+            raise RefinementError(f"{motion.source or motion.name}: {motion.fps:g} fps, {motion.up_axis}-up; "
+                                  f"{type(self).__name__} was fitted at {self.fps_:g} fps, {self.up_axis_}-up")
         X, observed = motion_matrix(motion)
         filled, repaired = self._refine_matrix(X, observed)
         frames, joints = motion.positions.shape[:2]

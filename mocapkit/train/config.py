@@ -81,22 +81,35 @@ def load_run_config(run_dir: str | Path, overrides: list[str] | None = None) -> 
     return cfg
 
 
+def parse_overrides(overrides: list[str], strict: bool = True):
+    """``(item, parsed)`` for each Hydra override of ``overrides``, parsed by Hydra's own parser.
+
+    Hydra's flags (``-m``, ``--cfg job``, ...) are yielded with ``parsed`` None. A line Hydra cannot
+    parse raises :class:`ConfigError` naming it when ``strict``; otherwise it is skipped (Hydra reports
+    it itself when it composes).
+    """
+    parser = OverridesParser.create()
+    for item in overrides:
+        if item.startswith("-"):
+            yield item, None
+            continue
+        try:
+            parsed = parser.parse_override(item)
+        except Exception as exc:
+            if strict:
+                raise ConfigError(f"override {item!r}: {exc}") from exc
+            continue
+        yield item, parsed
+
+
 def pop_override(overrides: list[str], key: str) -> tuple[str | None, list[str]]:
     """Split ``key=value`` off ``overrides`` (Hydra syntax, parsed by Hydra's own parser).
 
     Returns ``(value or None, the other overrides)``; the last one wins if ``key`` is given twice.
     """
-    parser = OverridesParser.create()
     value, rest = None, []
-    for item in overrides:
-        if item.startswith("-"):  # Hydra's flags (-m, --cfg job, ...) pass through
-            rest.append(item)
-            continue
-        try:
-            parsed = parser.parse_override(item)
-        except Exception as exc:
-            raise ConfigError(f"override {item!r}: {exc}") from exc
-        if parsed.key_or_group == key and parsed.package is None:
+    for item, parsed in parse_overrides(overrides):
+        if parsed is not None and parsed.key_or_group == key and parsed.package is None:
             value = None if parsed.value() is None else str(parsed.value())
         else:
             rest.append(item)
@@ -155,15 +168,8 @@ def check_output_paths(cfg: DictConfig) -> Path:
 
 def check_override_names(overrides: list[str]) -> None:
     """Check ``run_name`` / ``experiment_name`` overrides (every value of a sweep) as :func:`check_path_component`."""
-    parser = OverridesParser.create()
-    for item in overrides:
-        if item.startswith("-"):
-            continue
-        try:
-            parsed = parser.parse_override(item)
-        except Exception:  # Hydra reports it itself, naming the override
-            continue
-        if parsed.key_or_group not in NAME_KEYS or parsed.package is not None:
+    for _, parsed in parse_overrides(overrides, strict=False):
+        if parsed is None or parsed.key_or_group not in NAME_KEYS or parsed.package is not None:
             continue
         values = (list(parsed.sweep_string_iterator()) if parsed.is_sweep_override()
                   else [parsed.get_value_element_as_str()])
@@ -192,13 +198,8 @@ def check_override_types(overrides: list[str], reference: DictConfig, source: st
     """Refuse an override whose value has the wrong type for its key, naming both (``trainer.max_epochs=abc``:
     expected an integer). ``reference`` holds the defaults (the config without those overrides); every value
     of a sweep is checked. Keys that are new, null by default, or not numbers / booleans are not checked."""
-    parser = OverridesParser.create()
-    for item in overrides:
-        if item.startswith("-"):
-            continue
-        try:
-            parsed = parser.parse_override(item)
-        except Exception:  # Hydra reports it itself
+    for item, parsed in parse_overrides(overrides, strict=False):
+        if parsed is None:
             continue
         if parsed.is_delete() or parsed.is_add() or parsed.package is not None or "." not in parsed.key_or_group \
                 and (CONFIG_DIR / parsed.key_or_group).is_dir():

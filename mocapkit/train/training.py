@@ -33,6 +33,7 @@ from mocapkit.train.config import (
     check_override_types,
     compose_config,
     load_run_config,
+    parse_overrides,
     prepare_run_dir,
     save_run_config,
 )
@@ -148,16 +149,10 @@ def _hydra_task(cfg: DictConfig) -> None:
 
 def _first_job(overrides: list[str]) -> list[str]:
     """The overrides of a sweep's first job: every swept key at its first value, Hydra's flags left out."""
-    from hydra.core.override_parser.overrides_parser import OverridesParser
-
-    parser, job = OverridesParser.create(), []
-    for item in overrides:
-        if item.startswith("-"):
+    job = []
+    for item, parsed in parse_overrides(overrides):
+        if parsed is None:
             continue
-        try:
-            parsed = parser.parse_override(item)
-        except Exception as exc:
-            raise ConfigError(f"override {item!r}: {exc}") from exc
         if not parsed.is_sweep_override():
             job.append(item)
             continue
@@ -169,15 +164,9 @@ def _first_job(overrides: list[str]) -> list[str]:
 def _reference_config(overrides: list[str]) -> DictConfig:
     """The defaults the overrides' types are checked against: the config with only its group choices
     (``experiment=...``, ``model=...``; the first value of a swept group) applied."""
-    from hydra.core.override_parser.overrides_parser import OverridesParser
-
-    parser, groups = OverridesParser.create(), []
-    for item in overrides:
-        if item.startswith("-"):
-            continue
-        try:
-            parsed = parser.parse_override(item)
-        except Exception:
+    groups = []
+    for item, parsed in parse_overrides(overrides, strict=False):
+        if parsed is None:
             continue
         if "." in parsed.key_or_group or not (CONFIG_DIR / parsed.key_or_group).is_dir() or parsed.is_delete():
             continue
