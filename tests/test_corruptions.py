@@ -3,7 +3,7 @@ import re
 
 import numpy as np
 import pytest
-from shared_data import SHARED, needs
+from tests.shared_data import SHARED, needs
 
 from mocapkit.datasets.formats.motion import Motion
 from mocapkit.refinement import PROTOCOLS, Corruption, CorruptionError, corrupt

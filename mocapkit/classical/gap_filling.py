@@ -121,6 +121,10 @@ class HoldLastValue(_TemporalInterpolation):
         return y_obs[np.searchsorted(t_obs, t_new, side="right") - 1]
 
 
+#: An iterative PCA update that keeps growing beyond this (metres) is taken as diverging and stopped.
+DIVERGING_CHANGE_M = 0.05
+
+
 class PCAGapFilling(MotionRefiner):
     """PCA gap filling from the correlations between markers, after Gløersen & Federolf 2016.
 
@@ -245,18 +249,44 @@ class PCAGapFilling(MotionRefiner):
                                   [index[j] for j in gapped])
         if self.method == "iterative":
             self.basis_ = "iterative"
+            changes: list[float] = []
             for iteration in range(1, self.max_iter + 1):
                 self.n_iter_ = iteration
                 previous = estimate
                 estimate = self._pass(estimate, Oa, Sa, estimate, train, reference, distances,
                                       [index[j] for j in gapped], own_rows=Sa)
-                change = np.abs(estimate - previous)[~Oa].max()
+                change = float(np.abs(estimate - previous)[~Oa].max())
                 if change < self.tol:
                     break
+                # diverging: the update grew three times in a row and moves markers by more than 5 cm
+                if len(changes) >= 2 and change > changes[-1] > changes[-2] and change > DIVERGING_CHANGE_M:
+                    estimate = previous
+                    self.basis_ = "iterative (stopped: diverging)"
+                    break
+                changes.append(change)
+        estimate = self._plausible(estimate, Oa, Sa, self._initial(Xa, Oa), reference)
         result = np.where(Oa, Xa, estimate)
         result[~Sa.any(axis=1)] = np.nan                                  # frames with nothing observed
         out[:, cols] = np.where(Oa, Xa, result)
         return out, None
+
+    def _plausible(self, estimate: np.ndarray, observed: np.ndarray, seen: np.ndarray, fallback: np.ndarray,
+                   reference: np.ndarray) -> np.ndarray:
+        """Reconstructed markers farther from the body centre than any observed marker ever is (×1.5) are not
+        plausible: they are replaced by the ``fallback`` (linear interpolation over time) and counted in
+        ``n_implausible_``. With many markers missing at once the PCA solve can be ill-posed; this keeps a
+        diverging reconstruction from inventing positions metres away from the body."""
+        P = estimate.reshape(estimate.shape[0], -1, 3)
+        centre = self._centres(np.where(observed, estimate, fallback), reference)[:, None]   # [F, 1, 3]
+        radius = np.linalg.norm(P - centre, axis=2)                                           # [F, J]
+        reach = 1.5 * radius[seen].max() if seen.any() else np.inf
+        bad = (radius > reach) & ~seen
+        self.n_implausible_ = int(bad.sum())
+        if not bad.any():
+            return estimate
+        out = estimate.copy().reshape(P.shape)
+        out[bad] = fallback.reshape(P.shape)[bad]
+        return out.reshape(estimate.shape)
 
     @staticmethod
     def _initial(X: np.ndarray, observed: np.ndarray) -> np.ndarray:
