@@ -7,17 +7,9 @@ checked against a policy **before anything is instantiated**; anything else is r
 :class:`UnsafeConfigError` (a :class:`~mocapkit.train.config.ConfigError`: one line, exit code 2)
 naming the file and the offending key.
 
-Two levels:
-
-``GENERAL_PREFIXES``
-    what configs *we ship* (``configs/``) may name at all: ``mocapkit.``, ``torch.optim.``
-    (and its ``lr_scheduler``), ``lightning.pytorch.callbacks.``, ``lightning.pytorch.loggers.``,
-    ``lightning.Trainer`` and ``sklearn.`` — and nothing else (no ``builtins``, ``os``, ``pathlib``,
-    ``shutil``, ``numpy``, ``subprocess``, ...). :func:`check_general` applies it (comparisons).
-
-Per-key policies (:data:`RUN_POLICY`, :data:`CHECKPOINT_POLICY`, :data:`REFINER_POLICY`)
-    what a config read from a *run folder* or a *checkpoint* (``eval``, ``export``, ``train resume=``,
-    ``compare`` reading its runs) or a refiner may name, key by key. ``mocapkit.`` alone is not enough
+Per-key policies (:data:`RUN_POLICY`, :data:`CHECKPOINT_POLICY`, :data:`REFINER_POLICY`): what a config
+    read from a *run folder* or a *checkpoint* (``eval``, ``export``, ``train resume=``, ``compare`` reading
+    its runs), the config ``train`` is about to run, or a refiner may name, key by key. ``mocapkit.`` alone is not enough
     there: a mocapkit function that writes files (``mocapkit.datasets.formats.motion_io.write_motion``)
     must not become "the model". A rule first checks the name against its prefixes (so no module outside
     them is ever imported), then imports the named object and checks what it *is* (a LightningModule
@@ -63,11 +55,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from mocapkit.train.config import ConfigError
-
-#: What any config we ship may name (the coarse allow-list; the per-key rules below are stricter).
-GENERAL_PREFIXES = ("mocapkit.", "torch.optim.", "lightning.pytorch.callbacks.", "lightning.pytorch.loggers.",
-                    "sklearn.")
-GENERAL_EXACT = ("lightning.Trainer", "lightning.pytorch.Trainer")
 
 #: Lightning's own "instantiate this" keys in checkpoint hyper-parameters: never accepted.
 LIGHTNING_INSTANTIATOR_KEYS = ("_instantiator", "_class_path")
@@ -153,7 +140,7 @@ SCHEDULER = Rule("a torch.optim.lr_scheduler class", ("torch.optim.lr_scheduler.
                                        "torch.optim.lr_scheduler.ReduceLROnPlateau")))
 DATAMODULE = Rule("a LightningDataModule class under mocapkit.datasets named *DataModule", ("mocapkit.datasets.",),
                   accepts=_datamodule)
-TRAINER = Rule("lightning.Trainer", exact=GENERAL_EXACT)
+TRAINER = Rule("lightning.Trainer", exact=("lightning.Trainer", "lightning.pytorch.Trainer"))
 CALLBACK = Rule("a Lightning callback class (lightning.pytorch.callbacks or mocapkit.train.callbacks)",
                 ("lightning.pytorch.callbacks.", "mocapkit.train.callbacks."), accepts=_subclass_of("lightning.Callback"))
 LOGGER = Rule("a Lightning logger class (lightning.pytorch.loggers)", ("lightning.pytorch.loggers.",),
@@ -166,8 +153,6 @@ EXPORTER = Rule("mocapkit's ONNX exporter of the task",
                        "mocapkit.deploy.gait_export.export_gait_module"))
 REFINER = Rule("a mocapkit MotionRefiner class", ("mocapkit.",),
                accepts=_subclass_of("mocapkit.refinement.base.MotionRefiner"))
-GENERAL = Rule("a target under " + ", ".join(GENERAL_PREFIXES) + " or lightning.Trainer",
-               GENERAL_PREFIXES, GENERAL_EXACT)
 
 #: A run folder's config (``.hydra/config.yaml``) and the config ``train`` runs: key → rule.
 RUN_POLICY: dict[str, Rule] = {
@@ -245,11 +230,6 @@ def check_targets(cfg, policy: Mapping[str, Rule], source: str | Path, prefix: s
         if not found[1].allows(target):
             raise UnsafeConfigError(f"{source}: {key}._target_={target!r} is not allowed: expected "
                                     f"{found[1].expected}")
-
-
-def check_general(cfg, source: str | Path, prefix: str = "") -> None:
-    """The coarse allow-list (:data:`GENERAL_PREFIXES`) over every ``_target_`` of ``cfg``."""
-    check_targets(cfg, {"": GENERAL}, source, prefix)
 
 
 def check_run_config(cfg, source: str | Path) -> None:
