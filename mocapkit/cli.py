@@ -6,11 +6,13 @@
     mocapkit render FILE --out anim.gif [--strip]
     mocapkit prepare ntu --src DIR --out DIR [--workers N] [--skip-bad] [--missing-list FILE]
     mocapkit prepare casia-b --src DIR --out DIR [--size 64x44|124x124] [--per cycle|sequence] [--skip-bad]
-    mocapkit gait-report --data GEI_CACHE --out DIR [--protocols ...] [Hydra overrides ...]
-    mocapkit train [experiment=NAME] data.root=CACHE [Hydra overrides ...]
+    mocapkit train [experiment=NAME] data.root=CACHE [Hydra overrides ...]      (-m: a sweep; resume=RUN/last.ckpt)
     mocapkit eval ckpt_path=RUN/best.ckpt [overrides ...]
     mocapkit export ckpt_path=RUN/best.ckpt [out=FILE] [overrides ...]
     mocapkit predict --onnx FILE MOTION_FILE [MOTION_FILE ...]
+    mocapkit compare NAME [overrides ...]                 (configs/compare/NAME.yaml: methods × protocols × seeds)
+    mocapkit gait-report --data GEI_CACHE --out DIR [--protocols ...] [overrides ...]   (= compare gait)
+    mocapkit refine IN OUT --method NAME [--set KEY=VALUE ...] [--train PATH ...] [--repair-outliers]
 
 Errors are one line (``mocapkit: error: ...``, exit code 2); ``mocapkit --debug COMMAND ...`` (or
 ``MOCAPKIT_DEBUG=1``) shows the traceback instead.
@@ -248,7 +250,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     for name, help_text in (("train", "train a model (Hydra overrides)"),
                             ("eval", "evaluate a checkpoint: ckpt_path=PATH [overrides]"),
-                            ("export", "export a checkpoint to ONNX: ckpt_path=PATH [out=FILE]")):
+                            ("export", "export a checkpoint to ONNX: ckpt_path=PATH [out=FILE]"),
+                            ("compare", "run configs/compare/NAME.yaml: methods x protocols x seeds "
+                                        "(NAME [overrides])")):
         p = sub.add_parser(name, help=help_text)
         p.add_argument("overrides", nargs="*", help="key=value overrides")
 
