@@ -11,6 +11,7 @@ import torch
 from sklearn.base import clone
 
 from mocapkit.classical import LRMF, TrNN
+from mocapkit.classical.gap_filling import linear_fill
 from mocapkit.classical.lrmf import (
     CMU_UNIT,
     _dct_fft,
@@ -18,7 +19,6 @@ from mocapkit.classical.lrmf import (
     apply_second_difference,
     dct,
     idct,
-    interpolate_gaps,
     lrmf,
     lsj_rank,
     second_difference,
@@ -77,7 +77,7 @@ def test_interpolation_and_lsj_rank_rules():
     X = np.arange(10.0)[:, None] * [1.0, 2.0]
     observed = np.ones_like(X, bool)
     observed[3:6, 0] = observed[0, 1] = observed[9, 1] = False
-    filled = interpolate_gaps(np.where(observed, X, 0), observed)
+    filled = linear_fill(np.where(observed, X, 0), observed, empty=0.0)
     assert np.allclose(filled[:, 0], X[:, 0])                                     # interior gap: exact for a line
     assert filled[0, 1] == 2.0 and filled[9, 1] == 16.0                           # ends held
     s = np.array([100.0, 10.0, 9.0, 3.0, 2.95, 0.01])
@@ -162,7 +162,7 @@ def test_refine_fills_gaps_and_keeps_observed_entries(refiner):
     gap = missing[:, :11]
     err = np.linalg.norm(out.positions[:, :11] - clean.positions[:, :11], axis=2)
     X = np.nan_to_num(corrupted.positions.reshape(240, -1).astype(np.float64))
-    linear = interpolate_gaps(X, np.repeat(~missing, 3, axis=1)).reshape(240, 12, 3)[:, :11]
+    linear = linear_fill(X, np.repeat(~missing, 3, axis=1), empty=0.0).reshape(240, 12, 3)[:, :11]
     assert err[gap].mean() < 0.75 * np.linalg.norm(linear - clean.positions[:, :11], axis=2)[gap].mean()
     # observed entries: bit-identical unless flagged, and the flagged ones are the spikes
     changed = ~(out.positions == corrupted.positions).all(axis=2) & ~corrupted.missing
@@ -197,7 +197,7 @@ def test_trnn_beats_linear_interpolation_on_hdm05_gaps():
     frames = clean.num_frames
     X = np.nan_to_num(corruption.motion.positions.reshape(frames, -1).astype(np.float64))
     observed = np.repeat(~corruption.motion.missing, 3, axis=1)
-    linear = Motion(interpolate_gaps(X, observed).reshape(frames, -1, 3), clean.joint_names, clean.fps)
+    linear = Motion(linear_fill(X, observed, empty=0.0).reshape(frames, -1, 3), clean.joint_names, clean.fps)
     ours, baseline = score_refinement(out, clean, corruption), score_refinement(linear, clean, corruption)
     assert ours.coverage == 1.0 and ours.changed_clean == 0
     assert ours.rmse_cm < 0.8 * baseline.rmse_cm, (ours.rmse_cm, baseline.rmse_cm)

@@ -37,24 +37,12 @@ import numpy as np
 from scipy.linalg.lapack import dpotrf as _potrf
 from scipy.linalg.lapack import dpotri as _potri
 
+from mocapkit.classical.gap_filling import linear_fill
 from mocapkit.refinement.base import MotionRefiner
 
 _LOG_2PI = float(np.log(2.0 * np.pi))
 
 
-def linear_fill(X: np.ndarray, observed: np.ndarray) -> np.ndarray:
-    """Fill every column of ``X`` (``[frames, channels]``) by linear interpolation over its observed frames.
-
-    Leading / trailing gaps are held at the nearest observed value; a column with no observed frame
-    stays NaN. Observed entries are returned unchanged.
-    """
-    X = np.asarray(X, dtype=np.float64)
-    out = np.where(observed, X, np.nan)
-    t = np.arange(X.shape[0])
-    for c in np.flatnonzero((~observed).any(0) & observed.any(0)):
-        o = observed[:, c]
-        out[~o, c] = np.interp(t[~o], t[o], X[o, c])
-    return out
 
 
 def _inv_spd(M: np.ndarray) -> tuple[np.ndarray, float]:

@@ -51,7 +51,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from mocapkit.classical.dynammo import linear_fill
+from mocapkit.classical.gap_filling import linear_fill
 from mocapkit.datasets.formats.motion import AXES, Motion
 from mocapkit.refinement.base import MotionRefiner, RefinementError
 

@@ -36,6 +36,19 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.flatnonzero(edges == 1).tolist(), np.flatnonzero(edges == -1).tolist()))
 
 
+def linear_fill(X: np.ndarray, observed: np.ndarray, empty: float = np.nan) -> np.ndarray:
+    """Every column of ``X`` (``[frames, channels]``) linearly interpolated over time through its observed
+    frames, the nearest observed value held before the first and after the last; a column with no observed
+    frame becomes ``empty``. Observed entries are returned unchanged. The start of the iterative refiners."""
+    X = np.asarray(X, dtype=np.float64)
+    out = np.where(observed, X, empty)
+    t = np.arange(X.shape[0])
+    for c in np.flatnonzero((~observed).any(0) & observed.any(0)):
+        o = observed[:, c]
+        out[~o, c] = np.interp(t[~o], t[o], X[o, c])
+    return out
+
+
 class _TemporalInterpolation(MotionRefiner):
     """Shared machinery: per column, interpolate the missing frames from the observed ones."""
 
@@ -242,7 +255,8 @@ class PCAGapFilling(MotionRefiner):
         if self.method == "complete" and complete.sum() < max(2, self.min_complete_frames):
             raise RefinementError(f"PCAGapFilling(method='complete'): only {int(complete.sum())} frames have every "
                                   f"marker, {self.min_complete_frames} needed; use method='iterative'")
-        estimate = self._initial(Xa, Oa)
+        initial = linear_fill(Xa, Oa)                                   # the iterative start and the fallback
+        estimate = initial
         if complete.sum() >= max(2, self.min_complete_frames):
             self.basis_ = "complete"
             estimate = self._pass(estimate, Oa, Sa, Xa[complete], train, reference, distances,
@@ -264,7 +278,7 @@ class PCAGapFilling(MotionRefiner):
                     self.basis_ = "iterative (stopped: diverging)"
                     break
                 changes.append(change)
-        estimate = self._plausible(estimate, Oa, Sa, self._initial(Xa, Oa), reference)
+        estimate = self._plausible(estimate, Oa, Sa, initial, reference)
         result = np.where(Oa, Xa, estimate)
         result[~Sa.any(axis=1)] = np.nan                                  # frames with nothing observed
         out[:, cols] = np.where(Oa, Xa, result)
@@ -287,16 +301,6 @@ class PCAGapFilling(MotionRefiner):
         out = estimate.copy().reshape(P.shape)
         out[bad] = fallback.reshape(P.shape)[bad]
         return out.reshape(estimate.shape)
-
-    @staticmethod
-    def _initial(X: np.ndarray, observed: np.ndarray) -> np.ndarray:
-        """Linear interpolation over time, nearest value held at the ends (the iterative start)."""
-        out = X.copy()
-        t = np.arange(X.shape[0])
-        for c in np.flatnonzero(~observed.all(axis=0)):
-            s = np.flatnonzero(observed[:, c])
-            out[:, c] = np.interp(t, s, X[s, c])
-        return out
 
     @staticmethod
     def _distances(X: np.ndarray, seen: np.ndarray) -> np.ndarray:

@@ -65,6 +65,7 @@ import numpy as np
 import scipy.fft
 import torch
 
+from mocapkit.classical.gap_filling import linear_fill
 from mocapkit.refinement.base import MotionRefiner, RefinementError
 
 #: Length of the CMU ASF/AMC unit in metres: the unit the thesis's parameters were tuned in.
@@ -182,18 +183,6 @@ def soft(x: torch.Tensor, tau: float) -> torch.Tensor:
     return x - x.clamp(-tau, tau)
 
 
-def interpolate_gaps(X: np.ndarray, observed: np.ndarray) -> np.ndarray:
-    """Linear interpolation along time (axis 0) of every column of ``X [frames, features]`` over its unobserved
-    entries, holding the first/last observed value at the ends; columns with no observed entry become 0."""
-    X = np.asarray(X, dtype=np.float64)
-    out = X.copy()
-    t = np.arange(X.shape[0])
-    for j in range(X.shape[1]):
-        obs = observed[:, j]
-        if obs.all():
-            continue
-        out[:, j] = np.interp(t, t[obs], X[obs, j]) if obs.any() else 0.0
-    return out
 
 
 def lsj_rank(singular_values: np.ndarray, threshold: float = 0.1, rule: str = "absolute") -> int:
@@ -229,7 +218,7 @@ def lsj_rank(singular_values: np.ndarray, threshold: float = 0.1, rule: str = "a
 def estimate_rank(X: np.ndarray, observed: np.ndarray, threshold: float = 0.1, rule: str = "absolute") -> int:
     """LSJ rank of ``X [frames, features]`` (same units as ``threshold``) after linear interpolation of its gaps
     (Wang 2017 §4.1.2 steps 1–3); see :func:`lsj_rank` for ``rule``."""
-    filled = interpolate_gaps(X, observed)
+    filled = linear_fill(X, observed, empty=0.0)
     return lsj_rank(np.linalg.svd(filled, compute_uv=False), threshold, rule)
 
 

@@ -62,7 +62,7 @@ import scipy.sparse as sp
 import torch
 from scipy.interpolate import make_smoothing_spline
 
-from mocapkit.classical.dynammo import linear_fill
+from mocapkit.classical.gap_filling import linear_fill
 from mocapkit.datasets.formats.motion import Motion
 from mocapkit.refinement.base import MotionRefiner, RefinementError
 

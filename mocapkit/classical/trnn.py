@@ -31,7 +31,7 @@ Corrections of the printed algorithm (each marked ``[fix]`` in the code):
 * eq. 4.22, not 4.2: ``O`` ends with the row ``[1 −1]``, which makes it diagonal in the DCT-II basis;
 * Algorithm 3 line 1: ``R¹ = randn(n, d) / ‖·‖_F`` (the thesis prints ``randn(m, n)``);
 * ``U¹, V¹`` (not given by the thesis): the top-``r`` left/right singular vectors of the gap-interpolated
-  data (:func:`mocapkit.classical.lrmf.interpolate_gaps`), one SVD before the loop;
+  data (:func:`mocapkit.classical.gap_filling.linear_fill`), one SVD before the loop;
 * the ``E^k`` of the ϑ stopping rule is ``S^k``; the multipliers are unsigned (the thesis says ``Y1, Y2 > 0``);
 * the factor width ``d = min(round(1.2 · rank(X)), m, n)`` (§4.2.3) is raised to at least ``r + 1`` so that
   ``r ≤ rank(X) ≤ d`` (eq. 4.20) can hold.
@@ -58,6 +58,7 @@ import math
 import numpy as np
 import torch
 
+from mocapkit.classical.gap_filling import linear_fill
 from mocapkit.classical.lrmf import (
     CMU_UNIT,
     LowRankResult,
@@ -67,7 +68,6 @@ from mocapkit.classical.lrmf import (
     flag_outliers,
     ialm_multipliers,
     idct,
-    interpolate_gaps,
     lsj_rank,
     resolve_device,
     resolve_dtype,
@@ -130,7 +130,7 @@ def trnn(X: np.ndarray, observed: np.ndarray, truncation: int = 15, width: int |
     R = torch.randn(n, d, generator=gen, dtype=torch.float64).to(device=device, dtype=dtype)
     R = R / torch.linalg.matrix_norm(R)
     if r > 0:  # [fix: U, V start not given] top-r singular vectors of the interpolated data
-        start = interpolate_gaps(X, obs_np) if init is None else np.asarray(init, dtype=np.float64)
+        start = linear_fill(X, obs_np, empty=0.0) if init is None else np.asarray(init, dtype=np.float64)
         P, _, Qh = torch.linalg.svd(torch.as_tensor(start.T, device=device, dtype=dtype), full_matrices=False)
         U, V = P[:, :r].mT.contiguous(), Qh[:r].contiguous()                     # U: r×m, V: r×n
     else:
@@ -273,7 +273,7 @@ class TrNN(MotionRefiner):
             raise RefinementError(f"TrNN with truncation r={r} needs at least {r + 1} observed coordinates "
                                   f"({(r + 3) // 3} markers; r < d <= coordinates), got {int(keep.sum())}")
         Xs, obs = X[:, keep] / self.unit, observed[:, keep]
-        filled = interpolate_gaps(Xs, obs)
+        filled = linear_fill(Xs, obs, empty=0.0)
         width = self._width(Xs, obs, filled)
         result = trnn(Xs, obs, r, width, self.lam, self.mu, self.rho, self.eta, self.eta_max, self.max_iter,
                       self.tol, self.random_state, self.device, self.dtype, init=filled)
