@@ -28,10 +28,11 @@ from typing import IO
 __all__ = ["atomic_open", "atomic_path", "atomic_write_bytes", "atomic_write_text", "fsync_dir", "temp_path_for"]
 
 
-def temp_path_for(dest: str | os.PathLike) -> Path:
-    """The temporary sibling of ``dest`` this process writes: ``<dest>.tmp-<pid>`` in the same folder."""
+def temp_path_for(dest: str | os.PathLike, suffix: str = "") -> Path:
+    """The temporary sibling of ``dest`` this process writes: ``<dest>.tmp-<pid><suffix>`` in the same folder
+    (``suffix`` for writers that insist on an extension, such as ezc3d's ``.c3d``)."""
     dest = Path(dest)
-    return dest.with_name(f"{dest.name}.tmp-{os.getpid()}")
+    return dest.with_name(f"{dest.name}.tmp-{os.getpid()}{suffix}")
 
 
 def fsync_dir(folder: str | os.PathLike) -> None:
@@ -75,15 +76,16 @@ def _check_dest(dest: Path) -> None:
 
 
 @contextlib.contextmanager
-def atomic_path(dest: str | os.PathLike) -> Iterator[Path]:
-    """Yield a temporary path beside ``dest``; when the block ends without an exception, move it onto ``dest``.
+def atomic_path(dest: str | os.PathLike, suffix: str = "") -> Iterator[Path]:
+    """Yield a temporary path beside ``dest`` (ending in ``suffix``); when the block ends without an exception,
+    move it onto ``dest``.
 
     The block must write (and close) the whole file at the yielded path. Raises ``IsADirectoryError`` when
     ``dest`` is a folder and ``FileNotFoundError`` when its folder does not exist (nothing is created).
     """
     dest = Path(dest)
     _check_dest(dest)
-    tmp = temp_path_for(dest)
+    tmp = temp_path_for(dest, suffix)
     try:
         yield tmp
         if not tmp.is_file():

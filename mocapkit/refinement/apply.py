@@ -61,6 +61,7 @@ from pathlib import Path
 import numpy as np
 
 from mocapkit.datasets.formats.motion import Motion
+from mocapkit.io_atomic import atomic_open, atomic_path
 from mocapkit.refinement.base import MotionRefiner
 
 #: Output suffixes :func:`refine_file` writes.
@@ -418,15 +419,9 @@ def refine_file(src: str | os.PathLike, out: str | os.PathLike, method: str, ove
 def _write_npz(path: Path, motion: Motion, filled: np.ndarray) -> None:
     positions = motion.positions.astype(np.float32)
     positions[motion.missing] = np.nan
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        with open(tmp, "wb") as fh:
-            np.savez(fh, positions=positions, missing=motion.missing, filled=filled,
-                     joint_names=np.asarray(motion.joint_names, dtype=str), fps=np.float64(motion.fps))
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
+    with atomic_open(path, "wb") as fh:
+        np.savez(fh, positions=positions, missing=motion.missing, filled=filled,
+                 joint_names=np.asarray(motion.joint_names, dtype=str), fps=np.float64(motion.fps))
 
 
 # --------------------------------------------------------------------------- C3D in, C3D out
@@ -453,8 +448,7 @@ def patch_c3d(src: Path, out: Path, motion: Motion, refined: Motion, changed: np
     if not np.isfinite(values).all():
         raise RefineError(f"{src}: the refiner returned non-finite values for samples it reports as filled")
     scale = float(np.asarray(source["parameters"]["POINT"]["SCALE"]["value"]).ravel()[0])
-    tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp.c3d")
-    try:
+    with atomic_path(out, suffix=".c3d") as tmp:          # ezc3d appends ".c3d" to other names
         if scale > 0:
             mode = _patch_integer(src, tmp, source, motion, frames, joints, values, scale)
         else:
@@ -469,10 +463,6 @@ def patch_c3d(src: Path, out: Path, motion: Motion, refined: Motion, changed: np
             source.c3d_swig.write(str(tmp))
             mode = "C3D rewritten by ezc3d; only the changed samples differ"
         _verify(src, tmp, frames, joints, values, abs(scale))
-        os.replace(tmp, out)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
     return mode
 
 

@@ -624,11 +624,7 @@ def write_c3d(path: str | os.PathLike, motion: Motion, units: str = "mm", restor
     c3d.add_parameter("POINT", "Y_SCREEN", [y_screen])
     c3d.add_parameter("MANUFACTURER", "SOFTWARE", ["mocapkit"])
 
-    # ezc3d appends ".c3d" to other names; write beside the target and move into place.
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp.c3d")
-    try:
+    from mocapkit.io_atomic import atomic_path
+
+    with atomic_path(path, suffix=".c3d") as tmp:         # ezc3d appends ".c3d" to other names
         c3d.write(str(tmp))
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
