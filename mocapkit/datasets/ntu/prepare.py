@@ -45,7 +45,13 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from mocapkit.datasets.cache_files import INDEX_FILE, META_FILE, integrity_record, save_npz_atomic, write_meta
+from mocapkit.datasets.cache_files import (
+    INDEX_FILE,
+    META_FILE,
+    integrity_record,
+    save_npz_atomic,
+    write_meta,
+)
 from mocapkit.datasets.formats.errors import MotionFormatError
 from mocapkit.datasets.formats.ntu_skeleton import (
     NUM_JOINTS,
@@ -58,6 +64,7 @@ from mocapkit.datasets.formats.ntu_skeleton import (
 from mocapkit.datasets.formats.safe_io import regular_file_size
 from mocapkit.datasets.parallel import parallel_map
 from mocapkit.datasets.prepare_report import REPORT_JSON, REPORT_TXT, PrepareReportBase  # noqa: F401  (re-exported)
+from mocapkit.io_atomic import atomic_path
 
 #: Version of the on-disk layout written here and expected by :class:`~mocapkit.datasets.ntu.cache.NTUCache`.
 CACHE_FORMAT = "mocapkit-ntu-cache"
@@ -378,12 +385,11 @@ def _parse_one(job: tuple[str, dict]) -> dict:
 def _resize_rows(path: Path, rows: int) -> None:
     """Give the ``.npy`` at ``path`` exactly ``rows`` rows: the first ones kept, new ones zero (copied in chunks, renamed)."""
     old = np.load(path, mmap_mode="r")
-    tmp = path.with_name(path.name + ".tmp")
-    new = np.lib.format.open_memmap(tmp, mode="w+", dtype=old.dtype, shape=(rows,) + old.shape[1:])
-    step = 65536
-    keep = min(rows, len(old))
-    for start in range(0, keep, step):
-        new[start:start + step] = old[start:min(start + step, keep)]
-    new.flush()
-    del new, old
-    os.replace(tmp, path)
+    with atomic_path(path) as tmp:
+        new = np.lib.format.open_memmap(tmp, mode="w+", dtype=old.dtype, shape=(rows,) + old.shape[1:])
+        step = 65536
+        keep = min(rows, len(old))
+        for start in range(0, keep, step):
+            new[start:start + step] = old[start:min(start + step, keep)]
+        new.flush()
+        del new, old
