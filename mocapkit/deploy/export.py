@@ -54,7 +54,8 @@ def export_checkpoint(ckpt_path: str | Path, out: str | None = None, overrides: 
     print(f"[mocapkit] wrote {target} (onnx.checker passed)")
     diff = report["max_abs_diff"]  # one number, or one per output for multi-output models
     diff = max(diff.values()) if isinstance(diff, dict) else diff
+    top1 = f", same top-1: {report['same_top1']}" if "same_top1" in report else ""
     print(f"[mocapkit] parity on {report['checked_shape']} (traced with {report['traced_shape']}): "
-          f"max |onnxruntime - torch| = {diff:.2e}, same top-1: {report['same_top1']}")
+          f"max |onnxruntime - torch| = {diff:.2e}{top1}")
     print(f"[mocapkit] wrote {target.parent / (target.stem + '.parity.json')}")
     return report

@@ -14,7 +14,7 @@ from pathlib import Path
 import lightning as L
 import numpy as np
 import torch
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig, OmegaConf, open_dict
 
 from mocapkit.io_atomic import atomic_write_text
 from mocapkit.train.checkpoints import checkpoint_config, load_module
@@ -47,6 +47,8 @@ def evaluate(ckpt_path: str | Path, overrides: list[str] | None = None) -> dict:
         out_dir.mkdir(parents=True, exist_ok=True)
     except (FileExistsError, NotADirectoryError) as exc:
         raise ConfigError(f"eval.out_dir={out_dir}: not a folder ({exc.strerror})") from exc
+    with open_dict(cfg):
+        cfg.ckpt_path = str(ckpt_path)   # evaluators that hand the checkpoint on (refiners) read it here
     evaluator = build(cfg.eval.evaluator)
     report = {"checkpoint": str(ckpt_path), **evaluator(module, datamodule, cfg, out_dir)}
     atomic_write_text(out_dir / "eval_config.yaml", OmegaConf.to_yaml(cfg, resolve=True))

@@ -1,5 +1,6 @@
 """Motion refinement: the refiner contract (``base``) that classical (:mod:`mocapkit.classical`) and
-learned refiners share, and the seeded corruption protocols (``corruptions``) they are tested on."""
+learned refiners (``learned``: trained networks, from a checkpoint or an ONNX file) share, and the seeded
+corruption protocols (``corruptions``) they are tested and trained on."""
 from mocapkit.refinement.base import (
            MotionRefiner,
            RefinementError,
@@ -12,7 +13,9 @@ from mocapkit.refinement.corruptions import (
            CorruptionError,
            ProtocolInfo,
            corrupt,
+           training_corruption,
 )
+from mocapkit.refinement.learned import LearnedRefiner, OnnxRefiner
 
-__all__ = ["PROTOCOLS", "Corruption", "CorruptionError", "MotionRefiner", "ProtocolInfo", "RefinementError",
-           "check_motion", "corrupt", "motion_matrix"]
+__all__ = ["PROTOCOLS", "Corruption", "CorruptionError", "LearnedRefiner", "MotionRefiner", "OnnxRefiner",
+           "ProtocolInfo", "RefinementError", "check_motion", "corrupt", "motion_matrix", "training_corruption"]

@@ -428,3 +428,51 @@ def corrupt(motion: Motion, protocol: str, level=None, seed: int = 0) -> Corrupt
                                                                     "description": description}})
     return Corruption(motion=corrupted, removed=removed, perturbed=perturbed, protocol=protocol, level=level,
                       description=description, seed=seed, gaps=tuple(gaps))
+
+
+# ---------------------------------------------------------------------------------------------------- training
+
+#: The corruption mixture of learned refiners' training (:func:`training_corruption`): every protocol of
+#: :data:`PROTOCOLS`, with levels drawn around (and beyond) the theses' levels, gap lengths up to the window.
+TRAINING_MIXTURE = ("rdcrypt", "rdloss", "mxcrypt", "random_missing", "continuous_missing", "long_gaps", "spikes",
+                    "swaps")
+
+
+def training_corruption(motion: Motion, rng: np.random.Generator, whole_joint_rate: float = 0.15) -> Corruption:
+    """One corruption of ``motion`` (a training window) drawn from :data:`TRAINING_MIXTURE`.
+
+    The protocol is uniform over the mixture; its level is drawn: fractions 0.05–0.6 (rdcrypt, rdloss, mxcrypt,
+    random_missing), spikes 0.005–0.03, 1–10 gaps of 2 … ``frames − 2`` frames (continuous_missing draws the
+    length, long_gaps the count and length), swaps of 2 … ``frames / 3`` frames. With probability
+    ``whole_joint_rate`` 1–3 joints are also removed in every frame (a gap longer than the window, as the
+    windows inside a 2 s gap see). Protocols a short window cannot take fall back to ``rdloss``.
+    """
+    frames = motion.num_frames
+    protocol = TRAINING_MIXTURE[rng.integers(len(TRAINING_MIXTURE))]
+    if protocol in ("rdcrypt", "rdloss", "mxcrypt", "random_missing"):
+        level = float(rng.uniform(0.05, 0.6))
+    elif protocol == "spikes":
+        level = float(rng.uniform(0.005, 0.03))
+    elif protocol == "continuous_missing":
+        level = int(rng.integers(2, max(3, frames - 1)))
+    elif protocol == "long_gaps":
+        level = f"{int(rng.integers(1, 11))}x{int(rng.integers(2, max(3, frames - 1)))}"
+    else:
+        level = f"{int(rng.integers(1, 4))}x{int(rng.integers(2, max(3, frames // 3)))}"
+    seed = int(rng.integers(2**31))
+    try:
+        result = corrupt(motion, protocol, level, seed=seed)
+    except CorruptionError:
+        result = corrupt(motion, "rdloss", 0.2, seed=seed)
+    if rng.random() < whole_joint_rate:
+        joints = rng.choice(motion.num_joints, size=min(int(rng.integers(1, 4)), motion.num_joints), replace=False)
+        extra = np.zeros_like(result.removed)
+        extra[:, joints] = ~result.motion.missing[:, joints]
+        if (~(result.motion.missing | extra)).any():          # keep at least one observed entry
+            positions = result.motion.positions.copy()
+            positions[extra] = np.nan
+            moved = replace(result.motion, positions=positions, missing=result.motion.missing | extra)
+            result = replace(result, motion=moved, removed=result.removed | extra,
+                             perturbed=result.perturbed & ~extra,
+                             description=result.description + f"; joints {sorted(joints.tolist())} missing throughout")
+    return result

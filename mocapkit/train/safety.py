@@ -31,10 +31,12 @@ Per-key policies (:data:`RUN_POLICY`, :data:`CHECKPOINT_POLICY`, :data:`REFINER_
     ``callbacks.*``     a ``Callback`` subclass under ``lightning.pytorch.callbacks.`` or
                         ``mocapkit.train.callbacks.``
     ``logger.*``        a ``Logger`` subclass under ``lightning.pytorch.loggers.``
-    ``eval.evaluator``  exactly ``mocapkit.evaluation.evaluate_action.evaluate_action`` or
-                        ``mocapkit.evaluation.evaluate_gait.evaluate_gait``
-    ``export.exporter`` exactly ``mocapkit.deploy.skeleton_export.export_action_module`` or
-                        ``mocapkit.deploy.gait_export.export_gait_module``
+    ``eval.evaluator``  exactly ``mocapkit.evaluation.evaluate_action.evaluate_action``,
+                        ``mocapkit.evaluation.evaluate_gait.evaluate_gait`` or
+                        ``mocapkit.evaluation.evaluate_refinement.evaluate_refinement``
+    ``export.exporter`` exactly ``mocapkit.deploy.skeleton_export.export_action_module``,
+                        ``mocapkit.deploy.gait_export.export_gait_module`` or
+                        ``mocapkit.deploy.refiner_export.export_refinement_module``
     checkpoint          ``hyper_parameters.model`` / ``.optimizer`` / ``.scheduler``: as above;
                         no other ``_target_`` anywhere in the checkpoint, and no Lightning
                         ``_instantiator`` / ``_class_path`` keys
@@ -118,7 +120,7 @@ def _subclass_of(dotted: str, alternatives: tuple[str, ...] = ()) -> Callable[[o
 
 
 def _model_builder(obj) -> bool:
-    import torch.nn as nn
+    from torch import nn
 
     if inspect.isclass(obj):
         return issubclass(obj, nn.Module)
@@ -147,10 +149,12 @@ LOGGER = Rule("a Lightning logger class (lightning.pytorch.loggers)", ("lightnin
               accepts=_subclass_of("lightning.pytorch.loggers.Logger"))
 EVALUATOR = Rule("mocapkit's evaluator of the task",
                  exact=("mocapkit.evaluation.evaluate_action.evaluate_action",
-                        "mocapkit.evaluation.evaluate_gait.evaluate_gait"))
+                        "mocapkit.evaluation.evaluate_gait.evaluate_gait",
+                        "mocapkit.evaluation.evaluate_refinement.evaluate_refinement"))
 EXPORTER = Rule("mocapkit's ONNX exporter of the task",
                 exact=("mocapkit.deploy.skeleton_export.export_action_module",
-                       "mocapkit.deploy.gait_export.export_gait_module"))
+                       "mocapkit.deploy.gait_export.export_gait_module",
+                       "mocapkit.deploy.refiner_export.export_refinement_module"))
 REFINER = Rule("a mocapkit MotionRefiner class", ("mocapkit.",),
                accepts=_subclass_of("mocapkit.refinement.base.MotionRefiner"))
 

@@ -105,8 +105,8 @@ def train(cfg: DictConfig) -> Path:
     # the run folder already holds config.yaml, by design
     warnings.filterwarnings("ignore", message=r"Checkpoint directory .* exists and is not empty")
     print(f"[mocapkit] run folder: {run_dir}")
-    print(f"[mocapkit] task {cfg.task}, samples: {counts} (split {datamodule.describe()['split']}), "
-          f"{len(datamodule.class_names)} classes")
+    classes = f"{len(datamodule.class_names)} classes" if datamodule.class_names else "no classes"
+    print(f"[mocapkit] task {cfg.task}, samples: {counts} (split {datamodule.describe()['split']}), {classes}")
     trainer.fit(module, datamodule=datamodule, ckpt_path=cfg.resume, weights_only=True)
     if trainer.is_global_zero:
         print(f"[mocapkit] wrote {run_dir / 'config.yaml'}")

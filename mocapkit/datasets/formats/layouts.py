@@ -136,3 +136,26 @@ def get_layout(layout: SkeletonLayout | str) -> SkeletonLayout:
     if layout not in LAYOUTS:
         raise ValueError(f"unknown skeleton layout {layout!r}; known: {sorted(LAYOUTS)}")
     return LAYOUTS[layout]
+
+
+def hip_joints(joint_names, layout_name: str | None = None) -> tuple[int, int] | None:
+    """``(left, right)`` hip joint indices of a skeleton, for heading alignment; None when they cannot be told.
+
+    Known layouts use :data:`LANDMARKS` (``l_hip`` / ``r_hip``); other skeletons (BVH rigs) are matched by name:
+    a joint whose lower-case name contains ``upleg``, ``upperleg``, ``thigh`` or ``hip`` and a left / right mark
+    (``left`` / ``right``, a ``_l`` / ``_r`` suffix or an ``l`` / ``r`` prefix).
+    """
+    names = list(joint_names)
+    table = LANDMARKS.get(layout_name or "")
+    if table and table["l_hip"] in names and table["r_hip"] in names:
+        return names.index(table["l_hip"]), names.index(table["r_hip"])
+    found = {}
+    for i, name in enumerate(names):
+        low = name.lower()
+        if not any(k in low for k in ("upleg", "upperleg", "thigh", "hip")) or low in ("hips", "hip"):
+            continue
+        if "left" in low or low.endswith(("_l", ".l")) or low.startswith(("l_", "left")) or low[:1] == "l" and "hip" in low[1:4]:
+            found.setdefault("l", i)
+        elif "right" in low or low.endswith(("_r", ".r")) or low.startswith(("r_", "right")) or low[:1] == "r" and "hip" in low[1:4]:
+            found.setdefault("r", i)
+    return (found["l"], found["r"]) if "l" in found and "r" in found else None

@@ -70,7 +70,6 @@ frames when the test clips' lengths differ at least twofold).
 from __future__ import annotations
 
 import math
-import re
 import time
 import zlib
 from dataclasses import replace
@@ -78,13 +77,9 @@ from pathlib import Path
 
 import numpy as np
 
+from mocapkit.datasets.mocap.folders import DATASETS, FILE_PATTERNS, MocapFolderError  # noqa: F401
 from mocapkit.evaluation.compare.base import Benchmark, ComparisonError, Split
 
-DATASETS = ("hdm05", "cmu", "bandai")
-#: How each data set's files are found and grouped (see the module docstring).
-FILE_PATTERNS = {"hdm05": "HDM_<actor>_<class>_<nnn>_<fps>.amc (each actor folder with its HDM_<actor>.asf)",
-                 "cmu": "NN_MM.amc with NN.asf beside it",
-                 "bandai": "dataset-1_<content>_<style>_<nnn>.bvh"}
 #: A method whose coverage is below this is not eligible for the bold winner (its RMSE is on fewer entries).
 FULL_COVERAGE = 0.999
 #: Two mean RMSEs within this relative difference are a tie (claims: ≈; the baseline table leaves them out).
@@ -141,36 +136,13 @@ def clip_seed_for(seed: int, index: int) -> int:
 
 # ------------------------------------------------------------------------------------------ data
 def list_clips(dataset: str, root: Path) -> list[dict]:
-    """``[{"path", "name", "group", "class"}]`` of the clips of ``dataset`` under ``root``, sorted by path.
+    """:func:`mocapkit.datasets.mocap.folders.list_clips`, its errors as :class:`ComparisonError` on ``benchmark.*``."""
+    from mocapkit.datasets.mocap.folders import list_clips as folder_clips
 
-    Raises:
-        ComparisonError: unknown data set, a missing folder, or no file of the data set's pattern (names the folder).
-    """
-    if dataset not in DATASETS:
-        raise ComparisonError(f"benchmark.dataset={dataset!r}: one of {list(DATASETS)}")
-    root = Path(root)
-    if not root.is_dir():
-        raise ComparisonError(f"benchmark.root={str(root)!r} is not a folder (dataset {dataset}: "
-                              f"{FILE_PATTERNS[dataset]})")
-    clips = []
-    if dataset == "hdm05":
-        for path in sorted(root.rglob("*.amc")):
-            match = re.fullmatch(r"HDM_([^_]+)_(.+)_(\d+)_(\d+)", path.stem)
-            if match:
-                clips.append({"path": path, "name": path.stem, "group": match.group(1), "class": match.group(2)})
-    elif dataset == "cmu":
-        for path in sorted(root.rglob("*.amc")):
-            match = re.fullmatch(r"(\d+)_(\d+)", path.stem)
-            if match:
-                clips.append({"path": path, "name": path.stem, "group": match.group(1), "class": path.stem})
-    else:
-        for path in sorted(root.rglob("*.bvh")):
-            parts = path.stem.split("_")
-            if len(parts) == 4 and parts[0].startswith("dataset"):
-                clips.append({"path": path, "name": path.stem, "group": parts[2], "class": parts[1]})
-    if not clips:
-        raise ComparisonError(f"benchmark.root={str(root)!r}: no {dataset} clip found ({FILE_PATTERNS[dataset]})")
-    return clips
+    try:
+        return folder_clips(dataset, root)
+    except MocapFolderError as exc:
+        raise ComparisonError(f"benchmark.{exc}") from exc
 
 
 def _crop(motion, max_frames: int | None):
@@ -227,8 +199,6 @@ class RefinementBenchmark(Benchmark):
                  same_clips: bool = True, clip_seed: int = 0, curve_clip: str | None = None,
                  numerator: str = "frame", cache_fits: bool = True, baselines: list | None = None,
                  claims: list | None = None):
-        from mocapkit.datasets import read_motion
-
         if root is None:
             raise ComparisonError("benchmark.root is not set: give the data set's folder")
         if not protocols:
@@ -264,21 +234,14 @@ class RefinementBenchmark(Benchmark):
                 order = rng.permutation(len(mine))[:self.clips_per_performer]
                 keep += [mine[i] for i in sorted(order)]
             found = keep
-        self.clips, self.motions = [], []
-        for clip in found:
-            try:
-                motion = read_motion(clip["path"])
-            except Exception as exc:
-                raise ComparisonError(f"benchmark: cannot read {clip['path']}: {exc}") from exc
-            if self.fps is not None:
-                motion = motion.resample(self.fps)
-            motion = replace(motion, rotations=None)
-            if self.motions and motion.joint_names != self.motions[0].joint_names:
-                raise ComparisonError(f"benchmark: {clip['path']} has joints {list(motion.joint_names)[:5]}..., not "
-                                      f"those of {self.clips[0]['path']}; one skeleton layout per benchmark")
-            motion.metadata["group"] = clip["group"]
-            self.clips.append({**clip, "path": str(clip["path"]), "frames": motion.num_frames})
-            self.motions.append(motion)
+        from mocapkit.datasets.mocap.folders import read_clips
+
+        try:
+            self.motions = read_clips(found, self.fps)
+        except MocapFolderError as exc:
+            raise ComparisonError(f"benchmark: {exc}") from exc
+        self.clips = [{**clip, "path": str(clip["path"]), "frames": motion.num_frames}
+                      for clip, motion in zip(found, self.motions)]
         self.groups = np.asarray([c["group"] for c in self.clips])
         self.names = [c["name"] for c in self.clips]
         present = sorted(set(self.groups.tolist()))

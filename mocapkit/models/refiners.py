@@ -1,0 +1,309 @@
+"""Learned motion refiners: networks that fill missing joints and denoise observed ones.
+
+Both networks take raw joint positions and the missing mask and return refined positions; the
+normalisation and its inverse are part of the network (so they are part of the ONNX graph too):
+
+1. :class:`PoseNormalizer` — per sequence (window): centred on the mean observed root position,
+   turned about the up axis so that the mean observed hip line (left → right hip) lies along the
+   first horizontal axis, and divided by the body size (observed mean bone lengths against those
+   of the training set) times a unit of 10 cm. Only observed entries enter the
+   statistics; a missing root, missing hips or unobserved bones fall back to the other joints, no
+   turn and the training lengths.
+2. :func:`cubic_fill` — every missing entry gets a first guess: a cubic Hermite curve between the
+   nearest observed frames before and after it (end tangents from one-sided differences), the
+   nearest observed value at the ends of the window, 0 (the window's centre) for a joint missing in
+   the whole window. It is computed with masked reductions over ``[T, T]`` frame pairs (no loops,
+   no ``cummax``), so it exports to ONNX.
+3. A temporal network sees ``[first guess, observed mask]`` per frame and predicts a correction of
+   every entry (its last layer starts at zero: an untrained refiner *is* the cubic fill). Observed
+   entries are corrected too: that is how noise is removed.
+
+Networks (``joints`` J, frames T, batch B):
+
+- :class:`BiGRURefiner`: a bidirectional GRU over frames (the Kucherenko 2018 / Holden 2018 family).
+- :class:`MaskedTransformerRefiner`: a masked-autoencoder transformer: missing coordinates are replaced by
+  a learned mask token, each token is either a frame (joints as features, attention over frames) or a
+  joint in a frame (factorised attention: over the joints of a frame, then over the frames of a joint);
+  sinusoidal frame positions.
+
+Input ``positions`` float ``[B, T, J, 3]`` in the training data's units (metres for everything
+``read_motion`` returns), ``missing`` bool ``[B, T, J]`` (True = not observed; those positions are
+ignored, NaN allowed); output float ``[B, T, J, 3]`` in the same units.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import torch
+from torch import nn
+
+AXES = {"x": 0, "y": 1, "z": 2}
+
+
+def _masked_mean(values: torch.Tensor, weights: torch.Tensor, dims: tuple[int, ...]) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(Σ w·v / Σ w, Σ w)`` over ``dims`` (0 where ``Σ w = 0``); ``weights`` broadcast against ``values``."""
+    total = (weights * values).sum(dims, keepdim=True)
+    count = weights.sum(dims, keepdim=True)
+    return total / count.clamp_min(1e-6), count
+
+
+class PoseNormalizer(nn.Module):
+    """Per-window normalisation of joint positions (see the module docstring) and its inverse.
+
+    Args:
+        parents: parent index of every joint (``-1`` for the root).
+        up_axis: ``"x"``, ``"y"`` or ``"z"``.
+        hips: ``(left, right)`` hip joint indices for the heading, or None (no turn).
+        bone_lengths: mean length of every bone ``(j, parents[j])`` in the training data (``[J]``, 0 for the
+            root), in the data's units; None: ones.
+        unit: the normalised unit for a body of the training set's size, in the data's units (0.1: 10 cm, so that
+            noise of a few centimetres and whole-body extents are both of order 1 for the network).
+    """
+
+    def __init__(self, parents: Sequence[int], up_axis: str = "y", hips: Sequence[int] | None = None,
+                 bone_lengths: Sequence[float] | None = None, unit: float = 0.1):
+        super().__init__()
+        self.unit = float(unit)
+        parents = [int(p) for p in parents]
+        self.root = parents.index(-1)
+        self.child = [j for j, p in enumerate(parents) if p >= 0]
+        self.parent = [parents[j] for j in self.child]
+        self.up = AXES[up_axis]
+        self.horizontal = [a for a in range(3) if a != self.up]
+        self.hips = None if hips is None else (int(hips[0]), int(hips[1]))
+        lengths = torch.ones(len(parents)) if bone_lengths is None else torch.as_tensor(bone_lengths, dtype=torch.float32)
+        self.register_buffer("bone_lengths", lengths[self.child].clone())       # [bones]
+
+    def statistics(self, positions: torch.Tensor, observed: torch.Tensor):
+        """``(centre [B,1,1,3], cos [B,1,1], sin [B,1,1], scale [B,1,1,1])`` of each window."""
+        w = observed.unsqueeze(-1).to(positions.dtype)                              # [B,T,J,1]
+        root_w = w[:, :, self.root:self.root + 1]
+        root_mean, root_count = _masked_mean(positions[:, :, self.root:self.root + 1], root_w, (1, 2))
+        all_mean, _ = _masked_mean(positions, w, (1, 2))
+        centre = torch.where(root_count > 0, root_mean, all_mean)                   # [B,1,1,3]
+        h1, h2 = self.horizontal
+        if self.hips is None:
+            cos = torch.ones_like(centre[..., 0])
+            sin = torch.zeros_like(centre[..., 0])
+        else:
+            left, right = self.hips
+            both = (w[:, :, left] * w[:, :, right])                                 # [B,T,1]
+            line, _ = _masked_mean(positions[:, :, right] - positions[:, :, left], both, (1,))   # [B,1,3]
+            a, b = line[..., h1], line[..., h2]
+            norm = torch.sqrt(a * a + b * b)
+            ok = norm > 1e-6
+            cos = torch.where(ok, a / norm.clamp_min(1e-6), torch.ones_like(a)).unsqueeze(-1)   # [B,1,1]
+            sin = torch.where(ok, b / norm.clamp_min(1e-6), torch.zeros_like(b)).unsqueeze(-1)
+        bone_w = w[:, :, self.child, 0] * w[:, :, self.parent, 0]                   # [B,T,bones]
+        length = torch.linalg.vector_norm(positions[:, :, self.child] - positions[:, :, self.parent], dim=-1)
+        length = torch.where(bone_w > 0, length, torch.zeros_like(length))
+        mean_len, count = _masked_mean(length, bone_w, (1,))                        # [B,1,bones]
+        seen = (count > 0).to(positions.dtype)
+        ratio = (mean_len * seen).sum(-1) / (self.bone_lengths * seen).sum(-1).clamp_min(1e-6)   # [B,1]
+        ratio = torch.where(seen.sum(-1) > 0, ratio, torch.ones_like(ratio))
+        scale = (ratio * self.unit).reshape(-1, 1, 1, 1)
+        return centre, cos, sin, scale
+
+    def _turn(self, x: torch.Tensor, cos: torch.Tensor, sin: torch.Tensor) -> torch.Tensor:
+        h1, h2 = self.horizontal
+        a, b = x[..., h1], x[..., h2]
+        turned = {h1: cos * a + sin * b, h2: -sin * a + cos * b, self.up: x[..., self.up]}
+        return torch.stack([turned[0], turned[1], turned[2]], dim=-1)
+
+    def forward(self, positions: torch.Tensor, stats) -> torch.Tensor:
+        centre, cos, sin, scale = stats
+        return self._turn(positions - centre, cos, sin) / scale
+
+    def inverse(self, normalised: torch.Tensor, stats) -> torch.Tensor:
+        centre, cos, sin, scale = stats
+        return self._turn(normalised * scale, cos, -sin) + centre
+
+
+def cubic_fill(x: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
+    """First guess of every missing entry: cubic Hermite between the nearest observed frames.
+
+    Args:
+        x: ``[B, T, J, 3]`` (missing entries may hold anything finite).
+        observed: bool ``[B, T, J]``.
+
+    Returns:
+        ``[B, T, J, 3]``: ``x`` where observed; inside a gap the cubic Hermite curve through the gap's end
+        values with one-sided difference tangents (0 where the frame beyond an end is not observed); before the
+        first / after the last observation the nearest observed value; 0 for a joint never observed.
+    """
+    B, T, J, _ = x.shape
+    frames = torch.arange(T, device=x.device)
+    t = frames.view(1, T, 1, 1)                                  # the frame being filled
+    s = frames.view(1, 1, 1, T)                                  # the candidate observed frame
+    obs = observed.permute(0, 2, 1).unsqueeze(1)                 # [B,1,J,T]
+    before = obs & (s <= t)                                      # [B,T,J,T]
+    after = obs & (s >= t)
+    prev = torch.where(before, s, torch.full_like(s, -1)).amax(-1)          # [B,T,J]
+    nxt = torch.where(after, s, torch.full_like(s, T)).amin(-1)
+    has_prev, has_next = prev >= 0, nxt < T
+    prev_c, next_c = prev.clamp(0, T - 1), nxt.clamp(0, T - 1)
+    xt = x.permute(0, 2, 1, 3)                                   # [B,J,T,3]
+    gather = lambda idx: torch.gather(xt, 2, idx.permute(0, 2, 1).unsqueeze(-1).expand(B, J, T, 3)).permute(0, 2, 1, 3)
+    obs_t = observed.permute(0, 2, 1)                            # [B,J,T]
+    obs_at = lambda idx: torch.gather(obs_t, 2, idx.permute(0, 2, 1)).permute(0, 2, 1)
+    p0, p1 = gather(prev_c), gather(next_c)
+    before_prev, after_next = (prev_c - 1).clamp(0, T - 1), (next_c + 1).clamp(0, T - 1)
+    m0 = torch.where((obs_at(before_prev) & (prev_c > 0)).unsqueeze(-1), p0 - gather(before_prev), torch.zeros_like(p0))
+    m1 = torch.where((obs_at(after_next) & (next_c < T - 1)).unsqueeze(-1), gather(after_next) - p1, torch.zeros_like(p1))
+    span = (nxt - prev).clamp_min(1).to(x.dtype).unsqueeze(-1)   # [B,T,J,1]
+    u = ((frames.view(1, T, 1) - prev).to(x.dtype).unsqueeze(-1) / span).clamp(0, 1)
+    u2, u3 = u * u, u * u * u
+    hermite = ((2 * u3 - 3 * u2 + 1) * p0 + (u3 - 2 * u2 + u) * span * m0
+               + (-2 * u3 + 3 * u2) * p1 + (u3 - u2) * span * m1)
+    held = torch.where(has_prev.unsqueeze(-1), p0, p1)
+    inner = (has_prev & has_next).unsqueeze(-1)
+    fill = torch.where(inner, hermite, held)
+    fill = torch.where((has_prev | has_next).unsqueeze(-1), fill, torch.zeros_like(fill))
+    return torch.where(observed.unsqueeze(-1), x, fill)
+
+
+class _Refiner(nn.Module):
+    """Shared input and output handling: normalise, first guess, correct, denormalise (module docstring)."""
+
+    def __init__(self, joint_names: Sequence[str], parents: Sequence[int], up_axis: str = "y",
+                 hips: Sequence[int] | None = None, bone_lengths: Sequence[float] | None = None,
+                 fps: float | None = None):
+        super().__init__()
+        self.joint_names = tuple(joint_names)
+        self.parents = tuple(int(p) for p in parents)
+        self.up_axis, self.fps = up_axis, None if fps is None else float(fps)
+        if len(self.joint_names) != len(self.parents):
+            raise ValueError(f"{len(self.joint_names)} joint names but {len(self.parents)} parents")
+        self.num_joints = len(self.joint_names)
+        self.normalizer = PoseNormalizer(self.parents, up_axis, hips, bone_lengths)
+
+    def correction(self, guess: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
+        """``[B, T, J, 3]`` correction of the normalised first guess (subclasses)."""
+        raise NotImplementedError
+
+    def forward(self, positions: torch.Tensor, missing: torch.Tensor) -> torch.Tensor:
+        observed = ~missing.bool()
+        clean = torch.where(observed.unsqueeze(-1), positions, torch.zeros_like(positions))
+        stats = self.normalizer.statistics(clean, observed)
+        x = self.normalizer(clean, stats)
+        x = torch.where(observed.unsqueeze(-1), x, torch.zeros_like(x))
+        guess = cubic_fill(x, observed)
+        refined = guess + self.correction(guess, observed)
+        return self.normalizer.inverse(refined, stats)
+
+    def normalised_forward(self, positions: torch.Tensor, missing: torch.Tensor):
+        """``(refined, stats)`` with ``refined`` still normalised: what the training loss compares."""
+        observed = ~missing.bool()
+        clean = torch.where(observed.unsqueeze(-1), positions, torch.zeros_like(positions))
+        stats = self.normalizer.statistics(clean, observed)
+        x = torch.where(observed.unsqueeze(-1), self.normalizer(clean, stats), torch.zeros_like(clean))
+        guess = cubic_fill(x, observed)
+        return guess + self.correction(guess, observed), stats
+
+
+class BiGRURefiner(_Refiner):
+    """Bidirectional GRU over frames; see the module docstring.
+
+    Args:
+        joint_names, parents, up_axis, hips, bone_lengths, fps: the layout and training statistics
+            (the data module supplies them; :class:`PoseNormalizer`).
+        hidden: GRU units per direction. layers: stacked GRU layers. dropout: between layers.
+    """
+
+    def __init__(self, joint_names: Sequence[str], parents: Sequence[int], up_axis: str = "y",
+                 hips: Sequence[int] | None = None, bone_lengths: Sequence[float] | None = None,
+                 fps: float | None = None, hidden: int = 128, layers: int = 2, dropout: float = 0.1):
+        super().__init__(joint_names, parents, up_axis, hips, bone_lengths, fps)
+        J = self.num_joints
+        self.inp = nn.Sequential(nn.Linear(4 * J, hidden), nn.GELU())
+        self.gru = nn.GRU(hidden, hidden, num_layers=layers, batch_first=True, bidirectional=True,
+                          dropout=dropout if layers > 1 else 0.0)
+        self.out = nn.Linear(2 * hidden, 3 * J)
+        nn.init.zeros_(self.out.weight)
+        nn.init.zeros_(self.out.bias)
+
+    def correction(self, guess: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
+        B, T, J, _ = guess.shape
+        features = torch.cat([guess.reshape(B, T, 3 * J), observed.to(guess.dtype)], dim=-1)
+        hidden, _ = self.gru(self.inp(features))
+        return self.out(hidden).reshape(B, T, J, 3)
+
+
+def _sinusoid(T: int, dim: int, device, dtype) -> torch.Tensor:
+    position = torch.arange(T, device=device, dtype=dtype).unsqueeze(1)
+    freq = torch.exp(torch.arange(0, dim, 2, device=device, dtype=dtype) * (-math.log(10000.0) / dim))
+    angles = position * freq                                                    # [T, dim/2]
+    return torch.stack([torch.sin(angles), torch.cos(angles)], dim=-1).reshape(T, dim)
+
+
+class MaskedTransformerRefiner(_Refiner):
+    """Masked-autoencoder transformer; see the module docstring.
+
+    Args:
+        joint_names, parents, up_axis, hips, bone_lengths, fps: as :class:`BiGRURefiner`.
+        tokens: ``"frames"`` (a token per frame, joints as features) or ``"joints"`` (a token per joint and
+            frame, attention over the joints of a frame and then over the frames of a joint in every layer).
+        dim: token width. layers: encoder layers (``"joints"``: pairs of joint / frame layers). heads: attention
+            heads. ff: feed-forward width. dropout: in the encoder layers.
+    """
+
+    def __init__(self, joint_names: Sequence[str], parents: Sequence[int], up_axis: str = "y",
+                 hips: Sequence[int] | None = None, bone_lengths: Sequence[float] | None = None,
+                 fps: float | None = None, tokens: str = "frames", dim: int = 128, layers: int = 3, heads: int = 4,
+                 ff: int = 256, dropout: float = 0.1):
+        super().__init__(joint_names, parents, up_axis, hips, bone_lengths, fps)
+        if tokens not in ("frames", "joints"):
+            raise ValueError(f"tokens must be 'frames' or 'joints', got {tokens!r}")
+        J = self.num_joints
+        self.tokens, self.dim = tokens, dim
+        self.mask_token = nn.Parameter(torch.zeros(J, 3))                      # replaces missing coordinates
+        layer = lambda: nn.TransformerEncoderLayer(dim, heads, ff, dropout, activation="gelu", batch_first=True,
+                                                   norm_first=True)
+        if tokens == "frames":
+            self.embed = nn.Linear(7 * J, dim)
+            self.blocks = nn.ModuleList(layer() for _ in range(layers))
+            self.out = nn.Linear(dim, 3 * J)
+        else:
+            self.embed = nn.Linear(7, dim)
+            self.joint_embedding = nn.Parameter(torch.zeros(J, dim))
+            nn.init.normal_(self.joint_embedding, std=0.02)
+            self.blocks = nn.ModuleList(layer() for _ in range(2 * layers))    # joint, frame, joint, frame, ...
+            self.out = nn.Linear(dim, 3)
+        self.norm = nn.LayerNorm(dim)
+        nn.init.zeros_(self.out.weight)
+        nn.init.zeros_(self.out.bias)
+
+    def correction(self, guess: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
+        B, T, J, _ = guess.shape
+        obs = observed.unsqueeze(-1)
+        tokenised = torch.where(obs, guess, self.mask_token.to(guess.dtype).expand(B, T, J, 3))
+        per_joint = torch.cat([tokenised, guess, obs.to(guess.dtype)], dim=-1)     # [B,T,J,7]
+        pos = _sinusoid(T, self.dim, guess.device, guess.dtype)                      # [T, dim]
+        if self.tokens == "frames":
+            h = self.embed(per_joint.reshape(B, T, 7 * J)) + pos
+            for block in self.blocks:
+                h = block(h)
+            return self.out(self.norm(h)).reshape(B, T, J, 3)
+        h = self.embed(per_joint) + self.joint_embedding + pos.unsqueeze(1)         # [B,T,J,dim]
+        for i, block in enumerate(self.blocks):
+            if i % 2 == 0:                                                           # over the joints of a frame
+                h = block(h.reshape(B * T, J, self.dim)).reshape(B, T, J, self.dim)
+            else:                                                                    # over the frames of a joint
+                h = block(h.permute(0, 2, 1, 3).reshape(B * J, T, self.dim))
+                h = h.reshape(B, J, T, self.dim).permute(0, 2, 1, 3)
+        return self.out(self.norm(h))
+
+
+def refine_bigru(**kwargs) -> BiGRURefiner:
+    """The bidirectional GRU refiner (see :class:`BiGRURefiner` for the arguments)."""
+    return BiGRURefiner(**kwargs)
+
+
+def refine_transformer(**kwargs) -> MaskedTransformerRefiner:
+    """The masked-autoencoder transformer refiner (see :class:`MaskedTransformerRefiner`)."""
+    return MaskedTransformerRefiner(**kwargs)
+
+
+__all__ = ["BiGRURefiner", "MaskedTransformerRefiner", "PoseNormalizer", "cubic_fill", "refine_bigru",
+           "refine_transformer"]

@@ -1,0 +1,304 @@
+"""Learned refiners behind the one refiner contract: ``fit(motions)`` and ``refine(motion) -> Motion``.
+
+:class:`LearnedRefiner` wraps a network of :mod:`mocapkit.models.refiners`:
+
+- ``LearnedRefiner(checkpoint="RUN/best.ckpt")`` loads a trained run (``mocapkit train experiment=refine_bigru``);
+  with a list of checkpoints, ``fit(motions)`` picks the one trained on exactly the groups (performers) of
+  ``motions`` — how the comparison runner's leave-one-performer-out folds use runs trained per fold, and checks
+  that no run saw its fold's test performer;
+- ``LearnedRefiner(experiment="refine_bigru")`` trains in ``fit(motions)`` with that experiment's recipe.
+
+:class:`OnnxRefiner` runs an exported refiner (``mocapkit export``) with onnxruntime and numpy only.
+
+Both refine a take of any length in overlapping windows of the training window length (``window`` frames,
+``overlap`` frames shared by neighbours, blended with linear ramps), all windows in one batch. What they do
+not invent: frames in which **every** joint is missing before the first or after the last observed frame, and
+interior runs of such frames longer than ``max_empty_frames``, stay missing and are reported as unfilled.
+Observed entries come back bit-identical unless the network moves them by more than ``repair_threshold``
+(metres): those are the repaired outliers / noisy samples of the contract (``mocapkit refine`` writes them only
+with ``--repair-outliers``).
+
+A motion whose joints are those of the training layout in another order (a C3D whose point labels are the
+joint names, with or without extra markers) is refined on those joints; extra markers come back untouched.
+"""
+from __future__ import annotations
+
+import io
+from collections.abc import Sequence
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from mocapkit.datasets.formats.motion import Motion
+from mocapkit.refinement.base import MotionRefiner, RefinementError
+
+
+# ------------------------------------------------------------------------------------------ windows (numpy only)
+def window_starts(frames: int, window: int, overlap: int) -> list[int]:
+    """First frames of the windows that cover ``frames`` frames (one window when ``frames ≤ window``)."""
+    if frames <= window:
+        return [0]
+    hop = max(1, window - overlap)
+    starts = list(range(0, frames - window + 1, hop))
+    if starts[-1] != frames - window:
+        starts.append(frames - window)
+    return starts
+
+
+def blend_weights(length: int, overlap: int, first: bool, last: bool) -> np.ndarray:
+    """``[length]`` weights of one window: linear ramps over ``overlap`` frames at the ends that have a neighbour."""
+    weights = np.ones(length, dtype=np.float64)
+    ramp = min(int(overlap), length // 2)
+    if ramp > 0:
+        up = (np.arange(ramp) + 1.0) / (ramp + 1.0)
+        if not first:
+            weights[:ramp] = up
+        if not last:
+            weights[length - ramp:] = up[::-1]
+    return weights
+
+
+def refine_windows(predict, positions: np.ndarray, missing: np.ndarray, window: int, overlap: int) -> np.ndarray:
+    """Run ``predict(positions [N, W, J, 3] float32, missing [N, W, J] bool) -> [N, W, J, 3]`` over overlapping
+    windows of one take (``positions [T, J, 3]``, ``missing [T, J]``) and blend the windows into ``[T, J, 3]``."""
+    frames = positions.shape[0]
+    starts = window_starts(frames, window, overlap)
+    length = min(frames, window)
+    batch_p = np.stack([positions[s:s + length] for s in starts]).astype(np.float32)
+    batch_m = np.stack([missing[s:s + length] for s in starts])
+    out = np.asarray(predict(batch_p, batch_m), dtype=np.float64)
+    total = np.zeros(positions.shape, dtype=np.float64)
+    weight = np.zeros(frames, dtype=np.float64)
+    for i, s in enumerate(starts):
+        w = blend_weights(length, overlap, first=i == 0, last=i == len(starts) - 1)
+        total[s:s + length] += w[:, None, None] * out[i]
+        weight[s:s + length] += w
+    return total / weight[:, None, None]
+
+
+def empty_frames_kept(missing: np.ndarray, max_empty_frames: int) -> np.ndarray:
+    """bool ``[T]``: frames with every joint missing that stay unfilled (leading, trailing, or in an interior run
+    longer than ``max_empty_frames``)."""
+    empty = missing.all(axis=1)
+    keep = np.zeros_like(empty)
+    observed = np.flatnonzero(~empty)
+    if observed.size == 0:
+        return empty
+    keep[:observed[0]] = True
+    keep[observed[-1] + 1:] = True
+    start = None
+    for t in range(observed[0], observed[-1] + 2):
+        if t <= observed[-1] and empty[t]:
+            start = t if start is None else start
+        elif start is not None:
+            if t - start > max_empty_frames:
+                keep[start:t] = True
+            start = None
+    return keep
+
+
+# ------------------------------------------------------------------------------------------ the refiners
+class _WindowedRefiner(MotionRefiner):
+    """Shared by :class:`LearnedRefiner` and :class:`OnnxRefiner`: layout matching, windows, repairs, reports."""
+
+    requires_fit = True
+    fixed_sampling = True
+    min_frames = 2
+
+    def _predict(self, positions: np.ndarray, missing: np.ndarray) -> np.ndarray:
+        raise NotImplementedError
+
+    def _set_skeleton(self, skeleton: dict) -> None:
+        self.skeleton_ = dict(skeleton)
+        self.joint_names_ = tuple(skeleton["joint_names"])
+        self.fps_, self.up_axis_ = float(skeleton["fps"]), str(skeleton["up_axis"])
+        self.window_ = int(self.window or skeleton.get("window") or 120)
+        self.overlap_ = int(self.window_ // 4 if self.overlap is None else self.overlap)
+        if not 0 <= self.overlap_ < self.window_:
+            raise ValueError(f"{type(self).__name__}: overlap={self.overlap_} must be in [0, window={self.window_})")
+
+    def refine(self, motion: Motion) -> Motion:
+        """See :class:`~mocapkit.refinement.base.MotionRefiner` and the module docstring."""
+        trained = getattr(self, "joint_names_", None)
+        if trained is not None and tuple(motion.joint_names) != tuple(trained) \
+                and set(trained) <= set(motion.joint_names):
+            order = [motion.joint_names.index(name) for name in trained]
+            sub = replace(motion, positions=motion.positions[:, order], missing=motion.missing[:, order],
+                          joint_names=tuple(trained), parents=None, rotations=None, layout_name=None)
+            done = super().refine(sub)
+            positions, missing = motion.positions.copy(), motion.missing.copy()
+            positions[:, order], missing[:, order] = done.positions, done.missing
+            return replace(motion, positions=positions, missing=missing, rotations=None,
+                           metadata={**motion.metadata, "refinement": done.metadata["refinement"]})
+        return super().refine(motion)
+
+    def _refine_matrix(self, X: np.ndarray, observed: np.ndarray):
+        frames = X.shape[0]
+        joints = X.shape[1] // 3
+        positions = X.reshape(frames, joints, 3)
+        missing = ~observed.reshape(frames, joints, 3)[..., 0]
+        refined = refine_windows(self._predict, positions, missing, self.window_, self.overlap_)
+        keep = empty_frames_kept(missing, int(self.max_empty_frames))
+        refined[keep] = np.nan
+        moved = np.linalg.norm(refined - positions, axis=-1)
+        repaired = ~missing & (moved > float(self.repair_threshold))
+        return refined.reshape(frames, 3 * joints), repaired
+
+
+class LearnedRefiner(_WindowedRefiner):
+    """A refiner network of :mod:`mocapkit.models.refiners`; see the module docstring.
+
+    Args:
+        checkpoint: a run's checkpoint, or a list of them (``fit`` picks the one trained on the fit motions'
+            groups); None: ``fit`` trains with ``experiment``.
+        experiment: the training recipe ``fit`` uses when ``checkpoint`` is None (``configs/experiment/NAME``).
+        overrides: Hydra overrides of that recipe (e.g. ``["trainer.max_epochs=5"]``).
+        window: frames per window (None: the training window). overlap: frames shared by neighbouring windows
+            (None: a quarter of the window).
+        repair_threshold: an observed entry the network moves farther than this (metres) is replaced (repaired).
+        max_empty_frames: interior runs of frames with every joint missing up to this long are filled.
+        device: torch device of the network.
+    """
+
+    def __init__(self, checkpoint: str | Sequence[str] | None = None, experiment: str | None = None,
+                 overrides: Sequence[str] = (), window: int | None = None, overlap: int | None = None,
+                 repair_threshold: float = 0.02, max_empty_frames: int = 12, device: str = "cpu"):
+        self.checkpoint = checkpoint
+        self.experiment = experiment
+        self.overrides = overrides
+        self.window = window
+        self.overlap = overlap
+        self.repair_threshold = repair_threshold
+        self.max_empty_frames = max_empty_frames
+        self.device = device
+
+    # -------------------------------------------------------------- loading / training
+    @staticmethod
+    def _load(path: str | Path):
+        from mocapkit.train.checkpoints import parse_checkpoint, read_checkpoint_bytes
+        from mocapkit.train.refine_module import MotionRefinementModule
+
+        raw = read_checkpoint_bytes(path)
+        checkpoint = parse_checkpoint(raw, path)
+        if "skeleton" not in checkpoint.get("hyper_parameters", {}):
+            raise RefinementError(f"{path}: not a refiner checkpoint (no skeleton in its hyper-parameters); train one "
+                                  "with `mocapkit train experiment=refine_bigru`")
+        return MotionRefinementModule.load_from_checkpoint(io.BytesIO(raw), map_location="cpu", weights_only=True)
+
+    def _use(self, module) -> None:
+        self.module_ = module.to(self.device).eval()
+        self._set_skeleton(module.hparams.skeleton)
+
+    def fit(self, motions: Sequence[Motion] | None = None, y=None) -> LearnedRefiner:
+        """Load the checkpoint trained on the groups of ``motions`` (or the only one), or train on ``motions``."""
+        motions = list(motions or [])
+        if self.checkpoint is not None:
+            paths = [self.checkpoint] if isinstance(self.checkpoint, (str, Path)) else list(self.checkpoint)
+            modules = [(p, self._load(p)) for p in paths]
+            groups = sorted({str(m.metadata.get("group")) for m in motions if m.metadata.get("group") is not None})
+            if len(modules) == 1 and not groups:
+                self._use(modules[0][1])
+                return self
+            for path, module in modules:
+                if sorted(module.hparams.skeleton.get("train_groups") or []) == groups:
+                    self._use(module)
+                    self.checkpoint_used_ = str(path)
+                    return self
+            trained = {str(p): m.hparams.skeleton.get("train_groups") for p, m in modules}
+            raise RefinementError(f"LearnedRefiner.fit: no checkpoint was trained on exactly the groups {groups} of "
+                                  f"the fit motions (checkpoints and their training groups: {trained})")
+        if not self.experiment:
+            raise ValueError("LearnedRefiner: give checkpoint= (a trained run) or experiment= (a recipe to train)")
+        if not motions:
+            raise ValueError("LearnedRefiner.fit needs training motions (experiment= trains on them)")
+        self._use(train_on_motions(self.experiment, motions, list(self.overrides)))
+        return self
+
+    def _predict(self, positions: np.ndarray, missing: np.ndarray) -> np.ndarray:
+        import torch
+
+        with torch.inference_mode():
+            out = self.module_(torch.from_numpy(positions).to(self.device), torch.from_numpy(missing).to(self.device))
+        return out.cpu().numpy()
+
+
+def train_on_motions(experiment: str, motions: Sequence[Motion], overrides: Sequence[str] = ()):
+    """Train ``configs/experiment/<experiment>`` on clean ``motions`` (validation: a seeded fraction of them); the
+    LightningModule with the weights of the best validation epoch."""
+    import tempfile
+
+    import lightning as L
+    from lightning.pytorch.callbacks import ModelCheckpoint
+
+    from mocapkit.train.config import compose_config
+    from mocapkit.train.training import build
+
+    cfg = compose_config([f"experiment={experiment}", "logger=none", *overrides])
+    L.seed_everything(int(cfg.seed), workers=True, verbose=False)
+    # the motions are passed to the built partial, not to instantiate: Hydra merges instantiate's keyword arguments
+    # into the config, which turns dataclasses (Motion) into plain dicts
+    datamodule = build(cfg.data, _partial_=True, seed=cfg.seed)(motions=list(motions))
+    module = build(cfg.module, **datamodule.label_spaces())
+    with tempfile.TemporaryDirectory() as folder:
+        best = ModelCheckpoint(dirpath=folder, filename="best", monitor="val/mje_cm", mode="min")
+        trainer = L.Trainer(max_epochs=int(cfg.trainer.max_epochs), accelerator=cfg.trainer.accelerator, devices=1,
+                            logger=False, callbacks=[best], enable_progress_bar=False, enable_model_summary=False,
+                            gradient_clip_val=cfg.trainer.get("gradient_clip_val"))
+        trainer.fit(module, datamodule=datamodule)
+        return LearnedRefiner._load(best.best_model_path)
+
+
+class OnnxRefiner(_WindowedRefiner):
+    """An exported refiner (``mocapkit export`` of a refiner run) run with onnxruntime and numpy only.
+
+    Args:
+        path: the ``.onnx`` file (its metadata holds the layout, frame rate, up axis and training window).
+        window, overlap, repair_threshold, max_empty_frames: as :class:`LearnedRefiner`.
+        threads: onnxruntime intra-op threads (0: its default).
+    """
+
+    def __init__(self, path: str, window: int | None = None, overlap: int | None = None,
+                 repair_threshold: float = 0.02, max_empty_frames: int = 12, threads: int = 0):
+        self.path = path
+        self.window = window
+        self.overlap = overlap
+        self.repair_threshold = repair_threshold
+        self.max_empty_frames = max_empty_frames
+        self.threads = threads
+
+    def fit(self, motions: Sequence[Motion] | None = None, y=None) -> OnnxRefiner:
+        """Open the session and read the layout from the file's metadata (``motions`` are not needed)."""
+        import json
+
+        import onnxruntime as ort
+
+        path = Path(self.path)
+        if not path.is_file():
+            raise FileNotFoundError(f"{path}: no such ONNX file")
+        options = ort.SessionOptions()
+        if self.threads:
+            options.intra_op_num_threads = int(self.threads)
+        try:
+            self.session_ = ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
+        except Exception as exc:
+            raise RefinementError(f"{path}: onnxruntime cannot load it: {exc}") from exc
+        meta = self.session_.get_modelmeta().custom_metadata_map
+        if "mocapkit_skeleton" not in meta:
+            raise RefinementError(f"{path}: not a mocapkit refiner export (no mocapkit_skeleton metadata); export "
+                                  "one with `mocapkit export ckpt_path=RUN/best.ckpt`")
+        self._set_skeleton(json.loads(meta["mocapkit_skeleton"]))
+        return self
+
+    def refine(self, motion: Motion) -> Motion:
+        if not hasattr(self, "session_"):
+            self.fit()
+        return super().refine(motion)
+
+    def _predict(self, positions: np.ndarray, missing: np.ndarray) -> np.ndarray:
+        return self.session_.run(["refined"], {"positions": positions.astype(np.float32),
+                                               "missing": missing.astype(bool)})[0]
+
+
+__all__ = ["LearnedRefiner", "OnnxRefiner", "blend_weights", "empty_frames_kept", "refine_windows", "train_on_motions",
+           "window_starts"]
