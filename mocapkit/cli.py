@@ -13,6 +13,7 @@
     mocapkit compare NAME [overrides ...]                 (configs/compare/NAME.yaml: methods × protocols × seeds)
     mocapkit gait-report --data GEI_CACHE --out DIR [--protocols ...] [overrides ...]   (= compare gait)
     mocapkit refine IN OUT --method NAME [--set KEY=VALUE ...] [--train PATH ...] [--repair-outliers]
+    mocapkit refine IN OUT --method RUN/best.ckpt | --onnx FILE [--set KEY=VALUE ...] [--repair-outliers]
 
 Errors are one line (``mocapkit: error: ...``, exit code 2); ``mocapkit --debug COMMAND ...`` (or
 ``MOCAPKIT_DEBUG=1``) shows the traceback instead.
@@ -157,7 +158,8 @@ def cmd_refine(args: argparse.Namespace) -> None:
     from mocapkit.refinement.apply import refine_file
 
     report = refine_file(args.input, args.output, args.method, overrides=tuple(args.set),
-                         train=tuple(args.train), skip_bad=args.skip_bad, repair_outliers=args.repair_outliers)
+                         train=tuple(args.train), skip_bad=args.skip_bad, repair_outliers=args.repair_outliers,
+                         onnx=args.onnx)
     print(report.to_text())
 
 
@@ -272,10 +274,15 @@ def build_parser() -> argparse.ArgumentParser:
     refine = sub.add_parser("refine", help="fill the gaps of a motion file (C3D in, C3D out: only the gaps change)")
     refine.add_argument("input", help="any motion file read_motion reads (.c3d, .amc, .bvh, .skeleton, MSR .txt)")
     refine.add_argument("output", help="OUT.c3d (markers; from a C3D only the filled samples change) or OUT.npz")
-    refine.add_argument("--method", required=True, help="configs/refiner/NAME.yaml: linear, pchip, pca, svt, lrmf, "
-                                                        "trnn, psc, filter-bases, dynammo")
+    which = refine.add_mutually_exclusive_group(required=True)
+    which.add_argument("--method", help="configs/refiner/NAME.yaml: linear, pchip, pca, svt, lrmf, trnn, psc, "
+                                        "filter-bases, dynammo; or RUN/best.ckpt, a trained refiner "
+                                        "(mocapkit train experiment=refine_bigru)")
+    which.add_argument("--onnx", metavar="FILE", help="an exported refiner (mocapkit export of a refiner run), "
+                                                      "run with onnxruntime and numpy only")
     refine.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                        help="a parameter of the method (Hydra syntax), repeatable")
+                        help="a parameter of the method (Hydra syntax), repeatable; trained refiners: window, "
+                             "overlap, repair_threshold, max_empty_frames")
     refine.add_argument("--train", action="append", default=[], metavar="PATH",
                         help="clean training motions (file or folder) for data-driven methods, repeatable")
     refine.add_argument("--repair-outliers", dest="repair_outliers", action="store_true",

@@ -34,7 +34,9 @@ def model_input(path: str | Path, layout: str) -> np.ndarray:
     from mocapkit.datasets.formats.motion_io import read_motion
 
     motion = read_motion(path)
-    if motion.layout_name != layout:
+    if motion.layout_name == layout and layout in LAYOUTS and motion.joint_names != LAYOUTS[layout].joint_names:
+        motion = motion.select(list(LAYOUTS[layout].joint_names))   # a C3D labelled with the joints, in its order
+    elif motion.layout_name != layout:
         if layout not in LAYOUTS:
             raise ValueError(f"the model's metadata names the skeleton layout {layout!r}; known: {', '.join(LAYOUTS)}")
         motion = motion.map_layout(LAYOUTS[layout])

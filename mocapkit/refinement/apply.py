@@ -1,4 +1,5 @@
-"""Refine a motion file: what ``mocapkit refine IN OUT --method NAME [--set key=value ...] [--train PATH ...]`` runs.
+"""Refine a motion file: what ``mocapkit refine IN OUT --method NAME [--set key=value ...] [--train PATH ...]`` runs
+(and ``--method RUN/best.ckpt`` / ``--onnx FILE``: a trained refiner network).
 
 The refiners are declared once, as Hydra configs: ``configs/refiner/<NAME>.yaml`` = ``{_target_: the
 MotionRefiner class, its parameters with their defaults}`` (``linear``, ``pchip``, ``pca``, ``svt``, ``lrmf``,
@@ -9,6 +10,15 @@ refiners from the same files.
 :func:`refine_file` reads anything :func:`~mocapkit.datasets.formats.motion_io.read_motion` reads, fits the
 refiner on the ``--train`` motions (required when ``refiner.requires_fit``; used when given otherwise, e.g. the
 optional clean frames of PCA), refines and writes:
+
+**Trained refiner networks** need no ``--train``: ``--method PATH.ckpt`` (a run of ``mocapkit train
+experiment=refine_bigru``) is :class:`~mocapkit.refinement.learned.LearnedRefiner` loaded from that checkpoint,
+``--onnx FILE`` (its ``mocapkit export``) is :class:`~mocapkit.refinement.learned.OnnxRefiner`, run with
+onnxruntime and numpy only (torch is never imported on that path). ``--set`` takes their parameters
+(:data:`LEARNED_PARAMETERS`: ``window``, ``overlap``, ``repair_threshold``, ``max_empty_frames``; ``device`` of
+the checkpoint, ``threads`` of the ONNX session). The input must hold the joints the network was trained on
+(names; any order, extra markers are left as they are), at its frame rate and up axis; the report names the
+file as the method.
 
 **C3D in, C3D out** (the everyday case: a Vicon or Qualisys export with gaps). The file is not re-encoded from
 the Motion. The source is opened with ``ezc3d`` and only the samples the refiner changed (filled gaps, and the
@@ -50,7 +60,6 @@ to another skeleton layout, unreadable files) raises a ``ValueError`` subclass w
 from __future__ import annotations
 
 import dataclasses
-
 import inspect
 import os
 import struct
@@ -159,6 +168,89 @@ def build_refiner(method: str, overrides: Sequence[str] = ()) -> MotionRefiner:
     if not isinstance(refiner, MotionRefiner):
         raise _config_error(f"refiner {method!r}: {target} is a {type(refiner).__name__}, not a MotionRefiner")
     return refiner
+
+
+# --------------------------------------------------------------------------- trained refiners (.ckpt / .onnx)
+
+#: ``--set`` parameters of the trained refiners: name -> (type, None allowed, smallest value).
+#: ``device`` is :class:`~mocapkit.refinement.learned.LearnedRefiner`'s, ``threads``
+#: :class:`~mocapkit.refinement.learned.OnnxRefiner`'s.
+LEARNED_PARAMETERS: dict[str, tuple[type, bool, float | None]] = {
+    "window": (int, True, 2), "overlap": (int, True, 0), "repair_threshold": (float, False, 0.0),
+    "max_empty_frames": (int, False, 0), "device": (str, False, None), "threads": (int, False, 0),
+}
+
+
+def trained_model_kind(method: str | os.PathLike | None) -> str | None:
+    """``"checkpoint"`` for a ``--method`` ending in ``.ckpt``, ``"onnx"`` for one ending in ``.onnx``, else None
+    (a method name of ``configs/refiner``)."""
+    if method is None:
+        return None
+    return {".ckpt": "checkpoint", ".onnx": "onnx"}.get(Path(str(method)).suffix.lower())
+
+
+def _learned_value(item: str, key: str, raw: str):
+    import yaml
+
+    kind, nullable, low = LEARNED_PARAMETERS[key]
+    try:
+        value = yaml.safe_load(raw) if raw.strip() else None
+    except yaml.YAMLError:
+        value = raw
+    if value is None and nullable:
+        return None
+    try:
+        if kind is str:
+            if not isinstance(value, str) or not value:
+                raise ValueError
+            return value
+        if isinstance(value, bool) or value is None:
+            raise ValueError
+        if kind is int:
+            if isinstance(value, float) and not value.is_integer():
+                raise ValueError
+            value = int(value)
+        else:
+            value = float(value)
+        if low is not None and not value >= low:
+            raise ValueError
+    except (TypeError, ValueError):
+        what = {int: "an integer", float: "a number", str: "a name"}[kind]
+        bound = f" >= {low:g}" if low is not None else ""
+        raise _config_error(f"--set {item}: {key} must be {what}{bound}{' or null' if nullable else ''}, got "
+                            f"{raw!r}") from None
+    return value
+
+
+def build_learned_refiner(path: str | os.PathLike, overrides: Sequence[str] = (), onnx: bool = False,
+                          fit: bool = True) -> MotionRefiner:
+    """``LearnedRefiner(checkpoint=path)`` (``onnx``: ``OnnxRefiner(path)``) with the ``--set`` style
+    ``overrides`` (``key=value``, :data:`LEARNED_PARAMETERS`), loaded (``fit()``) unless ``fit=False``.
+
+    The ONNX refiner never imports torch.
+
+    Raises:
+        ConfigError: an unknown key (the message lists the parameters), a bad value, a checkpoint that is missing
+            or not a refiner's.
+        FileNotFoundError / RefinementError: an ONNX file that is missing or not a refiner export.
+    """
+    from mocapkit.refinement.learned import LearnedRefiner, OnnxRefiner
+
+    refiner = OnnxRefiner(str(path)) if onnx else LearnedRefiner(checkpoint=str(path))
+    name = type(refiner).__name__
+    keys = [k for k in refiner.get_params() if k in LEARNED_PARAMETERS]
+    params = {}
+    for item in overrides:
+        if "=" not in item:
+            raise _config_error(f"--set {item!r}: expected KEY=VALUE")
+        key, raw = item.split("=", 1)
+        key = key.strip().removeprefix("refiner.")
+        if key not in keys:
+            raise _config_error(f"--set {item}: {name} ({path}) has no parameter {key!r}; its parameters: "
+                                f"{', '.join(keys)}")
+        params[key] = _learned_value(item, key, raw)
+    refiner.set_params(**params)
+    return refiner.fit() if fit else refiner
 
 
 # --------------------------------------------------------------------------- the report
@@ -352,21 +444,24 @@ def refine_motion(refiner: MotionRefiner, motion: Motion) -> tuple[Motion, np.nd
     return out, filled | repaired
 
 
-def refine_file(src: str | os.PathLike, out: str | os.PathLike, method: str, overrides: Sequence[str] = (),
-                train: Sequence[str | os.PathLike] = (), skip_bad: bool = False,
-                repair_outliers: bool = False) -> RefineReport:
+def refine_file(src: str | os.PathLike, out: str | os.PathLike, method: str | None = None,
+                overrides: Sequence[str] = (), train: Sequence[str | os.PathLike] = (), skip_bad: bool = False,
+                repair_outliers: bool = False, onnx: str | os.PathLike | None = None) -> RefineReport:
     """Refine the motion file ``src`` with the refiner ``method`` and write ``out`` (``.c3d`` or ``.npz``).
 
-    See the module docstring for what is written. ``overrides`` are ``key=value`` parameters of the method
-    (``--set``); ``train`` are files or folders of clean motions of the same layout (``--train``); ``skip_bad``
+    See the module docstring for what is written. ``method`` is a name of ``configs/refiner`` or a trained
+    checkpoint ``PATH.ckpt`` (a ``PATH.onnx`` is taken as ``onnx``); ``onnx`` (``--onnx``, instead of ``method``)
+    an exported refiner. ``overrides`` are ``key=value`` parameters of the method (``--set``); ``train`` are
+    files or folders of clean motions of the same layout (``--train``; not with a trained model); ``skip_bad``
     skips unreadable training files (each is reported) instead of failing. ``repair_outliers`` also writes
-    the observed samples a robust method (LRMF, TrNN, PSC, filter bases) flags as outliers; by default only
-    the gaps are filled and every observed sample is written unchanged.
+    the observed samples a robust method (LRMF, TrNN, PSC, filter bases, the learned refiners) flags as
+    outliers; by default only the gaps are filled and every observed sample is written unchanged.
 
     Raises:
-        ConfigError: unknown method or parameter.
-        RefineError: an unsupported output suffix (the supported ones are listed), a method that needs
-            training data without ``train``, unusable training data, a failed write check.
+        ConfigError: unknown method or parameter; a checkpoint that is missing or not a refiner's.
+        RefineError: an unsupported output suffix (the supported ones are listed), neither or both of
+            ``method`` and ``onnx``, a method that needs training data without ``train``, ``train`` with a
+            trained model, unusable training data, a failed write check.
         RefinementError: a motion the refiner cannot work on (named: every sample missing, non-finite
             observed values, too few frames, another skeleton layout than the training data).
         MotionFormatError and its subclasses: an unreadable input file.
@@ -378,15 +473,30 @@ def refine_file(src: str | os.PathLike, out: str | os.PathLike, method: str, ove
     if suffix not in OUTPUT_SUFFIXES:
         raise RefineError(f"{out}: cannot write {suffix or 'a file without suffix'}; supported outputs: "
                           f"{', '.join(OUTPUT_SUFFIXES)} (C3D markers, or NumPy positions)")
-    refiner = build_refiner(method, overrides)
-    if refiner.requires_fit and not train:
+    if (method is None) == (onnx is None):
+        raise RefineError("give the method: --method NAME (configs/refiner), --method RUN/best.ckpt (a trained "
+                          "refiner) or --onnx FILE (an exported one)" if method is None else
+                          f"give either --method {method} or --onnx {onnx}, not both")
+    kind = "onnx" if onnx is not None else trained_model_kind(method)
+    if kind is not None:                  # a trained network: loaded, never trained here
+        model = Path(onnx if onnx is not None else method)
+        if train:
+            raise RefineError(f"--train: {model} is a trained refiner and is not trained again; train one with "
+                              f"`mocapkit train experiment=refine_bigru`")
+        refiner = build_learned_refiner(model, overrides, onnx=kind == "onnx", fit=False)
+        method = str(model)
+    else:
+        refiner = build_refiner(method, overrides)
+    if refiner.requires_fit and not train and kind is None:
         raise RefineError(f"refiner {method!r} ({type(refiner).__name__}) is data-driven and needs training motions: "
                           f"pass --train PATH (files or folders of clean motions of the layout of {src.name})")
     if not src.is_file():
         raise FileNotFoundError(f"{src}: no such file")
     motion = read_motion(src)
     used, skipped = [], []
-    if train:
+    if kind is not None:
+        refiner.fit()                     # loads the checkpoint / opens the ONNX session
+    elif train:
         motions, used, skipped = load_training(train, skip_bad=skip_bad)
         refiner.fit(motions)
     refined, changed = refine_motion(refiner, motion)

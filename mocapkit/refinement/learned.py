@@ -184,7 +184,11 @@ class LearnedRefiner(_WindowedRefiner):
         if "skeleton" not in checkpoint.get("hyper_parameters", {}):
             raise RefinementError(f"{path}: not a refiner checkpoint (no skeleton in its hyper-parameters); train one "
                                   "with `mocapkit train experiment=refine_bigru`")
-        return MotionRefinementModule.load_from_checkpoint(io.BytesIO(raw), map_location="cpu", weights_only=True)
+        try:
+            return MotionRefinementModule.load_from_checkpoint(io.BytesIO(raw), map_location="cpu", weights_only=True)
+        except Exception as exc:  # weights of another network version, hyper-parameters the class does not take
+            first = (str(exc).strip().splitlines() or [type(exc).__name__])[0][:300]
+            raise RefinementError(f"{path}: cannot restore the refiner from it: {first}") from exc
 
     def _use(self, module) -> None:
         self.module_ = module.to(self.device).eval()

@@ -1,7 +1,7 @@
 """C3D marker files (reading and writing) through the maintained ``ezc3d`` library.
 
 :func:`read_c3d` returns a :class:`~mocapkit.datasets.formats.motion.Motion` of marker
-trajectories (``parents=None``):
+trajectories (``parents=None``, unless the labels are the joints of a known layout, see below):
 
 - positions in **metres**, converted from ``POINT:UNITS`` (``mm``, ``cm``, ``dm``, ``m``;
   ``mm``, the C3D default, when the parameter is absent);
@@ -15,6 +15,11 @@ trajectories (``parents=None``):
   those) and, unless ``zero_as_missing=False``, coordinates exactly ``(0, 0, 0)``,
   which some writers use for gaps (Qualisys' Sample26 file stores the residual word as
   65535.0 rather than -1, so ezc3d sees a valid point at the origin);
+- labels that are exactly the joint names of a layout of
+  :data:`~mocapkit.datasets.formats.layouts.LAYOUTS` (the same set, in any order: what
+  :func:`write_c3d` writes for joint positions, e.g. ``mocapkit refine`` of an AMC to C3D)
+  make it that layout: ``layout_name`` is set and ``parents`` is the layout's hierarchy,
+  re-indexed to the file's marker order (which is kept);
 - ``fps`` is ``POINT:RATE``; ``up_axis`` comes from ``POINT:Y_SCREEN`` (the C3D
   parameter naming the axis that points up on screen) when it names one, otherwise the
   lab convention ``"z"``; the ``up_axis`` argument overrides both;
@@ -47,6 +52,7 @@ from pathlib import Path
 import numpy as np
 
 from mocapkit.datasets.formats.errors import MotionFormatError
+from mocapkit.datasets.formats.layouts import LAYOUTS
 from mocapkit.datasets.formats.motion import AXES, Motion
 from mocapkit.datasets.formats.safe_io import regular_file_size
 
@@ -173,11 +179,30 @@ def read_c3d(path: str | os.PathLike, labels: list[str] | None = None, strip_pre
     if len(subjects) == 1:
         metadata["subject"] = subjects[0].rstrip(":")
 
-    motion = Motion(positions=positions, joint_names=tuple(names), fps=fps, parents=None, missing=missing,
-                    source_units=units, up_axis=up, name=path.stem, source=str(path), metadata=metadata)
+    layout_name, parents = known_layout(names)
+    motion = Motion(positions=positions, joint_names=tuple(names), fps=fps, parents=parents, missing=missing,
+                    source_units=units, up_axis=up, name=path.stem, source=str(path), layout_name=layout_name,
+                    metadata=metadata)
     if labels is not None:
         motion = motion.select([_find_label(path, names, full, label) for label in labels])
     return motion
+
+
+def known_layout(names) -> tuple[str | None, tuple[int, ...] | None]:
+    """``(layout name, parents)`` when ``names`` are exactly the joint names of a layout of
+    :data:`~mocapkit.datasets.formats.layouts.LAYOUTS` (same set, any order; parents re-indexed to the order
+    of ``names``), else ``(None, None)``."""
+    names = tuple(names)
+    if len(set(names)) != len(names):
+        return None, None
+    for layout in LAYOUTS.values():
+        if len(layout.joint_names) != len(names) or set(layout.joint_names) != set(names):
+            continue
+        where = {name: i for i, name in enumerate(names)}
+        parents = tuple(-1 if p < 0 else where[layout.joint_names[p]]
+                        for p in (layout.parents[layout.index(name)] for name in names))
+        return layout.name, parents
+    return None, None
 
 
 def _processor(path: Path, head: bytes) -> str:
