@@ -7,18 +7,21 @@ the cubic first guess and the inverse normalisation are inside it (:mod:`mocapki
     missing    bool    [batch, frames, joints]      True where a joint is not observed
     refined    float32 [batch, frames, joints, 3]   metres
 
-``batch`` and ``frames`` are dynamic. The skeleton (joint names, parents, up axis, frame rate, training window)
+``batch`` and ``frames`` are dynamic. Recurrent networks go through the TorchScript exporter (ONNX's GRU
+op; opset ≤ 17), the others through ``torch.export`` (``dynamo=True``). The skeleton (joint names, parents, up axis, frame rate, training window)
 is stored as JSON in the metadata key ``mocapkit_skeleton``, which :class:`~mocapkit.refinement.learned.OnnxRefiner`
 (``mocapkit refine --onnx FILE IN OUT``) reads. Parity with PyTorch is checked on a batch size and a length other
 than the traced ones, with gaps, a joint missing throughout and NaN in missing entries.
 """
 from __future__ import annotations
 
+import io
 import json
 import warnings
 from pathlib import Path
 
 import numpy as np
+import onnx
 import onnxruntime as ort
 import torch
 
@@ -52,18 +55,29 @@ def export_refiner(model: torch.nn.Module, out: str | Path, skeleton: dict, opse
     model = model.eval().cpu()
     joints = len(skeleton["joint_names"])
     trace = example_take(trace_shape[0], trace_shape[1], joints, seed=0)
-    batch = torch.export.Dim("batch", min=1, max=65536)
-    frames = torch.export.Dim("frames", min=2, max=100_000)
+    recurrent = any(isinstance(m, torch.nn.RNNBase) for m in model.modules())
     with warnings.catch_warnings(), torch.no_grad():
         warnings.simplefilter("ignore")
-        program = torch.onnx.export(model, trace, None, input_names=["positions", "missing"],
-                                    output_names=["refined"], dynamic_shapes={"positions": {0: batch, 1: frames},
-                                                                              "missing": {0: batch, 1: frames}},
-                                    dynamo=True, opset_version=opset, optimize=False, verbose=False)
+        if recurrent:
+            # torch.export unrolls a GRU frame by frame over the traced length (slow, and a second export in one
+            # process came out with the frame count fixed); the TorchScript exporter writes ONNX's own GRU op
+            buffer = io.BytesIO()
+            torch.onnx.export(model, trace, buffer, input_names=["positions", "missing"], output_names=["refined"],
+                              dynamic_axes={name: {0: "batch", 1: "frames"}
+                                            for name in ("positions", "missing", "refined")},
+                              dynamo=False, opset_version=min(opset, 17))
+            proto = onnx.load_from_string(buffer.getvalue())
+        else:
+            batch = torch.export.Dim("batch", min=1, max=65536)
+            frames = torch.export.Dim("frames", min=2, max=100_000)
+            proto = torch.onnx.export(model, trace, None, input_names=["positions", "missing"],
+                                      output_names=["refined"], dynamic_shapes={"positions": {0: batch, 1: frames},
+                                                                                "missing": {0: batch, 1: frames}},
+                                      dynamo=True, opset_version=opset, optimize=False, verbose=False).model_proto
     meta = {"mocapkit_skeleton": json.dumps(skeleton), "producer": "mocapkit",
             "input": f"positions float32 [batch, frames, {joints}, 3] metres; missing bool [batch, frames, {joints}]",
             "output": f"refined float32 [batch, frames, {joints}, 3] metres"}
-    save_checked_onnx(program.model_proto, meta, out)
+    save_checked_onnx(proto, meta, out)
     session = ort.InferenceSession(str(out), providers=["CPUExecutionProvider"])
     checks = []
     for shape, seed in ((check_shape, 1), ((1, max(2, check_shape[1] // 3 + 7)), 2)):
@@ -77,7 +91,8 @@ def export_refiner(model: torch.nn.Module, out: str | Path, skeleton: dict, opse
         if not np.all(np.isfinite(result)) or not np.allclose(result, reference, atol=atol, rtol=rtol):
             raise ParityError(f"onnxruntime differs from PyTorch on input {list(positions.shape)}: max |diff| = "
                               f"{diff:.3g} m > atol {atol} + rtol {rtol}·|ref|")
-    return {"onnx": str(out), "opset": opset, "traced_shape": list(trace[0].shape),
+    return {"onnx": str(out), "opset": min(opset, 17) if recurrent else opset,
+            "exporter": "torchscript" if recurrent else "dynamo", "traced_shape": list(trace[0].shape),
             "checked_shape": checks[0]["shape"], "checks": checks, "max_abs_diff": max(c["max_abs_diff"] for c in checks),
             "atol": atol, "rtol": rtol}
 

@@ -14,7 +14,8 @@ normalisation and its inverse are part of the network (so they are part of the O
    nearest observed value at the ends of the window, 0 (the window's centre) for a joint missing in
    the whole window. It is computed with masked reductions over ``[T, T]`` frame pairs (no loops,
    no ``cummax``), so it exports to ONNX.
-3. A temporal network sees ``[first guess, observed mask]`` per frame and predicts a correction of
+3. A temporal network sees ``[first guess, its temporal detail (x_t − mean of the neighbours), observed mask]``
+   per frame and predicts a correction of
    every entry (its last layer starts at zero: an untrained refiner *is* the cubic fill). Observed
    entries are corrected too: that is how noise is removed.
 
@@ -163,6 +164,14 @@ def cubic_fill(x: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
     return torch.where(observed.unsqueeze(-1), x, fill)
 
 
+def temporal_detail(x: torch.Tensor) -> torch.Tensor:
+    """``x_t − (x_{t−1} + x_{t+1}) / 2`` along frames (dim 1; the end frames use their one neighbour): what a
+    noisy sample or a spike stands out by, handed to the networks so that denoising is an easy function to learn."""
+    prev = torch.cat([x[:, :1], x[:, :-1]], dim=1)
+    nxt = torch.cat([x[:, 1:], x[:, -1:]], dim=1)
+    return x - 0.5 * (prev + nxt)
+
+
 class _Refiner(nn.Module):
     """Shared input and output handling: normalise, first guess, correct, denormalise (module docstring)."""
 
@@ -177,6 +186,22 @@ class _Refiner(nn.Module):
             raise ValueError(f"{len(self.joint_names)} joint names but {len(self.parents)} parents")
         self.num_joints = len(self.joint_names)
         self.normalizer = PoseNormalizer(self.parents, up_axis, hips, bone_lengths)
+        depth = [0] * self.num_joints
+        for j in range(self.num_joints):                      # depth of every joint (parents may come later)
+            p, seen = self.parents[j], 0
+            while p >= 0 and seen <= self.num_joints:
+                depth[j], p, seen = depth[j] + 1, self.parents[p], seen + 1
+        #: (joint, parent) pairs, parents before children: a joint never observed in a window starts at its parent
+        self.tree_order = [(j, self.parents[j]) for j in sorted(range(self.num_joints), key=lambda k: depth[k])
+                           if self.parents[j] >= 0]
+
+    def first_guess(self, x: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
+        """:func:`cubic_fill`, then a joint never observed in the window takes its parent's guess (in tree order)."""
+        guess = cubic_fill(x, observed)
+        never = ~observed.any(dim=1, keepdim=True)                                   # [B,1,J]
+        for j, p in self.tree_order:
+            guess[:, :, j] = torch.where(never[:, :, j:j + 1], guess[:, :, p], guess[:, :, j])
+        return guess
 
     def correction(self, guess: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
         """``[B, T, J, 3]`` correction of the normalised first guess (subclasses)."""
@@ -188,7 +213,7 @@ class _Refiner(nn.Module):
         stats = self.normalizer.statistics(clean, observed)
         x = self.normalizer(clean, stats)
         x = torch.where(observed.unsqueeze(-1), x, torch.zeros_like(x))
-        guess = cubic_fill(x, observed)
+        guess = self.first_guess(x, observed)
         refined = guess + self.correction(guess, observed)
         return self.normalizer.inverse(refined, stats)
 
@@ -198,7 +223,7 @@ class _Refiner(nn.Module):
         clean = torch.where(observed.unsqueeze(-1), positions, torch.zeros_like(positions))
         stats = self.normalizer.statistics(clean, observed)
         x = torch.where(observed.unsqueeze(-1), self.normalizer(clean, stats), torch.zeros_like(clean))
-        guess = cubic_fill(x, observed)
+        guess = self.first_guess(x, observed)
         return guess + self.correction(guess, observed), stats
 
 
@@ -216,7 +241,7 @@ class BiGRURefiner(_Refiner):
                  fps: float | None = None, hidden: int = 128, layers: int = 2, dropout: float = 0.1):
         super().__init__(joint_names, parents, up_axis, hips, bone_lengths, fps)
         J = self.num_joints
-        self.inp = nn.Sequential(nn.Linear(4 * J, hidden), nn.GELU())
+        self.inp = nn.Sequential(nn.Linear(7 * J, hidden), nn.GELU())
         self.gru = nn.GRU(hidden, hidden, num_layers=layers, batch_first=True, bidirectional=True,
                           dropout=dropout if layers > 1 else 0.0)
         self.out = nn.Linear(2 * hidden, 3 * J)
@@ -225,7 +250,8 @@ class BiGRURefiner(_Refiner):
 
     def correction(self, guess: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
         B, T, J, _ = guess.shape
-        features = torch.cat([guess.reshape(B, T, 3 * J), observed.to(guess.dtype)], dim=-1)
+        features = torch.cat([guess.reshape(B, T, 3 * J), temporal_detail(guess).reshape(B, T, 3 * J),
+                              observed.to(guess.dtype)], dim=-1)
         hidden, _ = self.gru(self.inp(features))
         return self.out(hidden).reshape(B, T, J, 3)
 
@@ -261,11 +287,11 @@ class MaskedTransformerRefiner(_Refiner):
         layer = lambda: nn.TransformerEncoderLayer(dim, heads, ff, dropout, activation="gelu", batch_first=True,
                                                    norm_first=True)
         if tokens == "frames":
-            self.embed = nn.Linear(7 * J, dim)
+            self.embed = nn.Linear(10 * J, dim)
             self.blocks = nn.ModuleList(layer() for _ in range(layers))
             self.out = nn.Linear(dim, 3 * J)
         else:
-            self.embed = nn.Linear(7, dim)
+            self.embed = nn.Linear(10, dim)
             self.joint_embedding = nn.Parameter(torch.zeros(J, dim))
             nn.init.normal_(self.joint_embedding, std=0.02)
             self.blocks = nn.ModuleList(layer() for _ in range(2 * layers))    # joint, frame, joint, frame, ...
@@ -278,10 +304,10 @@ class MaskedTransformerRefiner(_Refiner):
         B, T, J, _ = guess.shape
         obs = observed.unsqueeze(-1)
         tokenised = torch.where(obs, guess, self.mask_token.to(guess.dtype).expand(B, T, J, 3))
-        per_joint = torch.cat([tokenised, guess, obs.to(guess.dtype)], dim=-1)     # [B,T,J,7]
+        per_joint = torch.cat([tokenised, guess, temporal_detail(guess), obs.to(guess.dtype)], dim=-1)   # [B,T,J,10]
         pos = _sinusoid(T, self.dim, guess.device, guess.dtype)                      # [T, dim]
         if self.tokens == "frames":
-            h = self.embed(per_joint.reshape(B, T, 7 * J)) + pos
+            h = self.embed(per_joint.reshape(B, T, 10 * J)) + pos
             for block in self.blocks:
                 h = block(h)
             return self.out(self.norm(h)).reshape(B, T, J, 3)

@@ -438,17 +438,28 @@ TRAINING_MIXTURE = ("rdcrypt", "rdloss", "mxcrypt", "random_missing", "continuou
                     "swaps")
 
 
-def training_corruption(motion: Motion, rng: np.random.Generator, whole_joint_rate: float = 0.15) -> Corruption:
+def training_corruption(motion: Motion, rng: np.random.Generator, whole_joint_rate: float = 0.15,
+                        weights: dict[str, float] | None = None) -> Corruption:
     """One corruption of ``motion`` (a training window) drawn from :data:`TRAINING_MIXTURE`.
 
-    The protocol is uniform over the mixture; its level is drawn: fractions 0.05–0.6 (rdcrypt, rdloss, mxcrypt,
+    The protocol is drawn with ``weights`` (protocol → relative weight; None: uniform over the mixture;
+    a protocol left out or weighted 0 is never drawn); its level is drawn: fractions 0.05–0.6 (rdcrypt, rdloss, mxcrypt,
     random_missing), spikes 0.005–0.03, 1–10 gaps of 2 … ``frames − 2`` frames (continuous_missing draws the
     length, long_gaps the count and length), swaps of 2 … ``frames / 3`` frames. With probability
     ``whole_joint_rate`` 1–3 joints are also removed in every frame (a gap longer than the window, as the
     windows inside a 2 s gap see). Protocols a short window cannot take fall back to ``rdloss``.
     """
     frames = motion.num_frames
-    protocol = TRAINING_MIXTURE[rng.integers(len(TRAINING_MIXTURE))]
+    if weights is None:
+        protocol = TRAINING_MIXTURE[rng.integers(len(TRAINING_MIXTURE))]
+    else:
+        unknown = sorted(set(weights) - set(TRAINING_MIXTURE))
+        if unknown or not sum(float(w) for w in weights.values()) > 0:
+            raise ValueError(f"corruption weights {dict(weights)}: protocols must be among {list(TRAINING_MIXTURE)} "
+                             "with a positive total weight")
+        names = list(weights)
+        p = np.asarray([float(weights[n]) for n in names])
+        protocol = names[rng.choice(len(names), p=p / p.sum())]
     if protocol in ("rdcrypt", "rdloss", "mxcrypt", "random_missing"):
         level = float(rng.uniform(0.05, 0.6))
     elif protocol == "spikes":

@@ -47,9 +47,10 @@ def _item(clean, corruption) -> dict:
 class RandomWindows(Dataset):
     """``count`` windows of ``length`` frames from ``motions``, freshly corrupted at every access."""
 
-    def __init__(self, motions: list, length: int, count: int, seed: int = 0):
+    def __init__(self, motions: list, length: int, count: int, seed: int = 0, corruption: dict | None = None):
         self.motions = [m for m in motions if m.num_frames >= length]
         self.length, self.count, self.seed, self.calls = length, count, seed, 0
+        self.corruption = dict(corruption or {})
         spans = np.asarray([m.num_frames - length + 1 for m in self.motions], dtype=np.float64)
         self.weights = spans / spans.sum() if len(spans) else spans
 
@@ -64,13 +65,14 @@ class RandomWindows(Dataset):
         motion = self.motions[rng.choice(len(self.motions), p=self.weights)]
         start = int(rng.integers(motion.num_frames - self.length + 1))
         clean = _window(motion, start, self.length)
-        return _item(clean, training_corruption(clean, rng))
+        return _item(clean, training_corruption(clean, rng, **self.corruption))
 
 
 class FixedWindows(Dataset):
     """Evenly spaced windows of every motion, each with a seeded corruption (the same at every access)."""
 
-    def __init__(self, motions: list, length: int, per_clip: int, seed: int = 0):
+    def __init__(self, motions: list, length: int, per_clip: int, seed: int = 0, corruption: dict | None = None):
+        self.corruption = dict(corruption or {})
         self.items = []
         for i, motion in enumerate(motions):
             if motion.num_frames < length:
@@ -87,7 +89,7 @@ class FixedWindows(Dataset):
 
         clip, start = self.items[index]
         clean = _window(self.motions[clip], start, self.length)
-        return _item(clean, training_corruption(clean, np.random.default_rng([self.seed, 1, index])))
+        return _item(clean, training_corruption(clean, np.random.default_rng([self.seed, 1, index]), **self.corruption))
 
 
 class MocapRefinementDataModule(L.LightningDataModule):
@@ -108,13 +110,16 @@ class MocapRefinementDataModule(L.LightningDataModule):
         batch_size, eval_batch_size, num_workers: the loaders'.
         split_seed: seed of the validation draw and the fixed corruptions.
         seed: the run's seed (``mocapkit train`` passes it): the stream of training windows and corruptions.
+        corruption: keyword arguments of :func:`~mocapkit.refinement.corruptions.training_corruption`
+            (``whole_joint_rate``, ``weights``: protocol → relative weight), for every part.
     """
 
     def __init__(self, dataset: str | None = "hdm05", root: str | None = None, test_groups: list | None = None,
                  train_groups: list | None = None, extra: list | None = None, motions: list | None = None,
                  fps: float | None = None, window: int = 120, windows_per_epoch: int = 4096,
                  val_fraction: float = 0.1, eval_windows_per_clip: int = 2, batch_size: int = 32,
-                 eval_batch_size: int = 64, num_workers: int = 0, split_seed: int = 0, seed: int = 0):
+                 eval_batch_size: int = 64, num_workers: int = 0, split_seed: int = 0, seed: int = 0,
+                 corruption: dict | None = None):
         super().__init__()
         if int(window) < 8:
             raise ValueError(f"data.window={window}: at least 8 frames")
@@ -124,6 +129,10 @@ class MocapRefinementDataModule(L.LightningDataModule):
         self.eval_windows_per_clip, self.split_seed, self.seed = int(eval_windows_per_clip), int(split_seed), int(seed)
         self.batch_size, self.eval_batch_size, self.num_workers = int(batch_size), int(eval_batch_size), int(num_workers)
         self.dataset_name, self.root = dataset, None if root is None else str(root)
+        self.corruption = dict(corruption or {})
+        if set(self.corruption) - {"whole_joint_rate", "weights"}:
+            raise ValueError(f"data.corruption: unknown key(s) {sorted(set(self.corruption) - {'whole_joint_rate', 'weights'})}"
+                             "; it takes whole_joint_rate and weights")
         if motions is not None:
             all_motions = [m if m.metadata.get("group") else replace(m, metadata={**m.metadata, "group": "train"})
                            for m in motions]
@@ -217,9 +226,12 @@ class MocapRefinementDataModule(L.LightningDataModule):
     def dataset(self, part: str) -> Dataset:
         if not hasattr(self, "_datasets"):
             self._datasets = {
-                "train": RandomWindows(self.train_motions, self.window, self.windows_per_epoch, self.seed),
-                "val": FixedWindows(self.val_motions, self.window, self.eval_windows_per_clip, self.split_seed),
-                "test": FixedWindows(self.test_motions, self.window, self.eval_windows_per_clip, self.split_seed + 1)}
+                "train": RandomWindows(self.train_motions, self.window, self.windows_per_epoch, self.seed,
+                                       self.corruption),
+                "val": FixedWindows(self.val_motions, self.window, self.eval_windows_per_clip, self.split_seed,
+                                    self.corruption),
+                "test": FixedWindows(self.test_motions, self.window, self.eval_windows_per_clip, self.split_seed + 1,
+                                     self.corruption)}
         return self._datasets[part]
 
     def _loader(self, part: str) -> DataLoader:
