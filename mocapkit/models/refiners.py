@@ -164,6 +164,10 @@ def cubic_fill(x: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
     return torch.where(observed.unsqueeze(-1), x, fill)
 
 
+#: Scale of the guess and of its temporal detail in the networks' input features (:meth:`_Refiner.features`).
+FEATURE_SCALE = (0.1, 5.0)
+
+
 def temporal_detail(x: torch.Tensor) -> torch.Tensor:
     """``x_t − (x_{t−1} + x_{t+1}) / 2`` along frames (dim 1; the end frames use their one neighbour): what a
     noisy sample or a spike stands out by, handed to the networks so that denoising is an easy function to learn."""
@@ -206,6 +210,14 @@ class _Refiner(nn.Module):
     def correction(self, guess: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
         """``[B, T, J, 3]`` correction of the normalised first guess (subclasses)."""
         raise NotImplementedError
+
+    @staticmethod
+    def features(guess: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
+        """Per joint ``[B, T, J, 7]``: the guess scaled to metres-like values (×0.1: a body spans about ±1), its
+        temporal detail ×5 (2 cm of noise ≈ 1) and the observed flag; inputs of order 1 keep the GRU's gates and
+        the attention out of saturation."""
+        return torch.cat([FEATURE_SCALE[0] * guess, FEATURE_SCALE[1] * temporal_detail(guess),
+                          observed.unsqueeze(-1).to(guess.dtype)], dim=-1)
 
     def forward(self, positions: torch.Tensor, missing: torch.Tensor) -> torch.Tensor:
         observed = ~missing.bool()
@@ -250,9 +262,7 @@ class BiGRURefiner(_Refiner):
 
     def correction(self, guess: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
         B, T, J, _ = guess.shape
-        features = torch.cat([guess.reshape(B, T, 3 * J), temporal_detail(guess).reshape(B, T, 3 * J),
-                              observed.to(guess.dtype)], dim=-1)
-        hidden, _ = self.gru(self.inp(features))
+        hidden, _ = self.gru(self.inp(self.features(guess, observed).reshape(B, T, 7 * J)))
         return self.out(hidden).reshape(B, T, J, 3)
 
 
@@ -303,8 +313,8 @@ class MaskedTransformerRefiner(_Refiner):
     def correction(self, guess: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
         B, T, J, _ = guess.shape
         obs = observed.unsqueeze(-1)
-        tokenised = torch.where(obs, guess, self.mask_token.to(guess.dtype).expand(B, T, J, 3))
-        per_joint = torch.cat([tokenised, guess, temporal_detail(guess), obs.to(guess.dtype)], dim=-1)   # [B,T,J,10]
+        tokenised = torch.where(obs, FEATURE_SCALE[0] * guess, self.mask_token.to(guess.dtype).expand(B, T, J, 3))
+        per_joint = torch.cat([tokenised, self.features(guess, observed)], dim=-1)                     # [B,T,J,10]
         pos = _sinusoid(T, self.dim, guess.device, guess.dtype)                      # [T, dim]
         if self.tokens == "frames":
             h = self.embed(per_joint.reshape(B, T, 10 * J)) + pos
