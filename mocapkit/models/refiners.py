@@ -11,9 +11,9 @@ normalisation and its inverse are part of the network (so they are part of the O
    turn and the training lengths.
 2. :func:`cubic_fill` — every missing entry gets a first guess: a cubic Hermite curve between the
    nearest observed frames before and after it (end tangents from one-sided differences), the
-   nearest observed value at the ends of the window, 0 (the window's centre) for a joint missing in
-   the whole window. It is computed with masked reductions over ``[T, T]`` frame pairs (no loops,
-   no ``cummax``), so it exports to ONNX.
+   nearest observed value at the ends of the window; a joint missing in the whole window starts at its
+   parent's guess (the root at the window's centre). The nearest observed frames come from a sort and a cumulative count per
+   joint (``O(T log T)``, no loops, no ``cummax``), so it exports to ONNX.
 3. A temporal network sees ``[first guess, its temporal detail (x_t − mean of the neighbours), observed mask]``
    per frame and predicts a correction of
    every entry (its last layer starts at zero: an untrained refiner *is* the cubic fill). Observed
@@ -135,18 +135,20 @@ def cubic_fill(x: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
     """
     B, T, J, _ = x.shape
     frames = torch.arange(T, device=x.device)
-    t = frames.view(1, T, 1, 1)                                  # the frame being filled
-    s = frames.view(1, 1, 1, T)                                  # the candidate observed frame
-    obs = observed.permute(0, 2, 1).unsqueeze(1)                 # [B,1,J,T]
-    before = obs & (s <= t)                                      # [B,T,J,T]
-    after = obs & (s >= t)
-    prev = torch.where(before, s, torch.full_like(s, -1)).amax(-1)          # [B,T,J]
-    nxt = torch.where(after, s, torch.full_like(s, T)).amin(-1)
+    obs = observed.permute(0, 2, 1)                                          # [B,J,T]
+    # observed frames first, in time order: the k-th observed frame of (b, j) is order[b, j, k]
+    order = torch.argsort(torch.where(obs, frames, frames + T), dim=-1)
+    seen = torch.cumsum(obs.to(torch.int64), dim=-1)                         # observed frames ≤ t
+    total = seen[..., -1:]
+    at = lambda k: torch.gather(order, 2, k.clamp(0, T - 1))
+    prev = torch.where(seen > 0, at(seen - 1), torch.full_like(seen, -1)).permute(0, 2, 1)        # [B,T,J]
+    before_t = seen - obs.to(torch.int64)                                    # observed frames < t
+    nxt = torch.where(before_t < total, at(before_t), torch.full_like(seen, T)).permute(0, 2, 1)
     has_prev, has_next = prev >= 0, nxt < T
     prev_c, next_c = prev.clamp(0, T - 1), nxt.clamp(0, T - 1)
     xt = x.permute(0, 2, 1, 3)                                   # [B,J,T,3]
     gather = lambda idx: torch.gather(xt, 2, idx.permute(0, 2, 1).unsqueeze(-1).expand(B, J, T, 3)).permute(0, 2, 1, 3)
-    obs_t = observed.permute(0, 2, 1)                            # [B,J,T]
+    obs_t = obs
     obs_at = lambda idx: torch.gather(obs_t, 2, idx.permute(0, 2, 1)).permute(0, 2, 1)
     p0, p1 = gather(prev_c), gather(next_c)
     before_prev, after_next = (prev_c - 1).clamp(0, T - 1), (next_c + 1).clamp(0, T - 1)
