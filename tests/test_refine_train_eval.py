@@ -57,9 +57,9 @@ def test_train_records_the_layout_and_the_training_performers(refiner_run):
 def test_eval_writes_the_benchmark_table_with_classical_rows(refiner_run):
     from mocapkit.evaluation.evaluate import evaluate
 
-    overrides = ["eval.overrides=['seeds=[0]','benchmark.protocols=[continuous_missing@10,rdloss@0.3]',"
-                 "'only=[linear,pchip,learned]','benchmark.clips_per_fold=1','benchmark.max_frames=100',"
-                 "'benchmark.claims=[]']"]
+    overrides = [("eval.overrides=['seeds=[0]','benchmark.protocols=[continuous_missing@10,rdloss@0.3]',"
+                  "'only=[linear,pchip,learned]','benchmark.clips_per_fold=1','benchmark.max_frames=100',"
+                  "'benchmark.claims=[]']")]
     report = evaluate(refiner_run / "best.ckpt", overrides)
     assert report["held_out"] == ["mm"]
     results = json.loads((refiner_run / "eval" / "results.json").read_text())

@@ -29,8 +29,8 @@ def evaluate_refinement(module, datamodule, cfg: DictConfig, out_dir: Path) -> d
     label = f"learned ({cfg.get('experiment_name', 'refiner')})"
     overrides = [name, f"benchmark.root={cfg.data.root}", f"benchmark.held_out=[{','.join(groups)}]",
                  f"out={out_dir}",
-                 f"+methods.learned={{label: '{label}', reseed: false, estimator: {{_target_: "
-                 f"mocapkit.refinement.learned.LearnedRefiner, checkpoint: '{Path(cfg.ckpt_path)}'}}}}",
+                 (f"+methods.learned={{label: '{label}', reseed: false, estimator: {{_target_: "
+                  f"mocapkit.refinement.learned.LearnedRefiner, checkpoint: '{Path(cfg.ckpt_path)}'}}}}"),
                  *[str(o) for o in cfg.eval.get("overrides") or []]]
     results = run_comparison(compose(overrides))
     summary = results["summary"]

@@ -18,14 +18,18 @@ from hydra.utils import instantiate
 from torch import nn
 from torchmetrics.classification import MulticlassAccuracy
 
-from mocapkit.train.optimization import ConfiguredOptimization, as_plain_dict
+from mocapkit.train.optimization import (
+    ConfiguredOptimization,
+    StagedSteps,
+    as_plain_dict,
+)
 
 #: Stages with their own accuracy metric (each is accumulated, synchronised and reset per epoch).
 STAGES = ("train", "val", "test")
 
 
 
-class ActionRecognitionModule(ConfiguredOptimization, L.LightningModule):
+class ActionRecognitionModule(ConfiguredOptimization, StagedSteps, L.LightningModule):
     """Cross-entropy training of ``model`` (skeletons ``[B, M, T, J, 3]`` → logits ``[B, C]``).
 
     Args:
@@ -65,15 +69,6 @@ class ActionRecognitionModule(ConfiguredOptimization, L.LightningModule):
                  sync_dist=True)
         self.log(f"{stage}/acc", accuracy, on_step=False, on_epoch=True, prog_bar=True)
         return loss
-
-    def training_step(self, batch: dict, batch_idx: int) -> torch.Tensor:
-        return self._step(batch, "train")
-
-    def validation_step(self, batch: dict, batch_idx: int) -> None:
-        self._step(batch, "val")
-
-    def test_step(self, batch: dict, batch_idx: int) -> None:
-        self._step(batch, "test")
 
     def predict_step(self, batch: dict, batch_idx: int) -> dict:
         return {"logits": self(batch["skeletons"]), "labels": batch["labels"], "indices": batch["indices"],

@@ -23,7 +23,11 @@ from hydra.utils import instantiate
 from torch import nn
 from torchmetrics.classification import MulticlassAccuracy
 
-from mocapkit.train.optimization import ConfiguredOptimization, as_plain_dict
+from mocapkit.train.optimization import (
+    ConfiguredOptimization,
+    StagedSteps,
+    as_plain_dict,
+)
 
 #: The batch key holding each task's labels.
 TASK_LABELS = {"subject": "subjects", "view": "views", "condition": "conditions"}
@@ -34,7 +38,7 @@ STAGES = ("train", "val", "test")
 
 
 
-class GaitRecognitionModule(ConfiguredOptimization, L.LightningModule):
+class GaitRecognitionModule(ConfiguredOptimization, StagedSteps, L.LightningModule):
     """Joint cross-entropy training of a multi-task gait network (GEIs ``[B, 1, H, W]`` → ``{task: logits}``).
 
     Args:
@@ -134,12 +138,6 @@ class GaitRecognitionModule(ConfiguredOptimization, L.LightningModule):
         if loss is None:
             raise ValueError("a training batch has no labelled sample: training needs subject labels ≥ 0")
         return loss
-
-    def validation_step(self, batch: dict, batch_idx: int) -> None:
-        self._step(batch, "val")
-
-    def test_step(self, batch: dict, batch_idx: int) -> None:
-        self._step(batch, "test")
 
     def predict_step(self, batch: dict, batch_idx: int) -> dict:
         """``{"embedding": [B, 512], "<task>_logits": ..., and the batch's subjects, subject_ids, views,

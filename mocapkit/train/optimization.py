@@ -1,4 +1,4 @@
-"""Optimiser and learning-rate schedule from Hydra configs, shared by every LightningModule here.
+"""Optimiser and learning-rate schedule from Hydra configs, and the stage steps, shared by every LightningModule here.
 
 A module stores the ``optimizer`` and ``scheduler`` configs (``_partial_: true`` dicts) in its
 hyper-parameters; :class:`ConfiguredOptimization` turns them into ``configure_optimizers`` and
@@ -31,3 +31,17 @@ class ConfiguredOptimization:
         configured = {k: v for k, v in (self.hparams.scheduler or {}).items() if not k.startswith("_")}
         for state in checkpoint.get("lr_schedulers", []):
             state.update({k: v for k, v in configured.items() if k in state})
+
+
+class StagedSteps:
+    """Mixin: ``training_step`` / ``validation_step`` / ``test_step`` as one ``_step(batch, stage)`` of the module
+    (``stage`` is ``"train"``, ``"val"`` or ``"test"``; the training step returns the loss)."""
+
+    def training_step(self, batch: dict, batch_idx: int):
+        return self._step(batch, "train")
+
+    def validation_step(self, batch: dict, batch_idx: int) -> None:
+        self._step(batch, "val")
+
+    def test_step(self, batch: dict, batch_idx: int) -> None:
+        self._step(batch, "test")

@@ -22,12 +22,16 @@ from hydra.utils import instantiate
 from torch import nn
 from torchmetrics import MeanMetric
 
-from mocapkit.train.optimization import ConfiguredOptimization, as_plain_dict
+from mocapkit.train.optimization import (
+    ConfiguredOptimization,
+    StagedSteps,
+    as_plain_dict,
+)
 
 STAGES = ("train", "val", "test")
 
 
-class MotionRefinementModule(ConfiguredOptimization, L.LightningModule):
+class MotionRefinementModule(ConfiguredOptimization, StagedSteps, L.LightningModule):
     """Trains a refiner network (positions ``[B, T, J, 3]`` + missing ``[B, T, J]`` → positions).
 
     Args:
@@ -87,12 +91,3 @@ class MotionRefinementModule(ConfiguredOptimization, L.LightningModule):
             self.log(f"{stage}/loss_{name}", value, on_step=False, on_epoch=True, batch_size=size, sync_dist=True)
         self.log(f"{stage}/mje_cm", metric, on_step=False, on_epoch=True, prog_bar=True)
         return loss
-
-    def training_step(self, batch: dict, batch_idx: int) -> torch.Tensor:
-        return self._step(batch, "train")
-
-    def validation_step(self, batch: dict, batch_idx: int) -> None:
-        self._step(batch, "val")
-
-    def test_step(self, batch: dict, batch_idx: int) -> None:
-        self._step(batch, "test")
