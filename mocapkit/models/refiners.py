@@ -222,13 +222,7 @@ class _Refiner(nn.Module):
                           observed.unsqueeze(-1).to(guess.dtype)], dim=-1)
 
     def forward(self, positions: torch.Tensor, missing: torch.Tensor) -> torch.Tensor:
-        observed = ~missing.bool()
-        clean = torch.where(observed.unsqueeze(-1), positions, torch.zeros_like(positions))
-        stats = self.normalizer.statistics(clean, observed)
-        x = self.normalizer(clean, stats)
-        x = torch.where(observed.unsqueeze(-1), x, torch.zeros_like(x))
-        guess = self.first_guess(x, observed)
-        refined = guess + self.correction(guess, observed)
+        refined, stats = self.normalised_forward(positions, missing)
         return self.normalizer.inverse(refined, stats)
 
     def normalised_forward(self, positions: torch.Tensor, missing: torch.Tensor):

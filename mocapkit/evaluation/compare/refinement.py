@@ -2,19 +2,9 @@
 held-out performers of real motion capture (HDM05, CMU, Bandai).
 
 Samples are the clips of one data set, read with :func:`~mocapkit.datasets.read_motion` (joint positions in
-metres, ``[frames, joints, 3]``, forward kinematics for ASF/AMC and BVH). Every clip belongs to a **group**:
-
-=========  ==========================================================  ============================================
-dataset    files under ``root``                                        group (the "performer" of a fold)
-=========  ==========================================================  ============================================
-``hdm05``  ``<actor>/HDM_<actor>_<class>_<nnn>_<fps>.amc`` (+ ASF)     the actor (bd, bk, dg, mm): leave one
-                                                                       performer out
-``cmu``    ``NN_MM.amc`` + ``NN.asf``                                  the subject ``NN`` (01, 02, 03)
-``bandai`` ``data/dataset-1_<content>_<style>_<nnn>.bvh``              the **style** (15): neither the file names nor
-                                                                       the JSON labels say which of the data set's
-                                                                       actors performed a take, so a Bandai fold
-                                                                       holds out a style, not a performer
-=========  ==========================================================  ============================================
+metres, ``[frames, joints, 3]``, forward kinematics for ASF/AMC and BVH). Every clip belongs to a **group**, the
+"performer" of a fold: the HDM05 actor, the CMU subject, the Bandai style (which files make up each data set and
+how they are grouped: :mod:`mocapkit.datasets.mocap.folders`).
 
 **Folds, protocols, seeds.** A runner protocol is one corruption ``"<protocol>@<level>"`` of
 :data:`~mocapkit.refinement.corruptions.PROTOCOLS` (``rdcrypt@0.3``, ``rgloss@10x60``, ``random_missing@0.3``,
