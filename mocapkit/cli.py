@@ -14,6 +14,8 @@
     mocapkit gait-report --data GEI_CACHE --out DIR [--protocols ...] [overrides ...]   (= compare gait)
     mocapkit refine IN OUT --method NAME [--set KEY=VALUE ...] [--train PATH ...] [--repair-outliers]
     mocapkit refine IN OUT --method RUN/best.ckpt | --onnx FILE [--set KEY=VALUE ...] [--repair-outliers]
+    mocapkit index --src DIR --out INDEX [--method NAME] [--ckpt PATH] [--skip-bad]
+    mocapkit search --index INDEX QUERY [QUERY ...] [-k K] [--json]
 
 Errors are one line (``mocapkit: error: ...``, exit code 2); ``mocapkit --debug COMMAND ...`` (or
 ``MOCAPKIT_DEBUG=1``) shows the traceback instead.
@@ -163,6 +165,29 @@ def cmd_refine(args: argparse.Namespace) -> None:
     print(report.to_text())
 
 
+def cmd_index(args: argparse.Namespace) -> None:
+    from mocapkit.retrieval.index import build_index
+
+    index = build_index(args.src, args.out, method=args.method, ckpt=args.ckpt, skip_bad=args.skip_bad)
+    print(f"[mocapkit] indexed {len(index.files)} files with {index.method_name} into {args.out}"
+          + (f"; skipped {len(index.skipped)} (listed in {args.out}/manifest.json)" if index.skipped else ""))
+
+
+def cmd_search(args: argparse.Namespace) -> None:
+    import json
+
+    from mocapkit.retrieval.index import search_index
+
+    results = search_index(args.index, args.queries, k=args.k, method=args.method, ckpt=args.ckpt)
+    if args.json:
+        print(json.dumps(results, indent=1))
+        return
+    for entry in results:
+        print(entry["query"])
+        for rank, hit in enumerate(entry["results"], 1):
+            print(f"  {rank:3d}  {hit['distance']:10.4f}  {hit['path']}")
+
+
 def cmd_predict(args: argparse.Namespace) -> None:
     from mocapkit.deploy.predict import predict_files, print_predictions
 
@@ -291,6 +316,27 @@ def build_parser() -> argparse.ArgumentParser:
     refine.add_argument("--skip-bad", dest="skip_bad", action="store_true",
                         help="skip unreadable training files (each is reported)")
     refine.set_defaults(func=cmd_refine)
+
+    index = sub.add_parser("index", help="index a folder of motion files for query by example (mocapkit search)")
+    index.add_argument("--src", required=True, help="folder searched recursively for files read_motion reads")
+    index.add_argument("--out", required=True, help="the index folder to write (manifest.json + state.npz)")
+    index.add_argument("--method", default=None,
+                       help="dtw_positions, dtw_relational, hod, gpf, amfs, laplacian_score, tsr_stpm, embedding "
+                            "(default: the recommended label-free method, mocapkit.retrieval.RECOMMENDED)")
+    index.add_argument("--ckpt", default=None, help="--method embedding: RUN/best.ckpt or an exported model.onnx")
+    index.add_argument("--skip-bad", dest="skip_bad", action="store_true",
+                       help="skip files that cannot be read or used (each is reported)")
+    index.set_defaults(func=cmd_index)
+
+    search = sub.add_parser("search", help="rank the files of an index for each query motion file")
+    search.add_argument("--index", required=True, help="a folder written by mocapkit index")
+    search.add_argument("queries", nargs="+", help="query motion files")
+    search.add_argument("-k", type=int, default=10, help="results per query (0: every indexed file)")
+    search.add_argument("--json", action="store_true",
+                        help='print [{"query": path, "results": [{"path", "distance"}, ...]}, ...]')
+    search.add_argument("--method", default=None, help="refuse unless the index was built with this method")
+    search.add_argument("--ckpt", default=None, help="refuse unless the index was built with this model file")
+    search.set_defaults(func=cmd_search)
 
     predict = sub.add_parser("predict", help="classify motion files with an exported ONNX model")
     predict.add_argument("--onnx", required=True, help="model written by `mocapkit export`")

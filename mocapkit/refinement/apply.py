@@ -374,19 +374,6 @@ def _report_markers(before: Motion, after: Motion, changed: np.ndarray) -> list[
 # --------------------------------------------------------------------------- training data
 
 
-def _is_motion_file(path: Path) -> bool:
-    from mocapkit.datasets.formats.motion_io import (
-        UnsupportedFormatError,
-        motion_format,
-    )
-
-    try:
-        motion_format(path)
-    except UnsupportedFormatError:
-        return False
-    return True
-
-
 def load_training(paths: Sequence[str | os.PathLike], skip_bad: bool = False
                   ) -> tuple[list[Motion], list[str], list[tuple[str, str]]]:
     """Read the ``--train`` paths: files, or folders searched (recursively) for files ``read_motion`` reads.
@@ -399,13 +386,13 @@ def load_training(paths: Sequence[str | os.PathLike], skip_bad: bool = False
         RefineError: a folder without motion files; an unreadable file (named) unless ``skip_bad``; nothing
             readable at all.
     """
-    from mocapkit.datasets.formats.motion_io import read_motion
+    from mocapkit.datasets.formats.motion_io import find_motion_files, read_motion
 
     files: list[Path] = []
     for raw in paths:
         path = Path(raw)
         if path.is_dir():
-            found = sorted(p for p in path.rglob("*") if p.is_file() and _is_motion_file(p))
+            found = find_motion_files(path)
             if not found:
                 raise RefineError(f"--train {path}: no motion files in this folder (looked for .c3d, .amc, .bvh, "
                                   f".skeleton, MSR *_skeleton3D.txt)")

@@ -159,3 +159,70 @@ def hip_joints(joint_names, layout_name: str | None = None) -> tuple[int, int] |
         elif "right" in low or low.endswith(("_r", ".r")) or low.startswith(("r_", "right")) or low[:1] == "r" and "hip" in low[1:4]:
             found.setdefault("r", i)
     return (found["l"], found["r"]) if "l" in found and "r" in found else None
+
+
+#: The 20 body landmarks of :data:`LANDMARKS`, in one order, with their tree (parent landmark index, -1 for the
+#: pelvis): the skeleton on which layout-independent features (retrieval) are computed.
+LANDMARK_NAMES: tuple[str, ...] = (
+    "pelvis", "spine", "neck", "head",
+    "l_shoulder", "l_elbow", "l_wrist", "l_hand", "r_shoulder", "r_elbow", "r_wrist", "r_hand",
+    "l_hip", "l_knee", "l_ankle", "l_foot", "r_hip", "r_knee", "r_ankle", "r_foot",
+)
+LANDMARK_PARENTS: tuple[int, ...] = (-1, 0, 1, 2, 2, 4, 5, 6, 2, 8, 9, 10, 0, 12, 13, 14, 0, 16, 17, 18)
+
+#: Landmark → lower-case joint-name stems of common BVH rigs (Bandai Namco ``UpperArm_L``, Mixamo and CMU-BVH
+#: ``LeftArm`` / ``LeftForeArm`` / ``LeftUpLeg``, ...), first match wins. A BVH joint sits at the *start* of its
+#: bone, so the "upper arm" joint is the shoulder, the "forearm" joint the elbow, the "hand" joint the wrist.
+_RIG_STEMS: dict[str, tuple[str, ...]] = {
+    "pelvis": ("hips", "hip", "pelvis", "root", "jointroot"),
+    "spine": ("spine", "spine1", "chest", "torso"),
+    "neck": ("neck", "neck1"),
+    "head": ("head",),
+    "shoulder": ("upperarm", "arm", "shoulder"),
+    "elbow": ("lowerarm", "forearm", "elbow"),
+    "wrist": ("hand", "wrist"),
+    "hand": ("handend", "hand", "wrist"),
+    "hip": ("upperleg", "upleg", "thigh"),
+    "knee": ("lowerleg", "leg", "shin", "calf", "knee"),
+    "ankle": ("foot", "ankle"),
+    "foot": ("toes", "toe", "toebase", "toesend", "foot"),
+}
+
+
+def _rig_side(name: str) -> tuple[str | None, str]:
+    """``("l" | "r" | None, stem)``: the side mark of a rig joint name and the name without it (lower case)."""
+    low = name.lower().replace(" ", "")
+    for side, words in (("l", ("left",)), ("r", ("right",))):
+        for word in words:
+            if word in low:
+                return side, low.replace(word, "").strip("_.:")
+        for suffix in (f"_{side}", f".{side}", f":{side}"):
+            if low.endswith(suffix):
+                return side, low[: -len(suffix)]
+        for prefix in (f"{side}_", f"{side}."):
+            if low.startswith(prefix):
+                return side, low[len(prefix):]
+    return None, low.replace("_", "")
+
+
+def find_landmarks(joint_names, layout_name: str | None = None) -> dict[str, int]:
+    """Landmark name → joint index of a skeleton, for every landmark of :data:`LANDMARK_NAMES` it has.
+
+    Known layouts (``ntu25``, ``msr20``, ``cmu31``: Kinect, HDM05 and CMU) use :data:`LANDMARKS`; other skeletons
+    (BVH rigs) are matched by joint name (:data:`_RIG_STEMS`, with ``Left``/``Right``, ``_L``/``_R`` or
+    ``L_``/``R_`` side marks). A landmark the skeleton lacks is absent from the result.
+    """
+    names = list(joint_names)
+    table = LANDMARKS.get(layout_name or "")
+    if table:
+        return {lm: names.index(joint) for lm, joint in table.items() if joint in names}
+    parsed = [_rig_side(name) for name in names]
+    found: dict[str, int] = {}
+    for landmark in LANDMARK_NAMES:
+        side, _, part = landmark.partition("_") if "_" in landmark else (None, "", landmark)
+        for stem in _RIG_STEMS[part]:
+            match = [i for i, (s, st) in enumerate(parsed) if s == side and st.replace("_", "") == stem]
+            if match:
+                found[landmark] = match[0]
+                break
+    return found

@@ -70,6 +70,21 @@ def motion_format(path: str | os.PathLike) -> str:
     raise UnsupportedFormatError(f"{path}: unknown motion file type{hint}; supported: {_supported()}")
 
 
+def is_motion_file(path: str | os.PathLike) -> bool:
+    """Whether the file name is one of the formats :func:`read_motion` reads (by name only; the file is not opened)."""
+    try:
+        motion_format(path)
+    except UnsupportedFormatError:
+        return False
+    return True
+
+
+def find_motion_files(folder: str | os.PathLike) -> list[Path]:
+    """Every file under ``folder`` (recursively, sorted) whose name :func:`read_motion` reads (``.asf`` skeletons,
+    texts and other files are not motions and are not listed)."""
+    return sorted(p for p in Path(folder).rglob("*") if p.is_file() and is_motion_file(p))
+
+
 def read_motion(path: str | os.PathLike, **options) -> Motion:
     """Read any supported motion file into a :class:`Motion` (see the module docstring).
 

@@ -1,0 +1,133 @@
+"""The one contract of every retrieval method, classical or learned: fit on a database, rank queries.
+
+A retrieval method is a scikit-learn estimator (parameters stored untouched in ``__init__``, learned state in
+attributes ending in ``_``, ``NotFittedError`` before ``fit``):
+
+``fit(motions, y=None) -> self``
+    the **database**: a sequence of :class:`~mocapkit.datasets.formats.motion.Motion` (any layout with body
+    landmarks, any frame rate). The method learns what it learns from them (a dictionary, a codebook, a feature
+    selection; labels ``y`` only where ``supervised``) and keeps the encoding of every database clip.
+``distances(queries) -> float64 [n_queries, n_database]``
+    smaller is nearer; a similarity method returns its negated score.
+``search(queries, k) -> (indices int64 [n_queries, k], distances float64 [n_queries, k])``
+    the ``k`` nearest database clips of each query, nearest first (ties by database order); the default sorts
+    :meth:`distances`, an embedding method answers from an approximate-nearest-neighbour index.
+``encode(motions)``
+    the method's representation of clips (what ``fit`` stores for the database), for inspection and reuse.
+
+Every method first turns a motion into :func:`~mocapkit.retrieval.skeleton.normalised_landmarks` ``[T, 20, 3]``
+(parameters ``fps`` and ``heading`` of every method). Subclasses implement:
+
+``_fit_sequences(sequences, y)``   learn from the database's landmark sequences (default: nothing to learn);
+``_encode_sequences(sequences)``   the representation of sequences;
+``_distances(encoded_queries, encoded_database)``   ``[n_q, n_db]``;
+``_state() -> dict[str, np.ndarray]`` / ``_set_state(state)``   learned parameters and database encodings as
+plain arrays (no pickles), which :mod:`mocapkit.retrieval.index` writes to ``state.npz`` beside a JSON manifest.
+
+Class attributes: ``label_free`` (False when ``fit`` needs labels), ``needs_run`` (True when the method needs
+a trained checkpoint), ``min_frames`` (the shortest clip, in frames after resampling, the method can encode).
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from sklearn.base import BaseEstimator
+from sklearn.exceptions import NotFittedError
+
+from mocapkit.datasets.formats.motion import Motion
+from mocapkit.retrieval.skeleton import RetrievalInputError, normalised_landmarks
+
+
+class RetrievalMethod(BaseEstimator):
+    """Base class of retrieval methods (see the module docstring). Subclasses set ``fps`` and ``heading``."""
+
+    label_free = True
+    needs_run = False
+    min_frames = 2
+
+    # ------------------------------------------------------------------ public contract
+    def fit(self, motions: Sequence[Motion], y=None) -> RetrievalMethod:
+        sequences = self.sequences(motions, what="database")
+        if not self.label_free:
+            if y is None:
+                raise ValueError(f"{type(self).__name__} is supervised: fit(motions, y) needs one label per motion")
+            y = np.asarray(y)
+            if len(y) != len(sequences):
+                raise ValueError(f"{len(y)} labels for {len(sequences)} database motions")
+        self._fit_sequences(sequences, y)
+        self.database_ = self._encode_sequences(sequences)
+        self.n_database_ = len(sequences)
+        return self
+
+    def encode(self, motions: Sequence[Motion]):
+        self._check_fitted()
+        return self._encode_sequences(self.sequences(motions, what="query"))
+
+    def distances(self, queries: Sequence[Motion]) -> np.ndarray:
+        """float64 ``[n_queries, n_database]``, smaller = nearer."""
+        self._check_fitted()
+        return np.asarray(self._distances(self.encode(queries), self.database_), dtype=np.float64)
+
+    def search(self, queries: Sequence[Motion], k: int = 10) -> tuple[np.ndarray, np.ndarray]:
+        """The ``k`` nearest database clips per query (``k <= 0`` or above the size: all), nearest first."""
+        d = self.distances(queries)
+        return top_k(d, k)
+
+    def sequences(self, motions: Sequence[Motion], what: str = "input") -> list[np.ndarray]:
+        """The normalised landmarks ``[T, 20, 3]`` of every motion (checks types and lengths, naming the file)."""
+        if isinstance(motions, Motion):
+            motions = [motions]
+        motions = list(motions)
+        if not motions:
+            raise RetrievalInputError(f"no {what} motions (an empty list or folder)")
+        out = []
+        for motion in motions:
+            if not isinstance(motion, Motion):
+                raise TypeError(f"{what} items must be Motion objects (read_motion), got {type(motion).__name__}")
+            out.append(normalised_landmarks(motion, fps=self.fps, heading=self.heading,
+                                            min_frames=self.min_frames))
+        return out
+
+    # ------------------------------------------------------------------ for subclasses
+    def _fit_sequences(self, sequences: list[np.ndarray], y) -> None:
+        """Learn from the database sequences (a no-op for methods with nothing to learn)."""
+
+    def _encode_sequences(self, sequences: list[np.ndarray]):
+        raise NotImplementedError
+
+    def _distances(self, queries, database) -> np.ndarray:
+        raise NotImplementedError
+
+    def _state(self) -> dict[str, np.ndarray]:
+        raise NotImplementedError
+
+    def _set_state(self, state: dict[str, np.ndarray]) -> None:
+        raise NotImplementedError
+
+    def _check_fitted(self) -> None:
+        if not hasattr(self, "database_"):
+            raise NotFittedError(f"{type(self).__name__} is not fitted: call fit(database_motions) first")
+
+
+def top_k(distances: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Indices and distances of the ``k`` smallest entries of each row, ascending, ties by index
+    (``k <= 0`` or ``k`` above the row length: every entry)."""
+    d = np.asarray(distances, dtype=np.float64)
+    n = d.shape[1]
+    k = n if k <= 0 or k > n else int(k)
+    order = np.argsort(d, axis=1, kind="stable")[:, :k]
+    return order.astype(np.int64), np.take_along_axis(d, order, axis=1)
+
+
+def ragged_to_state(prefix: str, arrays: list[np.ndarray]) -> dict[str, np.ndarray]:
+    """A list of arrays with one ragged first axis as ``{prefix_data, prefix_offsets}`` (for ``_state``)."""
+    lengths = np.array([len(a) for a in arrays], dtype=np.int64)
+    data = np.concatenate(arrays, axis=0) if arrays else np.zeros((0,))
+    return {f"{prefix}_data": data, f"{prefix}_offsets": np.concatenate([[0], np.cumsum(lengths)])}
+
+
+def ragged_from_state(prefix: str, state: dict[str, np.ndarray]) -> list[np.ndarray]:
+    """The inverse of :func:`ragged_to_state`."""
+    data, offsets = state[f"{prefix}_data"], state[f"{prefix}_offsets"]
+    return [data[offsets[i]:offsets[i + 1]] for i in range(len(offsets) - 1)]

@@ -1,0 +1,289 @@
+"""Index a folder of motion files once, then query it: ``mocapkit index`` / ``mocapkit search`` and their Python API.
+
+An index is a **folder**::
+
+    manifest.json   what was indexed and how: the method's name and parameters, the model file's SHA-1 (trained
+                    methods), the landmarks every indexed clip has, each file (absolute path, frames, fps, skeleton)
+                    and each file skipped with ``--skip-bad`` (and why)
+    state.npz       the fitted method: learned parameters and the database encodings as plain arrays
+                    (``allow_pickle=False``: loading an index runs no code from it)
+
+:func:`build_index` reads every file under ``src`` that :func:`~mocapkit.datasets.read_motion` reads
+(recursively), fits the method on them (the whole folder is the database) and writes the folder;
+:meth:`MotionIndex.search` ranks the indexed files for query files or motions. A query that is itself indexed
+(same resolved path) is left out of its own results. Methods are named (:data:`METHODS`); the one used without
+``--method`` is :data:`RECOMMENDED`, the label-free method that needs no training run and won our benchmark
+(README, *Motion retrieval*).
+
+Refusals, each naming both sides: a query method (or model) other than the index's, a query whose skeleton lacks
+landmarks every indexed clip has, a query shorter than the method can encode; an unreadable file fails naming it
+unless ``skip_bad`` (then it is skipped and reported); an empty folder is an error.
+"""
+from __future__ import annotations
+
+import hashlib
+import importlib
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from mocapkit.io_atomic import atomic_path, atomic_write_text
+
+FORMAT = "mocapkit-retrieval-index"
+VERSION = 1
+#: Method name → (class, default parameters). Label-free methods need no labels; ``embedding`` needs a trained
+#: encoder (``--ckpt RUN/best.ckpt`` or an exported ``.onnx``).
+METHODS: dict[str, tuple[str, dict]] = {
+    "dtw_positions": ("mocapkit.retrieval.dtw.DTWRetrieval", {"features": "positions"}),
+    "dtw_relational": ("mocapkit.retrieval.dtw.DTWRetrieval", {"features": "relational"}),
+    "hod": ("mocapkit.retrieval.feature_selection.FeatureRetrieval", {"views": ["hod"], "selector": None}),
+    "gpf": ("mocapkit.retrieval.feature_selection.FeatureRetrieval", {"views": ["gpf"], "selector": None}),
+    "amfs": ("mocapkit.retrieval.feature_selection.FeatureRetrieval", {"views": ["hod", "gpf"], "selector": "amfs"}),
+    "laplacian_score": ("mocapkit.retrieval.feature_selection.FeatureRetrieval",
+                        {"views": ["hod", "gpf"], "selector": "laplacian"}),
+    "tsr_stpm": ("mocapkit.retrieval.tsr_stpm.TSRSTPMRetrieval", {}),
+    "embedding": ("mocapkit.retrieval.embedding.EmbeddingRetrieval", {}),
+}
+#: The default of ``mocapkit index``: the best label-free method without a training run on our benchmark.
+RECOMMENDED = "dtw_relational"
+
+
+class RetrievalIndexError(ValueError):
+    """An index that cannot be built, read or queried as asked; the message names the file, method or key."""
+
+
+def _class(name: str):
+    if name not in METHODS:
+        raise RetrievalIndexError(f"--method {name!r}: unknown; known: {', '.join(METHODS)}")
+    module, _, cls = METHODS[name][0].rpartition(".")
+    return getattr(importlib.import_module(module), cls)
+
+
+def make_method(name: str, ckpt: str | os.PathLike | None = None, **params):
+    """A fresh retrieval method by name (:data:`METHODS`), its defaults updated by ``params``; ``ckpt`` is the
+    trained model of ``embedding`` (a ``best.ckpt`` or an exported ``.onnx``)."""
+    cls = _class(name)
+    values = {**METHODS[name][1], **params}
+    if name == "embedding":
+        if ckpt is None:
+            raise RetrievalIndexError("--method embedding needs --ckpt RUN/best.ckpt or an exported model.onnx "
+                              "(mocapkit train experiment=retrieval_supcon; mocapkit export ckpt_path=...)")
+        key = "onnx" if str(ckpt).endswith(".onnx") else "checkpoint"
+        values[key] = str(ckpt)
+    elif ckpt is not None:
+        raise RetrievalIndexError(f"--ckpt is for --method embedding; {name} needs no trained model")
+    return cls(**values)
+
+
+def file_sha1(path: str | os.PathLike) -> str:
+    digest = hashlib.sha1()
+    with open(path, "rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def _jsonable(value):
+    if isinstance(value, (tuple, list)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (np.generic,)):
+        return value.item()
+    if isinstance(value, Path):
+        return str(value)
+    return value
+
+
+def _read(path: Path):
+    from mocapkit.datasets.formats.motion_io import read_motion
+
+    return read_motion(path)
+
+
+def _progress(text: str, quiet: bool) -> None:
+    if not quiet:
+        print(f"[mocapkit] {text}", file=sys.stderr, flush=True)
+
+
+class MotionIndex:
+    """A fitted retrieval method over a list of files (see the module docstring); :meth:`load` / :meth:`save`."""
+
+    def __init__(self, method_name: str, method, files: list[dict], landmarks: list[str], skipped: list[dict],
+                 src: str | None = None, model_sha1: str | None = None):
+        self.method_name = method_name
+        self.method = method
+        self.files = files
+        self.landmarks = landmarks
+        self.skipped = skipped
+        self.src = src
+        self.model_sha1 = model_sha1
+
+    @property
+    def paths(self) -> list[str]:
+        return [f["path"] for f in self.files]
+
+    # ------------------------------------------------------------------ persistence
+    def save(self, out: str | os.PathLike) -> Path:
+        out = Path(out)
+        if out.exists() and not out.is_dir():
+            raise RetrievalIndexError(f"--out {out}: exists and is not a folder (an index is a folder)")
+        out.mkdir(parents=True, exist_ok=True)
+        state = self.method._state()
+        with atomic_path(out / "state.npz") as tmp:
+            with open(tmp, "wb") as handle:
+                np.savez(handle, **state)
+        manifest = {"format": FORMAT, "version": VERSION, "method": self.method_name,
+                    "target": METHODS[self.method_name][0],
+                    "params": _jsonable(self.method.get_params(deep=False)), "model_sha1": self.model_sha1,
+                    "landmarks": self.landmarks, "src": self.src, "n_files": len(self.files), "files": self.files,
+                    "skipped": self.skipped, "created": time.strftime("%Y-%m-%d %H:%M:%S")}
+        atomic_write_text(out / "manifest.json", json.dumps(manifest, indent=1))
+        return out
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> MotionIndex:
+        path = Path(path)
+        manifest_path = path / "manifest.json"
+        if not manifest_path.is_file():
+            raise RetrievalIndexError(f"--index {path}: not an index folder (no manifest.json; build one with "
+                              "mocapkit index --src DIR --out INDEX)")
+        try:
+            manifest = json.loads(manifest_path.read_text())
+        except json.JSONDecodeError as exc:
+            raise RetrievalIndexError(f"{manifest_path}: not valid JSON ({exc})") from exc
+        if manifest.get("format") != FORMAT or manifest.get("version") != VERSION:
+            raise RetrievalIndexError(f"{manifest_path}: format {manifest.get('format')!r} version {manifest.get('version')!r}"
+                              f", expected {FORMAT!r} version {VERSION}")
+        name = manifest["method"]
+        method = _class(name)(**manifest["params"])    # only classes of METHODS: nothing else is imported
+        with np.load(path / "state.npz", allow_pickle=False) as data:
+            method._set_state({k: data[k] for k in data.files})
+        return cls(name, method, manifest["files"], manifest["landmarks"], manifest.get("skipped", []),
+                   manifest.get("src"), manifest.get("model_sha1"))
+
+    # ------------------------------------------------------------------ queries
+    def check_query(self, motion, path: str) -> None:
+        """Refuse a query whose skeleton lacks a landmark every indexed clip has (names both)."""
+        from mocapkit.datasets.formats.layouts import find_landmarks
+
+        have = set(find_landmarks(motion.joint_names, motion.layout_name))
+        lacking = [lm for lm in self.landmarks if lm not in have]
+        if lacking:
+            layouts = sorted({f.get("skeleton") or "?" for f in self.files})
+            raise RetrievalIndexError(f"query {path}: its skeleton ({motion.num_joints} joints: "
+                              f"{', '.join(list(motion.joint_names)[:8])}...) lacks the landmarks {lacking} that "
+                              f"every clip of the index ({', '.join(layouts)} skeletons) has")
+
+    def search(self, queries, k: int = 10, method: str | None = None, ckpt: str | os.PathLike | None = None) -> list:
+        """Rank the indexed files for each query.
+
+        Args:
+            queries: file paths (read with ``read_motion``) or ``(name, Motion)`` pairs.
+            k: results per query (``k <= 0``: every indexed file).
+            method, ckpt: when given, must be the index's method (and model): refused otherwise, naming both.
+
+        Returns:
+            ``[{"query": path, "results": [{"path": indexed path, "distance": float}, ...]}, ...]``, nearest
+            first; a query that is itself indexed is left out of its own results.
+        """
+        if method is not None and method != self.method_name:
+            raise RetrievalIndexError(f"the index was built with --method {self.method_name}; it cannot be queried with "
+                              f"--method {method} (build another index with that method)")
+        if ckpt is not None:
+            sha1 = file_sha1(ckpt)
+            if sha1 != self.model_sha1:
+                raise RetrievalIndexError(f"--ckpt {ckpt} (SHA-1 {sha1[:12]}) is not the model the index was built with "
+                                  f"(SHA-1 {str(self.model_sha1)[:12]})")
+        names, motions = [], []
+        for query in queries:
+            if isinstance(query, tuple):
+                name, motion = query
+            else:
+                name, motion = str(query), _read(Path(query))
+            self.check_query(motion, name)
+            names.append(name)
+            motions.append(motion)
+        if not motions:
+            raise RetrievalIndexError("no query given")
+        n = len(self.files)
+        own = {str(Path(p).resolve()): i for i, p in enumerate(self.paths)}
+        want = n if k is None or k <= 0 else min(int(k), n)
+        indices, distances = self.method.search(motions, min(n, want + 1))
+        out = []
+        for name, row_i, row_d in zip(names, indices, distances):
+            self_index = own.get(str(Path(name).resolve())) if not name.startswith("<") else None
+            results = [{"path": self.paths[int(i)], "distance": float(d)} for i, d in zip(row_i, row_d)
+                       if int(i) != self_index]
+            out.append({"query": name, "results": results[:want]})
+        return out
+
+
+def build_index(src: str | os.PathLike, out: str | os.PathLike | None = None, method: str | None = None,
+                ckpt: str | os.PathLike | None = None, skip_bad: bool = False, quiet: bool = False,
+                **params) -> MotionIndex:
+    """Index every motion file under ``src`` (see the module docstring); written to ``out`` when given.
+
+    Raises:
+        RetrievalIndexError: no motion file under ``src``; a file that cannot be read or used (named) unless
+            ``skip_bad``; nothing usable at all; an unknown method.
+    """
+    from mocapkit.datasets.formats.layouts import find_landmarks
+    from mocapkit.datasets.formats.motion_io import find_motion_files
+
+    src = Path(src)
+    if not src.is_dir():
+        raise RetrievalIndexError(f"--src {src}: not a folder")
+    name = method or RECOMMENDED
+    estimator = make_method(name, ckpt=ckpt, **params)
+    paths = find_motion_files(src)
+    if not paths:
+        raise RetrievalIndexError(f"--src {src}: no motion files in this folder (looked for .amc, .bvh, .c3d, .skeleton, "
+                          "MSR *_skeleton3D.txt, recursively)")
+    _progress(f"indexing {len(paths)} files under {src} with {name}", quiet)
+    motions, files, skipped, landmark_sets = [], [], [], []
+    for n, path in enumerate(paths, 1):
+        try:
+            motion = _read(path)
+            estimator.sequences([motion], what="indexed")    # the checks the method makes (landmarks, length)
+        except Exception as exc:
+            why = f"{type(exc).__name__}: {exc}"
+            if not skip_bad:
+                message = str(exc) if str(path) in str(exc) else f"{path}: {why}"
+                raise RetrievalIndexError(f"cannot index {message} (--skip-bad skips such files and reports them)") from exc
+            skipped.append({"path": str(path.resolve()), "why": why})
+            _progress(f"skipped {path}: {why}", quiet)
+            continue
+        motions.append(motion)
+        landmark_sets.append(set(find_landmarks(motion.joint_names, motion.layout_name)))
+        files.append({"path": str(path.resolve()), "frames": motion.num_frames, "fps": motion.fps,
+                      "skeleton": motion.layout_name or f"{motion.num_joints} joints"})
+        if n % 100 == 0 or n == len(paths):
+            _progress(f"read {n}/{len(paths)} files", quiet)
+    if not motions:
+        raise RetrievalIndexError(f"--src {src}: none of the {len(paths)} motion files could be indexed")
+    start = time.perf_counter()
+    estimator.fit(motions)
+    _progress(f"fitted {name} on {len(motions)} clips in {time.perf_counter() - start:.1f} s", quiet)
+    common = set.intersection(*landmark_sets)
+    from mocapkit.datasets.formats.layouts import LANDMARK_NAMES
+
+    model_sha1 = file_sha1(ckpt) if ckpt is not None else None
+    index = MotionIndex(name, estimator, files, [lm for lm in LANDMARK_NAMES if lm in common], skipped,
+                        str(src.resolve()), model_sha1)
+    if out is not None:
+        index.save(out)
+        _progress(f"wrote {out} ({len(files)} clips, {len(skipped)} skipped)", quiet)
+    return index
+
+
+def search_index(index: str | os.PathLike | MotionIndex, queries, k: int = 10, method: str | None = None,
+                 ckpt: str | os.PathLike | None = None) -> list:
+    """:meth:`MotionIndex.search` on an index folder (or a loaded index)."""
+    if not isinstance(index, MotionIndex):
+        index = MotionIndex.load(index)
+    return index.search(queries, k=k, method=method, ckpt=ckpt)
