@@ -4,6 +4,7 @@ motion clustering (thesis §6.3) and their sample graphs; the bag-of-clip-words 
 gait baseline. :mod:`mocapkit.evaluation.compare` runs them beside the learned models on the same splits."""
 from mocapkit.classical.bag_of_words import BagOfWordsClassifier, ClipConditioner, SequenceClips
 from mocapkit.classical.dynammo import DynaMMo
+from mocapkit.classical.feature_selection import AMFS, LaplacianScore
 from mocapkit.classical.filter_bases import FilterBasesRefiner
 from mocapkit.classical.gap_filling import (
     HoldLastValue,
@@ -13,6 +14,7 @@ from mocapkit.classical.gap_filling import (
     SplineInterpolation,
 )
 from mocapkit.classical.gei_pca_lda import GEIPCALDA
+from mocapkit.classical.ksvd import KSVD
 from mocapkit.classical.graphs import (
     combine_graphs,
     knn_graph,
@@ -28,7 +30,9 @@ from mocapkit.classical.svt import SVTCompletion
 from mocapkit.classical.trnn import TrNN
 
 __all__ = [
+    "AMFS",
     "GEIPCALDA",
+    "KSVD",
     "GNMF",
     "LRMF",
     "NMC",
@@ -38,6 +42,7 @@ __all__ = [
     "DynaMMo",
     "FilterBasesRefiner",
     "HoldLastValue",
+    "LaplacianScore",
     "LinearInterpolation",
     "OrthogonalNMF",
     "PCAGapFilling",

@@ -45,7 +45,9 @@ METHODS: dict[str, tuple[str, dict]] = {
     "amfs": ("mocapkit.retrieval.feature_selection.FeatureRetrieval", {"views": ["hod", "gpf"], "selector": "amfs"}),
     "laplacian_score": ("mocapkit.retrieval.feature_selection.FeatureRetrieval",
                         {"views": ["hod", "gpf"], "selector": "laplacian"}),
-    "tsr_stpm": ("mocapkit.retrieval.tsr_stpm.TSRSTPMRetrieval", {}),
+    "tsr_stpm": ("mocapkit.retrieval.tsr_stpm.TSRSTPMRetrieval", {"n_atoms": 64, "n_nonzero": 4,
+                                                                  "normalize_kernel": True}),
+    "tsr_stpm_thesis": ("mocapkit.retrieval.tsr_stpm.TSRSTPMRetrieval", {}),
     "embedding": ("mocapkit.retrieval.embedding.EmbeddingRetrieval", {}),
 }
 #: The default of ``mocapkit index``: the best label-free method without a training run on our benchmark.
