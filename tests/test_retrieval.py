@@ -15,7 +15,13 @@ from mocapkit.datasets.formats.layouts import LANDMARK_NAMES, find_landmarks
 from mocapkit.datasets.formats.motion import Motion
 from mocapkit.datasets.synthetic.hdm05 import HDM05SynthConfig, synthesize_hdm05
 from mocapkit.evaluation.retrieval import retrieval_metrics, tp_ratio
-from mocapkit.retrieval import MotionIndex, RetrievalInputError, build_index, normalised_landmarks, search_index
+from mocapkit.retrieval import (
+    MotionIndex,
+    RetrievalInputError,
+    build_index,
+    normalised_landmarks,
+    search_index,
+)
 from mocapkit.retrieval.dtw import DTWRetrieval
 
 HDM05 = SHARED / "data" / "hdm05_cuts11"
@@ -137,7 +143,7 @@ def test_index_and_search_cli(hdm05_folder, tmp_path, capsys):
     manifest = json.loads((out / "manifest.json").read_text())
     assert manifest["n_files"] == 18 and manifest["method"] == "dtw_positions"
     assert set(manifest["landmarks"]) == set(LANDMARK_NAMES)
-    query = sorted((hdm05_folder / "bd").glob("*squat1Reps*.amc"))[0]
+    query = min((hdm05_folder / "bd").glob("*squat1Reps*.amc"))
     capsys.readouterr()
     assert cli(["search", "--index", str(out), str(query), "-k", "3", "--json"]) == 0
     results = json.loads(capsys.readouterr().out)
@@ -181,7 +187,7 @@ def test_index_bad_files_empty_folders_and_foreign_skeletons(hdm05_folder, tmp_p
 
 def test_index_round_trip_gives_the_same_ranking(hdm05_folder, tmp_path):
     index = build_index(hdm05_folder, tmp_path / "idx", method="dtw_relational", quiet=True)
-    query = sorted((hdm05_folder / "mm").glob("*.amc"))[0]
+    query = min((hdm05_folder / "mm").glob("*.amc"))
     before = index.search([str(query)], k=0)
     after = search_index(tmp_path / "idx", [str(query)], k=0)
     assert before == after

@@ -43,7 +43,7 @@ def retrieval_metrics(distances, query_labels, database_labels, ks=(1, 10)) -> d
         k_eff = min(int(k), len(db))
         metrics[f"p@{k}"] = float(ranked[:, :k_eff].mean())
     metrics["nn_accuracy"] = float((db[order[:, 0]] == q).mean())
-    metrics["n_queries"] = int(len(q))
+    metrics["n_queries"] = len(q)
     metrics["n_without_relevant"] = int(np.isnan(ap).sum())
     return {"metrics": metrics, "per_query": {"ap": ap.tolist(), "p@1": ranked[:, 0].astype(float).tolist(),
                                                "nearest": order[:, 0].tolist()}}

@@ -29,6 +29,8 @@ a trained checkpoint), ``min_frames`` (the shortest clip, in frames after resamp
 """
 from __future__ import annotations
 
+import hashlib
+import os
 from collections.abc import Sequence
 
 import numpy as np
@@ -131,3 +133,12 @@ def ragged_from_state(prefix: str, state: dict[str, np.ndarray]) -> list[np.ndar
     """The inverse of :func:`ragged_to_state`."""
     data, offsets = state[f"{prefix}_data"], state[f"{prefix}_offsets"]
     return [data[offsets[i]:offsets[i + 1]] for i in range(len(offsets) - 1)]
+
+
+def file_sha1(path: str | os.PathLike) -> str:
+    """The hex SHA-1 of a file's bytes (which model an index or an embedding method was built with)."""
+    digest = hashlib.sha1()
+    with open(path, "rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()

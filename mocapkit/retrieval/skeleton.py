@@ -27,7 +27,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from mocapkit.datasets.formats.layouts import LANDMARK_NAMES, LANDMARK_PARENTS, find_landmarks
+from mocapkit.datasets.formats.layouts import (
+    LANDMARK_NAMES,
+    LANDMARK_PARENTS,
+    find_landmarks,
+)
 from mocapkit.datasets.formats.motion import Motion
 
 #: Template bone lengths (metres) of the landmark tree, child landmark → length to its parent: an adult of about

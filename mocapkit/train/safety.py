@@ -32,11 +32,13 @@ Per-key policies (:data:`RUN_POLICY`, :data:`CHECKPOINT_POLICY`, :data:`REFINER_
                         ``mocapkit.train.callbacks.``
     ``logger.*``        a ``Logger`` subclass under ``lightning.pytorch.loggers.``
     ``eval.evaluator``  exactly ``mocapkit.evaluation.evaluate_action.evaluate_action``,
-                        ``mocapkit.evaluation.evaluate_gait.evaluate_gait`` or
-                        ``mocapkit.evaluation.evaluate_refinement.evaluate_refinement``
+                        ``mocapkit.evaluation.evaluate_gait.evaluate_gait``,
+                        ``mocapkit.evaluation.evaluate_refinement.evaluate_refinement`` or
+                        ``mocapkit.train.embedding_module.evaluate_embedding``
     ``export.exporter`` exactly ``mocapkit.deploy.skeleton_export.export_action_module``,
-                        ``mocapkit.deploy.gait_export.export_gait_module`` or
-                        ``mocapkit.deploy.refiner_export.export_refinement_module``
+                        ``mocapkit.deploy.gait_export.export_gait_module``,
+                        ``mocapkit.deploy.refiner_export.export_refinement_module`` or
+                        ``mocapkit.deploy.embedding_export.export_embedding_module``
     checkpoint          ``hyper_parameters.model`` / ``.optimizer`` / ``.scheduler``: as above;
                         no other ``_target_`` anywhere in the checkpoint, and no Lightning
                         ``_instantiator`` / ``_class_path`` keys
@@ -150,11 +152,13 @@ LOGGER = Rule("a Lightning logger class (lightning.pytorch.loggers)", ("lightnin
 EVALUATOR = Rule("mocapkit's evaluator of the task",
                  exact=("mocapkit.evaluation.evaluate_action.evaluate_action",
                         "mocapkit.evaluation.evaluate_gait.evaluate_gait",
-                        "mocapkit.evaluation.evaluate_refinement.evaluate_refinement"))
+                        "mocapkit.evaluation.evaluate_refinement.evaluate_refinement",
+                        "mocapkit.train.embedding_module.evaluate_embedding"))
 EXPORTER = Rule("mocapkit's ONNX exporter of the task",
                 exact=("mocapkit.deploy.skeleton_export.export_action_module",
                        "mocapkit.deploy.gait_export.export_gait_module",
-                       "mocapkit.deploy.refiner_export.export_refinement_module"))
+                       "mocapkit.deploy.refiner_export.export_refinement_module",
+                       "mocapkit.deploy.embedding_export.export_embedding_module"))
 REFINER = Rule("a mocapkit MotionRefiner class", ("mocapkit.",),
                accepts=_subclass_of("mocapkit.refinement.base.MotionRefiner"))
 

@@ -22,7 +22,8 @@ the method as its ``random_state`` (k-means, K-SVD, ...); the splits do not depe
 Metrics (:func:`~mocapkit.evaluation.retrieval.retrieval_metrics`, pooled over every query of every fold): ``map``,
 ``p@1``, ``p@10``, ``nn_accuracy`` (= ``p@1`` with relevance = same class), and ``fit_seconds`` (per fold),
 ``query_ms`` (encoding and ranking one query against its database, mean). ``zhou_tp20`` reports ``tp_ratio``.
-The report keeps label-free and supervised methods in separate tables.
+The report keeps label-free methods (no labels, no training run), self-supervised ones (a run trained without
+labels) and supervised ones in separate tables.
 """
 from __future__ import annotations
 
@@ -120,7 +121,7 @@ class RetrievalBenchmark(Benchmark):
     # -------------------------------------------------------------- splits
     def folds(self, protocol: str) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         """fold name → ``(database indices, query indices)`` of a protocol (sorted int64)."""
-        label, group = PROTOCOLS[self.dataset][protocol]
+        _, group = PROTOCOLS[self.dataset][protocol]
         everything = np.arange(len(self.motions), dtype=np.int64)
         if protocol == "zhou_tp20":
             queries = everything[np.isin(self.fields["class"], ZHOU_SHARED)]
@@ -187,6 +188,7 @@ class RetrievalBenchmark(Benchmark):
             q_labels.append(labels[queries])
             db_labels.append(labels[db])
             per_query_ap += scores["per_query"]["ap"]
+        kind["uses_labels"] = _uses_labels(fitted)
         pooled = _pooled(distances, q_labels, db_labels)
         metrics = {**pooled, "fit_seconds": float(np.mean(fit_seconds)), "query_ms": float(np.mean(query_ms))}
         return {"metrics": metrics, "detail": {**kind, "label": label, "folds": folds,
@@ -200,12 +202,14 @@ class RetrievalBenchmark(Benchmark):
         lines = []
         cells = results.get("cells", [])
         protocols = results["protocols"]
-        for title, wanted in (("Label-free methods", True), ("Supervised or trained methods", False)):
-            keys = [k for k in dict.fromkeys(c["method"] for c in cells) if _is_kind(cells, k, wanted)]
+        for title, wanted in (("Label-free methods, no training run", "label_free"),
+                              ("Self-supervised methods (a training run without labels)", "self_supervised"),
+                              ("Supervised methods (labels of the database side)", "supervised")):
+            keys = [k for k in dict.fromkeys(c["method"] for c in cells) if _kind(cells, k) == wanted]
             if not keys:
                 continue
-            lines += [f"## {title}", "", "mean ± sd over seeds; mAP / P@1 / P@10 pooled over every query of every "
-                      "fold (the query is never in its own database).", ""]
+            lines += [f"## {title}", "", ("mean ± sd over seeds; mAP / P@1 / P@10 pooled over every query of every "
+                      "fold (the query is never in its own database)."), ""]
             header = "| method | " + " | ".join(
                 f"{p} {'TP@20' if p == 'zhou_tp20' else 'mAP'} | {p} P@1" if p != "zhou_tp20" else f"{p} TP@20"
                 for p in protocols) + " | query ms |"
@@ -229,10 +233,20 @@ class RetrievalBenchmark(Benchmark):
         return _plot_confusions(results, Path(out_dir))
 
 
-def _is_kind(cells, key, label_free: bool) -> bool:
-    detail = next((c.get("detail") or {}) for c in cells if c["method"] == key)
-    free = detail.get("label_free", True) and not detail.get("needs_run", False)
-    return free == label_free
+def _uses_labels(fitted) -> bool:
+    """Whether labels shaped a fitted method: fitted with labels, or a trained encoder whose loss used them."""
+    if not getattr(fitted, "label_free", True):
+        return True
+    return (getattr(fitted, "model_info_", None) or {}).get("loss") == "supcon"
+
+
+def _kind(cells, key) -> str:
+    """``"label_free"`` (no labels, no run), ``"self_supervised"`` (a run trained without labels) or
+    ``"supervised"``, from the method's cells."""
+    details = [c.get("detail") or {} for c in cells if c["method"] == key]
+    if any(d.get("uses_labels") or not d.get("label_free", True) for d in details):
+        return "supervised"
+    return "self_supervised" if any(d.get("needs_run") for d in details) else "label_free"
 
 
 def _mean_sd(values) -> str:
