@@ -6,12 +6,10 @@ The folder is built from the synthetic HDM05 generator's output, renamed to HDM0
 from __future__ import annotations
 
 import json
-import shutil
 from pathlib import Path
 
 import pytest
-
-from mocapkit.datasets.synthetic.hdm05 import HDM05SynthConfig, synthesize_hdm05
+from shared_data import synthetic_hdm05_folder
 
 TINY = ["model.hidden=8", "model.layers=1", "data.window=48", "data.windows_per_epoch=64", "data.batch_size=16",
         "data.eval_windows_per_clip=1", "trainer.max_epochs=1", "logger=none", "callbacks.learning_rate=null",
@@ -20,17 +18,8 @@ TINY = ["model.hidden=8", "model.layers=1", "data.window=48", "data.windows_per_
 
 @pytest.fixture(scope="module")
 def hdm05_folder(tmp_path_factory) -> Path:
-    raw = tmp_path_factory.mktemp("synth")
-    cfg = HDM05SynthConfig(classes=("walk2StepsLstart", "hopBothLegs1hops"), actors=("bd", "mm"), clips_per_actor=2,
-                           max_frames=160)
-    synthesize_hdm05(raw, cfg, progress=False)
-    root = tmp_path_factory.mktemp("hdm05")
-    for amc in sorted(raw.glob("*.amc")):
-        cls, actor, number = amc.stem.rsplit("_", 2)
-        (root / actor).mkdir(exist_ok=True)
-        shutil.copy(raw / f"HDM_{actor}.asf", root / actor / f"HDM_{actor}.asf")
-        shutil.copy(amc, root / actor / f"HDM_{actor}_{cls}_{number}_120.amc")
-    return root
+    return synthetic_hdm05_folder(tmp_path_factory, ("walk2StepsLstart", "hopBothLegs1hops"), clips_per_actor=2,
+                                  max_frames=160)
 
 
 @pytest.fixture(scope="module")

@@ -8,12 +8,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from shared_data import SHARED, needs
+from shared_data import SHARED, needs, synthetic_hdm05_folder
 
 from mocapkit.cli import main as cli
 from mocapkit.datasets.formats.layouts import LANDMARK_NAMES, find_landmarks
 from mocapkit.datasets.formats.motion import Motion
-from mocapkit.datasets.synthetic.hdm05 import HDM05SynthConfig, synthesize_hdm05
 from mocapkit.evaluation.retrieval import retrieval_metrics, tp_ratio
 from mocapkit.retrieval import (
     MotionIndex,
@@ -33,17 +32,8 @@ BANDAI_JOINTS = ("joint_Root", "Hips", "Spine", "Chest", "Neck", "Head", "Should
 @pytest.fixture(scope="module")
 def hdm05_folder(tmp_path_factory) -> Path:
     """A synthetic HDM05-format folder: 3 classes × 2 actors × 3 takes, 120 fps."""
-    raw = tmp_path_factory.mktemp("synth")
-    cfg = HDM05SynthConfig(classes=("walk2StepsLstart", "hopBothLegs1hops", "squat1Reps"), actors=("bd", "mm"),
-                           clips_per_actor=3, max_frames=240)
-    synthesize_hdm05(raw, cfg, progress=False)
-    root = tmp_path_factory.mktemp("hdm05")
-    for amc in sorted(raw.glob("*.amc")):
-        cls, actor, number = amc.stem.rsplit("_", 2)
-        (root / actor).mkdir(exist_ok=True)
-        shutil.copy(raw / f"HDM_{actor}.asf", root / actor / f"HDM_{actor}.asf")
-        shutil.copy(amc, root / actor / f"HDM_{actor}_{cls}_{number}_120.amc")
-    return root
+    return synthetic_hdm05_folder(tmp_path_factory, ("walk2StepsLstart", "hopBothLegs1hops", "squat1Reps"),
+                                  clips_per_actor=3, max_frames=240)
 
 
 def _walker(frames: int = 90, fps: float = 30.0, seed: int = 0) -> Motion:

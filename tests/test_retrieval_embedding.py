@@ -7,7 +7,6 @@ HDM05's own layout), so it runs without the real data.
 from __future__ import annotations
 
 import json
-import shutil
 import subprocess
 import sys
 import textwrap
@@ -16,8 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from shared_data import synthetic_hdm05_folder
 
-from mocapkit.datasets.synthetic.hdm05 import HDM05SynthConfig, synthesize_hdm05
 from mocapkit.models.motion_encoder import motion_encoder
 from mocapkit.retrieval.embedding import EmbeddingRetrieval, resample_frames
 from mocapkit.train.embedding_module import contrastive_loss
@@ -157,16 +156,7 @@ def test_retrieval_scores_by_hand():
 # ------------------------------------------------------------------------------------------ train / eval / export
 @pytest.fixture(scope="module")
 def hdm05_folder(tmp_path_factory) -> Path:
-    raw = tmp_path_factory.mktemp("synth")
-    synthesize_hdm05(raw, HDM05SynthConfig(classes=CLASSES, actors=("bd", "mm"), clips_per_actor=3, max_frames=90),
-                     progress=False)
-    root = tmp_path_factory.mktemp("hdm05")
-    for amc in sorted(raw.glob("*.amc")):
-        cls, actor, number = amc.stem.rsplit("_", 2)
-        (root / actor).mkdir(exist_ok=True)
-        shutil.copy(raw / f"HDM_{actor}.asf", root / actor / f"HDM_{actor}.asf")
-        shutil.copy(amc, root / actor / f"HDM_{actor}_{cls}_{number}_120.amc")
-    return root
+    return synthetic_hdm05_folder(tmp_path_factory, CLASSES, clips_per_actor=3, max_frames=90)
 
 
 @pytest.fixture(scope="module")

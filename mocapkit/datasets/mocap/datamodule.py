@@ -28,7 +28,12 @@ import torch
 from torch.utils.data import DataLoader, Dataset
 
 from mocapkit.datasets.formats.layouts import hip_joints
-from mocapkit.datasets.mocap.folders import MocapFolderError, list_clips, read_clips
+from mocapkit.datasets.mocap.folders import (
+    MocapFolderError,
+    held_out_groups,
+    list_clips,
+    read_clips,
+)
 
 
 def _window(motion, start: int, length: int):
@@ -147,20 +152,7 @@ class MocapRefinementDataModule(L.LightningDataModule):
         if not all_motions:
             raise ValueError("no training motion")
         groups = sorted({m.metadata["group"] for m in all_motions})
-        if motions is not None:
-            test = []
-        elif test_groups is None:
-            test = groups[:1]
-        else:
-            test = [str(g) for g in ([test_groups] if isinstance(test_groups, (str, int)) else test_groups)]
-        unknown = [g for g in [*test, *(train_groups or [])] if str(g) not in groups]
-        if unknown:
-            raise MocapFolderError(f"data.test_groups / data.train_groups: {unknown} are not groups of {dataset} under "
-                                   f"{root} (groups: {groups})")
-        train = [str(g) for g in train_groups] if train_groups else [g for g in groups if g not in test]
-        overlap = sorted(set(train) & set(test))
-        if overlap:
-            raise MocapFolderError(f"data.train_groups and data.test_groups share {overlap}")
+        train, test = held_out_groups(groups, [] if motions is not None else test_groups, train_groups, dataset, root)
         self.groups = {"train": train, "test": test}
         train_motions = [m for m in all_motions if m.metadata["group"] in train]
         self.test_motions = [m for m in all_motions if m.metadata["group"] in test]

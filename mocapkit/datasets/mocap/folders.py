@@ -88,3 +88,27 @@ def read_clips(clips: list[dict], fps: float | None = None, progress: bool = Fal
         if progress and (n % 50 == 0 or n == len(clips)):
             print(f"[mocapkit] read {n}/{len(clips)} clips", flush=True)
     return motions
+
+
+def held_out_groups(groups, test_groups=None, train_groups=None, dataset: str = "", root=None
+                    ) -> tuple[list[str], list[str]]:
+    """``(train, test)`` groups of a fold: ``test_groups`` (one group or a list; None: the first of ``groups``) and
+    ``train_groups`` (None: every other group), checked against ``groups`` (the data's groups, sorted).
+
+    Raises:
+        MocapFolderError: a named group the data does not have, or a group on both sides (names them).
+    """
+    groups = [str(g) for g in groups]
+    if test_groups is None:
+        test = groups[:1]
+    else:
+        test = [str(g) for g in ([test_groups] if isinstance(test_groups, (str, int)) else test_groups)]
+    unknown = [g for g in [*test, *(train_groups or [])] if str(g) not in groups]
+    if unknown:
+        raise MocapFolderError(f"data.test_groups / data.train_groups: {unknown} are not groups of {dataset} under "
+                               f"{root} (groups: {groups})")
+    train = [str(g) for g in train_groups] if train_groups else [g for g in groups if g not in test]
+    overlap = sorted(set(train) & set(test))
+    if overlap:
+        raise MocapFolderError(f"data.train_groups and data.test_groups share {overlap}")
+    return train, test

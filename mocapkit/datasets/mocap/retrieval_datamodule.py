@@ -47,7 +47,7 @@ import torch
 from torch.utils.data import DataLoader, Dataset
 
 from mocapkit.datasets.formats.layouts import LANDMARK_NAMES
-from mocapkit.datasets.mocap.folders import MocapFolderError
+from mocapkit.datasets.mocap.folders import MocapFolderError, held_out_groups
 from mocapkit.retrieval.embedding import resample_frames
 from mocapkit.retrieval.skeleton import normalised_landmarks
 
@@ -211,18 +211,7 @@ class RetrievalDataModule(L.LightningDataModule):
         if not clips:
             raise ValueError("no clip")
         groups = sorted({c.group for c in clips})
-        if test_groups is None:
-            test = groups[:1]
-        else:
-            test = [str(g) for g in ([test_groups] if isinstance(test_groups, (str, int)) else test_groups)]
-        unknown = [g for g in [*test, *(train_groups or [])] if str(g) not in groups]
-        if unknown:
-            raise MocapFolderError(f"data.test_groups / data.train_groups: {unknown} are not groups of {dataset} under "
-                                   f"{root} (groups: {groups})")
-        train = [str(g) for g in train_groups] if train_groups else [g for g in groups if g not in test]
-        overlap = sorted(set(train) & set(test))
-        if overlap:
-            raise MocapFolderError(f"data.train_groups and data.test_groups share {overlap}")
+        train, test = held_out_groups(groups, test_groups, train_groups, dataset, root)
         self.groups = {"train": train, "test": test, "all": groups}
         train_clips = [c for c in clips if c.group in train]
         self.test_clips = [c for c in clips if c.group in test]
