@@ -76,7 +76,7 @@ def make_method(name: str, ckpt: str | os.PathLike | None = None, **params):
             raise RetrievalIndexError("--method embedding needs --ckpt RUN/best.ckpt or an exported model.onnx "
                               "(mocapkit train experiment=retrieval_supcon; mocapkit export ckpt_path=...)")
         key = "onnx" if str(ckpt).endswith(".onnx") else "checkpoint"
-        values[key] = str(ckpt)
+        values[key] = str(Path(ckpt).resolve())   # the manifest must find it from any working directory
     elif ckpt is not None:
         raise RetrievalIndexError(f"--ckpt is for --method embedding; {name} needs no trained model")
     return cls(**values)

@@ -12,7 +12,8 @@ Samples are the clips of one data set, read once with :func:`~mocapkit.datasets.
                only, a supervised or trained method is marked n/a)
 ``bandai``     ``content``: queries of one style against the database of the other styles, relevance = same
                content; ``style``: queries of one content against the other contents, relevance = same style
-``msr``        ``cross_subject``: queries from subjects 2 4 6 8 10, the database subjects 1 3 5 7 9
+``msr``        ``cross_subject``: queries from subjects 2 4 6 8 10, the database subjects 1 3 5 7 9 (groups named
+               ``"1"`` ... ``"10"``, as the data modules name them)
 =============  ==================================================================================================
 
 A cell (method, protocol, seed) runs every fold: the method is fitted on the fold's database only (labels
@@ -28,6 +29,7 @@ labels) and supervised ones in separate tables.
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -58,7 +60,7 @@ class RetrievalBenchmark(Benchmark):
         clip_seed: the seed of that subset.
         n_folds: hold out groups in this many folds (groups dealt round-robin in sorted order: fold ``i`` holds
             groups ``i, i + n_folds, ...``) instead of one group per fold; None: one fold per group. Bandai has 15
-            styles and 17 contents: 3 folds keep the trained methods to 3 runs per protocol.
+            styles and 16 contents: 3 folds keep the trained methods to 3 runs per protocol.
     """
 
     title = "Motion retrieval"
@@ -87,7 +89,7 @@ class RetrievalBenchmark(Benchmark):
             data = MSRAction3D(self.root)
             motions = list(data.motions)
             fields = {"action": np.array([f"a{a:02d}" for a in data.actions]),
-                      "subject": np.array([f"s{s:02d}" for s in data.subjects])}
+                      "subject": np.array([str(s) for s in data.subjects])}   # as the data modules name them
             for motion, name in zip(motions, data.names):
                 motion.name = name
         else:
@@ -128,7 +130,7 @@ class RetrievalBenchmark(Benchmark):
             return {"all": (everything, queries)}
         values = self.fields[group]
         if self.dataset == "msr":
-            train = np.isin(values, [f"s{s:02d}" for s in MSR_TRAIN_SUBJECTS])
+            train = np.isin(values, [str(s) for s in MSR_TRAIN_SUBJECTS])
             return {"subjects 2-10 even": (everything[train], everything[~train])}
         groups = sorted(set(values.tolist()))
         if self.n_folds and len(groups) > int(self.n_folds):
@@ -172,10 +174,14 @@ class RetrievalBenchmark(Benchmark):
             return {"metrics": {"tp_ratio": scores["tp_ratio"], "fit_seconds": fit_s}, "detail": {**kind, **scores}}
         distances, q_labels, db_labels, folds = [], [], [], {}
         per_query_ap, query_ms, fit_seconds = [], [], []
+        group_field = PROTOCOLS[self.dataset][split.protocol][1]
         for fold, (db, queries) in self.folds(split.protocol).items():
             fitted = clone(estimator)
             start = time.perf_counter()
-            fitted.fit([self.motions[i] for i in db], None if label_free else labels[db])
+            # the protocol's group of every database clip (a trained method picks the run that held out the rest)
+            database = [replace(self.motions[i], metadata={**self.motions[i].metadata,
+                                                           "group": str(self.fields[group_field][i])}) for i in db]
+            fitted.fit(database, None if label_free else labels[db])
             fit_seconds.append(time.perf_counter() - start)
             start = time.perf_counter()
             d = fitted.distances([self.motions[i] for i in queries])
