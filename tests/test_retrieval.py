@@ -88,6 +88,8 @@ def test_normalisation_fills_gaps_and_names_bad_input():
     assert np.isfinite(gappy).all()
     with pytest.raises(RetrievalInputError, match="walker.*frames"):
         normalised_landmarks(replace(motion, positions=motion.positions[:1], missing=None))
+    with pytest.raises(RetrievalInputError, match="walker: no landmark is observed"):
+        normalised_landmarks(replace(motion, positions=np.full_like(motion.positions, np.nan), missing=None))
     markers = Motion(np.zeros((20, 4, 3)), ["M1", "M2", "M3", "M4"], 100.0, source="markers.c3d")
     with pytest.raises(RetrievalInputError, match="markers.c3d.*landmarks"):
         normalised_landmarks(markers)

@@ -156,6 +156,9 @@ def normalised_landmarks(motion: Motion, fps: float = 30.0, heading: str = "fram
         raise RetrievalInputError(f"{_label(motion)}: {motion.num_frames} frames at {motion.fps:g} fps; retrieval "
                                   f"needs at least {min_frames} (a clip of {min_frames / motion.fps:.2f} s)")
     positions, observed = landmark_positions(motion)
+    if not observed.any():
+        raise RetrievalInputError(f"{_label(motion)}: no landmark is observed in any of its {motion.num_frames} "
+                                  "frames (every value missing or zero)")
     if not observed[:, PELVIS].any():
         raise RetrievalInputError(f"{_label(motion)}: the pelvis landmark is never observed")
     if not np.isfinite(positions[observed]).all():
