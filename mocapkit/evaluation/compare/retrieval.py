@@ -172,8 +172,8 @@ class RetrievalBenchmark(Benchmark):
             d = fitted.distances(motions)
             scores = tp_ratio(d, labels, split.test, k=20)
             return {"metrics": {"tp_ratio": scores["tp_ratio"], "fit_seconds": fit_s}, "detail": {**kind, **scores}}
-        distances, q_labels, db_labels, folds = [], [], [], {}
-        per_query_ap, query_ms, fit_seconds = [], [], []
+        distances, q_labels, db_labels, fold_scores, folds = [], [], [], [], {}
+        query_ms, fit_seconds = [], []
         group_field = PROTOCOLS[self.dataset][split.protocol][1]
         for fold, (db, queries) in self.folds(split.protocol).items():
             fitted = clone(estimator)
@@ -193,9 +193,9 @@ class RetrievalBenchmark(Benchmark):
             distances.append(d)
             q_labels.append(labels[queries])
             db_labels.append(labels[db])
-            per_query_ap += scores["per_query"]["ap"]
+            fold_scores.append(scores)
         kind["uses_labels"] = _uses_labels(fitted)
-        pooled = _pooled(distances, q_labels, db_labels)
+        pooled = _pooled(fold_scores)
         metrics = {**pooled, "fit_seconds": float(np.mean(fit_seconds)), "query_ms": float(np.mean(query_ms))}
         return {"metrics": metrics, "detail": {**kind, "label": label, "folds": folds,
                                                "confusion": _confusion(distances, q_labels, db_labels)}}
@@ -264,13 +264,11 @@ def _mean_sd(values) -> str:
     return f"{np.mean(finite):.3f} ± {np.std(finite, ddof=1):.3f}"
 
 
-def _pooled(distances, q_labels, db_labels) -> dict:
-    """Metrics over every query of every fold (each query ranked against its own fold's database)."""
-    from mocapkit.evaluation.retrieval import retrieval_metrics
-
+def _pooled(fold_scores: list[dict]) -> dict:
+    """Metrics over every query of every fold (each query ranked against its own fold's database), from the
+    folds' :func:`~mocapkit.evaluation.retrieval.retrieval_metrics`."""
     aps, p1, p10, nn = [], [], [], []
-    for d, q, db in zip(distances, q_labels, db_labels):
-        scores = retrieval_metrics(d, q, db)
+    for scores in fold_scores:
         n = scores["metrics"]["n_queries"]
         aps += [a for a in scores["per_query"]["ap"] if np.isfinite(a)]
         p1 += [scores["metrics"]["p@1"]] * n
