@@ -74,7 +74,7 @@ def make_method(name: str, ckpt: str | os.PathLike | None = None, **params):
     if name == "embedding":
         if ckpt is None:
             raise RetrievalIndexError("--method embedding needs --ckpt RUN/best.ckpt or an exported model.onnx "
-                              "(mocapkit train experiment=retrieval_supcon; mocapkit export ckpt_path=...)")
+                                      "(mocapkit train experiment=retrieval_supcon; mocapkit export ckpt_path=...)")
         key = "onnx" if str(ckpt).endswith(".onnx") else "checkpoint"
         values[key] = str(Path(ckpt).resolve())   # the manifest must find it from any working directory
     elif ckpt is not None:
@@ -145,14 +145,14 @@ class MotionIndex:
         manifest_path = path / "manifest.json"
         if not manifest_path.is_file():
             raise RetrievalIndexError(f"--index {path}: not an index folder (no manifest.json; build one with "
-                              "mocapkit index --src DIR --out INDEX)")
+                                      "mocapkit index --src DIR --out INDEX)")
         try:
             manifest = json.loads(manifest_path.read_text())
         except json.JSONDecodeError as exc:
             raise RetrievalIndexError(f"{manifest_path}: not valid JSON ({exc})") from exc
         if manifest.get("format") != FORMAT or manifest.get("version") != VERSION:
-            raise RetrievalIndexError(f"{manifest_path}: format {manifest.get('format')!r} version {manifest.get('version')!r}"
-                              f", expected {FORMAT!r} version {VERSION}")
+            raise RetrievalIndexError(f"{manifest_path}: format {manifest.get('format')!r} version "
+                                      f"{manifest.get('version')!r}, expected {FORMAT!r} version {VERSION}")
         name = manifest["method"]
         method = _class(name)(**manifest["params"])    # only classes of METHODS: nothing else is imported
         with np.load(path / "state.npz", allow_pickle=False) as data:
@@ -170,8 +170,8 @@ class MotionIndex:
         if lacking:
             layouts = sorted({f.get("skeleton") or "?" for f in self.files})
             raise RetrievalIndexError(f"query {path}: its skeleton ({motion.num_joints} joints: "
-                              f"{', '.join(list(motion.joint_names)[:8])}...) lacks the landmarks {lacking} that "
-                              f"every clip of the index ({', '.join(layouts)} skeletons) has")
+                                      f"{', '.join(list(motion.joint_names)[:8])}...) lacks the landmarks {lacking} "
+                                      f"that every clip of the index ({', '.join(layouts)} skeletons) has")
 
     def search(self, queries, k: int = 10, method: str | None = None, ckpt: str | os.PathLike | None = None) -> list:
         """Rank the indexed files for each query.
@@ -186,13 +186,13 @@ class MotionIndex:
             first; a query that is itself indexed is left out of its own results.
         """
         if method is not None and method != self.method_name:
-            raise RetrievalIndexError(f"the index was built with --method {self.method_name}; it cannot be queried with "
-                              f"--method {method} (build another index with that method)")
+            raise RetrievalIndexError(f"the index was built with --method {self.method_name}; it cannot be queried "
+                                      f"with --method {method} (build another index with that method)")
         if ckpt is not None:
             sha1 = file_sha1(ckpt)
             if sha1 != self.model_sha1:
-                raise RetrievalIndexError(f"--ckpt {ckpt} (SHA-1 {sha1[:12]}) is not the model the index was built with "
-                                  f"(SHA-1 {str(self.model_sha1)[:12]})")
+                raise RetrievalIndexError(f"--ckpt {ckpt} (SHA-1 {sha1[:12]}) is not the model the index was built "
+                                          f"with (SHA-1 {str(self.model_sha1)[:12]})")
         names, motions = [], []
         for query in queries:
             if isinstance(query, tuple):
@@ -210,7 +210,7 @@ class MotionIndex:
         indices, distances = self.method.search(motions, min(n, want + 1))
         out = []
         for name, row_i, row_d in zip(names, indices, distances):
-            self_index = own.get(str(Path(name).resolve())) if not name.startswith("<") else None
+            self_index = own.get(str(Path(name).resolve()))
             results = [{"path": self.paths[int(i)], "distance": float(d)} for i, d in zip(row_i, row_d)
                        if int(i) != self_index]
             out.append({"query": name, "results": results[:want]})
@@ -236,8 +236,8 @@ def build_index(src: str | os.PathLike, out: str | os.PathLike | None = None, me
     estimator = make_method(name, ckpt=ckpt, **params)
     paths = find_motion_files(src)
     if not paths:
-        raise RetrievalIndexError(f"--src {src}: no motion files in this folder (looked for .amc, .bvh, .c3d, .skeleton, "
-                          "MSR *_skeleton3D.txt, recursively)")
+        raise RetrievalIndexError(f"--src {src}: no motion files in this folder (looked for .amc, .bvh, .c3d, "
+                                  ".skeleton, MSR *_skeleton3D.txt, recursively)")
     _progress(f"indexing {len(paths)} files under {src} with {name}", quiet)
     motions, files, skipped, landmark_sets = [], [], [], []
     for n, path in enumerate(paths, 1):
@@ -248,7 +248,8 @@ def build_index(src: str | os.PathLike, out: str | os.PathLike | None = None, me
             why = f"{type(exc).__name__}: {exc}"
             if not skip_bad:
                 message = str(exc) if str(path) in str(exc) else f"{path}: {why}"
-                raise RetrievalIndexError(f"cannot index {message} (--skip-bad skips such files and reports them)") from exc
+                raise RetrievalIndexError(f"cannot index {message} (--skip-bad skips such files and reports "
+                                          "them)") from exc
             skipped.append({"path": str(path.resolve()), "why": why})
             _progress(f"skipped {path}: {why}", quiet)
             continue
