@@ -18,7 +18,8 @@ attributes ending in ``_``, ``NotFittedError`` before ``fit``):
 Every method first turns a motion into :func:`~mocapkit.retrieval.skeleton.normalised_landmarks` ``[T, 20, 3]``
 (parameters ``fps`` and ``heading`` of every method). Subclasses implement:
 
-``_fit_sequences(sequences, y)``   learn from the database's landmark sequences (default: nothing to learn);
+``_fit_sequences(sequences, y)``   learn from the database's landmark sequences (default: nothing to learn); it
+                                   may return the database's encoding when learning computed it (else None);
 ``_encode_sequences(sequences)``   the representation of sequences;
 ``_distances(encoded_queries, encoded_database)``   ``[n_q, n_db]``;
 ``_state() -> dict[str, np.ndarray]`` / ``_set_state(state)``   learned parameters and database encodings as
@@ -57,8 +58,8 @@ class RetrievalMethod(BaseEstimator):
             y = np.asarray(y)
             if len(y) != len(sequences):
                 raise ValueError(f"{len(y)} labels for {len(sequences)} database motions")
-        self._fit_sequences(sequences, y)
-        self.database_ = self._encode_sequences(sequences)
+        encoded = self._fit_sequences(sequences, y)
+        self.database_ = self._encode_sequences(sequences) if encoded is None else encoded
         self.n_database_ = len(sequences)
         return self
 
@@ -92,8 +93,9 @@ class RetrievalMethod(BaseEstimator):
         return out
 
     # ------------------------------------------------------------------ for subclasses
-    def _fit_sequences(self, sequences: list[np.ndarray], y) -> None:
-        """Learn from the database sequences (a no-op for methods with nothing to learn)."""
+    def _fit_sequences(self, sequences: list[np.ndarray], y):
+        """Learn from the database sequences (a no-op for methods with nothing to learn); return the database's
+        encoding if learning already computed it, None to have :meth:`_encode_sequences` compute it."""
 
     def _encode_sequences(self, sequences: list[np.ndarray]):
         raise NotImplementedError

@@ -88,7 +88,9 @@ class FeatureRetrieval(RetrievalMethod):
         return out
 
     # ------------------------------------------------------------------ RetrievalMethod
-    def _fit_sequences(self, sequences: list[np.ndarray], y) -> None:
+    def _fit_sequences(self, sequences: list[np.ndarray], y) -> np.ndarray:
+        """Fit the codebook, z-score and selector on the database; returns its encoding (its views are computed
+        once, here)."""
         views = self._views()
         self.gpf_ = self._new_gpf().fit(sequences) if "gpf" in views else None
         features = self._view_features(sequences)
@@ -114,10 +116,15 @@ class FeatureRetrieval(RetrievalMethod):
             if hasattr(sel, "alphas_"):
                 self.alphas_ = np.asarray(sel.alphas_, dtype=np.float64)
         self.view_dims_ = np.array([f.shape[1] for f in features], dtype=np.int64)
+        return self._encode_features(features)
 
     def _encode_sequences(self, sequences: list[np.ndarray]) -> np.ndarray:
         """float32 ``[n, n_selected]``: the z-scored selected features of each sequence."""
-        X = np.concatenate(self._view_features(sequences), axis=1)
+        return self._encode_features(self._view_features(sequences))
+
+    def _encode_features(self, features: list[np.ndarray]) -> np.ndarray:
+        """float32 ``[n, n_selected]`` from the views ``[n, d_v]`` of :meth:`_view_features`."""
+        X = np.concatenate(features, axis=1)
         if X.shape[1] != int(np.sum(self.view_dims_)):
             raise ValueError(f"views {self.views!r} give {X.shape[1]} features, the fitted state has "
                              f"{int(np.sum(self.view_dims_))}: restore a state with the parameters it was fitted with")

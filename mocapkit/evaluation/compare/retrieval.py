@@ -166,13 +166,12 @@ class RetrievalBenchmark(Benchmark):
                                               "trained method would have seen the queries"}}
             fitted = clone(estimator)
             start = time.perf_counter()
-            motions = [self.motions[i] for i in range(len(self.motions))]
-            fitted.fit(motions)
+            fitted.fit(self.motions)
             fit_s = time.perf_counter() - start
-            d = fitted.distances(motions)
+            d = fitted.distances(self.motions)
             scores = tp_ratio(d, labels, split.test, k=20)
             return {"metrics": {"tp_ratio": scores["tp_ratio"], "fit_seconds": fit_s}, "detail": {**kind, **scores}}
-        distances, q_labels, db_labels, fold_scores, folds = [], [], [], [], {}
+        q_labels, db_labels, fold_scores, folds = [], [], [], {}
         query_ms, fit_seconds = [], []
         group_field = PROTOCOLS[self.dataset][split.protocol][1]
         for fold, (db, queries) in self.folds(split.protocol).items():
@@ -190,7 +189,6 @@ class RetrievalBenchmark(Benchmark):
             folds[fold] = {**scores["metrics"], "fit_seconds": fit_seconds[-1], "query_ms": query_ms[-1],
                            "nearest": [self.names[db[j]] for j in scores["per_query"]["nearest"]],
                            "queries": [self.names[i] for i in queries]}
-            distances.append(d)
             q_labels.append(labels[queries])
             db_labels.append(labels[db])
             fold_scores.append(scores)
@@ -198,7 +196,7 @@ class RetrievalBenchmark(Benchmark):
         pooled = _pooled(fold_scores)
         metrics = {**pooled, "fit_seconds": float(np.mean(fit_seconds)), "query_ms": float(np.mean(query_ms))}
         return {"metrics": metrics, "detail": {**kind, "label": label, "folds": folds,
-                                               "confusion": _confusion(distances, q_labels, db_labels)}}
+                                               "confusion": _confusion(fold_scores, q_labels, db_labels)}}
 
     # -------------------------------------------------------------- presentation
     def headline(self, protocol: str) -> list[str]:
@@ -278,14 +276,14 @@ def _pooled(fold_scores: list[dict]) -> dict:
             "p@10": float(np.mean(p10)), "nn_accuracy": float(np.mean(nn)), "n_queries": len(p1)}
 
 
-def _confusion(distances, q_labels, db_labels) -> dict:
-    """Query class × class of the nearest database clip (counts), pooled over folds."""
+def _confusion(fold_scores, q_labels, db_labels) -> dict:
+    """Query class × class of the nearest database clip (counts), pooled over folds (the folds'
+    :func:`~mocapkit.evaluation.retrieval.retrieval_metrics` ``per_query["nearest"]``)."""
     classes = sorted(set(np.concatenate(q_labels).tolist()) | set(np.concatenate(db_labels).tolist()))
     index = {c: i for i, c in enumerate(classes)}
     counts = np.zeros((len(classes), len(classes)), dtype=np.int64)
-    for d, q, db in zip(distances, q_labels, db_labels):
-        nearest = db[np.argmin(d, axis=1)]
-        for a, b in zip(q, nearest):
+    for scores, q, db in zip(fold_scores, q_labels, db_labels):
+        for a, b in zip(q, db[np.asarray(scores["per_query"]["nearest"], dtype=np.int64)]):
             counts[index[a], index[b]] += 1
     return {"classes": classes, "counts": counts.tolist()}
 
