@@ -4,8 +4,10 @@
     mocapkit synth hdm05 --out DIR [--classes NAME ...] [--actors bd bk ...] [--seed K]
     mocapkit synth casia-b --out DIR [--subjects S] [--frames F] [--size H] [--seed K] [--workers N]
     mocapkit render FILE --out anim.gif [--strip]
-    mocapkit prepare ntu --src DIR --out DIR [--workers N] [--skip-bad] [--missing-list FILE]
-    mocapkit prepare casia-b --src DIR --out DIR [--size 64x44|124x124] [--per cycle|sequence] [--skip-bad]
+    mocapkit prepare ntu --src DIR --out DIR [--workers N] [--skip-bad] [--missing-list FILE] [--min-body-frames N]
+    mocapkit prepare casia-b --src DIR --out DIR [--size 64x44|124x124] [--per cycle|sequence] [--no-period ...]
+    mocapkit pyskl export --cache DIR --out FILE.pkl [--splits ntu60|ntu120]     (pyskl / MMAction2 annotations)
+    mocapkit pyskl import --pkl FILE.pkl --out DIR [--skip-bad] [--max-bodies N] [--classes FILE]
     mocapkit train [experiment=NAME] data.root=CACHE [Hydra overrides ...]      (-m: a sweep; resume=RUN/last.ckpt)
     mocapkit eval ckpt_path=RUN/best.ckpt [overrides ...]
     mocapkit export ckpt_path=RUN/best.ckpt [out=FILE] [overrides ...]
@@ -102,9 +104,9 @@ def cmd_prepare_ntu(args: argparse.Namespace) -> None:
     report = prepare_ntu(args.src, args.out, workers=args.workers, skip_bad=args.skip_bad,
                          missing_list=args.missing_list, max_bodies=args.max_bodies,
                          denoise_spread=args.denoise_spread, min_body_frames=args.min_body_frames,
-                         progress=not args.quiet)
+                         denoise_flicker=args.denoise_flicker, progress=not args.quiet)
     print(f"[mocapkit] prepared cache in {args.out}")
-    print(report.to_text())
+    print(report.summary())
 
 
 def cmd_prepare_casia_b(args: argparse.Namespace) -> None:
@@ -112,13 +114,35 @@ def cmd_prepare_casia_b(args: argparse.Namespace) -> None:
 
     report = prepare_casia_b(args.src, args.out, size=parse_gei_size(args.size), per=args.per,
                              skip_bad=args.skip_bad, workers=args.workers, subjects=args.subjects,
-                             fallback_period=args.fallback_period, progress=not args.quiet)
+                             fallback_period=args.fallback_period, no_period=args.no_period,
+                             progress=not args.quiet)
     print(f"[mocapkit] prepared GEI cache in {args.out}")
+    if args.quiet:  # otherwise prepare_casia_b has printed the summary (every item is in report.txt)
+        print(report.summary())
+
+
+def cmd_pyskl_export(args: argparse.Namespace) -> None:
+    from mocapkit.datasets.interop.pyskl import export_pyskl
+
+    summary = export_pyskl(args.cache, args.out, splits=args.splits)
+    lists = ", ".join(f"{k} {n}" for k, n in summary["split"].items())
+    print(f"[mocapkit] wrote {summary['num_samples']} samples ({summary['total_frames']} frames) to {args.out}; "
+          f"split: {lists}")
+
+
+def cmd_pyskl_import(args: argparse.Namespace) -> None:
+    from mocapkit.datasets.interop.pyskl import import_pyskl
+
+    report = import_pyskl(args.pkl, args.out, skip_bad=args.skip_bad, max_bodies=args.max_bodies,
+                          class_names=args.classes)
+    print(f"[mocapkit] imported {args.pkl} into the cache {args.out}")
     print(report.to_text())
 
 
 def cmd_gait_report(args: argparse.Namespace) -> None:
-    from mocapkit.evaluation.compare import gait_report  # `compare gait` with these options
+    from mocapkit.evaluation.compare import (
+        gait_report,  # `compare gait` with these options
+    )
 
     gait_report(args.data, args.out, protocols=tuple(args.protocols), experiments=tuple(args.experiments),
                 overrides=tuple(args.overrides), seed=args.seed, include_pca_lda=not args.no_pca_lda)
@@ -254,9 +278,16 @@ def build_parser() -> argparse.ArgumentParser:
     pntu.add_argument("--skip-bad", action="store_true", help="skip malformed files (each is listed in the report)")
     pntu.add_argument("--missing-list", help="official list of samples with missing skeletons to leave out")
     pntu.add_argument("--max-bodies", type=int, default=2, help="bodies kept per sample (most motion first)")
-    pntu.add_argument("--denoise-spread", action="store_true", help="drop non-human 'bodies' by their spread")
-    pntu.add_argument("--min-body-frames", type=int, default=1,
-                      help="drop bodies seen in fewer frames (pyskl uses 12)")
+    pntu.add_argument("--denoise-spread", action=argparse.BooleanOptionalAction, default=True,
+                      help="drop non-human 'bodies' wider than tall (the NTU authors' spread rule); on by default, "
+                           "--denoise-spread is accepted and changes nothing")
+    pntu.add_argument("--min-body-frames", type=int, default=12,
+                      help="drop bodies seen in fewer frames, never the longest of a file (default 12, the NTU "
+                           "authors' and pyskl's; 1 disables)")
+    pntu.add_argument("--denoise-flicker", action=argparse.BooleanOptionalAction, default=True,
+                      help="drop bodies that come and go (< 80%% of the frames of their span) or jump (> 0.3 m a "
+                           "frame); on by default. The former default was --min-body-frames 1 "
+                           "--no-denoise-spread --no-denoise-flicker")
     pntu.add_argument("--quiet", action="store_true", help="no progress bar")
     pntu.set_defaults(func=cmd_prepare_ntu)
 
@@ -267,13 +298,36 @@ def build_parser() -> argparse.ArgumentParser:
                      help="GEI HxW: 64x44 (OpenGait's convention, default) or 124x124 (the thesis network)")
     pcb.add_argument("--per", choices=["cycle", "sequence"], default="cycle",
                      help="one GEI per detected gait cycle (default) or per sequence")
+    pcb.add_argument("--no-period", dest="no_period", choices=["sequence", "fallback", "error"], default=None,
+                     help="a sequence without a detectable gait period gives one GEI over the whole sequence "
+                          "(sequence, the default), GEIs of --fallback-period frames (fallback), or is bad "
+                          "(error: stops, or is skipped with --skip-bad; the former behaviour); each is reported")
     pcb.add_argument("--fallback-period", dest="fallback_period", type=int,
-                     help="frames per cycle to use where no period is detected (each use is reported)")
+                     help="frames per cycle to use where no period is detected (implies --no-period fallback; "
+                          "each use is reported)")
     pcb.add_argument("--subjects", type=int, nargs="+", help="only these subject IDs")
     pcb.add_argument("--workers", type=int, default=1, help="parallel processes")
     pcb.add_argument("--skip-bad", action="store_true", help="skip bad sequences (each is listed in the report)")
     pcb.add_argument("--quiet", action="store_true", help="no progress bar")
     pcb.set_defaults(func=cmd_prepare_casia_b)
+
+    pyskl = sub.add_parser("pyskl", help="convert between NTU caches and pyskl / MMAction2 annotation pickles")
+    pyskl_sub = pyskl.add_subparsers(dest="direction", required=True)
+    pexp = pyskl_sub.add_parser("export", help="write an NTU cache as a pyskl 3D annotation pickle")
+    pexp.add_argument("--cache", required=True, help="NTU cache folder (mocapkit prepare ntu --out ...)")
+    pexp.add_argument("--out", required=True, help="the .pkl file to write")
+    pexp.add_argument("--splits", choices=["ntu60", "ntu120"],
+                      help="split lists: xsub/xview (ntu60) or xsub/xset (ntu120); default: ntu120 when the cache "
+                           "has NTU-120 setups or actions, else ntu60")
+    pexp.set_defaults(func=cmd_pyskl_export)
+    pimp = pyskl_sub.add_parser("import", help="write a pyskl 3D annotation pickle as an NTU cache")
+    pimp.add_argument("--pkl", required=True, help="pyskl annotation pickle (read without running code)")
+    pimp.add_argument("--out", required=True, help="cache folder to write")
+    pimp.add_argument("--skip-bad", action="store_true",
+                      help="skip bad annotations (each is listed in the report)")
+    pimp.add_argument("--max-bodies", type=int, default=2, help="bodies per sample; an annotation with more is bad")
+    pimp.add_argument("--classes", help="classes.txt with the action names (line k = action k+1)")
+    pimp.set_defaults(func=cmd_pyskl_import)
 
     for name, help_text in (("train", "train a model (Hydra overrides)"),
                             ("eval", "evaluate a checkpoint: ckpt_path=PATH [overrides]"),

@@ -42,8 +42,7 @@ def main() -> None:
         timings["synth"] = run("synth", "ntu", "--out", str(SYNTH), "--classes", "12", "--subjects", "20",
                                "--seed", "0", "--workers", "2")
     if not (CACHE / "meta.json").exists():
-        timings["prepare"] = run("prepare", "ntu", "--src", str(SYNTH), "--out", str(CACHE), "--workers", "2",
-                                 "--denoise-spread")
+        timings["prepare"] = run("prepare", "ntu", "--src", str(SYNTH), "--out", str(CACHE), "--workers", "2")
     run_name = "demo-" + datetime.now().strftime("%Y%m%d-%H%M%S")
     run_dir = ROOT / "checkpoints" / "ntu_energy_vgg" / run_name
     overrides = ["experiment=ntu_energy_vgg", f"data.root={CACHE}", f"run_name={run_name}"]

@@ -9,15 +9,15 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from mocapkit.datasets.casia_b.cache import GEICache
+from mocapkit.datasets.casia_b.gei import GaitSequenceError, gait_energy_images
+from mocapkit.datasets.casia_b.prepare import parse_gei_size, prepare_casia_b
 from mocapkit.datasets.formats.casia_b import (
     GaitSequenceKey,
     SilhouetteFormatError,
     list_casia_b,
     read_sequence,
 )
-from mocapkit.datasets.casia_b.prepare import parse_gei_size, prepare_casia_b
-from mocapkit.datasets.casia_b.gei import GaitSequenceError, gait_energy_images
-from mocapkit.datasets.casia_b.cache import GEICache
 from tests.test_gei import walking_silhouettes
 
 FRAMES = 60
@@ -117,7 +117,7 @@ def test_thesis_size_with_one_gei_per_sequence(casia_root, tmp_path):
 
 def test_skip_bad_reports_a_corrupt_png_and_a_short_sequence_and_goes_on(bad_root, tmp_path):
     root, broken, corrupt = bad_root
-    report = prepare_casia_b(root, tmp_path / "cache", skip_bad=True, progress=False)
+    report = prepare_casia_b(root, tmp_path / "cache", skip_bad=True, no_period="error", progress=False)
     skipped = {s["sequence"]: s for s in report.skipped}
     assert set(skipped) == {corrupt.name, "002/nm-03/090"}
     assert skipped[corrupt.name]["reason"] == "unreadable"
@@ -139,8 +139,50 @@ def test_without_skip_bad_the_first_bad_sequence_raises_naming_it(bad_root, tmp_
         prepare_casia_b(root, tmp_path / "cache", progress=False)
     assert not (tmp_path / "cache" / "meta.json").exists()
     shutil.rmtree(root / corrupt.name)
-    with pytest.raises(GaitSequenceError, match="nm-03"):
-        prepare_casia_b(root, tmp_path / "cache", progress=False)
+    with pytest.raises(GaitSequenceError, match="nm-03"):  # strict: a sequence without a period is bad
+        prepare_casia_b(root, tmp_path / "cache", no_period="error", progress=False)
+
+
+def test_by_default_a_sequence_without_a_period_gives_one_gei_over_the_whole_sequence(bad_root, tmp_path):
+    """The documented command must not stop on sequences whose period is not detected (0° / 180° views)."""
+    root, _, corrupt = bad_root
+    shutil.rmtree(root / corrupt.name)
+    short = "002/nm-03/090"                               # 12 frames: too short to find a 25-frame cycle
+    report = prepare_casia_b(root, tmp_path / "cache", progress=False)
+    assert not report.skipped and report.whole_sequence == [short] and not report.fallback_period
+    cache = GEICache(tmp_path / "cache")
+    rows = np.flatnonzero(cache.names == short)
+    assert len(rows) == 1 and cache.cycles[rows[0]] == 0 and cache.frames[rows[0]] == 12
+    seq = next(s for s in list_casia_b(root).sequences if s.key.name == short)
+    whole, _ = gait_energy_images(read_sequence(seq), per="sequence")
+    np.testing.assert_array_equal(cache.all_geis[rows], np.round(whole * 255).astype(np.uint8))
+    for key, cycle in CYCLES.items():                     # the others still give one GEI per cycle
+        if key != corrupt:
+            assert (cache.names == key.name).sum() == FRAMES // cycle
+    assert report.totals()["one_gei_per_sequence_no_period"] == 1 and cache.meta["options"]["no_period"] == "sequence"
+    text = (tmp_path / "cache" / "report.txt").read_text()
+    assert f"One GEI per sequence (no period detected) (1):\n  {short}\n" in text
+    assert json.loads((tmp_path / "cache" / "report.json").read_text())["whole_sequence"] == [short]
+    assert "1 without a detectable period, one GEI over the whole sequence" in report.summary()
+
+
+def test_no_period_options_from_the_command_line(bad_root, tmp_path, capsys):
+    from mocapkit.cli import main
+
+    root, _, corrupt = bad_root
+    shutil.rmtree(root / corrupt.name)
+    assert main(["prepare", "casia-b", "--src", str(root), "--out", str(tmp_path / "a"), "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "1 without a detectable period" in out and len(out.splitlines()) <= 4
+    assert main(["prepare", "casia-b", "--src", str(root), "--out", str(tmp_path / "b"), "--quiet",
+                 "--no-period", "error"]) == 2
+    assert "nm-03" in capsys.readouterr().err
+    assert main(["prepare", "casia-b", "--src", str(root), "--out", str(tmp_path / "c"), "--quiet",
+                 "--no-period", "error", "--skip-bad"]) == 0
+    assert json.loads((tmp_path / "c" / "report.json").read_text())["skipped"][0]["reason"] == "no_period"
+    assert main(["prepare", "casia-b", "--src", str(root), "--out", str(tmp_path / "d"), "--quiet",
+                 "--no-period", "error", "--fallback-period", "10"]) == 2
+    assert "contradicts" in capsys.readouterr().err
 
 
 def test_workers_give_the_same_cache(casia_root, tmp_path):
@@ -163,7 +205,10 @@ def test_subjects_filter_and_a_fallback_period(casia_root, tmp_path):
     assert set(cache.subjects) == {2}
     assert (cache.frames[cache.names == "002/nm-04/090"] == 25).all()
     with pytest.raises(GaitSequenceError, match="no gait period"):
-        prepare_casia_b(root, tmp_path / "cache2", progress=False)
+        prepare_casia_b(root, tmp_path / "cache2", no_period="error", progress=False)
+    report = prepare_casia_b(root, tmp_path / "cache3", subjects=[2], progress=False)  # the default
+    assert report.whole_sequence == ["002/nm-04/090"] and not report.fallback_period
+    assert (GEICache(tmp_path / "cache3").frames[GEICache(tmp_path / "cache3").names == "002/nm-04/090"] == FRAMES).all()
 
 
 def test_everything_skipped_is_an_error_after_the_report(tmp_path):
@@ -171,7 +216,7 @@ def test_everything_skipped_is_an_error_after_the_report(tmp_path):
     (tmp_path / "out").mkdir()
     (tmp_path / "out" / "meta.json").write_text("{}")  # an older cache there must not look finished
     with pytest.raises(RuntimeError, match="no GEI could be built"):
-        prepare_casia_b(tmp_path / "src", tmp_path / "out", skip_bad=True, progress=False)
+        prepare_casia_b(tmp_path / "src", tmp_path / "out", skip_bad=True, no_period="error", progress=False)
     assert json.loads((tmp_path / "out" / "report.json").read_text())["skipped"][0]["sequence"] == "001/nm-01/090"
     assert not (tmp_path / "out" / "meta.json").exists()
 
@@ -182,7 +227,10 @@ def test_bad_arguments_and_empty_sources_are_clear_errors(tmp_path):
     (tmp_path / "empty").mkdir()
     with pytest.raises(ValueError, match="no CASIA-B sequence"):
         prepare_casia_b(tmp_path / "empty", tmp_path / "out", progress=False)
-    for kwargs, match in (({"per": "frame"}, "per must be"), ({"size": (64,)}, "size"), ({"workers": 0}, "workers")):
+    for kwargs, match in (({"per": "frame"}, "per must be"), ({"size": (64,)}, "size"), ({"workers": 0}, "workers"),
+                          ({"no_period": "skip"}, "no_period must be"), ({"no_period": "fallback"}, "needs fallback"),
+                          ({"no_period": "error", "fallback_period": 25}, "contradicts"),
+                          ({"fallback_period": 0}, "fallback_period must be")):
         with pytest.raises(ValueError, match=match):
             prepare_casia_b(tmp_path / "empty", tmp_path / "out", progress=False, **kwargs)
 

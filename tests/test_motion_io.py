@@ -97,9 +97,10 @@ def _two_body_file(tmp_path):
     rng = np.random.default_rng(0)
     T = 12
     pos = np.zeros((3, T, 25, 3))
-    pos[0] = rng.normal(0, 0.01, (T, 25, 3)) + [0, 0, 3]          # barely moves
-    pos[1] = rng.normal(0, 0.30, (T, 25, 3)) + [1, 0, 3]          # moves most
-    pos[2, 3:9] = rng.normal(0, 0.10, (6, 25, 3)) + [-1, 0, 3]    # medium, only frames 3..8
+    tall = np.array([0.3, 1.0, 0.3])                              # taller than wide: spread denoising keeps them
+    pos[0] = rng.normal(0, 0.01, (T, 25, 3)) * tall + [0, 0, 3]   # barely moves
+    pos[1] = rng.normal(0, 0.30, (T, 25, 3)) * tall + [1, 0, 3]   # moves most
+    pos[2, 3:9] = rng.normal(0, 0.10, (6, 25, 3)) * tall + [-1, 0, 3]  # medium, only frames 3..8
     present = np.ones((3, T), dtype=bool)
     present[2] = False
     present[2, 3:9] = True
@@ -110,7 +111,8 @@ def _two_body_file(tmp_path):
 
 def test_ntu_main_body_and_other_bodies(tmp_path):
     path, pos = _two_body_file(tmp_path)
-    m = read_motion(path)
+    assert read_motion(path).metadata["body_ids"] == [22, 11]         # by default body 33 (6 frames) is too short
+    m = read_motion(path, min_frames=1)
     assert m.joint_names == NTU25.joint_names and m.parents == NTU25.parents and m.layout_name == "ntu25"
     assert m.fps == 30.0 and m.up_axis == "y" and m.name == "S001C001P001R001A050"
     np.testing.assert_allclose(m.positions, pos[1], atol=1e-6)        # most motion first
@@ -121,16 +123,16 @@ def test_ntu_main_body_and_other_bodies(tmp_path):
     assert other.shape == (12, 25, 3)
     assert np.isnan(other[:3]).all() and np.isnan(other[9:]).all()
     np.testing.assert_allclose(other[3:9], pos[2, 3:9], atol=1e-6)
-    assert len(read_motion(path, max_bodies=1).metadata["other_bodies"]) == 0
+    assert len(read_motion(path, max_bodies=1, min_frames=1).metadata["other_bodies"]) == 0
 
 
 def test_ntu_write_round_trip(tmp_path):
     path, _ = _two_body_file(tmp_path)
-    m = read_motion(path)
+    m = read_motion(path, min_frames=1)
     write_motion(tmp_path / "out.skeleton", m)
     seq = read_skeleton(tmp_path / "out.skeleton")
     assert seq.body_ids == [22, 33] and seq.present[1].sum() == 6
-    r = read_motion(tmp_path / "out.skeleton")
+    r = read_motion(tmp_path / "out.skeleton", min_frames=1)
     np.testing.assert_allclose(r.positions, m.positions, atol=1e-6)
     np.testing.assert_allclose(r.metadata["other_bodies"][0], m.metadata["other_bodies"][0], atol=1e-6)
     with pytest.raises(ValueError, match="ntu25"):

@@ -9,8 +9,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mocapkit.datasets.ntu.cache import NTUCache
-from mocapkit.datasets.ntu.prepare import prepare_ntu
 from mocapkit.datasets.formats.ntu_skeleton import (
     SkeletonFormatError,
     parse_ntu_name,
@@ -19,7 +17,8 @@ from mocapkit.datasets.formats.ntu_skeleton import (
     sequence_from_positions,
     write_skeleton,
 )
-
+from mocapkit.datasets.ntu.cache import NTUCache
+from mocapkit.datasets.ntu.prepare import prepare_ntu
 from tests.shared_data import NTU_SAMPLES as SAMPLES
 from tests.shared_data import needs
 
@@ -33,7 +32,8 @@ THREE_BODY_IDS = [72057594037900001, 72057594037900002, 72057594037900003]
 def _synthetic(path: Path, bodies: int, frames: int, seed: int, body_ids=None) -> None:
     rng = np.random.default_rng(seed)
     scale = np.array([0.01, 0.3, 0.1][:bodies])[:, None, None, None]
-    positions = rng.normal(size=(bodies, frames, 25, 3)) * scale + [0.0, 0.5, 3.0]
+    tall = np.array([0.3, 1.0, 0.3])  # taller than wide, as people are: spread denoising keeps them
+    positions = rng.normal(size=(bodies, frames, 25, 3)) * scale * tall + [0.0, 0.5, 3.0]
     write_skeleton(path, sequence_from_positions(path.stem, positions, body_ids=body_ids))
 
 
@@ -96,16 +96,27 @@ def test_report_lists_dropped_bodies_and_meta(tmp_path):
     report = prepare_ntu(src, tmp_path / "cache", progress=False)
     assert [d["name"] for d in report.dropped_bodies] == [THREE_BODY]
     entry = report.dropped_bodies[0]
-    assert entry["kept_body_ids"] == THREE_BODY_IDS[1:]  # most motion first
+    assert [k["body_id"] for k in entry["kept"]] == THREE_BODY_IDS[1:]  # most motion first
+    assert [k["rule"] for k in entry["kept"]] == ["most_motion", "most_motion"]
     assert [d["body_id"] for d in entry["dropped"]] == [THREE_BODY_IDS[0]]
-    assert "less motion" in entry["dropped"][0]["reason"]
+    assert entry["dropped"][0]["rule"] == "less_motion" and "less motion" in entry["dropped"][0]["reason"]
+    # every sample's decision is in the report, in cache order, the single-track ones too
+    assert [b["name"] for b in report.bodies] == sorted(_all_files(src))
+    single = next(b for b in report.bodies if b["tracks"] == 1)
+    assert single["kept"][0]["rule"] == "only_candidate" and single["kept"][0]["reason"] == "the only track"
     on_disk = json.loads((tmp_path / "cache" / "report.json").read_text())
-    assert on_disk["dropped_bodies"][0]["dropped"][0]["body_id"] == THREE_BODY_IDS[0]  # exact 64-bit ID
-    assert str(THREE_BODY_IDS[0]) in (tmp_path / "cache" / "report.txt").read_text()
+    assert on_disk["bodies"] == report.bodies
+    assert on_disk["bodies"][[b["name"] for b in report.bodies].index(THREE_BODY)]["dropped"][0]["body_id"] == \
+        THREE_BODY_IDS[0]  # exact 64-bit ID
+    assert on_disk["totals"]["tracks_dropped_less_motion"] == 1 and on_disk["totals"]["tracks_kept_most_motion"] == 4
+    text = (tmp_path / "cache" / "report.txt").read_text()
+    assert str(THREE_BODY_IDS[0]) in text and "[less_motion]" in text
+    assert "Body selection (the 1 samples whose only track is body 0 are not listed); samples listed (2):" in text
     meta = json.loads((tmp_path / "cache" / "meta.json").read_text())
     assert meta["num_samples"] == 3 and meta["max_bodies"] == 2 and meta["frames_trimmed"] is False
     assert meta["source"] == str(src.resolve())
-    assert meta["options"]["min_body_frames"] == 1
+    assert meta["options"]["min_body_frames"] == 12
+    assert meta["options"]["denoise_spread"] is True and meta["options"]["denoise_flicker"] is True
 
 
 def test_class_names_and_max_bodies(tmp_path):

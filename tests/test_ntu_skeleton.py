@@ -16,7 +16,6 @@ from mocapkit.datasets.formats.ntu_skeleton import (
     sequence_from_positions,
     write_skeleton,
 )
-
 from tests.shared_data import NTU_SAMPLES as SAMPLES
 from tests.shared_data import needs
 
@@ -235,7 +234,8 @@ def test_select_main_bodies_keeps_the_two_with_most_motion():
     T = 30
     base = np.zeros((3, T, 25, 3)) + [0.0, 0.0, 3.0]
     amplitude = [0.01, 0.2, 0.05]  # body 1 moves most, then body 2, body 0 barely moves
-    positions = base + rng.normal(size=(3, T, 25, 3)) * np.array(amplitude)[:, None, None, None]
+    tall = np.array([0.3, 1.0, 0.3])  # taller than wide, as people are: spread denoising keeps them
+    positions = base + rng.normal(size=(3, T, 25, 3)) * np.array(amplitude)[:, None, None, None] * tall
     ids = [72057594037900001, 72057594037900002, 72057594037900003]
     seq = sequence_from_positions("S001C001P001R001A050", positions, body_ids=ids)
     sel = select_main_bodies(seq)
@@ -254,3 +254,91 @@ def test_select_main_bodies_pads_a_missing_second_body_and_filters_short_tracks(
     assert sel.kept == [0]
     assert "present in 5 frames" in sel.dropped[1]
     assert not sel.positions[1].any()
+
+
+# --------------------------------------------------------------------------- default rules: length, spread, flicker
+
+def person(T: int, x: float = 0.0, sway: float = 0.05, seed: int = 0) -> np.ndarray:
+    """A tall, slowly swaying "person" ``[T, 25, 3]``: 25 points in a 0.4 m × 1.7 m × 0.3 m box, 3 m away."""
+    rng = np.random.default_rng(seed)
+    shape = rng.uniform(-0.5, 0.5, (25, 3)) * [0.4, 1.7, 0.3] + [x, 0.9, 3.0]
+    return shape + sway * np.sin(np.linspace(0, 6, T))[:, None, None] * [1.0, 0.2, 0.0]
+
+
+def wide_blob(T: int) -> np.ndarray:
+    """A static chair-like "body", wider than tall."""
+    return np.random.default_rng(9).uniform(-0.5, 0.5, (25, 3)) * [0.7, 0.3, 0.6] + [1.2, 0.4, 3.0] + np.zeros((T, 1, 1))
+
+
+def rules(seq, **options) -> dict:
+    sel = select_main_bodies(seq, **options)
+    return {seq.body_ids[b]: sel.rules[b] for b in range(seq.num_bodies)}
+
+
+def test_a_short_clip_still_gives_its_bodies():
+    """Tracks shorter than 12 frames are dropped, never the longest of the file."""
+    two = sequence_from_positions("S001C001P001R001A050", np.stack([person(8), person(8, x=1.0, seed=1)]),
+                                  body_ids=[1, 2])
+    assert rules(two) == {1: "rescued_short", 2: "rescued_short"}
+    sel = select_main_bodies(two)
+    assert len(sel.kept) == 2 and "no track of the file is longer" in sel.kept_reasons[sel.kept[0]]
+    positions = np.stack([person(30), person(30, x=1.0, seed=1)])
+    positions[1, 11:] = 0.0  # the second track is present in 11 frames: "more than 11" fails
+    assert rules(sequence_from_positions("S001C001P001R001A001", positions, body_ids=[1, 2])) == \
+        {1: "only_candidate", 2: "short"}
+
+
+def test_spread_denoising_is_on_by_default_and_never_empties_a_file():
+    seq = sequence_from_positions("S001C001P001R001A001", np.stack([wide_blob(40), person(40)]), body_ids=[1, 2])
+    sel = select_main_bodies(seq)
+    assert sel.kept == [1] and sel.rules == {0: "spread", 1: "only_candidate"}
+    assert "wider than tall in 100% of its frames" in sel.dropped[0]
+    assert select_main_bodies(seq, denoise_spread=False).rules[0] in ("most_motion", "less_motion")
+    taller = wide_blob(40)
+    taller[:8] *= [1.0, 4.0, 1.0]          # taller than wide in 8 of its 40 frames: wide in 80 % (>= 69.754 %)
+    blobs = sequence_from_positions("S001C001P001R001A001", np.stack([wide_blob(40), taller]), body_ids=[1, 2])
+    sel = select_main_bodies(blobs)       # every track is wide: the least wide is kept, and says so
+    assert sel.kept == [1] and sel.rules[1] == "rescued_spread" and "least wide" in sel.kept_reasons[1]
+
+
+def test_a_flickering_track_is_dropped_not_ranked_first():
+    rng = np.random.default_rng(3)
+    T = 60
+    ghost = person(T, x=0.3, seed=2) + rng.normal(0, 0.6, (T, 1, 3)) * [1, 0.05, 1]  # jumps every frame
+    positions = np.stack([ghost, person(T)])
+    positions[0, rng.random(T) < 0.5] = 0.0    # and is there half of the time
+    seq = sequence_from_positions("S001C001P001R001A001", positions, body_ids=[7, 8])
+    assert select_main_bodies(seq, denoise_flicker=False).kept == [0, 1]      # most "motion": the ghost
+    sel = select_main_bodies(seq)
+    assert sel.kept == [1] and sel.rules[0] == "flicker" and "flickering: present in" in sel.dropped[0]
+
+
+def test_a_track_that_jumps_without_gaps_is_dropped():
+    rng = np.random.default_rng(4)
+    T = 40
+    jumper = person(T, seed=3) + rng.normal(0, 0.8, (T, 1, 3)) * [1, 0, 1]
+    seq = sequence_from_positions("S001C001P001R001A001", np.stack([jumper, person(T)]), body_ids=[1, 2])
+    sel = select_main_bodies(seq)
+    assert sel.kept == [1] and sel.rules[0] == "jump" and "m a frame" in sel.dropped[0]
+
+
+def test_frames_the_sensor_lost_are_not_flicker():
+    T = 60
+    positions = np.stack([person(T), person(T, x=1.0, seed=1)])
+    positions[:, ::3] = 0.0                    # every third frame has no body at all
+    seq = sequence_from_positions("S001C001P001R001A050", positions, body_ids=[1, 2])
+    sel = select_main_bodies(seq)
+    assert sorted(sel.kept) == [0, 1] and not sel.dropped
+
+
+def test_when_every_track_flickers_the_steadiest_is_kept():
+    rng = np.random.default_rng(5)
+    T = 60
+    positions = np.stack([person(T), person(T, x=1.0, seed=1)])
+    positions[0, rng.random(T) < 0.5] = 0.0    # present in about 50 % and 40 % of the frames, independently
+    positions[1, rng.random(T) < 0.6] = 0.0
+    positions[:, 0] = person(T)[0]             # both seen in the first frame, so no frame is empty
+    seq = sequence_from_positions("S001C001P001R001A001", positions, body_ids=[1, 2])
+    sel = select_main_bodies(seq)
+    assert sel.kept == [0] and sel.rules == {0: "rescued_flicker", 1: "flicker"}
+    assert "the steadiest is kept" in sel.kept_reasons[0]

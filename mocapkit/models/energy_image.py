@@ -3,9 +3,11 @@
 Thesis §6.2 names a "motion histogram map / 3D energy image" but gives no
 recipe. This module implements **our reconstruction**:
 
-1. Normalise: centre every body on the spine base of body 0 in its first
-   present frame, divide by body size (the mean spine length of body 0), and
-   optionally turn the scene so body 0's hips face the camera (``align``).
+1. Normalise: centre every body on the median position of body 0's spine base
+   over its present frames, divide by body size (the median spine length of
+   body 0), and optionally turn the scene so body 0's hips face the camera
+   (``align``). Medians, so glitch frames left in files from the wild do not move
+   or shrink the image (:mod:`mocapkit.models.body_frame`, shared with the graph network).
 2. Take every joint of every present frame of every body, plus optional
    points sampled along the bones (``bone_samples``), and project them onto the
    xy (front), zy (side) and xz (top) planes.
@@ -29,7 +31,13 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from mocapkit.datasets.formats.layouts import LANDMARKS, NTU25, SkeletonLayout, get_layout
+from mocapkit.datasets.formats.layouts import (
+    LANDMARKS,
+    NTU25,
+    SkeletonLayout,
+    get_layout,
+)
+from mocapkit.models.body_frame import body0_origin, body0_size
 
 #: Planes as (horizontal axis, vertical axis) over (x, y, z); vertical axes grow upwards.
 PLANES = {"xy": (0, 1), "zy": (2, 1), "xz": (0, 2)}
@@ -47,9 +55,10 @@ class EnergyImage(nn.Module):
         splat: ``"nearest"`` (exact hard binning) or ``"bilinear"`` (each point shared by 4 pixels).
         smoothing: standard deviation in pixels of a Gaussian blur of each plane (0 = none).
         temporal_weighting: ``"none"`` or ``"linear"`` (frame ``t`` weighted by ``(t+1)/T``, later = brighter).
-        scale: divide by the mean spine length of body 0 (``True``) or keep metres (``False``).
+        scale: divide by the median spine length of body 0 (``True``) or keep metres (``False``).
         align: rotate about the vertical axis so body 0's mean hip line is parallel to x.
-        center_joint: joint whose first-frame position of body 0 is the origin (default: the layout root).
+        center_joint: joint of body 0 whose median position over its present frames is the origin
+            (default: the layout root).
         spine: ``(lower, upper)`` joints whose distance is the body size (default: pelvis → neck landmarks,
             SpineBase → SpineShoulder on NTU-25).
         hips: ``(left, right)`` joints used by ``align`` (default: the hip landmarks).
@@ -102,11 +111,8 @@ class EnergyImage(nn.Module):
     def normalize(self, skeletons: torch.Tensor, present: torch.Tensor) -> torch.Tensor:
         """Centre, scale and optionally align. ``[N, M, T, J, 3]`` → same shape, body-size units."""
         body0 = present[:, 0].to(skeletons.dtype)                                     # [N, T]
-        first = torch.argmax(body0, dim=1)                                             # first present frame
-        idx = first.view(-1, 1, 1).expand(-1, 1, 3)
-        center = torch.gather(skeletons[:, 0, :, self.center_joint, :], 1, idx)        # [N, 1, 3]
+        center = body0_origin(skeletons, present, self.center_joint)                   # [N, 3], median
         out = skeletons - center.view(-1, 1, 1, 1, 3)
-        n_frames0 = body0.sum(1).clamp(min=1.0)                                        # [N]
         if self.align:
             hip = skeletons[:, 0, :, self.hips[1], :] - skeletons[:, 0, :, self.hips[0], :]  # [N, T, 3]
             hip = (hip * body0.unsqueeze(-1)).sum(1)                                   # [N, 3]
@@ -116,9 +122,8 @@ class EnergyImage(nn.Module):
             x, y, z = out[..., 0], out[..., 1], out[..., 2]
             out = torch.stack((c * x + s * z, y, -s * x + c * z), dim=-1)
         if self.scale:
-            spine = skeletons[:, 0, :, self.spine[1], :] - skeletons[:, 0, :, self.spine[0], :]
-            length = (spine.norm(dim=-1) * body0).sum(1) / n_frames0                  # [N]
-            out = out / length.clamp(min=1e-3).view(-1, 1, 1, 1, 1)
+            length = body0_size(skeletons, present, *self.spine)                       # [N], median
+            out = out / length.view(-1, 1, 1, 1, 1)
         return out
 
     def points(self, coords: torch.Tensor) -> torch.Tensor:

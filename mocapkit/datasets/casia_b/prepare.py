@@ -7,8 +7,17 @@
 sequence) in parallel, and writes the cache read by
 :class:`~mocapkit.datasets.casia_b.cache.GEICache` (layout in :mod:`mocapkit.datasets.casia_b.cache`):
 ``geis.npy``, ``index.npz``, ``meta.json`` (last), plus ``report.json`` / ``report.txt``
-listing every skipped sequence and why, the listing's problems and the
-expected (subject, condition-nn, view) sequences absent from the folder.
+listing every skipped sequence and why, the sequences without a detectable gait period and
+what was done with them, the listing's problems and the expected (subject, condition-nn, view)
+sequences absent from the folder.
+
+**Sequences without a detectable period** (``per="cycle"``; about 3 % of the synthetic set,
+mostly 0° and 180° views, where the lower-body width hardly oscillates): by default
+(``no_period="sequence"``) such a sequence gives **one GEI over the whole sequence** (index
+``cycles`` 0, ``frames`` = its non-empty silhouettes), listed in the report section "one GEI per
+sequence (no period detected)", so the documented command does not stop on them. Alternatives:
+``fallback_period=N`` (cycles of ``N`` frames, each use listed) or ``no_period="error"`` (the former,
+strict behaviour: such a sequence is bad, it raises, or is skipped as ``no_period`` with ``skip_bad``).
 
 Memory: workers send back each sequence's GEIs as uint8; the cache is assembled in the
 main process (full CASIA-B at 124×124 with ~3 cycles per sequence: ~40k GEIs, ~0.6 GB).
@@ -22,19 +31,25 @@ from pathlib import Path
 
 import numpy as np
 
-from mocapkit.datasets.formats.casia_b import SilhouetteFormatError, list_casia_b, read_sequence
+from mocapkit.datasets.casia_b.cache import INDEX_KEYS, META_FILE, write_gei_cache
 from mocapkit.datasets.casia_b.gei import (
     OPENGAIT_SIZE,
     PER_CHOICES,
     GaitSequenceError,
     gait_energy_images,
 )
-from mocapkit.datasets.casia_b.cache import INDEX_KEYS, META_FILE, write_gei_cache
+from mocapkit.datasets.formats.casia_b import (
+    SilhouetteFormatError,
+    list_casia_b,
+    read_sequence,
+)
 from mocapkit.datasets.parallel import parallel_map
 from mocapkit.datasets.prepare_report import REPORT_JSON, REPORT_TXT, PrepareReportBase  # noqa: F401  (re-exported)
 
 #: Reasons a sequence is skipped (``GEIPrepareReport.skipped[i]["reason"]``).
 SKIP_REASONS = ("unreadable", "no_frames", "no_period", "too_short")
+#: What :func:`prepare_casia_b` does with a sequence whose gait period is not detected (``no_period``).
+NO_PERIOD_CHOICES = ("sequence", "fallback", "error")
 
 
 def parse_gei_size(text: str) -> tuple[int, int]:
@@ -63,6 +78,8 @@ class GEIPrepareReport(PrepareReportBase):
         missing: sequences absent from the folder (``"001/bg-02/090"``), as the listing names them: the
             expected 6 ``nm``, 2 ``bg`` and 2 ``cl`` walks in 11 views of each subject found.
         fallback_period: sequences whose GEIs use the fallback period (no period was detected).
+        whole_sequence: sequences given one GEI over the whole sequence because no period was
+            detected (``no_period="sequence"``, the default).
         seconds: wall-clock time of the whole run.
     """
 
@@ -79,6 +96,7 @@ class GEIPrepareReport(PrepareReportBase):
     listing_problems: list[str] = field(default_factory=list)
     missing: list[str] = field(default_factory=list)
     fallback_period: list[str] = field(default_factory=list)
+    whole_sequence: list[str] = field(default_factory=list)
     seconds: float = 0.0
 
     def totals(self) -> dict:
@@ -92,13 +110,15 @@ class GEIPrepareReport(PrepareReportBase):
             "listing_problems": len(self.listing_problems),
             "missing_sequences": len(self.missing),
             "fallback_period_used": len(self.fallback_period),
+            "one_gei_per_sequence_no_period": len(self.whole_sequence),
             "seconds": round(self.seconds, 3),
         }
 
     def to_dict(self) -> dict:
         return {"out": self.out, "source": self.source, "per": self.per, "size": list(self.size),
                 "totals": self.totals(), "skipped": self.skipped, "listing_problems": self.listing_problems,
-                "missing": self.missing, "fallback_period": self.fallback_period}
+                "missing": self.missing, "fallback_period": self.fallback_period,
+                "whole_sequence": self.whole_sequence}
 
     def summary(self) -> str:
         """One paragraph for the console."""
@@ -108,6 +128,7 @@ class GEIPrepareReport(PrepareReportBase):
                 f"{self.sequences_found} sequences in {self.seconds:.1f} s -> {self.out}\n"
                 f"skipped {len(self.skipped)} sequences{f' ({skipped})' if skipped else ''}; "
                 f"{len(self.listing_problems)} listing problems; {len(self.missing)} expected sequences missing; "
+                f"{len(self.whole_sequence)} without a detectable period, one GEI over the whole sequence; "
                 f"{len(self.fallback_period)} with the fallback period; details in {Path(self.out) / REPORT_TXT}")
 
     def _text_title(self) -> list[str]:
@@ -117,6 +138,7 @@ class GEIPrepareReport(PrepareReportBase):
     def _text_sections(self) -> list[tuple[str, int, list[str]]]:
         listed = (("Listing problems", self.listing_problems),
                   ("Missing sequences, subject/condition-nn/view", self.missing),
+                  ("One GEI per sequence (no period detected)", self.whole_sequence),
                   ("Sequences with the fallback period, no period detected", self.fallback_period))
         return [("Skipped sequences", len(self.skipped),
                  [f"  [{s['reason']}] {s['sequence']}: {s['message']}" for s in self.skipped]),
@@ -126,7 +148,7 @@ class GEIPrepareReport(PrepareReportBase):
 def prepare_casia_b(src: str | os.PathLike, out: str | os.PathLike, size: tuple[int, int] = OPENGAIT_SIZE,
                     per: str = "cycle", skip_bad: bool = False, workers: int = 1,
                     subjects: list[int] | None = None, fallback_period: int | None = None,
-                    progress: bool = True) -> GEIPrepareReport:
+                    no_period: str | None = None, progress: bool = True) -> GEIPrepareReport:
     """Build the GEIs of every sequence under ``src`` into a cache in ``out``.
 
     Args:
@@ -139,8 +161,13 @@ def prepare_casia_b(src: str | os.PathLike, out: str | os.PathLike, size: tuple[
         workers: processes building GEIs (1 = this process).
         subjects: only these subject IDs (1-based); None: all.
         fallback_period: with ``per="cycle"``, the cycle length (frames) used for a sequence whose
-            period is not detected (each such sequence is listed in the report); None: such a
-            sequence is bad (reason ``"no_period"``).
+            period is not detected (each such sequence is listed in the report); giving it implies
+            ``no_period="fallback"``.
+        no_period: with ``per="cycle"``, what a sequence whose gait period is not detected gives:
+            ``"sequence"`` (the default unless ``fallback_period`` is given): one GEI of all its
+            non-empty silhouettes, listed in the report ("one GEI per sequence (no period
+            detected)"); ``"fallback"``: GEIs of ``fallback_period`` frames; ``"error"``: the
+            sequence is bad (reason ``"no_period"``: raises, or is skipped with ``skip_bad``).
         progress: show a tqdm progress bar and print the summary.
 
     Returns:
@@ -150,7 +177,8 @@ def prepare_casia_b(src: str | os.PathLike, out: str | os.PathLike, size: tuple[
         FileNotFoundError: ``src`` does not exist.
         ValueError: ``src`` holds no sequence folder (the message gives the expected layout).
         SilhouetteFormatError: the first unreadable silhouette (names file and frame), unless ``skip_bad``.
-        GaitSequenceError: the first sequence without a GEI (names its folder and why), unless ``skip_bad``.
+        GaitSequenceError: the first sequence without a GEI (names its folder and why; with the default
+            ``no_period`` a missing period is not a reason), unless ``skip_bad``.
         RuntimeError: every sequence was skipped (the report is written first).
     """
     started = time.perf_counter()
@@ -162,6 +190,7 @@ def prepare_casia_b(src: str | os.PathLike, out: str | os.PathLike, size: tuple[
         raise ValueError(f"per must be one of {PER_CHOICES}, got {per!r}")
     if workers < 1:
         raise ValueError(f"workers must be >= 1, got {workers}")
+    no_period = _no_period_policy(no_period, fallback_period)
     if not src.is_dir():
         raise FileNotFoundError(f"CASIA-B source folder {src} does not exist or is not a folder")
 
@@ -172,7 +201,7 @@ def prepare_casia_b(src: str | os.PathLike, out: str | os.PathLike, size: tuple[
 
     rows: dict[str, list] = {key: [] for key in INDEX_KEYS}
     blocks: list[np.ndarray] = []
-    jobs = [(seq, size, per, fallback_period) for seq in listing.sequences]
+    jobs = [(seq, size, per, no_period, fallback_period) for seq in listing.sequences]
     with parallel_map(_build_one, jobs, workers, max_chunksize=8, desc="building GEIs", unit="seq",
                       progress=progress) as results:
         for seq, result in zip(listing.sequences, results):
@@ -196,6 +225,8 @@ def prepare_casia_b(src: str | os.PathLike, out: str | os.PathLike, size: tuple[
             report.frames_averaged += int(sum(frames))
             if result["fallback"]:
                 report.fallback_period.append(key.name)
+            if result["whole_sequence"]:
+                report.whole_sequence.append(key.name)
 
     out.mkdir(parents=True, exist_ok=True)
     (out / META_FILE).unlink(missing_ok=True)  # an older cache there must not look finished beside this report
@@ -208,6 +239,7 @@ def prepare_casia_b(src: str | os.PathLike, out: str | os.PathLike, size: tuple[
     index["names"] = np.asarray(rows["names"], dtype=str)
     meta = {"per": per, "size": list(size), "source": report.source,
             "options": {"skip_bad": skip_bad, "workers": workers, "fallback_period": fallback_period,
+                        "no_period": no_period,
                         "subjects": None if subjects is None else sorted(int(s) for s in subjects)},
             "counts": report.totals()}
     write_gei_cache(out, np.concatenate(blocks), index, meta)
@@ -221,14 +253,38 @@ def prepare_casia_b(src: str | os.PathLike, out: str | os.PathLike, size: tuple[
 # --------------------------------------------------------------------------- steps of prepare_casia_b
 
 
+def _no_period_policy(no_period: str | None, fallback_period: int | None) -> str:
+    """The ``no_period`` choice :func:`prepare_casia_b` applies, checked against ``fallback_period``."""
+    if no_period is None:
+        no_period = "sequence" if fallback_period is None else "fallback"
+    if no_period not in NO_PERIOD_CHOICES:
+        raise ValueError(f"no_period must be one of {NO_PERIOD_CHOICES}, got {no_period!r}")
+    if no_period == "fallback" and fallback_period is None:
+        raise ValueError("no_period='fallback' needs fallback_period (frames per cycle)")
+    if no_period != "fallback" and fallback_period is not None:
+        raise ValueError(f"fallback_period={fallback_period} contradicts no_period={no_period!r}: "
+                         "give one or the other")
+    if fallback_period is not None and int(fallback_period) < 1:
+        raise ValueError(f"fallback_period must be >= 1 frame, got {fallback_period}")
+    return no_period
+
+
 def _build_one(job) -> dict:
     """Worker: read one sequence and build its GEIs. Returns plain picklable values."""
-    seq, size, per, fallback_period = job
+    seq, size, per, no_period, fallback_period = job
+    whole = False
     try:
         if not seq.frames:
             raise GaitSequenceError("empty view folder (no PNG frames)", reason="no_frames")
         frames = read_sequence(seq)
-        geis, info = gait_energy_images(frames, size=size, per=per, fallback_period=fallback_period)
+        try:
+            geis, info = gait_energy_images(frames, size=size, per=per,
+                                            fallback_period=fallback_period if no_period == "fallback" else None)
+        except GaitSequenceError as exc:
+            if exc.reason != "no_period" or no_period != "sequence":
+                raise
+            geis, info = gait_energy_images(frames, size=size, per="sequence")  # one GEI of every non-empty frame
+            whole = True
     except SilhouetteFormatError as exc:
         return {"error": exc, "reason": "unreadable"}
     except GaitSequenceError as exc:
@@ -237,4 +293,5 @@ def _build_one(job) -> dict:
         return {"error": SilhouetteFormatError(seq.folder, None, f"{type(exc).__name__}: {exc}"),
                 "reason": "unreadable"}
     return {"geis": np.round(geis * 255).astype(np.uint8), "frames": info.frames_per_gei.tolist(),
-            "frames_read": len(frames), "fallback": per == "cycle" and not info.period_detected}
+            "frames_read": len(frames), "fallback": per == "cycle" and not whole and not info.period_detected,
+            "whole_sequence": whole}

@@ -140,14 +140,17 @@ def _load(fmt: str, which: int, doing: str):
 # --------------------------------------------------------------------------- NTU
 
 
-def _read_ntu(path: str | os.PathLike, max_bodies: int = 2, denoise_spread: bool = False,
-              min_frames: int = 1) -> Motion:
-    """An NTU ``.skeleton`` file as a Motion of its main body (options go to ``select_main_bodies``)."""
+def _read_ntu(path: str | os.PathLike, max_bodies: int = 2, **selection_options) -> Motion:
+    """An NTU ``.skeleton`` file as a Motion of its main body.
+
+    ``selection_options`` go to ``select_main_bodies`` (``denoise_spread``, ``min_frames``,
+    ``denoise_flicker``, ...); its defaults are those of ``mocapkit prepare ntu``.
+    """
     from mocapkit.datasets.formats.layouts import NTU25
     from mocapkit.datasets.formats.ntu_skeleton import read_skeleton, select_main_bodies
 
     seq = read_skeleton(path)
-    selection = select_main_bodies(seq, max_bodies=max_bodies, denoise_spread=denoise_spread, min_frames=min_frames)
+    selection = select_main_bodies(seq, max_bodies=max_bodies, **selection_options)
     bodies = []
     for track in selection.kept:
         body = seq.positions[track].copy()                       # [T, 25, 3], zeros where absent
@@ -183,7 +186,10 @@ def _write_ntu(path: str | os.PathLike, motion: Motion, body_ids: list[int] | No
     Only positions survive: depth/colour pixels are re-projected and orientations are identity.
     """
     from mocapkit.datasets.formats.layouts import NTU25
-    from mocapkit.datasets.formats.ntu_skeleton import sequence_from_positions, write_skeleton
+    from mocapkit.datasets.formats.ntu_skeleton import (
+        sequence_from_positions,
+        write_skeleton,
+    )
 
     if tuple(motion.joint_names) != NTU25.joint_names:
         raise ValueError(f"{motion.source or motion.name}: only motions on the ntu25 layout can be written as "

@@ -26,8 +26,10 @@ for gigabytes).
 Bodies are grouped into *tracks* by body ID across frames: ``positions`` is
 ``[tracks, frames, 25, 3]`` with zeros where a track is absent in a frame.
 :func:`select_main_bodies` reduces the tracks to the (at most) two actors used
-for training, following the dataset authors' advice (most motion wins; an
-option drops non-human "bodies" by their spread).
+for training, following the dataset authors' preprocessing (drop tracks seen in too
+few frames, then non-human "bodies" by their spread, then rank by motion) plus a
+flicker rule of ours (drop tracks that come and go or jump), and says why for every
+track.
 """
 from __future__ import annotations
 
@@ -203,8 +205,7 @@ def parse_skeleton_text(text: bytes | str, name: str = "<memory>", source: str |
         text = text.encode()
     lines = text.splitlines()  # handles \r\n, \n and \r
     stem = Path(name).name
-    if stem.endswith(".skeleton"):
-        stem = stem[: -len(".skeleton")]
+    stem = stem.removesuffix(".skeleton")
     if not lines or not lines[0].strip():
         raise SkeletonFormatError(source, 1, "empty file: expected the frame count")
 
@@ -427,27 +428,51 @@ def sequence_from_positions(name: str, positions: np.ndarray, body_ids: list[int
 
 # --------------------------------------------------------------------------- body selection
 
+#: Length rule (NTU authors' ``get_raw_denoised_data.py``, used by pyskl): a track must be present in
+#: more than 11 frames, i.e. at least this many.
+MIN_BODY_FRAMES = 12
+#: Spread rule (same script): a frame is "wide" when its x-spread exceeds ``SPREAD_RATIO`` × its y-spread;
+#: a track wide in at least ``SPREAD_THRESHOLD`` of its frames is not a person (a chair, a table).
+SPREAD_RATIO = 0.8
+SPREAD_THRESHOLD = 0.69754
+#: Flicker rule (ours, see :func:`select_main_bodies`): a person's track covers at least this fraction of
+#: the observed frames between its first and last appearance ...
+MIN_SPAN_COVERAGE = 0.8
+#: ... and its centre (mean of the 25 joints) moves at most this far between consecutive frames, metres
+#: (median over its pairs of consecutive present frames; 0.3 m a frame is 9 m/s at 30 fps).
+MAX_MEDIAN_STEP_M = 0.3
+
+#: Rule codes of :attr:`BodySelection.rules` for a dropped track.
+DROP_RULES = ("short", "spread", "flicker", "jump", "less_motion")
+#: Rule codes for a kept track: ranked by motion among several candidates, the only candidate left by the
+#: rules, or kept although a rule would drop it (every candidate failed that rule; see select_main_bodies).
+KEEP_RULES = ("most_motion", "only_candidate", "rescued_short", "rescued_spread", "rescued_flicker")
+
 
 @dataclass
 class BodySelection:
-    """Which tracks :func:`select_main_bodies` kept and why the others were dropped.
+    """Which tracks :func:`select_main_bodies` kept and why, and why the others were dropped.
 
     Attributes:
-        positions: float32 ``[max_bodies, T, 25, 3]``, kept tracks first (most motion first), zero padded.
-        kept: indices into the sequence's tracks.
-        dropped: ``{track index: reason}`` for every track not kept.
+        positions: float32 ``[max_bodies, T, 25, 3]``, kept tracks in rank order (body 0 first), zero padded.
+        kept: indices into the sequence's tracks, body 0 first.
+        dropped: ``{track index: reason}`` for every track not kept (a sentence with the measured value).
+        kept_reasons: ``{track index: reason}`` for every kept track.
+        rules: ``{track index: code}`` for every track: one of :data:`DROP_RULES` or :data:`KEEP_RULES`.
     """
 
     positions: np.ndarray
     kept: list[int]
     dropped: dict[int, str] = field(default_factory=dict)
+    kept_reasons: dict[int, str] = field(default_factory=dict)
+    rules: dict[int, str] = field(default_factory=dict)
 
 
 def body_motion(positions: np.ndarray, present: np.ndarray) -> np.ndarray:
     """Sum over x, y, z of the joint-position variance over each track's present frames (NTU FAQ).
 
     Args:
-        positions: ``[B, T, 25, 3]``; present: bool ``[B, T]``. Returns ``[B]``.
+        positions: ``[B, T, 25, 3]``; present: bool ``[B, T]``. Returns ``[B]`` (square metres).
     """
     out = np.zeros(len(positions))
     for b in range(len(positions)):
@@ -457,11 +482,11 @@ def body_motion(positions: np.ndarray, present: np.ndarray) -> np.ndarray:
     return out
 
 
-def spread_noise_ratio(positions: np.ndarray, present: np.ndarray, ratio: float = 0.8) -> np.ndarray:
+def spread_noise_ratio(positions: np.ndarray, present: np.ndarray, ratio: float = SPREAD_RATIO) -> np.ndarray:
     """Fraction of each track's frames whose x-spread exceeds ``ratio`` × y-spread, ``[B]``.
 
-    Non-human "bodies" (chairs, tables) are wider than tall; pyskl drops a track
-    when this fraction is at least 0.69754.
+    Non-human "bodies" (chairs, tables) are wider than tall; the NTU authors' script (and pyskl)
+    drop a track when this fraction is at least :data:`SPREAD_THRESHOLD` (0.69754).
     """
     spread = positions.max(axis=2) - positions.min(axis=2)  # [B, T, 3]
     wide = spread[..., 0] > ratio * spread[..., 1]
@@ -469,38 +494,161 @@ def spread_noise_ratio(positions: np.ndarray, present: np.ndarray, ratio: float 
     return (wide & present).sum(1) / n
 
 
-def select_main_bodies(seq: SkeletonSequence, max_bodies: int = 2, denoise_spread: bool = False,
-                       spread_threshold: float = 0.69754, min_frames: int = 1) -> BodySelection:
-    """Keep the ``max_bodies`` tracks with the most motion; report every other one.
+def track_steadiness(positions: np.ndarray, present: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """How steadily each track is seen and how far it jumps: ``(span_coverage [B], median_step [B])``.
+
+    Args:
+        positions: ``[B, T, 25, 3]`` metres; present: bool ``[B, T]``.
+
+    Returns:
+        span_coverage: the fraction of the *observed* frames (frames in which any track is
+            present; frames the sensor lost entirely do not count) between the track's first and
+            last appearance in which it is present. 1.0 for a track seen without a gap; about
+            ``p`` for a track that appears in a random fraction ``p`` of the frames.
+        median_step: the median distance (metres) its centre, the mean of its joints, moves
+            between consecutive frames ``t, t+1`` in which it is present in both; 0 if there is
+            no such pair.
+    """
+    B = len(positions)
+    observed = present.any(axis=0)
+    seen = present[:, observed]                                    # [B, T_obs]
+    coverage = np.ones(B)
+    step = np.zeros(B)
+    centre = positions.mean(axis=2)                                # [B, T, 3]
+    for b in range(B):
+        idx = np.flatnonzero(seen[b])
+        if len(idx):
+            coverage[b] = len(idx) / (idx[-1] - idx[0] + 1)
+        pairs = present[b, 1:] & present[b, :-1]
+        if pairs.any():
+            moves = np.linalg.norm(centre[b, 1:] - centre[b, :-1], axis=-1)[pairs]
+            step[b] = float(np.median(moves))
+    return coverage, step
+
+
+def select_main_bodies(seq: SkeletonSequence, max_bodies: int = 2, denoise_spread: bool = True,
+                       spread_threshold: float = SPREAD_THRESHOLD, min_frames: int = MIN_BODY_FRAMES,
+                       denoise_flicker: bool = True, min_span_coverage: float = MIN_SPAN_COVERAGE,
+                       max_median_step: float = MAX_MEDIAN_STEP_M) -> BodySelection:
+    """Reduce a file's tracks to its (at most) ``max_bodies`` actors, body 0 first; report every decision.
+
+    The rules run in this order, each on the tracks the previous ones left (*candidates*); the
+    first three follow the NTU authors' preprocessing (``get_raw_denoised_data.py``, used by pyskl),
+    the flicker rule is ours:
+
+    1. **Length**: drop a track present in fewer than ``min_frames`` frames (12: "more than 11"),
+       except the longest track(s) of the file: a short clip still gives a body.
+    2. **Spread** (``denoise_spread``): drop a track whose x-spread exceeds 0.8 × its y-spread in at
+       least ``spread_threshold`` of its frames (wider than tall: a chair, a table).
+    3. **Flicker** (``denoise_flicker``): drop a track that is present in fewer than
+       ``min_span_coverage`` of the observed frames of its own span (it appears and disappears:
+       reason ``flicker``), or whose centre moves more than ``max_median_step`` metres between
+       consecutive frames (median over its consecutive present pairs: reason ``jump``); see
+       :func:`track_steadiness`. Why: the motion ranking of step 4 is a variance over a track's
+       present frames, so a spurious detection that comes and goes and jumps around has by far
+       the largest "motion" and would become body 0; a person is tracked without gaps (the Kinect
+       SDK gives a new body ID after losing someone) and moves less than 9 m/s. Frames in which
+       the sensor saw no body at all do not count as gaps.
+    4. **Motion**: rank the remaining tracks by :func:`body_motion` (NTU FAQ: most motion is the
+       actor), keep the first ``max_bodies``, drop the rest (``less_motion``).
+
+    No rule leaves a file without a body: rule 1 keeps the longest track(s) even when they are short
+    (rule code ``rescued_short``), and when rule 2 or 3 would drop every candidate, the one it judges
+    best (the least wide; the best covered, then the smallest step; ties: more frames, then file
+    order) is kept, with the rule code ``rescued_spread`` / ``rescued_flicker``; the reason is in
+    :attr:`BodySelection.kept_reasons`.
+    Only a file with no body in any frame gives none. ``denoise_spread=False, min_frames=1,
+    denoise_flicker=False`` is the former default (most motion wins).
 
     Args:
         max_bodies: tracks kept (2 for NTU training).
-        denoise_spread: drop tracks that are wider than tall in at least
-            ``spread_threshold`` of their frames (non-human detections).
-        min_frames: drop tracks present in fewer frames (pyskl uses 12).
+        denoise_spread, spread_threshold: rule 2.
+        min_frames: rule 1 (1 disables it).
+        denoise_flicker, min_span_coverage, max_median_step: rule 3.
     """
+    if max_bodies < 1:
+        raise ValueError(f"max_bodies must be >= 1, got {max_bodies}")
     positions = seq.positions
     present = seq.present
+    counts = present.sum(1)
     dropped: dict[int, str] = {}
-    candidates = []
-    noise = spread_noise_ratio(positions, present) if denoise_spread else None
+    kept_reasons: dict[int, list[str]] = {}  # rescues, per track
+    rules: dict[int, str] = {}
+    candidates = [b for b in range(seq.num_bodies) if counts[b] > 0]
     for b in range(seq.num_bodies):
-        n = int(present[b].sum())
-        if n < min_frames:
-            dropped[b] = f"present in {n} frames (< {min_frames})"
-        elif noise is not None and noise[b] >= spread_threshold:
-            dropped[b] = f"spread denoising: wider than tall in {noise[b]:.0%} of its frames"
-        else:
-            candidates.append(b)
+        if counts[b] == 0:  # cannot come from a parsed file (a track exists because it is somewhere)
+            dropped[b], rules[b] = "present in no frame", "short"
+
+    # 1. length: never below the longest track
+    if candidates:
+        longest = max(int(counts[b]) for b in candidates)
+        short = [b for b in candidates if counts[b] < min_frames and counts[b] < longest]
+        for b in short:
+            dropped[b], rules[b] = f"present in {counts[b]} frames (< {min_frames})", "short"
+        candidates = [b for b in candidates if b not in short]
+        for b in candidates:
+            if counts[b] < min_frames:
+                rules[b] = "rescued_short"
+                kept_reasons[b] = [(f"present in only {counts[b]} frames (< {min_frames}), but no track of "
+                                    "the file is longer")]
+
+    # 2. spread
+    if denoise_spread and len(candidates) > 1:
+        noise = spread_noise_ratio(positions, present)
+        wide = [b for b in candidates if noise[b] >= spread_threshold]
+        if len(wide) == len(candidates):  # every candidate is wide: keep the least wide
+            best = min(candidates, key=lambda b: (noise[b], -counts[b], b))
+            wide.remove(best)
+            rules[best] = "rescued_spread"
+            kept_reasons.setdefault(best, []).append(f"wider than tall in {noise[best]:.0%} of its frames, like "
+                                                     "every other track: the least wide is kept")
+        for b in wide:
+            dropped[b], rules[b] = (f"spread denoising: wider than tall in {noise[b]:.0%} of its frames "
+                                    f"(>= {spread_threshold:.3%})"), "spread"
+        candidates = [b for b in candidates if b not in wide]
+
+    # 3. flicker and jumps
+    if denoise_flicker and len(candidates) > 1:
+        coverage, step = track_steadiness(positions, present)
+        unsteady = {}
+        for b in candidates:
+            if coverage[b] < min_span_coverage:
+                unsteady[b] = ("flicker", (f"flickering: present in {coverage[b]:.0%} of the observed frames "
+                                           f"of its span (< {min_span_coverage:.0%})"))
+            elif step[b] > max_median_step:
+                unsteady[b] = ("jump", (f"jumping: its centre moves {step[b]:.2f} m a frame (median; "
+                                        f"> {max_median_step:g} m)"))
+        if len(unsteady) == len(candidates):  # every candidate is unsteady: keep the steadiest
+            best = min(candidates, key=lambda b: (-coverage[b], step[b], -counts[b], b))
+            rules[best] = "rescued_flicker"
+            kept_reasons.setdefault(best, []).append(f"{unsteady.pop(best)[1]}, like every other track: "
+                                                     "the steadiest is kept")
+        for b, (rule, reason) in unsteady.items():
+            dropped[b], rules[b] = reason, rule
+        candidates = [b for b in candidates if b not in unsteady]
+
+    # 4. motion
     motion = body_motion(positions, present)
-    candidates.sort(key=lambda b: -motion[b])
+    candidates.sort(key=lambda b: (-motion[b], b))
     kept = candidates[:max_bodies]
     for b in candidates[max_bodies:]:
-        dropped[b] = f"less motion ({motion[b]:.4g}) than the {max_bodies} kept tracks"
+        dropped[b], rules[b] = f"less motion ({motion[b]:.4g}) than the {max_bodies} kept tracks", "less_motion"
+    reasons = {}
+    for rank, b in enumerate(kept):
+        if len(candidates) == 1:
+            why = ("the only track" if seq.num_bodies == 1
+                   else f"the only track left by the rules (of {seq.num_bodies})")
+        else:
+            why = f"motion {motion[b]:.4g}, rank {rank + 1} of {len(candidates)} candidates"
+        if b in kept_reasons:  # rescued by a rule: the rule code stays rescued_*
+            why = "; ".join([*kept_reasons[b], why])
+        else:
+            rules[b] = "only_candidate" if len(candidates) == 1 else "most_motion"
+        reasons[b] = why
     out = np.zeros((max_bodies,) + positions.shape[1:], dtype=np.float32)
     for k, b in enumerate(kept):
         out[k] = positions[b]
-    return BodySelection(positions=out, kept=kept, dropped=dropped)
+    return BodySelection(positions=out, kept=kept, dropped=dropped, kept_reasons=reasons, rules=rules)
 
 
 def read_missing_list(path: str | os.PathLike) -> set[str]:

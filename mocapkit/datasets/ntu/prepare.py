@@ -6,8 +6,10 @@
     float32 ``[total_frames, max_bodies, 25, 3]``, joint positions in metres
     (camera space). All samples are concatenated along the first axis: sample
     ``i`` is rows ``offsets[i] : offsets[i] + lengths[i]``. Bodies are those
-    kept by :func:`~mocapkit.datasets.formats.ntu_skeleton.select_main_bodies`, most
-    motion first; a body absent in a frame (or a missing second body) is zeros.
+    kept by :func:`~mocapkit.datasets.formats.ntu_skeleton.select_main_bodies` (by default the
+    NTU authors' rules: tracks seen in 12 frames or more, spread denoising, then most motion first;
+    plus the flicker rule: tracks that come and go or jump are dropped); a body absent in a frame
+    (or a missing second body) is zeros.
 ``index.npz``
     one entry per sample, in sorted-name order: ``names`` (str), ``offsets``,
     ``lengths`` (frames), ``labels`` (0-based action), ``subjects``,
@@ -19,8 +21,11 @@
     finished cache.
 ``report.json`` / ``report.txt``
     every file left out and why (missing-skeleton list, malformed with file and
-    line, bad name, duplicate name), every sample where bodies were dropped
-    (which body IDs and why), samples where no body was kept, and totals.
+    line, bad name, duplicate name); the body selection of every sample (which body
+    ID became body 0 / 1 and why, which were dropped and by which rule); samples
+    where no body was kept; totals, with the number of tracks per rule. ``report.txt``
+    lists every sample with more than one track, a rescue or no body (a sample whose
+    only track is body 0 is counted); the console gets :meth:`PrepareReport.summary`.
 
 Frames are **not trimmed**: ``lengths[i]`` is always the frame count written in
 the file, so frames in which no kept body is present are rows of zeros. This
@@ -38,7 +43,7 @@ from __future__ import annotations
 
 import os
 import time
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -54,6 +59,9 @@ from mocapkit.datasets.cache_files import (
 )
 from mocapkit.datasets.formats.errors import MotionFormatError
 from mocapkit.datasets.formats.ntu_skeleton import (
+    DROP_RULES,
+    KEEP_RULES,
+    MIN_BODY_FRAMES,
     NUM_JOINTS,
     SkeletonFormatError,
     parse_ntu_name,
@@ -63,7 +71,7 @@ from mocapkit.datasets.formats.ntu_skeleton import (
 )
 from mocapkit.datasets.formats.safe_io import regular_file_size
 from mocapkit.datasets.parallel import parallel_map
-from mocapkit.datasets.prepare_report import REPORT_JSON, REPORT_TXT, PrepareReportBase  # noqa: F401  (re-exported)
+from mocapkit.datasets.prepare_report import REPORT_JSON, REPORT_TXT, PrepareReportBase
 from mocapkit.io_atomic import atomic_path
 
 #: Version of the on-disk layout written here and expected by :class:`~mocapkit.datasets.ntu.cache.NTUCache`.
@@ -87,8 +95,10 @@ class PrepareReport(PrepareReportBase):
         skipped: one dict per file left out: ``{"file", "name", "reason", "message"}``
             with ``reason`` one of ``"missing_list"``, ``"malformed"``, ``"bad_name"``,
             ``"duplicate_name"``.
-        dropped_bodies: one dict per sample where bodies were dropped:
-            ``{"name", "kept_body_ids", "dropped": [{"body_id", "reason"}, ...]}``.
+        bodies: the body selection of every sample written, in cache order:
+            ``{"name", "tracks", "kept": [{"body_id", "rule", "reason"}, ...] (body 0 first),
+            "dropped": [{"body_id", "rule", "reason"}, ...]}``; rules are the codes of
+            :data:`~mocapkit.datasets.formats.ntu_skeleton.KEEP_RULES` and ``DROP_RULES``.
         empty_samples: names of samples written with no body at all (all zeros).
         seconds: wall-clock time of the whole run.
     """
@@ -98,11 +108,25 @@ class PrepareReport(PrepareReportBase):
     samples_written: int = 0
     total_frames: int = 0
     skipped: list[dict] = field(default_factory=list)
-    dropped_bodies: list[dict] = field(default_factory=list)
+    bodies: list[dict] = field(default_factory=list)
     empty_samples: list[str] = field(default_factory=list)
     seconds: float = 0.0
 
+    @property
+    def dropped_bodies(self) -> list[dict]:
+        """The entries of :attr:`bodies` where a track was dropped."""
+        return [b for b in self.bodies if b["dropped"]]
+
+    def rule_counts(self) -> dict[str, int]:
+        """Tracks per rule code, over every sample: dropped ones first (in rule order), then kept ones."""
+        counts = dict.fromkeys((*DROP_RULES, *KEEP_RULES), 0)
+        for entry in self.bodies:
+            for track in (*entry["dropped"], *entry["kept"]):
+                counts[track["rule"]] = counts.get(track["rule"], 0) + 1
+        return counts
+
     def totals(self) -> dict:
+        rules = self.rule_counts()
         return {
             "files_found": self.files_found,
             "samples_written": self.samples_written,
@@ -112,32 +136,68 @@ class PrepareReport(PrepareReportBase):
             "skipped_bad_name": self.count("bad_name"),
             "skipped_duplicate_name": self.count("duplicate_name"),
             "samples_with_dropped_bodies": len(self.dropped_bodies),
+            **{f"tracks_dropped_{rule}": rules[rule] for rule in DROP_RULES},
+            **{f"tracks_kept_{rule}": rules[rule] for rule in KEEP_RULES},
             "empty_samples": len(self.empty_samples),
             "seconds": round(self.seconds, 3),
         }
 
     def to_dict(self) -> dict:
         return {"out": self.out, "totals": self.totals(), "skipped": self.skipped,
-                "dropped_bodies": self.dropped_bodies, "empty_samples": self.empty_samples}
+                "bodies": self.bodies, "empty_samples": self.empty_samples}
+
+    def summary(self) -> str:
+        """A few lines for the console: counts per reason and where the details are."""
+        rules = self.rule_counts()
+        skipped = ", ".join(f"{self.count(r)} {r}" for r in ("missing_list", "malformed", "bad_name", "duplicate_name")
+                            if self.count(r))
+        dropped = ", ".join(f"{rules[r]} {_RULE_WORDS[r]}" for r in DROP_RULES if rules[r]) or "none"
+        rescued = ", ".join(f"{rules[r]} {_RULE_WORDS[r]}" for r in KEEP_RULES if r.startswith("rescued") and rules[r])
+        lines = [(f"{self.samples_written} samples ({self.total_frames} frames) from {self.files_found} files in "
+                  f"{self.seconds:.1f} s -> {self.out}"),
+                 f"skipped {len(self.skipped)} files{f' ({skipped})' if skipped else ''}",
+                 f"body selection: tracks dropped in {len(self.dropped_bodies)} samples: {dropped}"]
+        if rescued:
+            lines.append(f"kept although a rule would drop them (every track of the sample failed it): {rescued}")
+        lines.append(f"{len(self.empty_samples)} samples with no body (all zeros); "
+                     f"every decision in {Path(self.out) / REPORT_TXT} and {REPORT_JSON}")
+        return "\n".join(lines)
 
     def _text_title(self) -> list[str]:
         return [f"NTU preparation report for {self.out}"]
 
     def _text_sections(self) -> list[tuple[str, int, list[str]]]:
-        dropped = []
-        for d in self.dropped_bodies:
-            dropped.append(f"  {d['name']}: kept {d['kept_body_ids']}")
-            dropped += [f"      dropped body {x['body_id']}: {x['reason']}" for x in d["dropped"]]
+        listed, single = [], 0
+        for d in self.bodies:
+            kept, dropped = d["kept"], d["dropped"]
+            if len(kept) == 1 and not dropped and kept[0]["rule"] == "only_candidate":
+                single += 1
+                continue
+            listed.append(f"  {d['name']} ({d['tracks']} tracks):")
+            listed += [f"      body {k}: {x['body_id']} [{x['rule']}] {x['reason']}" for k, x in enumerate(kept)]
+            listed += [f"      dropped {x['body_id']} [{x['rule']}] {x['reason']}" for x in dropped]
+        heading = (f"Body selection (the {single} samples whose only track is body 0 are not listed); "
+                   "samples listed")
         return [("Skipped files", len(self.skipped),
                  [f"  [{s['reason']}] {s['file']}: {s['message']}" for s in self.skipped]),
-                ("Samples with dropped bodies", len(self.dropped_bodies), dropped),
+                (heading, len(self.bodies) - single, listed),
                 ("Samples with no body kept, stored as zeros", len(self.empty_samples),
                  [f"  {name}" for name in self.empty_samples])]
 
 
+#: How :meth:`PrepareReport.summary` names each rule code.
+_RULE_WORDS = {
+    "short": "seen in too few frames", "spread": "wider than tall (spread)", "flicker": "flickering",
+    "jump": "jumping", "less_motion": "beyond the kept bodies (less motion)",
+    "most_motion": "ranked by motion", "only_candidate": "only candidate",
+    "rescued_short": "short", "rescued_spread": "wide", "rescued_flicker": "flickering or jumping",
+}
+
+
 def prepare_ntu(src: str | os.PathLike, out: str | os.PathLike, workers: int = 1, skip_bad: bool = False,
                 missing_list: str | os.PathLike | Iterable[str] | None = None, max_bodies: int = 2,
-                denoise_spread: bool = False, min_body_frames: int = 1, progress: bool = True) -> PrepareReport:
+                denoise_spread: bool = True, min_body_frames: int = MIN_BODY_FRAMES, denoise_flicker: bool = True,
+                progress: bool = True) -> PrepareReport:
     """Parse every ``.skeleton`` file under ``src`` (recursively) into a cache in ``out``.
 
     Args:
@@ -150,8 +210,10 @@ def prepare_ntu(src: str | os.PathLike, out: str | os.PathLike, workers: int = 1
         missing_list: path of an official "samples with missing skeletons" list, or
             an iterable of sample names; those samples are left out.
         max_bodies: bodies kept per sample (``positions.npy`` axis 1).
-        denoise_spread, min_body_frames: passed to ``select_main_bodies``
-            (``min_frames``); pyskl uses ``True`` and 12.
+        denoise_spread, min_body_frames, denoise_flicker: the body selection rules, passed to
+            :func:`~mocapkit.datasets.formats.ntu_skeleton.select_main_bodies` (``min_frames``). The
+            defaults (True, 12, True) are the NTU authors' rules, as pyskl uses them, plus the flicker
+            rule; ``False, 1, False`` is the former default (most motion wins).
         progress: show a tqdm progress bar.
 
     Returns:
@@ -199,7 +261,8 @@ def prepare_ntu(src: str | os.PathLike, out: str | os.PathLike, workers: int = 1
     positions_path = out / POSITIONS_FILE
     positions = np.lib.format.open_memmap(positions_path, mode="w+", dtype=np.float32,
                                           shape=(capacity, max_bodies, NUM_JOINTS, 3))
-    options = {"max_bodies": max_bodies, "denoise_spread": denoise_spread, "min_body_frames": min_body_frames}
+    options = {"max_bodies": max_bodies, "denoise_spread": denoise_spread, "min_body_frames": min_body_frames,
+               "denoise_flicker": denoise_flicker}
     jobs = [(str(p), options) for p in files]
     rows: dict[str, list] = {k: [] for k in INDEX_KEYS}
     cursor = 0
@@ -232,10 +295,9 @@ def prepare_ntu(src: str | os.PathLike, out: str | os.PathLike, workers: int = 1
                                    ("replications", sample.replication)):
                     rows[key].append(value)
                 cursor += length
-                if result["dropped"]:
-                    report.dropped_bodies.append({"name": path.stem, "kept_body_ids": result["kept_body_ids"],
-                                                  "dropped": result["dropped"]})
-                if not result["kept_body_ids"]:
+                report.bodies.append({"name": path.stem, "tracks": result["tracks"], "kept": result["kept"],
+                                      "dropped": result["dropped"]})
+                if not result["kept"]:
                     report.empty_samples.append(path.stem)
         positions.flush()
         del positions
@@ -246,32 +308,65 @@ def prepare_ntu(src: str | os.PathLike, out: str | os.PathLike, workers: int = 1
         positions_path.unlink(missing_ok=True)
         raise
 
-    index = {k: np.asarray(v, dtype=np.int64) for k, v in rows.items() if k != "names"}
-    index["names"] = np.asarray(rows["names"], dtype="<U20")
-    save_npz_atomic(out / INDEX_FILE, **index)
-
     report.samples_written = len(rows["names"])
     report.total_frames = cursor
     report.seconds = time.perf_counter() - started
     report.write(out)
-    labels = index["labels"]
+    write_index_and_meta(out, rows, source=str(src.resolve()), max_bodies=max_bodies, class_names=class_names,
+                         options={**options, "skip_bad": skip_bad, "workers": workers, "missing_list": missing_source},
+                         totals=report.totals(), nan_rows=nan_rows)
+    return report
+
+
+def write_index_and_meta(out: str | os.PathLike, rows: Mapping[str, Sequence], *, source: str, max_bodies: int,
+                         class_names: list[str] | None, options: dict, totals: dict, nan_rows: int = 0,
+                         extra: Mapping | None = None) -> dict:
+    """Finish an NTU cache whose ``positions.npy`` is written: ``index.npz``, then ``meta.json`` (last).
+
+    The one place that lays out ``index.npz`` and ``meta.json``; :func:`prepare_ntu` and
+    :func:`mocapkit.datasets.interop.pyskl.import_pyskl` both end with it.
+
+    Args:
+        out: the cache folder, holding ``positions.npy`` (float32 ``[sum(lengths), max_bodies, 25, 3]``, metres).
+        rows: one sequence per key of :data:`INDEX_KEYS`, one entry per sample in sorted-name order
+            (``names`` str; the others int, ``labels`` 0-based, the IDs 1-based).
+        source: what the cache was made from (``meta["source"]``).
+        max_bodies: bodies per sample (axis 1 of ``positions.npy``).
+        class_names: ``num_classes`` names (line k = action k+1) or None (then 60, or 120 if an action is above 60).
+        options, totals: ``meta["options"]`` and ``meta["totals"]``.
+        nan_rows: rows of ``positions.npy`` holding NaN (recorded in the integrity record).
+        extra: more ``meta.json`` keys (placed before ``"integrity"``).
+
+    Returns:
+        The ``meta`` written.
+
+    Raises:
+        ValueError: ``class_names`` is shorter than the largest action needs.
+    """
+    out = Path(out)
+    index = {k: np.asarray(rows[k], dtype=np.int64) for k in INDEX_KEYS if k != "names"}
+    index["names"] = np.asarray(rows["names"], dtype="<U20")
+    num_classes = _num_classes(class_names, index["labels"])
+    save_npz_atomic(out / INDEX_FILE, **index)
+    num_samples = len(index["names"])
     meta = {
         "format": CACHE_FORMAT,
         "version": CACHE_VERSION,
-        "source": str(src.resolve()),
-        "num_samples": report.samples_written,
-        "total_frames": cursor,
+        "source": source,
+        "num_samples": num_samples,
+        "total_frames": int(index["lengths"].sum()),
         "max_bodies": max_bodies,
         "num_joints": NUM_JOINTS,
-        "num_classes": _num_classes(class_names, labels),
+        "num_classes": num_classes,
         "class_names": class_names,
-        "options": {**options, "skip_bad": skip_bad, "workers": workers, "missing_list": missing_source},
-        "totals": report.totals(),
+        "options": options,
+        "totals": totals,
         "frames_trimmed": False,
-        "integrity": integrity_record(out, POSITIONS_FILE, report.samples_written, nan_rows=nan_rows),
+        **(extra or {}),
+        "integrity": integrity_record(out, POSITIONS_FILE, num_samples, nan_rows=nan_rows),
     }
     write_meta(out, meta)
-    return report
+    return meta
 
 
 # --------------------------------------------------------------------------- steps of prepare_ntu
@@ -370,15 +465,19 @@ def _parse_one(job: tuple[str, dict]) -> dict:
     try:
         seq = read_skeleton(path)
         selection = select_main_bodies(seq, max_bodies=options["max_bodies"], denoise_spread=options["denoise_spread"],
-                                       min_frames=options["min_body_frames"])
+                                       min_frames=options["min_body_frames"],
+                                       denoise_flicker=options["denoise_flicker"])
     except MotionFormatError as exc:
         return {"error": exc}
     except Exception as exc:  # noqa: BLE001 - one bad file must not end the batch (see --skip-bad)
         return {"error": SkeletonFormatError(path, None, f"unexpected {type(exc).__name__} while reading: {exc}")}
     return {
         "positions": selection.positions,
-        "kept_body_ids": [seq.body_ids[b] for b in selection.kept],
-        "dropped": [{"body_id": seq.body_ids[b], "reason": reason} for b, reason in sorted(selection.dropped.items())],
+        "tracks": seq.num_bodies,
+        "kept": [{"body_id": seq.body_ids[b], "rule": selection.rules[b], "reason": selection.kept_reasons[b]}
+                 for b in selection.kept],
+        "dropped": [{"body_id": seq.body_ids[b], "rule": selection.rules[b], "reason": reason}
+                    for b, reason in sorted(selection.dropped.items())],
     }
 
 

@@ -1,0 +1,66 @@
+"""Body 0's reference frame (mocapkit.models.body_frame): masked medians, and both models shrug off glitch frames."""
+import numpy as np
+import torch
+
+from mocapkit.datasets.formats.layouts import NTU25
+from mocapkit.models import EnergyImage
+from mocapkit.models.body_frame import body0_origin, body0_size, masked_median
+from mocapkit.models.stgcn import stgcn
+from tests.test_energy_image import batch, standing_skeleton
+
+
+def test_masked_median_matches_numpy_and_gives_zero_without_frames():
+    rng = np.random.default_rng(0)
+    values = rng.normal(size=(5, 13, 3)).astype(np.float32)
+    mask = rng.random((5, 13)) < 0.6
+    mask[3] = False                       # no frame at all
+    mask[4] = False
+    mask[4, [2, 7]] = True                # an even count: mean of the two middle values
+    got = masked_median(torch.from_numpy(values), torch.from_numpy(mask)).numpy()
+    for n in range(5):
+        expected = np.median(values[n][mask[n]], axis=0) if mask[n].any() else np.zeros(3)
+        np.testing.assert_allclose(got[n], expected, atol=1e-6)
+
+
+def test_masked_median_has_gradients():
+    values = torch.randn(2, 9, 3, requires_grad=True)
+    mask = torch.ones(2, 9, dtype=torch.bool)
+    masked_median(values, mask).sum().backward()
+    assert torch.isfinite(values.grad).all() and values.grad.abs().sum() > 0
+
+
+def glitched(frames: int = 20, jump: float = 2.0) -> tuple[torch.Tensor, torch.Tensor]:
+    """A standing body ``[T, 25, 3]`` and the same whose first frame is a glitch ``jump`` metres aside and away."""
+    clean = standing_skeleton(frames=frames)
+    glitch = clean.clone()
+    glitch[0] += torch.tensor([jump, 0.3, jump])
+    return clean, glitch
+
+
+def test_origin_and_size_ignore_a_glitch_frame():
+    clean, glitch = glitched()
+    x = batch(glitch, torch.zeros_like(glitch))
+    present = x.abs().sum((-1, -2)) > 0
+    root, neck = NTU25.index("SpineBase"), NTU25.index("SpineShoulder")
+    torch.testing.assert_close(body0_origin(x, present, root)[0], clean[5, root])
+    torch.testing.assert_close(body0_size(x, present, root, neck), torch.tensor([0.5]))
+
+
+def test_graph_network_input_is_not_moved_by_a_glitch_in_the_first_frame():
+    """The origin used to be body 0's root in its first present frame: a glitch there moved every frame."""
+    clean, glitch = glitched()
+    model = stgcn(3, layout="ntu25", scale=True).eval()
+    x = batch(glitch, torch.zeros_like(glitch))
+    present = x.abs().sum((-1, -2)) > 0
+    normalized = model.normalize(x, present)
+    root = NTU25.index("SpineBase")
+    assert normalized[0, 0, 1:, root].abs().max() < 1e-5         # every real frame centred on its root
+    reference = model.normalize(batch(clean, torch.zeros_like(clean)), present)
+    torch.testing.assert_close(normalized[0, 0, 1:], reference[0, 0, 1:])
+
+
+def test_energy_image_is_not_moved_by_a_glitch_in_the_first_frame():
+    clean, glitch = glitched(jump=2.0)   # 4 spine lengths aside and away: off every plane's grid
+    energy = EnergyImage(size=48, bone_samples=2, align=False)
+    zeros = torch.zeros_like(clean)
+    torch.testing.assert_close(energy(batch(glitch, zeros)), energy(batch(clean, zeros)), atol=1e-5, rtol=1e-5)
