@@ -38,3 +38,24 @@ def test_energy_vgg_experiment_composes_on_msr20():
     ntu = compose_config(["experiment=ntu_energy_vgg", "model=stgcn", "data.root=x"])
     assert ntu.model.layout == "ntu25"
     assert compose_config(["experiment=ntu_gcn", "data.root=x"]).model.layout == "ntu25"
+
+
+def test_benchmark_subset_protocols_are_cross_subject_on_the_subset():
+    import numpy as np
+
+    from mocapkit.datasets.msr_action3d.datamodule import MSRAction3DDataModule
+    from mocapkit.datasets.msr_action3d.dataset import ACTION_SUBSETS
+    from mocapkit.evaluation.compare.msr import MSRActionBenchmark
+
+    bench = MSRActionBenchmark(str(MSR_ROOT))
+    assert {"cross_subject", "random_half", "AS1", "AS2", "AS3"} <= set(bench.protocols)
+    split = bench.split("AS2", seed=0)
+    actions = np.asarray(bench.dataset.actions)
+    subjects = np.asarray(bench.dataset.subjects)
+    assert set(actions[split.train]) == set(actions[split.test]) == set(ACTION_SUBSETS["AS2"])
+    assert set(subjects[split.train]) == {1, 3, 5, 7, 9} and set(subjects[split.test]) == {2, 4, 6, 8, 10}
+    overrides = dict(o.split("=", 1) for o in bench.learned_overrides("AS2", 0))
+    assert overrides["data.subset"] == "AS2" and overrides["data.split"] == "cross_subject"
+    dm = MSRAction3DDataModule(str(MSR_ROOT), split="cross_subject", subset="AS2", val_fraction=0)
+    np.testing.assert_array_equal(dm.test_idx, split.test)                    # the run scores the same clips
+    assert len(dm.val_idx) == 0 and len(dm.train_idx) == len(split.train)

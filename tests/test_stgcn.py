@@ -101,3 +101,32 @@ def test_onnx_export_on_msr20_one_body(tmp_path):
                          check_shape=(3, 41))
     assert report["layout"] == "msr20" and report["traced_shape"][3] == 20
     assert report["max_abs_diff"] < 1e-4 and report["same_top1"]
+
+
+def test_multi_stream_ensemble_trains_each_member_and_averages_at_inference(tmp_path):
+    from mocapkit.models.stgcn import stgcn_ensemble
+    from mocapkit.train.action_module import ActionRecognitionModule
+
+    torch.manual_seed(0)
+    net = stgcn_ensemble(5, layout="msr20", streams=[["joint"], ["bone"], ["bone_velocity"]], channels=[8, 8],
+                         strides=[1, 1])
+    x = torch.randn(4, 1, 12, 20, 3)
+    net.train()
+    members = net(x)
+    assert members.shape == (3, 4, 5)
+    net.eval()
+    torch.testing.assert_close(net(x), torch.stack([m(x) for m in net.members]).mean(0))
+    # velocity of the bones: zero for a skeleton translated rigidly frame by frame
+    still = torch.randn(1, 1, 1, 20, 3).repeat(1, 1, 6, 1, 1) + torch.arange(6.0).view(1, 1, 6, 1, 1)
+    member = net.members[2]
+    assert member.features(still, still.abs().sum((-1, -2)) > 0).abs().max() < 1e-5
+
+    spec = {"_target_": "mocapkit.models.stgcn.stgcn_ensemble", "layout": "msr20", "channels": [8, 8],
+            "strides": [1, 1], "streams": [["joint"], ["bone"]]}
+    module = ActionRecognitionModule(spec, {"_target_": "torch.optim.SGD", "_partial_": True, "lr": 0.1},
+                                     num_classes=5)
+    module.train()
+    batch = {"skeletons": x, "labels": torch.tensor([0, 1, 2, 3])}
+    loss = module._step(batch, "train")
+    each = [torch.nn.functional.cross_entropy(m(x), batch["labels"]) for m in module.model.members]
+    torch.testing.assert_close(loss, each[0] + each[1])           # each member on its own loss

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+
 def subject_masks(subjects: np.ndarray, train_subjects, test_subjects,
                   label: str = "split='custom'") -> tuple[np.ndarray, np.ndarray]:
     """Boolean masks of the samples of ``train_subjects`` and of ``test_subjects``.
@@ -42,7 +43,8 @@ def validation_split(train_idx: np.ndarray, subjects: np.ndarray, val_fraction: 
     Args:
         train_idx: sample indices of the training split (from :func:`split_indices`).
         subjects: per-sample subject IDs of the whole dataset (indexed by ``train_idx``).
-        val_fraction: share of training subjects (``by_subject``) or training samples held out.
+        val_fraction: share of training subjects (``by_subject``) or training samples held out; 0 holds out
+            nothing (the run then trains on every training sample and keeps its last checkpoint).
         seed: the same seed and inputs always give the same split.
         by_subject: hold out whole training subjects (at least 1, never all), so that no
             validation subject is seen in training; else a random share of training samples.
@@ -50,9 +52,11 @@ def validation_split(train_idx: np.ndarray, subjects: np.ndarray, val_fraction: 
     Returns:
         ``(train_idx, val_idx)``: sorted, disjoint, together equal to the input ``train_idx``.
     """
-    if not 0.0 < val_fraction < 1.0:
-        raise ValueError(f"val_fraction must be between 0 and 1 (exclusive), got {val_fraction}")
+    if not 0.0 <= val_fraction < 1.0:
+        raise ValueError(f"val_fraction must be in [0, 1), got {val_fraction}")
     train_idx = np.sort(np.asarray(train_idx, dtype=np.int64))
+    if val_fraction == 0:
+        return train_idx, train_idx[:0]
     subjects = np.asarray(subjects)
     if len(train_idx) and (train_idx.min() < 0 or train_idx.max() >= len(subjects)):
         raise IndexError(f"train_idx holds indices outside 0..{len(subjects) - 1} (the length of subjects)")

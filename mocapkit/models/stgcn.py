@@ -11,9 +11,10 @@ so the same code runs on NTU-25, MSR-20 and CMU-31 skeletons.
   the symmetric ``Â``; inward is outward transposed. Each block also learns an additive
   correction of the three matrices (initialised to zero; ``adaptive``).
 * **Input.** Skeletons ``[N, M, T, J, 3]`` as the data modules give them (zeros where a body or
-  frame is absent). Optional pre-normalisation inside the model: centre on the root joint of
-  body 0 in its first present frame (``center``), divide by the mean pelvis-neck length
-  (``scale``). Input streams (``streams``) are concatenated as channels: ``joint`` positions,
+  frame is absent). Optional pre-normalisation inside the model: centre on the median position of
+  body 0's root joint over its present frames (``center``), divide by body 0's median pelvis-neck
+  length (``scale``); medians, so glitch frames do not move or shrink the sequence
+  (:mod:`mocapkit.models.body_frame`, shared with the energy image). Input streams (``streams``) are concatenated as channels: ``joint`` positions,
   ``velocity`` (frame differences) and ``bone`` vectors (joint minus parent).
 * **Padding.** Features at absent frames are zeroed after every layer and the temporal pooling is
   a mean over present frames only, so zero-padded frames do not change the output (in eval mode).
@@ -27,8 +28,9 @@ import torch.nn.functional as F
 from torch import nn
 
 from mocapkit.datasets.formats.layouts import LANDMARKS, SkeletonLayout, get_layout
+from mocapkit.models.body_frame import body0_origin, body0_size
 
-STREAMS = ("joint", "velocity", "bone")
+STREAMS = ("joint", "velocity", "bone", "bone_velocity")
 
 
 def spatial_adjacency(layout: SkeletonLayout | str) -> torch.Tensor:
@@ -111,9 +113,10 @@ class STGCN(nn.Module):
         channels: output channels of each block (CPU-sized default: 64, 64, 128, 128).
         strides: temporal stride of each block.
         kernel_size: temporal kernel (frames).
-        streams: input features concatenated as channels, any of ``joint``, ``velocity``, ``bone``.
-        center: subtract the root joint of body 0 in its first present frame.
-        scale: divide by the mean pelvis-neck length of body 0 (needs the layout's landmarks).
+        streams: input features concatenated as channels, any of ``joint``, ``velocity`` (frame differences of
+            the joints), ``bone`` (joint minus parent) and ``bone_velocity`` (frame differences of the bones).
+        center: subtract the median position of body 0's root joint over its present frames.
+        scale: divide by the median pelvis-neck length of body 0 (needs the layout's landmarks).
         adaptive: learn an additive correction of the adjacency in each block.
         dropout: dropout inside blocks; ``head_dropout``: before the classifier.
     """
@@ -157,33 +160,36 @@ class STGCN(nn.Module):
     # ------------------------------------------------------------------ steps
 
     def normalize(self, x: torch.Tensor, present: torch.Tensor) -> torch.Tensor:
-        """Centre (and scale) as configured; absent frames stay zero. ``[N, M, T, J, C]``."""
+        """Centre (and scale) as configured; absent frames stay zero. ``[N, M, T, J, C]``.
+
+        Origin and size are medians over body 0's present frames (:mod:`mocapkit.models.body_frame`).
+        """
         if not (self.center or self.scale):
             return x
-        body0 = present[:, 0].to(x.dtype)                                             # [N, T]
         if self.center:
-            first = torch.argmax(body0, dim=1).view(-1, 1, 1).expand(-1, 1, x.shape[-1])
-            origin = torch.gather(x[:, 0, :, self.root, :], 1, first)                 # [N, 1, C]
-            x = x - origin.view(-1, 1, 1, 1, x.shape[-1])
+            x = x - body0_origin(x, present, self.root).view(-1, 1, 1, 1, x.shape[-1])
         if self.scale:
-            lower, upper = self.spine
-            raw = x[:, 0, :, upper, :] - x[:, 0, :, lower, :]                          # centring cancels
-            length = (raw.norm(dim=-1) * body0).sum(1) / body0.sum(1).clamp(min=1.0)  # [N]
-            x = x / length.clamp(min=1e-3).view(-1, 1, 1, 1, 1)
+            lower, upper = self.spine                                                  # centring cancels
+            x = x / body0_size(x, present, lower, upper).view(-1, 1, 1, 1, 1)
         return x * present[..., None, None].to(x.dtype)
 
     def features(self, x: torch.Tensor, present: torch.Tensor) -> torch.Tensor:
         """The input streams concatenated: ``[N, M, T, J, C]`` → ``[N, M, T, J, C * len(streams)]``."""
         out = []
+        both = (present[:, :, 1:] & present[:, :, :-1])[..., None, None].to(x.dtype)
+
+        def velocity(y):  # forward difference, zero where either frame is absent and at the last frame
+            return torch.cat(((y[:, :, 1:] - y[:, :, :-1]) * both, torch.zeros_like(y[:, :, :1])), dim=2)
+
         for stream in self.streams:
             if stream == "joint":
                 out.append(x)
             elif stream == "bone":
                 out.append(x - x[:, :, :, self.parents])
-            else:  # velocity: forward difference, zero where either frame is absent and at the last frame
-                both = (present[:, :, 1:] & present[:, :, :-1])[..., None, None].to(x.dtype)
-                diff = (x[:, :, 1:] - x[:, :, :-1]) * both
-                out.append(torch.cat((diff, torch.zeros_like(x[:, :, :1])), dim=2))
+            elif stream == "velocity":
+                out.append(velocity(x))
+            else:
+                out.append(velocity(x - x[:, :, :, self.parents]))
         return torch.cat(out, dim=-1)
 
     def forward(self, skeletons: torch.Tensor) -> torch.Tensor:
@@ -213,3 +219,43 @@ def stgcn(num_classes: int, layout: SkeletonLayout | str = "ntu25", in_channels:
     """Hydra builder of :class:`STGCN` (``configs/model/stgcn.yaml``); lists are accepted for tuples."""
     return STGCN(layout, num_classes, in_channels, tuple(channels), tuple(strides), kernel_size, tuple(streams),
                  center, scale, adaptive, dropout, head_dropout)
+
+
+class MultiStreamSTGCN(nn.Module):
+    """One :class:`STGCN` per input stream, late fusion: skeletons ``[N, M, T, J, 3]`` → logits ``[N, C]``.
+
+    In training mode the forward pass returns the members' logits stacked, ``[S, N, C]``, so that
+    :class:`~mocapkit.train.action_module.ActionRecognitionModule` trains each member on its own
+    cross-entropy (as if trained apart, the way pyskl trains its stream ensembles); in eval mode (evaluation,
+    prediction, ONNX export) it returns their mean ``[N, C]``.
+
+    Args:
+        streams: one list of input streams per member, e.g. ``[[joint], [bone], [velocity], [bone_velocity]]``.
+        kwargs: the :class:`STGCN` arguments every member shares (layout, channels, strides, ...).
+    """
+
+    def __init__(self, layout: SkeletonLayout | str, num_classes: int, streams, **kwargs):
+        super().__init__()
+        streams = [tuple([s] if isinstance(s, str) else s) for s in streams]
+        if not streams:
+            raise ValueError("MultiStreamSTGCN needs at least one member's streams, e.g. [[joint], [bone]]")
+        self.streams = streams
+        self.members = nn.ModuleList(STGCN(layout, num_classes, streams=member, **kwargs) for member in streams)
+        self.layout = self.members[0].layout      # read by the ONNX export (joint count, metadata)
+        self.num_classes = num_classes
+
+    def forward(self, skeletons: torch.Tensor) -> torch.Tensor:
+        logits = torch.stack([member(skeletons) for member in self.members])
+        return logits if self.training else logits.mean(0)
+
+
+def stgcn_ensemble(num_classes: int, layout: SkeletonLayout | str = "ntu25",
+                   streams=(("joint",), ("bone",), ("velocity",), ("bone_velocity",)), in_channels: int = 3,
+                   channels: tuple[int, ...] | list[int] = (64, 64, 128, 128),
+                   strides: tuple[int, ...] | list[int] = (1, 1, 2, 1), kernel_size: int = 9, center: bool = True,
+                   scale: bool = False, adaptive: bool = True, dropout: float = 0.0,
+                   head_dropout: float = 0.0) -> MultiStreamSTGCN:
+    """Hydra builder of :class:`MultiStreamSTGCN` (``configs/model/stgcn_ensemble.yaml``)."""
+    return MultiStreamSTGCN(layout, num_classes, streams, in_channels=in_channels, channels=tuple(channels),
+                            strides=tuple(strides), kernel_size=kernel_size, center=center, scale=scale,
+                            adaptive=adaptive, dropout=dropout, head_dropout=head_dropout)

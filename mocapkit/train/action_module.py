@@ -32,6 +32,10 @@ STAGES = ("train", "val", "test")
 class ActionRecognitionModule(ConfiguredOptimization, StagedSteps, L.LightningModule):
     """Cross-entropy training of ``model`` (skeletons ``[B, M, T, J, 3]`` → logits ``[B, C]``).
 
+    A model may return its ensemble members' logits ``[S, B, C]`` in training mode
+    (:class:`~mocapkit.models.stgcn.MultiStreamSTGCN`): the loss is then the sum of the members'
+    cross-entropies (each member's gradient is what it would get alone) and the accuracy is the mean logits'.
+
     Args:
         model: Hydra config of the network; ``num_classes`` is passed at instantiation.
         optimizer: Hydra config of a ``torch.optim`` optimiser with ``_partial_: true``.
@@ -61,7 +65,12 @@ class ActionRecognitionModule(ConfiguredOptimization, StagedSteps, L.LightningMo
 
     def _step(self, batch: dict, stage: str) -> torch.Tensor:
         logits = self(batch["skeletons"])
-        loss = F.cross_entropy(logits, batch["labels"], label_smoothing=self.hparams.label_smoothing)
+        if logits.dim() == 3:  # an ensemble in training mode: [members, B, C], each member on its own loss
+            loss = torch.stack([F.cross_entropy(member, batch["labels"], label_smoothing=self.hparams.label_smoothing)
+                                for member in logits]).sum()
+            logits = logits.mean(0)
+        else:
+            loss = F.cross_entropy(logits, batch["labels"], label_smoothing=self.hparams.label_smoothing)
         accuracy = self.accuracy[f"{stage}_acc"]
         accuracy.update(logits.detach(), batch["labels"])
         on_step = stage == "train"

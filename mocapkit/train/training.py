@@ -8,7 +8,8 @@ the data module (``data``), the LightningModule (``module``, given the data modu
     config.yaml          the resolved configuration
     .hydra/config.yaml   the unresolved one (eval / export / resume compose it again)
     last.ckpt            the latest checkpoint (resume with ``resume=<this file>``)
-    best.ckpt            the checkpoint with the best validation accuracy (val/acc)
+    best.ckpt            the checkpoint with the best validation accuracy (val/acc); not written by a run
+                         without a validation part (``data.val_fraction=0``), whose checkpoint is last.ckpt
     tensorboard/         TensorBoard logs
 """
 from __future__ import annotations
@@ -93,15 +94,20 @@ def train(cfg: DictConfig) -> Path:
     save_run_config(cfg, run_dir)
     datamodule = build_datamodule(cfg)
     counts = datamodule.sample_counts()
-    if counts["train"] == 0 or counts["val"] == 0:
+    validate = counts["val"] > 0
+    if counts["train"] == 0 or (counts["val"] == 0 and cfg.data.get("val_fraction", 1) != 0):
         raise ConfigError(f"split {datamodule.describe()['split']!r} leaves {counts}: "
-                          "training and validation both need samples")
+                          "training and validation both need samples (data.val_fraction=0: no validation)")
     module = build(cfg.module, **datamodule.label_spaces())
     callbacks = [build(node) for node in (cfg.get("callbacks") or {}).values() if node]
+    if not validate:  # nothing to monitor: the run's checkpoint is last.ckpt
+        callbacks = [c for c in callbacks if not (isinstance(c, ModelCheckpoint) and c.monitor)]
+        print("[mocapkit] data.val_fraction=0: no validation part; the checkpoint is last.ckpt (no best.ckpt)")
     loggers = [build(node) for node in (cfg.get("logger") or {}).values() if node]
     plugins = [*(cfg.trainer.get("plugins") or []), AtomicCheckpointIO()]
+    extra = {} if validate else {"limit_val_batches": 0, "num_sanity_val_steps": 0}
     trainer = build(cfg.trainer, callbacks=callbacks, logger=loggers or False, deterministic=cfg.deterministic,
-                    default_root_dir=str(run_dir), plugins=plugins)
+                    default_root_dir=str(run_dir), plugins=plugins, **extra)
     # the run folder already holds config.yaml, by design
     warnings.filterwarnings("ignore", message=r"Checkpoint directory .* exists and is not empty")
     print(f"[mocapkit] run folder: {run_dir}")
@@ -114,8 +120,8 @@ def train(cfg: DictConfig) -> Path:
             if isinstance(callback, ModelCheckpoint) and callback.monitor:
                 print(f"[mocapkit] wrote {callback.best_model_path} "
                       f"(best {callback.monitor} {float(callback.best_model_score or 0):.4f})")
-            elif isinstance(callback, ModelCheckpoint) and callback.last_model_path:
-                print(f"[mocapkit] wrote {callback.last_model_path}")
+            elif isinstance(callback, ModelCheckpoint) and (callback.last_model_path or callback.best_model_path):
+                print(f"[mocapkit] wrote {callback.last_model_path or callback.best_model_path}")
         if loggers:
             print(f"[mocapkit] logs: tensorboard --logdir {run_dir}")
     return run_dir

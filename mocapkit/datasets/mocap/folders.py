@@ -4,6 +4,7 @@
 dataset    files under ``root``                                        group (the "performer" of a fold)
 =========  ==========================================================  ============================================
 ``hdm05``  ``<actor>/HDM_<actor>_<class>_<nnn>_<fps>.amc`` (+ ASF)     the actor (bd, bk, dg, mm)
+           or the generator's ``<class>_<actor>_<nnn>.amc``
 ``cmu``    ``NN_MM.amc`` + ``NN.asf``                                  the subject ``NN`` (01, 02, 03)
 ``bandai`` ``data/dataset-1_<content>_<style>_<nnn>.bvh``              the **style** (15): neither the file names nor
                                                                        the JSON labels say which actor performed a
@@ -21,7 +22,7 @@ from pathlib import Path
 
 DATASETS = ("hdm05", "cmu", "bandai")
 #: How each data set's files are found and grouped (see the module docstring).
-FILE_PATTERNS = {"hdm05": "HDM_<actor>_<class>_<nnn>_<fps>.amc (each actor folder with its HDM_<actor>.asf)",
+FILE_PATTERNS = {"hdm05": "HDM_<actor>_<class>_<nnn>_<fps>.amc or <class>_<actor>_<nnn>.amc, with HDM_<actor>.asf",
                  "cmu": "NN_MM.amc with NN.asf beside it",
                  "bandai": "dataset-1_<content>_<style>_<nnn>.bvh"}
 
@@ -43,10 +44,14 @@ def list_clips(dataset: str, root: str | Path) -> list[dict]:
         raise MocapFolderError(f"root={str(root)!r} is not a folder (dataset {dataset}: {FILE_PATTERNS[dataset]})")
     clips = []
     if dataset == "hdm05":
+        from mocapkit.datasets.hdm05.classes import parse_clip_name
+
         for path in sorted(root.rglob("*.amc")):
-            match = re.fullmatch(r"HDM_([^_]+)_(.+)_(\d+)_(\d+)", path.stem)
-            if match:
-                clips.append({"path": path, "name": path.stem, "group": match.group(1), "class": match.group(2)})
+            try:
+                name = parse_clip_name(path, strict=False)
+            except ValueError:
+                continue
+            clips.append({"path": path, "name": path.stem, "group": name.actor, "class": name.cls})
     elif dataset == "cmu":
         for path in sorted(root.rglob("*.amc")):
             match = re.fullmatch(r"(\d+)_(\d+)", path.stem)

@@ -16,7 +16,8 @@ Configuration schema (``configs/compare.yaml``; a comparison file sets the keys)
     protocols: [closed_set, cross_subject]
     seeds: [0, 1, 2]
     methods:                           # KEY → one of:
-      cnn:   {label: ..., learned: {experiment: casiab_multitask, overrides: [trainer.max_epochs=80]}}
+      cnn:   {label: ..., learned: {experiment: casiab_multitask, overrides: [trainer.max_epochs=80],
+                                    checkpoint: best}}   # best (best val/acc) | last (the last epoch)
       pca:   {label: ..., estimator: {_target_: mocapkit.classical.GEIPCALDA, n_pca: null},
               params: {...},           # set_params after instantiation (nested names: step__param)
               select: {stages: [{bow__clusterer__n_components: [100, 200]}, ...], cv: 3}   # or {reuse: KEY}
@@ -27,7 +28,8 @@ Configuration schema (``configs/compare.yaml``; a comparison file sets the keys)
 
 A **learned** method is trained with :func:`mocapkit.train.training.train` on
 ``experiment=<NAME>`` + the benchmark's :meth:`~Benchmark.learned_overrides` + ``seed``, ``output_root``,
-``run_name`` + its ``overrides`` + ``learned_overrides``, and scored with
+``run_name`` + its ``overrides`` + ``learned_overrides``, and its ``best.ckpt`` (or ``last.ckpt`` with
+``checkpoint: last``, e.g. for runs without a validation part) is scored with
 :func:`mocapkit.evaluation.evaluate.evaluate`; the runner rebuilds the run's data module and fails unless it
 tested exactly the benchmark's test samples. An **estimator** is instantiated fresh per cell, fitted on the
 training side and scored by the benchmark's :meth:`~Benchmark.evaluate_estimator`, with the same metric code.
@@ -54,7 +56,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from mocapkit.evaluation.compare.base import Benchmark, ComparisonError, Split, indices_sha1
+from mocapkit.evaluation.compare.base import (
+    Benchmark,
+    ComparisonError,
+    Split,
+    indices_sha1,
+)
 from mocapkit.evaluation.compare.runner import Comparison, compose, main, run_comparison
 
 __all__ = ["Benchmark", "Comparison", "ComparisonError", "Split", "cli_main", "compose", "gait_report",

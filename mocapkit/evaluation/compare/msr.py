@@ -4,8 +4,10 @@ Samples are the sequences of an :class:`~mocapkit.datasets.msr_action3d.dataset.
 gets ``X`` = a list of skeleton sequences ``[T_i, 20, 3]`` (metres, float32) and ``y`` = 0-based action labels
 ``[n]`` (so a ``Pipeline([("clips", SequenceClips(window=M)), ("bow", BagOfWordsClassifier(...))])`` is one method,
 window included). Protocols (:func:`~mocapkit.datasets.msr_action3d.splits.msr_split_indices`):
-``random_half`` (per action, a random half trains, drawn with the **cell seed**, the thesis's protocol) and
-``cross_subject`` (odd subjects train; the seed then only moves the methods' initialisation).
+``random_half`` (per action, a random half trains, drawn with the **cell seed**, the thesis's protocol),
+``cross_subject`` (odd subjects train; the seed then only moves the methods' initialisation) and ``AS1`` /
+``AS2`` / ``AS3`` (Li et al. 2010's 8-action subsets, cross-subject; labels stay the 20-action indices for
+estimators, learned runs train the subset's 8 classes).
 
 Metrics per cell: ``accuracy`` (sequence recognition on the test side, a fraction) and, when the method exposes
 its training clips' words (a :class:`~mocapkit.classical.bag_of_words.BagOfWordsClassifier` as the last step, or
@@ -23,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mocapkit.datasets.msr_action3d.dataset import MSRAction3D
+from mocapkit.datasets.msr_action3d.dataset import ACTION_SUBSETS, MSRAction3D
 from mocapkit.datasets.msr_action3d.splits import MSR_SPLITS, msr_split_indices
 from mocapkit.evaluation.clustering import NMI_NORMALISATION, clustering_report
 from mocapkit.evaluation.compare.base import Benchmark, ComparisonError, Split
@@ -67,7 +69,7 @@ class MSRActionBenchmark(Benchmark):
     """
 
     title = "MSR Action3D action recognition (sequences)"
-    protocols = MSR_SPLITS
+    protocols = (*MSR_SPLITS, *sorted(ACTION_SUBSETS))
     percent_metrics = ("accuracy",)
 
     def __init__(self, root: str, actions=None, subjects=None, takes=None, subset_dir: str | None = None):
@@ -91,8 +93,14 @@ class MSRActionBenchmark(Benchmark):
                 "n_sequences": len(self.dataset), "excluded": dict(self.dataset.excluded),
                 "nmi_normalisation": NMI_NORMALISATION, "thesis_accuracy_random_half": THESIS_ACCURACY}
 
+    @staticmethod
+    def _protocol(protocol: str) -> tuple[str, str | None]:
+        """``(split, subset)`` of a protocol name: an ``AS*`` subset is its cross-subject split."""
+        return ("cross_subject", protocol) if protocol in ACTION_SUBSETS else (protocol, None)
+
     def split(self, protocol: str, seed: int) -> Split:
-        train, test = msr_split_indices(self.dataset, protocol, seed=seed)
+        split, subset = self._protocol(protocol)
+        train, test = msr_split_indices(self.dataset, split, subset=subset, seed=seed)
         subjects = np.asarray(self.dataset.subjects)
         return Split(protocol, seed, train, test, {"train_subjects": np.unique(subjects[train]).tolist(),
                                                    "test_subjects": np.unique(subjects[test]).tolist()})
@@ -120,12 +128,14 @@ class MSRActionBenchmark(Benchmark):
         return {"metrics": metrics, "detail": detail}
 
     def learned_overrides(self, protocol: str, seed: int) -> list[str]:
-        return [f"data.root={self.root}", f"data.split={protocol}", f"data.split_seed={seed}", "data.subset=null"]
+        split, subset = self._protocol(protocol)
+        return [f"data.root={self.root}", f"data.split={split}", f"data.split_seed={seed}",
+                f"data.subset={subset or 'null'}"]
 
     def evaluate_learned(self, report: dict, run_dir: Path, split: Split) -> dict:
         """Top-1 of ``mocapkit eval``; clip metrics of the model's arg-max soft words on the training sequences."""
         metrics = {"accuracy": float(report["top1"])}
-        words = learned_clip_words(Path(run_dir), [self.sequences[i] for i in split.train])
+        words = learned_clip_words(Path(report["checkpoint"]), [self.sequences[i] for i in split.train])
         if words is not None:
             owners, assigned = words
             metrics.update(clip_metrics(self.labels[split.train][owners], assigned))
@@ -160,14 +170,14 @@ def clip_metrics(clip_labels: np.ndarray, words: np.ndarray) -> dict:
             "n_words_used": report["n_clusters"]}
 
 
-def learned_clip_words(run_dir: Path, sequences: list[np.ndarray]):
-    """``(sequence index per clip, arg-max soft word per clip)`` of a run whose network has ``soft_words``
+def learned_clip_words(checkpoint: Path, sequences: list[np.ndarray]):
+    """``(sequence index per clip, arg-max soft word per clip)`` of a checkpoint whose network has ``soft_words``
     (the end-to-end NMF layer), over ``sequences`` one at a time; None for other networks."""
     import torch
 
     from mocapkit.train.checkpoints import checkpoint_config, load_module
 
-    checkpoint = Path(run_dir) / "best.ckpt"
+    checkpoint = Path(checkpoint)
     module = load_module(checkpoint_config(checkpoint), checkpoint).eval()   # vetted, weights_only
     network = getattr(module, "model", None)
     if not hasattr(network, "soft_words"):

@@ -17,13 +17,20 @@ from pathlib import Path
 import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
-from mocapkit.evaluation.compare.base import Benchmark, ComparisonError, Split, indices_sha1
+from mocapkit.evaluation.compare.base import (
+    Benchmark,
+    ComparisonError,
+    Split,
+    indices_sha1,
+)
 
 #: Keys of the compare config (``configs/compare.yaml``).
 CONFIG_KEYS = ("name", "out", "benchmark", "protocols", "seeds", "methods", "only", "learned_overrides", "templates")
 #: Keys of one method entry.
 METHOD_KEYS = ("label", "learned", "estimator", "params", "select", "reseed")
-LEARNED_KEYS = ("experiment", "overrides")
+LEARNED_KEYS = ("experiment", "overrides", "checkpoint")
+#: Which checkpoint of a learned run is scored (``learned.checkpoint``; best: best validation accuracy).
+CHECKPOINTS = ("best", "last")
 SELECT_KEYS = ("stages", "cv", "reuse")
 
 
@@ -115,6 +122,9 @@ def parse_methods(methods: dict) -> dict[str, Method]:
             bad = sorted(set(spec) - set(LEARNED_KEYS))
             if bad:
                 raise ComparisonError(f"methods.{key}.learned: unknown key(s) {bad}; it takes {list(LEARNED_KEYS)}")
+            if spec.get("checkpoint", "best") not in CHECKPOINTS:
+                raise ComparisonError(f"methods.{key}.learned.checkpoint={spec['checkpoint']!r}: one of "
+                                      f"{list(CHECKPOINTS)}")
             for other in ("params", "select"):
                 if entry.get(other):
                     raise ComparisonError(f"methods.{key}: {other} applies to estimators; give a learned method "
@@ -292,7 +302,8 @@ class Comparison:
         start = time.perf_counter()
         run_dir = Path(train(cfg))
         train_seconds = time.perf_counter() - start
-        report = evaluate(run_dir / "best.ckpt", [f"eval.out_dir={run_dir / 'eval'}"])
+        checkpoint = run_dir / f"{method.spec.get('checkpoint', 'best')}.ckpt"
+        report = evaluate(checkpoint, [f"eval.out_dir={run_dir / 'eval'}"])
         test_idx = self.benchmark.learned_test_indices(run_dir)
         if indices_sha1(test_idx) != indices_sha1(split.test):
             raise ComparisonError(f"methods.{method.key} under {split.protocol}, seed {split.seed}: the run's data "
@@ -301,7 +312,7 @@ class Comparison:
         scores = self.benchmark.evaluate_learned(report, run_dir, split)
         trainer = cfg.get("trainer") or {}
         return {**scores, "time_s": time.perf_counter() - start, "train_seconds": train_seconds,
-                "experiment": experiment, "run_dir": str(run_dir), "overrides": overrides,
+                "experiment": experiment, "run_dir": str(run_dir), "checkpoint": checkpoint.name, "overrides": overrides,
                 "max_epochs": trainer.get("max_epochs"), "n_test": len(test_idx),
                 "test_sha1": indices_sha1(test_idx)}
 
