@@ -174,6 +174,8 @@ def test_a_refinement_style_benchmark_plugs_in_without_runner_changes(tmp_path):
     ({"methods": {"knn": {"estimator": {"_target_": "sklearn.neighbors.NoSuchThing"}}}},
      "methods.knn.estimator: cannot build 'sklearn.neighbors.NoSuchThing'"),
     ({"methods": {"knn": {"estimator": KNN, "params": {"n_neighbours": 2}}}}, "methods.knn: Invalid parameter"),
+    ({"methods": {"net": {"learned": {"experiment": "x", "checkpoint": "worst"}}}},
+     r"methods.net.learned.checkpoint='worst': one of \['best', 'last'\]"),
 ])
 def test_configuration_errors_name_the_culprit(tmp_path, change, message):
     cfg = {**_config(tmp_path, {"knn": {"estimator": KNN}}), **change}

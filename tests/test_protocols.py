@@ -117,6 +117,11 @@ def test_validation_by_subject_bounds():
         validation_split(np.array([0, 1]), subjects)
     with pytest.raises(ValueError, match="val_fraction"):
         validation_split(np.arange(6), subjects, val_fraction=1.0)
+    with pytest.raises(ValueError, match="val_fraction"):
+        validation_split(np.arange(6), subjects, val_fraction=-0.1)
+    for by_subject in (True, False):   # 0: no validation part, every training sample trains
+        tr, val = validation_split(np.array([4, 0, 2]), subjects, val_fraction=0, by_subject=by_subject)
+        assert tr.tolist() == [0, 2, 4] and val.size == 0
 
 
 def test_validation_by_sample(grid):
