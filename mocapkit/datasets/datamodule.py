@@ -22,7 +22,7 @@ from __future__ import annotations
 import lightning as L
 import numpy as np
 import torch
-from torch.utils.data import DataLoader
+from torch.utils.data import DataLoader, Dataset
 
 from mocapkit.datasets.augment import SkeletonAugment
 
@@ -90,13 +90,56 @@ def pad_collate(items: list[dict]) -> dict:
     }
 
 
+class SequenceDataset(Dataset):
+    """Samples ``indices`` of in-memory one-body sequences as skeletons ``[1, T, J, 3]``.
+
+    Args:
+        sequences: per sample index, float32 ``[T_i, J, 3]`` tensors (metres; zeros where missing); a list or
+            a mapping holding at least ``indices``.
+        indices: the samples of this part. labels, subjects: per sample index (``[n]`` arrays).
+        max_frames: longer sequences are subsampled uniformly (:func:`uniform_frame_indices`).
+        augment: applied to every sample read (training only), or None.
+    """
+
+    def __init__(self, sequences, indices: np.ndarray, labels: np.ndarray, subjects: np.ndarray,
+                 max_frames: int, augment: SkeletonAugment | None = None):
+        self.sequences, self.indices = sequences, np.asarray(indices, dtype=np.int64)
+        self.labels, self.subjects = labels, subjects
+        self.max_frames, self.augment = int(max_frames), augment
+
+    def __len__(self) -> int:
+        return len(self.indices)
+
+    def __getitem__(self, k: int) -> dict:
+        i = int(self.indices[k])
+        seq = self.sequences[i]
+        seq = seq[torch.from_numpy(uniform_frame_indices(seq.shape[0], self.max_frames))].unsqueeze(0)
+        if self.augment is not None:
+            seq = self.augment(seq)
+        return {"skeleton": seq, "label": int(self.labels[i]), "index": i, "subject": int(self.subjects[i])}
+
+
 class SkeletonDataModule(SplitDataModule):
     """Base class of the skeleton data modules: batches padded by :func:`pad_collate`.
 
-    A subclass provides ``num_classes`` and ``class_names``.
+    A subclass provides ``num_classes`` and ``class_names``. A data module that holds its samples in memory
+    sets ``sequences`` (per sample index, ``[T_i, J, 3]`` tensors), ``labels`` and ``subjects`` (per sample
+    index) and inherits :meth:`dataset`; one that reads from disk (the NTU cache) overrides it.
     """
 
     collate_fn = staticmethod(pad_collate)
+    sequences = None
+    labels: np.ndarray
+    subjects: np.ndarray
+
+    def dataset(self, part: str) -> SequenceDataset:
+        """The ``"train"``, ``"val"`` or ``"test"`` part of the in-memory ``sequences`` (augmentation only on
+        train), built once."""
+        if part not in self._parts:
+            indices = {"train": self.train_idx, "val": self.val_idx, "test": self.test_idx}[part]
+            self._parts[part] = SequenceDataset(self.sequences, indices, self.labels, self.subjects,
+                                                self.max_frames, self.augment if part == "train" else None)
+        return self._parts[part]
 
     def _set_loading(self, batch_size: int, eval_batch_size: int | None, num_workers: int, max_frames: int,
                      augment: dict | None) -> None:
@@ -111,6 +154,7 @@ class SkeletonDataModule(SplitDataModule):
         self.num_workers = num_workers
         self.max_frames = max_frames
         self.augment = SkeletonAugment(**augment) if augment else None
+        self._parts: dict = {}  # the datasets built by dataset(part)
 
     def label_spaces(self) -> dict:
         """What the action LightningModule needs from the data: ``num_classes`` and ``class_names``."""

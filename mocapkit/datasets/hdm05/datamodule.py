@@ -27,10 +27,8 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from torch.utils.data import Dataset
 
-from mocapkit.datasets.augment import SkeletonAugment
-from mocapkit.datasets.datamodule import SkeletonDataModule, uniform_frame_indices
+from mocapkit.datasets.datamodule import SkeletonDataModule
 from mocapkit.datasets.formats.layouts import CMU31
 from mocapkit.datasets.hdm05.classes import merge_25, merge_65
 from mocapkit.datasets.mocap.folders import (
@@ -45,27 +43,6 @@ from mocapkit.datasets.splits import validation_split
 LABEL_SETS = {"file": lambda name: name, "65": merge_65, "25": merge_25}
 
 
-class ClipDataset(Dataset):
-    """Clips ``indices`` of in-memory sequences ``[T_i, J, 3]`` as one-body samples ``[1, T, J, 3]``."""
-
-    def __init__(self, sequences: list[torch.Tensor], indices: np.ndarray, labels: np.ndarray,
-                 subjects: np.ndarray, max_frames: int, augment: SkeletonAugment | None = None):
-        self.sequences, self.indices = sequences, np.asarray(indices, dtype=np.int64)
-        self.labels, self.subjects = labels, subjects
-        self.max_frames, self.augment = int(max_frames), augment
-
-    def __len__(self) -> int:
-        return len(self.indices)
-
-    def __getitem__(self, k: int) -> dict:
-        i = int(self.indices[k])
-        seq = self.sequences[i]
-        seq = seq[torch.from_numpy(uniform_frame_indices(seq.shape[0], self.max_frames))].unsqueeze(0)
-        if self.augment is not None:
-            seq = self.augment(seq)
-        return {"skeleton": seq, "label": int(self.labels[i]), "index": i, "subject": int(self.subjects[i])}
-
-
 class HDM05ActionDataModule(SkeletonDataModule):
     """Train / validation / test loaders over an HDM05 folder, one performer fold (see the module docstring).
 
@@ -78,7 +55,7 @@ class HDM05ActionDataModule(SkeletonDataModule):
         val_fraction, val_by_subject: validation from the training performers only: that share of their clips
             (seeded by the run ``seed``), or of the performers themselves; 0: no validation.
         batch_size, eval_batch_size, num_workers: the loaders'. max_frames: longer clips are subsampled uniformly.
-        augment: keyword arguments of :class:`SkeletonAugment` for training (None: off).
+        augment: keyword arguments of :class:`~mocapkit.datasets.augment.SkeletonAugment` for training (None: off).
         layout: the batches' joint order; always ``cmu31`` (model configs read it as ``data.layout``).
         seed: the run's seed (validation draw).
 
@@ -117,7 +94,6 @@ class HDM05ActionDataModule(SkeletonDataModule):
                                                         by_subject=val_by_subject)
         self.sequences = [self._positions(m, c["path"]) for m, c in zip(read_clips(self.clips, fps=self.fps),
                                                                             self.clips)]
-        self._datasets: dict[str, ClipDataset] = {}
 
     @staticmethod
     def _positions(motion, path) -> torch.Tensor:
@@ -142,11 +118,3 @@ class HDM05ActionDataModule(SkeletonDataModule):
                 "labels": self.labels_from, "fps": self.fps, "performers": self.performers,
                 "train_actors": self.train_actors, "test_actors": self.test_actors,
                 **self.split_description(np.asarray(self.performers)[self.subjects])}
-
-    def dataset(self, part: str) -> ClipDataset:
-        """The ``"train"``, ``"val"`` or ``"test"`` part (augmentation only on train), built once."""
-        if part not in self._datasets:
-            indices = {"train": self.train_idx, "val": self.val_idx, "test": self.test_idx}[part]
-            self._datasets[part] = ClipDataset(self.sequences, indices, self.labels, self.subjects, self.max_frames,
-                                               self.augment if part == "train" else None)
-        return self._datasets[part]

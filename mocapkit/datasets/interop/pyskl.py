@@ -79,6 +79,7 @@ from mocapkit.datasets.ntu.cache import NTUCache
 from mocapkit.datasets.ntu.prepare import (
     INDEX_KEYS,
     POSITIONS_FILE,
+    read_class_names,
     write_index_and_meta,
 )
 from mocapkit.datasets.ntu.splits import NTU60_MAX_SETUP, SPLITS, split_indices
@@ -404,14 +405,7 @@ def _read_class_names(class_names: Sequence[str] | str | os.PathLike | None) -> 
     if class_names is None:
         return None
     if isinstance(class_names, (str, os.PathLike)):
-        path = Path(class_names)
-        names = [line.strip() for line in path.read_text(encoding="utf-8").splitlines()]
-        while names and not names[-1]:
-            names.pop()
-        for k, name in enumerate(names):
-            if not name:
-                raise ValueError(f"{path}, line {k + 1}: empty class name")
-        return names
+        return read_class_names(class_names)
     return [str(n) for n in class_names]
 
 

@@ -16,41 +16,11 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from torch.utils.data import Dataset
 
+from mocapkit.datasets.datamodule import SkeletonDataModule
 from mocapkit.datasets.msr_action3d.dataset import ACTION_NAMES, MSRAction3D
 from mocapkit.datasets.msr_action3d.splits import msr_split_indices, subset_actions
 from mocapkit.datasets.splits import validation_split
-from mocapkit.datasets.augment import SkeletonAugment
-from mocapkit.datasets.datamodule import (
-    SkeletonDataModule,
-    uniform_frame_indices,
-)
-
-
-class MSRSkeletonDataset(Dataset):
-    """Samples ``indices`` of an :class:`MSRAction3D` as ``[1, T, 20, 3]`` tensors (one body)."""
-
-    def __init__(self, data: MSRAction3D, indices: np.ndarray, labels: np.ndarray, max_frames: int = 128,
-                 augment: SkeletonAugment | None = None, drop_missing_frames: bool = False):
-        self.data = data
-        self.indices = np.asarray(indices, dtype=np.int64)
-        self.labels = labels
-        self.max_frames = int(max_frames)
-        self.augment = augment
-        self.sequences = [torch.from_numpy(np.ascontiguousarray(data.positions(int(i), drop_missing_frames)))
-                          for i in self.indices]
-
-    def __len__(self) -> int:
-        return len(self.indices)
-
-    def __getitem__(self, k: int) -> dict:
-        i = int(self.indices[k])
-        seq = self.sequences[k]
-        seq = seq[torch.from_numpy(uniform_frame_indices(seq.shape[0], self.max_frames))].unsqueeze(0)
-        if self.augment is not None:
-            seq = self.augment(seq)
-        return {"skeleton": seq, "label": int(self.labels[i]), "index": i, "subject": int(self.data.subjects[i])}
 
 
 class MSRAction3DDataModule(SkeletonDataModule):
@@ -99,7 +69,11 @@ class MSRAction3DDataModule(SkeletonDataModule):
         self.train_idx, self.val_idx = validation_split(train, self.data.subjects, val_fraction=val_fraction,
                                                         seed=seed, by_subject=val_by_subject)
         self.test_idx = test
-        self._datasets: dict[str, MSRSkeletonDataset] = {}
+        self.subjects = np.asarray(self.data.subjects, dtype=np.int64)
+        used = np.concatenate([self.train_idx, self.val_idx, self.test_idx])
+        self.sequences = {int(i): torch.from_numpy(np.ascontiguousarray(self.data.positions(int(i),
+                                                                                           drop_missing_frames)))
+                          for i in used}
 
     @property
     def num_classes(self) -> int:
@@ -115,12 +89,3 @@ class MSRAction3DDataModule(SkeletonDataModule):
         return {"split": self.split if not self.subset else f"{self.subset}_{self.split}",
                 "subset": self.subset, "actions": list(self.actions), "data_root": str(self.root),
                 "excluded": dict(self.data.excluded), **self.split_description(subjects)}
-
-    def dataset(self, part: str) -> MSRSkeletonDataset:
-        """The ``"train"``, ``"val"`` or ``"test"`` part (augmentation only on train), built once."""
-        if part not in self._datasets:
-            indices = {"train": self.train_idx, "val": self.val_idx, "test": self.test_idx}[part]
-            self._datasets[part] = MSRSkeletonDataset(self.data, indices, self.labels, self.max_frames,
-                                                      self.augment if part == "train" else None,
-                                                      self.drop_missing_frames)
-        return self._datasets[part]

@@ -417,8 +417,16 @@ def _load_missing(missing_list) -> set[str]:
 
 def _read_class_names(src: Path) -> list[str] | None:
     path = src / "classes.txt"
-    if not path.is_file():
-        return None
+    return read_class_names(path) if path.is_file() else None
+
+
+def read_class_names(path: str | os.PathLike) -> list[str]:
+    """The action names of a ``classes.txt`` (line k = the name of action k+1; trailing blank lines ignored).
+
+    Raises:
+        ValueError: an empty line among the names (names the file and line).
+    """
+    path = Path(path)
     names = [line.strip() for line in path.read_text(encoding="utf-8").splitlines()]
     while names and not names[-1]:
         names.pop()
