@@ -4,7 +4,8 @@ import pytest
 import torch
 
 from mocapkit.datasets.ntu.datamodule import NTUDataModule
-from mocapkit.datasets.datamodule import pad_collate, uniform_frame_indices
+from mocapkit.datasets.datamodule import pad_collate
+from mocapkit.datasets.frames import uniform_frame_indices
 from mocapkit.datasets.ntu.prepare import prepare_ntu
 from mocapkit.datasets.augment import SkeletonAugment
 from mocapkit.datasets.synthetic.ntu import NTUSynthConfig, synthesize_ntu

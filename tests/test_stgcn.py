@@ -5,6 +5,7 @@ import torch
 
 from mocapkit.datasets.formats.layouts import CMU31, MSR20, NTU25
 from mocapkit.models.stgcn import STGCN, spatial_adjacency, stgcn
+from tests.shared_data import NTU_SAMPLES, needs
 
 
 @pytest.mark.parametrize("layout", [MSR20, NTU25, CMU31], ids=lambda l: l.name)
@@ -130,3 +131,32 @@ def test_multi_stream_ensemble_trains_each_member_and_averages_at_inference(tmp_
     loss = module._step(batch, "train")
     each = [torch.nn.functional.cross_entropy(m(x), batch["labels"]) for m in module.model.members]
     torch.testing.assert_close(loss, each[0] + each[1])           # each member on its own loss
+
+
+@needs(NTU_SAMPLES)
+def test_predict_samples_frames_as_training_did(tmp_path):
+    """The exported model stores data.max_frames; `mocapkit predict` subsamples a longer file to it, uniformly."""
+    import onnxruntime as ort
+
+    from mocapkit.datasets.frames import uniform_frame_indices
+    from mocapkit.deploy.predict import model_input, predict_files
+    from mocapkit.deploy.skeleton_export import export_onnx
+    from mocapkit.models.stgcn import stgcn_ensemble
+
+    torch.manual_seed(0)
+    model = stgcn_ensemble(3, layout="ntu25", streams=[["joint"], ["bone"]], channels=[8, 8], strides=[1, 1])
+    out = tmp_path / "ens.onnx"
+    report = export_onnx(model, out, class_names=["a", "b", "c"], trace_shape=(2, 16), check_shape=(3, 21),
+                         max_frames=8)
+    assert report["layout"] == "ntu25" and report["same_top1"]
+    sample = sorted(NTU_SAMPLES.glob("*.skeleton"))[0]
+    x = model_input(sample, "ntu25").astype(np.float32)                      # [1, 2, T, 25, 3]
+    assert x.shape[2] > 8
+    session = ort.InferenceSession(str(out), providers=["CPUExecutionProvider"])
+    sampled = session.run(None, {"skeletons": x[:, :, uniform_frame_indices(x.shape[2], 8)]})[0][0]
+    probs = np.exp(sampled - sampled.max()) / np.exp(sampled - sampled.max()).sum()
+    (result,) = predict_files(out, [sample], top=3)
+    top = dict(result["top"])
+    np.testing.assert_allclose([top[n] for n in "abc"], probs, rtol=1e-5)
+    full = session.run(None, {"skeletons": x})[0][0]
+    assert not np.allclose(full, sampled)                # all frames would have given another answer

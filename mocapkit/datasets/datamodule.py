@@ -25,6 +25,7 @@ import torch
 from torch.utils.data import DataLoader, Dataset
 
 from mocapkit.datasets.augment import SkeletonAugment
+from mocapkit.datasets.frames import uniform_frame_indices
 
 
 class SplitDataModule(L.LightningDataModule):
@@ -67,11 +68,6 @@ class SplitDataModule(L.LightningDataModule):
 
 
 
-def uniform_frame_indices(length: int, max_frames: int) -> np.ndarray:
-    """Indices of ``min(length, max_frames)`` frames spread evenly over ``length`` frames."""
-    if length <= max_frames:
-        return np.arange(length)
-    return np.linspace(0, length - 1, max_frames).round().astype(np.int64)
 
 
 def pad_collate(items: list[dict]) -> dict:

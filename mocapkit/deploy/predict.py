@@ -3,7 +3,8 @@
 No PyTorch is imported: this is the deployment path. NTU ``.skeleton`` files
 are reduced to their two main bodies; other formats are read with
 ``read_motion`` and mapped onto the model's skeleton layout (stored in the
-ONNX metadata) when they use another one.
+ONNX metadata) when they use another one. A file longer than the ``max_frames`` the model was trained
+with (also in the metadata) is subsampled uniformly to that many frames, as the data modules did.
 
 Only an ONNX file is ever loaded (never a checkpoint or a pickle); a file that is not an ONNX model,
 a model without a ``skeletons`` input, or a motion with non-finite coordinates is refused with a
@@ -18,6 +19,7 @@ import numpy as np
 import onnxruntime as ort
 
 from mocapkit.datasets.formats.ntu_skeleton import read_skeleton, select_main_bodies
+from mocapkit.datasets.frames import uniform_frame_indices
 
 
 def softmax(logits: np.ndarray) -> np.ndarray:
@@ -72,9 +74,14 @@ def predict_files(onnx_path: str | Path, files: list[str | Path], top: int = 5) 
     except (ValueError, TypeError) as exc:
         raise ValueError(f"--onnx {onnx_path}: metadata class_names is not a JSON list of names") from exc
     layout = meta.get("layout", "ntu25")
+    try:
+        max_frames = json.loads(meta.get("max_frames", "null"))
+    except (ValueError, TypeError) as exc:
+        raise ValueError(f"--onnx {onnx_path}: metadata max_frames is not a JSON number or null") from exc
     results = []
     for path in files:
         x = np.asarray(model_input(path, layout), dtype=np.float32)
+        x = x[:, :, uniform_frame_indices(x.shape[2], max_frames)]   # the frames training sampled
         if not np.isfinite(x).all():
             raise ValueError(f"{path}: the motion holds {int((~np.isfinite(x)).sum())} NaN or infinite coordinates; "
                              "expected finite positions (absent joints as zeros)")

@@ -42,8 +42,12 @@ def example_skeletons(batch: int, frames: int, bodies: int = 2, joints: int = 25
 
 def export_onnx(model: torch.nn.Module, out: str | Path, class_names: list[str] | None = None, opset: int = 18,
                 trace_shape: tuple[int, int] = (2, 64), check_shape: tuple[int, int] = (3, 97),
-                atol: float = 1e-4, rtol: float = 1e-3) -> dict:
+                atol: float = 1e-4, rtol: float = 1e-3, max_frames: int | None = None) -> dict:
     """Export ``model`` (skeletons → logits) to ``out`` and check it; return the parity figures.
+
+    ``max_frames`` (the training data's ``data.max_frames``) goes into the metadata: ``mocapkit predict``
+    subsamples a longer input uniformly to that many frames, as the data modules did in training
+    (:func:`~mocapkit.datasets.frames.uniform_frame_indices`).
 
     ``trace_shape`` and ``check_shape`` are ``(batch, frames)``; the trace uses 2 bodies and
     the check 1, so the parity check also covers a different body count. The joint count
@@ -73,7 +77,8 @@ def export_onnx(model: torch.nn.Module, out: str | Path, class_names: list[str] 
             "layout": layout.name if layout is not None else "ntu25",
             "joint_names": json.dumps(list(layout.joint_names) if layout is not None else []),
             "input": f"skeletons float32 [batch, bodies, frames, {joints}, 3], metres, zeros where a body is absent",
-            "output": "logits float32 [batch, classes]", "producer": "mocapkit"}
+            "output": "logits float32 [batch, classes]", "producer": "mocapkit",
+            "max_frames": json.dumps(None if max_frames is None else int(max_frames))}
     save_checked_onnx(proto, meta, out)
 
     session = ort.InferenceSession(str(out), providers=["CPUExecutionProvider"])
@@ -101,4 +106,4 @@ def export_action_module(module, target: Path, export_cfg) -> dict:
     return export_onnx(module.model, target, class_names=module.hparams.class_names, opset=export_cfg.opset,
                        trace_shape=(export_cfg.trace_batch, export_cfg.trace_frames),
                        check_shape=(export_cfg.check_batch, export_cfg.check_frames),
-                       atol=export_cfg.atol, rtol=export_cfg.rtol)
+                       atol=export_cfg.atol, rtol=export_cfg.rtol, max_frames=export_cfg.get("max_frames"))

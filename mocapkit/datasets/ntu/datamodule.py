@@ -16,7 +16,8 @@ from mocapkit.datasets.ntu.cache import NTUCache
 from mocapkit.datasets.ntu.splits import split_indices
 from mocapkit.datasets.splits import validation_split
 from mocapkit.datasets.augment import SkeletonAugment
-from mocapkit.datasets.datamodule import SkeletonDataModule, uniform_frame_indices
+from mocapkit.datasets.datamodule import SkeletonDataModule
+from mocapkit.datasets.frames import uniform_frame_indices
 
 
 class SkeletonDataset(Dataset):
