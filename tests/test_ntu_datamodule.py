@@ -3,11 +3,11 @@ import numpy as np
 import pytest
 import torch
 
-from mocapkit.datasets.ntu.datamodule import NTUDataModule
+from mocapkit.datasets.augment import SkeletonAugment
 from mocapkit.datasets.datamodule import pad_collate
 from mocapkit.datasets.frames import uniform_frame_indices
+from mocapkit.datasets.ntu.datamodule import NTUDataModule
 from mocapkit.datasets.ntu.prepare import prepare_ntu
-from mocapkit.datasets.augment import SkeletonAugment
 from mocapkit.datasets.synthetic.ntu import NTUSynthConfig, synthesize_ntu
 
 
@@ -22,7 +22,7 @@ def test_augment_keeps_absent_bodies_zero_and_is_rigid():
     present = out[0].abs().sum((-1, -2)) > 0
     assert present.sum() >= 1 and (out[0][~present] == 0).all()
     # rotation about the vertical axis: heights unchanged, pairwise distances unchanged
-    start = next(s for s in range(0, 41 - out.shape[1]) if torch.allclose(out[0, :, :, 1], x[0, s:s + out.shape[1], :, 1], atol=1e-5))
+    start = next(s for s in range(41 - out.shape[1]) if torch.allclose(out[0, :, :, 1], x[0, s:s + out.shape[1], :, 1], atol=1e-5))
     a, b = x[0, start:start + out.shape[1]][present], out[0][present]
     assert torch.allclose(torch.cdist(a, a), torch.cdist(b, b), atol=1e-4)
 

@@ -149,7 +149,7 @@ def test_predict_samples_frames_as_training_did(tmp_path):
     report = export_onnx(model, out, class_names=["a", "b", "c"], trace_shape=(2, 16), check_shape=(3, 21),
                          max_frames=8)
     assert report["layout"] == "ntu25" and report["same_top1"]
-    sample = sorted(NTU_SAMPLES.glob("*.skeleton"))[0]
+    sample = min(NTU_SAMPLES.glob("*.skeleton"))
     x = model_input(sample, "ntu25").astype(np.float32)                      # [1, 2, T, 25, 3]
     assert x.shape[2] > 8
     session = ort.InferenceSession(str(out), providers=["CPUExecutionProvider"])

@@ -12,12 +12,12 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
-from mocapkit.datasets.ntu.cache import NTUCache
-from mocapkit.datasets.ntu.splits import split_indices
-from mocapkit.datasets.splits import validation_split
 from mocapkit.datasets.augment import SkeletonAugment
 from mocapkit.datasets.datamodule import SkeletonDataModule
 from mocapkit.datasets.frames import uniform_frame_indices
+from mocapkit.datasets.ntu.cache import NTUCache
+from mocapkit.datasets.ntu.splits import split_indices
+from mocapkit.datasets.splits import validation_split
 
 
 class SkeletonDataset(Dataset):
