@@ -1,8 +1,13 @@
 """Classical (non-learned) methods, all scikit-learn estimators (parameters stored untouched in ``__init__``,
 input checks in ``fit``, fitted attributes ending in ``_``, ``NotFittedError`` before ``fit``): NMF solvers for
 motion clustering (thesis §6.3) and their sample graphs; the bag-of-clip-words classifier; the GEI + PCA + LDA
-gait baseline. :mod:`mocapkit.evaluation.compare` runs them beside the learned models on the same splits."""
-from mocapkit.classical.bag_of_words import BagOfWordsClassifier, ClipConditioner, SequenceClips
+gait baseline; Kinect posture reconstruction (Zhou 2014 ch. 5) and its random-forest baseline.
+:mod:`mocapkit.evaluation.compare` runs them beside the learned models on the same splits."""
+from mocapkit.classical.bag_of_words import (
+    BagOfWordsClassifier,
+    ClipConditioner,
+    SequenceClips,
+)
 from mocapkit.classical.dynammo import DynaMMo
 from mocapkit.classical.feature_selection import AMFS, LaplacianScore
 from mocapkit.classical.filter_bases import FilterBasesRefiner
@@ -14,7 +19,6 @@ from mocapkit.classical.gap_filling import (
     SplineInterpolation,
 )
 from mocapkit.classical.gei_pca_lda import GEIPCALDA
-from mocapkit.classical.ksvd import KSVD
 from mocapkit.classical.graphs import (
     combine_graphs,
     knn_graph,
@@ -23,6 +27,11 @@ from mocapkit.classical.graphs import (
     sparse_graph,
     split_laplacian,
 )
+from mocapkit.classical.kinect_reconstruction import (
+    KinectPostureReconstructor,
+    RandomForestPoseCorrector,
+)
+from mocapkit.classical.ksvd import KSVD
 from mocapkit.classical.lrmf import LRMF
 from mocapkit.classical.nmf import GNMF, NMC, NMF, OrthogonalNMF
 from mocapkit.classical.psc import PSCRefiner
@@ -32,8 +41,8 @@ from mocapkit.classical.trnn import TrNN
 __all__ = [
     "AMFS",
     "GEIPCALDA",
-    "KSVD",
     "GNMF",
+    "KSVD",
     "LRMF",
     "NMC",
     "NMF",
@@ -42,12 +51,14 @@ __all__ = [
     "DynaMMo",
     "FilterBasesRefiner",
     "HoldLastValue",
+    "KinectPostureReconstructor",
     "LaplacianScore",
     "LinearInterpolation",
     "OrthogonalNMF",
     "PCAGapFilling",
     "PSCRefiner",
     "PchipInterpolation",
+    "RandomForestPoseCorrector",
     "SVTCompletion",
     "SequenceClips",
     "SplineInterpolation",
