@@ -191,16 +191,7 @@ class PostureTransform:
     def to_world(self, normalised: np.ndarray) -> np.ndarray:
         """Exact inverse of F: positions ``[T, 20, 3]`` in the normalised frame → world (each bone keeps its
         normalised direction and takes back the input's length; then inverse yaw, then the translation)."""
-        p = np.asarray(normalised, dtype=np.float64)
-        out = np.zeros_like(p)
-        out[:, PELVIS] = p[:, PELVIS]
-        for k, parent in enumerate(LANDMARK_PARENTS):
-            if parent < 0:
-                continue
-            bone = p[:, k] - p[:, parent]
-            norm = np.linalg.norm(bone, axis=-1, keepdims=True)
-            direction = np.where(norm > 1e-12, bone / np.maximum(norm, 1e-300), 0.0)
-            out[:, k] = out[:, parent] + direction * self.lengths[:, k:k + 1]
+        out = retarget(np.asarray(normalised, dtype=np.float64), lengths=self.lengths)
         return _rotate_y(out, -self.yaw) + self.translation[:, None]
 
     def offsets_to_world(self, offsets: np.ndarray) -> np.ndarray:

@@ -108,8 +108,9 @@ def _to_y_up(positions: np.ndarray, up_axis: str) -> np.ndarray:
     return np.stack([positions[..., 1], positions[..., 0], -positions[..., 2]], axis=-1)  # x-up
 
 
-def retarget(positions: np.ndarray) -> np.ndarray:
-    """Zhou eqs. 3.2–3.3 on landmarks ``[T, 20, 3]``: every bone keeps its direction and takes the template length."""
+def retarget(positions: np.ndarray, lengths: np.ndarray | None = None) -> np.ndarray:
+    """Zhou eqs. 3.2–3.3 on landmarks ``[T, 20, 3]``: every bone keeps its direction and takes the template length
+    (:data:`TEMPLATE_BONES`), or ``lengths`` (``[T, 20]`` or ``[20]``, m: each landmark's bone to its parent)."""
     out = positions.copy()
     for k, parent in enumerate(LANDMARK_PARENTS):
         if parent < 0:
@@ -117,7 +118,8 @@ def retarget(positions: np.ndarray) -> np.ndarray:
         bone = positions[:, k] - positions[:, parent]
         length = np.linalg.norm(bone, axis=-1, keepdims=True)
         direction = np.where(length > 1e-6, bone / np.maximum(length, 1e-12), 0.0)
-        out[:, k] = out[:, parent] + direction * TEMPLATE_BONES[LANDMARK_NAMES[k]]
+        target = TEMPLATE_BONES[LANDMARK_NAMES[k]] if lengths is None else np.asarray(lengths)[..., k, None]
+        out[:, k] = out[:, parent] + direction * target
     return out
 
 
