@@ -100,7 +100,8 @@ def _fill_gaps(positions: np.ndarray, observed: np.ndarray) -> np.ndarray:
     return out
 
 
-def _to_y_up(positions: np.ndarray, up_axis: str) -> np.ndarray:
+def to_y_up(positions: np.ndarray, up_axis: str) -> np.ndarray:
+    """``[..., 3]`` positions with ``up_axis`` ("x", "y" or "z") turned to y-up, right-handed."""
     if up_axis == "y":
         return positions
     if up_axis == "z":                      # (x, y, z) z-up → (x, z, −y) y-up, right-handed
@@ -166,7 +167,7 @@ def normalised_landmarks(motion: Motion, fps: float = 30.0, heading: str = "fram
     if not np.isfinite(positions[observed]).all():
         raise RetrievalInputError(f"{_label(motion)}: non-finite observed positions")
     p = _fill_gaps(positions, observed)
-    p = _to_y_up(p, motion.up_axis)
+    p = to_y_up(p, motion.up_axis)
     p = retarget(p)
     p = p - p[:, PELVIS:PELVIS + 1]
     return face_forward(p, heading).astype(np.float32)

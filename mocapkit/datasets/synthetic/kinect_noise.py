@@ -88,7 +88,7 @@ from scipy.signal import lfilter
 
 from mocapkit.datasets.formats.layouts import LANDMARK_NAMES, LANDMARK_PARENTS
 from mocapkit.datasets.formats.motion import Motion
-from mocapkit.retrieval.skeleton import _to_y_up, landmark_positions
+from mocapkit.retrieval.skeleton import landmark_positions, to_y_up
 
 #: Kinect SDK joint tracking states (``NUI_SKELETON_POSITION_TRACKING_STATE``).
 TRACKED, INFERRED, NOT_TRACKED = 2, 1, 0
@@ -333,7 +333,7 @@ def kinect20_from_motion(motion: Motion, fps: float | None = 30.0) -> np.ndarray
                                f"{motion.num_frames} frames; the Kinect simulator needs every landmark in every frame")
     if not np.isfinite(positions).all():
         raise KinectInputError(f"{label}: non-finite landmark positions")
-    return _to_y_up(positions, motion.up_axis).astype(np.float32)
+    return to_y_up(positions, motion.up_axis).astype(np.float32)
 
 
 def _check_positions(positions: np.ndarray) -> np.ndarray:
