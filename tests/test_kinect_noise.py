@@ -17,14 +17,13 @@ from mocapkit.datasets.synthetic.kinect_noise import (
     KinectInputError,
     KinectNoiseConfig,
     VirtualCamera,
-    error_by_joint_cm,
     kinect20_from_motion,
-    per_joint_error_cm,
     place_camera,
     self_occlusion,
     simulate_kinect,
     simulate_pairs,
 )
+from mocapkit.evaluation.kinect import joint_error_cm
 from tests.shared_data import SHARED
 
 HDM05 = SHARED / "data" / "hdm05_cuts11"
@@ -152,7 +151,7 @@ def test_surface_bias_moves_every_joint_towards_the_camera_by_its_radius():
 
 def test_error_grows_with_the_noise_level():
     clip = moving_clip(seconds=6.0, turns=0.5)
-    errors = [per_joint_error_cm(clip, simulate_kinect(clip, KinectNoiseConfig().scaled(k), seed=1)[0])
+    errors = [joint_error_cm(clip, simulate_kinect(clip, KinectNoiseConfig().scaled(k), seed=1)[0])
               for k in (0.25, 0.5, 1.0, 2.0)]
     assert errors == sorted(errors) and errors[-1] > 1.5 * errors[0]
 
@@ -161,7 +160,7 @@ def test_depth_noise_grows_with_distance():
     clip = np.repeat(standing_pose()[None], 300, axis=0).astype(np.float32)
     config = KinectNoiseConfig.off(depth_noise=True)
     near, far = (simulate_kinect(clip, config, seed=0, camera=front_camera(d))[0] for d in (1.5, 4.0))
-    near_error, far_error = per_joint_error_cm(clip, near), per_joint_error_cm(clip, far)
+    near_error, far_error = joint_error_cm(clip, near), joint_error_cm(clip, far)
     assert far_error > 4 * near_error      # σ ∝ depth²: (4 / 1.5)² ≈ 7
 
 
@@ -177,15 +176,6 @@ def test_leg_swaps_are_more_frequent_side_on():
     # arms and the trunk stay where they are
     noisy, _ = simulate_kinect(clip, config, seed=0, camera=side)
     np.testing.assert_array_equal(noisy[:, :12], clip[:, :12])
-
-
-def test_per_joint_error_cm():
-    a = np.zeros((4, 20, 3))
-    b = a.copy()
-    b[..., 0], b[..., 1] = 0.03, 0.04                # 5 cm everywhere
-    assert per_joint_error_cm(a, b) == pytest.approx(5.0)
-    b[:, 3] = 0.0
-    assert error_by_joint_cm(a, b)[3] == 0.0 and per_joint_error_cm(a, b) == pytest.approx(5.0 * 19 / 20)
 
 
 def test_config_is_checked():
@@ -210,7 +200,7 @@ def test_kinect20_from_real_hdm05_clip_is_y_up_and_body_sized():
     assert first[J["head"], 1] > first[J["neck"], 1] > first[J["pelvis"], 1] > first[J["l_knee"], 1] > first[
         J["l_ankle"], 1]
     noisy, _ = simulate_kinect(skeleton, seed=0)
-    assert 2.0 < per_joint_error_cm(skeleton, noisy) < 40.0
+    assert 2.0 < joint_error_cm(skeleton, noisy) < 40.0
 
 
 def test_bad_files_raise_naming_the_file_or_are_reported(tmp_path):

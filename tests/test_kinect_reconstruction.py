@@ -24,10 +24,10 @@ from mocapkit.classical.kinect_reconstruction import (
     RandomForestPoseCorrector,
     joint_reliability,
     kinematic_reliability,
-    mean_joint_error_cm,
     normalise_posture,
 )
 from mocapkit.datasets.formats.layouts import LANDMARK_NAMES
+from mocapkit.evaluation.kinect import bone_length_sd_cm, jitter_cm, joint_error_cm
 from mocapkit.retrieval.skeleton import TEMPLATE_BONES, face_forward, retarget
 
 HAND_R, WRIST_R, ELBOW_R, HEAD, FOOT_L = (LANDMARK_NAMES.index(n) for n in ("r_hand", "r_wrist", "r_elbow", "head",
@@ -122,7 +122,7 @@ def paired_clips(seed, n):
 
 
 def _error(pred, mocap):
-    return float(np.mean([mean_joint_error_cm(p, m) for p, m in zip(pred, mocap)]))
+    return float(np.mean([joint_error_cm(p, m) for p, m in zip(pred, mocap)]))
 
 
 SMALL_GP = {"n_inducing": 40, "gp_iterations": 30}
@@ -150,8 +150,8 @@ def test_reconstructor_cuts_the_error_on_held_out_clips(fitted, data):
     assert raw > 1.2                                                   # the corruption is substantial
     assert err < 0.6 * raw, (err, raw)
     # the pose-dependent joints are the ones fixed: the right hand's error drops the most
-    per_joint_raw = np.mean([mean_joint_error_cm(k, m, per_joint=True) for k, m in zip(kte, mte)], 0)
-    per_joint = np.mean([mean_joint_error_cm(r, m, per_joint=True) for r, m in zip(rec, mte)], 0)
+    per_joint_raw = np.mean([joint_error_cm(k, m, per_joint=True) for k, m in zip(kte, mte)], 0)
+    per_joint = np.mean([joint_error_cm(r, m, per_joint=True) for r, m in zip(rec, mte)], 0)
     assert per_joint[HAND_R] < 0.5 * per_joint_raw[HAND_R]
     assert per_joint[HEAD] < 0.5 * per_joint_raw[HEAD]
     assert fitted.training_loss_[-1] < fitted.training_loss_[0]
@@ -193,13 +193,13 @@ def test_spatial_term_alone_is_the_gp_mean_and_every_ablation_runs(fitted, data)
     assert mu.shape == x.shape and var.shape == x.shape[:2] and (var > 0).all()
     est.set_params(w_spatial=0.6, w_temporal=0.0, w_reliability=0.0)
     np.testing.assert_allclose(est.predict(x), x + mu, atol=1e-12)
-    raw = mean_joint_error_cm(x, m)
+    raw = joint_error_cm(x, m)
     errors = {}
     for ws, wt, wr in [(0.6, 0, 0), (0, 0.2, 0), (0, 0, 0.2), (0.6, 0.2, 0), (0.6, 0, 0.2), (0, 0.2, 0.2),
                        (0.6, 0.2, 0.2)]:
         out = est.set_params(w_spatial=ws, w_temporal=wt, w_reliability=wr).predict(x)
         assert out.shape == x.shape and np.isfinite(out).all()
-        errors[(ws, wt, wr)] = mean_joint_error_cm(out, m)
+        errors[(ws, wt, wr)] = joint_error_cm(out, m)
     assert errors[(0, 0, 0.2)] == pytest.approx(raw)                   # Table 5.3 (b): raw Kinect
     assert errors[(0, 0.2, 0)] > raw                                   # (a): extrapolation drifts
     for key, err in errors.items():
@@ -375,15 +375,29 @@ def test_neighbours_follow_the_kinect_tree():
     assert NEIGHBOURS[2] == (1, 3, 4, 8)
 
 
-def test_mean_joint_error_cm():
+def test_joint_error_cm():
     a = np.zeros((4, 20, 3))
     b = a.copy()
     b[..., 0] = 0.03
-    assert mean_joint_error_cm(a, b) == pytest.approx(3.0)
+    assert joint_error_cm(a, b) == pytest.approx(3.0)
     b[:, 5, 1] = 0.04                                                  # joint 5: 5 cm
-    np.testing.assert_allclose(mean_joint_error_cm(a, b, per_joint=True)[[4, 5]], [3.0, 5.0])
+    np.testing.assert_allclose(joint_error_cm(a, b, per_joint=True)[[4, 5]], [3.0, 5.0])
     with pytest.raises(ValueError):
-        mean_joint_error_cm(a, b[:2])
+        joint_error_cm(a, b[:2])
+
+
+def test_bone_length_sd_and_jitter_cm():
+    rng = np.random.default_rng(0)
+    pose = rng.normal(size=(20, 3))
+    pose[3] = pose[2] + [0.0, 0.2, 0.0]                            # the head bone (ShoulderCenter → Head) points up
+    t = np.arange(30.0)[:, None, None]
+    moving = pose + 0.01 * t * np.array([1.0, 0.0, 0.0])          # rigid, constant velocity 1 cm/frame
+    assert bone_length_sd_cm(moving) == pytest.approx(0.0, abs=1e-9)
+    assert jitter_cm(moving) == pytest.approx(0.0, abs=1e-9)
+    stretched = moving.copy()
+    stretched[::2, 3, 1] += 0.02                                   # the head bone alternates between +0 and +2 cm
+    assert bone_length_sd_cm(stretched) == pytest.approx(1.0 / 19)  # 1 cm sd on one of 19 bones
+    assert jitter_cm(stretched) == pytest.approx(100 * 0.04 / 20, rel=0.05)   # |Δ²| = 4 cm on 1 of 20 joints
 
 
 # ------------------------------------------------------------------------------------------------- the contract

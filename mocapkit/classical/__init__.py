@@ -1,7 +1,8 @@
 """Classical (non-learned) methods, all scikit-learn estimators (parameters stored untouched in ``__init__``,
 input checks in ``fit``, fitted attributes ending in ``_``, ``NotFittedError`` before ``fit``): NMF solvers for
 motion clustering (thesis §6.3) and their sample graphs; the bag-of-clip-words classifier; the GEI + PCA + LDA
-gait baseline; Kinect posture reconstruction (Zhou 2014 ch. 5) and its random-forest baseline.
+gait baseline; Kinect posture reconstruction (Zhou 2014 ch. 5), its random-forest baseline and the Kinect SDK's
+smoothing filter.
 :mod:`mocapkit.evaluation.compare` runs them beside the learned models on the same splits."""
 from mocapkit.classical.bag_of_words import (
     BagOfWordsClassifier,
@@ -28,6 +29,7 @@ from mocapkit.classical.graphs import (
     split_laplacian,
 )
 from mocapkit.classical.kinect_reconstruction import (
+    DoubleExponentialSmoother,
     KinectPostureReconstructor,
     RandomForestPoseCorrector,
 )
@@ -48,6 +50,7 @@ __all__ = [
     "NMF",
     "BagOfWordsClassifier",
     "ClipConditioner",
+    "DoubleExponentialSmoother",
     "DynaMMo",
     "FilterBasesRefiner",
     "HoldLastValue",

@@ -10,7 +10,8 @@ corrupts it the way a Kinect v1 does. **Results on simulated data are not compar
 
 Units: positions in metres, y up, in the world frame of the input (the simulated skeleton is not moved into the
 camera's frame, so ``clean − noisy`` is the offset a reconstruction has to learn); times in seconds; errors reported
-in centimetres (:func:`per_joint_error_cm`, digest §4.6 eqs 5.7–5.9 as a per-frame mean, §7 item 29).
+in centimetres (:func:`mocapkit.evaluation.kinect.joint_error_cm`, digest §4.6 eqs 5.7–5.9 as a per-frame mean,
+§7 item 29).
 
 What is simulated, in this order (each a switch of :class:`KinectNoiseConfig`, named in :data:`COMPONENTS`):
 
@@ -51,10 +52,10 @@ others' noise unchanged); every component off returns the input exactly (all joi
 Calibration (``scripts/calibrate_kinect_noise.py``): the thesis reports raw Kinect errors of 12.5–14.5 cm against
 mocap on its occlusion-heavy motions (digest §4.6, Table 5.2). The defaults were tuned by hand, component by
 component, so that the raw error of the default config over all 232 HDM05 cuts (``../shared/data/hdm05_cuts11``,
-30 fps, world frame, all 20 joints, frame-weighted mean, :func:`per_joint_error_cm`) falls inside that range, with
-occlusion and inference the largest part of it and hands and feet the worst joints; the geometric parts (capsule
-radii, coverage threshold, camera) were set first by checking which joints each HDM05 class hides, then the
-magnitudes. ``python scripts/calibrate_kinect_noise.py --seed 0`` (232 files, 14,288 frames, 84 s) measured:
+30 fps, world frame, all 20 joints, frame-weighted mean, :func:`mocapkit.evaluation.kinect.joint_error_cm`) falls
+inside that range, with occlusion and inference the largest part of it and hands and feet the worst joints; the
+geometric parts (capsule radii, coverage threshold, camera) were set first by checking which joints each HDM05
+class hides, then the magnitudes. ``python scripts/calibrate_kinect_noise.py --seed 0`` (232 files, 14,288 frames, 84 s) measured:
 
 - overall raw error **13.90 cm** (seeds 1 and 2: 13.80, 13.63 cm); median clip 10.9 cm;
 - states: TRACKED 80.0 %, INFERRED 16.0 %, NOT_TRACKED 4.0 %; error 9.1 cm on TRACKED entries and 32.9 cm on the
@@ -790,26 +791,8 @@ def simulate_pairs(paths: Iterable[str | os.PathLike], config: KinectNoiseConfig
     return pairs, skipped
 
 
-# ---------------------------------------------------------------------------------------------------- errors
-
-
-def error_by_joint_cm(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """float64 ``[J]``: per joint, the mean over frames of the Euclidean distance between ``a`` and ``b``
-    (``[T, J, 3]``, metres), in cm."""
-    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
-    if a.shape != b.shape or a.ndim != 3 or a.shape[-1] != 3:
-        raise ValueError(f"need two [T, J, 3] arrays of one shape, got {list(a.shape)} and {list(b.shape)}")
-    return 100.0 * np.linalg.norm(a - b, axis=-1).mean(axis=0)
-
-
-def per_joint_error_cm(a: np.ndarray, b: np.ndarray) -> float:
-    """Zhou eqs 5.7–5.9 as a per-frame mean (digest §7 item 29): mean over frames and joints of the Euclidean
-    distance between ``a`` and ``b`` (``[T, J, 3]`` metres), in cm."""
-    return float(error_by_joint_cm(a, b).mean())
-
-
 __all__ = [
     "CAPSULES", "COMPONENTS", "INFERRED", "KINECT20_NAMES", "NOT_TRACKED", "TRACKED", "KinectInputError",
-    "KinectNoiseConfig", "KinectPair", "VirtualCamera", "error_by_joint_cm", "file_seed", "kinect20_from_motion",
-    "per_joint_error_cm", "place_camera", "self_occlusion", "simulate_kinect", "simulate_pairs",
+    "KinectNoiseConfig", "KinectPair", "VirtualCamera", "file_seed", "kinect20_from_motion",
+    "place_camera", "self_occlusion", "simulate_kinect", "simulate_pairs",
 ]

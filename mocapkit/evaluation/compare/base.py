@@ -60,6 +60,8 @@ class Benchmark:
     """
 
     title = "benchmark"
+    #: How :meth:`cross_validate` splits the training side, for the report.
+    selection_cv = "stratified k-fold CV"
     protocols: tuple[str, ...] = ()
     percent_metrics: tuple[str, ...] = ("*",)
 
@@ -87,6 +89,17 @@ class Benchmark:
         X_test, y_test = self.data(split.test)
         predicted = np.asarray(estimator.predict(X_test))
         return {"metrics": {"accuracy": float((predicted == np.asarray(y_test)).mean())}, "detail": {}}
+
+    def cross_validate(self, estimator, train: np.ndarray, folds: int, seed: int) -> float:
+        """Mean validation score (higher is better) of ``estimator`` over ``folds`` folds of the training samples
+        ``train``: what the runner's ``select`` maximises. The default: stratified ``folds``-fold
+        ``cross_val_score`` on :meth:`data` (the estimator's own ``score``); a benchmark whose folds must keep
+        groups apart (performers, subjects) or whose score is not the estimator's overrides it."""
+        from sklearn.model_selection import StratifiedKFold, cross_val_score
+
+        X, y = self.data(train)
+        cv = StratifiedKFold(folds, shuffle=True, random_state=seed)
+        return float(np.mean(cross_val_score(estimator, X, y, cv=cv, error_score="raise")))
 
     # ------------------------------------------------------------------ learned runs
     def learned_overrides(self, protocol: str, seed: int) -> list[str]:

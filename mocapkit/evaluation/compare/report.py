@@ -92,7 +92,7 @@ def results_markdown(results: dict, benchmark: Benchmark) -> str:
              "## Summary: mean ± sd over seeds", "", summary_markdown(results, benchmark)]
     if results.get("selection"):
         lines += ["## Hyper-parameter selection", "",
-                  "Coordinate search by stratified k-fold CV on the training side of the first seed's split only.",
+                  f"Coordinate search by {benchmark.selection_cv} on the training side of the first seed's split only.",
                   "", "| method | protocol | chosen | CV score | tried |", "|---|---|---|---|---|"]
         for method, per_protocol in results["selection"].items():
             for protocol, entry in per_protocol.items():

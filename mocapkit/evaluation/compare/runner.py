@@ -236,8 +236,9 @@ class Comparison:
     def selected(self, method: Method, protocol: str) -> dict:
         """Parameters chosen by ``method.select`` under ``protocol`` (memoised; ``{}`` without selection).
 
-        Coordinate search by cross-validation on the **training side** of the first seed's split, with that
-        seed for the folds and the estimators: the stages in order, each trying its values at the best
+        Coordinate search by cross-validation on the **training side** of the first seed's split
+        (:meth:`~mocapkit.evaluation.compare.base.Benchmark.cross_validate`), with that seed for the folds and
+        the estimators: the stages in order, each trying its values at the best
         parameters so far; a value replaces the best only when its mean CV score is strictly higher (ties keep
         the earlier one), and a parameter set already scored is not scored again.
         """
@@ -249,11 +250,8 @@ class Comparison:
         memo = self.selection.setdefault(method.key, {})
         if protocol in memo:
             return memo[protocol]["params"]
-        from sklearn.model_selection import StratifiedKFold, cross_val_score
-
         seed = self.seeds[0]
         split = self.split(protocol, seed)
-        X, y = self.benchmark.data(split.train)
         folds = int(method.select.get("cv", 3))
         stages = [next(iter(stage.items())) for stage in method.select["stages"]]
         current = self.make_estimator(method, seed).get_params(deep=True)
@@ -269,8 +267,7 @@ class Comparison:
                 if any(t["params"] == candidate for t in tried):
                     continue
                 estimator = self.make_estimator(method, seed, candidate)
-                cv = StratifiedKFold(folds, shuffle=True, random_state=seed)
-                score = float(np.mean(cross_val_score(estimator, X, y, cv=cv, error_score="raise")))
+                score = self.benchmark.cross_validate(estimator, split.train, folds, seed)
                 tried.append({"params": candidate, "cv_score": score})
                 print(f"[compare] select {method.key} | {protocol}: {candidate} → CV {score:.4f}", flush=True)
                 if score > best_score:

@@ -1,0 +1,113 @@
+"""``mocapkit kinect-fix``'s library: training on simulated pairs of real mocap, saving and loading the model,
+correcting real MSR Action3D Kinect files (the all-zero one refused or reported), wild input (missing joints),
+and the Kinect SDK smoothing baseline."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mocapkit.classical import DoubleExponentialSmoother, KinectPostureReconstructor
+from mocapkit.datasets.formats.layouts import LANDMARK_NAMES, MSR20, find_landmarks
+from mocapkit.datasets.formats.motion import Motion
+from mocapkit.datasets.formats.motion_io import read_motion
+from mocapkit.refinement.kinect_fix import KinectFixError, fix_kinect_files, kinect_clip, train_kinect_model
+from tests.shared_data import SHARED, needs
+
+HDM05 = SHARED / "data" / "hdm05_cuts11"
+MSR = SHARED / "data" / "msr_action3d"
+TINY = {"gp_iterations": 3, "n_inducing": 20, "max_train_frames": 400}
+
+
+@pytest.fixture(scope="module")
+def model_path(tmp_path_factory):
+    if not HDM05.is_dir():
+        pytest.skip(f"{HDM05} is absent")
+    out = tmp_path_factory.mktemp("kinect_model") / "model.npz"
+    report = train_kinect_model(sorted((HDM05 / "bd").glob("*.amc"))[:4], out, **TINY)
+    assert report["files"] == 4 and report["frames"] > 100 and not report["skipped"]
+    return out
+
+
+@needs(HDM05)
+def test_saved_model_predicts_exactly_as_the_fitted_one(tmp_path):
+    from mocapkit.datasets.synthetic.kinect_noise import simulate_pairs
+
+    pairs, _ = simulate_pairs(sorted((HDM05 / "bk").glob("*.amc"))[:3], seed=0)
+    model = KinectPostureReconstructor(**TINY).fit([p.noisy for p in pairs[:2]], [p.clean for p in pairs[:2]])
+    loaded = KinectPostureReconstructor.load(model.save(tmp_path / "sub" / "model.npz"))
+    assert loaded.get_params() == model.get_params() and loaded.n_train_frames_ == model.n_train_frames_
+    test = pairs[2]
+    np.testing.assert_array_equal(model.predict(test.noisy, state=test.state),
+                                  loaded.predict(test.noisy, state=test.state))
+
+
+def test_a_file_that_is_not_a_model_is_named(tmp_path):
+    bad = tmp_path / "notes.npz"
+    np.savez(bad, x=np.zeros(3))
+    with pytest.raises(ValueError, match="notes.npz"):
+        KinectPostureReconstructor.load(bad)
+
+
+@needs(MSR)
+def test_msr_files_are_corrected_and_the_all_zero_file_is_refused_or_reported(model_path, tmp_path):
+    good = [MSR / "a01_s01_e01_skeleton3D.txt", MSR / "a02_s03_e01_skeleton3D.txt"]
+    empty = MSR / "a13_s09_e02_skeleton3D.txt"
+    with pytest.raises(KinectFixError, match="a13_s09_e02"):
+        fix_kinect_files(model_path, [empty, *good], tmp_path / "strict")
+    report = fix_kinect_files(model_path, [empty, *good], tmp_path / "out", skip_bad=True, plot=1)
+    assert [Path(s[0]).name for s in report.skipped] == [empty.name]
+    assert len(report.fixed) == 2 and report.frames_per_s > 0
+    saved = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert saved["skipped"][0][0] == str(empty)
+    for entry in saved["fixed"]:
+        motion = read_motion(entry["output"])
+        source = read_motion(entry["input"])
+        assert motion.layout_name == "msr20" and motion.fps == 30.0 and source.fps == 15.0
+        assert abs(motion.num_frames - 2 * source.num_frames) <= 2          # 15 → 30 fps over the same duration
+        assert np.isfinite(motion.positions).all()
+        # corrections are offsets of centimetres, not a different motion
+        raw, _, _ = kinect_clip(source.resample(30.0))
+        where = find_landmarks(motion.joint_names, motion.layout_name)
+        fixed = motion.positions[:, [where[n] for n in LANDMARK_NAMES]]
+        assert 0.001 < np.linalg.norm(fixed - raw, axis=-1).mean() < 0.2
+    assert (tmp_path / "out" / "a01_s01_e01_skeleton3D_before_after.png").stat().st_size > 0
+    assert "skipped" in report.to_text() and "a13_s09_e02" in report.to_text()
+
+
+def test_missing_joints_are_filled_marked_not_tracked_and_counted():
+    t = np.linspace(0, 1, 12)
+    positions = np.zeros((12, 20, 3), dtype=np.float32)
+    rng = np.random.default_rng(1)
+    positions[:] = rng.normal(size=(20, 3)) * 0.3
+    positions[:, :, 0] += t[:, None]                                     # everyone walks 1 m along x
+    missing = np.zeros((12, 20), dtype=bool)
+    missing[4:7, 5] = True
+    positions[missing] = np.nan
+    motion = Motion(positions=positions, joint_names=MSR20.joint_names, parents=MSR20.parents, fps=30.0,
+                    missing=missing, layout_name="msr20", name="gappy")
+    clip, state, filled = kinect_clip(motion)
+    assert filled == 3 and np.isfinite(clip).all()
+    assert (state == 0).sum() == 3 and (state == 2).sum() == 12 * 20 - 3
+    k = int(np.flatnonzero((state == 0).any(axis=0))[0])
+    np.testing.assert_allclose(clip[4:7, k, 0] - clip[3, k, 0], (t[4:7] - t[3]), atol=1e-5)   # linear in time
+    every = motion.positions.copy()
+    every[:, 5] = np.nan
+    with pytest.raises(KinectFixError, match="gappy.*missing in every frame"):
+        kinect_clip(Motion(positions=every, joint_names=MSR20.joint_names, parents=MSR20.parents, fps=30.0,
+                           layout_name="msr20", name="gappy"))
+
+
+def test_sdk_smoother_keeps_still_joints_bounds_deviation_and_reduces_noise():
+    rng = np.random.default_rng(0)
+    still = np.repeat(rng.normal(size=(1, 20, 3)), 50, axis=0)
+    np.testing.assert_allclose(DoubleExponentialSmoother().fit([still]).predict(still), still, atol=1e-12)
+    noisy = still + rng.normal(scale=0.01, size=still.shape)
+    smoother = DoubleExponentialSmoother(smoothing=0.75, jitter_radius=0.05, max_deviation=0.04)
+    out = smoother.predict(noisy)
+    assert np.linalg.norm(out - noisy, axis=-1).max() <= 0.04 + 1e-9
+    assert np.linalg.norm(out - still, axis=-1)[5:].mean() < 0.6 * np.linalg.norm(noisy - still, axis=-1)[5:].mean()
+    with pytest.raises(ValueError, match="smoothing"):
+        DoubleExponentialSmoother(smoothing=1.5).fit([still])
