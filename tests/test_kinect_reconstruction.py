@@ -448,3 +448,16 @@ def test_bad_parameters_and_predict_inputs(fitted, data):
         fitted.predict(kte[0], state=np.ones((5, 20)))
     with pytest.raises(ValueError, match="reliability"):
         fitted.predict(kte[0], reliability=np.full((len(kte[0]), 20), 1.5))
+
+
+def test_whole_posture_gp_input_sees_every_joint():
+    rng = np.random.default_rng(0)
+    postures = rng.normal(size=(7, 20, 3))
+    inputs, mask = kr._gp_inputs(postures, "posture"), kr._input_mask("posture")
+    assert inputs.shape == (20, 7, 60) and mask.all()
+    np.testing.assert_array_equal(inputs[5], postures.reshape(7, 60))
+    neighbours = kr._gp_inputs(postures, "neighbours")
+    assert neighbours.shape == (20, 7, 15)
+    np.testing.assert_array_equal(neighbours[3, :, :6], postures[:, [3, 2]].reshape(7, 6))   # head: itself, neck
+    with pytest.raises(ValueError, match="gp_input"):
+        KinectPostureReconstructor(gp_input="arms").fit([postures], [postures])

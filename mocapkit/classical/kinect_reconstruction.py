@@ -21,8 +21,9 @@ coordinates (the raw Kinect frame), so errors are measured against world mocap.
 exact inverse of F) and the per-clip ``s``.
 
 **Spatial term (§4.2, §7 item 28).** One sparse GP per joint ``i``: input = normalised positions of ``i`` and its
-neighbours ``N(i)`` (the joints sharing a bone with ``i``), flattened (6–15 numbers); output = its 3-D normalised
-offset. The 3 coordinates share one kernel and one noise (as Lawrence's GP toolbox, which the thesis used, does
+neighbours ``N(i)`` (the joints sharing a bone with ``i``), flattened (6–15 numbers; ``gp_input="posture"``
+instead gives every joint's GP the whole normalised posture, 60 numbers, as the random forest sees it: not the
+thesis's model); output = its 3-D normalised offset. The 3 coordinates share one kernel and one noise (as Lawrence's GP toolbox, which the thesis used, does
 for multi-dimensional outputs), so the predictive variance is one number per joint and frame, isotropic, and
 unchanged by the yaw rotation; offsets are centred per coordinate and divided by one scalar per joint.
 Kernel = RBF + bias + noise (thesis eq. 4.3, isotropic): ``gpytorch.kernels.InducingPointKernel`` over
@@ -83,6 +84,8 @@ NEIGHBOURS: tuple[tuple[int, ...], ...] = tuple(
 #: The joints of each joint's GP input: itself, then its neighbours.
 GP_INPUT_JOINTS: tuple[tuple[int, ...], ...] = tuple((i, *NEIGHBOURS[i]) for i in range(N_JOINTS))
 _MAX_INPUT_DIM = 3 * max(len(j) for j in GP_INPUT_JOINTS)
+#: What a joint's GP sees: its own and its neighbours' positions (the thesis), or the whole posture.
+GP_INPUTS = ("neighbours", "posture")
 COMBINATIONS = ("product", "min")
 
 
@@ -338,17 +341,30 @@ def _training_pairs(kinect: list[np.ndarray], mocap: list[np.ndarray], max_frame
     return X, Y
 
 
-def _gp_inputs(normalised: np.ndarray) -> np.ndarray:
-    """Normalised postures ``[N, 20, 3]`` → per-joint GP inputs ``[20, N, 15]`` (joint + neighbours, zero-padded)."""
-    out = np.zeros((N_JOINTS, len(normalised), _MAX_INPUT_DIM))
-    for j, joints in enumerate(GP_INPUT_JOINTS):
+def _input_joints(gp_input: str) -> tuple[tuple[int, ...], ...]:
+    """The joints of each joint's GP input: :data:`GP_INPUT_JOINTS` (``"neighbours"``) or all 20 (``"posture"``)."""
+    if gp_input == "neighbours":
+        return GP_INPUT_JOINTS
+    if gp_input == "posture":
+        return (tuple(range(N_JOINTS)),) * N_JOINTS
+    raise ValueError(f"gp_input={gp_input!r}: expected one of {GP_INPUTS}")
+
+
+def _gp_inputs(normalised: np.ndarray, gp_input: str = "neighbours") -> np.ndarray:
+    """Normalised postures ``[N, 20, 3]`` → per-joint GP inputs ``[20, N, D]`` (D = 15 for the neighbours,
+    zero-padded; 60 for the whole posture)."""
+    joints_of = _input_joints(gp_input)
+    out = np.zeros((N_JOINTS, len(normalised), 3 * max(len(j) for j in joints_of)))
+    for j, joints in enumerate(joints_of):
         out[j, :, :3 * len(joints)] = normalised[:, joints].reshape(len(normalised), -1)
     return out
 
 
-def _input_mask() -> np.ndarray:
-    mask = np.zeros((N_JOINTS, _MAX_INPUT_DIM))
-    for j, joints in enumerate(GP_INPUT_JOINTS):
+def _input_mask(gp_input: str = "neighbours") -> np.ndarray:
+    """``[20, D]``: 1 on the input dimensions each joint's GP uses, 0 on the padding."""
+    joints_of = _input_joints(gp_input)
+    mask = np.zeros((N_JOINTS, 3 * max(len(j) for j in joints_of)))
+    for j, joints in enumerate(joints_of):
         mask[j, :3 * len(joints)] = 1.0
     return mask
 
@@ -513,6 +529,8 @@ class KinectPostureReconstructor(BaseEstimator):
         w_spatial, w_temporal, w_reliability: the energy weights (thesis 0.6 / 0.2 / 0.2); each ≥ 0, not all 0.
             They are used only by :meth:`predict`, so ``set_params`` after ``fit`` runs the Table 5.3 ablation
             without retraining.
+        gp_input: ``"neighbours"`` (the thesis: each joint's GP sees the joint and its neighbours) or ``"posture"``
+            (every joint's GP sees the whole normalised posture, 60 numbers, as the random-forest baseline does).
         n_inducing: inducing points per joint GP (capped at the training frames).
         max_train_frames: training frames kept (a seeded random subset of all clips' frames); None = all.
         gp_iterations: Adam steps on the SGPR bound (0 keeps the starting hyper-parameters).
@@ -534,13 +552,14 @@ class KinectPostureReconstructor(BaseEstimator):
                       "still_threshold", "energy_unit")
 
     def __init__(self, w_spatial: float = 0.6, w_temporal: float = 0.2, w_reliability: float = 0.2,
-                 n_inducing: int = 200, max_train_frames: int | None = 3000, gp_iterations: int = 100,
-                 learning_rate: float = 0.05, reliability: str = "product", kappa: float = 5.0,
+                 gp_input: str = "neighbours", n_inducing: int = 200, max_train_frames: int | None = 3000,
+                 gp_iterations: int = 100, learning_rate: float = 0.05, reliability: str = "product", kappa: float = 5.0,
                  jump_threshold: float = 0.15, still_threshold: float = 0.01, energy_unit: float = 0.01,
                  device: str = "cpu", random_state: int | None = 0):
         self.w_spatial = w_spatial
         self.w_temporal = w_temporal
         self.w_reliability = w_reliability
+        self.gp_input = gp_input
         self.n_inducing = n_inducing
         self.max_train_frames = max_train_frames
         self.gp_iterations = gp_iterations
@@ -567,6 +586,7 @@ class KinectPostureReconstructor(BaseEstimator):
 
     def _check_fit_params(self):
         self._check_energy_params()
+        _input_joints(self.gp_input)
         _check_nonneg("n_inducing", self.n_inducing, integer=True, minimum=1)
         _check_nonneg("gp_iterations", self.gp_iterations, integer=True)
         if self.max_train_frames is not None:
@@ -587,12 +607,12 @@ class KinectPostureReconstructor(BaseEstimator):
         _check_states(states, [len(c) for c in kinect], "states")
         seed = int(check_random_state(self.random_state).randint(2 ** 31 - N_JOINTS))    # k-means seeds
         X, Y = _training_pairs(kinect, mocap, self.max_train_frames, self.random_state)
-        inputs = _gp_inputs(X)                                                          # [J, N, D]
+        inputs = _gp_inputs(X, self.gp_input)                                           # [J, N, D]
         offsets = Y.transpose(1, 0, 2)                                                  # [J, N, 3]
         y_mean = offsets.mean(1)
         y_scale = np.maximum(np.sqrt(((offsets - y_mean[:, None]) ** 2).mean((1, 2))), 1e-4)
         targets = (offsets - y_mean[:, None]) / y_scale[:, None, None]
-        mask = _input_mask()
+        mask = _input_mask(self.gp_input)
         m = min(int(self.n_inducing), len(X))
         Z0 = _kmeans_inducing(inputs, mask, m, seed)
         params, history = _train_sgpr(inputs, targets, mask, Z0, self.gp_iterations, float(self.learning_rate),
@@ -640,7 +660,7 @@ class KinectPostureReconstructor(BaseEstimator):
         check_is_fitted(self, "gp_")
         x = _check_clip(kinect, "kinect")
         norm, tf = normalise_posture(x)
-        mean, var = self.gp_.predict(_gp_inputs(norm))
+        mean, var = self.gp_.predict(_gp_inputs(norm, self.gp_input))
         return tf.offsets_to_world(mean), tf.variance_to_world(var)
 
     def reliability_of(self, kinect: np.ndarray, state: np.ndarray | None = None) -> np.ndarray:
