@@ -18,6 +18,11 @@
     mocapkit refine IN OUT --method RUN/best.ckpt | --onnx FILE [--set KEY=VALUE ...] [--repair-outliers]
     mocapkit index --src DIR --out INDEX [--method NAME] [--ckpt PATH] [--skip-bad]
     mocapkit search --index INDEX QUERY [QUERY ...] [-k K] [--json]
+    mocapkit synthesize INPUT [INPUT ...] --out DIR [--type SUBSTRING] [--variants N] [--frames F] [--seed S]
+                        [--method slfm|perlin|lau|cvae] [--no-footskate] [--set KEY=VALUE ...]   (Zhou 2014 ch. 4)
+    mocapkit kinect-fix train --mocap PATH [PATH ...] --out MODEL.npz [--set KEY=VALUE ...] [--skip-bad]
+    mocapkit kinect-fix apply INPUT [INPUT ...] --model MODEL.npz --out DIR [--set KEY=VALUE ...] [--plot N]
+                        [--skip-bad]                                            (Zhou 2014 ch. 5)
 
 Errors are one line (``mocapkit: error: ...``, exit code 2); ``mocapkit --debug COMMAND ...`` (or
 ``MOCAPKIT_DEBUG=1``) shows the traceback instead.
@@ -212,6 +217,53 @@ def cmd_search(args: argparse.Namespace) -> None:
             print(f"  {rank:3d}  {hit['distance']:10.4f}  {hit['path']}")
 
 
+def cmd_synthesize(args: argparse.Namespace) -> None:
+    from mocapkit.synthesis.synthesize import synthesize
+
+    report = synthesize(args.inputs, args.out, n_variants=args.variants, n_frames=args.frames, seed=args.seed,
+                        method=args.method, motion_type=args.type, max_clips=args.max_clips,
+                        footskate_cleanup=not args.no_footskate, options=_key_values(args.set),
+                        progress=not args.quiet)
+    print(f"[mocapkit] wrote {len(report['variants'])} variants of {len(report['training_clips'])} training clips to "
+          f"{args.out} (fit {report['fit_seconds']:.1f} s, {report['sample_seconds_per_motion_second']:.4f} s of "
+          f"compute per second of motion)")
+
+
+def cmd_kinect_fix_train(args: argparse.Namespace) -> None:
+    from mocapkit.refinement.kinect_fix import train_kinect_model
+
+    report = train_kinect_model(args.mocap, args.out, seed=args.seed, skip_bad=args.skip_bad,
+                                **_key_values(args.set))
+    print(f"[mocapkit] Kinect reconstruction model of {report['files']} simulated clips ({report['frames']} frames, "
+          f"fit {report['fit_seconds']:.0f} s) written to {report['model']}"
+          + "".join(f"\n  skipped {path}: {reason}" for path, reason in report["skipped"]))
+
+
+def cmd_kinect_fix_apply(args: argparse.Namespace) -> None:
+    from mocapkit.refinement.kinect_fix import fix_kinect_files
+
+    report = fix_kinect_files(args.model, args.inputs, args.out, skip_bad=args.skip_bad, plot=args.plot,
+                              **_key_values(args.set))
+    print(report.to_text())
+
+
+def _key_values(items) -> dict:
+    """``["n_fit=50", "sample_noise=False", "gp_input=posture"]`` → a parameter dict (values read as Python
+    literals, else kept as strings)."""
+    import ast
+
+    options = {}
+    for item in items:
+        key, sep, text = item.partition("=")
+        if not sep or not key.strip():
+            raise ValueError(f"--set {item!r}: expected KEY=VALUE")
+        try:
+            options[key.strip()] = ast.literal_eval(text.strip())
+        except (ValueError, SyntaxError):
+            options[key.strip()] = text.strip()
+    return options
+
+
 def cmd_predict(args: argparse.Namespace) -> None:
     from mocapkit.deploy.predict import predict_files, print_predictions
 
@@ -391,6 +443,57 @@ def build_parser() -> argparse.ArgumentParser:
     search.add_argument("--method", default=None, help="refuse unless the index was built with this method")
     search.add_argument("--ckpt", default=None, help="refuse unless the index was built with this model file")
     search.set_defaults(func=cmd_search)
+
+    synthesize = sub.add_parser("synthesize", help="new variants of a motion type from about ten example AMC clips "
+                                                   "(Zhou 2014 ch. 4 SLFM Gaussian processes)")
+    synthesize.add_argument("inputs", nargs="+", help="AMC files and/or folders (searched recursively); the ASF is "
+                                                      "looked up beside each AMC")
+    synthesize.add_argument("--type", default=None, metavar="SUBSTRING",
+                            help="keep only files whose name contains this, e.g. hopBothLegs1hops")
+    synthesize.add_argument("--out", required=True, help="output folder: variant_000.amc ..., the reference .asf, "
+                                                         "report.json")
+    synthesize.add_argument("--variants", type=int, default=10, help="variants to write (default 10)")
+    synthesize.add_argument("--frames", type=int, default=None, help="frames per variant (default: mean training "
+                                                                     "length)")
+    synthesize.add_argument("--seed", type=int, default=0, help="seed of the fit and the sampling (default 0)")
+    synthesize.add_argument("--max-clips", dest="max_clips", type=int, default=10,
+                            help="use the first N matching clips, sorted by path (default 10, as the thesis)")
+    synthesize.add_argument("--method", default="slfm", choices=["slfm", "perlin", "lau", "cvae"],
+                            help="synthesiser (default slfm; perlin, lau and cvae are the baselines)")
+    synthesize.add_argument("--no-footskate", dest="no_footskate", action="store_true",
+                            help="skip the footskate cleanup (contact detection + two-bone leg IK)")
+    synthesize.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                            help="a parameter of the synthesiser, repeatable, e.g. n_inducing=64, max_iter=50, "
+                                 "frame_stride=4, sample_noise=False, dynamic_feature=scf_difference")
+    synthesize.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    synthesize.set_defaults(func=cmd_synthesize)
+
+    kinect = sub.add_parser("kinect-fix", help="correct noisy Kinect skeletons (Zhou 2014 ch. 5: GP offset prior, "
+                                               "temporal and reliability terms)")
+    kinect_sub = kinect.add_subparsers(dest="action", required=True)
+    ktrain = kinect_sub.add_parser("train", help="fit a model on simulated Kinect pairs of real mocap files")
+    ktrain.add_argument("--mocap", nargs="+", required=True, help="mocap files and/or folders (ASF/AMC, BVH, C3D "
+                                                                   "with body landmarks), searched recursively")
+    ktrain.add_argument("--out", required=True, help="the model file (.npz)")
+    ktrain.add_argument("--seed", type=int, default=0, help="simulation and model seed (default 0)")
+    ktrain.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="a parameter of KinectPostureReconstructor, repeatable, e.g. gp_input=posture, "
+                             "energy_unit=0.1, w_temporal=0.1, max_train_frames=5000")
+    ktrain.add_argument("--skip-bad", dest="skip_bad", action="store_true", help="skip (and list) unusable files")
+    ktrain.set_defaults(func=cmd_kinect_fix_train)
+    kapply = kinect_sub.add_parser("apply", help="correct Kinect skeleton files (MSR Action3D .txt, NTU .skeleton, "
+                                                 "C3D) with a trained model; writes OUT/<name>.c3d + report.json")
+    kapply.add_argument("inputs", nargs="+", help="Kinect skeleton files and/or folders (searched recursively)")
+    kapply.add_argument("--model", required=True, help="a model from `mocapkit kinect-fix train`")
+    kapply.add_argument("--out", required=True, help="output folder")
+    kapply.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="a prediction parameter, repeatable: w_spatial, w_temporal, w_reliability, energy_unit, "
+                             "reliability, kappa, jump_threshold, still_threshold")
+    kapply.add_argument("--plot", type=int, default=0, metavar="N",
+                        help="draw the first N files before/after as PNG strips (default 0)")
+    kapply.add_argument("--skip-bad", dest="skip_bad", action="store_true",
+                        help="skip (and list) unreadable files, empty files and skeletons without the 20 joints")
+    kapply.set_defaults(func=cmd_kinect_fix_apply)
 
     predict = sub.add_parser("predict", help="classify motion files with an exported ONNX model")
     predict.add_argument("--onnx", required=True, help="model written by `mocapkit export`")

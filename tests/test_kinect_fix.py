@@ -111,3 +111,23 @@ def test_sdk_smoother_keeps_still_joints_bounds_deviation_and_reduces_noise():
     assert np.linalg.norm(out - still, axis=-1)[5:].mean() < 0.6 * np.linalg.norm(noisy - still, axis=-1)[5:].mean()
     with pytest.raises(ValueError, match="smoothing"):
         DoubleExponentialSmoother(smoothing=1.5).fit([still])
+
+
+@needs(MSR)
+def test_cli_trains_and_applies_and_names_the_bad_file(tmp_path, capsys):
+    from mocapkit.cli import main
+
+    model = tmp_path / "m.npz"
+    assert main(["kinect-fix", "train", "--mocap", *map(str, sorted((HDM05 / "dg").glob("*.amc"))[:3]),
+                 "--out", str(model), "--set", "gp_iterations=2", "--set", "n_inducing=10",
+                 "--set", "max_train_frames=200"]) == 0
+    assert "written to" in capsys.readouterr().out and model.is_file()
+    good, empty = MSR / "a05_s02_e01_skeleton3D.txt", MSR / "a13_s09_e02_skeleton3D.txt"
+    assert main(["kinect-fix", "apply", str(good), "--model", str(model), "--out", str(tmp_path / "o"),
+                 "--set", "energy_unit=0.1"]) == 0
+    assert "corrected 1 file" in capsys.readouterr().out and (tmp_path / "o" / f"{good.stem}.c3d").is_file()
+    assert main(["kinect-fix", "apply", str(empty), "--model", str(model), "--out", str(tmp_path / "p")]) == 2
+    assert "a13_s09_e02" in capsys.readouterr().err
+    assert main(["kinect-fix", "apply", str(good), "--model", str(model), "--out", str(tmp_path / "q"),
+                 "--set", "w_banana=1"]) == 2
+    assert "w_banana" in capsys.readouterr().err

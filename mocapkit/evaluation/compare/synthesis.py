@@ -1,0 +1,277 @@
+"""The motion-variation synthesis benchmark of the comparison runner (Zhou 2014 ch. 4,
+``../shared/spec/thesis-zhou-2014-retrieval-synthesis.md`` §3.7 and §7 gaps 20 and 22): synthesisers ×
+motion types × seeds on real HDM05 clips.
+
+**Protocols** are HDM05 motion types (``hopBothLegs1hops``, ``squat1Reps``, ...; the class part of
+``HDM_<actor>_<class>_<nnn>_120.amc``). **Split** of a type for a seed: ``n_train`` clips (10, as the thesis)
+drawn with ``numpy.random.default_rng(seed)`` from the type's clips of every performer are the training side; all
+the other clips of the type are held out, as the real references of the naturalness measures (the synthesisers
+never see them).
+
+**A cell** (:meth:`SynthesisBenchmark.evaluate_estimator`): ``fit`` on the training clips, then
+``sample(n_variants, seed=seed)`` (20 variants, as the thesis's Fig. 4.6) of the mean training length on the
+reference skeleton (the first training clip's ASF). Metrics (:mod:`mocapkit.evaluation.synthesis` for their
+definitions and units):
+
+- ``v_variants`` (eq. 4.5 on the variants, metres × path steps), ``v_variants_per_step`` (path-length
+  normalised, metres); ``v_train``: the training clips' own V; ``v_ratio = v_variants / v_train``;
+  ``v_heldout``: the held-out clips' V. Real clips are **posed on the reference skeleton** by their own AMC
+  angles for every V and for the feature distance (so that the performers' body sizes do not count as
+  variation: the variants all have the reference body);
+- ``foot_skating_cms`` (cm/s), ``bone_drift_mm`` (mm), ``jerk`` (m/s³): means over the variants; the same on
+  the held-out real clips, as recorded (their own skeletons): ``real_foot_skating_cms``, ``real_bone_drift_mm``,
+  ``real_jerk``;
+- ``feature_distance``: mean over the variants of the standardised mean/sd distance of their per-frame pose and
+  velocity features to the held-out clips pooled; ``feature_distance_real`` ± ``feature_distance_real_sd``: the
+  same distance of each held-out clip to the other held-out clips (the reference spread); ``within_real``: the
+  fraction of variants no farther than the farthest held-out clip;
+- ``fit_seconds`` (wall time of ``fit``), ``sample_seconds_per_second`` (wall time of ``sample`` per second of
+  generated motion; the thesis: 0.17 s per 1 s on HDM05).
+
+The real-clip numbers depend only on the split and are computed once per (protocol, seed). ``select:`` of the
+runner (classifier cross-validation) does not apply. :meth:`~SynthesisBenchmark.markdown` adds one table per
+protocol with the variants' numbers beside the real references; :meth:`~SynthesisBenchmark.plots` draws V per
+method with the training set's and the held-out set's V as lines (``variation.png``).
+"""
+from __future__ import annotations
+
+import math
+import time
+import zlib
+from pathlib import Path
+
+import numpy as np
+
+from mocapkit.evaluation.compare.base import Benchmark, ComparisonError, Split
+
+#: Metric name → digits in the tables.
+DIGITS = {"v_variants": 1, "v_train": 1, "v_heldout": 1, "v_ratio": 3, "v_variants_per_step": 3,
+          "foot_skating_cms": 1, "real_foot_skating_cms": 1, "bone_drift_mm": 4, "real_bone_drift_mm": 4,
+          "jerk": 0, "real_jerk": 0, "feature_distance": 3, "feature_distance_real": 3,
+          "feature_distance_real_sd": 3, "fit_seconds": 2, "sample_seconds_per_second": 3}
+
+
+def on_skeleton(motion, skeleton):
+    """A real AMC clip posed on ``skeleton`` by its own AMC values (same frame rate)."""
+    from mocapkit.datasets.formats.asf_amc import amc_motion
+
+    return amc_motion(skeleton, motion.metadata["amc_values"], fps=motion.fps,
+                      angle_unit=motion.metadata.get("amc_angle_unit", "deg"), name=motion.name, source=motion.source)
+
+
+class SynthesisBenchmark(Benchmark):
+    """Variation synthesisers on HDM05 motion types (module docstring).
+
+    Args:
+        root: the HDM05 cuts folder (``../shared/data/hdm05_cuts11``: ``<actor>/HDM_<actor>_<class>_<nnn>_120.amc``).
+        protocols: the motion types (HDM05 class names) to run; each needs more than ``n_train + 1`` clips.
+        n_train: training clips per split.
+        n_variants: variants sampled per cell.
+    """
+
+    title = "Motion variation synthesis on HDM05 motion types"
+    percent_metrics = ("within_real",)
+
+    def __init__(self, root: str, protocols: list[str], n_train: int = 10, n_variants: int = 20):
+        if root is None:
+            raise ComparisonError("benchmark.root is not set: give the HDM05 cuts folder")
+        if not protocols:
+            raise ComparisonError("benchmark.protocols: give at least one HDM05 motion type, e.g. hopBothLegs1hops")
+        if int(n_train) < 2 or int(n_variants) < 2:
+            raise ComparisonError(f"benchmark.n_train={n_train}, n_variants={n_variants}: both must be >= 2 "
+                                  "(V averages pairs)")
+        from mocapkit.datasets.mocap.folders import (
+            MocapFolderError,
+            list_clips,
+            read_clips,
+        )
+
+        self.root, self.n_train, self.n_variants = Path(root), int(n_train), int(n_variants)
+        try:
+            found = list_clips("hdm05", self.root)
+        except MocapFolderError as exc:
+            raise ComparisonError(f"benchmark.{exc}") from exc
+        wanted = [str(p) for p in protocols]
+        counts = {p: sum(1 for c in found if c["class"] == p) for p in wanted}
+        short = {p: n for p, n in counts.items() if n < self.n_train + 2}
+        if short:
+            raise ComparisonError(f"benchmark.protocols: {short} clips under {self.root}; each motion type needs at "
+                                  f"least n_train + 2 = {self.n_train + 2} (training + two held out)")
+        found = [c for c in found if c["class"] in wanted]
+        try:
+            self.motions = read_clips(found)
+        except MocapFolderError as exc:
+            raise ComparisonError(f"benchmark: {exc}") from exc
+        self.clips = [{"name": c["name"], "class": c["class"], "group": c["group"]} for c in found]
+        self.classes = np.asarray([c["class"] for c in found])
+        self.protocols = tuple(wanted)
+        self._references: dict[tuple[str, int], dict] = {}
+
+    # -------------------------------------------------------------- data
+    def describe(self) -> dict:
+        return {"dataset": "hdm05", "root": str(self.root), "n_train": self.n_train, "n_variants": self.n_variants,
+                "clips": {p: int((self.classes == p).sum()) for p in self.protocols},
+                "fps": float(self.motions[0].fps)}
+
+    def data(self, indices: np.ndarray):
+        """The clips (AMC :class:`~mocapkit.datasets.formats.motion.Motion`, positions ``[T_i, 31, 3]`` metres) and
+        their motion types (``[n]`` str) of ``indices``."""
+        indices = np.asarray(indices, dtype=np.int64)
+        return [self.motions[i] for i in indices], self.classes[indices]
+
+    def split(self, protocol: str, seed: int) -> Split:
+        """``n_train`` clips of the type drawn with ``default_rng([seed, crc32(type)])``; the rest held out."""
+        if protocol not in self.protocols:
+            raise ComparisonError(f"protocol {protocol!r}: not among benchmark.protocols {list(self.protocols)}")
+        mine = np.flatnonzero(self.classes == protocol)
+        rng = np.random.default_rng([int(seed), zlib.crc32(protocol.encode())])
+        train = np.sort(rng.choice(mine, size=self.n_train, replace=False)).astype(np.int64)
+        test = np.setdiff1d(mine, train).astype(np.int64)
+        groups = lambda idx: sorted({self.clips[i]["group"] for i in idx})
+        return Split(protocol, seed, train, test, {
+            "train_clips": [self.clips[i]["name"] for i in train], "train_performers": groups(train),
+            "heldout_performers": groups(test),
+            "train_frames": [self.motions[i].num_frames for i in train]})
+
+    # -------------------------------------------------------------- scoring
+    def references(self, split: Split) -> dict:
+        """The split's real-clip numbers (computed once per protocol and seed): ``{"metrics", "heldout"}`` with
+        ``heldout`` the held-out clips posed on the reference skeleton."""
+        from mocapkit.evaluation.synthesis import naturalness, variation
+
+        key = (split.protocol, split.seed)
+        if key not in self._references:
+            train, _ = self.data(split.train)
+            heldout, _ = self.data(split.test)
+            skeleton = train[0].metadata["asf"]
+            posed_train = [on_skeleton(m, skeleton) for m in train]
+            posed_heldout = [on_skeleton(m, skeleton) for m in heldout]
+            real = naturalness(heldout)
+            metrics = {"v_train": variation(posed_train).v, "v_heldout": variation(posed_heldout).v,
+                       **{f"real_{k}": v for k, v in real.items()}}
+            self._references[key] = {"metrics": metrics, "heldout": posed_heldout}
+        return self._references[key]
+
+    def evaluate_estimator(self, estimator, split: Split) -> dict:
+        """Fit on the training clips, sample ``n_variants`` of the mean training length with the cell's seed,
+        score them against the references (module docstring)."""
+        from mocapkit.evaluation.synthesis import (
+            feature_distances,
+            naturalness,
+            variation,
+        )
+
+        train, _ = self.data(split.train)
+        start = time.perf_counter()
+        estimator.fit(train)
+        fit_seconds = time.perf_counter() - start
+        start = time.perf_counter()
+        variants = estimator.sample(self.n_variants, seed=split.seed)
+        sample_seconds = time.perf_counter() - start
+        reference = self.references(split)
+        v = variation(variants)
+        distances = feature_distances(variants, reference["heldout"])
+        frames = variants[0].num_frames
+        metrics = {"v_variants": v.v, "v_variants_per_step": v.v_per_step, **reference["metrics"],
+                   "v_ratio": v.v / reference["metrics"]["v_train"], **naturalness(variants),
+                   **distances.summary(), "fit_seconds": fit_seconds,
+                   "sample_seconds_per_second": sample_seconds / (len(variants) * frames / variants[0].fps)}
+        detail = {"n_frames": frames, "fps": float(variants[0].fps), "n_variants": len(variants),
+                  "train_clips": split.info["train_clips"], "n_heldout": len(split.test),
+                  "variant_feature_distances": distances.variants.tolist(),
+                  "real_feature_distances": distances.real.tolist(),
+                  "fitted": {k: _json(getattr(estimator, k)) for k in ("width_", "cv_log_likelihood_", "sigma_",
+                                                                 "train_seconds_")
+                             if hasattr(estimator, k)}}
+        return {"metrics": metrics, "detail": detail}
+
+    # -------------------------------------------------------------- presentation
+    def headline(self, protocol: str) -> list[str]:
+        return ["v_variants", "v_ratio", "foot_skating_cms", "jerk", "feature_distance", "within_real",
+                "fit_seconds", "sample_seconds_per_second"]
+
+    def format_metric(self, name, mean, sd=None) -> str:
+        if mean is None or (isinstance(mean, float) and math.isnan(mean)):
+            return "–"
+        if name in self.percent_metrics:
+            return super().format_metric(name, mean, sd)
+        digits = DIGITS.get(name, 3)
+        return f"{mean:.{digits}f}" + (f" ± {sd:.{digits}f}" if sd is not None else "")
+
+    def markdown(self, results: dict) -> str:
+        rows = results.get("summary") or []
+        if not rows:
+            return ""
+        lines = ["## Variation and naturalness per motion type", "",
+                 ("V: Zhou eq. 4.5, mean pairwise DTW cost of root-normalised joint positions (Euclidean local cost, "
+                  "unnormalised path sum; metres × steps) of the variants, all on the reference skeleton; ratio: "
+                  "V / V of the training clips. Naturalness proxies: foot skating (cm/s during contacts), jerk "
+                  "(m/s³), bone-length drift (mm); feature distance: standardised mean/sd distance of per-frame pose "
+                  "and velocity features to the held-out real clips (dimensionless), beside the real clips' own "
+                  "leave-one-out distance (mean ± sd over held-out clips). Mean over seeds."), ""]
+        for protocol in results["protocols"]:
+            mine = [r for r in rows if r["protocol"] == protocol]
+            if not mine:
+                continue
+            get = lambda r, k: (r["metrics"].get(k) or {}).get("mean")
+            first = mine[0]
+            fmt = self.format_metric
+            lines += [f"### {protocol}", "",
+                      (f"Training set V = {fmt('v_train', get(first, 'v_train'))}, held-out set V = "
+                       f"{fmt('v_heldout', get(first, 'v_heldout'))}; held-out real clips: foot skating "
+                       f"{fmt('real_foot_skating_cms', get(first, 'real_foot_skating_cms'))} cm/s, jerk "
+                       f"{fmt('real_jerk', get(first, 'real_jerk'))} m/s³, bone drift "
+                       f"{fmt('real_bone_drift_mm', get(first, 'real_bone_drift_mm'))} mm, feature distance "
+                       f"{fmt('feature_distance_real', get(first, 'feature_distance_real'))} ± "
+                       f"{fmt('feature_distance_real_sd', get(first, 'feature_distance_real_sd'))}."), "",
+                      ("| method | V | V / V_train | V per step (m) | foot skating (cm/s) | jerk (m/s³) | "
+                       "bone drift (mm) | feature distance | within real | fit (s) | sample (s per s) |"),
+                      "|---|" + "---|" * 10]
+            for r in mine:
+                cells = [fmt(k, get(r, k)) for k in ("v_variants", "v_ratio", "v_variants_per_step",
+                                                      "foot_skating_cms", "jerk", "bone_drift_mm",
+                                                      "feature_distance", "within_real", "fit_seconds",
+                                                      "sample_seconds_per_second")]
+                lines.append(f"| {r['label']} | " + " | ".join(cells) + " |")
+            lines.append("")
+        return "\n".join(lines)
+
+    def plots(self, results: dict, out_dir: Path) -> list[Path]:
+        rows = results.get("summary") or []
+        protocols = [p for p in results["protocols"] if any(r["protocol"] == p for r in rows)]
+        if not protocols:
+            return []
+        from mocapkit.evaluation.plots import pyplot, save_figure
+
+        plt = pyplot()
+        fig, axes = plt.subplots(1, len(protocols), figsize=(4.8 * len(protocols), 4.0), squeeze=False)
+        for ax, protocol in zip(axes[0], protocols):
+            mine = [r for r in rows if r["protocol"] == protocol]
+            labels = [r["label"] for r in mine]
+            means = [r["metrics"]["v_variants"]["mean"] for r in mine]
+            sds = [r["metrics"]["v_variants"]["sd"] for r in mine]
+            ax.bar(range(len(mine)), means, yerr=sds, capsize=3, color="tab:blue", alpha=0.8)
+            for key, style, name in (("v_train", "-", "training set"), ("v_heldout", "--", "held-out set")):
+                value = (mine[0]["metrics"].get(key) or {}).get("mean")
+                if value is not None:
+                    ax.axhline(value, color="k", linestyle=style, lw=1, label=f"{name} V")
+            ax.set_xticks(range(len(mine)), labels, rotation=25, ha="right", fontsize=8)
+            ax.set_title(protocol, fontsize=9)
+            ax.set_ylabel("V (Zhou eq. 4.5; m × DTW steps)")
+            ax.grid(axis="y", alpha=0.3)
+            ax.legend(fontsize=7, frameon=False)
+        fig.suptitle(f"Variation of {results['benchmark'].get('n_variants', '')} variants per method "
+                     f"(mean ± sd over seeds {results['seeds']})", fontsize=10)
+        return [save_figure(fig, Path(out_dir) / "variation.png")]
+
+
+def _json(value):
+    """A fitted attribute as JSON (floats, lists, dicts with string keys)."""
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, dict):
+        return {str(k): _json(v) for k, v in value.items()}
+    return float(value) if isinstance(value, (int, float, np.floating, np.integer)) else repr(value)
+
+
+__all__ = ["SynthesisBenchmark", "on_skeleton"]

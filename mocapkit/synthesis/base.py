@@ -1,0 +1,186 @@
+"""The one contract of every motion-variation synthesiser (Zhou 2014 ch. 4 and its baselines).
+
+A synthesiser is a scikit-learn estimator (parameters stored untouched in ``__init__``, learned state in
+attributes ending in ``_``, ``NotFittedError`` before ``fit``) with two methods:
+
+``fit(clips) -> self``
+    about ten example clips of **one motion type**: a sequence of :class:`~mocapkit.datasets.formats.motion.Motion`
+    read from ASF/AMC (:func:`~mocapkit.datasets.formats.asf_amc.read_amc`), so that each carries its raw joint
+    angles in ``metadata["amc_values"]`` and its skeleton in ``metadata["asf"]``. The clips may come from
+    different performers (different bone lengths) but must share one bone hierarchy and the same dofs per bone.
+``sample(n_variants, n_frames=None, seed=None) -> list[Motion]``
+    ``n_variants`` new clips of ``n_frames`` frames each (default: the mean training length), drawn with
+    ``seed``. Each is an AMC motion on the **reference skeleton** (the first training clip's ASF; override with
+    the ``skeleton`` argument of :meth:`MotionSynthesizer.sample`), made with
+    :func:`~mocapkit.datasets.formats.asf_amc.amc_motion`, so :func:`~mocapkit.datasets.formats.asf_amc.write_amc`
+    writes it, ``read_amc`` reads it back and ``mocapkit render`` draws it.
+
+Subclasses implement ``_fit_clips(clips)`` and ``_sample_values(n_variants, n_frames, rng)`` (one dict
+bone → ``[n_frames, len(dof)]`` AMC values per variant, angles in degrees, root translation in ASF units).
+The shared checks (AMC clips, one hierarchy, enough clips, long enough clips) and the packing of AMC values
+into one matrix (:func:`dof_matrix`, :func:`dof_values`) live here.
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from sklearn.base import BaseEstimator
+from sklearn.exceptions import NotFittedError
+
+from mocapkit.datasets.formats.asf_amc import AsfSkeleton, amc_motion
+from mocapkit.datasets.formats.motion import Motion
+
+
+class SynthesisInputError(ValueError):
+    """Training clips a synthesiser cannot learn from; the message names the clip (file) and what is wrong."""
+
+
+def clip_label(motion: Motion) -> str:
+    """The file of a clip, else its name: what error messages name."""
+    return str(motion.source or motion.name or "<unnamed clip>")
+
+
+@dataclass(frozen=True)
+class DofLayout:
+    """Which AMC channel is which column of a :func:`dof_matrix`.
+
+    Attributes:
+        bones: the bones with dofs, root first, in the skeleton's AMC order.
+        dofs: per bone, its channel names (root: ``AsfSkeleton.root_order``, e.g. ``("TX", ..., "RZ")``; other
+            bones: their ``dof``, e.g. ``("rx", "ry", "rz")``).
+    """
+
+    bones: tuple[str, ...]
+    dofs: tuple[tuple[str, ...], ...]
+
+    @classmethod
+    def of(cls, skeleton: AsfSkeleton) -> DofLayout:
+        dof = {b.name: tuple(b.dof) for b in skeleton.bones}
+        bones = tuple(skeleton.amc_bones)
+        return cls(bones=bones, dofs=tuple(tuple(skeleton.root_order) if b == "root" else dof[b] for b in bones))
+
+    @property
+    def width(self) -> int:
+        """Number of columns (channels) of the matrix."""
+        return sum(len(d) for d in self.dofs)
+
+    def columns(self, bone: str) -> slice:
+        """The columns of ``bone`` in the matrix."""
+        start = 0
+        for b, d in zip(self.bones, self.dofs):
+            if b == bone:
+                return slice(start, start + len(d))
+            start += len(d)
+        raise KeyError(bone)
+
+
+def dof_matrix(motion: Motion) -> tuple[np.ndarray, DofLayout]:
+    """A clip's AMC values as one float64 ``[frames, channels]`` matrix (angles in degrees, root TX/TY/TZ in ASF
+    length units) and the :class:`DofLayout` of its columns."""
+    skeleton = motion.metadata["asf"]
+    layout = DofLayout.of(skeleton)
+    values = motion.metadata["amc_values"]
+    scale = np.degrees(1.0) if motion.metadata.get("amc_angle_unit", "deg") == "rad" else 1.0
+    columns = []
+    for bone, dofs in zip(layout.bones, layout.dofs):
+        v = np.asarray(values[bone], dtype=np.float64).reshape(len(motion.positions), len(dofs)).copy()
+        for k, name in enumerate(dofs):
+            if name.lower().startswith("r"):
+                v[:, k] *= scale
+        columns.append(v)
+    return np.concatenate(columns, axis=1), layout
+
+
+def dof_values(matrix: np.ndarray, layout: DofLayout) -> dict[str, np.ndarray]:
+    """The inverse of :func:`dof_matrix`: bone → ``[frames, len(dof)]`` AMC values (degrees, ASF units)."""
+    matrix = np.asarray(matrix, dtype=np.float64)
+    if matrix.ndim != 2 or matrix.shape[1] != layout.width:
+        raise ValueError(f"a DOF matrix must be [frames, {layout.width}], got {list(matrix.shape)}")
+    return {bone: matrix[:, layout.columns(bone)].copy() for bone in layout.bones}
+
+
+def check_clips(clips: Sequence[Motion], min_clips: int = 2, min_frames: int = 4, what: str = "fit") -> DofLayout:
+    """Reject what no synthesiser can learn from, naming the clip; returns the shared :class:`DofLayout`.
+
+    Raises:
+        SynthesisInputError: fewer than ``min_clips`` clips; a clip that is not an AMC motion (no
+            ``metadata["amc_values"]``/``["asf"]``); a clip shorter than ``min_frames`` frames; a clip whose bones or
+            dofs differ from the first clip's; non-finite angles.
+    """
+    clips = list(clips)
+    if len(clips) < min_clips:
+        raise SynthesisInputError(f"{what}: {len(clips)} training clip(s); this synthesiser needs at least {min_clips} "
+                                  f"of one motion type")
+    layout = None
+    for clip in clips:
+        if not isinstance(clip, Motion) or "amc_values" not in clip.metadata or "asf" not in clip.metadata:
+            raise SynthesisInputError(f"{what}: {clip_label(clip) if isinstance(clip, Motion) else type(clip).__name__}"
+                                      f" is not an ASF/AMC motion (read it with mocapkit.datasets.formats.asf_amc."
+                                      f"read_amc); synthesis works on joint angles")
+        if len(clip.positions) < min_frames:
+            raise SynthesisInputError(f"{what}: {clip_label(clip)} has {len(clip.positions)} frames; this synthesiser "
+                                      f"needs at least {min_frames}")
+        this = DofLayout.of(clip.metadata["asf"])
+        if layout is None:
+            layout, first = this, clip
+        elif this != layout:
+            diff = sorted(set(zip(this.bones, this.dofs)) ^ set(zip(layout.bones, layout.dofs)))
+            raise SynthesisInputError(f"{what}: {clip_label(clip)} has a different skeleton from {clip_label(first)} "
+                                      f"(bones/dofs that differ: {diff[:6]})")
+        matrix, _ = dof_matrix(clip)
+        bad = ~np.isfinite(matrix)
+        if bad.any():
+            frame, column = np.argwhere(bad)[0]
+            raise SynthesisInputError(f"{what}: {clip_label(clip)} has a non-finite AMC value at frame {frame + 1} "
+                                      f"(column {column})")
+    return layout
+
+
+class MotionSynthesizer(BaseEstimator):
+    """Base class of variation synthesisers (see the module docstring).
+
+    Class attributes: ``min_clips`` (fewest training clips), ``min_frames`` (shortest training clip, frames).
+    """
+
+    min_clips = 2
+    min_frames = 4
+
+    def fit(self, clips: Sequence[Motion]) -> MotionSynthesizer:
+        clips = list(clips)
+        self.layout_ = check_clips(clips, self.min_clips, self.min_frames, what=f"{type(self).__name__}.fit")
+        self.skeleton_ = clips[0].metadata["asf"]
+        self.fps_ = float(clips[0].fps)
+        self.mean_frames_ = int(round(np.mean([len(c.positions) for c in clips])))
+        self._fit_clips(clips)
+        return self
+
+    def sample(self, n_variants: int, n_frames: int | None = None, seed: int | None = None,
+               skeleton: AsfSkeleton | None = None) -> list[Motion]:
+        """``n_variants`` new clips of ``n_frames`` frames (default: the mean training length) on ``skeleton``
+        (default: the first training clip's)."""
+        if not hasattr(self, "layout_"):
+            raise NotFittedError(f"{type(self).__name__} is not fitted: call fit(clips) first")
+        if n_variants < 1:
+            raise ValueError(f"n_variants must be >= 1, got {n_variants}")
+        n_frames = self.mean_frames_ if n_frames is None else int(n_frames)
+        if n_frames < 1:
+            raise ValueError(f"n_frames must be >= 1, got {n_frames}")
+        skeleton = self.skeleton_ if skeleton is None else skeleton
+        if DofLayout.of(skeleton) != self.layout_:
+            raise SynthesisInputError(f"sample: skeleton {skeleton.source or skeleton.name} does not match the "
+                                      f"training clips' bones/dofs")
+        rng = np.random.default_rng(seed)
+        out = []
+        for k, values in enumerate(self._sample_values(n_variants, n_frames, rng)):
+            out.append(amc_motion(skeleton, values, fps=self.fps_, angle_unit="deg",
+                                  name=f"{type(self).__name__}_variant_{k:03d}"))
+        return out
+
+    # ------------------------------------------------------------------ subclasses
+    def _fit_clips(self, clips: list[Motion]) -> None:
+        raise NotImplementedError
+
+    def _sample_values(self, n_variants: int, n_frames: int, rng: np.random.Generator) -> list[dict[str, np.ndarray]]:
+        raise NotImplementedError

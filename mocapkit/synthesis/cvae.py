@@ -1,0 +1,146 @@
+"""A small modern learned generator for the variation benchmark: an autoregressive conditional VAE (MVAE-style)
+over the thesis's pose features, trained in ``fit`` on the ~10 example clips.
+
+**Features.** Each training clip is resampled to ``fps`` frames per second (every AMC channel time-warped
+linearly, :func:`~mocapkit.synthesis.perlin.time_warp`; at 120 fps consecutive frames are nearly equal and an
+autoregressive model learns to extrapolate and ignore its latent code) and encoded
+(:func:`~mocapkit.synthesis.representation.encode`, ``FeatureClip.flat``: ``[T, 7 + 3B]``); every dimension is
+z-scored over the training frames (sd floored at 1e-3 of the largest).
+
+**Network and training.** :class:`~mocapkit.models.motion_vae.MotionVAE` (encoder ``q(z | x_t, x_{t−1})``,
+decoder ``p(x_t | z, x_{t−1}, x_{t−2})``), trained by :class:`~mocapkit.train.motion_vae_module.MotionVAEModule`
+with a Lightning ``Trainer`` for ``steps`` optimiser steps of ``batch_size`` frame triples (Adam, learning rate
+``lr``), on the CPU, no logger, no checkpoint written, seeded by ``random_state``
+(``lightning.seed_everything``). ``loss_curve_`` keeps the loss of every step.
+
+**Sampling.** Per variant the first two frames of a training clip drawn uniformly, then the decoder run
+autoregressively with ``z ~ N(0, I)`` at every step (a torch generator seeded from the sampling seed), for the
+number of model-rate frames that spans ``n_frames`` at the training rate; the features are decoded
+(:func:`~mocapkit.synthesis.representation.decode`, from the drawn clip's start position and heading) and the AMC
+values time-warped to ``n_frames``.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from mocapkit.datasets.formats.asf_amc import amc_motion
+from mocapkit.datasets.formats.motion import Motion
+from mocapkit.synthesis.base import MotionSynthesizer, dof_matrix, dof_values
+from mocapkit.synthesis.perlin import rotation_columns, time_warp
+from mocapkit.synthesis.representation import decode, encode, root_start
+
+
+def model_frames(frames: int, fps: float, model_fps: float) -> int:
+    """Frames at ``model_fps`` that span ``frames`` frames at ``fps`` (first and last frames kept)."""
+    return round((frames - 1) * model_fps / fps) + 1
+
+
+class CVAESynthesizer(MotionSynthesizer):
+    """Autoregressive conditional VAE trained on the example clips (module docstring).
+
+    Args:
+        fps: the model's frame rate (frames per second; None: the clips' own).
+        latent, hidden, layers: :class:`~mocapkit.models.motion_vae.MotionVAE` sizes.
+        beta: KL weight; condition_noise: noise on the conditioning frames in training (standardised units).
+        steps: optimiser steps; batch_size: frame triples per step; lr: Adam learning rate.
+        random_state: seed of the initialisation, the batches and the training noise.
+
+    Attributes (after ``fit``): module_: the trained :class:`~mocapkit.train.motion_vae_module.MotionVAEModule`
+    (eval mode); mean_, scale_: float64 ``[F]`` standardisation; starts_: float64 ``[C, 2, F]`` the first two
+    (unstandardised) frames of every clip at the model rate; start_places_: per clip ``(start_xz, start_yaw)``;
+    model_fps_: the model rate; loss_curve_: float64 ``[steps]``; train_seconds_: wall time of the training.
+    """
+
+    min_frames = 4
+
+    def __init__(self, fps: float | None = 30.0, latent: int = 16, hidden: int = 256, layers: int = 2,
+                 beta: float = 0.01, condition_noise: float = 0.05, steps: int = 400, batch_size: int = 256,
+                 lr: float = 1e-3, random_state: int | None = 0):
+        self.fps = fps
+        self.latent = latent
+        self.hidden = hidden
+        self.layers = layers
+        self.beta = beta
+        self.condition_noise = condition_noise
+        self.steps = steps
+        self.batch_size = batch_size
+        self.lr = lr
+        self.random_state = random_state
+
+    def _resampled(self, clip: Motion) -> Motion:
+        """``clip`` at the model rate (AMC values time-warped linearly)."""
+        if self.model_fps_ == clip.fps:
+            return clip
+        matrix, layout = dof_matrix(clip)
+        frames = model_frames(len(matrix), clip.fps, self.model_fps_)
+        values = dof_values(time_warp(matrix, frames, rotation_columns(layout)), layout)
+        return amc_motion(clip.metadata["asf"], values, fps=self.model_fps_, angle_unit="deg", name=clip.name,
+                          source=clip.source)
+
+    def _fit_clips(self, clips: list[Motion]) -> None:
+        import lightning as L
+        import torch
+
+        from mocapkit.train.motion_vae_module import MotionVAEModule
+
+        if self.fps is not None and not float(self.fps) > 0:
+            raise ValueError(f"CVAESynthesizer: fps={self.fps!r} must be positive (or None)")
+        self.model_fps_ = self.fps_ if self.fps is None else float(self.fps)
+        resampled = [self._resampled(clip) for clip in clips]
+        short = [c for c in resampled if c.num_frames < 3]
+        if short:
+            raise ValueError(f"CVAESynthesizer.fit: {short[0].source or short[0].name} has {short[0].num_frames} "
+                             f"frames at {self.model_fps_:g} fps; the model needs 3 (raise fps)")
+        frames = [encode(c).flat() for c in resampled]
+        pooled = np.concatenate(frames)
+        self.mean_ = pooled.mean(axis=0)
+        sd = pooled.std(axis=0)
+        self.scale_ = np.maximum(sd, 1e-3 * sd.max())
+        self.starts_ = np.stack([f[:2] for f in frames])
+        self.start_places_ = [root_start(c) for c in resampled]
+        standard = [(f - self.mean_) / self.scale_ for f in frames]
+        current = np.concatenate([s[2:] for s in standard])
+        previous = np.concatenate([np.stack([s[1:-1], s[:-2]], axis=1) for s in standard])
+
+        L.seed_everything(0 if self.random_state is None else int(self.random_state), workers=False, verbose=False)
+        data = torch.utils.data.TensorDataset(torch.tensor(current, dtype=torch.float32),
+                                              torch.tensor(previous, dtype=torch.float32))
+        loader = torch.utils.data.DataLoader(data, batch_size=int(self.batch_size), shuffle=True, drop_last=False,
+                                             collate_fn=lambda items: {"current": torch.stack([i[0] for i in items]),
+                                                                       "previous": torch.stack([i[1] for i in items])})
+        module = MotionVAEModule(
+            model={"_target_": "mocapkit.models.motion_vae.MotionVAE", "features": current.shape[1],
+                   "latent": int(self.latent), "hidden": int(self.hidden), "layers": int(self.layers)},
+            optimizer={"_target_": "torch.optim.Adam", "_partial_": True, "lr": float(self.lr)},
+            beta=float(self.beta), condition_noise=float(self.condition_noise))
+        trainer = L.Trainer(max_steps=int(self.steps), max_epochs=-1, accelerator="cpu", devices=1,
+                            logger=False, enable_checkpointing=False, enable_progress_bar=False,
+                            enable_model_summary=False)
+        start = time.perf_counter()
+        trainer.fit(module, train_dataloaders=loader)
+        self.train_seconds_ = time.perf_counter() - start
+        self.loss_curve_ = np.asarray(module.loss_curve, dtype=np.float64)
+        self.module_ = module.eval()
+
+    def _sample_values(self, n_variants: int, n_frames: int, rng: np.random.Generator) -> list[dict[str, np.ndarray]]:
+        import torch
+
+        chosen = rng.integers(len(self.starts_), size=n_variants)
+        generator = torch.Generator().manual_seed(int(rng.integers(2 ** 63 - 1)))
+        frames = max(model_frames(n_frames, self.fps_, self.model_fps_), 2)
+        start = torch.tensor((self.starts_[chosen] - self.mean_) / self.scale_, dtype=torch.float32)
+        generated = self.module_.model.rollout(start, frames, generator=generator).double().numpy()
+        generated = generated * self.scale_ + self.mean_
+        angles = rotation_columns(self.layout_)
+        out = []
+        for k, clip in enumerate(chosen):
+            start_xz, start_yaw = self.start_places_[clip]
+            values = decode(generated[k], self.skeleton_, start_xz=start_xz, start_yaw=start_yaw)
+            matrix = np.concatenate([values[bone] for bone in self.layout_.bones], axis=1)
+            out.append(dof_values(time_warp(matrix, n_frames, angles), self.layout_))
+        return out
+
+
+__all__ = ["CVAESynthesizer", "model_frames"]

@@ -1,0 +1,153 @@
+"""``mocapkit synthesize``: fit a variation synthesiser on example AMC clips and write new variants.
+
+Zhou 2014 ch. 4 (../shared/spec/thesis-zhou-2014-retrieval-synthesis.md §3): about ten example clips of one motion
+type in, ``n_variants`` new clips out. The output folder gets ``variant_000.amc`` … (on the reference skeleton,
+the first clip's), a copy of that skeleton's ``.asf`` and ``report.json``.
+"""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+from mocapkit.datasets.formats.asf_amc import read_amc, write_amc, write_asf
+from mocapkit.synthesis.base import MotionSynthesizer, SynthesisInputError
+
+#: Synthesiser name → class: Zhou's SLFM and the baselines of the comparison (configs/compare/synthesis_hdm05.yaml).
+METHODS = {"slfm": "mocapkit.synthesis.slfm.SLFMSynthesizer",
+           "perlin": "mocapkit.synthesis.perlin.PerlinNoiseSynthesizer",
+           "lau": "mocapkit.synthesis.lau.LauDBNSynthesizer",
+           "cvae": "mocapkit.synthesis.cvae.CVAESynthesizer"}
+
+
+def find_clips(inputs: Sequence[str | os.PathLike], motion_type: str | None = None) -> list[Path]:
+    """The AMC files named by ``inputs`` (files, or folders searched recursively for ``*.amc``), keeping only
+    names that contain ``motion_type`` when given; sorted, without duplicates.
+
+    Raises:
+        FileNotFoundError: an input does not exist.
+        SynthesisInputError: no AMC file matches (the message names the folders and the pattern).
+    """
+    found: list[Path] = []
+    for item in inputs:
+        path = Path(item)
+        if path.is_dir():
+            found.extend(sorted(p for p in path.rglob("*") if p.suffix.lower() == ".amc" and p.is_file()))
+        elif path.is_file():
+            found.append(path)
+        else:
+            raise FileNotFoundError(f"{path}: no such file or folder")
+    if motion_type:
+        found = [p for p in found if motion_type in p.name]
+    found = sorted(dict.fromkeys(p.resolve() for p in found))
+    if not found:
+        where = ", ".join(str(i) for i in inputs)
+        pattern = f"*{motion_type}*.amc" if motion_type else "*.amc"
+        raise SynthesisInputError(f"no AMC clips matching {pattern} in {where}")
+    return found
+
+
+def make_synthesizer(method: str, seed: int, footskate_cleanup: bool, options: dict | None = None
+                     ) -> MotionSynthesizer:
+    """The synthesiser ``method`` (a key of :data:`METHODS`) seeded with ``seed``, with ``options`` as parameters
+    (``set_params``: an unknown one is a ``ValueError`` listing the valid ones). ``footskate_cleanup`` applies to
+    SLFM, the one method with a cleanup step."""
+    import importlib
+
+    if method not in METHODS:
+        raise ValueError(f"unknown synthesis method {method!r}; known: {', '.join(METHODS)}")
+    module, _, name = METHODS[method].rpartition(".")
+    synthesizer = getattr(importlib.import_module(module), name)()
+    params = synthesizer.get_params()
+    defaults = {"random_state": seed} if "random_state" in params else {}
+    if "footskate_cleanup" in params:
+        defaults["footskate_cleanup"] = footskate_cleanup
+    return synthesizer.set_params(**defaults, **dict(options or {}))
+
+
+def synthesize(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, n_variants: int = 10,
+               n_frames: int | None = None, seed: int = 0, method: str = "slfm", motion_type: str | None = None,
+               max_clips: int = 10, footskate_cleanup: bool = True, options: dict | None = None,
+               progress: bool = True) -> dict:
+    """Fit ``method`` on example clips and write ``n_variants`` variants to ``out_dir``.
+
+    Args:
+        inputs: AMC files and/or folders (searched recursively); each AMC's ASF is looked up beside it.
+        out_dir: the output folder (created): ``variant_000.amc`` …, the reference ``.asf``, ``report.json``.
+        n_variants: variants to write.
+        n_frames: frames per variant (default: the mean training length).
+        seed: seeds the fit (``random_state``) and the sampling.
+        method: ``"slfm"`` (:class:`~mocapkit.synthesis.slfm.SLFMSynthesizer`).
+        motion_type: keep only files whose name contains this (e.g. ``"hopBothLegs1hops"``).
+        max_clips: use the first ``max_clips`` matching files (sorted by path; the thesis trains on 10).
+        footskate_cleanup: pin planted feet in the variants.
+        options: further constructor parameters of the synthesiser (e.g. ``{"n_inducing": 32}``).
+        progress: progress lines on stderr.
+
+    Returns:
+        The report written to ``report.json``: training clips, fit seconds, sampling seconds, seconds of
+        compute per second of synthesised motion, the variants' files, the synthesiser's parameters, and (with
+        footskate cleanup) the mean horizontal ankle speed during contacts before and after it.
+
+    Raises:
+        SynthesisInputError: no matching clips, too few, too short, or clips on different skeletons (named).
+    """
+    def say(message: str) -> None:
+        if progress:
+            print(f"[synthesize] {message}", file=sys.stderr, flush=True)
+
+    files = find_clips(inputs, motion_type)[: max(int(max_clips), 0)]
+    say(f"reading {len(files)} clip(s)")
+    clips = [read_amc(f) for f in files]
+    synthesizer = make_synthesizer(method, seed, footskate_cleanup, options)
+    if progress and hasattr(synthesizer, "verbose"):
+        synthesizer.set_params(verbose=True)
+    say(f"fitting {type(synthesizer).__name__} on {len(clips)} clips")
+    start = time.perf_counter()
+    synthesizer.fit(clips)
+    fit_seconds = time.perf_counter() - start
+    say(f"fitted in {fit_seconds:.1f} s; sampling {n_variants} variant(s)")
+    start = time.perf_counter()
+    variants = synthesizer.sample(n_variants, n_frames=n_frames, seed=seed)
+    sample_seconds = time.perf_counter() - start
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    skeleton = clips[0].metadata["asf"]
+    asf_source = clips[0].metadata.get("asf_path")
+    asf_name = Path(asf_source).name if asf_source else "skeleton.asf"
+    if asf_source:
+        shutil.copyfile(asf_source, out / asf_name)
+    else:
+        write_asf(out / asf_name, skeleton)
+    written = []
+    for k, motion in enumerate(variants):
+        path = out / f"variant_{k:03d}.amc"
+        write_amc(path, motion)
+        written.append(path.name)
+    motion_seconds = sum(len(m.positions) for m in variants) / synthesizer.fps_
+    report = {
+        "method": method,
+        "training_clips": [str(f) for f in files],
+        "skeleton": asf_name,
+        "variants": written,
+        "frames_per_variant": len(variants[0].positions),
+        "fps": synthesizer.fps_,
+        "seed": seed,
+        "fit_seconds": round(fit_seconds, 3),
+        "sample_seconds": round(sample_seconds, 3),
+        "sample_seconds_per_motion_second": round(sample_seconds / motion_seconds, 5),
+        "parameters": {k: v for k, v in synthesizer.get_params().items() if k != "verbose"},
+    }
+    reports = getattr(synthesizer, "footskate_reports_", None)
+    if footskate_cleanup and reports:
+        report["footskate_sliding_m_per_s"] = {
+            "before": [None if r.sliding_before != r.sliding_before else round(r.sliding_before, 4) for r in reports],
+            "after": [None if r.sliding_after != r.sliding_after else round(r.sliding_after, 4) for r in reports]}
+    (out / "report.json").write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")
+    say(f"wrote {len(written)} variant(s), {asf_name} and report.json to {out} "
+        f"({report['sample_seconds_per_motion_second']:.4f} s of compute per second of motion)")
+    return report

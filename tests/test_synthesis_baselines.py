@@ -1,0 +1,154 @@
+"""The baselines of motion-variation synthesis on real HDM05 hops: training-clip copies, Perlin noise
+(mocapkit/synthesis/perlin.py), the Lau et al. kernel-regression DBN (lau.py) and the autoregressive CVAE (cvae.py,
+mocapkit/models/motion_vae.py, mocapkit/train/motion_vae_module.py)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from sklearn.exceptions import NotFittedError
+
+from mocapkit.datasets.formats.asf_amc import read_amc
+from mocapkit.datasets.formats.motion import Motion
+from mocapkit.synthesis.base import SynthesisInputError, dof_matrix
+from mocapkit.synthesis.cvae import CVAESynthesizer
+from mocapkit.synthesis.lau import LauDBNSynthesizer
+from mocapkit.synthesis.perlin import (
+    CopyTrainingClips,
+    PerlinNoiseSynthesizer,
+    perlin_noise,
+    time_warp,
+)
+from tests.shared_data import SHARED, needs
+
+HDM05 = SHARED / "data" / "hdm05_cuts11"
+HOPS = sorted(HDM05.glob("*/HDM_*_hopBothLegs1hops_*_120.amc"))
+FAST_CVAE = {"hidden": 64, "latent": 8, "steps": 150, "batch_size": 128}
+
+
+def _methods():
+    return {"copy": CopyTrainingClips(), "perlin": PerlinNoiseSynthesizer(),
+            "lau": LauDBNSynthesizer(widths=(0.05, 0.2, 0.35, 0.5, 4.0)), "cvae": CVAESynthesizer(**FAST_CVAE)}
+
+
+@pytest.fixture(scope="module")
+def hops():
+    """Five hops of three performers for training, three others held out (the clips are 56–151 frames)."""
+    clips = [read_amc(path) for path in HOPS[::4]]
+    return clips[:5], clips[5:8]
+
+
+@pytest.fixture(scope="module")
+def fitted(hops):
+    train, _ = hops
+    return {name: method.fit(train) for name, method in _methods().items()}
+
+
+@needs(HDM05)
+@pytest.mark.parametrize("name", ["copy", "perlin", "lau", "cvae"])
+def test_samples_finite_variants_on_the_reference_skeleton(fitted, hops, name):
+    synthesizer = fitted[name]
+    variants = synthesizer.sample(3, n_frames=40, seed=1)
+    assert len(variants) == 3
+    for v in variants:
+        assert v.num_frames == 40 and np.isfinite(v.positions).all()
+        assert v.metadata["asf"] is hops[0][0].metadata["asf"] and v.fps == 120.0
+        assert np.isfinite(dof_matrix(v)[0]).all()
+    again = synthesizer.sample(3, n_frames=40, seed=1)
+    other = synthesizer.sample(3, n_frames=40, seed=2)
+    np.testing.assert_array_equal(variants[0].positions, again[0].positions)
+    assert any(not np.allclose(a.positions, b.positions) for a, b in zip(variants, other))
+    assert synthesizer.sample(2, seed=0)[0].num_frames == synthesizer.mean_frames_
+
+
+@needs(HDM05)
+def test_copies_are_the_training_clips(fitted, hops):
+    train, _ = hops
+    variants = fitted["copy"].sample(5, n_frames=None, seed=0)
+    originals = {c.name: dof_matrix(c)[0] for c in train}
+    matrix = dof_matrix(variants[0])[0]
+    warped = [time_warp(m, len(matrix), fitted["copy"].angles_) for m in originals.values()]
+    assert min(np.abs(matrix - w).max() for w in warped) < 1e-9
+    assert len({tuple(dof_matrix(v)[0][0]) for v in variants}) == 5          # five variants, five different clips
+
+
+@needs(HDM05)
+def test_perlin_deviation_scales_with_its_amplitude(hops):
+    train, _ = hops
+    positions = {a: np.stack([v.positions for v in PerlinNoiseSynthesizer(amplitude=a).fit(train).sample(4, 60, seed=3)])
+                 for a in (0.0, 0.25, 0.5)}
+    copies = np.stack([v.positions for v in CopyTrainingClips().fit(train).sample(4, 60, seed=3)])
+    np.testing.assert_allclose(positions[0.0], copies, atol=1e-4)            # amplitude 0: the copies
+    small = np.abs(positions[0.25] - copies).mean()
+    large = np.abs(positions[0.5] - copies).mean()
+    assert small > 1e-3 and large / small == pytest.approx(2.0, rel=0.15)
+
+
+def test_perlin_noise_is_bounded_smooth_and_zero_on_the_lattice():
+    gradients = np.random.default_rng(0).uniform(-1, 1, 12)
+    x = np.linspace(0, 10, 2001)
+    noise = perlin_noise(x, gradients)
+    assert np.abs(noise).max() <= 1.0 and noise.std() > 0.05
+    np.testing.assert_allclose(perlin_noise(np.arange(11.0), gradients), 0.0, atol=1e-12)
+    assert np.abs(np.diff(noise, 2)).max() < 1e-3                           # no kinks at this sampling
+
+
+@needs(HDM05)
+def test_lau_width_is_chosen_by_held_out_likelihood(fitted):
+    lau = fitted["lau"]
+    widths = (0.05, 0.2, 0.35, 0.5, 4.0)
+    assert lau.width_ in widths and set(lau.cv_log_likelihood_) == set(widths)
+    assert lau.cv_log_likelihood_[lau.width_] == max(lau.cv_log_likelihood_.values())
+    assert lau.cv_log_likelihood_[lau.width_] > max(lau.cv_log_likelihood_[0.05], lau.cv_log_likelihood_[4.0])
+
+
+@needs(HDM05)
+def test_lau_chosen_width_beats_the_extremes_on_unseen_clips():
+    clips = [read_amc(path) for path in HOPS[:20]]                    # 10 to fit on (as the thesis), 10 unseen
+    lau = LauDBNSynthesizer(widths=(0.05, 0.35, 4.0)).fit(clips[::2])
+    unseen = clips[1::2]
+    chosen = lau.log_likelihood(unseen)
+    assert chosen > lau.log_likelihood(unseen, width=0.05) and chosen > lau.log_likelihood(unseen, width=4.0)
+
+
+@needs(HDM05)
+def test_cvae_trains_quickly_and_its_loss_falls(fitted):
+    cvae = fitted["cvae"]
+    assert len(cvae.loss_curve_) == FAST_CVAE["steps"] and cvae.train_seconds_ < 60
+    assert cvae.loss_curve_[-10:].mean() < 0.5 * cvae.loss_curve_[:10].mean()
+
+
+@needs(HDM05)
+def test_cvae_is_seeded(hops):
+    train, _ = hops
+    small = {**FAST_CVAE, "steps": 20}
+    a, b = CVAESynthesizer(**small).fit(train), CVAESynthesizer(**small).fit(train)
+    np.testing.assert_array_equal(a.loss_curve_, b.loss_curve_)
+    c = CVAESynthesizer(**small, random_state=5).fit(train)
+    assert not np.array_equal(a.loss_curve_, c.loss_curve_)
+
+
+@pytest.mark.parametrize("name", ["copy", "perlin", "lau", "cvae"])
+def test_not_fitted(name):
+    with pytest.raises(NotFittedError):
+        _methods()[name].sample(2, 10, seed=0)
+
+
+@needs(HDM05)
+@pytest.mark.parametrize("name", ["copy", "perlin", "lau", "cvae"])
+def test_bad_training_clips_are_rejected(hops, name):
+    train, _ = hops
+    with pytest.raises(SynthesisInputError, match="at least"):
+        _methods()[name].fit(train[:1])
+    positions_only = Motion(positions=train[0].positions, joint_names=train[0].joint_names, fps=120.0, name="pos")
+    with pytest.raises(SynthesisInputError, match="pos is not an ASF/AMC motion"):
+        _methods()[name].fit([positions_only, train[1]])
+
+
+@needs(HDM05)
+@pytest.mark.parametrize("method, message", [(PerlinNoiseSynthesizer(amplitude=-1.0), "amplitude"),
+                                             (PerlinNoiseSynthesizer(frequency=0.0), "frequency"),
+                                             (LauDBNSynthesizer(widths=(0.0, 1.0)), "widths"),
+                                             (CVAESynthesizer(fps=0.0), "fps")])
+def test_bad_parameters_are_rejected(hops, method, message):
+    with pytest.raises(ValueError, match=message):
+        method.fit(hops[0])

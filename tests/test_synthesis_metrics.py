@@ -1,0 +1,166 @@
+"""Metrics of motion-variation synthesis (mocapkit/evaluation/synthesis.py) on hand-built motions, and the synthesis
+benchmark (mocapkit/evaluation/compare/synthesis.py) end to end through the comparison runner on real HDM05 hops.
+"""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from mocapkit.datasets.formats.motion import Motion
+from mocapkit.evaluation.compare import ComparisonError, compose, run_comparison
+from mocapkit.evaluation.synthesis import (
+    bone_length_drift,
+    feature_distances,
+    foot_skating,
+    mean_jerk,
+    root_normalised_positions,
+    variation,
+)
+from tests.shared_data import SHARED, needs
+
+HDM05 = SHARED / "data" / "hdm05_cuts11"
+JOINTS = ("Hips", "LeftUpLeg", "RightUpLeg", "LeftFoot", "RightFoot", "Head")
+PARENTS = (-1, 0, 0, 1, 2, 0)
+
+
+def body(head_heights, fps: float = 10.0, feet=None) -> Motion:
+    """A rig facing +z (left hip at −x, right hip at +x, as the HDM05 hips' line after normalisation) whose head
+    rises as ``head_heights`` (metres) per frame; ``feet``: optional ``[T, 2, 3]`` foot positions."""
+    heights = np.asarray(head_heights, dtype=np.float64)
+    T = len(heights)
+    p = np.zeros((T, len(JOINTS), 3))
+    p[:, 0] = [0.0, 1.0, 0.0]
+    p[:, 1] = [-0.1, 1.0, 0.0]
+    p[:, 2] = [0.1, 1.0, 0.0]
+    p[:, 3] = [-0.1, 0.0, 0.0]
+    p[:, 4] = [0.1, 0.0, 0.0]
+    p[:, 5, 1] = heights
+    if feet is not None:
+        p[:, 3:5] = feet
+    return Motion(positions=p, joint_names=JOINTS, parents=PARENTS, fps=fps, name="hand-built")
+
+
+def moved(motion: Motion, yaw: np.ndarray, offset: np.ndarray) -> Motion:
+    """``motion`` turned about +y by ``yaw[T]`` (radians) and shifted on the ground by ``offset[T, 2]``."""
+    p = motion.positions.astype(np.float64)
+    c, s = np.cos(yaw)[:, None], np.sin(yaw)[:, None]
+    out = p.copy()
+    out[..., 0] = c * p[..., 0] + s * p[..., 2] + offset[:, :1]
+    out[..., 2] = -s * p[..., 0] + c * p[..., 2] + offset[:, 1:]
+    return Motion(positions=out, joint_names=motion.joint_names, parents=motion.parents, fps=motion.fps)
+
+
+def test_variation_equals_hand_computed_dtw():
+    # the motions differ only in the head height, so the local cost is |Δ head height|:
+    # DTW([0,1,2], [0,2]) = 1, DTW([0,1,2], [1,1,1]) = 1 + 0 + 1 = 2, DTW([0,2], [1,1,1]) = 3 (3 steps of cost 1)
+    motions = [body([0.0, 1.0, 2.0]), body([0.0, 2.0]), body([1.0, 1.0, 1.0])]
+    score = variation(motions)
+    assert score.v == pytest.approx((1 + 2 + 3) / 3)
+    assert score.distances[0, 1] == pytest.approx(1.0) and score.distances[1, 2] == pytest.approx(3.0)
+    assert score.path_lengths[0, 1] == 3 and score.path_lengths[0, 2] == 3 and score.path_lengths[1, 2] == 3
+    assert score.v_per_step == pytest.approx((1 / 3 + 2 / 3 + 3 / 3) / 3)
+
+
+def test_variation_ignores_ground_position_and_heading():
+    a, b = body([0.0, 0.5, 1.0, 0.2]), body([0.1, 0.9, 0.3, 0.3])
+    rng = np.random.default_rng(0)
+    turned = moved(a, rng.uniform(-3, 3, 4), rng.normal(size=(4, 2)))
+    np.testing.assert_allclose(root_normalised_positions(turned), root_normalised_positions(a), atol=1e-5)
+    assert variation([turned, b]).v == pytest.approx(variation([a, b]).v, abs=1e-4)
+
+
+def test_variation_of_identical_copies_is_zero():
+    clip = body(np.sin(np.linspace(0, 3, 30)))
+    assert variation([clip, clip, clip]).v == pytest.approx(0.0, abs=1e-9)
+    with pytest.raises(ValueError, match="at least two"):
+        variation([clip])
+
+
+def test_foot_skating_of_fixed_and_sliding_feet():
+    T, fps = 50, 100.0
+    fixed = body(np.full(T, 1.7), fps=fps)
+    assert foot_skating(fixed) == pytest.approx(0.0, abs=1e-6)
+    feet = np.zeros((T, 2, 3))
+    feet[:, 0, 0] = -0.1 + 0.5 * np.arange(T) / fps          # both feet slide along x at 0.5 m/s on the ground
+    feet[:, 1, 0] = 0.1 + 0.5 * np.arange(T) / fps
+    assert foot_skating(body(np.full(T, 1.7), fps=fps, feet=feet)) == pytest.approx(50.0, rel=1e-4)  # cm/s
+    lifted = feet.copy()
+    lifted[:, :, 1] = np.linspace(0.0, 1.0, T)[:, None]       # rising 2 m/s: never a contact
+    assert np.isnan(foot_skating(body(np.full(T, 1.7), fps=fps, feet=lifted)))
+
+
+def test_jerk_of_constant_acceleration_is_zero_and_of_a_sine_its_derivative():
+    fps = 30.0
+    t = np.arange(60) / fps
+    const = body(1.0 + 0.3 * t - 0.5 * 2.0 * t ** 2, fps=fps)
+    A, w = 0.1, 2 * np.pi * 2.0
+    wave = body(1.5 + A * np.sin(w * t), fps=fps)
+    assert mean_jerk(const) < 0.05
+    # only the head moves: mean over 6 joints of |A w³ cos| ≈ A w³ (2/π) / 6 (finite differences: within 15 %)
+    assert mean_jerk(wave) == pytest.approx(A * w ** 3 * 2 / np.pi / len(JOINTS), rel=0.15)
+
+
+def test_bone_length_drift_detects_a_stretched_bone():
+    steady = body(np.full(20, 1.7))
+    assert bone_length_drift(steady) == pytest.approx(0.0, abs=1e-6)
+    heights = np.linspace(1.6, 1.8, 20)                          # the hips → head bone stretches from 0.6 to 0.8 m
+    expected = np.std(heights - 1.0) * 1000 / (len(JOINTS) - 1)
+    assert bone_length_drift(body(heights)) == pytest.approx(expected, rel=1e-4)
+
+
+def test_feature_distance_reference_spread():
+    rng = np.random.default_rng(1)
+    real = [body(1.5 + 0.1 * np.sin(np.linspace(0, 6, 40) + rng.uniform(0, 1))) for _ in range(5)]
+    odd = [body(1.0 + 0.5 * np.sin(np.linspace(0, 30, 40)))]
+    scores = feature_distances(real[:1] + odd, real[1:])
+    assert scores.real.shape == (4,) and scores.variants.shape == (2,)
+    assert scores.variants[1] > scores.real.max()                 # far outside the real clips' spread
+    summary = scores.summary()
+    assert summary["within_real"] == pytest.approx(0.5)
+    with pytest.raises(ValueError, match="two real clips"):
+        feature_distances(real, real[:1])
+
+
+# ------------------------------------------------------------------------------------------ the benchmark
+def test_config_composes_with_every_method():
+    cfg = compose(["synthesis_hdm05", "benchmark.root=/nonexistent"])
+    assert set(cfg.methods) == {"slfm", "lau", "perlin", "cvae", "copy"}
+    assert list(cfg.protocols) == list(cfg.benchmark.protocols)
+
+
+@needs(HDM05)
+def test_benchmark_runs_end_to_end(tmp_path):
+    cfg = {"name": "synthesis_test", "out": str(tmp_path),
+           "benchmark": {"_target_": "mocapkit.evaluation.compare.synthesis.SynthesisBenchmark", "root": str(HDM05),
+                         "protocols": ["hopBothLegs1hops"], "n_train": 4, "n_variants": 3},
+           "protocols": ["hopBothLegs1hops"], "seeds": [0],
+           "methods": {"copy": {"label": "copy", "estimator": {"_target_": "mocapkit.synthesis.perlin.CopyTrainingClips"}},
+                       "perlin": {"label": "perlin", "estimator": {
+                           "_target_": "mocapkit.synthesis.perlin.PerlinNoiseSynthesizer", "amplitude": 1.0}}}}
+    run_comparison(cfg)
+    saved = json.loads((tmp_path / "results.json").read_text())
+    assert {(c["method"], c["protocol"], c["seed"]) for c in saved["cells"]} == {
+        ("copy", "hopBothLegs1hops", 0), ("perlin", "hopBothLegs1hops", 0)}
+    split = saved["splits"]["hopBothLegs1hops"]["0"]
+    assert split["n_train"] == 4 and split["n_test"] == 33 - 4
+    for cell in saved["cells"]:
+        m = cell["metrics"]
+        for key in ("v_variants", "v_train", "v_heldout", "v_ratio", "foot_skating_cms", "jerk", "bone_drift_mm",
+                    "real_jerk", "feature_distance", "feature_distance_real", "fit_seconds",
+                    "sample_seconds_per_second"):
+            assert np.isfinite(m[key]), key
+        assert m["v_ratio"] == pytest.approx(m["v_variants"] / m["v_train"])
+    copy, perlin = (next(c for c in saved["cells"] if c["method"] == k) for k in ("copy", "perlin"))
+    assert copy["metrics"]["v_train"] == perlin["metrics"]["v_train"]       # one reference per split
+    assert (tmp_path / "variation.png").is_file()
+    assert "Variation and naturalness" in (tmp_path / "results.md").read_text()
+
+
+@needs(HDM05)
+def test_benchmark_rejects_a_type_with_too_few_clips():
+    with pytest.raises(ComparisonError, match="n_train"):
+        from mocapkit.evaluation.compare.synthesis import SynthesisBenchmark
+
+        SynthesisBenchmark(str(HDM05), ["jogLeftCircle4StepsRstart"], n_train=12)
