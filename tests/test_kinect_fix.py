@@ -13,7 +13,12 @@ from mocapkit.classical import DoubleExponentialSmoother, KinectPostureReconstru
 from mocapkit.datasets.formats.layouts import LANDMARK_NAMES, MSR20, find_landmarks
 from mocapkit.datasets.formats.motion import Motion
 from mocapkit.datasets.formats.motion_io import read_motion
-from mocapkit.refinement.kinect_fix import KinectFixError, fix_kinect_files, kinect_clip, train_kinect_model
+from mocapkit.refinement.kinect_fix import (
+    KinectFixError,
+    fix_kinect_files,
+    kinect_clip,
+    train_kinect_model,
+)
 from tests.shared_data import SHARED, needs
 
 HDM05 = SHARED / "data" / "hdm05_cuts11"

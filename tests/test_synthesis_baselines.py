@@ -9,14 +9,13 @@ from sklearn.exceptions import NotFittedError
 
 from mocapkit.datasets.formats.asf_amc import read_amc
 from mocapkit.datasets.formats.motion import Motion
-from mocapkit.synthesis.base import SynthesisInputError, dof_matrix
+from mocapkit.synthesis.base import SynthesisInputError, dof_matrix, time_warp
 from mocapkit.synthesis.cvae import CVAESynthesizer
 from mocapkit.synthesis.lau import LauDBNSynthesizer
 from mocapkit.synthesis.perlin import (
     CopyTrainingClips,
     PerlinNoiseSynthesizer,
     perlin_noise,
-    time_warp,
 )
 from tests.shared_data import SHARED, needs
 

@@ -133,8 +133,8 @@ class KinectFixReport:
     frames_per_s: float = float("nan")
 
     def to_text(self) -> str:
-        lines = [f"[kinect-fix] corrected {len(self.fixed)} file(s) with {self.model} "
-                 f"({self.frames_per_s:,.0f} frames/s)"]
+        lines = [(f"[kinect-fix] corrected {len(self.fixed)} file(s) with {self.model} "
+                  f"({self.frames_per_s:,.0f} frames/s)")]
         if self.fixed:
             mean = {k: float(np.mean([f[k] for f in self.fixed])) for k in
                     ("bone_sd_raw_cm", "bone_sd_fixed_cm", "jitter_raw_cm", "jitter_fixed_cm")}

@@ -17,8 +17,9 @@ attributes ending in ``_``, ``NotFittedError`` before ``fit``) with two methods:
 
 Subclasses implement ``_fit_clips(clips)`` and ``_sample_values(n_variants, n_frames, rng)`` (one dict
 bone → ``[n_frames, len(dof)]`` AMC values per variant, angles in degrees, root translation in ASF units).
-The shared checks (AMC clips, one hierarchy, enough clips, long enough clips) and the packing of AMC values
-into one matrix (:func:`dof_matrix`, :func:`dof_values`) live here.
+The shared checks (AMC clips, one hierarchy, enough clips, long enough clips), the packing of AMC values into one
+matrix (:func:`dof_matrix`, :func:`dof_values`) and its resampling in time (:func:`time_warp`,
+:func:`resample_clip`, for methods that model a lower frame rate than the data's) live here.
 """
 from __future__ import annotations
 
@@ -101,6 +102,52 @@ def dof_values(matrix: np.ndarray, layout: DofLayout) -> dict[str, np.ndarray]:
     return {bone: matrix[:, layout.columns(bone)].copy() for bone in layout.bones}
 
 
+def rotation_columns(layout: DofLayout) -> np.ndarray:
+    """bool ``[channels]``: which columns of a :func:`dof_matrix` are angles (degrees)."""
+    return np.array([name.lower().startswith("r") for dofs in layout.dofs for name in dofs])
+
+
+def time_warp(matrix: np.ndarray, n_frames: int, angles: np.ndarray | None = None, kind: str = "linear") -> np.ndarray:
+    """Resample a ``[T, channels]`` matrix to ``[n_frames, channels]`` at evenly spaced times (first and last frames
+    kept), by ``kind`` = ``"linear"`` interpolation or a ``"cubic"`` spline (scipy ``CubicSpline``, not-a-knot;
+    continuous velocity and acceleration, so upsampling adds no jerk at the source frames).
+
+    ``angles`` (bool ``[channels]``) marks the columns in degrees: they are unwrapped (period 360°) first, so the
+    result may leave ``[-180, 180]`` (AMC takes any angle).
+    """
+    matrix = np.asarray(matrix, dtype=np.float64)
+    if angles is not None and angles.any():
+        matrix = matrix.copy()
+        matrix[:, angles] = np.unwrap(matrix[:, angles], period=360.0, axis=0)
+    if len(matrix) == n_frames:
+        return matrix.copy()
+    source = np.linspace(0.0, 1.0, len(matrix))
+    target = np.linspace(0.0, 1.0, n_frames)
+    if kind == "cubic" and len(matrix) >= 4:
+        from scipy.interpolate import CubicSpline
+
+        return CubicSpline(source, matrix, axis=0)(target)
+    if kind not in ("linear", "cubic"):
+        raise ValueError(f"time_warp: kind={kind!r}, expected 'linear' or 'cubic'")
+    return np.stack([np.interp(target, source, column) for column in matrix.T], axis=1)
+
+
+def model_frames(frames: int, fps: float, model_fps: float) -> int:
+    """Frames at ``model_fps`` that span ``frames`` frames at ``fps`` (first and last frames kept)."""
+    return round((frames - 1) * model_fps / fps) + 1
+
+
+def resample_clip(clip: Motion, fps: float) -> Motion:
+    """An AMC clip at another frame rate, its AMC values time-warped linearly over the same duration (the
+    synthesisers that model a lower rate than the data's train on these)."""
+    if float(fps) == clip.fps:
+        return clip
+    matrix, layout = dof_matrix(clip)
+    values = dof_values(time_warp(matrix, model_frames(len(matrix), clip.fps, fps), rotation_columns(layout)), layout)
+    return amc_motion(clip.metadata["asf"], values, fps=float(fps), angle_unit="deg", name=clip.name,
+                      source=clip.source)
+
+
 def check_clips(clips: Sequence[Motion], min_clips: int = 2, min_frames: int = 4, what: str = "fit") -> DofLayout:
     """Reject what no synthesiser can learn from, naming the clip; returns the shared :class:`DofLayout`.
 
@@ -152,7 +199,7 @@ class MotionSynthesizer(BaseEstimator):
         self.layout_ = check_clips(clips, self.min_clips, self.min_frames, what=f"{type(self).__name__}.fit")
         self.skeleton_ = clips[0].metadata["asf"]
         self.fps_ = float(clips[0].fps)
-        self.mean_frames_ = int(round(np.mean([len(c.positions) for c in clips])))
+        self.mean_frames_ = round(float(np.mean([len(c.positions) for c in clips])))
         self._fit_clips(clips)
         return self
 

@@ -2,7 +2,7 @@
 over the thesis's pose features, trained in ``fit`` on the ~10 example clips.
 
 **Features.** Each training clip is resampled to ``fps`` frames per second (every AMC channel time-warped
-linearly, :func:`~mocapkit.synthesis.perlin.time_warp`; at 120 fps consecutive frames are nearly equal and an
+linearly, :func:`~mocapkit.synthesis.base.resample_clip`; at 120 fps consecutive frames are nearly equal and an
 autoregressive model learns to extrapolate and ignore its latent code) and encoded
 (:func:`~mocapkit.synthesis.representation.encode`, ``FeatureClip.flat``: ``[T, 7 + 3B]``); every dimension is
 z-scored over the training frames (sd floored at 1e-3 of the largest).
@@ -17,7 +17,8 @@ with a Lightning ``Trainer`` for ``steps`` optimiser steps of ``batch_size`` fra
 autoregressively with ``z ~ N(0, I)`` at every step (a torch generator seeded from the sampling seed), for the
 number of model-rate frames that spans ``n_frames`` at the training rate; the features are decoded
 (:func:`~mocapkit.synthesis.representation.decode`, from the drawn clip's start position and heading) and the AMC
-values time-warped to ``n_frames``.
+values resampled to ``n_frames`` by a cubic spline (:func:`~mocapkit.synthesis.base.time_warp`: velocity and
+acceleration stay continuous at the model's frames, where linear interpolation would kink).
 """
 from __future__ import annotations
 
@@ -25,16 +26,16 @@ import time
 
 import numpy as np
 
-from mocapkit.datasets.formats.asf_amc import amc_motion
 from mocapkit.datasets.formats.motion import Motion
-from mocapkit.synthesis.base import MotionSynthesizer, dof_matrix, dof_values
-from mocapkit.synthesis.perlin import rotation_columns, time_warp
+from mocapkit.synthesis.base import (
+    MotionSynthesizer,
+    dof_values,
+    model_frames,
+    resample_clip,
+    rotation_columns,
+    time_warp,
+)
 from mocapkit.synthesis.representation import decode, encode, root_start
-
-
-def model_frames(frames: int, fps: float, model_fps: float) -> int:
-    """Frames at ``model_fps`` that span ``frames`` frames at ``fps`` (first and last frames kept)."""
-    return round((frames - 1) * model_fps / fps) + 1
 
 
 class CVAESynthesizer(MotionSynthesizer):
@@ -69,16 +70,6 @@ class CVAESynthesizer(MotionSynthesizer):
         self.lr = lr
         self.random_state = random_state
 
-    def _resampled(self, clip: Motion) -> Motion:
-        """``clip`` at the model rate (AMC values time-warped linearly)."""
-        if self.model_fps_ == clip.fps:
-            return clip
-        matrix, layout = dof_matrix(clip)
-        frames = model_frames(len(matrix), clip.fps, self.model_fps_)
-        values = dof_values(time_warp(matrix, frames, rotation_columns(layout)), layout)
-        return amc_motion(clip.metadata["asf"], values, fps=self.model_fps_, angle_unit="deg", name=clip.name,
-                          source=clip.source)
-
     def _fit_clips(self, clips: list[Motion]) -> None:
         import lightning as L
         import torch
@@ -88,7 +79,7 @@ class CVAESynthesizer(MotionSynthesizer):
         if self.fps is not None and not float(self.fps) > 0:
             raise ValueError(f"CVAESynthesizer: fps={self.fps!r} must be positive (or None)")
         self.model_fps_ = self.fps_ if self.fps is None else float(self.fps)
-        resampled = [self._resampled(clip) for clip in clips]
+        resampled = [resample_clip(clip, self.model_fps_) for clip in clips]
         short = [c for c in resampled if c.num_frames < 3]
         if short:
             raise ValueError(f"CVAESynthesizer.fit: {short[0].source or short[0].name} has {short[0].num_frames} "
@@ -139,8 +130,8 @@ class CVAESynthesizer(MotionSynthesizer):
             start_xz, start_yaw = self.start_places_[clip]
             values = decode(generated[k], self.skeleton_, start_xz=start_xz, start_yaw=start_yaw)
             matrix = np.concatenate([values[bone] for bone in self.layout_.bones], axis=1)
-            out.append(dof_values(time_warp(matrix, n_frames, angles), self.layout_))
+            out.append(dof_values(time_warp(matrix, n_frames, angles, kind="cubic"), self.layout_))
         return out
 
 
-__all__ = ["CVAESynthesizer", "model_frames"]
+__all__ = ["CVAESynthesizer"]

@@ -5,7 +5,7 @@ with Perlin noise added to every DOF curve (``../shared/spec/thesis-zhou-2014-re
 Both draw, for every variant, one training clip: the clips in a random order, cycled (variant ``k`` is clip
 ``order[k mod n_clips]``), so every clip is used equally often and ``n_clips`` variants are all different clips.
 A clip whose length differs from the requested ``n_frames`` is **time-warped by linear resampling**
-(:func:`time_warp`: every AMC channel interpolated linearly at ``n_frames`` evenly spaced times from its first
+(:func:`~mocapkit.synthesis.base.time_warp`: every AMC channel interpolated linearly at ``n_frames`` evenly spaced times from its first
 to its last frame, angles unwrapped first so that a 179° → −179° step is not swept through 0°). Variants are
 posed on the reference skeleton by their AMC angles (:mod:`mocapkit.synthesis.base`).
 
@@ -34,30 +34,14 @@ import numpy as np
 
 from mocapkit.datasets.formats.asf_amc import amc_motion
 from mocapkit.datasets.formats.motion import Motion
-from mocapkit.synthesis.base import DofLayout, MotionSynthesizer, dof_matrix, dof_values
+from mocapkit.synthesis.base import (
+    MotionSynthesizer,
+    dof_matrix,
+    dof_values,
+    rotation_columns,
+    time_warp,
+)
 from mocapkit.synthesis.representation import decode, encode, root_start
-
-
-def rotation_columns(layout: DofLayout) -> np.ndarray:
-    """bool ``[channels]``: which columns of a :func:`~mocapkit.synthesis.base.dof_matrix` are angles (degrees)."""
-    return np.array([name.lower().startswith("r") for dofs in layout.dofs for name in dofs])
-
-
-def time_warp(matrix: np.ndarray, n_frames: int, angles: np.ndarray | None = None) -> np.ndarray:
-    """Linearly resample a ``[T, channels]`` matrix to ``[n_frames, channels]`` (first and last frames kept).
-
-    ``angles`` (bool ``[channels]``) marks the columns in degrees: they are unwrapped (period 360°) before the
-    interpolation, so the result may leave ``[-180, 180]`` (AMC takes any angle).
-    """
-    matrix = np.asarray(matrix, dtype=np.float64)
-    if angles is not None and angles.any():
-        matrix = matrix.copy()
-        matrix[:, angles] = np.unwrap(matrix[:, angles], period=360.0, axis=0)
-    if len(matrix) == n_frames:
-        return matrix.copy()
-    source = np.linspace(0.0, 1.0, len(matrix))
-    target = np.linspace(0.0, 1.0, n_frames)
-    return np.stack([np.interp(target, source, column) for column in matrix.T], axis=1)
 
 
 def perlin_noise(x: np.ndarray, gradients: np.ndarray) -> np.ndarray:
@@ -148,5 +132,4 @@ class PerlinNoiseSynthesizer(CopyTrainingClips):
         return out
 
 
-__all__ = ["CopyTrainingClips", "PerlinNoiseSynthesizer", "perlin_noise", "rotation_columns", "time_warp",
-           "within_class_sd"]
+__all__ = ["CopyTrainingClips", "PerlinNoiseSynthesizer", "perlin_noise", "within_class_sd"]

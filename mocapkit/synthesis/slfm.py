@@ -46,7 +46,16 @@ from scipy.spatial.transform import Rotation
 
 from mocapkit.datasets.formats.asf_amc import AsfSkeleton
 from mocapkit.datasets.formats.motion import Motion
-from mocapkit.synthesis.base import MotionSynthesizer, SynthesisInputError, clip_label
+from mocapkit.synthesis.base import (
+    MotionSynthesizer,
+    SynthesisInputError,
+    clip_label,
+    dof_values,
+    model_frames,
+    resample_clip,
+    rotation_columns,
+    time_warp,
+)
 from mocapkit.synthesis.footskate import cleanup_footskate
 from mocapkit.synthesis.representation import (
     ROOT_FEATURES,
@@ -606,12 +615,19 @@ class SLFMSynthesizer(MotionSynthesizer):
             ``ρ·z_{t−1} + √(1−ρ²)·ε_t`` (each still N(0, 1), so every frame's draw keeps its predictive
             distribution), which makes successive draws move together instead of jittering; 0 = independent
             draws, the thesis's literal procedure (§3.6). Not from the thesis; the normals are mapped through each
-            frame's own covariance, so the correlation of the outputs is approximate. The default 0.97 (a time
-            constant of about 0.3 s at 120 Hz) was picked among 0, 0.9, 0.97, 0.99 on 10 bd hop clips by the
-            variants' jerk against the training clips' own: 19.7k, 13.3k, 11.5k, 13.3k m/s³ against 1.2k (V 102,
-            133, 148, 152): it halves the jitter, which stays ~9× the data's.
+            frame's own covariance, so the correlation of the outputs is approximate.
         dynamic_feature: ``"position"`` or ``"scf_difference"``.
         footskate_cleanup: pin planted feet after sampling.
+        model_fps: the frame rate the models work at (None: the clips' own, the thesis's 120 Hz). Lower, the
+            clips are resampled for training (:func:`~mocapkit.synthesis.base.resample_clip`) and the variants are
+            drawn at this rate, then brought back to the clips' rate by a cubic spline before the footskate
+            cleanup. Not from the thesis.
+
+    Defaults ``model_fps=30`` and ``noise_correlation=0.9`` were chosen on the training clips only (the first 10
+    hopBothLegs1hops cuts by path, all of performer bd), by the variants' jerk against those clips' own, 1.25k
+    m/s³: the thesis's literal setting (120 Hz, independent draws) gave 19.7k; 120 Hz with ρ = 0.97, 11.5k; 30 Hz
+    with independent draws, 1.7k; 30 Hz with ρ = 0.9, 1.2k (V 147 against the clips' 66). At 120 Hz successive
+    frames differ less than the per-frame predictive noise, so independent draws jitter.
         random_state: seeds the training subsets and inducing points.
         verbose: progress lines on stderr.
 
@@ -624,8 +640,9 @@ class SLFMSynthesizer(MotionSynthesizer):
     min_frames = 4
 
     def __init__(self, frame_stride: int = 2, n_fit: int = 100, n_inducing: int = 32, max_iter: int = 30,
-                 sample_noise: bool = True, noise_correlation: float = 0.97, dynamic_feature: str = "position",
-                 footskate_cleanup: bool = True, random_state: int | None = 0, verbose: bool = False):
+                 sample_noise: bool = True, noise_correlation: float = 0.9, dynamic_feature: str = "position",
+                 footskate_cleanup: bool = True, model_fps: float | None = 30.0, random_state: int | None = 0,
+                 verbose: bool = False):
         self.frame_stride = frame_stride
         self.n_fit = n_fit
         self.n_inducing = n_inducing
@@ -634,6 +651,7 @@ class SLFMSynthesizer(MotionSynthesizer):
         self.noise_correlation = noise_correlation
         self.dynamic_feature = dynamic_feature
         self.footskate_cleanup = footskate_cleanup
+        self.model_fps = model_fps
         self.random_state = random_state
         self.verbose = verbose
 
@@ -696,6 +714,15 @@ class SLFMSynthesizer(MotionSynthesizer):
         if self.frame_stride < 1:
             raise ValueError(f"frame_stride must be >= 1, got {self.frame_stride}")
         start = time.perf_counter()
+        if self.model_fps is not None and not float(self.model_fps) > 0:
+            raise ValueError(f"model_fps must be positive (or None), got {self.model_fps!r}")
+        self.model_fps_ = self.fps_ if self.model_fps is None else float(self.model_fps)
+        clips = [resample_clip(clip, self.model_fps_) for clip in clips]
+        short = [c for c in clips if c.num_frames < self.min_frames]
+        if short:
+            raise SynthesisInputError(f"SLFMSynthesizer.fit: {clip_label(short[0])} has {short[0].num_frames} frames "
+                                      f"at model_fps={self.model_fps_:g}; the second-order model needs "
+                                      f"{self.min_frames} (raise model_fps)")
         rng = np.random.default_rng(self.random_state)
         self.bones_ = tuple(self.layout_.bones[1:])
         self.partitions_ = partitions(self.skeleton_)
@@ -761,7 +788,8 @@ class SLFMSynthesizer(MotionSynthesizer):
                 groups.setdefault(axes, []).append(b)
         self.reduced_bones_ = {axes: np.array(bones) for axes, bones in groups.items()}
         kinematics = RootFrameKinematics(self.skeleton_, self.bones_)
-        V, T, F = n_variants, n_frames, ROOT_FEATURES + 3 * len(self.bones_)
+        V, F = n_variants, ROOT_FEATURES + 3 * len(self.bones_)
+        T = max(model_frames(n_frames, self.fps_, self.model_fps_), 2)     # frames at the model's rate
         flat = np.zeros((V, T, F))
         positions = np.zeros((V, T, len(self.bones_), 3))
         dynamic = np.zeros((V, T, self._dynamic(flat[:, 0], flat[:, 0], positions[:, 0], positions[:, 0]).shape[1]))
@@ -792,6 +820,10 @@ class SLFMSynthesizer(MotionSynthesizer):
         for v in range(V):
             values = decode(FeatureClip.from_flat(flat[v], self.bones_), self.skeleton_, start_xz=self.start_xz_,
                             start_yaw=self.start_yaw_)
+            if T != n_frames:                         # back to the data's rate by a cubic spline
+                matrix = np.concatenate([values[bone] for bone in self.layout_.bones], axis=1)
+                values = dof_values(time_warp(matrix, n_frames, rotation_columns(self.layout_), kind="cubic"),
+                                    self.layout_)
             if self.footskate_cleanup:
                 values, report = cleanup_footskate(values, self.skeleton_, self.fps_, floor=self.floor_)
                 self.footskate_reports_.append(report)

@@ -190,8 +190,8 @@ class KinectReconstructionBenchmark(Benchmark):
             return ""
         keys = list(dict.fromkeys(c["method"] for c in cells))
         lines = ["## Over all held-out performers", "",
-                 "Frame-weighted mean joint error (cm) over every test frame of every protocol, per seed; mean ± sd "
-                 "over seeds. `raw` is the simulated Kinect input on the same frames.", "",
+                 ("Frame-weighted mean joint error (cm) over every test frame of every protocol, per seed; mean ± sd "
+                  "over seeds. `raw` is the simulated Kinect input on the same frames."), "",
                  "| method | error (cm) | raw (cm) | reduction | frames/s |", "|---|---|---|---|---|"]
         for key in keys:
             mine = [c for c in cells if c["method"] == key and "metrics" in c]
