@@ -151,3 +151,20 @@ def test_bad_training_clips_are_rejected(hops, name):
 def test_bad_parameters_are_rejected(hops, method, message):
     with pytest.raises(ValueError, match=message):
         method.fit(hops[0])
+
+
+@needs(HDM05)
+def test_synthesize_command_runs_a_baseline(tmp_path, capsys):
+    from mocapkit.cli import main
+
+    out = tmp_path / "perlin"
+    assert main(["synthesize", *map(str, HOPS[:4]), "--method", "perlin", "--out", str(out), "--variants", "2",
+                 "--seed", "3", "--quiet"]) == 0
+    assert "wrote 2 variants of 4 training clips" in capsys.readouterr().out
+    variants = sorted(out.glob("variant_*.amc"))
+    assert len(variants) == 2
+    motion = read_amc(variants[0], asf=next(out.glob("*.asf")))
+    assert np.isfinite(motion.positions).all() and motion.num_frames > 10
+    assert main(["synthesize", *map(str, HOPS[:3]), "--method", "lau", "--out", str(tmp_path / "x"),
+                 "--set", "amplitude=2"]) == 2                       # a Perlin parameter, not Lau's
+    assert "amplitude" in capsys.readouterr().err
