@@ -49,7 +49,8 @@ class KinectReconstructionBenchmark(Benchmark):
 
     title = "Kinect posture reconstruction (simulated Kinect v1 from real mocap, held-out performers)"
     percent_metrics = ("reduction",)
-    selection_cv = "leave-one-performer-out CV over the training performers (error in cm, negated)"
+    selection_cv = ("validation on training performers held out in turn (the first `cv` in name order; error in cm, "
+                    "negated)")
 
     def __init__(self, root: str, protocols: list[str] | None = None, fps: float = 30.0,
                  clips_per_group: int | None = None, clip_seed: int = 0, cache_fits: bool = True):
