@@ -386,21 +386,9 @@ def load_training(paths: Sequence[str | os.PathLike], skip_bad: bool = False
         RefineError: a folder without motion files; an unreadable file (named) unless ``skip_bad``; nothing
             readable at all.
     """
-    from mocapkit.datasets.formats.motion_io import find_motion_files, read_motion
+    from mocapkit.datasets.formats.motion_io import expand_motion_paths, read_motion
 
-    files: list[Path] = []
-    for raw in paths:
-        path = Path(raw)
-        if path.is_dir():
-            found = find_motion_files(path)
-            if not found:
-                raise RefineError(f"--train {path}: no motion files in this folder (looked for .c3d, .amc, .bvh, "
-                                  f".skeleton, MSR *_skeleton3D.txt)")
-            files += found
-        elif path.is_file():
-            files.append(path)
-        else:
-            raise FileNotFoundError(f"--train {path}: no such file or folder")
+    files = expand_motion_paths(paths, "--train", empty_error=RefineError)
     motions, used, skipped = [], [], []
     for path in files:
         try:

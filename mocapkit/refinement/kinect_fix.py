@@ -105,9 +105,10 @@ def train_kinect_model(mocap, out: str | os.PathLike, seed: int = 0, skip_bad: b
         ``{"model", "files", "frames", "skipped": [[path, reason], ...], "fit_seconds"}`` (also printed by the CLI).
     """
     from mocapkit.classical.kinect_reconstruction import KinectPostureReconstructor
+    from mocapkit.datasets.formats.motion_io import expand_motion_paths
     from mocapkit.datasets.synthetic.kinect_noise import simulate_pairs
 
-    files = _motion_files(mocap, "--mocap")
+    files = expand_motion_paths(mocap, "--mocap", empty_error=KinectFixError)
     pairs, skipped = simulate_pairs(files, seed=seed, fps=MODEL_FPS, skip_bad=skip_bad, progress=True)
     if not pairs:
         raise KinectFixError(f"--mocap {', '.join(map(str, mocap))}: no usable motion file "
@@ -164,7 +165,11 @@ def fix_kinect_files(model, inputs, out_dir: str | os.PathLike, skip_bad: bool =
             ``energy_unit``, ...).
     """
     from mocapkit.classical.kinect_reconstruction import KinectPostureReconstructor
-    from mocapkit.datasets.formats.motion_io import read_motion, write_motion
+    from mocapkit.datasets.formats.motion_io import (
+        expand_motion_paths,
+        read_motion,
+        write_motion,
+    )
     from mocapkit.evaluation.kinect import bone_length_sd_cm, jitter_cm
     from mocapkit.io_atomic import atomic_write_text
 
@@ -173,7 +178,7 @@ def fix_kinect_files(model, inputs, out_dir: str | os.PathLike, skip_bad: bool =
         model = KinectPostureReconstructor.load(model)
     if energy:
         model.set_params(**energy)
-    files = _motion_files(inputs, "input")
+    files = expand_motion_paths(inputs, "input", empty_error=KinectFixError)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     report = KinectFixReport(model=name)
@@ -218,24 +223,3 @@ def _plot_before_after(raw: np.ndarray, fixed: np.ndarray, path: Path, out_dir: 
     after = _as_msr_motion(fixed, MODEL_FPS, f"{path.stem} corrected", str(path))
     return render_strip([before, after], out_dir / f"{path.stem}_before_after.png", n=8, view="front",
                         title=f"{path.name}: raw Kinect (blue) and corrected (red)")
-
-
-def _motion_files(paths, what: str) -> list[Path]:
-    from mocapkit.datasets.formats.motion_io import find_motion_files
-
-    if isinstance(paths, (str, os.PathLike)):
-        paths = [paths]
-    files: list[Path] = []
-    for p in map(Path, paths):
-        if p.is_dir():
-            found = find_motion_files(p)
-            if not found:
-                raise KinectFixError(f"{what} {p}: no motion files in this folder")
-            files += found
-        elif p.is_file():
-            files.append(p)
-        else:
-            raise KinectFixError(f"{what} {p}: no such file or folder")
-    if not files:
-        raise KinectFixError(f"{what}: nothing given")
-    return files

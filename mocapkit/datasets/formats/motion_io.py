@@ -85,6 +85,30 @@ def find_motion_files(folder: str | os.PathLike) -> list[Path]:
     return sorted(p for p in Path(folder).rglob("*") if p.is_file() and is_motion_file(p))
 
 
+def expand_motion_paths(paths, what: str = "input", empty_error: type[Exception] = ValueError) -> list[Path]:
+    """Files and folders (searched recursively with :func:`find_motion_files`) → the motion files, in order.
+
+    Raises:
+        FileNotFoundError: a path that does not exist (``"<what> <path>: no such file or folder"``).
+        empty_error: a folder without motion files, naming it.
+    """
+    if isinstance(paths, (str, os.PathLike)):
+        paths = [paths]
+    files: list[Path] = []
+    for path in map(Path, paths):
+        if path.is_dir():
+            found = find_motion_files(path)
+            if not found:
+                raise empty_error(f"{what} {path}: no motion files in this folder (looked for .c3d, .amc, .bvh, "
+                                  f".skeleton, MSR *_skeleton3D.txt)")
+            files += found
+        elif path.is_file():
+            files.append(path)
+        else:
+            raise FileNotFoundError(f"{what} {path}: no such file or folder")
+    return files
+
+
 def read_motion(path: str | os.PathLike, **options) -> Motion:
     """Read any supported motion file into a :class:`Motion` (see the module docstring).
 

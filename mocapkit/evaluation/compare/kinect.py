@@ -145,15 +145,13 @@ class KinectReconstructionBenchmark(Benchmark):
         predicted = fitted.predict(kinect, state=self.states(test, seed))
         seconds = time.perf_counter() - start
         frames = np.array([len(k) for k in kinect], dtype=np.float64)
-        error = np.array([joint_error_cm(p, m) for p, m in zip(predicted, mocap)])
-        raw = np.array([joint_error_cm(k, m) for k, m in zip(kinect, mocap)])
-        per_joint = sum(joint_error_cm(p, m, per_joint=True) * len(m) for p, m in zip(predicted, mocap))
-        per_joint_raw = sum(joint_error_cm(k, m, per_joint=True) * len(m) for k, m in zip(kinect, mocap))
         total = frames.sum()
-        return {"error_cm": float(error @ frames / total), "raw_cm": float(raw @ frames / total),
+        # frame-weighted per-joint means; the overall error is their mean (every frame has all 20 joints)
+        per_joint = sum(joint_error_cm(p, m, per_joint=True) * len(m) for p, m in zip(predicted, mocap)) / total
+        per_joint_raw = sum(joint_error_cm(k, m, per_joint=True) * len(m) for k, m in zip(kinect, mocap)) / total
+        return {"error_cm": float(per_joint.mean()), "raw_cm": float(per_joint_raw.mean()),
                 "frames_per_s": float(total / max(seconds, 1e-9)), "n_frames": int(total),
-                "per_joint_cm": (per_joint / total).round(3).tolist(),
-                "per_joint_raw_cm": (per_joint_raw / total).round(3).tolist()}
+                "per_joint_cm": per_joint.round(3).tolist(), "per_joint_raw_cm": per_joint_raw.round(3).tolist()}
 
     def evaluate_estimator(self, estimator, split: Split) -> dict:
         fitted, fit_seconds, cached = self._fitted(estimator, split.train, split.seed)
