@@ -20,7 +20,7 @@
     mocapkit search --index INDEX QUERY [QUERY ...] [-k K] [--json]
     mocapkit synthesize INPUT [INPUT ...] --out DIR [--type SUBSTRING] [--variants N] [--frames F] [--seed S]
                         [--method slfm|perlin|lau|cvae] [--no-footskate] [--set KEY=VALUE ...]   (Zhou 2014 ch. 4)
-    mocapkit kinect-fix train --mocap PATH [PATH ...] --out MODEL.npz [--set KEY=VALUE ...] [--skip-bad]
+    mocapkit kinect-fix train --mocap PATH [PATH ...] --out MODEL.npz [--noise PRESET] [--set KEY=VALUE ...] [--skip-bad]
     mocapkit kinect-fix apply INPUT [INPUT ...] --model MODEL.npz --out DIR [--set KEY=VALUE ...] [--plot N]
                         [--skip-bad]                                            (Zhou 2014 ch. 5)
 
@@ -232,9 +232,10 @@ def cmd_synthesize(args: argparse.Namespace) -> None:
 def cmd_kinect_fix_train(args: argparse.Namespace) -> None:
     from mocapkit.refinement.kinect_fix import train_kinect_model
 
-    report = train_kinect_model(args.mocap, args.out, seed=args.seed, skip_bad=args.skip_bad,
+    report = train_kinect_model(args.mocap, args.out, seed=args.seed, skip_bad=args.skip_bad, noise=args.noise,
                                 **_key_values(args.set))
     print(f"[mocapkit] Kinect reconstruction model of {report['files']} simulated clips ({report['frames']} frames, "
+          f"noise {report['noise']}, "
           f"fit {report['fit_seconds']:.0f} s) written to {report['model']}"
           + "".join(f"\n  skipped {path}: {reason}" for path, reason in report["skipped"]))
 
@@ -476,6 +477,9 @@ def build_parser() -> argparse.ArgumentParser:
                                                                    "with body landmarks), searched recursively")
     ktrain.add_argument("--out", required=True, help="the model file (.npz)")
     ktrain.add_argument("--seed", type=int, default=0, help="simulation and model seed (default 0)")
+    ktrain.add_argument("--noise", default="mean_error",
+                        help="the Kinect simulator's calibration: mean_error (raw error only, the default) or "
+                             "msr_steadiness (as steady as MSR Action3D's real skeletons)")
     ktrain.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                         help="a parameter of KinectPostureReconstructor, repeatable, e.g. gp_input=posture, "
                              "energy_unit=0.1, w_temporal=0.1, max_train_frames=5000")

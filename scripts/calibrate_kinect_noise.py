@@ -14,6 +14,13 @@ Usage (from the repository root)::
     python scripts/calibrate_kinect_noise.py                  # all 232 HDM05 cuts
     python scripts/calibrate_kinect_noise.py --max-files 40   # quick check while tuning
     python scripts/calibrate_kinect_noise.py --set snap_weight=0.8 --set depth_sigma_at_1m_m=0.003
+    python scripts/calibrate_kinect_noise.py --preset msr_steadiness --no-ablation
+
+Steadiness (the second calibration target, :meth:`KinectNoiseConfig.preset` ``"msr_steadiness"``): the mean over
+clips of :func:`~mocapkit.evaluation.kinect.bone_length_sd_cm` and :func:`~mocapkit.evaluation.kinect.jitter_cm`,
+with the simulated clips taken at 15 fps (every second frame) to compare with the real Kinect skeletons of MSR
+Action3D (15 fps, ``--msr``, every readable file), once with every component and once with occlusion and swaps
+off (tracked joints only, the regime of MSR's mostly unoccluded actions).
 
 Simulated errors are not comparable with the thesis's Table 5.2 (real sensor, other motions).
 """
@@ -25,6 +32,7 @@ import re
 import sys
 import time
 from collections import defaultdict
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -37,6 +45,7 @@ from mocapkit.datasets.synthetic.kinect_noise import (
     COMPONENTS,
     INFERRED,
     KINECT20_NAMES,
+    NOISE_PRESETS,
     NOT_TRACKED,
     TRACKED,
     KinectNoiseConfig,
@@ -80,6 +89,39 @@ def simulate_all(clips, config: KinectNoiseConfig, seed: int, fps: float):
     return out
 
 
+def steadiness(clips, config: KinectNoiseConfig, seed: int, fps: float, step: int) -> tuple[float, float]:
+    """Mean over clips of the simulated clips' bone-length sd and jitter (cm), every ``step``-th frame."""
+    from mocapkit.evaluation.kinect import bone_length_sd_cm, jitter_cm
+
+    bones, jitters = [], []
+    for path, clean in clips:
+        noisy = simulate_kinect(clean, config, seed=file_seed(seed, path), fps=fps)[0][::step]
+        if len(noisy) >= 3:
+            bones.append(bone_length_sd_cm(noisy))
+            jitters.append(jitter_cm(noisy))
+    return float(np.mean(bones)), float(np.mean(jitters))
+
+
+def msr_steadiness(folder: Path) -> tuple[int, float, float] | None:
+    """``(files, bone-length sd, jitter)`` (cm, means over files) of the real MSR Action3D skeletons in ``folder``
+    (15 fps, gaps filled as ``mocapkit kinect-fix`` does); None when the folder is absent."""
+    from mocapkit.evaluation.kinect import bone_length_sd_cm, jitter_cm
+    from mocapkit.refinement.kinect_fix import kinect_clip
+
+    files = sorted(folder.glob("*_skeleton3D.txt")) if folder.is_dir() else []
+    bones, jitters = [], []
+    for path in files:
+        try:
+            positions = kinect_clip(read_motion(path))[0]
+        except ValueError as exc:
+            print(f"skipped {exc}", file=sys.stderr)
+            continue
+        if len(positions) >= 3:
+            bones.append(bone_length_sd_cm(positions))
+            jitters.append(jitter_cm(positions))
+    return (len(bones), float(np.mean(bones)), float(np.mean(jitters))) if bones else None
+
+
 def parse_set(items: list[str]) -> dict:
     changes = {}
     for item in items:
@@ -98,6 +140,10 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--max-files", type=int, default=None, help="use this many files, spread over the folder")
     parser.add_argument("--fps", type=float, default=30.0)
+    parser.add_argument("--preset", choices=NOISE_PRESETS, default="mean_error",
+                        help="the calibration to start from (default: mean_error, the default config)")
+    parser.add_argument("--msr", type=Path, default=REPO / ".." / "shared" / "data" / "msr_action3d",
+                        help="MSR Action3D folder for the steadiness reference (skipped when absent)")
     parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
                         help="override a KinectNoiseConfig field (Python literal), repeatable")
     parser.add_argument("--no-ablation", action="store_true", help="skip the per-component runs")
@@ -108,12 +154,12 @@ def main(argv: list[str] | None = None) -> None:
     frames = sum(len(c) for _, c in clips)
     print(f"{len(clips)} files, {frames} frames at {args.fps:g} fps from {args.src.resolve()} "
           f"(read in {time.time() - start:.1f} s)")
-    config = KinectNoiseConfig(**parse_set(args.set))
+    config = replace(KinectNoiseConfig.preset(args.preset), **parse_set(args.set))
 
     results = simulate_all(clips, config, args.seed, args.fps)
     distance = np.concatenate([d for d, _ in results]) * 100.0            # [frames, 20] cm
     state = np.concatenate([s for _, s in results])
-    print(f"\nraw error, default config (seed {args.seed}): {distance.mean():.2f} cm "
+    print(f"\nraw error, preset {args.preset} (seed {args.seed}): {distance.mean():.2f} cm "
           f"(median clip {np.median([d.mean() * 100 for d, _ in results]):.2f} cm)")
     shares = {name: float((state == value).mean()) for name, value in
               (("TRACKED", TRACKED), ("INFERRED", INFERRED), ("NOT_TRACKED", NOT_TRACKED))}
@@ -137,6 +183,18 @@ def main(argv: list[str] | None = None) -> None:
         s = np.concatenate([s for _, s in by_class[name]])
         print(f"  {name:<30} {d.mean():6.2f}   {len(by_class[name]):3d}   {100 * (s != TRACKED).mean():5.1f} %")
 
+    step = max(1, round(args.fps / 15.0))
+    print(f"\nsteadiness at {args.fps / step:g} fps (cm, mean over clips): bone-length sd, jitter")
+    bone, jitter = steadiness(clips, KinectNoiseConfig.off(), args.seed, args.fps, step)
+    print(f"  clean mocap                         {bone:6.2f} {jitter:6.2f}")
+    bone, jitter = steadiness(clips, config, args.seed, args.fps, step)
+    print(f"  simulated, every component          {bone:6.2f} {jitter:6.2f}")
+    bone, jitter = steadiness(clips, config.without("occlusion", "swaps"), args.seed, args.fps, step)
+    print(f"  simulated, no occlusion or swaps    {bone:6.2f} {jitter:6.2f}")
+    real = msr_steadiness(args.msr.resolve())
+    if real:
+        print(f"  real Kinect, MSR Action3D ({real[0]} files) {real[1]:6.2f} {real[2]:6.2f}")
+
     if not args.no_ablation:
         print("\ncomponent ablation (overall cm with the component off; drop = its contribution):")
         for name in COMPONENTS:
@@ -144,8 +202,7 @@ def main(argv: list[str] | None = None) -> None:
             error = np.concatenate([d for d, _ in without]).mean() * 100.0
             print(f"  without {name:<14} {error:6.2f}   drop {distance.mean() - error:6.2f}")
         for name in COMPONENTS:
-            alone = simulate_all(clips, KinectNoiseConfig.off(**{name: True, **{
-                k: v for k, v in parse_set(args.set).items() if k not in COMPONENTS}}), args.seed, args.fps)
+            alone = simulate_all(clips, config.without(*[c for c in COMPONENTS if c != name]), args.seed, args.fps)
             error = np.concatenate([d for d, _ in alone]).mean() * 100.0
             print(f"  only    {name:<14} {error:6.2f}")
     print(f"\n{time.time() - start:.1f} s")

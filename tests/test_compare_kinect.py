@@ -81,3 +81,21 @@ def test_unknown_held_out_performer_is_named(tmp_path):
         KinectReconstructionBenchmark(str(HDM05), protocols=["xx"], clips_per_group=1)
     with pytest.raises(ComparisonError, match="no motion files"):
         KinectReconstructionBenchmark(str(tmp_path))
+
+
+@needs(HDM05)
+def test_noise_preset_is_a_benchmark_option():
+    from mocapkit.datasets.synthetic.kinect_noise import (
+        KinectNoiseConfig,
+        file_seed,
+        simulate_kinect,
+    )
+
+    with pytest.raises(ComparisonError, match="benchmark.noise='loud'"):
+        KinectReconstructionBenchmark(str(HDM05), clips_per_group=1, noise="loud")
+    bench = KinectReconstructionBenchmark(str(HDM05), clips_per_group=1, noise="msr_steadiness")
+    assert bench.describe()["noise"] == "msr_steadiness"
+    pair = bench.pairs(0)[0]
+    expected, _ = simulate_kinect(pair.clean, KinectNoiseConfig.preset("msr_steadiness"),
+                                  seed=file_seed(0, pair.path), fps=30.0)
+    assert (pair.noisy == expected).all()

@@ -123,10 +123,15 @@ def test_cli_trains_and_applies_and_names_the_bad_file(tmp_path, capsys):
     from mocapkit.cli import main
 
     model = tmp_path / "m.npz"
-    assert main(["kinect-fix", "train", "--mocap", *map(str, sorted((HDM05 / "dg").glob("*.amc"))[:3]),
-                 "--out", str(model), "--set", "gp_iterations=2", "--set", "n_inducing=10",
-                 "--set", "max_train_frames=200"]) == 0
-    assert "written to" in capsys.readouterr().out and model.is_file()
+    clips = [str(p) for p in sorted((HDM05 / "dg").glob("*.amc"))[:3]]
+    tiny = ["--set", "gp_iterations=2", "--set", "n_inducing=10", "--set", "max_train_frames=200"]
+    assert main(["kinect-fix", "train", "--mocap", *clips, "--out", str(model), *tiny]) == 0
+    assert "noise mean_error" in (printed := capsys.readouterr().out) and "written to" in printed and model.is_file()
+    assert main(["kinect-fix", "train", "--mocap", *clips, "--out", str(tmp_path / "s.npz"),
+                 "--noise", "msr_steadiness", *tiny]) == 0
+    assert "noise msr_steadiness" in capsys.readouterr().out
+    assert main(["kinect-fix", "train", "--mocap", *clips, "--out", str(tmp_path / "x.npz"), "--noise", "loud"]) == 2
+    assert "--noise loud" in capsys.readouterr().err
     good, empty = MSR / "a05_s02_e01_skeleton3D.txt", MSR / "a13_s09_e02_skeleton3D.txt"
     assert main(["kinect-fix", "apply", str(good), "--model", str(model), "--out", str(tmp_path / "o"),
                  "--set", "energy_unit=0.1"]) == 0

@@ -178,6 +178,30 @@ def test_leg_swaps_are_more_frequent_side_on():
     np.testing.assert_array_equal(noisy[:, :12], clip[:, :12])
 
 
+def test_msr_steadiness_preset_cuts_only_the_frame_to_frame_noise():
+    from mocapkit.evaluation.kinect import bone_length_sd_cm, jitter_cm
+
+    clip = moving_clip(seconds=8.0, turns=0.5)
+    default, steady = KinectNoiseConfig.preset("mean_error"), KinectNoiseConfig.preset("msr_steadiness")
+    assert default == KinectNoiseConfig()
+    assert steady.jitter_sigma_m["hand"] == pytest.approx(0.1 * default.jitter_sigma_m["hand"])
+    assert steady.bone_length_sigma == pytest.approx(0.1 * default.bone_length_sigma)
+    assert steady.surface_radius_m["pelvis"] == pytest.approx(1.15 * default.surface_radius_m["pelvis"])
+    # about the same occlusion (the visible surface moves with the surface radius), a much steadier skeleton
+    noisy_default, state_default = simulate_kinect(clip, default, seed=2)
+    noisy_steady, state_steady = simulate_kinect(clip, steady, seed=2)
+    assert (state_default != TRACKED).mean() > 0.02
+    assert abs((state_default == TRACKED).mean() - (state_steady == TRACKED).mean()) < 0.05
+    tracked_only = {"occlusion": False, "swaps": False}
+    calm_default = simulate_kinect(clip, replace(default, **tracked_only), seed=2)[0]
+    calm_steady = simulate_kinect(clip, replace(steady, **tracked_only), seed=2)[0]
+    assert bone_length_sd_cm(calm_steady) < 0.5 * bone_length_sd_cm(calm_default)
+    assert jitter_cm(calm_steady) < 0.5 * jitter_cm(calm_default)
+    assert jitter_cm(noisy_steady) < jitter_cm(noisy_default)
+    with pytest.raises(ValueError, match="unknown Kinect noise preset 'v2'"):
+        KinectNoiseConfig.preset("v2")
+
+
 def test_config_is_checked():
     with pytest.raises(ValueError, match="surface_radius_m"):
         KinectNoiseConfig(surface_radius_m={"pelvis": 0.1})

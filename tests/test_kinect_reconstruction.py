@@ -432,6 +432,27 @@ def test_bad_inputs_name_the_clip(estimator, data):
         estimator.fit([], [])
 
 
+def test_rigid_bones_keep_each_bone_at_its_median_length_and_direction(fitted, data):
+    from mocapkit.classical.kinect_reconstruction import bone_lengths
+    from mocapkit.datasets.formats.layouts import LANDMARK_PARENTS
+
+    _, (kte, _) = data
+    est = copy.deepcopy(fitted)
+    loose = est.set_params(rigid_bones=False).predict(kte[0])
+    rigid = est.set_params(rigid_bones=True).predict(kte[0])
+    assert bone_lengths(loose)[:, 1:].std(axis=0).mean() > 1e-3            # the per-joint energy wobbles
+    np.testing.assert_allclose(bone_lengths(rigid), np.broadcast_to(np.median(bone_lengths(loose), axis=0),
+                                                                     rigid.shape[:2]), atol=1e-9)
+    np.testing.assert_array_equal(rigid[:, 0], loose[:, 0])                    # HipCenter stays
+    for j in range(1, 20):
+        a = loose[:, j] - loose[:, LANDMARK_PARENTS[j]]
+        b = rigid[:, j] - rigid[:, LANDMARK_PARENTS[j]]
+        cos = (a * b).sum(-1) / np.linalg.norm(a, axis=-1) / np.linalg.norm(b, axis=-1)
+        assert (cos > 1 - 1e-9).all()
+    with pytest.raises(ValueError, match="rigid_bones"):
+        est.set_params(rigid_bones="yes").predict(kte[0])
+
+
 def test_bad_parameters_and_predict_inputs(fitted, data):
     (ktr, mtr), (kte, _) = data
     for bad in ({"w_spatial": -0.1}, {"w_spatial": 0, "w_temporal": 0, "w_reliability": 0}, {"reliability": "max"},

@@ -48,6 +48,10 @@ frames (Table 5.3 (b) and (a)). The energy's length unit matters (``σ²`` again
 ``energy_unit`` metres, centimetres by default — the thesis's error unit; in metres the GP term would outweigh
 the others ~10⁴ times and the weights 0.6/0.2/0.2 would have no effect.
 
+**Rigid output (ours, off by default).** The minimiser moves each joint on its own, so the output's bone lengths
+vary from frame to frame even on a steady input; ``rigid_bones=True`` then gives every bone the clip's median
+reconstructed length along its reconstructed direction (from HipCenter outwards).
+
 Errors are :func:`mocapkit.evaluation.kinect.joint_error_cm` (eqs. 5.7–5.9 with the per-frame mean, §7 item 29).
 """
 from __future__ import annotations
@@ -539,6 +543,10 @@ class KinectPostureReconstructor(BaseEstimator):
         kappa: the kinematic cue's rate κ (:func:`kinematic_reliability`).
         jump_threshold, still_threshold: the behaviour cue's thresholds, m/frame (:func:`behaviour_reliability`).
         energy_unit: the energy's length unit in metres (0.01: centimetres, see the module docstring).
+        rigid_bones: give every output bone the clip's median reconstructed length, keeping the bone directions
+            (:func:`~mocapkit.retrieval.skeleton.retarget`; not in the thesis). The energy corrects each joint on
+            its own, so its output's bone lengths wobble from frame to frame even on a steady input; this makes the
+            skeleton rigid, as a real body is.
         device: torch device of the GP training (``"cpu"``, ``"cuda"``); prediction runs in numpy.
         random_state: seeds the frame subset and the k-means initialisation of the inducing points.
 
@@ -549,13 +557,13 @@ class KinectPostureReconstructor(BaseEstimator):
     #: Parameters used only by :meth:`predict`: changing them after ``fit`` needs no refit (the comparison
     #: benchmark reuses one fit across them).
     predict_params = ("w_spatial", "w_temporal", "w_reliability", "reliability", "kappa", "jump_threshold",
-                      "still_threshold", "energy_unit")
+                      "still_threshold", "energy_unit", "rigid_bones")
 
     def __init__(self, w_spatial: float = 0.6, w_temporal: float = 0.2, w_reliability: float = 0.2,
                  gp_input: str = "neighbours", n_inducing: int = 200, max_train_frames: int | None = 3000,
                  gp_iterations: int = 100, learning_rate: float = 0.05, reliability: str = "product", kappa: float = 5.0,
                  jump_threshold: float = 0.15, still_threshold: float = 0.01, energy_unit: float = 0.01,
-                 device: str = "cpu", random_state: int | None = 0):
+                 rigid_bones: bool = False, device: str = "cpu", random_state: int | None = 0):
         self.w_spatial = w_spatial
         self.w_temporal = w_temporal
         self.w_reliability = w_reliability
@@ -569,6 +577,7 @@ class KinectPostureReconstructor(BaseEstimator):
         self.jump_threshold = jump_threshold
         self.still_threshold = still_threshold
         self.energy_unit = energy_unit
+        self.rigid_bones = rigid_bones
         self.device = device
         self.random_state = random_state
 
@@ -580,6 +589,8 @@ class KinectPostureReconstructor(BaseEstimator):
             raise ValueError("at least one of w_spatial, w_temporal, w_reliability must be positive")
         if self.reliability not in COMBINATIONS:
             raise ValueError(f"reliability={self.reliability!r}: expected one of {COMBINATIONS}")
+        if not isinstance(self.rigid_bones, (bool, np.bool_)):
+            raise ValueError(f"rigid_bones={self.rigid_bones!r}: must be True or False")  # noqa: TRY004 (a bad value, as the others)
         _check_nonneg("energy_unit", self.energy_unit)
         if self.energy_unit <= 0:
             raise ValueError(f"energy_unit={self.energy_unit!r}: must be positive (metres per unit)")
@@ -710,6 +721,8 @@ class KinectPostureReconstructor(BaseEstimator):
         for t in range(head, T):                                                        # sequential over frames
             c = 2.0 * out[t - 1] - out[t - 2] - x[t]
             out[t] = x[t] + _safe_ratio(base_num[t] + two_wt * c, base_den[t] + two_wt)
+        if self.rigid_bones:
+            out = retarget(out, np.median(bone_lengths(out), axis=0))
         return out
 
 

@@ -92,24 +92,34 @@ def _as_msr_motion(positions: np.ndarray, fps: float, name: str, source: str) ->
                   name=name, source=source, layout_name=MSR20.name)
 
 
-def train_kinect_model(mocap, out: str | os.PathLike, seed: int = 0, skip_bad: bool = False, **params) -> dict:
+def train_kinect_model(mocap, out: str | os.PathLike, seed: int = 0, skip_bad: bool = False,
+                       noise: str = "mean_error", **params) -> dict:
     """Fit :class:`~mocapkit.classical.kinect_reconstruction.KinectPostureReconstructor` on simulated pairs of the
     motion files in ``mocap`` (files or folders, searched recursively) and save it to ``out`` (``.npz``).
 
     Args:
         seed: the simulation seed and the model's ``random_state``.
+        noise: the simulator's calibration (:meth:`~mocapkit.datasets.synthetic.kinect_noise.KinectNoiseConfig.preset`:
+            ``mean_error`` or ``msr_steadiness``).
         skip_bad: skip (and report) unreadable or unusable files instead of failing.
         params: other parameters of the reconstructor (``max_train_frames``, ``gp_iterations``, weights, ...).
 
     Returns:
-        ``{"model", "files", "frames", "skipped": [[path, reason], ...], "fit_seconds"}`` (also printed by the CLI).
+        ``{"model", "noise", "files", "frames", "skipped": [[path, reason], ...], "fit_seconds"}`` (also printed by
+        the CLI).
     """
     from mocapkit.classical.kinect_reconstruction import KinectPostureReconstructor
     from mocapkit.datasets.formats.motion_io import expand_motion_paths
-    from mocapkit.datasets.synthetic.kinect_noise import simulate_pairs
+    from mocapkit.datasets.synthetic.kinect_noise import (
+        NOISE_PRESETS,
+        KinectNoiseConfig,
+        simulate_pairs,
+    )
 
+    if noise not in NOISE_PRESETS:
+        raise KinectFixError(f"--noise {noise}: unknown simulator calibration; known: {', '.join(NOISE_PRESETS)}")
     files = expand_motion_paths(mocap, "--mocap", empty_error=KinectFixError)
-    pairs, skipped = simulate_pairs(files, seed=seed, fps=MODEL_FPS, skip_bad=skip_bad, progress=True)
+    pairs, skipped = simulate_pairs(files, KinectNoiseConfig.preset(noise), seed=seed, fps=MODEL_FPS, skip_bad=skip_bad, progress=True)
     if not pairs:
         raise KinectFixError(f"--mocap {', '.join(map(str, mocap))}: no usable motion file "
                              f"({len(skipped)} skipped)")
@@ -120,7 +130,7 @@ def train_kinect_model(mocap, out: str | os.PathLike, seed: int = 0, skip_bad: b
     model.fit([p.noisy for p in pairs], [p.clean for p in pairs], [p.state for p in pairs])
     seconds = time.perf_counter() - start
     path = model.save(out)
-    return {"model": str(path), "files": len(pairs), "frames": int(sum(len(p.clean) for p in pairs)),
+    return {"model": str(path), "noise": noise, "files": len(pairs), "frames": int(sum(len(p.clean) for p in pairs)),
             "skipped": [[str(p), r] for p, r in skipped], "fit_seconds": round(seconds, 1)}
 
 

@@ -45,6 +45,8 @@ class KinectReconstructionBenchmark(Benchmark):
         clips_per_group: read only this many clips of each performer (a seeded subset; None: all), for quick runs.
         clip_seed: the seed of that subset.
         cache_fits: reuse a fit across methods and cells that differ only in prediction parameters.
+        noise: the simulator's calibration, a :data:`~mocapkit.datasets.synthetic.kinect_noise.NOISE_PRESETS` name
+            (``mean_error``: the default config; ``msr_steadiness``: as steady as MSR Action3D's real skeletons).
     """
 
     title = "Kinect posture reconstruction (simulated Kinect v1 from real mocap, held-out performers)"
@@ -53,8 +55,14 @@ class KinectReconstructionBenchmark(Benchmark):
                     "negated)")
 
     def __init__(self, root: str, protocols: list[str] | None = None, fps: float = 30.0,
-                 clips_per_group: int | None = None, clip_seed: int = 0, cache_fits: bool = True):
+                 clips_per_group: int | None = None, clip_seed: int = 0, cache_fits: bool = True,
+                 noise: str = "mean_error"):
         from mocapkit.datasets.formats.motion_io import find_motion_files
+        from mocapkit.datasets.synthetic.kinect_noise import NOISE_PRESETS
+
+        if noise not in NOISE_PRESETS:
+            raise ComparisonError(f"benchmark.noise={noise!r}: unknown; known presets {list(NOISE_PRESETS)}")
+        self.noise = noise
 
         self.root = Path(root)
         if not self.root.is_dir():
@@ -86,9 +94,12 @@ class KinectReconstructionBenchmark(Benchmark):
     def pairs(self, seed: int) -> list:
         """The simulated :class:`~mocapkit.datasets.synthetic.kinect_noise.KinectPair` of every clip for ``seed``."""
         if seed not in self._pairs:
-            from mocapkit.datasets.synthetic.kinect_noise import simulate_pairs
+            from mocapkit.datasets.synthetic.kinect_noise import (
+                KinectNoiseConfig,
+                simulate_pairs,
+            )
 
-            pairs, _ = simulate_pairs(self.files, seed=seed, fps=self.fps)
+            pairs, _ = simulate_pairs(self.files, KinectNoiseConfig.preset(self.noise), seed=seed, fps=self.fps)
             self._pairs[seed] = pairs
         return self._pairs[seed]
 
@@ -114,7 +125,7 @@ class KinectReconstructionBenchmark(Benchmark):
     def describe(self) -> dict:
         return {"root": str(self.root), "n_clips": len(self.files), "fps": self.fps,
                 "groups": {g: int((self.groups == g).sum()) for g in sorted(set(self.groups.tolist()))},
-                "clips_per_group": self.clips_per_group, "clip_seed": self.clip_seed}
+                "clips_per_group": self.clips_per_group, "clip_seed": self.clip_seed, "noise": self.noise}
 
     # ------------------------------------------------------------------ scoring
     def _fitted(self, estimator, train: np.ndarray, seed: int) -> tuple[object, float, bool]:
