@@ -20,7 +20,8 @@
     mocapkit search --index INDEX QUERY [QUERY ...] [-k K] [--json]
     mocapkit synthesize INPUT [INPUT ...] --out DIR [--type SUBSTRING] [--variants N] [--frames F] [--seed S]
                         [--method slfm|perlin|lau|cvae] [--no-footskate] [--set KEY=VALUE ...]   (Zhou 2014 ch. 4)
-    mocapkit kinect-fix train --mocap PATH [PATH ...] --out MODEL.npz [--noise PRESET] [--set KEY=VALUE ...] [--skip-bad]
+    mocapkit kinect-fix train --mocap PATH [PATH ...] --out MODEL.npz [--noise PRESET] [--set KEY=VALUE ...]
+                        [--skip-bad]
     mocapkit kinect-fix apply INPUT [INPUT ...] --model MODEL.npz --out DIR [--set KEY=VALUE ...] [--plot N]
                         [--skip-bad]                                            (Zhou 2014 ch. 5)
 

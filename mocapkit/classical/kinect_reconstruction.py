@@ -590,7 +590,8 @@ class KinectPostureReconstructor(BaseEstimator):
         if self.reliability not in COMBINATIONS:
             raise ValueError(f"reliability={self.reliability!r}: expected one of {COMBINATIONS}")
         if not isinstance(self.rigid_bones, (bool, np.bool_)):
-            raise ValueError(f"rigid_bones={self.rigid_bones!r}: must be True or False")  # noqa: TRY004 (a bad value, as the others)
+            # a bad parameter value, a ValueError as every other check here
+            raise ValueError(f"rigid_bones={self.rigid_bones!r}: must be True or False")  # noqa: TRY004
         _check_nonneg("energy_unit", self.energy_unit)
         if self.energy_unit <= 0:
             raise ValueError(f"energy_unit={self.energy_unit!r}: must be positive (metres per unit)")

@@ -119,7 +119,8 @@ def train_kinect_model(mocap, out: str | os.PathLike, seed: int = 0, skip_bad: b
     if noise not in NOISE_PRESETS:
         raise KinectFixError(f"--noise {noise}: unknown simulator calibration; known: {', '.join(NOISE_PRESETS)}")
     files = expand_motion_paths(mocap, "--mocap", empty_error=KinectFixError)
-    pairs, skipped = simulate_pairs(files, KinectNoiseConfig.preset(noise), seed=seed, fps=MODEL_FPS, skip_bad=skip_bad, progress=True)
+    pairs, skipped = simulate_pairs(files, KinectNoiseConfig.preset(noise), seed=seed, fps=MODEL_FPS,
+                                    skip_bad=skip_bad, progress=True)
     if not pairs:
         raise KinectFixError(f"--mocap {', '.join(map(str, mocap))}: no usable motion file "
                              f"({len(skipped)} skipped)")
