@@ -80,46 +80,39 @@ def load(src: Path, max_files: int | None, fps: float) -> list[tuple[Path, np.nd
     return clips
 
 
-def simulate_all(clips, config: KinectNoiseConfig, seed: int, fps: float):
-    """Per clip ``(distance [T, 20] m, state [T, 20])``."""
-    out = []
-    for path, clean in clips:
-        noisy, state = simulate_kinect(clean, config, seed=file_seed(seed, path), fps=fps)
-        out.append((np.linalg.norm(noisy.astype(np.float64) - clean, axis=-1), state))
-    return out
+def simulate(clips, config: KinectNoiseConfig, seed: int, fps: float) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Per clip ``(noisy [T, 20, 3] m, state [T, 20])``, each file with its own :func:`file_seed`."""
+    return [simulate_kinect(clean, config, seed=file_seed(seed, path), fps=fps) for path, clean in clips]
 
 
-def steadiness(clips, config: KinectNoiseConfig, seed: int, fps: float, step: int) -> tuple[float, float]:
-    """Mean over clips of the simulated clips' bone-length sd and jitter (cm), every ``step``-th frame."""
+def simulate_all(clips, config: KinectNoiseConfig, seed: int, fps: float, simulated=None):
+    """Per clip ``(distance [T, 20] m, state [T, 20])`` (of ``simulated``, when already simulated)."""
+    simulated = simulated if simulated is not None else simulate(clips, config, seed, fps)
+    return [(np.linalg.norm(noisy.astype(np.float64) - clean, axis=-1), state)
+            for (_, clean), (noisy, state) in zip(clips, simulated)]
+
+
+def mean_steadiness(positions, step: int = 1) -> tuple[float, float]:
+    """Mean over clips ``[T, 20, 3]`` (m) of :func:`~mocapkit.evaluation.kinect.bone_length_sd_cm` and
+    :func:`~mocapkit.evaluation.kinect.jitter_cm` (cm), every ``step``-th frame; clips under 3 frames are left out."""
     from mocapkit.evaluation.kinect import bone_length_sd_cm, jitter_cm
 
-    bones, jitters = [], []
-    for path, clean in clips:
-        noisy = simulate_kinect(clean, config, seed=file_seed(seed, path), fps=fps)[0][::step]
-        if len(noisy) >= 3:
-            bones.append(bone_length_sd_cm(noisy))
-            jitters.append(jitter_cm(noisy))
-    return float(np.mean(bones)), float(np.mean(jitters))
+    kept = [p[::step] for p in positions if len(p[::step]) >= 3]
+    return float(np.mean([bone_length_sd_cm(p) for p in kept])), float(np.mean([jitter_cm(p) for p in kept]))
 
 
-def msr_steadiness(folder: Path) -> tuple[int, float, float] | None:
-    """``(files, bone-length sd, jitter)`` (cm, means over files) of the real MSR Action3D skeletons in ``folder``
-    (15 fps, gaps filled as ``mocapkit kinect-fix`` does); None when the folder is absent."""
-    from mocapkit.evaluation.kinect import bone_length_sd_cm, jitter_cm
+def msr_clips(folder: Path) -> list[np.ndarray]:
+    """The real MSR Action3D skeletons in ``folder`` (15 fps, gaps filled as ``mocapkit kinect-fix`` does;
+    unusable files reported on stderr); empty when the folder is absent."""
     from mocapkit.refinement.kinect_fix import kinect_clip
 
-    files = sorted(folder.glob("*_skeleton3D.txt")) if folder.is_dir() else []
-    bones, jitters = [], []
-    for path in files:
+    clips = []
+    for path in sorted(folder.glob("*_skeleton3D.txt")) if folder.is_dir() else []:
         try:
-            positions = kinect_clip(read_motion(path))[0]
+            clips.append(kinect_clip(read_motion(path))[0])
         except ValueError as exc:
             print(f"skipped {exc}", file=sys.stderr)
-            continue
-        if len(positions) >= 3:
-            bones.append(bone_length_sd_cm(positions))
-            jitters.append(jitter_cm(positions))
-    return (len(bones), float(np.mean(bones)), float(np.mean(jitters))) if bones else None
+    return clips
 
 
 def parse_set(items: list[str]) -> dict:
@@ -156,7 +149,8 @@ def main(argv: list[str] | None = None) -> None:
           f"(read in {time.time() - start:.1f} s)")
     config = replace(KinectNoiseConfig.preset(args.preset), **parse_set(args.set))
 
-    results = simulate_all(clips, config, args.seed, args.fps)
+    simulated = simulate(clips, config, args.seed, args.fps)
+    results = simulate_all(clips, config, args.seed, args.fps, simulated)
     distance = np.concatenate([d for d, _ in results]) * 100.0            # [frames, 20] cm
     state = np.concatenate([s for _, s in results])
     print(f"\nraw error, preset {args.preset} (seed {args.seed}): {distance.mean():.2f} cm "
@@ -185,15 +179,17 @@ def main(argv: list[str] | None = None) -> None:
 
     step = max(1, round(args.fps / 15.0))
     print(f"\nsteadiness at {args.fps / step:g} fps (cm, mean over clips): bone-length sd, jitter")
-    bone, jitter = steadiness(clips, KinectNoiseConfig.off(), args.seed, args.fps, step)
-    print(f"  clean mocap                         {bone:6.2f} {jitter:6.2f}")
-    bone, jitter = steadiness(clips, config, args.seed, args.fps, step)
-    print(f"  simulated, every component          {bone:6.2f} {jitter:6.2f}")
-    bone, jitter = steadiness(clips, config.without("occlusion", "swaps"), args.seed, args.fps, step)
-    print(f"  simulated, no occlusion or swaps    {bone:6.2f} {jitter:6.2f}")
-    real = msr_steadiness(args.msr.resolve())
+    rows = [("clean mocap", [clean for _, clean in clips]),
+            ("simulated, every component", [noisy for noisy, _ in simulated]),
+            ("simulated, no occlusion or swaps",
+             [noisy for noisy, _ in simulate(clips, config.without("occlusion", "swaps"), args.seed, args.fps)])]
+    for label, positions in rows:
+        bone, jitter = mean_steadiness(positions, step)
+        print(f"  {label:<36}{bone:6.2f} {jitter:6.2f}")
+    real = msr_clips(args.msr.resolve())
     if real:
-        print(f"  real Kinect, MSR Action3D ({real[0]} files) {real[1]:6.2f} {real[2]:6.2f}")
+        bone, jitter = mean_steadiness(real)
+        print(f"  real Kinect, MSR Action3D ({len(real)} files) {bone:6.2f} {jitter:6.2f}")
 
     if not args.no_ablation:
         print("\ncomponent ablation (overall cm with the component off; drop = its contribution):")

@@ -111,15 +111,16 @@ def train_kinect_model(mocap, out: str | os.PathLike, seed: int = 0, skip_bad: b
     from mocapkit.classical.kinect_reconstruction import KinectPostureReconstructor
     from mocapkit.datasets.formats.motion_io import expand_motion_paths
     from mocapkit.datasets.synthetic.kinect_noise import (
-        NOISE_PRESETS,
         KinectNoiseConfig,
         simulate_pairs,
     )
 
-    if noise not in NOISE_PRESETS:
-        raise KinectFixError(f"--noise {noise}: unknown simulator calibration; known: {', '.join(NOISE_PRESETS)}")
+    try:
+        config = KinectNoiseConfig.preset(noise)
+    except ValueError as exc:
+        raise KinectFixError(f"--noise {noise}: {exc}") from None
     files = expand_motion_paths(mocap, "--mocap", empty_error=KinectFixError)
-    pairs, skipped = simulate_pairs(files, KinectNoiseConfig.preset(noise), seed=seed, fps=MODEL_FPS,
+    pairs, skipped = simulate_pairs(files, config, seed=seed, fps=MODEL_FPS,
                                     skip_bad=skip_bad, progress=True)
     if not pairs:
         raise KinectFixError(f"--mocap {', '.join(map(str, mocap))}: no usable motion file "

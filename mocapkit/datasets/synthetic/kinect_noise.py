@@ -290,18 +290,12 @@ class KinectNoiseConfig:
         """Every error magnitude times ``factor`` (surface radii, joint offsets, snap weight (at most 1), drift,
         depth noise, jitter, bone-length noise, swap rates); the camera and the body capsules are kept."""
         f = float(factor)
-        if f < 0:
-            raise ValueError(f"scale factor must be non-negative, got {factor}")
         return replace(
-            self,
+            self.sensor_noise_scaled(f),
             surface_radius_m={k: v * f for k, v in self.surface_radius_m.items()},
             joint_offset_m={k: tuple(x * f for x in v) for k, v in self.joint_offset_m.items()},
             snap_weight=min(1.0, self.snap_weight * f),
             inferred_drift_m=self.inferred_drift_m * f,
-            depth_sigma_at_1m_m=self.depth_sigma_at_1m_m * f,
-            jitter_sigma_m={k: v * f for k, v in self.jitter_sigma_m.items()},
-            speed_jitter_s=self.speed_jitter_s * f,
-            bone_length_sigma=self.bone_length_sigma * f,
             leg_swap_rate_facing_hz=self.leg_swap_rate_facing_hz * f,
             leg_swap_rate_side_hz=self.leg_swap_rate_side_hz * f,
             arm_swap_rate_facing_hz=self.arm_swap_rate_facing_hz * f,

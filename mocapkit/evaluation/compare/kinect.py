@@ -58,10 +58,12 @@ class KinectReconstructionBenchmark(Benchmark):
                  clips_per_group: int | None = None, clip_seed: int = 0, cache_fits: bool = True,
                  noise: str = "mean_error"):
         from mocapkit.datasets.formats.motion_io import find_motion_files
-        from mocapkit.datasets.synthetic.kinect_noise import NOISE_PRESETS
+        from mocapkit.datasets.synthetic.kinect_noise import KinectNoiseConfig
 
-        if noise not in NOISE_PRESETS:
-            raise ComparisonError(f"benchmark.noise={noise!r}: unknown; known presets {list(NOISE_PRESETS)}")
+        try:
+            self._noise_config = KinectNoiseConfig.preset(noise)
+        except ValueError as exc:
+            raise ComparisonError(f"benchmark.noise={noise!r}: {exc}") from None
         self.noise = noise
 
         self.root = Path(root)
@@ -94,12 +96,9 @@ class KinectReconstructionBenchmark(Benchmark):
     def pairs(self, seed: int) -> list:
         """The simulated :class:`~mocapkit.datasets.synthetic.kinect_noise.KinectPair` of every clip for ``seed``."""
         if seed not in self._pairs:
-            from mocapkit.datasets.synthetic.kinect_noise import (
-                KinectNoiseConfig,
-                simulate_pairs,
-            )
+            from mocapkit.datasets.synthetic.kinect_noise import simulate_pairs
 
-            pairs, _ = simulate_pairs(self.files, KinectNoiseConfig.preset(self.noise), seed=seed, fps=self.fps)
+            pairs, _ = simulate_pairs(self.files, self._noise_config, seed=seed, fps=self.fps)
             self._pairs[seed] = pairs
         return self._pairs[seed]
 
