@@ -238,6 +238,8 @@ def test_cli_end_to_end(tmp_path, capsys):
     assert len(report["training_clips"]) == 3 and report["variants"] == ["variant_000.amc", "variant_001.amc"]
     assert report["fit_seconds"] > 0 and report["sample_seconds_per_motion_second"] > 0
     assert report["parameters"]["n_fit"] == TINY["n_fit"] and "footskate_sliding_m_per_s" in report
+    assert report["noise_scale"] == float(list(report["variation_by_noise_scale"])[-1])
+    assert "angle_flips" not in report  # the three bd hops have none
     variant = read_amc(out / "variant_001.amc", asf=out / "HDM_bd.asf")
     assert variant.positions.shape[0] == 30 and np.all(np.isfinite(variant.positions))
 
@@ -248,3 +250,87 @@ def test_cli_errors(tmp_path, capsys):
     assert "no AMC clips matching *noSuchMotion*.amc" in err and str(tmp_path) in err
     assert main(["synthesize", str(tmp_path / "missing"), "--out", str(tmp_path / "o")]) == 2
     assert "no such file or folder" in capsys.readouterr().err
+
+
+DEEP_SQUAT = HDM05 / "dg" / "HDM_dg_squat1Reps_025_120.amc"
+
+
+@needs(HDM05)
+def test_angle_flips_of_a_real_deep_squat_and_none_in_hops(hops):
+    from mocapkit.synthesis.representation import angle_flips
+
+    squat = read_amc(DEEP_SQUAT)
+    flips = angle_flips(squat)
+    # the knee passes 180°: lfemur turns 180° in one frame while the joint positions move by millimetres
+    assert (83, "lfemur") in {(frame, bone) for frame, bone, _ in flips}
+    assert all(degrees > 45 for _, _, degrees in flips)
+    step = np.linalg.norm(squat.positions[83] - squat.positions[82], axis=1).max()
+    assert step < 0.06
+    assert all(angle_flips(clip) == [] for clip in hops)
+    assert angle_flips(squat, max_turn_speed=1e6) == []
+
+
+@needs(HDM05)
+def test_clip_segment_is_the_frames_of_the_clip(hops):
+    from mocapkit.synthesis.base import clip_segment
+
+    piece = clip_segment(hops[0], 10, 30)
+    assert piece.num_frames == 20 and piece.fps == hops[0].fps and piece.source.endswith("[10:30]")
+    np.testing.assert_allclose(piece.positions, hops[0].positions[10:30], atol=1e-9)
+
+
+@needs(HDM05)
+def test_fit_cuts_training_clips_at_angle_flips_and_says_so(hops):
+    squat = read_amc(DEEP_SQUAT)
+    with pytest.warns(UserWarning, match=r"HDM_dg_squat1Reps_025_120.amc: joint-angle flips \(.*lfemur 180° at frame 83"):
+        model = SLFMSynthesizer(**TINY, footskate_cleanup=False).fit([squat, hops[0]])
+    assert ("lfemur", 83) in {(bone, frame) for _, frame, bone, _ in model.angle_flips_}
+    assert all(label.endswith("HDM_dg_squat1Reps_025_120.amc") for label, *_ in model.unused_pieces_)
+    # the pieces' first frames are not clip starts: the first-frame statistics come from the two clips only
+    assert np.all(np.isfinite(model.sample(1, n_frames=20, seed=0)[0].positions))
+    kept = SLFMSynthesizer(**TINY, footskate_cleanup=False, max_turn_speed=None).fit([squat, hops[0]])
+    assert kept.angle_flips_ == [] and kept.unused_pieces_ == []
+
+
+@needs(HDM05)
+def test_noise_scale_shrinks_the_spread_of_the_variants(fitted):
+    from mocapkit.evaluation.synthesis import variation
+
+    def spread(scale):
+        model = copy.deepcopy(fitted).set_params(noise_scale=scale, footskate_cleanup=False)
+        return variation(model.sample(4, n_frames=40, seed=5)).v
+
+    assert spread(0.2) < 0.8 * spread(1.0)
+
+
+@needs(HDM05)
+def test_output_margin_keeps_draws_in_the_training_range(fitted):
+    sampler = fitted.samplers_["t>3"]
+    G, D = sampler.stack.y_mean.shape
+    context = np.full((3, sampler.gather.max() + 1), 50.0)
+    context[:, -1] = 0.0
+    huge = np.full((G, 3, D), 40.0)
+    columns, draws = sampler.draw(context, np.random.default_rng(0), True, huge, output_margin=0.0)
+    low = sampler.stack.y_low.reshape(-1)[sampler.slots]
+    high = sampler.stack.y_high.reshape(-1)[sampler.slots]
+    assert np.all(draws >= low - 1e-9) and np.all(draws <= high + 1e-9)
+    _, free = sampler.draw(context, np.random.default_rng(0), True, huge)
+    assert np.any((free < low - 1e-6) | (free > high + 1e-6))
+
+
+@needs(HDM05)
+def test_auto_noise_scale_is_the_smallest_reaching_the_target_variation(fitted, hops):
+    from mocapkit.synthesis.slfm import NOISE_SCALES
+
+    tried = fitted.variation_by_noise_scale_
+    assert list(tried) == list(NOISE_SCALES[: len(tried)]) and fitted.noise_scale_ == list(tried)[-1]
+    ratios = list(tried.values())
+    assert all(r < fitted.target_variation for r in ratios[:-1])
+    assert ratios[-1] >= fitted.target_variation or fitted.noise_scale_ == NOISE_SCALES[-1]
+    # a higher target needs at least as much noise
+    wider = SLFMSynthesizer(**TINY, random_state=0, target_variation=ratios[-1] + 0.5).fit(hops)
+    assert wider.noise_scale_ >= fitted.noise_scale_
+    fixed = SLFMSynthesizer(**TINY, noise_scale=0.4).fit(hops[:2])
+    assert fixed.noise_scale_ == 0.4 and fixed.variation_by_noise_scale_ == {}
+    with pytest.raises(ValueError, match="noise_scale"):
+        SLFMSynthesizer(**TINY, noise_scale="large").fit(hops[:2])

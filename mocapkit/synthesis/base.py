@@ -148,6 +148,23 @@ def resample_clip(clip: Motion, fps: float) -> Motion:
                       source=clip.source)
 
 
+def clip_segment(clip: Motion, start: int, stop: int) -> Motion:
+    """Frames ``start`` … ``stop - 1`` of an AMC clip, as an AMC motion on the same skeleton and frame rate (its
+    name and source gain ``[start:stop]``)."""
+    values = {bone: np.asarray(v)[start:stop] for bone, v in clip.metadata["amc_values"].items()}
+    suffix = f"[{start}:{stop}]"
+    return amc_motion(clip.metadata["asf"], values, fps=clip.fps,
+                      angle_unit=clip.metadata.get("amc_angle_unit", "deg"), name=f"{clip.name}{suffix}",
+                      source=f"{clip.source}{suffix}" if clip.source else None)
+
+
+def on_skeleton(clip: Motion, skeleton: AsfSkeleton) -> Motion:
+    """An AMC clip posed on another ``skeleton`` by its own AMC values (same frame rate), so that clips of
+    different performers compare without their body sizes."""
+    return amc_motion(skeleton, clip.metadata["amc_values"], fps=clip.fps,
+                      angle_unit=clip.metadata.get("amc_angle_unit", "deg"), name=clip.name, source=clip.source)
+
+
 def check_clips(clips: Sequence[Motion], min_clips: int = 2, min_frames: int = 4, what: str = "fit") -> DofLayout:
     """Reject what no synthesiser can learn from, naming the clip; returns the shared :class:`DofLayout`.
 

@@ -262,6 +262,27 @@ def encode(motion: Motion) -> FeatureClip:
     return FeatureClip(root=root, joints=joints, bones=tuple(bones))
 
 
+def angle_flips(motion: Motion, max_turn_speed: float = 5400.0) -> list[tuple[int, str, float]]:
+    """Frames where a bone's AMC rotation turns faster than a limb can: ``(frame, bone, degrees)`` for every bone
+    whose rotation from frame ``k - 1`` to ``k`` exceeds ``max_turn_speed / fps`` degrees (default 45° per frame at
+    120 Hz; the fastest real turns in the HDM05 types of the synthesis benchmark are under 10° per frame).
+
+    Such a turn is a change of representation, not of posture. HDM05's deep squats of performer ``dg`` have them:
+    in ``HDM_dg_squat1Reps_025_120`` at frame 83 ``lfemur`` turns by 180° (AMC ``160, -76, -39`` → ``200, 104,
+    -39``) while ``ltibia`` goes ``202°`` → ``158°`` and the joint positions move by millimetres, the solver
+    having switched to an equivalent leg configuration once the knee passed 180°. A regression on joint angles
+    must not learn those jumps as motion.
+    """
+    features = encode(motion)
+    limit = float(max_turn_speed) / float(motion.fps)
+    flips = []
+    for b, bone in enumerate(features.bones):
+        v = features.joints[:, b]
+        turn = np.degrees((Rotation.from_rotvec(v[:-1]).inv() * Rotation.from_rotvec(v[1:])).magnitude())
+        flips.extend((int(k) + 1, bone, float(turn[k])) for k in np.flatnonzero(turn > limit))
+    return sorted(flips)
+
+
 def root_start(motion: Motion) -> tuple[tuple[float, float], float]:
     """``(start_xz, start_yaw)`` of a clip's first frame (ASF units, radians): what :func:`decode` needs to put
     decoded features back where the clip was."""

@@ -36,9 +36,11 @@ prediction costs ``O(Q² M²)`` flops, batched over queries (the synthesis varia
 """
 from __future__ import annotations
 
+import itertools
 import math
 import sys
 import time
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -50,8 +52,10 @@ from mocapkit.synthesis.base import (
     MotionSynthesizer,
     SynthesisInputError,
     clip_label,
+    clip_segment,
     dof_values,
     model_frames,
+    on_skeleton,
     resample_clip,
     rotation_columns,
     time_warp,
@@ -60,6 +64,7 @@ from mocapkit.synthesis.footskate import cleanup_footskate
 from mocapkit.synthesis.representation import (
     ROOT_FEATURES,
     FeatureClip,
+    angle_flips,
     decode,
     dof_axes,
     encode,
@@ -332,6 +337,7 @@ class SLFMRegressor:
         x_std = X.std(axis=0)
         self.x_scale_ = np.where(x_std > 1e-12, x_std, 1.0)
         self.y_mean_ = Y.mean(axis=0)
+        self.y_low_, self.y_high_ = Y.min(axis=0), Y.max(axis=0)
         self.modelled_ = np.flatnonzero(Y.std(axis=0) > 1e-9 * (1.0 + np.abs(self.y_mean_)))
         self.n_outputs_ = Y.shape[1]
         Xs = (X - self.x_mean_) / self.x_scale_
@@ -397,6 +403,7 @@ class StackedSLFM:
         M = max([len(p.Z) for p in posts], default=1)
         self.x_mean, self.x_scale = np.zeros((G, d)), np.ones((G, d))
         self.x_low, self.x_high = np.zeros((G, d)), np.zeros((G, d))
+        self.y_low, self.y_high = np.full((G, D), -np.inf), np.full((G, D), np.inf)
         self.y_mean, self.weights = np.zeros((G, D)), np.zeros((G, d, D))
         self.Z, self.lengthscale, self.bias = np.zeros((G, M, d)), np.ones((G, Q, 1, 1)), np.zeros((G, Q, 1, 1))
         self.r, self.H = np.zeros((G, Q, M)), np.zeros((G, Q, M, Q, M))
@@ -406,6 +413,7 @@ class StackedSLFM:
             k = len(reg.x_mean_)
             self.x_mean[g, :k], self.x_scale[g, :k] = reg.x_mean_, reg.x_scale_
             self.y_mean[g, : reg.n_outputs_] = reg.y_mean_
+            self.y_low[g, : reg.n_outputs_], self.y_high[g, : reg.n_outputs_] = reg.y_low_, reg.y_high_
             if reg.posterior_ is None:
                 continue
             self.x_low[g, :k], self.x_high[g, :k] = reg.x_low_, reg.x_high_
@@ -454,6 +462,12 @@ class StackedSLFM:
 # --------------------------------------------------------------------------- the synthesiser
 
 CASES = ("t1", "t2", "t3", "t>3")
+
+NOISE_SCALES = (0.1, 0.2, 0.3, 0.5, 0.7, 1.0)
+"""The scales of the predictive noise ``noise_scale="auto"`` tries, smallest first."""
+
+AUTO_VARIANTS = 10
+"""Variants sampled per tried scale by ``noise_scale="auto"``."""
 """The cases of Zhou eq. 4.2 (§3.3): frame 1 (same-frame ancestors), 2, 3 and later frames."""
 
 
@@ -557,11 +571,17 @@ class _CaseSampler:
         self.columns = np.concatenate([m.outputs for m in models])
 
     def draw(self, context: np.ndarray, rng: np.random.Generator, noise: bool,
-             z: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+             z: np.ndarray | None = None, output_margin: float | None = None) -> tuple[np.ndarray, np.ndarray]:
         """The flat-feature columns and their draws ``[V, n]`` given a context ``[V, width + 1]`` (from standard
-        normals ``z`` ``[G, V, D]`` when given)."""
+        normals ``z`` ``[G, V, D]`` when given), clipped to each output's training range widened by
+        ``output_margin`` times that range on both sides when given."""
         X = np.swapaxes(context[:, self.gather], 0, 1)                          # [G, V, d]
-        draws = np.swapaxes(self.stack.sample(X, rng, noise=noise, z=z), 0, 1)  # [V, G, D]
+        draws = self.stack.sample(X, rng, noise=noise, z=z)                     # [G, V, D]
+        if output_margin is not None:
+            low, high = self.stack.y_low[:, None], self.stack.y_high[:, None]
+            span = np.where(np.isfinite(high - low), high - low, 0.0)
+            draws = np.clip(draws, low - output_margin * span, high + output_margin * span)
+        draws = np.swapaxes(draws, 0, 1)                                        # [V, G, D]
         return self.columns, draws.reshape(len(context), -1)[:, self.slots]
 
 
@@ -593,6 +613,13 @@ class SLFMSynthesizer(MotionSynthesizer):
     jumps of 0.8 ASF units against 0.2 per frame in the data) and the ``t>3`` models then ran off their data.
     Each model's hyper-parameters are fitted on at most ``n_fit`` pairs; its posterior uses all pairs through
     ``n_inducing`` inducing inputs (:class:`SLFMRegressor`).
+    Training clips are first **cut at joint-angle flips** (``max_turn_speed``;
+    :func:`~mocapkit.synthesis.representation.angle_flips`): frames where a bone's AMC rotation turns by more than
+    a limb can in one frame while the joints barely move, i.e. the capture's solver switched to an equivalent
+    joint configuration. HDM05's deep squats of performer ``dg`` flip ``femur`` by 180° (with ``tibia`` going
+    from 202° to 158°) when the knee passes 180°; learnt as motion, those jumps made every squat model unstable
+    (jerk 93k m/s³ against the real 0.8k, ``mocapkit compare synthesis_hdm05``). Each piece between flips is a
+    training sequence of its own; only clip starts feed the first-frame statistics; each flip is warned about.
 
     **Sampling** (§3.6), all variants at once: frame 1's nodes without ancestors (the root pose and each limb's
     top bone) are drawn per dimension from ``N(mean, std)`` of the clips' first frames (the root's planar step
@@ -606,7 +633,7 @@ class SLFMSynthesizer(MotionSynthesizer):
     the training clips' mean lowest ankle height).
 
     Args:
-        frame_stride: every how many frames a ``t1``/``t>3`` training pair is taken (120 Hz data is smooth).
+        frame_stride: every how many frames (at ``model_fps``) a training pair is taken.
         n_fit: most pairs per model for the hyper-parameter fit (exact GP: a ``D·n_fit`` square matrix).
         n_inducing: inducing inputs per model for prediction (cost per prediction ``O(D² n_inducing²)``).
         max_iter: L-BFGS iterations of each hyper-parameter fit.
@@ -622,16 +649,35 @@ class SLFMSynthesizer(MotionSynthesizer):
             clips are resampled for training (:func:`~mocapkit.synthesis.base.resample_clip`) and the variants are
             drawn at this rate, then brought back to the clips' rate by a cubic spline before the footskate
             cleanup. Not from the thesis.
+        noise_scale: the predictive draws' standard normals are multiplied by this (1 = the model's own
+            predictive distribution, the thesis; 0 = its mean). ``"auto"`` (default): after fitting, the smallest
+            of :data:`NOISE_SCALES` whose variants reach ``target_variation`` times the training clips' own V
+            (:meth:`_set_noise_scale`; training clips only). Not from the thesis.
+        target_variation: the ``V / V_train`` that ``noise_scale="auto"`` asks for; default 1.28 = Zhou's 558.7
+            / 435.8 (§3.7), the variation the thesis reports over its "visibly varied" reference set.
+        output_margin: draws are clipped to each model output's training range widened by this fraction of
+            the range on both sides (0, default: the range itself, joint limits from the data); None: no clip.
+            Not from the thesis.
+        max_turn_speed: degrees per second above which a bone's frame-to-frame turn in a training clip counts
+            as a joint-angle flip (default 5400, 45° per frame at 120 Hz); None: no cutting.
+        random_state: seeds the training subsets and inducing points.
+        verbose: progress lines on stderr.
 
     Defaults ``model_fps=30`` and ``noise_correlation=0.9`` were chosen on the training clips only (the first 10
     hopBothLegs1hops cuts by path, all of performer bd), by the variants' jerk against those clips' own, 1.25k
     m/s³: the thesis's literal setting (120 Hz, independent draws) gave 19.7k; 120 Hz with ρ = 0.97, 11.5k; 30 Hz
     with independent draws, 1.7k; 30 Hz with ρ = 0.9, 1.2k (V 147 against the clips' 66). At 120 Hz successive
     frames differ less than the per-frame predictive noise, so independent draws jitter.
-        random_state: seeds the training subsets and inducing points.
-        verbose: progress lines on stderr.
+    ``noise_scale="auto"``, ``output_margin=0`` and ``frame_stride=1`` were chosen the same way, on the first 10
+    cuts by path of hopBothLegs1hops and of squat1Reps (performer bd), by the variants' feature distance to those
+    clips (:func:`~mocapkit.evaluation.synthesis.feature_distances`) and the share of variants within the clips'
+    own leave-one-out spread: on hops the scale 1 gave V / V_train 1.91 and 0 % within, 0.5 (the one ``"auto"``
+    picks) 1.33 and 80 % (85 % with the output clip); on squats ``frame_stride`` 2 → 1 took the distance from
+    7.6 to 2.7 and the jerk from 7.4k to 0.84k m/s³ (the clips': 0.51k), at a cost on hops of 85 → 75 % within.
 
     Attributes (after ``fit``): ``models_`` (every model, in sampling order), ``partitions_``, ``fit_seconds_``,
+    ``noise_scale_`` and ``variation_by_noise_scale_`` (:meth:`_set_noise_scale`), ``angle_flips_`` (``(clip,
+    frame, bone, degrees)``) and ``unused_pieces_`` (``(clip, start, stop)``) of the cutting,
     ``footskate_reports_`` (after ``sample`` with cleanup: one :class:`~mocapkit.synthesis.footskate.
     FootskateReport` per variant).
     """
@@ -639,10 +685,11 @@ class SLFMSynthesizer(MotionSynthesizer):
     min_clips = 2
     min_frames = 4
 
-    def __init__(self, frame_stride: int = 2, n_fit: int = 100, n_inducing: int = 32, max_iter: int = 30,
+    def __init__(self, frame_stride: int = 1, n_fit: int = 100, n_inducing: int = 32, max_iter: int = 30,
                  sample_noise: bool = True, noise_correlation: float = 0.9, dynamic_feature: str = "position",
-                 footskate_cleanup: bool = True, model_fps: float | None = 30.0, random_state: int | None = 0,
-                 verbose: bool = False):
+                 footskate_cleanup: bool = True, model_fps: float | None = 30.0, noise_scale: float | str = "auto",
+                 target_variation: float = 1.28, output_margin: float | None = 0.0,
+                 max_turn_speed: float | None = 5400.0, random_state: int | None = 0, verbose: bool = False):
         self.frame_stride = frame_stride
         self.n_fit = n_fit
         self.n_inducing = n_inducing
@@ -652,6 +699,10 @@ class SLFMSynthesizer(MotionSynthesizer):
         self.dynamic_feature = dynamic_feature
         self.footskate_cleanup = footskate_cleanup
         self.model_fps = model_fps
+        self.noise_scale = noise_scale
+        self.target_variation = target_variation
+        self.output_margin = output_margin
+        self.max_turn_speed = max_turn_speed
         self.random_state = random_state
         self.verbose = verbose
 
@@ -708,6 +759,32 @@ class SLFMSynthesizer(MotionSynthesizer):
 
     # ------------------------------------------------------------------ fit
 
+    def _continuous_pieces(self, clips: list[Motion]) -> list[tuple[Motion, bool]]:
+        """The training clips cut at their joint-angle flips (:func:`~mocapkit.synthesis.representation.
+        angle_flips`), each piece at the model's rate, with whether it starts its clip; pieces too short for the
+        second-order model are left out. Every flip and every left-out piece is warned about, naming the clip, and
+        kept in ``angle_flips_`` / ``unused_pieces_``."""
+        pieces, self.angle_flips_, self.unused_pieces_ = [], [], []
+        for clip in clips:
+            flips = angle_flips(clip, self.max_turn_speed) if self.max_turn_speed is not None else []
+            self.angle_flips_.extend((clip_label(clip), frame, bone, degrees) for frame, bone, degrees in flips)
+            cuts = [0, *sorted({frame for frame, _, _ in flips}), clip.num_frames]
+            unused = []
+            for start, stop in itertools.pairwise(cuts):
+                piece = clip if (start, stop) == (0, clip.num_frames) else clip_segment(clip, start, stop)
+                piece = resample_clip(piece, self.model_fps_)
+                if piece.num_frames >= self.min_frames:
+                    pieces.append((piece, start == 0))
+                else:
+                    unused.append(f"{start}–{stop - 1}")
+                    self.unused_pieces_.append((clip_label(clip), start, stop))
+            if flips:
+                turns = ", ".join(f"{bone} {degrees:.0f}° at frame {frame}" for frame, bone, degrees in flips)
+                warnings.warn(f"SLFMSynthesizer.fit: {clip_label(clip)}: joint-angle flips ({turns}: changes of "
+                              "representation, not motion); the clip is cut there"
+                              + (f", frames {', '.join(unused)} too short to use" if unused else ""), stacklevel=4)
+        return pieces
+
     def _fit_clips(self, clips: list[Motion]) -> None:
         if self.dynamic_feature not in ("position", "scf_difference"):
             raise ValueError(f"dynamic_feature must be 'position' or 'scf_difference', got {self.dynamic_feature!r}")
@@ -717,8 +794,8 @@ class SLFMSynthesizer(MotionSynthesizer):
         if self.model_fps is not None and not float(self.model_fps) > 0:
             raise ValueError(f"model_fps must be positive (or None), got {self.model_fps!r}")
         self.model_fps_ = self.fps_ if self.model_fps is None else float(self.model_fps)
-        clips = [resample_clip(clip, self.model_fps_) for clip in clips]
-        short = [c for c in clips if c.num_frames < self.min_frames]
+        resampled = [resample_clip(clip, self.model_fps_) for clip in clips]
+        short = [c for c in resampled if c.num_frames < self.min_frames]
         if short:
             raise SynthesisInputError(f"SLFMSynthesizer.fit: {clip_label(short[0])} has {short[0].num_frames} frames "
                                       f"at model_fps={self.model_fps_:g}; the second-order model needs "
@@ -726,36 +803,64 @@ class SLFMSynthesizer(MotionSynthesizer):
         rng = np.random.default_rng(self.random_state)
         self.bones_ = tuple(self.layout_.bones[1:])
         self.partitions_ = partitions(self.skeleton_)
-        states = []
-        for clip in clips:
+        pieces = self._continuous_pieces(clips)
+        states, first = [], []
+        for piece, starts_clip in pieces:
             try:
-                states.append(self._clip_states(clip))
+                states.append(self._clip_states(piece))
             except ValueError as exc:
-                raise SynthesisInputError(f"SLFMSynthesizer.fit: {clip_label(clip)}: {exc}") from exc
-        first = np.stack([flat[0] for flat, _ in states])
+                raise SynthesisInputError(f"SLFMSynthesizer.fit: {clip_label(piece)}: {exc}") from exc
+            if starts_clip:
+                first.append(states[-1][0][0])
+        if not first:
+            raise SynthesisInputError("SLFMSynthesizer.fit: every clip's first frames are cut off by angle flips "
+                                      "(see the warnings); no first-frame statistics")
+        first = np.stack(first)
         self.first_frame_mean_ = first.mean(axis=0)
         self.first_frame_std_ = first.std(axis=0)
         self.start_xz_, self.start_yaw_ = root_start(clips[0])
         shins = [part[1] for name, part in self.partitions_.items() if name in ("LL", "RL") and len(part) > 1]
         ankles = [self.skeleton_.joint_names.index(shin) for shin in shins]
-        self.floor_ = float(np.mean([c.positions[:, ankles, 1].min() for c in clips])) if ankles else None
+        self.floor_ = float(np.mean([c.positions[:, ankles, 1].min() for c in resampled])) if ankles else None
         self.models_ = []
         for partition in self.partitions_.values():
             self.models_.extend(self._node_models(partition, partition_ancestors(self.skeleton_, partition)))
-        for n, model in enumerate(self.models_):
-            X, Y = self._training_pairs(model, states)
-            tick = time.perf_counter()
-            model.regressor = SLFMRegressor(n_fit=self.n_fit, n_inducing=self.n_inducing, max_iter=self.max_iter
-                                            ).fit(X, Y, rng)
-            if self.verbose:
-                print(f"[slfm] model {n + 1}/{len(self.models_)}: {model.node} {model.case}, {len(X)} pairs, "
-                      f"{X.shape[1]}-D inputs, {time.perf_counter() - tick:.2f} s", file=sys.stderr, flush=True)
-        width = {("flat", b): len(self.first_frame_mean_) for b in (0, 1, 2)}
-        width.update({("dynamic", b): states[0][1].shape[1] for b in (1, 2)})
-        self.samplers_ = {"t1": [_CaseSampler([m], width) for m in self.models_ if m.case == "t1"]}
-        self.samplers_.update({case: _CaseSampler([m for m in self.models_ if m.case == case], width)
-                               for case in CASES[1:]})
+        self.reduced_bones_ = self._reduced_bones()
+        self._fit_models([self._training_pairs(model, states) for model in self.models_], states, rng)
+        self._set_noise_scale(clips)
         self.fit_seconds_ = time.perf_counter() - start
+
+    def _noise_scale(self) -> float:
+        """The scale sampling uses: ``noise_scale`` when a number (so it can change after ``fit``), else the one
+        ``fit`` chose."""
+        if isinstance(self.noise_scale, str):
+            return self.noise_scale_
+        return float(self.noise_scale)
+
+    def _set_noise_scale(self, clips: list[Motion]) -> None:
+        """``noise_scale_``: the given scale, or with ``"auto"`` the smallest of :data:`NOISE_SCALES` whose variants
+        vary at least ``target_variation`` times as much as the training clips (V of eq. 4.5 over
+        ``AUTO_VARIANTS`` variants of the mean length, against the training clips posed on the reference skeleton;
+        :func:`~mocapkit.evaluation.synthesis.variation`), the largest when none does. Only training clips are
+        used. ``variation_by_noise_scale_`` keeps each tried scale's ``V / V_train``."""
+        from mocapkit.evaluation.synthesis import variation
+
+        self.variation_by_noise_scale_ = {}
+        if self.noise_scale != "auto":
+            if isinstance(self.noise_scale, str) or not float(self.noise_scale) >= 0:
+                raise ValueError(f"noise_scale must be 'auto' or a number >= 0, got {self.noise_scale!r}")
+            self.noise_scale_ = float(self.noise_scale)
+            return
+        reference = variation([on_skeleton(clip, self.skeleton_) for clip in clips]).v
+        for scale in NOISE_SCALES:
+            self.noise_scale_ = scale
+            ratio = variation(self.sample(AUTO_VARIANTS, seed=self.random_state)).v / reference
+            self.variation_by_noise_scale_[scale] = ratio
+            if self.verbose:
+                print(f"[slfm] noise_scale {scale}: V / V_train = {ratio:.2f} (target {self.target_variation})",
+                      file=sys.stderr, flush=True)
+            if ratio >= self.target_variation:
+                break
 
     def _training_pairs(self, model: _NodeModel, states: list[tuple[np.ndarray, np.ndarray]]
                         ) -> tuple[np.ndarray, np.ndarray]:
@@ -768,6 +873,22 @@ class SLFMSynthesizer(MotionSynthesizer):
             Y.append(flat[frames][:, model.outputs])
         return np.concatenate(X), np.concatenate(Y)
 
+    def _fit_models(self, pairs: list[tuple[np.ndarray, np.ndarray]], states: list[tuple[np.ndarray, np.ndarray]],
+                    rng: np.random.Generator) -> None:
+        """Fit every model on its ``(X, Y)`` pairs and stack them into the samplers of each case."""
+        for n, (model, (X, Y)) in enumerate(zip(self.models_, pairs)):
+            tick = time.perf_counter()
+            model.regressor = SLFMRegressor(n_fit=self.n_fit, n_inducing=self.n_inducing, max_iter=self.max_iter
+                                            ).fit(X, Y, rng)
+            if self.verbose:
+                print(f"[slfm] model {n + 1}/{len(self.models_)}: {model.node} {model.case}, {len(X)} pairs, "
+                      f"{X.shape[1]}-D inputs, {time.perf_counter() - tick:.2f} s", file=sys.stderr, flush=True)
+        width = {("flat", b): len(self.first_frame_mean_) for b in (0, 1, 2)}
+        width.update({("dynamic", b): states[0][1].shape[1] for b in (1, 2)})
+        self.samplers_ = {"t1": [_CaseSampler([m], width) for m in self.models_ if m.case == "t1"]}
+        self.samplers_.update({case: _CaseSampler([m for m in self.models_ if m.case == case], width)
+                               for case in CASES[1:]})
+
     # ------------------------------------------------------------------ sample
 
     def _project(self, flat: np.ndarray) -> None:
@@ -777,7 +898,8 @@ class SLFMSynthesizer(MotionSynthesizer):
             v = flat[:, cols].reshape(len(flat), len(bones), 3)
             flat[:, cols] = project_expmap(v, axes).reshape(len(flat), -1)
 
-    def _sample_values(self, n_variants: int, n_frames: int, rng: np.random.Generator) -> list[dict[str, np.ndarray]]:
+    def _reduced_bones(self) -> dict[str, np.ndarray]:
+        """The bones with exactly 2 dofs, grouped by their axes (``"xy"`` → bone indices), for :meth:`_project`."""
         dofs = dict(zip(self.layout_.bones, self.layout_.dofs))
         groups: dict[str, list[int]] = {}
         for b, bone in enumerate(self.bones_):
@@ -786,36 +908,58 @@ class SLFMSynthesizer(MotionSynthesizer):
             # outputs are constant and drawn as 0 (SLFMRegressor): already on its dof; 2-dof bones need projecting
             if len(axes) == 2:
                 groups.setdefault(axes, []).append(b)
-        self.reduced_bones_ = {axes: np.array(bones) for axes, bones in groups.items()}
+        return {axes: np.array(bones) for axes, bones in groups.items()}
+
+    def _start_arrays(self, flat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Bone positions ``[V, T, B, 3]`` and dynamic features ``[V, T, Fd]`` for flat features ``[V, T, F]`` whose
+        frame 0 is set: frame 0's positions filled, everything else zero."""
+        V, T = flat.shape[:2]
+        positions = np.zeros((V, T, len(self.bones_), 3))
+        positions[:, 0] = RootFrameKinematics(self.skeleton_, self.bones_).positions(
+            flat[:, 0, ROOT_FEATURES:].reshape(V, -1, 3))
+        width = self._dynamic(flat[:, 0], flat[:, 0], positions[:, 0], positions[:, 0]).shape[1]
+        return positions, np.zeros((V, T, width))
+
+    def _rollout(self, flat: np.ndarray, positions: np.ndarray, dynamic: np.ndarray, start: int,
+                 rng: np.random.Generator) -> None:
+        """Draw frames ``start`` … ``T-1`` of ``flat [V, T, F]`` (and their ``positions``, ``dynamic``) in place, each
+        from the model of its case given the frames before (the sampling loop of the class docstring)."""
         kinematics = RootFrameKinematics(self.skeleton_, self.bones_)
+        V, T = flat.shape[:2]
+        tau, rho, z = self._noise_scale(), float(self.noise_correlation), None
+        for k in range(start, T):
+            sampler = self.samplers_["t2" if k == 1 else "t3" if k == 2 else "t>3"]
+            G, D = sampler.stack.y_mean.shape
+            eps = rng.standard_normal((G, V, D))
+            # from frame 4 on, AR(1) standard normals: each stays N(0, 1), successive frames' draws correlate by rho
+            z = rho * z + math.sqrt(1.0 - rho * rho) * eps if k > 3 and rho > 0 and z is not None else eps
+            columns, draws = sampler.draw(_context(flat, dynamic, k), rng, self.sample_noise, tau * z,
+                                          self.output_margin)
+            flat[:, k, columns] = draws
+            self._project(flat[:, k])
+            positions[:, k] = kinematics.positions(flat[:, k, ROOT_FEATURES:].reshape(V, -1, 3))
+            dynamic[:, k] = self._dynamic(flat[:, k], flat[:, k - 1], positions[:, k], positions[:, k - 1])
+
+    def _sample_values(self, n_variants: int, n_frames: int, rng: np.random.Generator) -> list[dict[str, np.ndarray]]:
         V, F = n_variants, ROOT_FEATURES + 3 * len(self.bones_)
         T = max(model_frames(n_frames, self.fps_, self.model_fps_), 2)     # frames at the model's rate
         flat = np.zeros((V, T, F))
-        positions = np.zeros((V, T, len(self.bones_), 3))
-        dynamic = np.zeros((V, T, self._dynamic(flat[:, 0], flat[:, 0], positions[:, 0], positions[:, 0]).shape[1]))
         # frame 1: nodes without ancestors from the first-frame statistics, the others top-down from t1
         top = np.concatenate([np.arange(3, ROOT_FEATURES)] + [self._columns(part[0])[0]
                                                                for name, part in self.partitions_.items()
                                                                if name != "TH"])
         flat[:, 0, top] = self.first_frame_mean_[top] + self.first_frame_std_[top] * rng.standard_normal((V, len(top)))
         self._project(flat[:, 0])
+        _, dynamic = self._start_arrays(flat)
         for sampler in self.samplers_["t1"]:
-            columns, draws = sampler.draw(_context(flat, dynamic, 0), rng, self.sample_noise)
+            G, D = sampler.stack.y_mean.shape
+            columns, draws = sampler.draw(_context(flat, dynamic, 0), rng, self.sample_noise,
+                                          self._noise_scale() * rng.standard_normal((G, V, D)),
+                                          self.output_margin)
             flat[:, 0, columns] = draws
             self._project(flat[:, 0])
-        positions[:, 0] = kinematics.positions(flat[:, 0, ROOT_FEATURES:].reshape(V, -1, 3))
-        rho, z = float(self.noise_correlation), None
-        for k in range(1, T):
-            sampler = self.samplers_["t2" if k == 1 else "t3" if k == 2 else "t>3"]
-            if k >= 3 and rho > 0:                    # AR(1) standard normals: each stays N(0, 1), successive
-                G, D = sampler.stack.y_mean.shape     # frames' draws are correlated by rho
-                eps = rng.standard_normal((G, V, D))
-                z = eps if z is None else rho * z + math.sqrt(1.0 - rho * rho) * eps
-            columns, draws = sampler.draw(_context(flat, dynamic, k), rng, self.sample_noise, z)
-            flat[:, k, columns] = draws
-            self._project(flat[:, k])
-            positions[:, k] = kinematics.positions(flat[:, k, ROOT_FEATURES:].reshape(V, -1, 3))
-            dynamic[:, k] = self._dynamic(flat[:, k], flat[:, k - 1], positions[:, k], positions[:, k - 1])
+        positions, dynamic = self._start_arrays(flat)
+        self._rollout(flat, positions, dynamic, 1, rng)
         out, self.footskate_reports_ = [], []
         for v in range(V):
             values = decode(FeatureClip.from_flat(flat[v], self.bones_), self.skeleton_, start_xz=self.start_xz_,

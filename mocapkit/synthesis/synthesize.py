@@ -90,8 +90,10 @@ def synthesize(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, 
 
     Returns:
         The report written to ``report.json``: training clips, fit seconds, sampling seconds, seconds of
-        compute per second of synthesised motion, the variants' files, the synthesiser's parameters, and (with
-        footskate cleanup) the mean horizontal ankle speed during contacts before and after it.
+        compute per second of synthesised motion, the variants' files, the synthesiser's parameters, for SLFM
+        the noise scale it sampled with (and, with ``noise_scale="auto"``, ``V / V_train`` of each scale tried) and
+        the joint-angle flips its training clips were cut at, and (with footskate cleanup) the mean horizontal
+        ankle speed during contacts before and after it.
 
     Raises:
         SynthesisInputError: no matching clips, too few, too short, or clips on different skeletons (named).
@@ -142,6 +144,13 @@ def synthesize(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, 
         "sample_seconds_per_motion_second": round(sample_seconds / motion_seconds, 5),
         "parameters": {k: v for k, v in synthesizer.get_params().items() if k != "verbose"},
     }
+    if hasattr(synthesizer, "noise_scale_"):
+        report["noise_scale"] = synthesizer.noise_scale_
+        report["variation_by_noise_scale"] = {str(k): round(v, 4)
+                                              for k, v in synthesizer.variation_by_noise_scale_.items()}
+    if getattr(synthesizer, "angle_flips_", None):
+        report["angle_flips"] = [{"clip": clip, "frame": frame, "bone": bone, "degrees": round(degrees, 1)}
+                                 for clip, frame, bone, degrees in synthesizer.angle_flips_]
     reports = getattr(synthesizer, "footskate_reports_", None)
     if footskate_cleanup and reports:
         report["footskate_sliding_m_per_s"] = {

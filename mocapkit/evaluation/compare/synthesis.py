@@ -51,14 +51,6 @@ DIGITS = {"v_variants": 1, "v_train": 1, "v_heldout": 1, "v_ratio": 3, "v_varian
           "feature_distance_real_sd": 3, "fit_seconds": 2, "sample_seconds_per_second": 3}
 
 
-def on_skeleton(motion, skeleton):
-    """A real AMC clip posed on ``skeleton`` by its own AMC values (same frame rate)."""
-    from mocapkit.datasets.formats.asf_amc import amc_motion
-
-    return amc_motion(skeleton, motion.metadata["amc_values"], fps=motion.fps,
-                      angle_unit=motion.metadata.get("amc_angle_unit", "deg"), name=motion.name, source=motion.source)
-
-
 class SynthesisBenchmark(Benchmark):
     """Variation synthesisers on HDM05 motion types (module docstring).
 
@@ -138,6 +130,7 @@ class SynthesisBenchmark(Benchmark):
         """The split's real-clip numbers (computed once per protocol and seed): ``{"metrics", "heldout"}`` with
         ``heldout`` the held-out clips posed on the reference skeleton."""
         from mocapkit.evaluation.synthesis import naturalness, variation
+        from mocapkit.synthesis.base import on_skeleton
 
         key = (split.protocol, split.seed)
         if key not in self._references:
@@ -274,4 +267,4 @@ def _json(value):
     return float(value) if isinstance(value, (int, float, np.floating, np.integer)) else repr(value)
 
 
-__all__ = ["SynthesisBenchmark", "on_skeleton"]
+__all__ = ["SynthesisBenchmark"]
