@@ -168,3 +168,18 @@ def test_synthesize_command_runs_a_baseline(tmp_path, capsys):
     assert main(["synthesize", *map(str, HOPS[:3]), "--method", "lau", "--out", str(tmp_path / "x"),
                  "--set", "amplitude=2"]) == 2                       # a Perlin parameter, not Lau's
     assert "amplitude" in capsys.readouterr().err
+
+
+@needs(HDM05)
+@pytest.mark.parametrize("name", ["lau", "cvae"])
+def test_frame_to_frame_models_cut_training_clips_at_angle_flips(hops, name):
+    squat = read_amc(HDM05 / "dg" / "HDM_dg_squat1Reps_025_120.amc")   # lfemur turns 180° at frame 83
+    train, _ = hops
+    with pytest.warns(UserWarning, match=r"HDM_dg_squat1Reps_025_120.amc: joint-angle flips"):
+        model = _methods()[name].fit([squat, train[0]])
+    assert ("lfemur", 83) in {(bone, frame) for _, frame, bone, _ in model.angle_flips_}
+    assert len(model.starts_) == 2 == len(model.start_places_)   # pieces after a flip are not starting poses
+    variant = model.sample(1, n_frames=30, seed=0)[0]
+    assert np.all(np.isfinite(variant.positions))
+    kept = _methods()[name].set_params(max_turn_speed=None).fit([squat, train[0]])
+    assert kept.angle_flips_ == []

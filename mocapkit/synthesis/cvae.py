@@ -35,7 +35,12 @@ from mocapkit.synthesis.base import (
     rotation_columns,
     time_warp,
 )
-from mocapkit.synthesis.representation import decode, encode, root_start
+from mocapkit.synthesis.representation import (
+    continuous_pieces,
+    decode,
+    encode,
+    root_start,
+)
 
 
 class CVAESynthesizer(MotionSynthesizer):
@@ -46,19 +51,22 @@ class CVAESynthesizer(MotionSynthesizer):
         latent, hidden, layers: :class:`~mocapkit.models.motion_vae.MotionVAE` sizes.
         beta: KL weight; condition_noise: noise on the conditioning frames in training (standardised units).
         steps: optimiser steps; batch_size: frame triples per step; lr: Adam learning rate.
+        max_turn_speed: training clips are cut at joint-angle flips faster than this (degrees per second;
+            :func:`~mocapkit.synthesis.representation.continuous_pieces`, as for SLFM); None: no cutting.
         random_state: seed of the initialisation, the batches and the training noise.
 
     Attributes (after ``fit``): module_: the trained :class:`~mocapkit.train.motion_vae_module.MotionVAEModule`
     (eval mode); mean_, scale_: float64 ``[F]`` standardisation; starts_: float64 ``[C, 2, F]`` the first two
     (unstandardised) frames of every clip at the model rate; start_places_: per clip ``(start_xz, start_yaw)``;
-    model_fps_: the model rate; loss_curve_: float64 ``[steps]``; train_seconds_: wall time of the training.
+    model_fps_: the model rate; loss_curve_: float64 ``[steps]``; train_seconds_: wall time of the training;
+    angle_flips_: ``(clip, frame, bone, degrees)`` of the flips the clips were cut at.
     """
 
     min_frames = 4
 
     def __init__(self, fps: float | None = 30.0, latent: int = 16, hidden: int = 256, layers: int = 2,
                  beta: float = 0.01, condition_noise: float = 0.05, steps: int = 400, batch_size: int = 256,
-                 lr: float = 1e-3, random_state: int | None = 0):
+                 lr: float = 1e-3, max_turn_speed: float | None = 5400.0, random_state: int | None = 0):
         self.fps = fps
         self.latent = latent
         self.hidden = hidden
@@ -68,6 +76,7 @@ class CVAESynthesizer(MotionSynthesizer):
         self.steps = steps
         self.batch_size = batch_size
         self.lr = lr
+        self.max_turn_speed = max_turn_speed
         self.random_state = random_state
 
     def _fit_clips(self, clips: list[Motion]) -> None:
@@ -84,13 +93,15 @@ class CVAESynthesizer(MotionSynthesizer):
         if short:
             raise ValueError(f"CVAESynthesizer.fit: {short[0].source or short[0].name} has {short[0].num_frames} "
                              f"frames at {self.model_fps_:g} fps; the model needs 3 (raise fps)")
-        frames = [encode(c).flat() for c in resampled]
+        cut = continuous_pieces(clips, self.model_fps_, 3, self.max_turn_speed, what="CVAESynthesizer.fit")
+        self.angle_flips_ = cut.flips
+        frames = [encode(c).flat() for c in cut.pieces]
         pooled = np.concatenate(frames)
         self.mean_ = pooled.mean(axis=0)
         sd = pooled.std(axis=0)
         self.scale_ = np.maximum(sd, 1e-3 * sd.max())
-        self.starts_ = np.stack([f[:2] for f in frames])
-        self.start_places_ = [root_start(c) for c in resampled]
+        self.starts_ = np.stack([f[:2] for f, first in zip(frames, cut.starts_clip) if first])
+        self.start_places_ = [root_start(c) for c, first in zip(cut.pieces, cut.starts_clip) if first]
         standard = [(f - self.mean_) / self.scale_ for f in frames]
         current = np.concatenate([s[2:] for s in standard])
         previous = np.concatenate([np.stack([s[1:-1], s[:-2]], axis=1) for s in standard])

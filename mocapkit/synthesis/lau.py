@@ -36,7 +36,12 @@ import numpy as np
 
 from mocapkit.datasets.formats.motion import Motion
 from mocapkit.synthesis.base import MotionSynthesizer
-from mocapkit.synthesis.representation import decode, encode, root_start
+from mocapkit.synthesis.representation import (
+    continuous_pieces,
+    decode,
+    encode,
+    root_start,
+)
 
 #: Default candidate kernel widths (per-dimension sd units of the standardised input).
 WIDTHS = (0.05, 0.1, 0.2, 0.35, 0.5, 0.75, 1.0, 1.5, 2.0, 4.0)
@@ -78,20 +83,26 @@ class LauDBNSynthesizer(MotionSynthesizer):
         widths: candidate kernel widths ``h`` (per-dimension sd units), chosen by leave-one-clip-out likelihood.
         start_noise: sd of the noise added to the drawn first two frames, in units of the first frames' sd
             across the training clips.
+        max_turn_speed: training clips are cut at joint-angle flips faster than this (degrees per second;
+            :func:`~mocapkit.synthesis.representation.continuous_pieces`, as for SLFM), so that a flip is not
+            learnt as a frame difference; None: no cutting.
 
     Attributes (after ``fit``):
         width_: the chosen width. cv_log_likelihood_: ``{width: mean held-out log-likelihood per frame and
         dimension}``. inputs_: float64 ``[N, 2F]`` standardised training inputs; outputs_: float64 ``[N, F]``
         standardised training differences (``F = 7 + 3B``); in_mean_, in_scale_, out_mean_, out_scale_: the
         standardisation; starts_: float64 ``[C, 2, F]`` the first two frames of every clip; start_sd_: ``[F]``;
-        start_places_: per clip ``(start_xz, start_yaw)``; bones_: the representation's bones.
+        start_places_: per clip ``(start_xz, start_yaw)``; bones_: the representation's bones; angle_flips_:
+        ``(clip, frame, bone, degrees)`` of the flips the clips were cut at.
     """
 
     min_frames = 4
 
-    def __init__(self, widths: Sequence[float] = WIDTHS, start_noise: float = 0.1):
+    def __init__(self, widths: Sequence[float] = WIDTHS, start_noise: float = 0.1,
+                 max_turn_speed: float | None = 5400.0):
         self.widths = widths
         self.start_noise = start_noise
+        self.max_turn_speed = max_turn_speed
 
     @staticmethod
     def _pairs(frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -105,7 +116,9 @@ class LauDBNSynthesizer(MotionSynthesizer):
             raise ValueError(f"LauDBNSynthesizer: widths={self.widths!r} must be positive numbers")
         if not float(self.start_noise) >= 0:
             raise ValueError(f"LauDBNSynthesizer: start_noise={self.start_noise!r} must be >= 0")
-        encoded = [encode(clip) for clip in clips]
+        cut = continuous_pieces(clips, self.fps_, 3, self.max_turn_speed, what="LauDBNSynthesizer.fit")
+        self.angle_flips_ = cut.flips
+        encoded = [encode(piece) for piece in cut.pieces]
         self.bones_ = encoded[0].bones
         frames = [e.flat() for e in encoded]
         pairs = [self._pairs(f) for f in frames]
@@ -118,12 +131,12 @@ class LauDBNSynthesizer(MotionSynthesizer):
         self.out_scale_ = _scale(outputs)
         self.inputs_ = (inputs - self.in_mean_) / self.in_scale_
         self.outputs_ = (outputs - self.out_mean_) / self.out_scale_
-        clip_of = np.concatenate([np.full(len(p[1]), c) for c, p in enumerate(pairs)])
+        clip_of = np.concatenate([np.full(len(p[1]), c) for c, p in zip(cut.clip_index, pairs)])
         self.cv_log_likelihood_ = self._cross_validate(widths, clip_of)
         self.width_ = max(widths, key=lambda w: self.cv_log_likelihood_[w])
-        self.starts_ = np.stack([f[:2] for f in frames])
+        self.starts_ = np.stack([f[:2] for f, first in zip(frames, cut.starts_clip) if first])
         self.start_sd_ = self.starts_[:, 0].std(axis=0)
-        self.start_places_ = [root_start(clip) for clip in clips]
+        self.start_places_ = [root_start(piece) for piece, first in zip(cut.pieces, cut.starts_clip) if first]
 
     def _cross_validate(self, widths: list[float], clip_of: np.ndarray) -> dict[float, float]:
         """Mean held-out log-likelihood (per frame and output dimension) of every width, leaving one clip out."""

@@ -32,6 +32,7 @@ the previous frame; then unwrapped), so decoded AMC curves have no 360° jumps.
 """
 from __future__ import annotations
 
+import itertools
 import warnings
 from dataclasses import dataclass
 
@@ -40,7 +41,14 @@ from scipy.spatial.transform import Rotation
 
 from mocapkit.datasets.formats.asf_amc import AsfSkeleton
 from mocapkit.datasets.formats.motion import Motion
-from mocapkit.synthesis.base import DofLayout, SynthesisInputError, dof_matrix
+from mocapkit.synthesis.base import (
+    DofLayout,
+    SynthesisInputError,
+    clip_label,
+    clip_segment,
+    dof_matrix,
+    resample_clip,
+)
 
 ROOT_FEATURES = 7
 """Columns of :attr:`FeatureClip.root`: ``dx, dz, dyaw, height, tilt_x, tilt_y, tilt_z``."""
@@ -281,6 +289,56 @@ def angle_flips(motion: Motion, max_turn_speed: float = 5400.0) -> list[tuple[in
         turn = np.degrees((Rotation.from_rotvec(v[:-1]).inv() * Rotation.from_rotvec(v[1:])).magnitude())
         flips.extend((int(k) + 1, bone, float(turn[k])) for k in np.flatnonzero(turn > limit))
     return sorted(flips)
+
+
+@dataclass
+class ContinuousPieces:
+    """Training clips cut at their joint-angle flips (:func:`continuous_pieces`).
+
+    Attributes:
+        pieces: the pieces, AMC motions at the requested frame rate, in clip order.
+        clip_index: per piece, the index of the clip it comes from.
+        starts_clip: per piece, whether it begins at its clip's first frame.
+        flips: ``(clip, frame, bone, degrees)`` of every flip found (frames of the clip as given).
+        unused: ``(clip, start, stop)`` of the pieces left out as too short.
+    """
+
+    pieces: list[Motion]
+    clip_index: list[int]
+    starts_clip: list[bool]
+    flips: list[tuple[str, int, str, float]]
+    unused: list[tuple[str, int, int]]
+
+
+def continuous_pieces(clips: list[Motion], fps: float, min_frames: int, max_turn_speed: float | None = 5400.0,
+                      what: str = "fit") -> ContinuousPieces:
+    """The clips cut at their :func:`angle_flips` and resampled to ``fps``
+    (:func:`~mocapkit.synthesis.base.resample_clip`), so that a model of successive frames never learns a flip as
+    motion; pieces of fewer than ``min_frames`` frames at ``fps`` are left out. One warning per clip with flips
+    names it, every flip and every piece left out (``what`` prefixes it). ``max_turn_speed=None``: no cutting.
+    """
+    out = ContinuousPieces([], [], [], [], [])
+    for c, clip in enumerate(clips):
+        flips = angle_flips(clip, max_turn_speed) if max_turn_speed is not None else []
+        out.flips.extend((clip_label(clip), frame, bone, degrees) for frame, bone, degrees in flips)
+        cuts = [0, *sorted({frame for frame, _, _ in flips}), clip.num_frames]
+        unused = []
+        for start, stop in itertools.pairwise(cuts):
+            piece = clip if (start, stop) == (0, clip.num_frames) else clip_segment(clip, start, stop)
+            piece = resample_clip(piece, fps)
+            if piece.num_frames >= min_frames:
+                out.pieces.append(piece)
+                out.clip_index.append(c)
+                out.starts_clip.append(start == 0)
+            else:
+                unused.append(f"{start}–{stop - 1}")
+                out.unused.append((clip_label(clip), start, stop))
+        if flips:
+            turns = ", ".join(f"{bone} {degrees:.0f}° at frame {frame}" for frame, bone, degrees in flips)
+            warnings.warn(f"{what}: {clip_label(clip)}: joint-angle flips ({turns}: changes of representation, not "
+                          "motion); the clip is cut there" + (f", frames {', '.join(unused)} too short to use"
+                                                              if unused else ""), stacklevel=3)
+    return out
 
 
 def root_start(motion: Motion) -> tuple[tuple[float, float], float]:

@@ -36,11 +36,9 @@ prediction costs ``O(Q² M²)`` flops, batched over queries (the synthesis varia
 """
 from __future__ import annotations
 
-import itertools
 import math
 import sys
 import time
-import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -52,7 +50,6 @@ from mocapkit.synthesis.base import (
     MotionSynthesizer,
     SynthesisInputError,
     clip_label,
-    clip_segment,
     dof_values,
     model_frames,
     on_skeleton,
@@ -64,7 +61,7 @@ from mocapkit.synthesis.footskate import cleanup_footskate
 from mocapkit.synthesis.representation import (
     ROOT_FEATURES,
     FeatureClip,
-    angle_flips,
+    continuous_pieces,
     decode,
     dof_axes,
     encode,
@@ -759,32 +756,6 @@ class SLFMSynthesizer(MotionSynthesizer):
 
     # ------------------------------------------------------------------ fit
 
-    def _continuous_pieces(self, clips: list[Motion]) -> list[tuple[Motion, bool]]:
-        """The training clips cut at their joint-angle flips (:func:`~mocapkit.synthesis.representation.
-        angle_flips`), each piece at the model's rate, with whether it starts its clip; pieces too short for the
-        second-order model are left out. Every flip and every left-out piece is warned about, naming the clip, and
-        kept in ``angle_flips_`` / ``unused_pieces_``."""
-        pieces, self.angle_flips_, self.unused_pieces_ = [], [], []
-        for clip in clips:
-            flips = angle_flips(clip, self.max_turn_speed) if self.max_turn_speed is not None else []
-            self.angle_flips_.extend((clip_label(clip), frame, bone, degrees) for frame, bone, degrees in flips)
-            cuts = [0, *sorted({frame for frame, _, _ in flips}), clip.num_frames]
-            unused = []
-            for start, stop in itertools.pairwise(cuts):
-                piece = clip if (start, stop) == (0, clip.num_frames) else clip_segment(clip, start, stop)
-                piece = resample_clip(piece, self.model_fps_)
-                if piece.num_frames >= self.min_frames:
-                    pieces.append((piece, start == 0))
-                else:
-                    unused.append(f"{start}–{stop - 1}")
-                    self.unused_pieces_.append((clip_label(clip), start, stop))
-            if flips:
-                turns = ", ".join(f"{bone} {degrees:.0f}° at frame {frame}" for frame, bone, degrees in flips)
-                warnings.warn(f"SLFMSynthesizer.fit: {clip_label(clip)}: joint-angle flips ({turns}: changes of "
-                              "representation, not motion); the clip is cut there"
-                              + (f", frames {', '.join(unused)} too short to use" if unused else ""), stacklevel=4)
-        return pieces
-
     def _fit_clips(self, clips: list[Motion]) -> None:
         if self.dynamic_feature not in ("position", "scf_difference"):
             raise ValueError(f"dynamic_feature must be 'position' or 'scf_difference', got {self.dynamic_feature!r}")
@@ -803,9 +774,11 @@ class SLFMSynthesizer(MotionSynthesizer):
         rng = np.random.default_rng(self.random_state)
         self.bones_ = tuple(self.layout_.bones[1:])
         self.partitions_ = partitions(self.skeleton_)
-        pieces = self._continuous_pieces(clips)
+        cut = continuous_pieces(clips, self.model_fps_, self.min_frames, self.max_turn_speed,
+                                what="SLFMSynthesizer.fit")
+        self.angle_flips_, self.unused_pieces_ = cut.flips, cut.unused
         states, first = [], []
-        for piece, starts_clip in pieces:
+        for piece, starts_clip in zip(cut.pieces, cut.starts_clip):
             try:
                 states.append(self._clip_states(piece))
             except ValueError as exc:
