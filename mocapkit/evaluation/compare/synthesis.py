@@ -174,8 +174,10 @@ class SynthesisBenchmark(Benchmark):
                   "variant_feature_distances": distances.variants.tolist(),
                   "real_feature_distances": distances.real.tolist(),
                   "fitted": {k: _json(getattr(estimator, k)) for k in ("width_", "cv_log_likelihood_", "sigma_",
-                                                                 "train_seconds_")
-                             if hasattr(estimator, k)}}
+                                                                 "train_seconds_", "noise_scale_",
+                                                                 "variation_by_noise_scale_")
+                             if hasattr(estimator, k)},
+                  "angle_flips": [list(flip) for flip in getattr(estimator, "angle_flips_", [])]}
         return {"metrics": metrics, "detail": detail}
 
     # -------------------------------------------------------------- presentation
