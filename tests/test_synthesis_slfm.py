@@ -310,7 +310,7 @@ def test_output_margin_keeps_draws_in_the_training_range(fitted):
     context = np.full((3, sampler.gather.max() + 1), 50.0)
     context[:, -1] = 0.0
     huge = np.full((G, 3, D), 40.0)
-    columns, draws = sampler.draw(context, np.random.default_rng(0), True, huge, output_margin=0.0)
+    _, draws = sampler.draw(context, np.random.default_rng(0), True, huge, output_margin=0.0)
     low = sampler.stack.y_low.reshape(-1)[sampler.slots]
     high = sampler.stack.y_high.reshape(-1)[sampler.slots]
     assert np.all(draws >= low - 1e-9) and np.all(draws <= high + 1e-9)

@@ -459,13 +459,13 @@ class StackedSLFM:
 # --------------------------------------------------------------------------- the synthesiser
 
 CASES = ("t1", "t2", "t3", "t>3")
+"""The cases of Zhou eq. 4.2 (§3.3): frame 1 (same-frame ancestors), 2, 3 and later frames."""
 
 NOISE_SCALES = (0.1, 0.2, 0.3, 0.5, 0.7, 1.0)
 """The scales of the predictive noise ``noise_scale="auto"`` tries, smallest first."""
 
 AUTO_VARIANTS = 10
 """Variants sampled per tried scale by ``noise_scale="auto"``."""
-"""The cases of Zhou eq. 4.2 (§3.3): frame 1 (same-frame ancestors), 2, 3 and later frames."""
 
 
 class RootFrameKinematics:
@@ -615,7 +615,7 @@ class SLFMSynthesizer(MotionSynthesizer):
     a limb can in one frame while the joints barely move, i.e. the capture's solver switched to an equivalent
     joint configuration. HDM05's deep squats of performer ``dg`` flip ``femur`` by 180° (with ``tibia`` going
     from 202° to 158°) when the knee passes 180°; learnt as motion, those jumps made every squat model unstable
-    (jerk 93k m/s³ against the real 0.8k, ``mocapkit compare synthesis_hdm05``). Each piece between flips is a
+    (``mocapkit compare synthesis_hdm05`` before the cutting: jerk 47k m/s³ against the real 0.8k). Each piece between flips is a
     training sequence of its own; only clip starts feed the first-frame statistics; each flip is warned about.
 
     **Sampling** (§3.6), all variants at once: frame 1's nodes without ancestors (the root pose and each limb's
