@@ -761,6 +761,8 @@ class SLFMSynthesizer(MotionSynthesizer):
             raise ValueError(f"dynamic_feature must be 'position' or 'scf_difference', got {self.dynamic_feature!r}")
         if self.frame_stride < 1:
             raise ValueError(f"frame_stride must be >= 1, got {self.frame_stride}")
+        if self.noise_scale != "auto" and (isinstance(self.noise_scale, str) or not float(self.noise_scale) >= 0):
+            raise ValueError(f"noise_scale must be 'auto' or a number >= 0, got {self.noise_scale!r}")
         start = time.perf_counter()
         if self.model_fps is not None and not float(self.model_fps) > 0:
             raise ValueError(f"model_fps must be positive (or None), got {self.model_fps!r}")
@@ -820,8 +822,6 @@ class SLFMSynthesizer(MotionSynthesizer):
 
         self.variation_by_noise_scale_ = {}
         if self.noise_scale != "auto":
-            if isinstance(self.noise_scale, str) or not float(self.noise_scale) >= 0:
-                raise ValueError(f"noise_scale must be 'auto' or a number >= 0, got {self.noise_scale!r}")
             self.noise_scale_ = float(self.noise_scale)
             return
         reference = variation([on_skeleton(clip, self.skeleton_) for clip in clips]).v
@@ -893,14 +893,14 @@ class SLFMSynthesizer(MotionSynthesizer):
         width = self._dynamic(flat[:, 0], flat[:, 0], positions[:, 0], positions[:, 0]).shape[1]
         return positions, np.zeros((V, T, width))
 
-    def _rollout(self, flat: np.ndarray, positions: np.ndarray, dynamic: np.ndarray, start: int,
-                 rng: np.random.Generator) -> None:
-        """Draw frames ``start`` … ``T-1`` of ``flat [V, T, F]`` (and their ``positions``, ``dynamic``) in place, each
+    def _rollout(self, flat: np.ndarray, positions: np.ndarray, dynamic: np.ndarray, rng: np.random.Generator
+                 ) -> None:
+        """Draw frames 1 … ``T-1`` of ``flat [V, T, F]`` (and their ``positions``, ``dynamic``) in place, each
         from the model of its case given the frames before (the sampling loop of the class docstring)."""
         kinematics = RootFrameKinematics(self.skeleton_, self.bones_)
         V, T = flat.shape[:2]
         tau, rho, z = self._noise_scale(), float(self.noise_correlation), None
-        for k in range(start, T):
+        for k in range(1, T):
             sampler = self.samplers_["t2" if k == 1 else "t3" if k == 2 else "t>3"]
             G, D = sampler.stack.y_mean.shape
             eps = rng.standard_normal((G, V, D))
@@ -932,7 +932,7 @@ class SLFMSynthesizer(MotionSynthesizer):
             flat[:, 0, columns] = draws
             self._project(flat[:, 0])
         positions, dynamic = self._start_arrays(flat)
-        self._rollout(flat, positions, dynamic, 1, rng)
+        self._rollout(flat, positions, dynamic, rng)
         out, self.footskate_reports_ = [], []
         for v in range(V):
             values = decode(FeatureClip.from_flat(flat[v], self.bones_), self.skeleton_, start_xz=self.start_xz_,
