@@ -238,6 +238,7 @@ def test_cli_end_to_end(tmp_path, capsys):
     assert len(report["training_clips"]) == 3 and report["variants"] == ["variant_000.amc", "variant_001.amc"]
     assert report["fit_seconds"] > 0 and report["sample_seconds_per_motion_second"] > 0
     assert report["parameters"]["n_fit"] == TINY["n_fit"] and "footskate_sliding_m_per_s" in report
+    assert len(report["footskate_root_shift_m"]["horizontal_max"]) == 2
     assert report["noise_scale"] == float(list(report["variation_by_noise_scale"])[-1])
     assert "angle_flips" not in report  # the three bd hops have none
     variant = read_amc(out / "variant_001.amc", asf=out / "HDM_bd.asf")

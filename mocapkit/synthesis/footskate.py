@@ -1,24 +1,34 @@
-"""Footskate cleanup of synthesised AMC motion: detect foot contacts, pin the feet with two-bone leg IK.
+"""Footskate cleanup of synthesised AMC motion: find the stances, ground the feet and halt them by moving the
+root, pin what is left with two-bone leg IK.
 
 Zhou 2014 ch. 4 §3.6 step 4 post-processes variants with an unspecified blending technique or "automatic
 footskate cleanup"; gap 19 (../shared/spec/thesis-zhou-2014-retrieval-synthesis.md) asks for contact detection by
-foot height and speed thresholds and pinning with two-bone IK, kept optional. This module does exactly that, on
-AMC values (so the result is still a valid AMC motion on the same skeleton):
+foot height and speed thresholds and pinning with two-bone IK, kept optional. This module does that, on AMC
+values (so the result is still a valid AMC motion on the same skeleton):
 
 1. **Legs**: the first two bones with dofs of the ``RL`` and ``LL`` partitions
    (:func:`~mocapkit.synthesis.representation.partitions`), the thigh (hip → knee) and the shin (knee → ankle,
    CMU/HDM05 ``femur``/``tibia``). The shin must be a one-dof hinge (HDM05/CMU ``tibia rx``); a leg without one
    is left alone and reported.
-2. **Contacts** (:func:`detect_contacts`): frames where the ankle (the end of the shin) is within
-   ``height_tolerance`` metres of the floor (given, or the lowest ankle height of the clip over both legs) and its
-   moving-average path moves slower than ``speed_threshold`` m/s; runs shorter than ``min_contact_frames`` are
-   dropped.
-3. **Targets**: during a contact run the ankle is pinned at its mean position over the run; over
-   ``blend_frames`` frames before and after, the target blends linearly back to the unmodified ankle.
-4. **Two-bone IK** per frame with a target: the knee hinge angle is solved in closed form so that the hip–ankle
+2. **Contacts** (:func:`detect_contacts`): runs of frames where the ankle (the end of the shin) barely moves
+   vertically, near the lowest point of the run, when that point is low (within ``max_height`` of the floor).
+   Sampled variants float above the floor or sink into it by centimetres and their planted feet slide, so
+   neither the floor height nor the horizontal speed can tell a stance.
+3. **Root** (:func:`root_shift`, ``move_root``): the root is lowered or raised so that each stance stands on
+   the floor, and (``"full"``) its horizontal step loses the planted feet's step, so the body moves over a
+   still foot instead of the foot sliding under the body.
+4. **Targets**: during a contact run the ankle is pinned at its mean horizontal position over the run, on the
+   floor; over ``blend_frames`` frames before and after, the target blends linearly back to the free ankle.
+5. **Two-bone IK** per frame with a target: the knee hinge angle is solved in closed form so that the hip–ankle
    distance equals the hip–target distance (clamped to what the bone lengths reach), then the thigh is turned
-   about the hip by the smallest rotation that points the ankle at the target. Only the thigh's and the shin's
-   AMC values change; the foot keeps its angles relative to the shin.
+   about the hip by the smallest rotation that points the ankle at the target. Only the root's translation and
+   the thigh's and the shin's AMC values change; the foot keeps its angles relative to the shin.
+
+Why the root moves: SLFM samples the root's planar steps and each leg in partitions of their own (gap 17), so
+the legs' stance does not follow the body's travel; on HDM05 jogs the planted ankles of its variants slid at
+1.65 m/s. Pinning them with the IK alone stretches the legs against the travel (jerk up to twice the real
+clips'); halting them through the root lets the feet set the travel instead, at the price of a travel speed
+that is the legs' and not the sampled one. The numbers behind the defaults are in :func:`cleanup_footskate`.
 """
 from __future__ import annotations
 
@@ -30,6 +40,9 @@ from scipy.spatial.transform import Rotation
 from mocapkit.datasets.formats.asf_amc import AsfSkeleton, forward_kinematics
 from mocapkit.synthesis.representation import dof_axes, euler_near, partitions
 
+#: The ways :func:`cleanup_footskate` may move the root (its ``move_root``).
+ROOT_MOVES = ("full", "vertical", "none")
+
 
 @dataclass
 class FootskateReport:
@@ -40,37 +53,55 @@ class FootskateReport:
         sliding_before: mean horizontal ankle speed during contacts before the cleanup, m/s (NaN without contacts).
         sliding_after: the same after the cleanup.
         skipped_legs: legs left alone (no one-dof shin), with the reason.
+        root_shift: float64 ``[T, 3]`` metres added to the root's position (:func:`root_shift`; zeros when the
+            root was not moved).
     """
 
     contacts: dict[str, np.ndarray]
     sliding_before: float
     sliding_after: float
     skipped_legs: list[str]
+    root_shift: np.ndarray
 
 
-def detect_contacts(ankle: np.ndarray, fps: float, floor: float, height_tolerance: float = 0.05,
-                    speed_threshold: float = 1.0, min_contact_frames: int = 3, smoothing_frames: int = 9
-                    ) -> np.ndarray:
-    """bool ``[T]``: the frames where a foot is planted.
+def _smoothed(signal: np.ndarray, frames: int) -> np.ndarray:
+    """Moving average of ``[T, ...]`` over ``frames`` frames (edges padded with their values)."""
+    width = max(1, min(int(frames), len(signal)))
+    kernel = np.ones(width) / width
+    pad = [(width // 2, width - 1 - width // 2)] + [(0, 0)] * (signal.ndim - 1)
+    padded = np.pad(signal, pad, mode="edge")
+    flat = padded.reshape(len(padded), -1)
+    out = np.stack([np.convolve(flat[:, k], kernel, mode="valid") for k in range(flat.shape[1])], axis=1)
+    return out.reshape(signal.shape)
+
+
+def detect_contacts(ankle: np.ndarray, fps: float, floor: float, max_height: float = 0.12,
+                    height_tolerance: float = 0.03, vertical_speed: float = 0.3, min_contact_frames: int = 3,
+                    smoothing_frames: int = 9) -> np.ndarray:
+    """bool ``[T]``: the frames where a foot is planted (stance).
+
+    A stance is a run of frames where the ankle barely moves **vertically** (the moving average over
+    ``smoothing_frames`` frames of its height changes slower than ``vertical_speed`` m/s), restricted to the
+    frames within ``height_tolerance`` of the run's lowest ankle height, when that lowest height is at most
+    ``max_height`` above ``floor`` (a foot held still high up, as at the top of a knee lift, is no stance). Runs
+    shorter than ``min_contact_frames`` are dropped. Horizontal speed plays no part: a foot that slides along the
+    floor is exactly what the cleanup has to find, and sampled motion floats or sinks by centimetres, so the
+    stance height is the run's own rather than the floor's.
 
     Args:
         ankle: float64 ``[T, 3]`` ankle positions, metres, ``y`` up.
         fps: frames per second.
-        floor: floor height, metres.
-        height_tolerance: the ankle is at most this far above ``floor`` (metres).
-        speed_threshold: and moves slower than this (m/s, central differences of the ankle path averaged over
-            ``smoothing_frames`` frames, so that frame-to-frame jitter of sampled motion does not hide a plant).
-        min_contact_frames: shorter runs are not contacts.
+        floor: the ankle height of a planted foot, metres.
     """
-    if len(ankle) > 1:
-        width = min(smoothing_frames, len(ankle))
-        kernel = np.ones(width) / width
-        padded = np.pad(ankle, ((width // 2, width - 1 - width // 2), (0, 0)), mode="edge")
-        smooth = np.stack([np.convolve(padded[:, a], kernel, mode="valid") for a in range(3)], axis=1)
-        speed = np.linalg.norm(np.gradient(smooth, axis=0), axis=1) * fps
-    else:
-        speed = np.zeros(len(ankle))
-    contact = (ankle[:, 1] < floor + height_tolerance) & (speed < speed_threshold)
+    contact = np.zeros(len(ankle), dtype=bool)
+    if len(ankle) < 2:
+        return contact
+    height = _smoothed(ankle[:, 1], smoothing_frames)
+    still = np.abs(np.gradient(height)) * fps < vertical_speed
+    for start, stop in _runs(still):
+        lowest = float(ankle[start:stop, 1].min())
+        if lowest <= floor + max_height:
+            contact[start:stop] = ankle[start:stop, 1] <= lowest + height_tolerance
     for start, stop in _runs(contact):
         if stop - start < min_contact_frames:
             contact[start:stop] = False
@@ -84,13 +115,18 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(edges[::2].tolist(), edges[1::2].tolist()))
 
 
-def _pin_targets(ankle: np.ndarray, contact: np.ndarray, blend_frames: int) -> tuple[np.ndarray, np.ndarray]:
-    """Ankle targets ``[T, 3]`` and their weights ``[T]`` (1 in contacts, linear ramps ``blend_frames`` long)."""
+def _pin_targets(ankle: np.ndarray, contact: np.ndarray, blend_frames: int, floor: float | None = None
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """Ankle targets ``[T, 3]`` and their weights ``[T]`` (1 in contacts, linear ramps ``blend_frames`` long).
+
+    Each contact run's target is the ankle's mean position over the run, at height ``floor`` when given."""
     T = len(ankle)
     weight = np.zeros(T)
     pin = ankle.copy()
     for start, stop in _runs(contact):
         point = ankle[start:stop].mean(axis=0)
+        if floor is not None:
+            point[1] = floor
         lo, hi = max(0, start - blend_frames), min(T, stop + blend_frames)
         for t in range(lo, hi):
             w = 1.0 if start <= t < stop else 1.0 - (start - t if t < start else t - stop + 1) / (blend_frames + 1)
@@ -98,6 +134,44 @@ def _pin_targets(ankle: np.ndarray, contact: np.ndarray, blend_frames: int) -> t
                 weight[t] = w
                 pin[t] = point
     return ankle + weight[:, None] * (pin - ankle), weight
+
+
+def root_shift(ankles: list[np.ndarray], contacts: list[np.ndarray], floor: float, blend_frames: int = 6
+               ) -> np.ndarray:
+    """float64 ``[T, 3]`` metres: the shift of the root that grounds and halts the planted feet.
+
+    - **Horizontal** (x, z): the root's step in each frame loses the weighted mean horizontal step of the
+      planted ankles (weights: 1 in a contact, linear ramps ``blend_frames`` long around it, as the IK pins), so
+      that a planted foot stands still while the body moves over it; the shift is the running sum of those
+      corrections (0 at frame 0).
+    - **Vertical** (y): in contact frames, ``floor`` minus the mean height of the planted ankles over their
+      contact runs (each run lifted or lowered as a whole, so the foot's own small motion within a stance is
+      kept); between contacts linearly interpolated, then smoothed over ``2·blend_frames + 1`` frames; 0
+      everywhere without contacts.
+
+    Args:
+        ankles: per leg, float64 ``[T, 3]`` ankle positions (metres, y up).
+        contacts: per leg, bool ``[T]`` (:func:`detect_contacts`).
+        floor: the ankle height of a planted foot, metres.
+    """
+    T = len(ankles[0])
+    step, total = np.zeros((T, 2)), np.zeros(T)
+    lift, count = np.zeros(T), np.zeros(T)
+    for ankle, contact in zip(ankles, contacts):
+        _, weight = _pin_targets(ankle, contact, blend_frames)
+        if T > 1:
+            step += weight[:, None] * np.diff(ankle[:, [0, 2]], axis=0, prepend=ankle[:1, [0, 2]])
+        total += weight
+        for start, stop in _runs(contact):
+            lift[start:stop] += floor - ankle[start:stop, 1].mean()
+            count[start:stop] += 1
+    shift = np.zeros((T, 3))
+    shift[:, [0, 2]] = -np.cumsum(step / np.maximum(total, 1.0)[:, None], axis=0)
+    planted = np.flatnonzero(count)
+    if len(planted):
+        vertical = np.interp(np.arange(T), planted, lift[planted] / count[planted])
+        shift[:, 1] = _smoothed(vertical, 2 * blend_frames + 1)
+    return shift
 
 
 def _global_rotations(skeleton: AsfSkeleton, local: np.ndarray) -> np.ndarray:
@@ -158,9 +232,10 @@ def _sliding(ankles: list[np.ndarray], contacts: list[np.ndarray], fps: float) -
 
 
 def cleanup_footskate(values: dict[str, np.ndarray], skeleton: AsfSkeleton, fps: float, floor: float | None = None,
-                      height_tolerance: float = 0.05, speed_threshold: float = 1.0, min_contact_frames: int = 3,
-                      blend_frames: int = 6) -> tuple[dict[str, np.ndarray], FootskateReport]:
-    """Pin planted feet (module docstring).
+                      max_height: float = 0.12, height_tolerance: float = 0.03, vertical_speed: float = 0.3,
+                      min_contact_frames: int = 3, blend_frames: int = 12, move_root: str = "full"
+                      ) -> tuple[dict[str, np.ndarray], FootskateReport]:
+    """Ground and pin planted feet (module docstring).
 
     Args:
         values: AMC values, bone → float64 ``[T, len(dof)]`` (degrees; root translation in ASF units).
@@ -168,13 +243,23 @@ def cleanup_footskate(values: dict[str, np.ndarray], skeleton: AsfSkeleton, fps:
         fps: frames per second.
         floor: the ankle height (metres) of a planted foot; default: the lowest ankle height of the clip over both
             legs (a synthesiser passes its training clips' value, which one low sampled frame cannot move).
-        height_tolerance, speed_threshold, min_contact_frames: contact detection (:func:`detect_contacts`).
+        max_height, height_tolerance, vertical_speed, min_contact_frames: contact detection
+            (:func:`detect_contacts`).
         blend_frames: frames over which a pin fades in before and out after a contact.
+        move_root: how the root's translation is shifted before the IK (:func:`root_shift`): ``"full"``
+            (default) grounds and halts the planted feet, so the body's travel follows its feet; ``"vertical"``
+            only grounds them and keeps the sampled path (the IK then pins what the legs reach); ``"none"``
+            leaves the root alone.
+
+    Raises:
+        ValueError: an unknown ``move_root``.
 
     Returns:
-        The cleaned values (a new dict; only the legs' thigh and shin values change) and a
-        :class:`FootskateReport`.
+        The cleaned values (a new dict; only the root's translation and the legs' thigh and shin values change)
+        and a :class:`FootskateReport`.
     """
+    if move_root not in ROOT_MOVES:
+        raise ValueError(f"move_root={move_root!r}: expected one of {list(ROOT_MOVES)}")
     out = {bone: np.array(v, dtype=np.float64) for bone, v in values.items()}
     positions, local = forward_kinematics(skeleton, out)
     index = {name: j for j, name in enumerate(skeleton.joint_names)}
@@ -187,21 +272,35 @@ def cleanup_footskate(values: dict[str, np.ndarray], skeleton: AsfSkeleton, fps:
             continue
         legs.append((chain[0], chain[1]))
     if not legs:
-        return out, FootskateReport({}, float("nan"), float("nan"), skipped)
+        return out, FootskateReport({}, float("nan"), float("nan"), skipped, np.zeros((len(positions), 3)))
     if floor is None:
         floor = min(float(positions[:, index[shin], 1].min()) for _, shin in legs)
+    before = [positions[:, index[shin]].astype(np.float64) for _, shin in legs]
+    masks = [detect_contacts(ankle, fps, floor, max_height, height_tolerance, vertical_speed, min_contact_frames)
+             for ankle in before]
+    contacts = {thigh: mask for (thigh, _), mask in zip(legs, masks)}
+    shift = np.zeros((len(positions), 3))
+    if move_root != "none" and any(mask.any() for mask in masks):
+        shift = root_shift(before, masks, floor, blend_frames)
+        order = [channel.upper() for channel in skeleton.root_order]
+        if "root" not in out:
+            out["root"] = np.zeros((len(positions), len(order)))
+        for axis in range(3):
+            channel = "T" + "XYZ"[axis]
+            if channel in order and (axis == 1 or move_root != "vertical"):
+                out["root"][:, order.index(channel)] += shift[:, axis] / skeleton.metres_per_unit
+            else:
+                shift[:, axis] = 0.0
+        positions, local = forward_kinematics(skeleton, out)
     glob = _global_rotations(skeleton, local)
     offsets = skeleton.offsets()
-    contacts, before, after = {}, [], []
-    for thigh, shin in legs:
+    after = []
+    for (thigh, shin), contact in zip(legs, masks):
         j_thigh, j_shin = index[thigh], index[shin]
         j_hip = skeleton.parents[j_thigh]
         ankle = positions[:, j_shin].astype(np.float64)
-        contact = detect_contacts(ankle, fps, floor, height_tolerance, speed_threshold, min_contact_frames)
-        contacts[thigh] = contact
-        before.append(ankle)
         after.append(ankle.copy())
-        target, weight = _pin_targets(ankle, contact, blend_frames)
+        target, weight = _pin_targets(ankle, contact, blend_frames, floor)
         frames = np.flatnonzero(weight > 0)
         if len(frames) == 0:
             continue
@@ -229,5 +328,4 @@ def cleanup_footskate(values: dict[str, np.ndarray], skeleton: AsfSkeleton, fps:
         axes = dof_axes(skeleton.bone(thigh).dof)
         out[thigh][frames] = np.degrees(euler_near(Rotation.from_matrix(m_thigh), axes,
                                                    np.radians(out[thigh][frames])))
-    masks = [contacts[thigh] for thigh, _ in legs]
-    return out, FootskateReport(contacts, _sliding(before, masks, fps), _sliding(after, masks, fps), skipped)
+    return out, FootskateReport(contacts, _sliding(before, masks, fps), _sliding(after, masks, fps), skipped, shift)

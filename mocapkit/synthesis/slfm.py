@@ -57,7 +57,7 @@ from mocapkit.synthesis.base import (
     rotation_columns,
     time_warp,
 )
-from mocapkit.synthesis.footskate import cleanup_footskate
+from mocapkit.synthesis.footskate import ROOT_MOVES, cleanup_footskate
 from mocapkit.synthesis.representation import (
     ROOT_FEATURES,
     FeatureClip,
@@ -626,8 +626,8 @@ class SLFMSynthesizer(MotionSynthesizer):
     are projected onto their dofs (:func:`~mocapkit.synthesis.representation.project_expmap`), so later frames
     condition on poses the skeleton can take. The root path is integrated from the planar steps
     (:func:`~mocapkit.synthesis.representation.decode`), starting at the first training clip's position and
-    heading; ``footskate_cleanup`` then pins planted feet (:mod:`mocapkit.synthesis.footskate`; the floor is
-    the training clips' mean lowest ankle height).
+    heading; ``footskate_cleanup`` then grounds and pins planted feet (:mod:`mocapkit.synthesis.footskate`; the
+    floor is the training clips' mean lowest ankle height).
 
     Args:
         frame_stride: every how many frames (at ``model_fps``) a training pair is taken.
@@ -641,7 +641,10 @@ class SLFMSynthesizer(MotionSynthesizer):
             draws, the thesis's literal procedure (§3.6). Not from the thesis; the normals are mapped through each
             frame's own covariance, so the correlation of the outputs is approximate.
         dynamic_feature: ``"position"`` or ``"scf_difference"``.
-        footskate_cleanup: pin planted feet after sampling.
+        footskate_cleanup: ground and pin planted feet after sampling.
+        footskate_root: how the cleanup moves the root (``move_root`` of
+            :func:`~mocapkit.synthesis.footskate.cleanup_footskate`): ``"full"`` (default; the travel follows the
+            planted feet), ``"vertical"`` (the sampled path is kept) or ``"none"``.
         model_fps: the frame rate the models work at (None: the clips' own, the thesis's 120 Hz). Lower, the
             clips are resampled for training (:func:`~mocapkit.synthesis.base.resample_clip`) and the variants are
             drawn at this rate, then brought back to the clips' rate by a cubic spline before the footskate
@@ -684,7 +687,8 @@ class SLFMSynthesizer(MotionSynthesizer):
 
     def __init__(self, frame_stride: int = 1, n_fit: int = 100, n_inducing: int = 32, max_iter: int = 30,
                  sample_noise: bool = True, noise_correlation: float = 0.9, dynamic_feature: str = "position",
-                 footskate_cleanup: bool = True, model_fps: float | None = 30.0, noise_scale: float | str = "auto",
+                 footskate_cleanup: bool = True, footskate_root: str = "full", model_fps: float | None = 30.0,
+                 noise_scale: float | str = "auto",
                  target_variation: float = 1.28, output_margin: float | None = 0.0,
                  max_turn_speed: float | None = 5400.0, random_state: int | None = 0, verbose: bool = False):
         self.frame_stride = frame_stride
@@ -695,6 +699,7 @@ class SLFMSynthesizer(MotionSynthesizer):
         self.noise_correlation = noise_correlation
         self.dynamic_feature = dynamic_feature
         self.footskate_cleanup = footskate_cleanup
+        self.footskate_root = footskate_root
         self.model_fps = model_fps
         self.noise_scale = noise_scale
         self.target_variation = target_variation
@@ -763,6 +768,8 @@ class SLFMSynthesizer(MotionSynthesizer):
             raise ValueError(f"frame_stride must be >= 1, got {self.frame_stride}")
         if self.noise_scale != "auto" and (isinstance(self.noise_scale, str) or not float(self.noise_scale) >= 0):
             raise ValueError(f"noise_scale must be 'auto' or a number >= 0, got {self.noise_scale!r}")
+        if self.footskate_root not in ROOT_MOVES:
+            raise ValueError(f"footskate_root must be one of {list(ROOT_MOVES)}, got {self.footskate_root!r}")
         start = time.perf_counter()
         if self.model_fps is not None and not float(self.model_fps) > 0:
             raise ValueError(f"model_fps must be positive (or None), got {self.model_fps!r}")
@@ -942,7 +949,8 @@ class SLFMSynthesizer(MotionSynthesizer):
                 values = dof_values(time_warp(matrix, n_frames, rotation_columns(self.layout_), kind="cubic"),
                                     self.layout_)
             if self.footskate_cleanup:
-                values, report = cleanup_footskate(values, self.skeleton_, self.fps_, floor=self.floor_)
+                values, report = cleanup_footskate(values, self.skeleton_, self.fps_, floor=self.floor_,
+                                                   move_root=self.footskate_root)
                 self.footskate_reports_.append(report)
             out.append(values)
         return out

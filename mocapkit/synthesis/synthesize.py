@@ -14,6 +14,8 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
+import numpy as np
+
 from mocapkit.datasets.formats.asf_amc import read_amc, write_amc, write_asf
 from mocapkit.synthesis.base import MotionSynthesizer, SynthesisInputError
 
@@ -93,7 +95,8 @@ def synthesize(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, 
         compute per second of synthesised motion, the variants' files, the synthesiser's parameters, for SLFM
         the noise scale it sampled with (and, with ``noise_scale="auto"``, ``V / V_train`` of each scale tried) and
         the joint-angle flips its training clips were cut at, and (with footskate cleanup) the mean horizontal
-        ankle speed during contacts before and after it.
+        ankle speed during contacts before and after it and the largest horizontal and vertical shift it gave the
+        root, per variant (metres).
 
     Raises:
         SynthesisInputError: no matching clips, too few, too short, or clips on different skeletons (named).
@@ -156,6 +159,9 @@ def synthesize(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, 
         report["footskate_sliding_m_per_s"] = {
             "before": [None if r.sliding_before != r.sliding_before else round(r.sliding_before, 4) for r in reports],
             "after": [None if r.sliding_after != r.sliding_after else round(r.sliding_after, 4) for r in reports]}
+        report["footskate_root_shift_m"] = {
+            "horizontal_max": [round(float(np.hypot(r.root_shift[:, 0], r.root_shift[:, 2]).max()), 4) for r in reports],
+            "vertical_max": [round(float(np.abs(r.root_shift[:, 1]).max()), 4) for r in reports]}
     (out / "report.json").write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")
     say(f"wrote {len(written)} variant(s), {asf_name} and report.json to {out} "
         f"({report['sample_seconds_per_motion_second']:.4f} s of compute per second of motion)")
