@@ -335,3 +335,22 @@ def test_auto_noise_scale_is_the_smallest_reaching_the_target_variation(fitted, 
     assert fixed.noise_scale_ == 0.4 and fixed.variation_by_noise_scale_ == {}
     with pytest.raises(ValueError, match="noise_scale"):
         SLFMSynthesizer(**TINY, noise_scale="large").fit(hops[:2])
+
+
+@needs(HDM05)
+def test_cross_partition_gives_the_limbs_the_roots_pose_and_step(hops):
+    def inputs(model, node):
+        (found,) = [m for m in model.models_ if m.node == node and m.case == "t>3"]
+        return {(state, back): set(columns.tolist()) for state, back, columns in found.inputs}
+
+    literal = SLFMSynthesizer(**TINY, footskate_cleanup=False, noise_scale=0.5).fit(hops[:2])
+    coupled = SLFMSynthesizer(**TINY, footskate_cleanup=False, noise_scale=0.5, cross_partition=True).fit(hops[:2])
+    root_pose, root_step = (set(c.tolist()) for c in coupled._columns("root"))
+    for node in ("ltibia", "rhumerus"):
+        before, after = inputs(literal, node), inputs(coupled, node)
+        for back in (1, 2):
+            assert not before[("flat", back)] & root_pose and after[("flat", back)] == before[("flat", back)] | root_pose
+            assert after[("dynamic", back)] == before[("dynamic", back)] | root_step
+    assert inputs(literal, "lowerback") == inputs(coupled, "lowerback")   # TH holds the root already
+    (variant,) = coupled.sample(1, n_frames=20, seed=0)
+    assert np.all(np.isfinite(variant.positions))

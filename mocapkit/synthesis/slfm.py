@@ -660,6 +660,11 @@ class SLFMSynthesizer(MotionSynthesizer):
             Not from the thesis.
         max_turn_speed: degrees per second above which a bone's frame-to-frame turn in a training clip counts
             as a joint-angle flip (default 5400, 45° per frame at 120 Hz); None: no cutting.
+        cross_partition: gap 17's ablation: every node of the limb partitions (all but ``TH``) also takes the
+            root's pose ``(height, tilt)`` and its step as inputs, at the frames its own features enter (pose at
+            ``k-1`` for ``t2``, at ``k-1, k-2`` after; step at ``k-1`` for ``t3``, at ``k-1, k-2`` for ``t>3``;
+            not in ``t1``), so the limbs can follow the body's height and travel. False
+            (default): no input crosses partitions, the thesis's literal model. Not from the thesis.
         random_state: seeds the training subsets and inducing points.
         verbose: progress lines on stderr.
 
@@ -690,7 +695,8 @@ class SLFMSynthesizer(MotionSynthesizer):
                  footskate_cleanup: bool = True, footskate_root: str = "full", model_fps: float | None = 30.0,
                  noise_scale: float | str = "auto",
                  target_variation: float = 1.28, output_margin: float | None = 0.0,
-                 max_turn_speed: float | None = 5400.0, random_state: int | None = 0, verbose: bool = False):
+                 max_turn_speed: float | None = 5400.0, cross_partition: bool = False, random_state: int | None = 0,
+                 verbose: bool = False):
         self.frame_stride = frame_stride
         self.n_fit = n_fit
         self.n_inducing = n_inducing
@@ -705,6 +711,7 @@ class SLFMSynthesizer(MotionSynthesizer):
         self.target_variation = target_variation
         self.output_margin = output_margin
         self.max_turn_speed = max_turn_speed
+        self.cross_partition = cross_partition
         self.random_state = random_state
         self.verbose = verbose
 
@@ -740,8 +747,9 @@ class SLFMSynthesizer(MotionSynthesizer):
 
     def _node_models(self, partition: tuple[str, ...], ancestors: dict[str, tuple[str, ...]]) -> list[_NodeModel]:
         out = []
+        pelvis = ("root",) if self.cross_partition and "root" not in partition else ()
         for node in partition:
-            members = ancestors[node] + (node,)
+            members = pelvis + ancestors[node] + (node,)
             scf = [self._columns(m)[0] for m in members]
             if node == "root":
                 scf = [np.arange(3)] + scf  # the root's own previous planar steps
