@@ -352,5 +352,9 @@ def test_cross_partition_gives_the_limbs_the_roots_pose_and_step(hops):
             assert not before[("flat", back)] & root_pose and after[("flat", back)] == before[("flat", back)] | root_pose
             assert after[("dynamic", back)] == before[("dynamic", back)] | root_step
     assert inputs(literal, "lowerback") == inputs(coupled, "lowerback")   # TH holds the root already
+    with pytest.raises(ValueError, match="cross_partition must be True or False, got 'false'"):
+        SLFMSynthesizer(**TINY, cross_partition="false").fit(hops[:2])
+    with pytest.raises(ValueError, match="footskate_root must be one of"):
+        SLFMSynthesizer(**TINY, footskate_root="sideways").fit(hops[:2])
     (variant,) = coupled.sample(1, n_frames=20, seed=0)
     assert np.all(np.isfinite(variant.positions))

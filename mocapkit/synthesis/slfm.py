@@ -781,6 +781,8 @@ class SLFMSynthesizer(MotionSynthesizer):
             raise ValueError(f"frame_stride must be >= 1, got {self.frame_stride}")
         if self.noise_scale != "auto" and (isinstance(self.noise_scale, str) or not float(self.noise_scale) >= 0):
             raise ValueError(f"noise_scale must be 'auto' or a number >= 0, got {self.noise_scale!r}")
+        if not isinstance(self.cross_partition, (bool, np.bool_)):
+            raise ValueError(f"cross_partition must be True or False, got {self.cross_partition!r}")
         if self.footskate_root not in ROOT_MOVES:
             raise ValueError(f"footskate_root must be one of {list(ROOT_MOVES)}, got {self.footskate_root!r}")
         start = time.perf_counter()
