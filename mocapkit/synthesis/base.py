@@ -205,6 +205,14 @@ def check_clips(clips: Sequence[Motion], min_clips: int = 2, min_frames: int = 4
 class MotionSynthesizer(BaseEstimator):
     """Base class of variation synthesisers (see the module docstring).
 
+    **Footskate cleanup**, one for every synthesiser that has the parameters ``footskate_cleanup`` (bool) and
+    ``footskate_root`` (``"full"``, ``"vertical"`` or ``"none"``): :meth:`sample` passes each variant through
+    :func:`~mocapkit.synthesis.footskate.cleanup_footskate` on the output skeleton, with the floor ``floor_``
+    that :meth:`fit` measured on the training clips (the mean over the clips of their lowest ankle height,
+    metres) and ``move_root=footskate_root``; ``footskate_reports_`` then holds one
+    :class:`~mocapkit.synthesis.footskate.FootskateReport` per variant (empty without the cleanup). A
+    synthesiser without those parameters (the training-clip reference) is never cleaned.
+
     Class attributes: ``min_clips`` (fewest training clips), ``min_frames`` (shortest training clip, frames).
     """
 
@@ -217,8 +225,27 @@ class MotionSynthesizer(BaseEstimator):
         self.skeleton_ = clips[0].metadata["asf"]
         self.fps_ = float(clips[0].fps)
         self.mean_frames_ = round(float(np.mean([len(c.positions) for c in clips])))
+        if hasattr(self, "footskate_cleanup"):
+            from mocapkit.synthesis.footskate import planted_ankle_height
+
+            self._cleans_feet()                      # checks the parameters before a long fit
+            self.floor_ = planted_ankle_height(clips)
         self._fit_clips(clips)
         return self
+
+    def _cleans_feet(self) -> bool:
+        """Whether :meth:`sample` runs the footskate cleanup (class docstring); checks its parameters."""
+        if not hasattr(self, "footskate_cleanup"):
+            return False
+        from mocapkit.synthesis.footskate import ROOT_MOVES
+
+        if not isinstance(self.footskate_cleanup, (bool, np.bool_)):
+            raise ValueError(f"{type(self).__name__}: footskate_cleanup must be True or False, got "
+                             f"{self.footskate_cleanup!r}")
+        if self.footskate_root not in ROOT_MOVES:
+            raise ValueError(f"{type(self).__name__}: footskate_root must be one of {list(ROOT_MOVES)}, got "
+                             f"{self.footskate_root!r}")
+        return bool(self.footskate_cleanup)
 
     def sample(self, n_variants: int, n_frames: int | None = None, seed: int | None = None,
                skeleton: AsfSkeleton | None = None) -> list[Motion]:
@@ -236,8 +263,15 @@ class MotionSynthesizer(BaseEstimator):
             raise SynthesisInputError(f"sample: skeleton {skeleton.source or skeleton.name} does not match the "
                                       f"training clips' bones/dofs")
         rng = np.random.default_rng(seed)
-        out = []
+        cleans = self._cleans_feet()
+        out, self.footskate_reports_ = [], []
         for k, values in enumerate(self._sample_values(n_variants, n_frames, rng)):
+            if cleans:
+                from mocapkit.synthesis.footskate import cleanup_footskate
+
+                values, report = cleanup_footskate(values, skeleton, self.fps_, floor=self.floor_,
+                                                   move_root=self.footskate_root)
+                self.footskate_reports_.append(report)
             out.append(amc_motion(skeleton, values, fps=self.fps_, angle_unit="deg",
                                   name=f"{type(self).__name__}_variant_{k:03d}"))
         return out

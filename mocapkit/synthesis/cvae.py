@@ -54,6 +54,8 @@ class CVAESynthesizer(MotionSynthesizer):
         max_turn_speed: training clips are cut at joint-angle flips faster than this (degrees per second;
             :func:`~mocapkit.synthesis.representation.continuous_pieces`, as for SLFM); None: no cutting.
         random_state: seed of the initialisation, the batches and the training noise.
+        footskate_cleanup, footskate_root: the footskate cleanup after sampling, the same as SLFM's
+            (:class:`~mocapkit.synthesis.base.MotionSynthesizer`).
 
     Attributes (after ``fit``): module_: the trained :class:`~mocapkit.train.motion_vae_module.MotionVAEModule`
     (eval mode); mean_, scale_: float64 ``[F]`` standardisation; starts_: float64 ``[C, 2, F]`` the first two
@@ -66,7 +68,8 @@ class CVAESynthesizer(MotionSynthesizer):
 
     def __init__(self, fps: float | None = 30.0, latent: int = 16, hidden: int = 256, layers: int = 2,
                  beta: float = 0.01, condition_noise: float = 0.05, steps: int = 400, batch_size: int = 256,
-                 lr: float = 1e-3, max_turn_speed: float | None = 5400.0, random_state: int | None = 0):
+                 lr: float = 1e-3, max_turn_speed: float | None = 5400.0, random_state: int | None = 0,
+                 footskate_cleanup: bool = True, footskate_root: str = "full"):
         self.fps = fps
         self.latent = latent
         self.hidden = hidden
@@ -78,6 +81,8 @@ class CVAESynthesizer(MotionSynthesizer):
         self.lr = lr
         self.max_turn_speed = max_turn_speed
         self.random_state = random_state
+        self.footskate_cleanup = footskate_cleanup
+        self.footskate_root = footskate_root
 
     def _fit_clips(self, clips: list[Motion]) -> None:
         import lightning as L

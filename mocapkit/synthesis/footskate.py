@@ -64,6 +64,19 @@ class FootskateReport:
     root_shift: np.ndarray
 
 
+def planted_ankle_height(clips) -> float | None:
+    """The floor of :func:`cleanup_footskate` from real clips: the mean over ``clips`` (AMC
+    :class:`~mocapkit.datasets.formats.motion.Motion`, ``metadata["asf"]`` their skeleton) of each clip's lowest
+    ankle height over both legs, metres; None when the skeleton has no legs (``LL``/``RL`` partitions with a
+    shin)."""
+    skeleton = clips[0].metadata["asf"]
+    shins = [part[1] for name, part in partitions(skeleton).items() if name in ("LL", "RL") and len(part) > 1]
+    if not shins:
+        return None
+    ankles = [skeleton.joint_names.index(shin) for shin in shins]
+    return float(np.mean([clip.positions[:, ankles, 1].min() for clip in clips]))
+
+
 def _smoothed(signal: np.ndarray, frames: int) -> np.ndarray:
     """Moving average of ``[T, ...]`` over ``frames`` frames (edges padded with their values)."""
     width = max(1, min(int(frames), len(signal)))

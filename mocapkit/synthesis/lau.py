@@ -86,6 +86,8 @@ class LauDBNSynthesizer(MotionSynthesizer):
         max_turn_speed: training clips are cut at joint-angle flips faster than this (degrees per second;
             :func:`~mocapkit.synthesis.representation.continuous_pieces`, as for SLFM), so that a flip is not
             learnt as a frame difference; None: no cutting.
+        footskate_cleanup, footskate_root: the footskate cleanup after sampling, the same as SLFM's
+            (:class:`~mocapkit.synthesis.base.MotionSynthesizer`).
 
     Attributes (after ``fit``):
         width_: the chosen width. cv_log_likelihood_: ``{width: mean held-out log-likelihood per frame and
@@ -99,10 +101,13 @@ class LauDBNSynthesizer(MotionSynthesizer):
     min_frames = 4
 
     def __init__(self, widths: Sequence[float] = WIDTHS, start_noise: float = 0.1,
-                 max_turn_speed: float | None = 5400.0):
+                 max_turn_speed: float | None = 5400.0, footskate_cleanup: bool = True,
+                 footskate_root: str = "full"):
         self.widths = widths
         self.start_noise = start_noise
         self.max_turn_speed = max_turn_speed
+        self.footskate_cleanup = footskate_cleanup
+        self.footskate_root = footskate_root
 
     @staticmethod
     def _pairs(frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

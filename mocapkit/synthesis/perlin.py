@@ -91,15 +91,20 @@ class PerlinNoiseSynthesizer(CopyTrainingClips):
     Args:
         amplitude: peak of the noise in units of each channel's within-class sd (``>= 0``; 0: plain copies).
         frequency: noise frequency, Hz (lattice points ``1/frequency`` seconds apart; ``> 0``).
+        footskate_cleanup, footskate_root: the footskate cleanup after sampling, the same as SLFM's
+            (:class:`~mocapkit.synthesis.base.MotionSynthesizer`).
 
     Attributes (after ``fit``): those of :class:`CopyTrainingClips`, and ``sigma_``: float64 ``[7 + 3B]``
     within-class sd of every channel of the :mod:`~mocapkit.synthesis.representation` features (ASF units per
     frame / radians per frame for the root's ``dx, dz, dyaw``, ASF units for its height, radians otherwise).
     """
 
-    def __init__(self, amplitude: float = 1.0, frequency: float = 2.0):
+    def __init__(self, amplitude: float = 1.0, frequency: float = 2.0, footskate_cleanup: bool = True,
+                 footskate_root: str = "full"):
         self.amplitude = amplitude
         self.frequency = frequency
+        self.footskate_cleanup = footskate_cleanup
+        self.footskate_root = footskate_root
 
     def _encoded(self, matrix: np.ndarray):
         """``(flat features [T, 7 + 3B], start_xz, start_yaw)`` of AMC values ``[T, channels]`` on the reference

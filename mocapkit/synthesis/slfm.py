@@ -57,7 +57,6 @@ from mocapkit.synthesis.base import (
     rotation_columns,
     time_warp,
 )
-from mocapkit.synthesis.footskate import ROOT_MOVES, cleanup_footskate
 from mocapkit.synthesis.representation import (
     ROOT_FEATURES,
     FeatureClip,
@@ -626,8 +625,8 @@ class SLFMSynthesizer(MotionSynthesizer):
     are projected onto their dofs (:func:`~mocapkit.synthesis.representation.project_expmap`), so later frames
     condition on poses the skeleton can take. The root path is integrated from the planar steps
     (:func:`~mocapkit.synthesis.representation.decode`), starting at the first training clip's position and
-    heading; ``footskate_cleanup`` then grounds and pins planted feet (:mod:`mocapkit.synthesis.footskate`; the
-    floor is the training clips' mean lowest ankle height).
+    heading; ``footskate_cleanup`` then grounds and pins planted feet (:class:`~mocapkit.synthesis.base.
+    MotionSynthesizer`, the same for every synthesiser).
 
     Args:
         frame_stride: every how many frames (at ``model_fps``) a training pair is taken.
@@ -641,10 +640,8 @@ class SLFMSynthesizer(MotionSynthesizer):
             draws, the thesis's literal procedure (§3.6). Not from the thesis; the normals are mapped through each
             frame's own covariance, so the correlation of the outputs is approximate.
         dynamic_feature: ``"position"`` or ``"scf_difference"``.
-        footskate_cleanup: ground and pin planted feet after sampling.
-        footskate_root: how the cleanup moves the root (``move_root`` of
-            :func:`~mocapkit.synthesis.footskate.cleanup_footskate`): ``"full"`` (default; the travel follows the
-            planted feet), ``"vertical"`` (the sampled path is kept) or ``"none"``.
+        footskate_cleanup, footskate_root: the footskate cleanup after sampling
+            (:class:`~mocapkit.synthesis.base.MotionSynthesizer`).
         model_fps: the frame rate the models work at (None: the clips' own, the thesis's 120 Hz). Lower, the
             clips are resampled for training (:func:`~mocapkit.synthesis.base.resample_clip`) and the variants are
             drawn at this rate, then brought back to the clips' rate by a cubic spline before the footskate
@@ -687,9 +684,8 @@ class SLFMSynthesizer(MotionSynthesizer):
 
     Attributes (after ``fit``): ``models_`` (every model, in sampling order), ``partitions_``, ``fit_seconds_``,
     ``noise_scale_`` and ``variation_by_noise_scale_`` (:meth:`_set_noise_scale`), ``angle_flips_`` (``(clip,
-    frame, bone, degrees)``) and ``unused_pieces_`` (``(clip, start, stop)``) of the cutting,
-    ``footskate_reports_`` (after ``sample`` with cleanup: one :class:`~mocapkit.synthesis.footskate.
-    FootskateReport` per variant).
+    frame, bone, degrees)``) and ``unused_pieces_`` (``(clip, start, stop)``) of the cutting, and those of
+    :class:`~mocapkit.synthesis.base.MotionSynthesizer` (``floor_``, ``footskate_reports_``).
     """
 
     min_clips = 2
@@ -783,8 +779,6 @@ class SLFMSynthesizer(MotionSynthesizer):
             raise ValueError(f"noise_scale must be 'auto' or a number >= 0, got {self.noise_scale!r}")
         if not isinstance(self.cross_partition, (bool, np.bool_)):
             raise ValueError(f"cross_partition must be True or False, got {self.cross_partition!r}")
-        if self.footskate_root not in ROOT_MOVES:
-            raise ValueError(f"footskate_root must be one of {list(ROOT_MOVES)}, got {self.footskate_root!r}")
         start = time.perf_counter()
         if self.model_fps is not None and not float(self.model_fps) > 0:
             raise ValueError(f"model_fps must be positive (or None), got {self.model_fps!r}")
@@ -816,9 +810,6 @@ class SLFMSynthesizer(MotionSynthesizer):
         self.first_frame_mean_ = first.mean(axis=0)
         self.first_frame_std_ = first.std(axis=0)
         self.start_xz_, self.start_yaw_ = root_start(clips[0])
-        shins = [part[1] for name, part in self.partitions_.items() if name in ("LL", "RL") and len(part) > 1]
-        ankles = [self.skeleton_.joint_names.index(shin) for shin in shins]
-        self.floor_ = float(np.mean([c.positions[:, ankles, 1].min() for c in resampled])) if ankles else None
         self.models_ = []
         for partition in self.partitions_.values():
             self.models_.extend(self._node_models(partition, partition_ancestors(self.skeleton_, partition)))
@@ -955,7 +946,7 @@ class SLFMSynthesizer(MotionSynthesizer):
             self._project(flat[:, 0])
         positions, dynamic = self._start_arrays(flat)
         self._rollout(flat, positions, dynamic, rng)
-        out, self.footskate_reports_ = [], []
+        out = []
         for v in range(V):
             values = decode(FeatureClip.from_flat(flat[v], self.bones_), self.skeleton_, start_xz=self.start_xz_,
                             start_yaw=self.start_yaw_)
@@ -963,9 +954,5 @@ class SLFMSynthesizer(MotionSynthesizer):
                 matrix = np.concatenate([values[bone] for bone in self.layout_.bones], axis=1)
                 values = dof_values(time_warp(matrix, n_frames, rotation_columns(self.layout_), kind="cubic"),
                                     self.layout_)
-            if self.footskate_cleanup:
-                values, report = cleanup_footskate(values, self.skeleton_, self.fps_, floor=self.floor_,
-                                                   move_root=self.footskate_root)
-                self.footskate_reports_.append(report)
             out.append(values)
         return out

@@ -56,8 +56,8 @@ def find_clips(inputs: Sequence[str | os.PathLike], motion_type: str | None = No
 def make_synthesizer(method: str, seed: int, footskate_cleanup: bool, options: dict | None = None
                      ) -> MotionSynthesizer:
     """The synthesiser ``method`` (a key of :data:`METHODS`) seeded with ``seed``, with ``options`` as parameters
-    (``set_params``: an unknown one is a ``ValueError`` listing the valid ones). ``footskate_cleanup`` applies to
-    SLFM, the one method with a cleanup step."""
+    (``set_params``: an unknown one is a ``ValueError`` listing the valid ones). ``footskate_cleanup`` switches
+    the footskate cleanup that every method shares (:class:`~mocapkit.synthesis.base.MotionSynthesizer`)."""
     import importlib
 
     if method not in METHODS:
@@ -86,7 +86,7 @@ def synthesize(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, 
         method: ``"slfm"`` (:class:`~mocapkit.synthesis.slfm.SLFMSynthesizer`).
         motion_type: keep only files whose name contains this (e.g. ``"hopBothLegs1hops"``).
         max_clips: use the first ``max_clips`` matching files (sorted by path; the thesis trains on 10).
-        footskate_cleanup: pin planted feet in the variants.
+        footskate_cleanup: ground and pin planted feet in the variants.
         options: further constructor parameters of the synthesiser (e.g. ``{"n_inducing": 32}``).
         progress: progress lines on stderr.
 
