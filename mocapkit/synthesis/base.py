@@ -239,8 +239,8 @@ class MotionSynthesizer(BaseEstimator):
             return False
         from mocapkit.synthesis.footskate import ROOT_MOVES
 
-        if not isinstance(self.footskate_cleanup, (bool, np.bool_)):
-            raise ValueError(f"{type(self).__name__}: footskate_cleanup must be True or False, got "
+        if not isinstance(self.footskate_cleanup, (bool, np.bool_)):  # a bad parameter value, as scikit-learn's
+            raise ValueError(f"{type(self).__name__}: footskate_cleanup must be True or False, got "  # noqa: TRY004
                              f"{self.footskate_cleanup!r}")
         if self.footskate_root not in ROOT_MOVES:
             raise ValueError(f"{type(self).__name__}: footskate_root must be one of {list(ROOT_MOVES)}, got "
