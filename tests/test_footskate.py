@@ -5,7 +5,7 @@ import pytest
 
 from mocapkit.datasets.formats.asf_amc import forward_kinematics
 from mocapkit.datasets.synthetic.hdm05 import actor_skeleton
-from mocapkit.synthesis.footskate import cleanup_footskate, detect_contacts
+from mocapkit.synthesis.footskate import cleanup_footskate, detect_contacts, root_shift
 
 FPS = 120.0
 T = 60
@@ -100,3 +100,18 @@ def test_a_foot_moving_up_and_down_is_no_contact():
     # only the turns at the floor, where the foot is slow and low, can be stance; never the climb
     speed = np.abs(np.gradient(ankle[:, 1])) * FPS
     assert not contact[speed > 0.6].any()
+
+
+def test_root_slack_lets_the_legs_absorb_small_slides():
+    t = np.arange(240) / FPS
+    floor = 0.1
+    swaying = np.stack([0.04 * np.sin(2 * np.pi * t), np.full_like(t, floor), np.zeros_like(t)], axis=1)
+    walking = np.stack([-SPEED * t, np.full_like(t, floor), np.zeros_like(t)], axis=1)
+    contact = np.ones(len(t), dtype=bool)
+    assert np.abs(root_shift([swaying], [contact], floor)[:, 0]).max() == pytest.approx(0.04, abs=2e-3)
+    assert np.abs(root_shift([swaying], [contact], floor, slack=0.05)[:, 0]).max() < 1e-9
+    # a steady slide is still taken up by the root, lagging by the slack at most
+    full = root_shift([walking], [contact], floor)[:, 0]
+    lagging = root_shift([walking], [contact], floor, slack=0.05)[:, 0]
+    np.testing.assert_allclose(full, SPEED * t, atol=1e-9)
+    assert np.abs(lagging - full)[30:-30].max() <= 0.05 + 1e-9 and lagging[-30] > 0.9 * full[-30]

@@ -149,8 +149,20 @@ def _pin_targets(ankle: np.ndarray, contact: np.ndarray, blend_frames: int, floo
     return ankle + weight[:, None] * (pin - ankle), weight
 
 
-def root_shift(ankles: list[np.ndarray], contacts: list[np.ndarray], floor: float, blend_frames: int = 6
-               ) -> np.ndarray:
+def _follow(path: np.ndarray, slack: float) -> np.ndarray:
+    """``[T, 2]``: a path that stays within ``slack`` of ``path`` and moves only when ``path`` pulls it further
+    (a dead-band follower starting at ``path[0]``)."""
+    out = np.empty_like(path)
+    out[0] = path[0]
+    for t in range(1, len(path)):
+        gap = out[t - 1] - path[t]
+        norm = float(np.hypot(*gap))
+        out[t] = path[t] + (gap if norm <= slack else gap * (slack / norm))
+    return out
+
+
+def root_shift(ankles: list[np.ndarray], contacts: list[np.ndarray], floor: float, blend_frames: int = 6,
+               slack: float = 0.0) -> np.ndarray:
     """float64 ``[T, 3]`` metres: the shift of the root that grounds and halts the planted feet.
 
     - **Horizontal** (x, z): the root's step in each frame loses the weighted mean horizontal step of the
@@ -166,6 +178,9 @@ def root_shift(ankles: list[np.ndarray], contacts: list[np.ndarray], floor: floa
         ankles: per leg, float64 ``[T, 3]`` ankle positions (metres, y up).
         contacts: per leg, bool ``[T]`` (:func:`detect_contacts`).
         floor: the ankle height of a planted foot, metres.
+        slack: metres the horizontal shift may lag behind the full correction (a dead-band follower, then
+            smoothed like the vertical shift): the legs' IK absorbs slides within it, so an in-place motion
+            whose planted feet slide back and forth keeps its pelvis in place; 0 (default): the full correction.
     """
     T = len(ankles[0])
     step, total = np.zeros((T, 2)), np.zeros(T)
@@ -180,6 +195,8 @@ def root_shift(ankles: list[np.ndarray], contacts: list[np.ndarray], floor: floa
             count[start:stop] += 1
     shift = np.zeros((T, 3))
     shift[:, [0, 2]] = -np.cumsum(step / np.maximum(total, 1.0)[:, None], axis=0)
+    if slack > 0 and T > 1:
+        shift[:, [0, 2]] = _smoothed(_follow(shift[:, [0, 2]], slack), 2 * blend_frames + 1)
     planted = np.flatnonzero(count)
     if len(planted):
         vertical = np.interp(np.arange(T), planted, lift[planted] / count[planted])
@@ -246,8 +263,8 @@ def _sliding(ankles: list[np.ndarray], contacts: list[np.ndarray], fps: float) -
 
 def cleanup_footskate(values: dict[str, np.ndarray], skeleton: AsfSkeleton, fps: float, floor: float | None = None,
                       max_height: float = 0.12, height_tolerance: float = 0.03, vertical_speed: float = 0.3,
-                      min_contact_frames: int = 3, blend_frames: int = 12, move_root: str = "full"
-                      ) -> tuple[dict[str, np.ndarray], FootskateReport]:
+                      min_contact_frames: int = 3, blend_frames: int = 12, move_root: str = "full",
+                      root_slack: float = 0.0) -> tuple[dict[str, np.ndarray], FootskateReport]:
     """Ground and pin planted feet (module docstring).
 
     Args:
@@ -263,6 +280,7 @@ def cleanup_footskate(values: dict[str, np.ndarray], skeleton: AsfSkeleton, fps:
             (default) grounds and halts the planted feet, so the body's travel follows its feet; ``"vertical"``
             only grounds them and keeps the sampled path (the IK then pins what the legs reach); ``"none"``
             leaves the root alone.
+        root_slack: the ``slack`` of :func:`root_shift` (metres).
 
     The defaults ``move_root="full"`` and ``blend_frames=12`` were chosen on training clips only: SLFM variants
     (literal model, no cross-partition inputs) of the seed-0 splits of the four HDM05 types of ``mocapkit compare
@@ -271,6 +289,8 @@ def cleanup_footskate(values: dict[str, np.ndarray], skeleton: AsfSkeleton, fps:
     against the clips' leave-one-out distance): full/12 0.78, full/6 0.83, vertical/12 0.93, vertical/6 0.95,
     none/12 1.06, none/6 1.12, no cleanup 1.46. The seed-1 splits hold some of those clips among their held-out
     references.
+    ``root_slack`` on the same variants (full/12): 0 → 0.78, 0.05 → 0.79, 0.1 → 0.80, 0.2 → 0.82; slack helps
+    squats (feature distance 2.28 → 1.60 at 0.05, the clips' own 0.66) and costs the elbow-to-knee (2.15 → 2.22).
 
     Raises:
         ValueError: an unknown ``move_root``.
@@ -302,7 +322,7 @@ def cleanup_footskate(values: dict[str, np.ndarray], skeleton: AsfSkeleton, fps:
     contacts = {thigh: mask for (thigh, _), mask in zip(legs, masks)}
     shift = np.zeros((len(positions), 3))
     if move_root != "none" and any(mask.any() for mask in masks):
-        shift = root_shift(before, masks, floor, blend_frames)
+        shift = root_shift(before, masks, floor, blend_frames, root_slack)
         order = [channel.upper() for channel in skeleton.root_order]
         if "root" not in out:
             out["root"] = np.zeros((len(positions), len(order)))
