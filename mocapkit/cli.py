@@ -463,7 +463,8 @@ def build_parser() -> argparse.ArgumentParser:
     synthesize.add_argument("--method", default="slfm", choices=["slfm", "perlin", "lau", "cvae"],
                             help="synthesiser (default slfm; perlin, lau and cvae are the baselines)")
     synthesize.add_argument("--no-footskate", dest="no_footskate", action="store_true",
-                            help="skip the footskate cleanup (contact detection + two-bone leg IK)")
+                            help="skip the footskate cleanup that every method applies (stances, root shift, "
+                                 "two-bone leg IK)")
     synthesize.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                             help="a parameter of the synthesiser, repeatable, e.g. n_inducing=64, max_iter=50, "
                                  "frame_stride=4, sample_noise=False, dynamic_feature=scf_difference")
