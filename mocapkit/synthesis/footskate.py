@@ -24,11 +24,12 @@ values (so the result is still a valid AMC motion on the same skeleton):
    about the hip by the smallest rotation that points the ankle at the target. Only the root's translation and
    the thigh's and the shin's AMC values change; the foot keeps its angles relative to the shin.
 
-Why the root moves: SLFM samples the root's planar steps and each leg in partitions of their own (gap 17), so
-the legs' stance does not follow the body's travel; on HDM05 jogs the planted ankles of its variants slid at
-1.65 m/s. Pinning them with the IK alone stretches the legs against the travel (jerk up to twice the real
-clips'); halting them through the root lets the feet set the travel instead, at the price of a travel speed
-that is the legs' and not the sampled one. The numbers behind the defaults are in :func:`cleanup_footskate`.
+Why the root moves: a generator samples the body's travel and the legs' swing as different outputs (SLFM's
+literal model even in partitions of their own, gap 17), so the legs' stance need not follow the travel; on HDM05
+jogs the planted ankles of the literal model's variants slid at 1.65 m/s. Pinning them with the IK alone
+stretches the legs against the travel (jerk 2.4× the training clips'); halting them through the root lets the
+feet set the travel instead, at the price of a travel speed that is the legs' and not the sampled one. The
+numbers behind the defaults are in :func:`cleanup_footskate`.
 """
 from __future__ import annotations
 
