@@ -558,3 +558,34 @@ def test_onnx_refiner_matches_learned_refiner(tiny_module, tiny_refiner, gappy, 
     assert filled.sum() > 0
     np.testing.assert_allclose(b.positions[filled], a.positions[filled], atol=1e-4, rtol=0)
     assert a.metadata["refinement"]["unfilled"] == b.metadata["refinement"]["unfilled"]
+
+
+def test_first_guess_of_an_unobserved_chain_is_its_nearest_observed_ancestor():
+    """Foot and knee never observed in a window: both start at the nearest observed ancestor's guess (a chain of
+    two, which the pointer jumping must follow twice); with the root missing too, joints whose every ancestor is
+    missing start at the root's guess (zero: the root is never observed)."""
+    net = NETWORKS["bigru"]()
+    parents = list(CMU31.parents)
+    foot = 9
+    knee, hip = parents[foot], parents[parents[foot]]
+    x = torch.randn(2, 12, len(parents), 3)
+    observed = torch.rand(2, 12, len(parents)) < 0.7
+    observed[:, 0] = True
+    observed[0, :, [foot, knee]] = False
+    observed[1] = False
+    observed[1, :, foot] = True                                                # only the foot is seen in window 1
+    guess = net.first_guess(x, observed)
+    cubic = cubic_fill(x, observed)
+    torch.testing.assert_close(guess[0, :, foot], cubic[0, :, hip], rtol=0, atol=0)
+    torch.testing.assert_close(guess[0, :, knee], cubic[0, :, hip], rtol=0, atol=0)
+    seen = observed[0].any(dim=0)
+    torch.testing.assert_close(guess[0][:, seen], cubic[0][:, seen], rtol=0, atol=0)
+    def below_foot(j):
+        while j >= 0 and j != foot:
+            j = parents[j]
+        return j == foot
+
+    for j in range(len(parents)):                       # the foot's descendants start at the foot, the rest at 0
+        expected = x[1, :, foot] if below_foot(j) else torch.zeros_like(x[1, :, foot])
+        torch.testing.assert_close(guess[1, :, j], expected, rtol=0, atol=0)
+    assert any(below_foot(j) and j != foot for j in range(len(parents)))       # the rule is exercised both ways

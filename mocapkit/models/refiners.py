@@ -11,9 +11,10 @@ normalisation and its inverse are part of the network (so they are part of the O
    turn and the training lengths.
 2. :func:`cubic_fill` — every missing entry gets a first guess: a cubic Hermite curve between the
    nearest observed frames before and after it (end tangents from one-sided differences), the
-   nearest observed value at the ends of the window; a joint missing in the whole window starts at its
-   parent's guess (the root at the window's centre). The nearest observed frames come from a sort and a cumulative count per
-   joint (``O(T log T)``, no loops, no ``cummax``), so it exports to ONNX.
+   nearest observed value at the ends of the window; a joint missing in the whole window starts at the guess
+   of its nearest ancestor observed in it (the root at the window's centre). The nearest observed frames come
+   from a sort and a cumulative count per joint (``O(T log T)``, no loops, no ``cummax``), so it exports to ONNX
+   as a few dozen operators.
 3. A temporal network sees ``[first guess, its temporal detail (x_t − mean of the neighbours), observed mask]``
    per frame and predicts a correction of
    every entry (its last layer starts at zero: an untrained refiner *is* the cubic fill). Observed
@@ -121,6 +122,14 @@ class PoseNormalizer(nn.Module):
         return self._turn(normalised * scale, cos, -sin) + centre
 
 
+def coordinate_mask(observed: torch.Tensor) -> torch.Tensor:
+    """``observed [B, T, J]`` as a mask of the coordinates' shape ``[B, T, J, 3]``, built by concatenation: a
+    ``torch.where`` whose condition broadcasts over the trailing axis of 3 runs several times slower in
+    onnxruntime (bench/RESULTS.md §13)."""
+    seen = observed.unsqueeze(-1)
+    return torch.cat([seen, seen, seen], dim=-1)
+
+
 def cubic_fill(x: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
     """First guess of every missing entry: cubic Hermite between the nearest observed frames.
 
@@ -132,38 +141,42 @@ def cubic_fill(x: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
         ``[B, T, J, 3]``: ``x`` where observed; inside a gap the cubic Hermite curve through the gap's end
         values with one-sided difference tangents (0 where the frame beyond an end is not observed); before the
         first / after the last observation the nearest observed value; 0 for a joint never observed.
+
+    Computed coordinate-first (``[B, 3, T, J]``, masks ``[B, 1, T, J]``) and with the four neighbour frames of
+    every entry read by one gather: an exported graph pays per operator, and onnxruntime broadcasts a mask over a
+    leading axis several times faster than over a trailing axis of 3 (bench/RESULTS.md §13).
     """
-    B, T, J, _ = x.shape
-    frames = torch.arange(T, device=x.device)
-    obs = observed.permute(0, 2, 1)                                          # [B,J,T]
-    # observed frames first, in time order: the k-th observed frame of (b, j) is order[b, j, k]
-    order = torch.argsort(torch.where(obs, frames, frames + T), dim=-1)
-    seen = torch.cumsum(obs.to(torch.int64), dim=-1)                         # observed frames ≤ t
-    total = seen[..., -1:]
-    at = lambda k: torch.gather(order, 2, k.clamp(0, T - 1))
-    prev = torch.where(seen > 0, at(seen - 1), torch.full_like(seen, -1)).permute(0, 2, 1)        # [B,T,J]
-    before_t = seen - obs.to(torch.int64)                                    # observed frames < t
-    nxt = torch.where(before_t < total, at(before_t), torch.full_like(seen, T)).permute(0, 2, 1)
-    has_prev, has_next = prev >= 0, nxt < T
+    T = x.shape[1]
+    x = x.permute(0, 3, 1, 2)                                                # [B,3,T,J]
+    frames = torch.arange(T, device=x.device).view(1, 1, T, 1)
+    seen_here = observed.unsqueeze(1)                                        # [B,1,T,J]
+    counted = seen_here.to(torch.int64)
+    # observed frames first, in time order: the k-th observed frame of (b, j) is order[b, 0, k, j]
+    order = torch.argsort(torch.where(seen_here, frames, frames + T), dim=2)  # [B,1,T,J]
+    seen = torch.cumsum(counted, dim=2)                                      # observed frames ≤ t
+    before_t = seen - counted                                                # observed frames < t
+    ranked = torch.gather(order, 2, torch.cat([seen - 1, before_t], dim=2).clamp(0, T - 1))
+    prev_at, next_at = ranked[:, :, :T], ranked[:, :, T:]
+    has_prev, has_next = seen > 0, before_t < seen[:, :, -1:]
+    prev = torch.where(has_prev, prev_at, torch.full_like(prev_at, -1))      # [B,1,T,J]
+    nxt = torch.where(has_next, next_at, torch.full_like(next_at, T))
     prev_c, next_c = prev.clamp(0, T - 1), nxt.clamp(0, T - 1)
-    xt = x.permute(0, 2, 1, 3)                                   # [B,J,T,3]
-    gather = lambda idx: torch.gather(xt, 2, idx.permute(0, 2, 1).unsqueeze(-1).expand(B, J, T, 3)).permute(0, 2, 1, 3)
-    obs_t = obs
-    obs_at = lambda idx: torch.gather(obs_t, 2, idx.permute(0, 2, 1)).permute(0, 2, 1)
-    p0, p1 = gather(prev_c), gather(next_c)
     before_prev, after_next = (prev_c - 1).clamp(0, T - 1), (next_c + 1).clamp(0, T - 1)
-    m0 = torch.where((obs_at(before_prev) & (prev_c > 0)).unsqueeze(-1), p0 - gather(before_prev), torch.zeros_like(p0))
-    m1 = torch.where((obs_at(after_next) & (next_c < T - 1)).unsqueeze(-1), gather(after_next) - p1, torch.zeros_like(p1))
-    span = (nxt - prev).clamp_min(1).to(x.dtype).unsqueeze(-1)   # [B,T,J,1]
-    u = ((frames.view(1, T, 1) - prev).to(x.dtype).unsqueeze(-1) / span).clamp(0, 1)
+    index = torch.cat([prev_c, next_c, before_prev, after_next], dim=2)      # [B,1,4T,J]
+    ends = torch.gather(x, 2, index.expand(-1, 3, -1, -1))                   # [B,3,4T,J]
+    p0, p1, q0, q1 = ends[:, :, :T], ends[:, :, T:2 * T], ends[:, :, 2 * T:3 * T], ends[:, :, 3 * T:]
+    beyond = torch.gather(seen_here, 2, index[:, :, 2 * T:])                 # [B,1,2T,J]
+    m0 = torch.where(beyond[:, :, :T] & (prev_c > 0), p0 - q0, torch.zeros_like(p0))
+    m1 = torch.where(beyond[:, :, T:] & (next_c < T - 1), q1 - p1, torch.zeros_like(p1))
+    span = (nxt - prev).clamp_min(1).to(x.dtype)                             # [B,1,T,J]
+    u = ((frames - prev).to(x.dtype) / span).clamp(0, 1)
     u2, u3 = u * u, u * u * u
     hermite = ((2 * u3 - 3 * u2 + 1) * p0 + (u3 - 2 * u2 + u) * span * m0
                + (-2 * u3 + 3 * u2) * p1 + (u3 - u2) * span * m1)
-    held = torch.where(has_prev.unsqueeze(-1), p0, p1)
-    inner = (has_prev & has_next).unsqueeze(-1)
-    fill = torch.where(inner, hermite, held)
-    fill = torch.where((has_prev | has_next).unsqueeze(-1), fill, torch.zeros_like(fill))
-    return torch.where(observed.unsqueeze(-1), x, fill)
+    held = torch.where(has_prev, p0, p1)
+    fill = torch.where(has_prev & has_next, hermite, held)
+    fill = torch.where(has_prev | has_next, fill, torch.zeros_like(fill))
+    return torch.where(seen_here, x, fill).permute(0, 2, 3, 1)
 
 
 #: Scale of the guess and of its temporal detail in the networks' input features (:meth:`_Refiner.features`).
@@ -197,17 +210,25 @@ class _Refiner(nn.Module):
             p, seen = self.parents[j], 0
             while p >= 0 and seen <= self.num_joints:
                 depth[j], p, seen = depth[j] + 1, self.parents[p], seen + 1
-        #: (joint, parent) pairs, parents before children: a joint never observed in a window starts at its parent
-        self.tree_order = [(j, self.parents[j]) for j in sorted(range(self.num_joints), key=lambda k: depth[k])
-                           if self.parents[j] >= 0]
+        #: pointer-jumping rounds that reach a joint's farthest ancestor (2 ** rounds ≥ the tree's depth)
+        self.ancestor_rounds = max(1, math.ceil(math.log2(max(depth) + 1)))
+        parent_or_self = [p if p >= 0 else j for j, p in enumerate(self.parents)]
+        self.register_buffer("parent_or_self", torch.tensor(parent_or_self, dtype=torch.int64), persistent=False)
 
     def first_guess(self, x: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
-        """:func:`cubic_fill`, then a joint never observed in the window takes its parent's guess (in tree order)."""
+        """:func:`cubic_fill`, then a joint never observed in the window takes the guess of its nearest ancestor
+        that is observed in it (the root's when none is), found by pointer jumping: each joint's pointer moves to
+        its parent where the joint is never observed, and ``ancestor_rounds`` compositions of the pointers reach
+        the nearest observed ancestor — a few gathers instead of a loop over the joints (a graph of ``J`` small
+        operators once exported)."""
         guess = cubic_fill(x, observed)
+        B, T, J, _ = guess.shape
         never = ~observed.any(dim=1, keepdim=True)                                   # [B,1,J]
-        for j, p in self.tree_order:
-            guess[:, :, j] = torch.where(never[:, :, j:j + 1], guess[:, :, p], guess[:, :, j])
-        return guess
+        own = torch.arange(J, device=guess.device).view(1, 1, J)
+        source = torch.where(never, self.parent_or_self.view(1, 1, J), own)           # [B,1,J]
+        for _ in range(self.ancestor_rounds):
+            source = torch.gather(source, 2, source)
+        return torch.gather(guess, 2, source.unsqueeze(-1).expand(B, T, J, 3))
 
     def correction(self, guess: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
         """``[B, T, J, 3]`` correction of the normalised first guess (subclasses)."""
@@ -228,9 +249,10 @@ class _Refiner(nn.Module):
     def normalised_forward(self, positions: torch.Tensor, missing: torch.Tensor):
         """``(refined, stats)`` with ``refined`` still normalised: what the training loss compares."""
         observed = ~missing.bool()
-        clean = torch.where(observed.unsqueeze(-1), positions, torch.zeros_like(positions))
+        seen = coordinate_mask(observed)
+        clean = torch.where(seen, positions, torch.zeros_like(positions))
         stats = self.normalizer.statistics(clean, observed)
-        x = torch.where(observed.unsqueeze(-1), self.normalizer(clean, stats), torch.zeros_like(clean))
+        x = torch.where(seen, self.normalizer(clean, stats), torch.zeros_like(clean))
         guess = self.first_guess(x, observed)
         return guess + self.correction(guess, observed), stats
 
@@ -308,8 +330,7 @@ class MaskedTransformerRefiner(_Refiner):
 
     def correction(self, guess: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
         B, T, J, _ = guess.shape
-        obs = observed.unsqueeze(-1)
-        tokenised = torch.where(obs, FEATURE_SCALE[0] * guess, self.mask_token.to(guess.dtype).expand(B, T, J, 3))
+        tokenised = torch.where(coordinate_mask(observed), FEATURE_SCALE[0] * guess, self.mask_token.to(guess.dtype).expand(B, T, J, 3))
         per_joint = torch.cat([tokenised, self.features(guess, observed)], dim=-1)                     # [B,T,J,10]
         pos = _sinusoid(T, self.dim, guess.device, guess.dtype)                      # [T, dim]
         if self.tokens == "frames":
