@@ -50,6 +50,14 @@ def _masked_mean(values: torch.Tensor, weights: torch.Tensor, dims: tuple[int, .
     return total / count.clamp_min(1e-6), count
 
 
+def coordinate_mask(observed: torch.Tensor) -> torch.Tensor:
+    """``observed [B, T, J]`` as a mask of the coordinates' shape ``[B, T, J, 3]``, built by concatenation: a
+    ``torch.where`` whose condition broadcasts over the trailing axis of 3 runs several times slower in
+    onnxruntime (bench/RESULTS.md §13)."""
+    seen = observed.unsqueeze(-1)
+    return torch.cat([seen, seen, seen], dim=-1)
+
+
 class PoseNormalizer(nn.Module):
     """Per-window normalisation of joint positions (see the module docstring) and its inverse.
 
@@ -79,7 +87,7 @@ class PoseNormalizer(nn.Module):
 
     def statistics(self, positions: torch.Tensor, observed: torch.Tensor):
         """``(centre [B,1,1,3], cos [B,1,1], sin [B,1,1], scale [B,1,1,1])`` of each window."""
-        w = observed.unsqueeze(-1).to(positions.dtype)                              # [B,T,J,1]
+        w = coordinate_mask(observed).to(positions.dtype)                           # [B,T,J,3]
         root_w = w[:, :, self.root:self.root + 1]
         root_mean, root_count = _masked_mean(positions[:, :, self.root:self.root + 1], root_w, (1, 2))
         all_mean, _ = _masked_mean(positions, w, (1, 2))
@@ -107,27 +115,24 @@ class PoseNormalizer(nn.Module):
         scale = (ratio * self.unit).reshape(-1, 1, 1, 1)
         return centre, cos, sin, scale
 
-    def _turn(self, x: torch.Tensor, cos: torch.Tensor, sin: torch.Tensor) -> torch.Tensor:
+    def _turn(self, coords: list[torch.Tensor], cos: torch.Tensor, sin: torch.Tensor) -> list[torch.Tensor]:
+        """The three ``[B, T, J]`` coordinates turned about the up axis by the per-window ``cos``, ``sin``."""
         h1, h2 = self.horizontal
-        a, b = x[..., h1], x[..., h2]
-        turned = {h1: cos * a + sin * b, h2: -sin * a + cos * b, self.up: x[..., self.up]}
-        return torch.stack([turned[0], turned[1], turned[2]], dim=-1)
+        a, b = coords[h1], coords[h2]
+        turned = {h1: cos * a + sin * b, h2: -sin * a + cos * b, self.up: coords[self.up]}
+        return [turned[0], turned[1], turned[2]]
 
+    # both directions work on one coordinate at a time: the per-window centre and scale then broadcast over
+    # frames and joints, which onnxruntime does several times faster than over a trailing axis of 3
     def forward(self, positions: torch.Tensor, stats) -> torch.Tensor:
         centre, cos, sin, scale = stats
-        return self._turn(positions - centre, cos, sin) / scale
+        coords = [positions[..., k] - centre[..., k] for k in range(3)]
+        return torch.stack([c / scale[..., 0] for c in self._turn(coords, cos, sin)], dim=-1)
 
     def inverse(self, normalised: torch.Tensor, stats) -> torch.Tensor:
         centre, cos, sin, scale = stats
-        return self._turn(normalised * scale, cos, -sin) + centre
-
-
-def coordinate_mask(observed: torch.Tensor) -> torch.Tensor:
-    """``observed [B, T, J]`` as a mask of the coordinates' shape ``[B, T, J, 3]``, built by concatenation: a
-    ``torch.where`` whose condition broadcasts over the trailing axis of 3 runs several times slower in
-    onnxruntime (bench/RESULTS.md §13)."""
-    seen = observed.unsqueeze(-1)
-    return torch.cat([seen, seen, seen], dim=-1)
+        turned = self._turn([normalised[..., k] * scale[..., 0] for k in range(3)], cos, -sin)
+        return torch.stack([c + centre[..., k] for k, c in enumerate(turned)], dim=-1)
 
 
 def cubic_fill(x: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
