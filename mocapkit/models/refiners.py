@@ -103,15 +103,15 @@ class PoseNormalizer(nn.Module):
             a, b = line[..., h1], line[..., h2]
             norm = torch.sqrt(a * a + b * b)
             ok = norm > 1e-6
-            cos = torch.where(ok, a / norm.clamp_min(1e-6), torch.ones_like(a)).unsqueeze(-1)   # [B,1,1]
-            sin = torch.where(ok, b / norm.clamp_min(1e-6), torch.zeros_like(b)).unsqueeze(-1)
+            cos = torch.where(ok, a / norm.clamp_min(1e-6), 1.0).unsqueeze(-1)   # [B,1,1]
+            sin = torch.where(ok, b / norm.clamp_min(1e-6), 0.0).unsqueeze(-1)
         bone_w = w[:, :, self.child, 0] * w[:, :, self.parent, 0]                   # [B,T,bones]
         length = torch.linalg.vector_norm(positions[:, :, self.child] - positions[:, :, self.parent], dim=-1)
-        length = torch.where(bone_w > 0, length, torch.zeros_like(length))
+        length = torch.where(bone_w > 0, length, 0.0)
         mean_len, count = _masked_mean(length, bone_w, (1,))                        # [B,1,bones]
         seen = (count > 0).to(positions.dtype)
         ratio = (mean_len * seen).sum(-1) / (self.bone_lengths * seen).sum(-1).clamp_min(1e-6)   # [B,1]
-        ratio = torch.where(seen.sum(-1) > 0, ratio, torch.ones_like(ratio))
+        ratio = torch.where(seen.sum(-1) > 0, ratio, 1.0)
         scale = (ratio * self.unit).reshape(-1, 1, 1, 1)
         return centre, cos, sin, scale
 
@@ -163,16 +163,16 @@ def cubic_fill(x: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
     ranked = torch.gather(order, 2, torch.cat([seen - 1, before_t], dim=2).clamp(0, T - 1))
     prev_at, next_at = ranked[:, :, :T], ranked[:, :, T:]
     has_prev, has_next = seen > 0, before_t < seen[:, :, -1:]
-    prev = torch.where(has_prev, prev_at, torch.full_like(prev_at, -1))      # [B,1,T,J]
-    nxt = torch.where(has_next, next_at, torch.full_like(next_at, T))
+    prev = torch.where(has_prev, prev_at, -1)      # [B,1,T,J]
+    nxt = torch.where(has_next, next_at, T)
     prev_c, next_c = prev.clamp(0, T - 1), nxt.clamp(0, T - 1)
     before_prev, after_next = (prev_c - 1).clamp(0, T - 1), (next_c + 1).clamp(0, T - 1)
     index = torch.cat([prev_c, next_c, before_prev, after_next], dim=2)      # [B,1,4T,J]
     ends = torch.gather(x, 2, index.expand(-1, 3, -1, -1))                   # [B,3,4T,J]
     p0, p1, q0, q1 = ends[:, :, :T], ends[:, :, T:2 * T], ends[:, :, 2 * T:3 * T], ends[:, :, 3 * T:]
     beyond = torch.gather(seen_here, 2, index[:, :, 2 * T:])                 # [B,1,2T,J]
-    m0 = torch.where(beyond[:, :, :T] & (prev_c > 0), p0 - q0, torch.zeros_like(p0))
-    m1 = torch.where(beyond[:, :, T:] & (next_c < T - 1), q1 - p1, torch.zeros_like(p1))
+    m0 = torch.where(beyond[:, :, :T] & (prev_c > 0), p0 - q0, 0.0)
+    m1 = torch.where(beyond[:, :, T:] & (next_c < T - 1), q1 - p1, 0.0)
     span = (nxt - prev).clamp_min(1).to(x.dtype)                             # [B,1,T,J]
     u = ((frames - prev).to(x.dtype) / span).clamp(0, 1)
     u2, u3 = u * u, u * u * u
@@ -180,7 +180,7 @@ def cubic_fill(x: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
                + (-2 * u3 + 3 * u2) * p1 + (u3 - u2) * span * m1)
     held = torch.where(has_prev, p0, p1)
     fill = torch.where(has_prev & has_next, hermite, held)
-    fill = torch.where(has_prev | has_next, fill, torch.zeros_like(fill))
+    fill = torch.where(has_prev | has_next, fill, 0.0)
     return torch.where(seen_here, x, fill).permute(0, 2, 3, 1)
 
 
@@ -255,9 +255,9 @@ class _Refiner(nn.Module):
         """``(refined, stats)`` with ``refined`` still normalised: what the training loss compares."""
         observed = ~missing.bool()
         seen = coordinate_mask(observed)
-        clean = torch.where(seen, positions, torch.zeros_like(positions))
+        clean = torch.where(seen, positions, 0.0)
         stats = self.normalizer.statistics(clean, observed)
-        x = torch.where(seen, self.normalizer(clean, stats), torch.zeros_like(clean))
+        x = torch.where(seen, self.normalizer(clean, stats), 0.0)
         guess = self.first_guess(x, observed)
         return guess + self.correction(guess, observed), stats
 
