@@ -111,19 +111,43 @@ def test_cubic_fill_reproduces_a_linear_trajectory_inside_gaps():
     assert torch.equal(out[observed], x[observed])     # observed entries untouched, bit for bit
 
 
-def test_cubic_fill_ends_hold_the_nearest_observation_and_unobserved_joint_is_zero():
+def test_cubic_fill_ends_hold_the_nearest_observation_without_extrapolation_and_unobserved_joint_is_zero():
     _, _, x = _track(T=20, J=3, seed=1)
     x = x.float()
     observed = torch.ones(1, 20, 3, dtype=torch.bool)
     observed[0, :5, 0] = False                        # leading gap
     observed[0, 14:, 0] = False                       # trailing gap
     observed[0, :, 1] = False                         # never observed
-    out = cubic_fill(torch.where(observed.unsqueeze(-1), x, torch.full_like(x, -7.0)), observed)
+    out = cubic_fill(torch.where(observed.unsqueeze(-1), x, torch.full_like(x, -7.0)), observed, extrapolate=0)
     assert torch.equal(out[0, :5, 0], x[0, 5, 0].expand(5, 3))
     assert torch.equal(out[0, 14:, 0], x[0, 13, 0].expand(6, 3))
     assert torch.equal(out[0, :, 1], torch.zeros(20, 3))
     assert torch.equal(out[0, :, 2], x[0, :, 2])
     assert torch.equal(out[observed], x[observed])
+
+
+def test_cubic_fill_continues_the_last_observed_step_at_the_ends_then_holds():
+    _, b, x = _track(T=30, J=1, seed=2)
+    observed = torch.ones(1, 30, 1, dtype=torch.bool)
+    observed[0, :10, 0] = False                       # 10 frames before the first observation
+    observed[0, 22:, 0] = False                       # 8 after the last
+    out = cubic_fill(torch.where(observed.unsqueeze(-1), x, torch.zeros_like(x)), observed, extrapolate=4)
+    torch.testing.assert_close(out[0, 6:10, 0], x[0, 6:10, 0], atol=1e-9, rtol=0)        # 4 frames continued
+    torch.testing.assert_close(out[0, :6, 0], x[0, 6, 0].expand(6, 3), atol=1e-9, rtol=0)  # then held
+    torch.testing.assert_close(out[0, 22:26, 0], x[0, 22:26, 0], atol=1e-9, rtol=0)
+    torch.testing.assert_close(out[0, 26:, 0], x[0, 25, 0].expand(4, 3), atol=1e-9, rtol=0)
+
+
+@pytest.mark.parametrize("tangents, exact", [("chord", True), ("zero", False)])
+def test_cubic_fill_tangent_rule_where_the_gap_ends_outer_neighbours_are_missing(tangents, exact):
+    """Frames 5 and 7 missing: each gap has one end whose outer neighbour is missing. The chord rule fills a
+    straight track exactly; the zero-tangent rule of the first runs bends it by a quarter of a frame's step."""
+    _, _, x = _track(T=21, J=2, seed=3)
+    observed = torch.ones(1, 21, 2, dtype=torch.bool)
+    observed[0, [5, 7, 12, 14]] = False
+    out = cubic_fill(torch.where(observed.unsqueeze(-1), x, torch.zeros_like(x)), observed, tangents)
+    error = (out - x).abs().max().item()
+    assert (error < 1e-9) if exact else (error > 0.05)
 
 
 def test_cubic_fill_is_a_smooth_bridge_between_the_gap_ends():
@@ -237,7 +261,7 @@ def test_untrained_network_is_the_first_guess(name, T):
         clean = torch.where(observed.unsqueeze(-1), x, 0.0)
         stats = net.normalizer.statistics(clean, observed)
         normalised = net.normalizer(clean, stats) * observed.unsqueeze(-1)
-        cubic = net.normalizer.inverse(cubic_fill(normalised, observed), stats)
+        cubic = net.normalizer.inverse(cubic_fill(normalised, observed, net.tangents, net.extrapolate), stats)
     assert out.shape == x.shape and out.dtype == torch.float32
     assert torch.isfinite(out).all()
     torch.testing.assert_close(out[observed], x[observed], atol=1e-5, rtol=0)

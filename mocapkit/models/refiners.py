@@ -135,17 +135,48 @@ class PoseNormalizer(nn.Module):
         return torch.stack([c + centre[..., k] for k, c in enumerate(turned)], dim=-1)
 
 
-def cubic_fill(x: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
+def observed_neighbours(observed: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(prev, next)``, int64 ``[B, 1, T, J]``: for every frame, the nearest observed frame at or before it (−1
+    when none) and strictly after it (``T`` when none), per joint, of ``observed`` bool ``[B, T, J]``.
+
+    From a sort and a cumulative count (``O(T log T)``, no loops, no ``cummax``), so that it exports to ONNX: the
+    k-th observed frame of a joint is ``order[k]``, and the frames observed up to ``t`` count ``seen[t]``.
+    """
+    T = observed.shape[1]
+    frames = torch.arange(T, device=observed.device).view(1, 1, T, 1)
+    seen_here = observed.unsqueeze(1)                                        # [B,1,T,J]
+    counted = seen_here.to(torch.int64)
+    order = torch.argsort(torch.where(seen_here, frames, frames + T), dim=2)  # observed frames first, in time order
+    seen = torch.cumsum(counted, dim=2)                                      # observed frames ≤ t
+    before_t = seen - counted                                                # observed frames < t
+    ranked = torch.gather(order, 2, torch.cat([seen - 1, before_t], dim=2).clamp(0, T - 1))
+    prev = torch.where(seen > 0, ranked[:, :, :T], -1)
+    nxt = torch.where(before_t < seen[:, :, -1:], ranked[:, :, T:], T)
+    return prev, nxt
+
+
+#: How :func:`cubic_fill` sets a gap end's tangent when the frame beyond that end is not observed either.
+TANGENT_RULES = ("chord", "zero")
+
+
+def cubic_fill(x: torch.Tensor, observed: torch.Tensor, tangents: str = "chord", extrapolate: int = 6) -> torch.Tensor:
     """First guess of every missing entry: cubic Hermite between the nearest observed frames.
 
     Args:
         x: ``[B, T, J, 3]`` (missing entries may hold anything finite).
         observed: bool ``[B, T, J]``.
+        tangents: the tangent at a gap end whose outer neighbour frame is not observed: ``"chord"``, the gap's
+            own slope (p1 − p0) / span (with both ends so, the fill is linear), or ``"zero"`` (the first
+            networks' rule: it bends the curve by a quarter of a frame's motion on one-frame gaps next to other
+            gaps, bench/RESULTS.md §13).
+        extrapolate: before the first / after the last observation, the nearest observed value moved on by the
+            observed frame step there for at most this many frames, then held (0: held from the start; a joint
+            lost at the end of a take otherwise freezes mid-motion).
 
     Returns:
         ``[B, T, J, 3]``: ``x`` where observed; inside a gap the cubic Hermite curve through the gap's end
-        values with one-sided difference tangents (0 where the frame beyond an end is not observed); before the
-        first / after the last observation the nearest observed value; 0 for a joint never observed.
+        values with one-sided difference tangents (``tangents`` where the frame beyond an end is not observed);
+        before the first / after the last observation as ``extrapolate`` says; 0 for a joint never observed.
 
     Computed coordinate-first (``[B, 3, T, J]``, masks ``[B, 1, T, J]``) and with the four neighbour frames of
     every entry read by one gather: an exported graph pays per operator, and onnxruntime broadcasts a mask over a
@@ -155,30 +186,26 @@ def cubic_fill(x: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
     x = x.permute(0, 3, 1, 2)                                                # [B,3,T,J]
     frames = torch.arange(T, device=x.device).view(1, 1, T, 1)
     seen_here = observed.unsqueeze(1)                                        # [B,1,T,J]
-    counted = seen_here.to(torch.int64)
-    # observed frames first, in time order: the k-th observed frame of (b, j) is order[b, 0, k, j]
-    order = torch.argsort(torch.where(seen_here, frames, frames + T), dim=2)  # [B,1,T,J]
-    seen = torch.cumsum(counted, dim=2)                                      # observed frames ≤ t
-    before_t = seen - counted                                                # observed frames < t
-    ranked = torch.gather(order, 2, torch.cat([seen - 1, before_t], dim=2).clamp(0, T - 1))
-    prev_at, next_at = ranked[:, :, :T], ranked[:, :, T:]
-    has_prev, has_next = seen > 0, before_t < seen[:, :, -1:]
-    prev = torch.where(has_prev, prev_at, -1)      # [B,1,T,J]
-    nxt = torch.where(has_next, next_at, T)
+    prev, nxt = observed_neighbours(observed)
+    has_prev, has_next = prev >= 0, nxt < T
     prev_c, next_c = prev.clamp(0, T - 1), nxt.clamp(0, T - 1)
     before_prev, after_next = (prev_c - 1).clamp(0, T - 1), (next_c + 1).clamp(0, T - 1)
     index = torch.cat([prev_c, next_c, before_prev, after_next], dim=2)      # [B,1,4T,J]
     ends = torch.gather(x, 2, index.expand(-1, 3, -1, -1))                   # [B,3,4T,J]
     p0, p1, q0, q1 = ends[:, :, :T], ends[:, :, T:2 * T], ends[:, :, 2 * T:3 * T], ends[:, :, 3 * T:]
     beyond = torch.gather(seen_here, 2, index[:, :, 2 * T:])                 # [B,1,2T,J]
-    m0 = torch.where(beyond[:, :, :T] & (prev_c > 0), p0 - q0, 0.0)
-    m1 = torch.where(beyond[:, :, T:] & (next_c < T - 1), q1 - p1, 0.0)
     span = (nxt - prev).clamp_min(1).to(x.dtype)                             # [B,1,T,J]
+    known0, known1 = beyond[:, :, :T] & (prev_c > 0), beyond[:, :, T:] & (next_c < T - 1)
+    step0, step1 = torch.where(known0, p0 - q0, 0.0), torch.where(known1, q1 - p1, 0.0)   # observed frame steps
+    unknown = (p1 - p0) / span if tangents == "chord" else 0.0               # a tangent whose neighbour is missing
+    m0, m1 = torch.where(known0, step0, unknown), torch.where(known1, step1, unknown)
     u = ((frames - prev).to(x.dtype) / span).clamp(0, 1)
     u2, u3 = u * u, u * u * u
     hermite = ((2 * u3 - 3 * u2 + 1) * p0 + (u3 - 2 * u2 + u) * span * m0
                + (-2 * u3 + 3 * u2) * p1 + (u3 - u2) * span * m1)
-    held = torch.where(has_prev, p0, p1)
+    after = p0 + step0 * (frames - prev).clamp(max=extrapolate).to(x.dtype)   # past the last observation
+    before = p1 - step1 * (nxt - frames).clamp(max=extrapolate).to(x.dtype)   # before the first
+    held = torch.where(has_prev, after, before)
     fill = torch.where(has_prev & has_next, hermite, held)
     fill = torch.where(has_prev | has_next, fill, 0.0)
     return torch.where(seen_here, x, fill).permute(0, 2, 3, 1)
@@ -201,8 +228,9 @@ class _Refiner(nn.Module):
 
     def __init__(self, joint_names: Sequence[str], parents: Sequence[int], up_axis: str = "y",
                  hips: Sequence[int] | None = None, bone_lengths: Sequence[float] | None = None,
-                 fps: float | None = None):
+                 fps: float | None = None, tangents: str = "chord", extrapolate: int = 6):
         super().__init__()
+        self.set_first_guess(tangents, extrapolate)
         self.joint_names = tuple(joint_names)
         self.parents = tuple(int(p) for p in parents)
         self.up_axis, self.fps = up_axis, None if fps is None else float(fps)
@@ -220,13 +248,21 @@ class _Refiner(nn.Module):
         parent_or_self = [p if p >= 0 else j for j, p in enumerate(self.parents)]
         self.register_buffer("parent_or_self", torch.tensor(parent_or_self, dtype=torch.int64), persistent=False)
 
+    def set_first_guess(self, tangents: str = "chord", extrapolate: int = 6) -> None:
+        """The first guess's rules (:func:`cubic_fill`); an inference-time setting, no weight depends on it."""
+        if tangents not in TANGENT_RULES:
+            raise ValueError(f"tangents must be one of {TANGENT_RULES}, got {tangents!r}")
+        if isinstance(extrapolate, bool) or not isinstance(extrapolate, int) or extrapolate < 0:
+            raise ValueError(f"extrapolate must be a frame count ≥ 0, got {extrapolate!r}")
+        self.tangents, self.extrapolate = tangents, extrapolate
+
     def first_guess(self, x: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
         """:func:`cubic_fill`, then a joint never observed in the window takes the guess of its nearest ancestor
         that is observed in it (the root's when none is), found by pointer jumping: each joint's pointer moves to
         its parent where the joint is never observed, and ``ancestor_rounds`` compositions of the pointers reach
         the nearest observed ancestor — a few gathers instead of a loop over the joints (a graph of ``J`` small
         operators once exported)."""
-        guess = cubic_fill(x, observed)
+        guess = cubic_fill(x, observed, self.tangents, self.extrapolate)
         B, T, J, _ = guess.shape
         never = ~observed.any(dim=1, keepdim=True)                                   # [B,1,J]
         own = torch.arange(J, device=guess.device).view(1, 1, J)
@@ -269,12 +305,17 @@ class BiGRURefiner(_Refiner):
         joint_names, parents, up_axis, hips, bone_lengths, fps: the layout and training statistics
             (the data module supplies them; :class:`PoseNormalizer`).
         hidden: GRU units per direction. layers: stacked GRU layers. dropout: between layers.
+        tangents, extrapolate: the first guess's rules for a gap end whose outer neighbour is missing and for the
+            frames before the first / after the last observation (:func:`cubic_fill`). ``tangents="zero",
+            extrapolate=0`` is the first guess of the runs trained before these options (their configs lack the
+            keys: restore them with ``LearnedRefiner(first_guess={"tangents": "zero", "extrapolate": 0})``).
     """
 
     def __init__(self, joint_names: Sequence[str], parents: Sequence[int], up_axis: str = "y",
                  hips: Sequence[int] | None = None, bone_lengths: Sequence[float] | None = None,
-                 fps: float | None = None, hidden: int = 128, layers: int = 2, dropout: float = 0.1):
-        super().__init__(joint_names, parents, up_axis, hips, bone_lengths, fps)
+                 fps: float | None = None, hidden: int = 128, layers: int = 2, dropout: float = 0.1,
+                 tangents: str = "chord", extrapolate: int = 6):
+        super().__init__(joint_names, parents, up_axis, hips, bone_lengths, fps, tangents, extrapolate)
         J = self.num_joints
         self.inp = nn.Sequential(nn.Linear(7 * J, hidden), nn.GELU())
         self.gru = nn.GRU(hidden, hidden, num_layers=layers, batch_first=True, bidirectional=True,
@@ -300,7 +341,7 @@ class MaskedTransformerRefiner(_Refiner):
     """Masked-autoencoder transformer; see the module docstring.
 
     Args:
-        joint_names, parents, up_axis, hips, bone_lengths, fps: as :class:`BiGRURefiner`.
+        joint_names, parents, up_axis, hips, bone_lengths, fps, tangents, extrapolate: as :class:`BiGRURefiner`.
         tokens: ``"frames"`` (a token per frame, joints as features) or ``"joints"`` (a token per joint and
             frame, attention over the joints of a frame and then over the frames of a joint in every layer).
         dim: token width. layers: encoder layers (``"joints"``: pairs of joint / frame layers). heads: attention
@@ -310,8 +351,8 @@ class MaskedTransformerRefiner(_Refiner):
     def __init__(self, joint_names: Sequence[str], parents: Sequence[int], up_axis: str = "y",
                  hips: Sequence[int] | None = None, bone_lengths: Sequence[float] | None = None,
                  fps: float | None = None, tokens: str = "frames", dim: int = 128, layers: int = 3, heads: int = 4,
-                 ff: int = 256, dropout: float = 0.1):
-        super().__init__(joint_names, parents, up_axis, hips, bone_lengths, fps)
+                 ff: int = 256, dropout: float = 0.1, tangents: str = "chord", extrapolate: int = 6):
+        super().__init__(joint_names, parents, up_axis, hips, bone_lengths, fps, tangents, extrapolate)
         if tokens not in ("frames", "joints"):
             raise ValueError(f"tokens must be 'frames' or 'joints', got {tokens!r}")
         J = self.num_joints

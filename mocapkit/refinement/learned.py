@@ -159,11 +159,15 @@ class LearnedRefiner(_WindowedRefiner):
         repair_threshold: an observed entry the network moves farther than this (metres) is replaced (repaired).
         max_empty_frames: interior runs of frames with every joint missing up to this long are filled.
         device: torch device of the network.
+        first_guess: None (the network's own) or keyword arguments of the network's ``set_first_guess``, e.g.
+            ``{"tangents": "zero", "extrapolate": 0}``: the first guess of runs trained before those options
+            (:class:`~mocapkit.models.refiners.BiGRURefiner`).
     """
 
     def __init__(self, checkpoint: str | Sequence[str] | None = None, experiment: str | None = None,
                  overrides: Sequence[str] = (), window: int | None = None, overlap: int | None = None,
-                 repair_threshold: float = 0.02, max_empty_frames: int = 12, device: str = "cpu"):
+                 repair_threshold: float = 0.02, max_empty_frames: int = 12, device: str = "cpu",
+                 first_guess: dict | None = None):
         self.checkpoint = checkpoint
         self.experiment = experiment
         self.overrides = overrides
@@ -172,6 +176,7 @@ class LearnedRefiner(_WindowedRefiner):
         self.repair_threshold = repair_threshold
         self.max_empty_frames = max_empty_frames
         self.device = device
+        self.first_guess = first_guess
 
     # -------------------------------------------------------------- loading / training
     @staticmethod
@@ -192,6 +197,8 @@ class LearnedRefiner(_WindowedRefiner):
 
     def _use(self, module) -> None:
         self.module_ = module.to(self.device).eval()
+        if self.first_guess is not None:
+            self.module_.model.set_first_guess(**dict(self.first_guess))
         self._set_skeleton(module.hparams.skeleton)
 
     def fit(self, motions: Sequence[Motion] | None = None, y=None) -> LearnedRefiner:
