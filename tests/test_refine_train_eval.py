@@ -43,6 +43,22 @@ def test_train_records_the_layout_and_the_training_performers(refiner_run):
     assert skeleton["hips"] == [1, 6] or tuple(skeleton["hips"]) == (1, 6)
 
 
+def test_first_guess_rules_are_recorded_and_can_be_restored_for_old_runs(refiner_run):
+    """A run records its first-guess rules (the model config); ``LearnedRefiner(first_guess=...)`` sets others on
+    the loaded network (how runs trained before the rules existed get theirs back) and rejects bad values."""
+    from mocapkit.refinement.learned import LearnedRefiner
+
+    default = LearnedRefiner(checkpoint=str(refiner_run / "best.ckpt")).fit()
+    assert (default.module_.model.tangents, default.module_.model.extrapolate) == ("chord", 6)
+    old = LearnedRefiner(checkpoint=str(refiner_run / "best.ckpt"), first_guess={"tangents": "zero", "extrapolate": 0})
+    old.fit()
+    assert (old.module_.model.tangents, old.module_.model.extrapolate) == ("zero", 0)
+    with pytest.raises(ValueError, match="tangents"):
+        LearnedRefiner(checkpoint=str(refiner_run / "best.ckpt"), first_guess={"tangents": "flat"}).fit()
+    with pytest.raises(ValueError, match="extrapolate"):
+        LearnedRefiner(checkpoint=str(refiner_run / "best.ckpt"), first_guess={"extrapolate": -1}).fit()
+
+
 def test_eval_writes_the_benchmark_table_with_classical_rows(refiner_run):
     from mocapkit.evaluation.evaluate import evaluate
 

@@ -10,8 +10,9 @@ normalisation and its inverse are part of the network (so they are part of the O
    statistics; a missing root, missing hips or unobserved bones fall back to the other joints, no
    turn and the training lengths.
 2. :func:`cubic_fill` — every missing entry gets a first guess: a cubic Hermite curve between the
-   nearest observed frames before and after it (end tangents from one-sided differences), the
-   nearest observed value at the ends of the window; a joint missing in the whole window starts at the guess
+   nearest observed frames before and after it (end tangents from one-sided differences, the gap's own slope
+   where the frame beyond an end is missing too), the last observed step continued for a few frames and then
+   held at the ends of the window; a joint missing in the whole window starts at the guess
    of its nearest ancestor observed in it (the root at the window's centre). The nearest observed frames come
    from a sort and a cumulative count per joint (``O(T log T)``, no loops, no ``cummax``), so it exports to ONNX
    as a few dozen operators.
@@ -376,7 +377,8 @@ class MaskedTransformerRefiner(_Refiner):
 
     def correction(self, guess: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
         B, T, J, _ = guess.shape
-        tokenised = torch.where(coordinate_mask(observed), FEATURE_SCALE[0] * guess, self.mask_token.to(guess.dtype).expand(B, T, J, 3))
+        mask_token = self.mask_token.to(guess.dtype).expand(B, T, J, 3)
+        tokenised = torch.where(coordinate_mask(observed), FEATURE_SCALE[0] * guess, mask_token)
         per_joint = torch.cat([tokenised, self.features(guess, observed)], dim=-1)                     # [B,T,J,10]
         pos = _sinusoid(T, self.dim, guess.device, guess.dtype)                      # [T, dim]
         if self.tokens == "frames":
