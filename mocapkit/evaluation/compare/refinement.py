@@ -743,7 +743,8 @@ def _plot_levels(table: dict, protocols: list[str], name: str, xlabel: str, path
 
     plt = pyplot()
     levels.sort()
-    fig, ax = plt.subplots(figsize=(7.5, 4.4))
+    longest = max((len(label) for label in table["methods"].values()), default=0)
+    fig, ax = plt.subplots(figsize=(max(7.5, 5.0 + 0.06 * longest), 4.4))      # room for the legend's labels
     styles = _styles(table["methods"].values())
     for key, label in table["methods"].items():
         xs, ys, es = [], [], []
@@ -758,7 +759,7 @@ def _plot_levels(table: dict, protocols: list[str], name: str, xlabel: str, path
     ax.set_xlabel(xlabel)
     ax.set_ylabel("RMSE (cm, Wang eq. 3.18)")
     ax.set_yscale("log", nonpositive="clip")
-    ax.set_title(f"{name}: RMSE, mean ± sd over seeds × folds")
+    ax.set_title(f"{name}: RMSE, mean ± sd over seeds × folds", loc="left")
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=7, frameon=False, loc="center left", bbox_to_anchor=(1.0, 0.5))
     return save_figure(fig, path)
