@@ -202,6 +202,15 @@ def check_clips(clips: Sequence[Motion], min_clips: int = 2, min_frames: int = 4
     return layout
 
 
+def check_flag(estimator, name: str) -> bool:
+    """``estimator.<name>`` as a bool; a ValueError naming the class and parameter when it is not True or False
+    (a bad parameter value, as scikit-learn's checks raise)."""
+    value = getattr(estimator, name)
+    if not isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"{type(estimator).__name__}: {name} must be True or False, got {value!r}")  # noqa: TRY004
+    return bool(value)
+
+
 class MotionSynthesizer(BaseEstimator):
     """Base class of variation synthesisers (see the module docstring).
 
@@ -239,13 +248,11 @@ class MotionSynthesizer(BaseEstimator):
             return False
         from mocapkit.synthesis.footskate import ROOT_MOVES
 
-        if not isinstance(self.footskate_cleanup, (bool, np.bool_)):  # a bad parameter value, as scikit-learn's
-            raise ValueError(f"{type(self).__name__}: footskate_cleanup must be True or False, got "  # noqa: TRY004
-                             f"{self.footskate_cleanup!r}")
+        cleans = check_flag(self, "footskate_cleanup")
         if self.footskate_root not in ROOT_MOVES:
             raise ValueError(f"{type(self).__name__}: footskate_root must be one of {list(ROOT_MOVES)}, got "
                              f"{self.footskate_root!r}")
-        return bool(self.footskate_cleanup)
+        return cleans
 
     def sample(self, n_variants: int, n_frames: int | None = None, seed: int | None = None,
                skeleton: AsfSkeleton | None = None) -> list[Motion]:

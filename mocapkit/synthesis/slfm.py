@@ -49,6 +49,7 @@ from mocapkit.datasets.formats.motion import Motion
 from mocapkit.synthesis.base import (
     MotionSynthesizer,
     SynthesisInputError,
+    check_flag,
     clip_label,
     dof_values,
     model_frames,
@@ -777,8 +778,7 @@ class SLFMSynthesizer(MotionSynthesizer):
             raise ValueError(f"frame_stride must be >= 1, got {self.frame_stride}")
         if self.noise_scale != "auto" and (isinstance(self.noise_scale, str) or not float(self.noise_scale) >= 0):
             raise ValueError(f"noise_scale must be 'auto' or a number >= 0, got {self.noise_scale!r}")
-        if not isinstance(self.cross_partition, (bool, np.bool_)):  # a bad parameter value, as scikit-learn's
-            raise ValueError(f"cross_partition must be True or False, got {self.cross_partition!r}")  # noqa: TRY004
+        check_flag(self, "cross_partition")
         start = time.perf_counter()
         if self.model_fps is not None and not float(self.model_fps) > 0:
             raise ValueError(f"model_fps must be positive (or None), got {self.model_fps!r}")
