@@ -36,6 +36,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.ndimage import uniform_filter1d
 from scipy.spatial.transform import Rotation
 
 from mocapkit.datasets.formats.asf_amc import AsfSkeleton, forward_kinematics
@@ -79,14 +80,9 @@ def planted_ankle_height(clips) -> float | None:
 
 
 def _smoothed(signal: np.ndarray, frames: int) -> np.ndarray:
-    """Moving average of ``[T, ...]`` over ``frames`` frames (edges padded with their values)."""
-    width = max(1, min(int(frames), len(signal)))
-    kernel = np.ones(width) / width
-    pad = [(width // 2, width - 1 - width // 2)] + [(0, 0)] * (signal.ndim - 1)
-    padded = np.pad(signal, pad, mode="edge")
-    flat = padded.reshape(len(padded), -1)
-    out = np.stack([np.convolve(flat[:, k], kernel, mode="valid") for k in range(flat.shape[1])], axis=1)
-    return out.reshape(signal.shape)
+    """Moving average of ``[T, ...]`` along frames over ``frames`` frames (at most ``T``; edges padded with their
+    values)."""
+    return uniform_filter1d(signal, size=max(1, min(int(frames), len(signal))), axis=0, mode="nearest")
 
 
 def detect_contacts(ankle: np.ndarray, fps: float, floor: float, max_height: float = 0.12,
