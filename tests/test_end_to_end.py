@@ -69,6 +69,24 @@ def test_eval_writes_metrics_and_confusion_matrix(run_dir):
     assert (run_dir / "eval" / "confusion_matrix.png").stat().st_size > 1000
 
 
+def test_eval_with_test_time_views(run_dir, tmp_path):
+    def evaluate(name, *views):
+        out = tmp_path / name
+        assert main(["eval", f"ckpt_path={run_dir / 'best.ckpt'}", "trainer.enable_progress_bar=false",
+                     f"eval.out_dir={out}", *views]) == 0
+        return json.loads((out / "metrics.json").read_text())
+
+    plain = evaluate("plain")
+    assert plain["views"] is None
+    identity = evaluate("identity", "eval.views={crops:[1.0],rotate_deg:[0]}")     # one view = the clip itself
+    assert identity["views"]["n_views"] == 1
+    assert identity["confusion_matrix"] == plain["confusion_matrix"] and identity["top1"] == plain["top1"]
+    twelve = evaluate("twelve", "eval.views={crops:[1.0,0.9],rotate_deg:[0,-10,10]}")
+    assert twelve["views"] == {"crops": [1.0, 0.9], "rotate_deg": [0.0, -10.0, 10.0], "n_views": 12}
+    assert twelve["num_samples"] == plain["num_samples"]                        # one prediction per clip
+    assert "test-time views | 12" in (tmp_path / "twelve" / "summary.md").read_text()
+
+
 def test_export_checks_parity_and_predict_uses_it(run_dir, workspace, capsys):
     onnx_path = run_dir / "exported.onnx"
     assert main(["export", f"ckpt_path={run_dir / 'best.ckpt'}", f"out={onnx_path}"]) == 0

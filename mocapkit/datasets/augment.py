@@ -1,4 +1,5 @@
-"""Training-time augmentation of skeleton sequences (torch, one sample at a time).
+"""Augmentation of skeleton sequences (torch, one sample at a time): random views for training,
+fixed views for testing.
 
 Absent bodies and frames are stored as zeros, so every transform here keeps
 zeros as zeros. Random numbers come from torch's global generator, which
@@ -11,8 +12,33 @@ import math
 import torch
 
 
+def temporal_crop(skeleton: torch.Tensor, keep: int, start: int) -> torch.Tensor:
+    """Frames ``start … start + keep - 1`` of ``skeleton`` ``[M, T, J, 3]`` → ``[M, keep, J, 3]``."""
+    return skeleton[:, start:start + keep]
+
+
+def rotate_about_vertical(skeleton: torch.Tensor, angle: float) -> torch.Tensor:
+    """``skeleton`` ``[M, T, J, 3]`` (y up) rotated by ``angle`` radians about the vertical axis through the
+    centroid of its present (non-zero) joints; absent joints stay zeros."""
+    present = skeleton.abs().sum(-1, keepdim=True) > 0                      # [M, T, J, 1]
+    if not present.any() or angle == 0:
+        return skeleton
+    center = (skeleton * present).sum((0, 1, 2)) / present.sum()
+    c, s = math.cos(angle), math.sin(angle)
+    rot = skeleton.new_tensor([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+    rotated = (skeleton - center) @ rot.T + center
+    return torch.where(present, rotated, skeleton)
+
+
+def _check_fraction(name: str, values) -> tuple[float, ...]:
+    values = tuple(float(v) for v in values)
+    if not values or not all(0 < v <= 1 for v in values):
+        raise ValueError(f"{name} must be fractions in (0, 1], got {list(values)}")
+    return values
+
+
 class SkeletonAugment:
-    """Random rotation about the vertical axis and random temporal cropping.
+    """Random rotation about the vertical axis and random temporal cropping (training).
 
     Args:
         rotate_deg: maximum absolute rotation about the vertical (y) axis, degrees;
@@ -32,28 +58,50 @@ class SkeletonAugment:
 
     def __call__(self, skeleton: torch.Tensor) -> torch.Tensor:
         """``[M, T, J, 3]`` → ``[M, T', J, 3]`` with ``T' <= T``."""
-        skeleton = self._crop(skeleton)
-        if self.rotate_deg > 0:
-            skeleton = self._rotate(skeleton)
-        return skeleton
-
-    def _crop(self, skeleton: torch.Tensor) -> torch.Tensor:
         t = skeleton.shape[1]
         lo, hi = self.crop
-        if lo >= 1.0 or t <= self.min_frames:
-            return skeleton
-        ratio = lo + (hi - lo) * float(torch.rand(()))
-        keep = max(self.min_frames, int(round(ratio * t)))
-        start = int(torch.randint(0, t - keep + 1, ()))
-        return skeleton[:, start:start + keep]
+        if lo < 1.0 and t > self.min_frames:
+            ratio = lo + (hi - lo) * float(torch.rand(()))
+            keep = max(self.min_frames, round(ratio * t))
+            skeleton = temporal_crop(skeleton, keep, int(torch.randint(0, t - keep + 1, ())))
+        if self.rotate_deg > 0:
+            angle = math.radians(self.rotate_deg) * (2 * float(torch.rand(())) - 1)
+            skeleton = rotate_about_vertical(skeleton, angle)
+        return skeleton
 
-    def _rotate(self, skeleton: torch.Tensor) -> torch.Tensor:
-        present = skeleton.abs().sum(-1, keepdim=True) > 0                      # [M, T, J, 1]
-        if not present.any():
-            return skeleton
-        center = (skeleton * present).sum((0, 1, 2)) / present.sum()
-        angle = math.radians(self.rotate_deg) * (2 * float(torch.rand(())) - 1)
-        c, s = math.cos(angle), math.sin(angle)
-        rot = skeleton.new_tensor([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
-        rotated = (skeleton - center) @ rot.T + center
-        return torch.where(present, rotated, skeleton)
+
+class TestTimeViews:
+    """Fixed views of one test sample, whose predictions are averaged (test-time augmentation).
+
+    Every crop fraction ``f < 1`` gives three crops of ``round(f * T)`` frames (at the start, the centre and the
+    end of the clip), ``f = 1`` the whole clip; each crop is taken at every rotation. The views stay inside the
+    training augmentation's range when ``crops`` and ``rotate_deg`` do (``SkeletonAugment``'s ``crop`` and
+    ``rotate_deg``).
+
+    Args:
+        crops: fractions of the frames kept, each in (0, 1].
+        rotate_deg: rotations about the vertical axis, degrees.
+        min_frames: never crop below this many frames (a shorter clip is kept whole).
+    """
+
+    __test__ = False  # not a pytest class
+
+    def __init__(self, crops=(1.0,), rotate_deg=(0.0,), min_frames: int = 8):
+        self.crops = _check_fraction("eval.views.crops", crops)
+        self.rotate_deg = tuple(float(a) for a in rotate_deg)
+        if not self.rotate_deg:
+            raise ValueError("eval.views.rotate_deg: give at least one angle (0 for none)")
+        self.min_frames = int(min_frames)
+
+    def __len__(self) -> int:
+        return sum(1 if f >= 1 else 3 for f in self.crops) * len(self.rotate_deg)
+
+    def __call__(self, skeleton: torch.Tensor) -> list[torch.Tensor]:
+        """``[M, T, J, 3]`` → ``len(self)`` views ``[M, T', J, 3]`` (crops outer, rotations inner)."""
+        t = skeleton.shape[1]
+        crops = []
+        for fraction in self.crops:
+            keep = t if t <= self.min_frames else max(self.min_frames, round(fraction * t))
+            starts = [0] if fraction >= 1 else [0, (t - keep) // 2, t - keep]
+            crops += [temporal_crop(skeleton, keep, start) for start in starts]
+        return [rotate_about_vertical(crop, math.radians(angle)) for crop in crops for angle in self.rotate_deg]

@@ -24,7 +24,7 @@ import numpy as np
 import torch
 from torch.utils.data import DataLoader, Dataset
 
-from mocapkit.datasets.augment import SkeletonAugment
+from mocapkit.datasets.augment import SkeletonAugment, TestTimeViews
 from mocapkit.datasets.frames import uniform_frame_indices
 
 
@@ -115,6 +115,32 @@ class SequenceDataset(Dataset):
         return {"skeleton": seq, "label": int(self.labels[i]), "index": i, "subject": int(self.subjects[i])}
 
 
+class ViewDataset(Dataset):
+    """Every sample of ``dataset`` as ``len(views)`` consecutive items, one per fixed view of its skeleton.
+
+    Item ``k`` is view ``k % len(views)`` of sample ``k // len(views)``, with that sample's label, index and
+    subject, so predictions over an unshuffled loader come in groups of ``len(views)`` rows per sample.
+
+    Args:
+        dataset: a skeleton dataset whose items are dicts with ``"skeleton"`` ``[M, T, J, 3]``.
+        views: the fixed views (:class:`~mocapkit.datasets.augment.TestTimeViews`).
+    """
+
+    def __init__(self, dataset: Dataset, views: TestTimeViews):
+        self.dataset, self.views = dataset, views
+        self._cached: tuple[int, list] | None = None  # the last sample's views: a loader reads them in a row
+
+    def __len__(self) -> int:
+        return len(self.dataset) * len(self.views)
+
+    def __getitem__(self, k: int) -> dict:
+        sample, view = divmod(k, len(self.views))
+        if self._cached is None or self._cached[0] != sample:
+            item = self.dataset[sample]
+            self._cached = (sample, [{**item, "skeleton": v} for v in self.views(item["skeleton"])])
+        return self._cached[1][view]
+
+
 class SkeletonDataModule(SplitDataModule):
     """Base class of the skeleton data modules: batches padded by :func:`pad_collate`.
 
@@ -136,6 +162,12 @@ class SkeletonDataModule(SplitDataModule):
             self._parts[part] = SequenceDataset(self.sequences, indices, self.labels, self.subjects,
                                                 self.max_frames, self.augment if part == "train" else None)
         return self._parts[part]
+
+    def views_dataloader(self, part: str, views: TestTimeViews) -> DataLoader:
+        """An unshuffled loader over the ``"val"`` or ``"test"`` part in which every sample appears as
+        ``len(views)`` consecutive items (:class:`ViewDataset`), for test-time augmentation."""
+        return DataLoader(ViewDataset(self.dataset(part), views), batch_size=self.eval_batch_size, shuffle=False,
+                          num_workers=self.num_workers, collate_fn=self.collate_fn, drop_last=False)
 
     def _set_loading(self, batch_size: int, eval_batch_size: int | None, num_workers: int, max_frames: int,
                      augment: dict | None) -> None:
