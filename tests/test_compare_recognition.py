@@ -5,6 +5,7 @@ import json
 
 import numpy as np
 import pytest
+from omegaconf import OmegaConf
 
 from mocapkit.cli import main
 from mocapkit.datasets.ntu.cache import NTUCache
@@ -52,3 +53,40 @@ def test_ntu_learned_run_and_baseline_score_the_same_subjects(ntu_cache, tmp_pat
     assert cells["pooled_logreg"]["metrics"]["accuracy"] > 0.25           # 4 classes: chance 25 %
     assert {"accuracy", "top5", "mean_class_accuracy"} <= set(cells["energy_vgg"]["metrics"])
     assert "pooled joint statistics" in (out / "results.md").read_text()
+
+
+@pytest.mark.slow
+def test_methods_differing_only_in_evaluation_share_one_run(ntu_cache, tmp_path):
+    from mocapkit.evaluation.compare import (
+        Comparison,
+        ComparisonError,
+        compose,
+        run_comparison,
+    )
+
+    out = tmp_path / "cmp"
+    cfg = compose(["ntu_recognition", f"benchmark.root={ntu_cache}", f"out={out}", "seeds=[0]",
+                   ("learned_overrides=['trainer.max_epochs=1','trainer.enable_progress_bar=false',"
+                    "'data.batch_size=8','model.energy.size=32']")])
+    plain = OmegaConf.to_container(cfg, resolve=True)
+    vgg = plain["methods"]["energy_vgg"]
+    plain["methods"] = {
+        "energy_vgg": vgg,
+        "energy_vgg_identity_view": {"label": "one identity view", "learned": {
+            **vgg["learned"], "eval_overrides": ["eval.views={crops:[1.0],rotate_deg:[0]}"]}},
+        "energy_vgg_views": {"label": "12 views", "learned": {
+            **vgg["learned"], "eval_overrides": ["eval.views={crops:[1.0,0.9],rotate_deg:[0,-10,10]}"]}},
+    }
+    saved = run_comparison(plain)
+    cells = {c["method"]: c for c in saved["cells"]}
+    assert [cells[k]["shared_run"] for k in plain["methods"]] == [False, True, True]
+    assert len({c["run_dir"] for c in cells.values()}) == 1
+    assert len(list((out / "runs").glob("*/*/last.ckpt"))) == 1                      # trained once
+    # the identity view scores exactly what the plain evaluation scored; the 12 views were really applied
+    assert cells["energy_vgg_identity_view"]["metrics"] == cells["energy_vgg"]["metrics"]
+    views = json.loads((out / "runs" / "ntu_energy_vgg" / "energy_vgg_ntu60_xsub_seed0" / "eval_energy_vgg_views"
+                        / "metrics.json").read_text())["views"]
+    assert views["n_views"] == 12
+    plain["methods"]["energy_vgg"]["learned"]["eval_overrides"] = "eval.views=x"
+    with pytest.raises(ComparisonError, match="eval_overrides"):
+        Comparison(plain)

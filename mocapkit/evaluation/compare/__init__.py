@@ -17,7 +17,8 @@ Configuration schema (``configs/compare.yaml``; a comparison file sets the keys)
     seeds: [0, 1, 2]
     methods:                           # KEY → one of:
       cnn:   {label: ..., learned: {experiment: casiab_multitask, overrides: [trainer.max_epochs=80],
-                                    checkpoint: best}}   # best (best val/acc) | last (the last epoch)
+                                    checkpoint: best,    # best (best val/acc) | last (the last epoch)
+                                    eval_overrides: []}} # for `mocapkit eval` only, e.g. ['eval.views={...}']
       pca:   {label: ..., estimator: {_target_: mocapkit.classical.GEIPCALDA, n_pca: null},
               params: {...},           # set_params after instantiation (nested names: step__param)
               select: {stages: [{bow__clusterer__n_components: [100, 200]}, ...], cv: 3}   # or {reuse: KEY}
@@ -30,7 +31,10 @@ A **learned** method is trained with :func:`mocapkit.train.training.train` on
 ``experiment=<NAME>`` + the benchmark's :meth:`~Benchmark.learned_overrides` + ``seed``, ``output_root``,
 ``run_name`` + its ``overrides`` + ``learned_overrides``, and its ``best.ckpt`` (or ``last.ckpt`` with
 ``checkpoint: last``, e.g. for runs without a validation part) is scored with
-:func:`mocapkit.evaluation.evaluate.evaluate`; the runner rebuilds the run's data module and fails unless it
+:func:`mocapkit.evaluation.evaluate.evaluate` and its ``eval_overrides``. Learned methods whose training overrides
+are equal (they differ only in ``checkpoint`` or ``eval_overrides``) share one run per cell: the first trains
+it, the others score it (``shared_run`` in results.json), so "the same model with test-time augmentation" costs no
+second training. The runner rebuilds the run's data module and fails unless it
 tested exactly the benchmark's test samples. An **estimator** is instantiated fresh per cell, fitted on the
 training side and scored by the benchmark's :meth:`~Benchmark.evaluate_estimator`, with the same metric code.
 ``select`` chooses hyper-parameters by cross-validation on the first seed's training side (see

@@ -28,7 +28,7 @@ from mocapkit.evaluation.compare.base import (
 CONFIG_KEYS = ("name", "out", "benchmark", "protocols", "seeds", "methods", "only", "learned_overrides", "templates")
 #: Keys of one method entry.
 METHOD_KEYS = ("label", "learned", "estimator", "params", "select", "reseed")
-LEARNED_KEYS = ("experiment", "overrides", "checkpoint")
+LEARNED_KEYS = ("experiment", "overrides", "checkpoint", "eval_overrides")
 #: Which checkpoint of a learned run is scored (``learned.checkpoint``; best: best validation accuracy).
 CHECKPOINTS = ("best", "last")
 SELECT_KEYS = ("stages", "cv", "reuse")
@@ -122,6 +122,10 @@ def parse_methods(methods: dict) -> dict[str, Method]:
             bad = sorted(set(spec) - set(LEARNED_KEYS))
             if bad:
                 raise ComparisonError(f"methods.{key}.learned: unknown key(s) {bad}; it takes {list(LEARNED_KEYS)}")
+            for name in ("overrides", "eval_overrides"):
+                if not isinstance(spec.get(name) or [], list):
+                    raise ComparisonError(f"methods.{key}.learned.{name}: expected a list of Hydra overrides, got "
+                                          f"{spec[name]!r}")
             if spec.get("checkpoint", "best") not in CHECKPOINTS:
                 raise ComparisonError(f"methods.{key}.learned.checkpoint={spec['checkpoint']!r}: one of "
                                       f"{list(CHECKPOINTS)}")
@@ -204,6 +208,9 @@ class Comparison:
             raise ComparisonError(f"protocols={self.protocols}: {type(self.benchmark).__name__} knows "
                                   f"{list(self.benchmark.protocols)}")
         self._splits: dict[tuple[str, int], Split] = {}
+        #: trained runs by their training overrides (less run_name): learned methods that differ only in
+        #: ``eval_overrides`` or ``checkpoint`` are scored on one run → (run_dir, training seconds, config)
+        self._trained: dict[tuple[str, ...], tuple[Path, float, DictConfig]] = {}
         self.selection: dict[str, dict[str, dict]] = {}
         self.cells: list[dict] = []
 
@@ -285,22 +292,29 @@ class Comparison:
                 "estimator": repr(estimator), "n_test": len(split.test), "test_sha1": indices_sha1(split.test)}
 
     def run_learned(self, method: Method, split: Split) -> dict:
+        """Train ``method`` on ``split`` (or reuse the run of an earlier method with the same training
+        overrides) and score its checkpoint with ``eval_overrides``."""
         from mocapkit.evaluation.evaluate import evaluate
         from mocapkit.train.config import compose_config
         from mocapkit.train.training import train
 
         experiment = method.spec["experiment"]
-        overrides = [f"experiment={experiment}", *self.benchmark.learned_overrides(split.protocol, split.seed),
-                     f"seed={split.seed}", f"output_root={self.out / 'runs'}",
-                     f"run_name={method.key}_{split.protocol}_seed{split.seed}",
-                     *[str(o) for o in method.spec.get("overrides") or []], *self.learned_overrides]
-        cfg = compose_config(overrides)
-        self.benchmark.check_learned_config(cfg, method.key)
+        training = [f"experiment={experiment}", *self.benchmark.learned_overrides(split.protocol, split.seed),
+                    f"seed={split.seed}", f"output_root={self.out / 'runs'}",
+                    *[str(o) for o in method.spec.get("overrides") or []], *self.learned_overrides]
+        overrides = [*training, f"run_name={method.key}_{split.protocol}_seed{split.seed}"]
         start = time.perf_counter()
-        run_dir = Path(train(cfg))
-        train_seconds = time.perf_counter() - start
+        shared = tuple(training) in self._trained
+        if not shared:
+            cfg = compose_config(overrides)
+            self.benchmark.check_learned_config(cfg, method.key)
+            run_dir = Path(train(cfg))
+            self._trained[tuple(training)] = (run_dir, time.perf_counter() - start, cfg)
+        run_dir, train_seconds, cfg = self._trained[tuple(training)]
         checkpoint = run_dir / f"{method.spec.get('checkpoint', 'best')}.ckpt"
-        report = evaluate(checkpoint, [f"eval.out_dir={run_dir / 'eval'}"])
+        eval_overrides = [str(o) for o in method.spec.get("eval_overrides") or []]
+        eval_dir = run_dir / (f"eval_{method.key}" if shared or eval_overrides else "eval")
+        report = evaluate(checkpoint, [f"eval.out_dir={eval_dir}", *eval_overrides])
         test_idx = self.benchmark.learned_test_indices(run_dir)
         if indices_sha1(test_idx) != indices_sha1(split.test):
             raise ComparisonError(f"methods.{method.key} under {split.protocol}, seed {split.seed}: the run's data "
@@ -309,7 +323,8 @@ class Comparison:
         scores = self.benchmark.evaluate_learned(report, run_dir, split)
         trainer = cfg.get("trainer") or {}
         return {**scores, "time_s": time.perf_counter() - start, "train_seconds": train_seconds,
-                "experiment": experiment, "run_dir": str(run_dir), "checkpoint": checkpoint.name, "overrides": overrides,
+                "experiment": experiment, "run_dir": str(run_dir), "shared_run": shared,
+                "checkpoint": checkpoint.name, "overrides": overrides, "eval_overrides": eval_overrides,
                 "max_epochs": trainer.get("max_epochs"), "n_test": len(test_idx),
                 "test_sha1": indices_sha1(test_idx)}
 
@@ -325,7 +340,7 @@ class Comparison:
             method = self.methods[key]
             split = self.split(protocol, seed)
             if method.kind == "learned":
-                print(f"[compare] cell {n}/{len(jobs)} {key} | {protocol} | seed {seed}: training "
+                print(f"[compare] cell {n}/{len(jobs)} {key} | {protocol} | seed {seed}: learned run of "
                       f"{method.spec['experiment']} (elapsed {_elapsed(start)})", flush=True)
                 cell = self.run_learned(method, split)
             else:
