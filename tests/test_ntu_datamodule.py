@@ -5,7 +5,7 @@ import torch
 
 from mocapkit.datasets.augment import SkeletonAugment
 from mocapkit.datasets.datamodule import pad_collate
-from mocapkit.datasets.frames import uniform_frame_indices
+from mocapkit.datasets.frames import true_runs, uniform_frame_indices
 from mocapkit.datasets.ntu.datamodule import NTUDataModule
 from mocapkit.datasets.ntu.prepare import prepare_ntu
 from mocapkit.datasets.synthetic.ntu import NTUSynthConfig, synthesize_ntu
@@ -25,6 +25,13 @@ def test_augment_keeps_absent_bodies_zero_and_is_rigid():
     start = next(s for s in range(41 - out.shape[1]) if torch.allclose(out[0, :, :, 1], x[0, s:s + out.shape[1], :, 1], atol=1e-5))
     a, b = x[0, start:start + out.shape[1]][present], out[0][present]
     assert torch.allclose(torch.cdist(a, a), torch.cdist(b, b), atol=1e-4)
+
+
+def test_true_runs_are_slices():
+    mask = np.array([1, 1, 0, 0, 1, 0, 1, 1, 1], dtype=bool)
+    assert true_runs(mask) == [(0, 2), (4, 5), (6, 9)]
+    assert all(mask[a:b].all() for a, b in true_runs(mask)) and sum(b - a for a, b in true_runs(mask)) == mask.sum()
+    assert true_runs(np.zeros(4, bool)) == [] and true_runs(np.ones(3, bool)) == [(0, 3)] and true_runs([]) == []
 
 
 def test_uniform_frame_indices_and_collate_padding():

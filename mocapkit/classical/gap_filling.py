@@ -30,12 +30,6 @@ from scipy.interpolate import CubicSpline, PchipInterpolator
 from mocapkit.refinement.base import MotionRefiner, RefinementError
 
 
-def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
-    """``[(start, stop), ...]`` of the runs of True in a 1-D bool array."""
-    edges = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
-    return list(zip(np.flatnonzero(edges == 1).tolist(), np.flatnonzero(edges == -1).tolist()))
-
-
 def linear_fill(X: np.ndarray, observed: np.ndarray, empty: float = np.nan) -> np.ndarray:
     """Every column of ``X`` (``[frames, channels]``) linearly interpolated over time through its observed
     frames, the nearest observed value held before the first and after the last; a column with no observed

@@ -70,6 +70,7 @@ from pathlib import Path
 import numpy as np
 
 from mocapkit.datasets.formats.motion import Motion
+from mocapkit.datasets.frames import true_runs
 from mocapkit.io_atomic import atomic_open, atomic_path
 from mocapkit.refinement.base import MotionRefiner
 
@@ -340,12 +341,6 @@ class RefineReport:
         return "\n".join(lines)
 
 
-def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
-    """``[(first, last), ...]`` (inclusive) of the runs of True in a 1-D bool array."""
-    edges = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
-    return [(a, b - 1) for a, b in zip(np.flatnonzero(edges == 1).tolist(), np.flatnonzero(edges == -1).tolist())]
-
-
 def _report_markers(before: Motion, after: Motion, changed: np.ndarray) -> list[MarkerReport]:
     frames = before.num_frames
     filled = before.missing & ~after.missing
@@ -354,7 +349,8 @@ def _report_markers(before: Motion, after: Motion, changed: np.ndarray) -> list[
     for j in np.flatnonzero(before.missing.any(axis=0) | repaired.any(axis=0)):
         seen = np.flatnonzero(~before.missing[:, j])
         unfilled = []
-        for a, b in _runs(after.missing[:, j]):
+        for a, stop in true_runs(after.missing[:, j]):
+            b = stop - 1                                              # the report's runs are inclusive
             if seen.size == 0:
                 why = "missing in every frame"
             elif a == 0:
@@ -364,7 +360,7 @@ def _report_markers(before: Motion, after: Motion, changed: np.ndarray) -> list[
             else:
                 why = "interior, not filled by the method"
             unfilled.append((a, b, why))
-        longest = max([b - a + 1 for a, b in _runs(filled[:, j])] + [0])
+        longest = max([stop - start for start, stop in true_runs(filled[:, j])] + [0])
         out.append(MarkerReport(name=before.joint_names[j], index=int(j), missing=int(before.missing[:, j].sum()),
                                 filled=int(filled[:, j].sum()), longest_gap=longest,
                                 repaired=int(repaired[:, j].sum()), unfilled=unfilled))

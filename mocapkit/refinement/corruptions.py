@@ -55,6 +55,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from mocapkit.datasets.formats.motion import Motion
+from mocapkit.datasets.frames import true_runs
 
 #: Standard deviation of the Gaussian noise of rdcrypt / mxcrypt, metres (thesis: σ = 2, reported in cm).
 NOISE_SIGMA_M = 0.02
@@ -209,13 +210,7 @@ def _gap_capacity(frames: int, length: int) -> int:
 
 def _longest_runs(mask: np.ndarray) -> int:
     """Longest run of True along axis 0 of a ``[frames, joints]`` mask."""
-    best = 0
-    for column in mask.T:
-        if column.any():
-            edges = np.diff(np.concatenate([[0], column.astype(np.int8), [0]]))
-            starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-            best = max(best, int((ends - starts).max()))
-    return best
+    return max((stop - start for column in mask.T for start, stop in true_runs(column)), default=0)
 
 
 # ---------------------------------------------------------------------------------------------------- protocols

@@ -40,6 +40,7 @@ from scipy.ndimage import uniform_filter1d
 from scipy.spatial.transform import Rotation
 
 from mocapkit.datasets.formats.asf_amc import AsfSkeleton, forward_kinematics
+from mocapkit.datasets.frames import true_runs
 from mocapkit.synthesis.representation import dof_axes, euler_near, partitions
 
 #: The ways :func:`cleanup_footskate` may move the root (its ``move_root``).
@@ -108,21 +109,14 @@ def detect_contacts(ankle: np.ndarray, fps: float, floor: float, max_height: flo
         return contact
     height = _smoothed(ankle[:, 1], smoothing_frames)
     still = np.abs(np.gradient(height)) * fps < vertical_speed
-    for start, stop in _runs(still):
+    for start, stop in true_runs(still):
         lowest = float(ankle[start:stop, 1].min())
         if lowest <= floor + max_height:
             contact[start:stop] = ankle[start:stop, 1] <= lowest + height_tolerance
-    for start, stop in _runs(contact):
+    for start, stop in true_runs(contact):
         if stop - start < min_contact_frames:
             contact[start:stop] = False
     return contact
-
-
-def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
-    """``[start, stop)`` of each run of True."""
-    padded = np.concatenate([[False], mask, [False]]).astype(np.int8)
-    edges = np.flatnonzero(np.diff(padded))
-    return list(zip(edges[::2].tolist(), edges[1::2].tolist()))
 
 
 def _pin_targets(ankle: np.ndarray, contact: np.ndarray, blend_frames: int, floor: float | None = None
@@ -133,7 +127,7 @@ def _pin_targets(ankle: np.ndarray, contact: np.ndarray, blend_frames: int, floo
     T = len(ankle)
     weight = np.zeros(T)
     pin = ankle.copy()
-    for start, stop in _runs(contact):
+    for start, stop in true_runs(contact):
         point = ankle[start:stop].mean(axis=0)
         if floor is not None:
             point[1] = floor
@@ -187,7 +181,7 @@ def root_shift(ankles: list[np.ndarray], contacts: list[np.ndarray], floor: floa
         if T > 1:
             step += weight[:, None] * np.diff(ankle[:, [0, 2]], axis=0, prepend=ankle[:1, [0, 2]])
         total += weight
-        for start, stop in _runs(contact):
+        for start, stop in true_runs(contact):
             lift[start:stop] += floor - ankle[start:stop, 1].mean()
             count[start:stop] += 1
     shift = np.zeros((T, 3))

@@ -104,6 +104,7 @@ from scipy.signal import lfilter
 
 from mocapkit.datasets.formats.layouts import LANDMARK_NAMES, LANDMARK_PARENTS
 from mocapkit.datasets.formats.motion import Motion
+from mocapkit.datasets.frames import true_runs
 from mocapkit.retrieval.skeleton import landmark_positions, to_y_up
 
 #: Kinect SDK joint tracking states (``NUI_SKELETON_POSITION_TRACKING_STATE``).
@@ -605,13 +606,6 @@ def _lowpass_noise(rng: np.random.Generator, shape: tuple[int, ...], fps: float,
     return lfilter([b], [1.0, -a], white, axis=0, zi=(1.0 - b) * white[:1])[0]
 
 
-def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
-    """``[(start, stop), ...]`` of the True runs of a 1-D bool array."""
-    padded = np.concatenate([[False], mask, [False]]).astype(np.int8)
-    edges = np.flatnonzero(np.diff(padded))
-    return list(zip(edges[::2].tolist(), edges[1::2].tolist()))
-
-
 def _infer_hidden(est: np.ndarray, hidden: np.ndarray, hit_distance: np.ndarray, clean: np.ndarray,
                   camera: VirtualCamera, cfg: KinectNoiseConfig, fps: float,
                   rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
@@ -646,7 +640,7 @@ def _infer_hidden(est: np.ndarray, hidden: np.ndarray, hit_distance: np.ndarray,
         weight = np.where(snapped, cfg.snap_weight, 0.0)[:, None]
         guess = weight * snap + (1.0 - weight) * hold + drift
         out[h, j] = guess[h]
-        for start, stop in _runs(h):
+        for start, stop in true_runs(h):
             if stop - start > after and run_draws[start, j] < cfg.not_tracked_probability:
                 state[start + after:stop, j] = NOT_TRACKED
     return out, state
