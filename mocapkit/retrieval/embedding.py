@@ -11,8 +11,9 @@ vector and ranks the database by cosine similarity (distance ``1 − cos``):
 
 Every motion becomes :func:`~mocapkit.retrieval.skeleton.normalised_landmarks` (``fps``, ``heading``), then
 ``frames`` frames by :func:`resample_frames` (the function the training data module uses). The database's
-embeddings go into a FAISS index (``index``): ``"flat"`` (``IndexFlatIP``: exact) or ``"hnsw"``
-(``IndexHNSWFlat`` with inner product: approximate, for large libraries); :meth:`EmbeddingRetrieval.search`
+embeddings go into a FAISS index (``index``): ``"flat"`` (``IndexFlatIP``: exact), ``"hnsw"``
+(``IndexHNSWFlat`` with inner product: approximate, for large libraries) or ``"auto"`` (the default: flat below
+``AUTO_HNSW_MIN_CLIPS`` clips, HNSW from there; ``index_kind_`` says which); :meth:`EmbeddingRetrieval.search`
 answers from it, and the returned distances are recomputed exactly (float64) for the returned clips.
 
 The state (``_state``) is the embeddings, the model's SHA-1 (``model_sha1_``: of the checkpoint or ONNX file;
@@ -32,7 +33,11 @@ import numpy as np
 from mocapkit.datasets.formats.motion import Motion
 from mocapkit.retrieval.base import RetrievalMethod, file_sha1, top_k
 
-INDEXES = ("flat", "hnsw")
+INDEXES = ("auto", "flat", "hnsw")
+#: ``index="auto"`` builds HNSW for libraries of at least this many clips, an exact flat index below: exact search
+#: grows with the library (bench/RESULTS.md §14: 4.4 ms a query at 10^5 clips, HNSW 0.14 ms at recall@10 1.0),
+#: and below ~10^4 clips it stays under half a millisecond, without HNSW's build time and approximation.
+AUTO_HNSW_MIN_CLIPS = 20_000
 #: HNSW graph degree and build / search breadth (FAISS parameters).
 HNSW_M, HNSW_EF_CONSTRUCTION, HNSW_EF_SEARCH = 32, 80, 64
 
@@ -60,14 +65,16 @@ class EmbeddingRetrieval(RetrievalMethod):
             groups absent from the database).
         onnx: an exported encoder (``mocapkit export``); onnxruntime + numpy only. Give ``checkpoint`` or ``onnx``.
         frames: frames every clip is resampled to; None: the model's training ``frames``.
-        index: ``"flat"`` (exact inner product) or ``"hnsw"`` (approximate, large libraries).
+        index: ``"flat"`` (exact inner product), ``"hnsw"`` (approximate, large libraries) or ``"auto"`` (HNSW
+            from ``AUTO_HNSW_MIN_CLIPS`` clips, flat below).
         fps, heading: of :func:`~mocapkit.retrieval.skeleton.normalised_landmarks` (the model's training values are
             expected; another value warns).
         batch_size: clips per forward pass.
 
     Attributes (after ``fit`` or a restored state): ``database_`` float32 ``[n, dim]`` (unit norm), ``n_database_``,
     ``model_sha1_`` (hex digest of the model file), ``frames_``, ``model_info_`` (the model's description: fps,
-    frames, heading, loss, training data), ``checkpoint_used_`` (with a checkpoint), ``index_`` (the FAISS index).
+    frames, heading, loss, training data), ``checkpoint_used_`` (with a checkpoint), ``index_`` (the FAISS index) and
+    ``index_kind_`` (``"flat"`` or ``"hnsw"``: what ``index`` resolved to).
     """
 
     label_free = True
@@ -75,7 +82,7 @@ class EmbeddingRetrieval(RetrievalMethod):
     min_frames = 2
 
     def __init__(self, checkpoint: str | Sequence[str] | None = None, onnx: str | None = None,
-                 frames: int | None = None, index: str = "flat", fps: float = 30.0, heading: str = "frame",
+                 frames: int | None = None, index: str = "auto", fps: float = 30.0, heading: str = "frame",
                  batch_size: int = 64):
         self.checkpoint = checkpoint
         self.onnx = onnx
@@ -209,10 +216,11 @@ class EmbeddingRetrieval(RetrievalMethod):
         items = [motions] if isinstance(motions, Motion) else list(motions)
         groups = sorted({str(m.metadata["group"]) for m in items
                          if isinstance(m, Motion) and m.metadata.get("group") is not None})
-        for name in ("_predict", "model_sha1_", "index_", "frames_", "model_info_", "checkpoint_used_"):
+        for name in ("_predict", "model_sha1_", "index_", "index_kind_", "frames_", "model_info_", "checkpoint_used_"):
             self.__dict__.pop(name, None)
         self._load_model(groups=groups)
         super().fit(items, y)
+        self.index_kind_ = self._resolved_index(self.n_database_)
         self._build_index()
         return self
 
@@ -236,10 +244,10 @@ class EmbeddingRetrieval(RetrievalMethod):
         q = np.ascontiguousarray(self.encode(queries), dtype=np.float32)
         n = int(self.n_database_)
         k = n if k <= 0 or k > n else int(k)
-        if self.index == "hnsw" and k == n:  # every clip: exact (a graph search need not reach them all)
+        if self.index_kind_ == "hnsw" and k == n:  # every clip: exact (a graph search need not reach them all)
             found = top_k(self._distances(q, self.database_), k)[0]
         else:
-            if self.index == "hnsw":
+            if self.index_kind_ == "hnsw":
                 self.index_.hnsw.efSearch = max(HNSW_EF_SEARCH, 2 * k)
             found = self.index_.search(q, k)[1].astype(np.int64)
         exact = None
@@ -251,11 +259,17 @@ class EmbeddingRetrieval(RetrievalMethod):
         return np.take_along_axis(found, order, axis=1), np.take_along_axis(d, order, axis=1)
 
     # ------------------------------------------------------------------ index and state
+    def _resolved_index(self, n: int) -> str:
+        """``"flat"`` or ``"hnsw"``: ``index``, with ``"auto"`` decided by the library's size ``n``."""
+        if self.index != "auto":
+            return self.index
+        return "hnsw" if n >= AUTO_HNSW_MIN_CLIPS else "flat"
+
     def _build_index(self) -> None:
         import faiss
 
         x = np.ascontiguousarray(self.database_, dtype=np.float32)
-        if self.index == "hnsw":
+        if self.index_kind_ == "hnsw":
             index = faiss.IndexHNSWFlat(x.shape[1], HNSW_M, faiss.METRIC_INNER_PRODUCT)
             index.hnsw.efConstruction = HNSW_EF_CONSTRUCTION
         else:
@@ -268,7 +282,7 @@ class EmbeddingRetrieval(RetrievalMethod):
         state = {"embeddings": np.asarray(self.database_, dtype=np.float32),
                  "model_sha1": np.frombuffer(bytes.fromhex(self.model_sha1_), dtype=np.uint8).copy(),
                  "frames": np.array([self.frames_], dtype=np.int64)}
-        if self.index == "hnsw":
+        if self.index_kind_ == "hnsw":
             import faiss
 
             state["hnsw_index"] = faiss.serialize_index(self.index_)
@@ -287,7 +301,9 @@ class EmbeddingRetrieval(RetrievalMethod):
         self.database_ = np.asarray(state["embeddings"], dtype=np.float32)
         self.n_database_ = len(self.database_)
         self.frames_ = int(np.asarray(state["frames"]).reshape(-1)[0])
-        if self.index == "hnsw" and "hnsw_index" in state:
+        self.index_kind_ = ("hnsw" if self.index == "auto" and "hnsw_index" in state
+                            else self._resolved_index(self.n_database_))
+        if self.index_kind_ == "hnsw" and "hnsw_index" in state:
             self.index_ = faiss.deserialize_index(np.asarray(state["hnsw_index"], dtype=np.uint8))
         else:
             self._build_index()
