@@ -11,11 +11,11 @@ import torch
 import torch.nn.functional as F
 
 from mocapkit.datasets.casia_b.datamodule import GaitDataModule
-from mocapkit.train.config import compose_config
-from mocapkit.train.training import build, build_datamodule
 from mocapkit.deploy.export import ParityError
 from mocapkit.deploy.gait_export import export_gait_module, export_gait_onnx
+from mocapkit.train.config import compose_config
 from mocapkit.train.gait_module import GaitRecognitionModule
+from mocapkit.train.training import build, build_datamodule
 from tests.test_gait_datamodule import write_synthetic_gei_cache
 
 MODEL = {"_target_": "mocapkit.models.gait_cnn.multitask_gait_cnn", "dropout": 0.2}
@@ -72,6 +72,56 @@ def test_joint_loss_is_the_weighted_sum_of_per_task_cross_entropies():
                                    2.0 * F.cross_entropy(out["subject"], b["subjects"]))
     with pytest.raises(ValueError, match="task_weights: unknown tasks \\['gender'\\]"):
         _module(task_weights={"gender": 1.0})
+
+
+def test_metric_term_is_the_contrastive_loss_of_the_labelled_embeddings():
+    from mocapkit.train.losses import contrastive_loss
+
+    module = _module(tasks=("subject",), metric_weight=0.5, temperature=0.2).eval()
+    batch = _batch(8)
+    batch["subjects"][:2] = -1                                  # unseen subjects: outside both terms
+    with torch.no_grad():
+        out = module(batch["geis"])
+        losses = module.task_losses(out, batch)
+    expected = contrastive_loss(F.normalize(out["embedding"][2:], dim=1), batch["subjects"][2:], 0.2)
+    torch.testing.assert_close(losses["metric"], expected)
+    torch.testing.assert_close(module.joint_loss(losses), losses["subject"] + 0.5 * expected)
+    assert "metric" not in _module(tasks=("subject",)).task_losses(out, batch)   # off by default
+    with pytest.raises(ValueError, match="metric_weight"):
+        _module(metric_weight=-1.0)
+
+
+def test_subject_batches_hold_k_geis_of_p_subjects():
+    from mocapkit.datasets.casia_b.datamodule import SubjectBatchSampler
+
+    labels = np.repeat(np.arange(10), [12, 12, 12, 12, 12, 12, 12, 12, 12, 3])      # subject 9 has 3 GEIs
+    torch.manual_seed(0)
+    sampler = SubjectBatchSampler(labels, batch_size=16, subjects_per_batch=4)
+    batches = list(sampler)
+    assert len(batches) == len(sampler) == len(labels) // 16
+    for batch in batches:
+        subjects, counts = np.unique(labels[batch], return_counts=True)
+        assert len(subjects) == 4 and (counts == 4).all()
+        for s in subjects:                                      # without replacement where the subject has enough
+            picked = [i for i in batch if labels[i] == s]
+            assert s == 9 or len(set(picked)) == 4
+    for bad in ({"subjects_per_batch": 5}, {"subjects_per_batch": 16}, {"subjects_per_batch": 1}):
+        with pytest.raises(ValueError, match="subjects_per_batch"):
+            SubjectBatchSampler(labels, batch_size=16, **bad)
+    with pytest.raises(ValueError, match="only 10 subjects"):
+        SubjectBatchSampler(labels, batch_size=24, subjects_per_batch=12)
+
+
+def test_the_metric_experiment_trains_on_subject_batches(cache_root):
+    cfg = compose_config(["experiment=casiab_single_metric", f"data.root={cache_root}", "data.batch_size=8",
+                          "data.subjects_per_batch=4"])
+    dm = build_datamodule(cfg)
+    module = build(cfg.module, **dm.label_spaces())
+    assert module.hparams.metric_weight == 1.0 and cfg.eval.metric == "cos" and module.tasks == ("subject",)
+    batch = next(iter(dm.train_dataloader()))
+    assert batch["geis"].shape[0] == 8 and len(torch.unique(batch["subjects"])) == 4
+    loss = module.training_step(batch, 0)
+    assert torch.isfinite(loss) and loss.requires_grad
 
 
 def test_predict_step_returns_the_evaluation_keys():

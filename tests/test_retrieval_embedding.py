@@ -19,7 +19,7 @@ from shared_data import synthetic_hdm05_folder
 
 from mocapkit.models.motion_encoder import motion_encoder
 from mocapkit.retrieval.embedding import EmbeddingRetrieval, resample_frames
-from mocapkit.train.embedding_module import contrastive_loss
+from mocapkit.train.losses import contrastive_loss
 
 ROOT = Path(__file__).resolve().parents[1]
 TINY_MODEL = ["model.channels=[16,16]", "model.strides=[2,1]", "model.hidden=16", "model.embedding_dim=8"]

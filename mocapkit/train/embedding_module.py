@@ -8,7 +8,7 @@ augmented views of each clip and its label). Both views go through the encoder; 
 - ``simclr``: NT-Xent (Chen et al., "A simple framework for contrastive learning of visual representations",
   ICML 2020): the other view of the same clip is the only positive; labels are never used.
 
-Both are :func:`contrastive_loss` (SimCLR is SupCon with each clip its own class), at ``temperature`` (0.1).
+Both are :func:`~mocapkit.train.losses.contrastive_loss` (SimCLR is SupCon with each clip its own class), at ``temperature`` (0.1).
 
 Validation and test are retrieval: the query clips' embeddings ranked against the database clips' by cosine
 (the data module flags each clip; validation: the training groups' held-back clips against the training clips of
@@ -32,6 +32,7 @@ import numpy as np
 import torch
 from hydra.utils import instantiate
 
+from mocapkit.train.losses import contrastive_loss
 from mocapkit.train.optimization import (
     ConfiguredOptimization,
     StagedSteps,
@@ -39,27 +40,6 @@ from mocapkit.train.optimization import (
 )
 
 LOSSES = ("supcon", "simclr")
-
-
-def contrastive_loss(embeddings: torch.Tensor, labels: torch.Tensor, temperature: float = 0.1) -> torch.Tensor:
-    """Supervised contrastive loss (Khosla et al. 2020, ``L_out``) of unit-norm ``embeddings`` ``[N, D]``.
-
-    For each anchor ``i`` with positives ``P(i)`` (the other rows of its label):
-    ``-1/|P(i)| Σ_{p ∈ P(i)} log(exp(z_i·z_p/τ) / Σ_{a ≠ i} exp(z_i·z_a/τ))``, averaged over the anchors that have
-    a positive. With ``labels`` = the clip index of each view this is SimCLR's NT-Xent.
-    """
-    n = embeddings.shape[0]
-    logits = embeddings @ embeddings.T / temperature
-    self_mask = torch.eye(n, dtype=torch.bool, device=embeddings.device)
-    logits = logits.masked_fill(self_mask, float("-inf"))
-    log_prob = logits - torch.logsumexp(logits, dim=1, keepdim=True)
-    positives = (labels[:, None] == labels[None, :]) & ~self_mask
-    count = positives.sum(1)
-    has = count > 0
-    if not has.any():
-        return embeddings.sum() * 0.0
-    mean_log_prob = log_prob.masked_fill(~positives, 0.0).sum(1)[has] / count[has]
-    return -mean_log_prob.mean()
 
 
 def retrieval_scores(queries: np.ndarray, query_labels: np.ndarray, database: np.ndarray, database_labels: np.ndarray,
@@ -210,5 +190,5 @@ def evaluate_embedding(module, datamodule, cfg, out_dir: Path) -> dict:
     return report
 
 
-__all__ = ["LOSSES", "MotionEmbeddingModule", "contrastive_loss", "evaluate_embedding", "retrieval_loss",
+__all__ = ["LOSSES", "MotionEmbeddingModule", "evaluate_embedding", "retrieval_loss",
            "retrieval_scores"]

@@ -7,7 +7,14 @@ The loss is ``Σ_task weight_task · CE(logits_task, label_task)`` over the task
 loss or accuracy. The network, optimiser and schedule are Hydra configs stored in the checkpoint's
 hyper-parameters, so ``GaitRecognitionModule.load_from_checkpoint(path)`` rebuilds the exact model.
 
-Logged: ``{stage}/loss`` (the joint loss), ``{stage}/{task}_loss``, ``{stage}/acc`` (subject accuracy,
+With ``metric_weight > 0`` the loss adds ``metric_weight ·`` the supervised contrastive loss
+(:func:`~mocapkit.train.losses.contrastive_loss`, temperature ``temperature``) of the unit-normalised shared
+embedding over the labelled subjects of the batch: the embedding that cross-subject evaluation ranks unseen people
+by is then trained to put one person's GEIs together, not only to feed the classifier (OpenGait's GEI networks
+train a metric loss for this reason). Batches with several GEIs per subject make it bite: the data module's
+``subjects_per_batch``.
+
+Logged: ``{stage}/loss`` (the joint loss), ``{stage}/{task}_loss``, ``{stage}/metric_loss`` (with a metric term), ``{stage}/acc`` (subject accuracy,
 the checkpoint monitor; the first task's accuracy for a model without a subject head), ``{stage}/view_acc`` and ``{stage}/condition_acc`` when those tasks exist.
 The accuracies are ``torchmetrics`` metric objects (``ignore_index=-1``), one per stage and name,
 logged as objects: Lightning accumulates them over the epoch, synchronises them across processes
@@ -23,6 +30,7 @@ from hydra.utils import instantiate
 from torch import nn
 from torchmetrics.classification import MulticlassAccuracy
 
+from mocapkit.train.losses import contrastive_loss
 from mocapkit.train.optimization import (
     ConfiguredOptimization,
     StagedSteps,
@@ -53,12 +61,15 @@ class GaitRecognitionModule(ConfiguredOptimization, StagedSteps, L.LightningModu
         subject_names: the subject label space for reports and ONNX metadata (e.g. ``["001", ...]``).
         label_smoothing: cross-entropy label smoothing (all tasks).
         input_size: ``(H, W)`` of the GEIs.
+        metric_weight: weight of the supervised contrastive term on the embedding (0: off, the thesis's loss).
+        temperature: its temperature.
     """
 
     def __init__(self, model: dict, optimizer: dict, num_subjects: int, num_views: int, num_conditions: int,
                  scheduler: dict | None = None, task_weights: dict | None = None,
                  subject_names: list[str] | None = None, label_smoothing: float = 0.0,
-                 input_size: tuple[int, int] | list[int] = (124, 124)):
+                 input_size: tuple[int, int] | list[int] = (124, 124), metric_weight: float = 0.0,
+                 temperature: float = 0.1):
         super().__init__()
         model, optimizer = as_plain_dict(model), as_plain_dict(optimizer)
         scheduler = as_plain_dict(scheduler) if scheduler else None
@@ -70,7 +81,11 @@ class GaitRecognitionModule(ConfiguredOptimization, StagedSteps, L.LightningModu
                                    "num_subjects": num_subjects, "num_views": num_views,
                                    "num_conditions": num_conditions, "task_weights": task_weights,
                                    "subject_names": list(subject_names) if subject_names is not None else None,
-                                   "label_smoothing": label_smoothing, "input_size": list(input_size)})
+                                   "label_smoothing": label_smoothing, "input_size": list(input_size),
+                                   "metric_weight": float(metric_weight), "temperature": float(temperature)})
+        if metric_weight < 0 or temperature <= 0:
+            raise ValueError(f"module.metric_weight must be >= 0 and module.temperature > 0, got {metric_weight} "
+                             f"and {temperature}")
         self.model = instantiate(model, num_subjects=num_subjects, num_views=num_views,
                                  num_conditions=num_conditions, input_size=list(input_size))
         self.tasks: tuple[str, ...] = tuple(self.model.tasks)
@@ -98,8 +113,14 @@ class GaitRecognitionModule(ConfiguredOptimization, StagedSteps, L.LightningModu
         return self.model(geis)
 
     def task_losses(self, outputs: dict[str, torch.Tensor], batch: dict) -> dict[str, torch.Tensor]:
-        """Cross-entropy per task; the subject loss skips samples labelled -1 (absent when all are)."""
+        """Cross-entropy per task; the subject loss skips samples labelled -1 (absent when all are); with
+        ``metric_weight``, ``"metric"``: the contrastive loss of the labelled subjects' embeddings."""
         losses = {}
+        if self.hparams.metric_weight > 0:
+            known = batch["subjects"] >= 0
+            if bool(known.any()):
+                embedding = F.normalize(outputs["embedding"][known], dim=1)
+                losses["metric"] = contrastive_loss(embedding, batch["subjects"][known], self.hparams.temperature)
         for task in self.tasks:
             labels = batch[TASK_LABELS[task]]
             known = labels >= 0
@@ -110,8 +131,9 @@ class GaitRecognitionModule(ConfiguredOptimization, StagedSteps, L.LightningModu
         return losses
 
     def joint_loss(self, losses: dict[str, torch.Tensor]) -> torch.Tensor:
-        """``Σ weight_task · loss_task`` over the tasks present in ``losses``."""
-        return sum(self.task_weights[task] * loss for task, loss in losses.items())
+        """``Σ weight_task · loss_task`` over the tasks present in ``losses`` (the metric term: ``metric_weight``)."""
+        weights = {**self.task_weights, "metric": self.hparams.metric_weight}
+        return sum(weights[task] * loss for task, loss in losses.items())
 
     def _step(self, batch: dict, stage: str) -> torch.Tensor | None:
         outputs = self(batch["geis"])

@@ -29,12 +29,16 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from torch.utils.data import DataLoader, Dataset
+from torch.utils.data import DataLoader, Dataset, Sampler
 
-from mocapkit.datasets.formats.casia_b import CONDITIONS, VIEWS
-from mocapkit.datasets.casia_b.splits import PROTOCOLS, protocol_split, sequence_validation_split
 from mocapkit.datasets.casia_b.cache import GEICache
+from mocapkit.datasets.casia_b.splits import (
+    PROTOCOLS,
+    protocol_split,
+    sequence_validation_split,
+)
 from mocapkit.datasets.datamodule import SplitDataModule
+from mocapkit.datasets.formats.casia_b import CONDITIONS, VIEWS
 
 
 class GEIShift:
@@ -101,6 +105,50 @@ class GEIDataset(Dataset):
                 "index": int(self.indices[k])}
 
 
+class SubjectBatchSampler(Sampler[list[int]]):
+    """Training batches of ``subjects_per_batch`` subjects × ``batch_size // subjects_per_batch`` GEIs each (the
+    P × K batches of metric learning: every GEI has positives in its batch).
+
+    An epoch has ``len(labels) // batch_size`` batches; each draws its subjects without replacement and each
+    subject's GEIs without replacement (with replacement when the subject has fewer). Random numbers come from
+    torch's global generator (seeded by the run seed). One process: under DDP every process would draw the same
+    batches.
+
+    Args:
+        labels: the subject label of each training item ``[n]`` (dataset positions; labels ≥ 0).
+        batch_size: items per batch; subjects_per_batch: subjects per batch (divides ``batch_size``).
+    """
+
+    def __init__(self, labels: np.ndarray, batch_size: int, subjects_per_batch: int):
+        labels = np.asarray(labels, dtype=np.int64)
+        subjects = np.unique(labels)
+        if subjects_per_batch < 2 or batch_size % subjects_per_batch or batch_size // subjects_per_batch < 2:
+            raise ValueError(f"data.subjects_per_batch={subjects_per_batch} must be at least 2 and divide "
+                             f"data.batch_size={batch_size} into at least 2 GEIs per subject")
+        if len(subjects) < subjects_per_batch:
+            raise ValueError(f"data.subjects_per_batch={subjects_per_batch}: the training part has only "
+                             f"{len(subjects)} subjects")
+        self.members = [torch.from_numpy(np.flatnonzero(labels == s)) for s in subjects]
+        self.batch_size, self.subjects_per_batch = int(batch_size), int(subjects_per_batch)
+        self.per_subject = self.batch_size // self.subjects_per_batch
+        self.batches = max(1, len(labels) // self.batch_size)
+
+    def __len__(self) -> int:
+        return self.batches
+
+    def __iter__(self):
+        for _ in range(self.batches):
+            batch = []
+            for s in torch.randperm(len(self.members))[:self.subjects_per_batch].tolist():
+                members = self.members[s]
+                if len(members) >= self.per_subject:
+                    picked = members[torch.randperm(len(members))[:self.per_subject]]
+                else:
+                    picked = members[torch.randint(len(members), (self.per_subject,))]
+                batch += picked.tolist()
+            yield batch
+
+
 def gei_collate(items: list[dict]) -> dict:
     """Stack :class:`GEIDataset` items into the batch dict of the module docstring (plural keys)."""
     return {"geis": torch.stack([it["gei"] for it in items]),
@@ -127,6 +175,8 @@ class GaitDataModule(SplitDataModule):
         num_workers: data-loader workers.
         augment: keyword arguments of :class:`GEIShift` for the training set (None or {} = off).
         seed: the run seed (the validation draw).
+        subjects_per_batch: None (shuffled batches) or the subjects of each training batch
+            (:class:`SubjectBatchSampler`: ``batch_size // subjects_per_batch`` GEIs each), for a metric loss.
 
     Attributes:
         cache: the :class:`GEICache`. train_idx, val_idx, test_idx: sorted GEI indices.
@@ -138,7 +188,8 @@ class GaitDataModule(SplitDataModule):
 
     def __init__(self, root: str, protocol: str = "closed_set", holdout_seed: int = 0,
                  num_train_subjects: int | None = None, val_fraction: float = 0.1, batch_size: int = 32,
-                 eval_batch_size: int | None = 128, num_workers: int = 0, augment: dict | None = None, seed: int = 0):
+                 eval_batch_size: int | None = 128, num_workers: int = 0, augment: dict | None = None, seed: int = 0,
+                 subjects_per_batch: int | None = None):
         super().__init__()
         if root is None:
             raise ValueError("data.root is not set: give the GEI cache folder written by `mocapkit prepare casia-b`")
@@ -153,6 +204,7 @@ class GaitDataModule(SplitDataModule):
         self.batch_size = int(batch_size)
         self.eval_batch_size = int(eval_batch_size or batch_size)
         self.num_workers = int(num_workers)
+        self.subjects_per_batch = None if subjects_per_batch is None else int(subjects_per_batch)
         unknown = sorted(set(augment or {}) - {"shift", "shift_y"})
         if unknown:
             raise ValueError(f"data.augment: unknown keys {unknown}; GEIs take only shift and shift_y "
@@ -241,6 +293,14 @@ class GaitDataModule(SplitDataModule):
             self._datasets[part] = GEIDataset(geis, indices, self.subject_labels, self.cache,
                                               self.augment if part == "train" else None)
         return self._datasets[part]
+
+    def train_dataloader(self) -> DataLoader:
+        """Shuffled batches, or P × K batches (:class:`SubjectBatchSampler`) with ``subjects_per_batch``."""
+        if self.subjects_per_batch is None:
+            return super().train_dataloader()
+        sampler = SubjectBatchSampler(self.subject_labels[self.train_idx], self.batch_size, self.subjects_per_batch)
+        return DataLoader(self.dataset("train"), batch_sampler=sampler, num_workers=self.num_workers,
+                          collate_fn=self.collate_fn, persistent_workers=self.num_workers > 0)
 
     def predict_dataloader(self) -> DataLoader:
         """The test part (what ``trainer.predict`` embeds for the gallery/probe evaluation)."""
