@@ -209,8 +209,9 @@ class Comparison:
                                   f"{list(self.benchmark.protocols)}")
         self._splits: dict[tuple[str, int], Split] = {}
         #: trained runs by their training overrides (less run_name): learned methods that differ only in
-        #: ``eval_overrides`` or ``checkpoint`` are scored on one run → (run_dir, training seconds, config)
-        self._trained: dict[tuple[str, ...], tuple[Path, float, DictConfig]] = {}
+        #: ``eval_overrides`` or ``checkpoint`` are scored on one run → (run_dir, training seconds, config, the
+        #: overrides it was trained with)
+        self._trained: dict[tuple[str, ...], tuple[Path, float, DictConfig, list[str]]] = {}
         self.selection: dict[str, dict[str, dict]] = {}
         self.cells: list[dict] = []
 
@@ -309,8 +310,8 @@ class Comparison:
             cfg = compose_config(overrides)
             self.benchmark.check_learned_config(cfg, method.key)
             run_dir = Path(train(cfg))
-            self._trained[tuple(training)] = (run_dir, time.perf_counter() - start, cfg)
-        run_dir, train_seconds, cfg = self._trained[tuple(training)]
+            self._trained[tuple(training)] = (run_dir, time.perf_counter() - start, cfg, overrides)
+        run_dir, train_seconds, cfg, overrides = self._trained[tuple(training)]
         checkpoint = run_dir / f"{method.spec.get('checkpoint', 'best')}.ckpt"
         eval_overrides = [str(o) for o in method.spec.get("eval_overrides") or []]
         eval_dir = run_dir / (f"eval_{method.key}" if shared or eval_overrides else "eval")
