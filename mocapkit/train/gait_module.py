@@ -14,8 +14,9 @@ by is then trained to put one person's GEIs together, not only to feed the class
 train a metric loss for this reason). Batches with several GEIs per subject make it bite: the data module's
 ``subjects_per_batch``.
 
-Logged: ``{stage}/loss`` (the joint loss), ``{stage}/{task}_loss``, ``{stage}/metric_loss`` (with a metric term), ``{stage}/acc`` (subject accuracy,
-the checkpoint monitor; the first task's accuracy for a model without a subject head), ``{stage}/view_acc`` and ``{stage}/condition_acc`` when those tasks exist.
+Logged: ``{stage}/loss`` (the joint loss), ``{stage}/{task}_loss``, ``{stage}/metric_loss`` (with a metric
+term), ``{stage}/acc`` (subject accuracy, the checkpoint monitor; the first task's accuracy for a model without a
+subject head), ``{stage}/view_acc`` and ``{stage}/condition_acc`` when those tasks exist.
 The accuracies are ``torchmetrics`` metric objects (``ignore_index=-1``), one per stage and name,
 logged as objects: Lightning accumulates them over the epoch, synchronises them across processes
 (DDP) and resets them, so ``val/acc`` is the accuracy over the whole validation set. Losses are
