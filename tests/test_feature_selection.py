@@ -1,10 +1,12 @@
-"""AMFS and Laplacian Score (mocapkit.classical.feature_selection) and FeatureRetrieval, their retrieval method."""
+"""AMFS, Laplacian Score, SPEC and UDFS (mocapkit.classical.feature_selection) and FeatureRetrieval, their retrieval method."""
 import numpy as np
 import pytest
 from sklearn.exceptions import NotFittedError
 
 from mocapkit.classical.feature_selection import (
     AMFS,
+    SPEC,
+    UDFS,
     LaplacianScore,
     _knn,
     laplacian_quadratic_diag,
@@ -111,6 +113,61 @@ def test_laplacian_score_selects_the_structured_features():
         LaplacianScore(5).transform(views)
 
 
+# --------------------------------------------------------------------------- SPEC and UDFS
+
+@pytest.mark.parametrize("ranking", ["phi1", "phi2", "phi3"])
+def test_spec_selects_the_structured_features(ranking):
+    views, structured = two_view_toy()
+    spec = SPEC(n_features=14, ranking=ranking, n_components=4).fit(views)
+    assert spec.selected_.dtype == np.int64 and len(set(spec.selected_)) == 14
+    assert len(set(spec.selected_) & set(structured)) >= 12
+    ordered = spec.scores_[spec.selected_]
+    assert np.all(np.diff(ordered) <= 0) if ranking == "phi3" else np.all(np.diff(ordered) >= 0)
+    assert spec.transform(views).shape == (120, 14)
+
+
+def test_spec_scores_by_hand_on_a_dense_graph():
+    from mocapkit.classical.feature_selection import heat_kernel_graph
+
+    views, _ = two_view_toy(N=30)
+    spec = SPEC(n_features=3, ranking="phi2", standardize=False, n_neighbors=6).fit(views[0])
+    S = heat_kernel_graph(views[0], 6)[0].toarray()
+    d = S.sum(1)
+    normalised = np.eye(30) - S / np.sqrt(np.outer(d, d))
+    f = views[0][:, 5] * np.sqrt(d)
+    f /= np.linalg.norm(f)
+    xi1 = np.sqrt(d) / np.linalg.norm(np.sqrt(d))
+    assert np.isclose(spec.scores_[5], f @ normalised @ f / (1 - (f @ xi1) ** 2))
+    with pytest.raises(ValueError, match="ranking"):
+        SPEC(3, ranking="phi4").fit(views)
+
+
+def test_udfs_selects_the_structured_features_and_its_objective_falls():
+    views, structured = two_view_toy()
+    udfs = UDFS(n_features=14, n_components=3, gamma=0.1, n_neighbors=5).fit(views)
+    assert len(set(udfs.selected_) & set(structured)) >= 12
+    assert np.all(np.diff(udfs.scores_[udfs.selected_]) <= 0)          # largest ‖w^i‖ first
+    assert np.allclose(udfs.W_.T @ udfs.W_, np.eye(3), atol=1e-8)       # WᵀW = I
+    assert udfs.objective_[-1] <= udfs.objective_[0] + 1e-9
+    assert 1 <= udfs.n_iter_ <= udfs.max_iter
+    with pytest.raises(ValueError, match="mu must"):
+        UDFS(3, mu=0).fit(views)
+    with pytest.raises(NotFittedError):
+        UDFS(3).transform(views)
+
+
+def test_udfs_matrix_is_the_sum_of_local_regressions():
+    """M = Σ_i X_{N_i}ᵀ H (H K_i H + μI)⁻¹ H X_{N_i}: checked against the paper's form built sample by sample."""
+    rng = np.random.default_rng(2)
+    X = rng.normal(size=(25, 6))
+    udfs = UDFS(n_features=2, n_components=2, mu=0.5, n_neighbors=4, max_iter=1, standardize=False).fit(X)
+    nbrs = _knn(X, 4)
+    H = np.eye(4) - 1 / 4
+    M = sum(X[nb].T @ H @ np.linalg.inv(H @ X[nb] @ X[nb].T @ H + 0.5 * np.eye(4)) @ H @ X[nb] for nb in nbrs)
+    W = np.linalg.eigh(M + np.eye(6))[1][:, :2]                          # first iteration: D_W = I
+    assert np.allclose(np.abs(W.T @ udfs.W_), np.eye(2), atol=1e-6)   # the same eigenvectors, up to sign
+
+
 # --------------------------------------------------------------------------- FeatureRetrieval
 
 def _motion(seq_landmarks: np.ndarray, name: str) -> Motion:
@@ -146,6 +203,8 @@ def synthetic_motions(n_per_class=4, seed=0):
 
 @pytest.mark.parametrize("params", [{"selector": "amfs", "n_features": 60},
                                     {"selector": "laplacian", "n_features": 60, "views": ("gpf", "hod")},
+                                    {"selector": "spec", "n_features": 60},
+                                    {"selector": "udfs", "n_features": 20, "views": ("gpf",)},
                                     {"views": ("hod",)}, {"views": "gpf"}])
 def test_feature_retrieval_state_round_trip(tmp_path, params):
     motions, labels = synthetic_motions()
@@ -179,7 +238,7 @@ def test_feature_retrieval_checks():
     with pytest.raises(ValueError, match="views"):
         FeatureRetrieval(views=("hod", "bones")).fit(motions)
     with pytest.raises(ValueError, match="selector"):
-        FeatureRetrieval(selector="udfs").fit(motions)
+        FeatureRetrieval(selector="mcfs").fit(motions)
     m = FeatureRetrieval(views=("hod",), selector="amfs", n_features=10 ** 6).fit(motions)   # capped at D
     assert len(m.selected_) == 19 * 3 * 8 * 7
     assert FeatureRetrieval().get_params()["fps"] == 30.0 and FeatureRetrieval().heading == "frame"

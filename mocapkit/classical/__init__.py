@@ -10,7 +10,7 @@ from mocapkit.classical.bag_of_words import (
     SequenceClips,
 )
 from mocapkit.classical.dynammo import DynaMMo
-from mocapkit.classical.feature_selection import AMFS, LaplacianScore
+from mocapkit.classical.feature_selection import AMFS, SPEC, UDFS, LaplacianScore
 from mocapkit.classical.filter_bases import FilterBasesRefiner
 from mocapkit.classical.gap_filling import (
     HoldLastValue,
@@ -48,6 +48,8 @@ __all__ = [
     "LRMF",
     "NMC",
     "NMF",
+    "SPEC",
+    "UDFS",
     "BagOfWordsClassifier",
     "ClipConditioner",
     "DoubleExponentialSmoother",

@@ -1,6 +1,7 @@
-"""Unsupervised feature selection over several feature views: AMFS (Wang 2017, ch. 5) and the Laplacian Score.
+"""Unsupervised feature selection over several feature views: AMFS (Wang 2017, ch. 5) and its baselines, the
+Laplacian Score, SPEC and UDFS.
 
-Both estimators take **views**: a list of arrays ``[N, d_v]`` (samples in rows, one array per feature type; a
+Every estimator here takes **views**: a list of arrays ``[N, d_v]`` (samples in rows, one array per feature type; a
 single 2-D array is one view), stack them into ``X [N, D]``, ``D = Σ d_v``, z-score every feature (fitted, kept in
 ``mean_`` / ``scale_``; ``standardize=False`` keeps the raw values) and select ``n_features`` columns of the stacked
 features: ``selected_`` (int64 indices into the stacked features, best first), ``view_slices_`` (the columns of
@@ -31,6 +32,19 @@ With ``standardize=True`` every other ``B_ii`` equals ``N``, so the W step keeps
 (standardised) features, ``S_ij = exp(−‖x_i − x_j‖² / t)`` for neighbours (either way), ``t`` = the mean squared
 neighbour distance unless given, ``L = D − S``; the score of feature ``f`` is ``f̃ᵀ L f̃ / f̃ᵀ D f̃`` with
 ``f̃ = f − (fᵀD1 / 1ᵀD1) 1``; the ``n_features`` **smallest** scores are selected.
+
+**SPEC**, spectral feature selection (Zhao & Liu 2007; one of AMFS's baselines in the thesis, spec §4), on the
+same heat-kernel graph: with the normalised Laplacian ``𝓛 = D^{-1/2} (D − S) D^{-1/2}`` (eigenpairs
+``λ_1 = 0 ≤ λ_2 ≤ …``, ``ξ_1 = D^{1/2}1 / ‖D^{1/2}1‖``) and ``f̂ = D^{1/2} f / ‖D^{1/2} f‖``, a feature scores
+``φ1 = f̂ᵀ𝓛f̂`` (smaller is better), ``φ2 = f̂ᵀ𝓛f̂ / (1 − (f̂ᵀξ_1)²)`` (smaller is better; the default) or
+``φ3 = Σ_{j=2..c} (2 − λ_j)(f̂ᵀξ_j)²`` (larger is better).
+
+**UDFS**, ℓ2,1-regularised discriminative feature selection (Yang et al. 2011; the thesis's other baseline):
+``min tr(WᵀMW) + γ‖W‖_{2,1}`` s.t. ``WᵀW = I`` (``W`` ``[D, c]``), in rows-as-samples form
+``M = Σ_i X_{N_i}ᵀ B_i X_{N_i}`` (``X_{N_i}`` the rows of sample ``i``'s neighbourhood), ``B_i = H (H K_i H + μI)⁻¹ H`` over each sample's ``k`` nearest neighbours (the
+local-regression matrix of AMFS divided by ``μ``: :func:`local_regression_laplacians`), solved by the paper's
+iteration: ``W`` = the ``c`` eigenvectors of ``M + γ diag(1 / 2‖w^i‖)`` of smallest eigenvalue, until the
+selection stops changing; features ranked by ``‖w^i‖`` (largest first).
 """
 from __future__ import annotations
 
@@ -235,6 +249,25 @@ class AMFS(_ViewSelector):
         return self
 
 
+def heat_kernel_graph(X: np.ndarray, n_neighbors: int, t: float | None = None) -> tuple[sp.csr_matrix, float]:
+    """The symmetric ``k``-nearest-neighbour heat-kernel graph of the rows of ``X`` and its width:
+    ``S_ij = exp(−‖x_i − x_j‖² / t)`` where ``j`` is among the ``k`` nearest other rows of ``i`` or the reverse,
+    ``t`` the mean squared neighbour distance unless given (``k`` capped at ``N − 1``)."""
+    N = X.shape[0]
+    k = int(min(max(int(n_neighbors), 1), N - 1))
+    dist, nbrs = NearestNeighbors(n_neighbors=k + 1).fit(X).kneighbors(X)
+    not_self = nbrs != np.arange(N)[:, None]
+    keep = np.zeros_like(not_self)
+    keep[np.arange(N)[:, None], np.argsort(~not_self, axis=1, kind="stable")[:, :k]] = True  # k non-self
+    keep &= not_self
+    rows = np.repeat(np.arange(N), keep.sum(1))
+    cols, d2 = nbrs[keep], dist[keep] ** 2
+    t = float(t) if t is not None else float(d2.mean())
+    t = t if t > 0 else 1.0
+    S = sp.csr_matrix((np.exp(-d2 / t), (rows, cols)), shape=(N, N))
+    return S.maximum(S.T), t
+
+
 class LaplacianScore(_ViewSelector):
     """Laplacian Score feature selection (He, Cai & Niyogi 2005) on the stacked views (module docstring).
 
@@ -257,21 +290,9 @@ class LaplacianScore(_ViewSelector):
     def fit(self, views, y=None) -> LaplacianScore:
         """Score and select the features of ``views`` (list of ``[N, d_v]``); ``y`` is ignored."""
         _, X = self._prepare(views)
-        N = X.shape[0]
-        if N < 2:
+        if X.shape[0] < 2:
             raise ValueError("LaplacianScore needs at least 2 samples")
-        k = int(min(max(int(self.n_neighbors), 1), N - 1))
-        dist, nbrs = NearestNeighbors(n_neighbors=k + 1).fit(X).kneighbors(X)
-        not_self = nbrs != np.arange(N)[:, None]
-        keep = np.zeros_like(not_self)
-        keep[np.arange(N)[:, None], np.argsort(~not_self, axis=1, kind="stable")[:, :k]] = True  # k non-self
-        keep &= not_self
-        rows = np.repeat(np.arange(N), keep.sum(1))
-        cols, d2 = nbrs[keep], dist[keep] ** 2
-        t = float(self.t) if self.t is not None else float(d2.mean())
-        t = t if t > 0 else 1.0
-        S = sp.csr_matrix((np.exp(-d2 / t), (rows, cols)), shape=(N, N))
-        S = S.maximum(S.T)
+        S, t = heat_kernel_graph(X, self.n_neighbors, self.t)
         deg = np.asarray(S.sum(1)).ravel()
         F = X - (deg @ X) / max(deg.sum(), 1e-300)
         den = (deg[:, None] * F * F).sum(0)
@@ -282,4 +303,128 @@ class LaplacianScore(_ViewSelector):
         self.scores_ = scores
         self.t_ = t
         self.selected_ = np.argsort(scores, kind="stable")[: int(self.n_features)].astype(np.int64)
+        return self
+
+
+class SPEC(_ViewSelector):
+    """Spectral feature selection (Zhao & Liu 2007) on the stacked views' heat-kernel graph (module docstring).
+
+    Args:
+        n_features: number of stacked features to select.
+        ranking: ``"phi1"``, ``"phi2"`` (default) or ``"phi3"``.
+        n_components: ``c`` of ``φ3`` (eigenvectors 2..c of the normalised Laplacian).
+        n_neighbors, t: the graph (:func:`heat_kernel_graph`).
+        standardize: z-score every stacked feature first (fitted).
+
+    Fitted attributes: ``selected_`` int64 ``[n_features]`` (best first), ``scores_`` ``[D]`` (the ranking's values;
+    a constant-zero feature gets the worst), ``t_``, ``view_slices_``, ``mean_``, ``scale_``.
+    """
+
+    rankings = ("phi1", "phi2", "phi3")
+
+    def __init__(self, n_features: int, ranking: str = "phi2", n_components: int = 10, n_neighbors: int = 5,
+                 t: float | None = None, standardize: bool = True):
+        self.n_features = n_features
+        self.ranking = ranking
+        self.n_components = n_components
+        self.n_neighbors = n_neighbors
+        self.t = t
+        self.standardize = standardize
+
+    def fit(self, views, y=None) -> SPEC:
+        """Score and select the features of ``views`` (list of ``[N, d_v]``); ``y`` is ignored."""
+        if self.ranking not in self.rankings:
+            raise ValueError(f"ranking must be one of {self.rankings}, got {self.ranking!r}")
+        _, X = self._prepare(views)
+        N = X.shape[0]
+        if N < 3:
+            raise ValueError("SPEC needs at least 3 samples")
+        S, self.t_ = heat_kernel_graph(X, self.n_neighbors, self.t)
+        root = np.sqrt(np.maximum(np.asarray(S.sum(1)).ravel(), 1e-300))              # D^{1/2}
+        normalised = sp.identity(N, format="csr") - sp.diags(1 / root) @ S @ sp.diags(1 / root)
+        F = root[:, None] * X                                                         # D^{1/2} f per column
+        norms = np.linalg.norm(F, axis=0)
+        ok = norms > 1e-12 * max(1.0, norms.max())
+        F = F / np.where(ok, norms, 1.0)
+        if self.ranking == "phi3":
+            c = int(min(max(int(self.n_components), 2), N))
+            lam, xi = np.linalg.eigh(normalised.toarray())
+            scores = ((2.0 - lam[1:c]) * (xi[:, 1:c].T @ F).T ** 2).sum(1)
+            scores = np.where(ok, scores, -np.inf)
+            order = np.argsort(-scores, kind="stable")
+        else:
+            scores = (F * (normalised @ F)).sum(0)
+            if self.ranking == "phi2":
+                xi1 = root / np.linalg.norm(root)
+                scores = scores / np.maximum(1.0 - (xi1 @ F) ** 2, 1e-12)
+            scores = np.where(ok, scores, np.inf)
+            order = np.argsort(scores, kind="stable")
+        self.scores_ = scores
+        self.selected_ = order[: int(self.n_features)].astype(np.int64)
+        return self
+
+
+class UDFS(_ViewSelector):
+    """ℓ2,1-regularised discriminative feature selection (Yang et al. 2011) on the stacked views (module docstring).
+
+    Args:
+        n_features: number of stacked features to select.
+        n_components: ``c``, the columns of ``W`` (the paper: the number of clusters).
+        gamma: weight ``γ`` of the ℓ2,1 norm.
+        mu: ridge of the local regressions (the paper's ``λ``).
+        n_neighbors: neighbourhood size ``k`` (the sample included), capped at ``N``.
+        max_iter: most reweighting iterations.
+        standardize: z-score every stacked feature first (fitted).
+
+    Fitted attributes: ``selected_`` int64 ``[n_features]`` (largest ``‖w^i‖`` first), ``scores_`` ``[D]``
+    (``‖w^i‖``), ``W_`` ``[D, c]``, ``objective_`` (``tr(WᵀMW) + γ‖W‖_{2,1}`` after every iteration), ``n_iter_``,
+    ``view_slices_``, ``mean_``, ``scale_``. Cost: one ``D × D`` eigenproblem per iteration.
+    """
+
+    def __init__(self, n_features: int, n_components: int = 10, gamma: float = 1.0, mu: float = 1.0,
+                 n_neighbors: int = 5, max_iter: int = 20, standardize: bool = True):
+        self.n_features = n_features
+        self.n_components = n_components
+        self.gamma = gamma
+        self.mu = mu
+        self.n_neighbors = n_neighbors
+        self.max_iter = max_iter
+        self.standardize = standardize
+
+    def fit(self, views, y=None) -> UDFS:
+        """Select features from ``views`` (list of ``[N, d_v]``); ``y`` is ignored (unsupervised)."""
+        from scipy.linalg import eigh
+
+        if not float(self.mu) > 0.0 or not float(self.gamma) >= 0.0:
+            raise ValueError(f"mu must be > 0 and gamma >= 0, got mu={self.mu}, gamma={self.gamma}")
+        _, X = self._prepare(views)
+        N, D = X.shape
+        if N < 2:
+            raise ValueError("UDFS needs at least 2 samples")
+        c = int(min(max(int(self.n_components), 1), D))
+        nbrs = _knn(X, int(min(max(int(self.n_neighbors), 2), N)))
+        B = local_regression_laplacians(X, nbrs, float(self.mu)) / float(self.mu)   # H (H K_i H + μI)⁻¹ H
+        k = nbrs.shape[1]
+        rows = np.repeat(nbrs, k, axis=1).ravel()
+        cols = np.tile(nbrs, (1, k)).ravel()
+        total = sp.csr_matrix((B.ravel(), (rows, cols)), shape=(N, N))             # Σ_i S_i B_i S_iᵀ (duplicates add)
+        M = X.T @ (total @ X)
+        M = 0.5 * (M + M.T)
+        weights = np.ones(D)
+        history, selected, W = [], None, None
+        n_iter = 0
+        for _ in range(int(self.max_iter)):
+            n_iter += 1
+            W = eigh(M + float(self.gamma) * np.diag(weights), subset_by_index=[0, c - 1], driver="evr")[1]
+            norms = np.linalg.norm(W, axis=1)
+            history.append(float(np.trace(W.T @ M @ W) + float(self.gamma) * norms.sum()))
+            weights = 1.0 / (2.0 * np.maximum(norms, 1e-12))
+            previous, selected = selected, np.argsort(-norms, kind="stable")[: int(self.n_features)]
+            if previous is not None and np.array_equal(np.sort(previous), np.sort(selected)):
+                break
+        self.W_ = W
+        self.scores_ = np.linalg.norm(W, axis=1)
+        self.selected_ = np.asarray(selected, dtype=np.int64)
+        self.objective_ = np.asarray(history, dtype=np.float64)
+        self.n_iter_ = n_iter
         return self

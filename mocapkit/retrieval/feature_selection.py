@@ -5,7 +5,9 @@ fixed-length vector of one or two views (§4.5: :func:`~mocapkit.retrieval.featu
 landmarks, and :class:`~mocapkit.retrieval.features.GPFBagOfWords`, the LLC bag of words of its geometric pose
 features); the method learns on the database (label-free: the database is the training set) the GPF codebook, the
 z-score of the stacked features and, with ``selector``, a feature selection (:class:`~mocapkit.classical.
-feature_selection.AMFS` or :class:`~mocapkit.classical.feature_selection.LaplacianScore`); queries get the same
+feature_selection.AMFS`, or a baseline: :class:`~mocapkit.classical.feature_selection.LaplacianScore`,
+:class:`~mocapkit.classical.feature_selection.SPEC`, :class:`~mocapkit.classical.feature_selection.UDFS`); queries
+get the same
 codebook, z-score and selection, and the database is ranked by **plain Euclidean distance**.
 """
 from __future__ import annotations
@@ -13,12 +15,12 @@ from __future__ import annotations
 import numpy as np
 from sklearn.metrics.pairwise import euclidean_distances
 
-from mocapkit.classical.feature_selection import AMFS, LaplacianScore
+from mocapkit.classical.feature_selection import AMFS, SPEC, UDFS, LaplacianScore
 from mocapkit.retrieval.base import RetrievalMethod
 from mocapkit.retrieval.features import GPFBagOfWords, hod
 
 VIEWS = ("hod", "gpf")
-SELECTORS = (None, "amfs", "laplacian")
+SELECTORS = (None, "amfs", "laplacian", "spec", "udfs")
 
 
 class FeatureRetrieval(RetrievalMethod):
@@ -26,12 +28,13 @@ class FeatureRetrieval(RetrievalMethod):
 
     Args:
         views: the feature views, any non-empty subset of ``("hod", "gpf")`` in any order (the stacking order).
-        selector: ``None`` (all stacked features, z-scored), ``"amfs"`` (AMFS on the views) or ``"laplacian"``
-            (Laplacian Score on the stacked views).
+        selector: ``None`` (all stacked features, z-scored), ``"amfs"`` (AMFS on the views), or on the stacked
+            views ``"laplacian"`` (Laplacian Score), ``"spec"`` (SPEC, ``φ2``) or ``"udfs"`` (UDFS, its
+            ``n_components`` and ``gamma`` at their defaults; one D × D eigenproblem per iteration).
         n_features: features kept by the selector (capped at the stacked dimension; ignored without selector).
-        r, mu: AMFS's view-weight exponent and local-regression ridge.
-        n_neighbors: the neighbourhood size of the selector (AMFS's local regressions, the sample included;
-            LaplacianScore's graph), capped by the database size.
+        r, mu: AMFS's view-weight exponent and local-regression ridge (``mu`` is UDFS's ridge too).
+        n_neighbors: the neighbourhood size of the selector (AMFS's and UDFS's local regressions, the sample
+            included; the Laplacian Score's and SPEC's graph), capped by the database size.
         n_words: GPF codebook size.
         fps, heading: of :func:`~mocapkit.retrieval.skeleton.normalised_landmarks`.
         random_state: seed of the GPF codebook and of AMFS's initial selection.
@@ -107,6 +110,10 @@ class FeatureRetrieval(RetrievalMethod):
             if self.selector == "amfs":
                 sel = AMFS(n_features=d, r=self.r, mu=self.mu, n_neighbors=self.n_neighbors,
                            random_state=self.random_state)
+            elif self.selector == "udfs":
+                sel = UDFS(n_features=d, mu=self.mu, n_neighbors=self.n_neighbors)
+            elif self.selector == "spec":
+                sel = SPEC(n_features=d, n_neighbors=self.n_neighbors)
             else:
                 sel = LaplacianScore(n_features=d, n_neighbors=self.n_neighbors)
             sel.fit(features)
