@@ -379,6 +379,11 @@ class UDFS(_ViewSelector):
     Fitted attributes: ``selected_`` int64 ``[n_features]`` (largest ``‖w^i‖`` first), ``scores_`` ``[D]``
     (``‖w^i‖``), ``W_`` ``[D, c]``, ``objective_`` (``tr(WᵀMW) + γ‖W‖_{2,1}`` after every iteration), ``n_iter_``,
     ``view_slices_``, ``mean_``, ``scale_``. Cost: one ``D × D`` eigenproblem per iteration.
+
+    With more features than samples (``D > N``, e.g. 3,256 HOD + GPF features of ~170 clips) ``M = XᵀLX`` has rank
+    at most ``N``: every ``W`` inside the null space of ``X`` makes ``tr(WᵀMW) = 0``, so the ℓ2,1 term alone picks
+    the rows and the selection says little about the data's structure. Reduce ``D`` first (fewer views, or PCA)
+    where that matters.
     """
 
     def __init__(self, n_features: int, n_components: int = 10, gamma: float = 1.0, mu: float = 1.0,
