@@ -298,6 +298,10 @@ class GaitDataModule(SplitDataModule):
         """Shuffled batches, or P × K batches (:class:`SubjectBatchSampler`) with ``subjects_per_batch``."""
         if self.subjects_per_batch is None:
             return super().train_dataloader()
+        if self.trainer is not None and self.trainer.world_size > 1:
+            raise ValueError(f"data.subjects_per_batch={self.subjects_per_batch} draws its batches in one process; "
+                             f"with {self.trainer.world_size} processes every one would train on the same batches: "
+                             "use data.subjects_per_batch=null under DDP")
         sampler = SubjectBatchSampler(self.subject_labels[self.train_idx], self.batch_size, self.subjects_per_batch)
         return DataLoader(self.dataset("train"), batch_sampler=sampler, num_workers=self.num_workers,
                           collate_fn=self.collate_fn, persistent_workers=self.num_workers > 0)
