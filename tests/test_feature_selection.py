@@ -126,6 +126,15 @@ def test_spec_selects_the_structured_features(ranking):
     assert spec.transform(views).shape == (120, 14)
 
 
+def test_spec_phi2_is_the_laplacian_score():
+    views, _ = two_view_toy()
+    spec = SPEC(n_features=14, ranking="phi2", n_neighbors=5).fit(views)
+    laplacian = LaplacianScore(n_features=14, n_neighbors=5).fit(views)
+    np.testing.assert_allclose(spec.scores_, laplacian.scores_, rtol=1e-9)
+    assert np.array_equal(spec.selected_, laplacian.selected_)
+    assert not np.array_equal(SPEC(n_features=14, n_neighbors=5).fit(views).selected_, laplacian.selected_)
+
+
 def test_spec_scores_by_hand_on_a_dense_graph():
     from mocapkit.classical.feature_selection import heat_kernel_graph
 

@@ -36,8 +36,11 @@ neighbour distance unless given, ``L = D − S``; the score of feature ``f`` is 
 **SPEC**, spectral feature selection (Zhao & Liu 2007; one of AMFS's baselines in the thesis, spec §4), on the
 same heat-kernel graph: with the normalised Laplacian ``𝓛 = D^{-1/2} (D − S) D^{-1/2}`` (eigenpairs
 ``λ_1 = 0 ≤ λ_2 ≤ …``, ``ξ_1 = D^{1/2}1 / ‖D^{1/2}1‖``) and ``f̂ = D^{1/2} f / ‖D^{1/2} f‖``, a feature scores
-``φ1 = f̂ᵀ𝓛f̂`` (smaller is better), ``φ2 = f̂ᵀ𝓛f̂ / (1 − (f̂ᵀξ_1)²)`` (smaller is better; the default) or
-``φ3 = Σ_{j=2..c} (2 − λ_j)(f̂ᵀξ_j)²`` (larger is better).
+``φ1 = f̂ᵀ𝓛f̂`` (smaller is better), ``φ2 = f̂ᵀ𝓛f̂ / (1 − (f̂ᵀξ_1)²)`` (smaller is better) or
+``φ3 = Σ_{j=2..c} (2 − λ_j)(f̂ᵀξ_j)²`` (larger is better; the default). ``φ2`` **is** the Laplacian Score on the
+same graph (expand ``f̂`` and ``ξ_1``: both are ``fᵀLf / (fᵀDf − (fᵀD1)²/1ᵀD1)``; Zhao & Liu note it), so the
+default is ``φ3``, the ranking SPEC adds: how much of a feature lies on the graph's ``c − 1`` smoothest
+non-trivial eigenvectors.
 
 **UDFS**, ℓ2,1-regularised discriminative feature selection (Yang et al. 2011; the thesis's other baseline):
 ``min tr(WᵀMW) + γ‖W‖_{2,1}`` s.t. ``WᵀW = I`` (``W`` ``[D, c]``), in rows-as-samples form
@@ -311,7 +314,7 @@ class SPEC(_ViewSelector):
 
     Args:
         n_features: number of stacked features to select.
-        ranking: ``"phi1"``, ``"phi2"`` (default) or ``"phi3"``.
+        ranking: ``"phi1"``, ``"phi2"`` (= the Laplacian Score) or ``"phi3"`` (default).
         n_components: ``c`` of ``φ3`` (eigenvectors 2..c of the normalised Laplacian).
         n_neighbors, t: the graph (:func:`heat_kernel_graph`).
         standardize: z-score every stacked feature first (fitted).
@@ -322,7 +325,7 @@ class SPEC(_ViewSelector):
 
     rankings = ("phi1", "phi2", "phi3")
 
-    def __init__(self, n_features: int, ranking: str = "phi2", n_components: int = 10, n_neighbors: int = 5,
+    def __init__(self, n_features: int, ranking: str = "phi3", n_components: int = 10, n_neighbors: int = 5,
                  t: float | None = None, standardize: bool = True):
         self.n_features = n_features
         self.ranking = ranking

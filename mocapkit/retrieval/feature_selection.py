@@ -29,7 +29,7 @@ class FeatureRetrieval(RetrievalMethod):
     Args:
         views: the feature views, any non-empty subset of ``("hod", "gpf")`` in any order (the stacking order).
         selector: ``None`` (all stacked features, z-scored), ``"amfs"`` (AMFS on the views), or on the stacked
-            views ``"laplacian"`` (Laplacian Score), ``"spec"`` (SPEC, ``φ2``) or ``"udfs"`` (UDFS, its
+            views ``"laplacian"`` (Laplacian Score), ``"spec"`` (SPEC, ``φ3``; its ``φ2`` is the Laplacian Score) or ``"udfs"`` (UDFS, its
             ``n_components`` and ``gamma`` at their defaults; one D × D eigenproblem per iteration).
         n_features: features kept by the selector (capped at the stacked dimension; ignored without selector).
         r, mu: AMFS's view-weight exponent and local-regression ridge (``mu`` is UDFS's ridge too).
