@@ -117,7 +117,7 @@ def test_the_metric_experiment_trains_on_subject_batches(cache_root):
                           "data.subjects_per_batch=4"])
     dm = build_datamodule(cfg)
     module = build(cfg.module, **dm.label_spaces())
-    assert module.hparams.metric_weight == 1.0 and cfg.eval.metric == "cos" and module.tasks == ("subject",)
+    assert module.hparams.metric_weight == 1.0 and cfg.eval.metric == "euc" and module.tasks == ("subject",)
     batch = next(iter(dm.train_dataloader()))
     assert batch["geis"].shape[0] == 8 and len(torch.unique(batch["subjects"])) == 4
     loss = module.training_step(batch, 0)
