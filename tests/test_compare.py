@@ -191,7 +191,8 @@ def test_compose_names_an_unknown_comparison_and_lists_the_known_ones():
     assert cfg.out == "checkpoints/compare/gei_pca_lda"
     gait = compose(["compare=gait"])
     assert {k: m.get("learned", {}).get("experiment") for k, m in gait.methods.items()} == {
-        "casiab_multitask": "casiab_multitask", "casiab_single_subject": "casiab_single_subject", "gei_pca_lda": None}
+        "casiab_multitask": "casiab_multitask", "casiab_single_subject": "casiab_single_subject",
+        "casiab_single_metric": "casiab_single_metric", "casiab_multitask_metric": "casiab_multitask", "gei_pca_lda": None}
 
 
 # ------------------------------------------------------------------------------------------ gait, end to end
