@@ -111,7 +111,10 @@ def gait_report(data_root, out_dir, protocols=("closed_set", "cross_subject"),
             key, _, value = item.lstrip("+").partition("=")
             if key in ("data.holdout_seed", "data.num_train_subjects"):
                 OmegaConf.update(cfg, f"benchmark.{key.split('.', 1)[1]}", None if value == "null" else int(value))
-        by_experiment = {m.learned.experiment: k for k, m in cfg.methods.items() if m.get("learned")}
+        by_experiment = {}   # experiment → its first method (gait.yaml lists the plain recipe before variants)
+        for k, m in cfg.methods.items():
+            if m.get("learned"):
+                by_experiment.setdefault(m.learned.experiment, k)
         only = []
         for experiment in experiments:
             if experiment not in by_experiment:
