@@ -72,6 +72,8 @@ def test_mean_over_views_averages_probabilities_per_sample():
     assert mean["labels"].tolist() == [0, 1] and mean["indices"].tolist() == [5, 7]
     with pytest.raises(RuntimeError, match="groups of 2"):
         mean_over_views({**out, "indices": np.array([5, 7, 5, 7])}, 2)
+    with pytest.raises(RuntimeError, match="groups of 3"):
+        mean_over_views(out, 3)
 
 
 def test_eval_views_config_errors_name_the_key():

@@ -53,8 +53,7 @@ def mean_over_views(out: dict[str, np.ndarray], n_views: int) -> dict[str, np.nd
     each group's first row (they are the sample's own: label, index, subject).
     """
     n = len(out["logits"]) // n_views
-    indices = out["indices"].reshape(n, n_views)
-    if len(out["logits"]) != n * n_views or (indices != indices[:, :1]).any():
+    if len(out["logits"]) != n * n_views or (out["indices"].reshape(n, n_views) != out["indices"][::n_views, None]).any():
         raise RuntimeError(f"test-time views: the {len(out['logits'])} predictions do not come in groups of "
                            f"{n_views} rows per sample")
     probabilities = torch.softmax(torch.from_numpy(out["logits"]).double(), dim=-1).reshape(n, n_views, -1)
