@@ -44,8 +44,8 @@ def test_ntu_learned_run_and_baseline_score_the_same_subjects(ntu_cache, tmp_pat
     out = tmp_path / "cmp"
     assert main(["compare", "ntu_recognition", f"benchmark.root={ntu_cache}", f"out={out}", "seeds=[0]",
                  "only=[energy_vgg,pooled_logreg]",
-                 "learned_overrides=['trainer.max_epochs=1','trainer.enable_progress_bar=false','data.batch_size=8',"
-                 "'model.energy.size=32']"]) == 0
+                 ("learned_overrides=['trainer.max_epochs=1','trainer.enable_progress_bar=false','data.batch_size=8',"
+                  "'model.energy.size=32']")]) == 0
     saved = json.loads((out / "results.json").read_text())
     cells = {c["method"]: c for c in saved["cells"]}
     _, test = split_indices(NTUCache(ntu_cache), "ntu60_xsub")
