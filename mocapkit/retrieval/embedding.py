@@ -220,7 +220,6 @@ class EmbeddingRetrieval(RetrievalMethod):
             self.__dict__.pop(name, None)
         self._load_model(groups=groups)
         super().fit(items, y)
-        self.index_kind_ = self._resolved_index(self.n_database_)
         self._build_index()
         return self
 
@@ -266,9 +265,11 @@ class EmbeddingRetrieval(RetrievalMethod):
         return "hnsw" if n >= AUTO_HNSW_MIN_CLIPS else "flat"
 
     def _build_index(self) -> None:
+        """``index_`` over ``database_``, of the kind ``index`` resolves to for its size (``index_kind_``)."""
         import faiss
 
         x = np.ascontiguousarray(self.database_, dtype=np.float32)
+        self.index_kind_ = self._resolved_index(len(x))
         if self.index_kind_ == "hnsw":
             index = faiss.IndexHNSWFlat(x.shape[1], HNSW_M, faiss.METRIC_INNER_PRODUCT)
             index.hnsw.efConstruction = HNSW_EF_CONSTRUCTION
@@ -301,9 +302,8 @@ class EmbeddingRetrieval(RetrievalMethod):
         self.database_ = np.asarray(state["embeddings"], dtype=np.float32)
         self.n_database_ = len(self.database_)
         self.frames_ = int(np.asarray(state["frames"]).reshape(-1)[0])
-        self.index_kind_ = ("hnsw" if self.index == "auto" and "hnsw_index" in state
-                            else self._resolved_index(self.n_database_))
-        if self.index_kind_ == "hnsw" and "hnsw_index" in state:
+        if self.index in ("auto", "hnsw") and "hnsw_index" in state:   # a saved graph is used as it was built
+            self.index_kind_ = "hnsw"
             self.index_ = faiss.deserialize_index(np.asarray(state["hnsw_index"], dtype=np.uint8))
         else:
             self._build_index()
