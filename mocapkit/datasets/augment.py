@@ -17,6 +17,12 @@ def temporal_crop(skeleton: torch.Tensor, keep: int, start: int) -> torch.Tensor
     return skeleton[:, start:start + keep]
 
 
+def crop_length(frames: int, fraction: float, min_frames: int) -> int:
+    """Frames a crop of ``fraction`` of a ``frames``-long clip keeps: never below ``min_frames``, and a clip of at
+    most ``min_frames`` frames is kept whole."""
+    return frames if frames <= min_frames else max(min_frames, round(fraction * frames))
+
+
 def rotate_about_vertical(skeleton: torch.Tensor, angle: float) -> torch.Tensor:
     """``skeleton`` ``[M, T, J, 3]`` (y up) rotated by ``angle`` radians about the vertical axis through the
     centroid of its present (non-zero) joints; absent joints stay zeros."""
@@ -61,8 +67,7 @@ class SkeletonAugment:
         t = skeleton.shape[1]
         lo, hi = self.crop
         if lo < 1.0 and t > self.min_frames:
-            ratio = lo + (hi - lo) * float(torch.rand(()))
-            keep = max(self.min_frames, round(ratio * t))
+            keep = crop_length(t, lo + (hi - lo) * float(torch.rand(())), self.min_frames)
             skeleton = temporal_crop(skeleton, keep, int(torch.randint(0, t - keep + 1, ())))
         if self.rotate_deg > 0:
             angle = math.radians(self.rotate_deg) * (2 * float(torch.rand(())) - 1)
@@ -101,7 +106,7 @@ class TestTimeViews:
         t = skeleton.shape[1]
         crops = []
         for fraction in self.crops:
-            keep = t if t <= self.min_frames else max(self.min_frames, round(fraction * t))
+            keep = crop_length(t, fraction, self.min_frames)
             starts = [0] if fraction >= 1 else [0, (t - keep) // 2, t - keep]
             crops += [temporal_crop(skeleton, keep, start) for start in starts]
         return [rotate_about_vertical(crop, math.radians(angle)) for crop in crops for angle in self.rotate_deg]
