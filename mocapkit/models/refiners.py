@@ -23,7 +23,8 @@ normalisation and its inverse are part of the network (so they are part of the O
 
 Networks (``joints`` J, frames T, batch B):
 
-- :class:`BiGRURefiner`: a bidirectional GRU over frames (the Kucherenko 2018 / Holden 2018 family).
+- :class:`BiGRURefiner`: a bidirectional GRU over frames (the Kucherenko 2018 / Holden 2018 family), its
+  input projected and layer-normalised per frame.
 - :class:`MaskedTransformerRefiner`: a masked-autoencoder transformer: missing coordinates are replaced by
   a learned mask token, each token is either a frame (joints as features, attention over frames) or a
   joint in a frame (factorised attention: over the joints of a frame, then over the frames of a joint);
@@ -318,7 +319,9 @@ class BiGRURefiner(_Refiner):
                  tangents: str = "chord", extrapolate: int = 6):
         super().__init__(joint_names, parents, up_axis, hips, bone_lengths, fps, tangents, extrapolate)
         J = self.num_joints
-        self.inp = nn.Sequential(nn.Linear(7 * J, hidden), nn.GELU())
+        # LayerNorm before the GRU: without it the GRU's output collapsed to ~0 within an epoch in some runs
+        # (mean |h| 2e-5 on validation windows, the correction constant from then on: bench/RESULTS.md §13)
+        self.inp = nn.Sequential(nn.Linear(7 * J, hidden), nn.LayerNorm(hidden), nn.GELU())
         self.gru = nn.GRU(hidden, hidden, num_layers=layers, batch_first=True, bidirectional=True,
                           dropout=dropout if layers > 1 else 0.0)
         self.out = nn.Linear(2 * hidden, 3 * J)
