@@ -28,6 +28,7 @@ from mocapkit.models.refiners import (
 from mocapkit.refinement.base import RefinementError
 from mocapkit.refinement.corruptions import TRAINING_MIXTURE, training_corruption
 from mocapkit.refinement.learned import (
+    INFERENCE_WINDOW_FACTOR,
     LearnedRefiner,
     OnnxRefiner,
     blend_weights,
@@ -504,7 +505,7 @@ def _changed(before: Motion, after: Motion) -> np.ndarray:
 
 def test_learned_refiner_fills_gaps_and_keeps_observations(tiny_refiner, gappy):
     clean, motion = gappy
-    assert tiny_refiner.window_ == 32 and tiny_refiner.fps_ == 120.0
+    assert tiny_refiner.window_ == INFERENCE_WINDOW_FACTOR * 32 and tiny_refiner.fps_ == 120.0
     out = tiny_refiner.refine(motion)
     report = out.metadata["refinement"]
     assert report["method"] == "LearnedRefiner"

@@ -10,8 +10,9 @@
 
 :class:`OnnxRefiner` runs an exported refiner (``mocapkit export``) with onnxruntime and numpy only.
 
-Both refine a take of any length in overlapping windows of the training window length (``window`` frames,
-``overlap`` frames shared by neighbours, blended with linear ramps), all windows in one batch. What they do
+Both refine a take of any length in overlapping windows (``window`` frames, by default
+:data:`INFERENCE_WINDOW_FACTOR` times the training window; ``overlap`` frames shared by neighbours, blended with
+linear ramps), all windows in one batch. What they do
 not invent: frames in which **every** joint is missing before the first or after the last observed frame, and
 interior runs of such frames longer than ``max_empty_frames``, stay missing and are reported as unfilled.
 Observed entries come back bit-identical unless the network moves them by more than ``repair_threshold``
@@ -32,6 +33,12 @@ import numpy as np
 
 from mocapkit.datasets.formats.motion import Motion
 from mocapkit.refinement.base import MotionRefiner, RefinementError
+
+#: Default inference window in training windows. Both networks run on any length, and with twice the training
+#: window they filled long gaps better on the runs' validation clips (training performers only; 2 s gaps: 32 → 25 cm
+#: RMS) at the cost of up to 0.3 mm under 20 % random loss for the transformer
+#: (``scripts/refiner_inference_settings.py --setting window``; bench/RESULTS.md §13).
+INFERENCE_WINDOW_FACTOR = 2
 
 
 # ------------------------------------------------------------------------------------------ windows (numpy only)
@@ -113,7 +120,7 @@ class _WindowedRefiner(MotionRefiner):
         self.skeleton_ = dict(skeleton)
         self.joint_names_ = tuple(skeleton["joint_names"])
         self.fps_, self.up_axis_ = float(skeleton["fps"]), str(skeleton["up_axis"])
-        self.window_ = int(self.window or skeleton.get("window") or 120)
+        self.window_ = int(self.window or INFERENCE_WINDOW_FACTOR * int(skeleton.get("window") or 120))
         self.overlap_ = int(self.window_ // 4 if self.overlap is None else self.overlap)
         if not 0 <= self.overlap_ < self.window_:
             raise ValueError(f"{type(self).__name__}: overlap={self.overlap_} must be in [0, window={self.window_})")
@@ -154,8 +161,8 @@ class LearnedRefiner(_WindowedRefiner):
             groups); None: ``fit`` trains with ``experiment``.
         experiment: the training recipe ``fit`` uses when ``checkpoint`` is None (``configs/experiment/NAME``).
         overrides: Hydra overrides of that recipe (e.g. ``["trainer.max_epochs=5"]``).
-        window: frames per window (None: the training window). overlap: frames shared by neighbouring windows
-            (None: a quarter of the window).
+        window: frames per window (None: :data:`INFERENCE_WINDOW_FACTOR` × the training window). overlap: frames
+            shared by neighbouring windows (None: a quarter of the window).
         repair_threshold: an observed entry the network moves farther than this (metres) is replaced (repaired).
         max_empty_frames: interior runs of frames with every joint missing up to this long are filled.
         device: torch device of the network.
@@ -311,5 +318,5 @@ class OnnxRefiner(_WindowedRefiner):
                                                "missing": missing.astype(bool)})[0]
 
 
-__all__ = ["LearnedRefiner", "OnnxRefiner", "blend_weights", "empty_frames_kept", "refine_windows", "train_on_motions",
-           "window_starts"]
+__all__ = ["INFERENCE_WINDOW_FACTOR", "LearnedRefiner", "OnnxRefiner", "blend_weights", "empty_frames_kept",
+           "refine_windows", "train_on_motions", "window_starts"]

@@ -1,0 +1,108 @@
+"""Choose the learned refiners' inference settings on the runs' own validation clips (training performers only).
+
+Two settings of :class:`~mocapkit.refinement.learned.LearnedRefiner` are not learned and are chosen here, never on
+a test performer: each run is scored on its **validation clips** (the 10 % of its training performers' clips that
+checkpoint selection held out, rebuilt from the run's data settings: performer ``P`` held out, ``split_seed`` 0).
+
+``--setting threshold`` — ``repair_threshold``: an observed entry comes back unchanged unless the network moves it
+    farther than this many metres (then the network's value replaces it). It trades noisy entries left as they
+    are (too high) against clean entries moved by the network's own error (too low), and touches only observed
+    entries, so the score is the RMS 3-D error over the **observed** entries of the corrupted clip (clean and noisy
+    alike); clips cropped to their central ``--frames`` frames.
+``--setting window`` — the inference ``window`` (frames per window; longer takes are refined in overlapping
+    windows blended with ramps), as multiples of the training window; the score is the RMS 3-D error over the
+    **corrupted** entries (removed or perturbed) of the whole clips (not cropped: a window longer than a clip is
+    the whole clip).
+
+Runs: ``checkpoints/refine_<model>/fold_<P>/best.ckpt`` for the given models and folds; clip ``i`` corrupted with
+``corrupt(clip, protocol, level, seed=i)``. Printed per model: mm, mean over clips and then over folds, one row per
+protocol, one column per value, and the mean over protocols.
+
+Usage (from the repository root)::
+
+    python scripts/refiner_inference_settings.py --setting threshold        # bigru + transformer, folds bd bk mm
+    python scripts/refiner_inference_settings.py --setting window --models transformer --folds bd
+"""
+from __future__ import annotations
+
+import argparse
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from mocapkit.datasets.mocap.datamodule import MocapRefinementDataModule
+from mocapkit.refinement.corruptions import CorruptionError, corrupt
+from mocapkit.refinement.learned import LearnedRefiner
+
+ROOT = Path(__file__).resolve().parents[1]
+SETTINGS = {
+    "threshold": {"values": [0.0, 0.005, 0.01, 0.015, 0.02, 0.03, float("inf")], "unit": "m",
+                  "protocols": [("rdcrypt", 0.3), ("mxcrypt", 0.3), ("spikes", 0.01), ("random_missing", 0.2),
+                                ("continuous_missing", 40)]},
+    "window": {"values": [1, 2, 4], "unit": "× training window",
+               "protocols": [("rdcrypt", 0.3), ("mxcrypt", 0.3), ("random_missing", 0.2), ("continuous_missing", 40),
+                             ("long_gaps", "20x100"), ("long_gaps", "5x2s")]},
+}
+
+
+def central(motion, frames: int):
+    start = max(0, (motion.num_frames - frames) // 2)
+    return replace(motion, positions=motion.positions[start:start + frames],
+                   missing=motion.missing[start:start + frames])
+
+
+def rms_error_mm(clean, refined, entries: np.ndarray) -> float:
+    """RMS 3-D distance (mm) between ``refined`` and ``clean`` over ``entries [T, J]``."""
+    distance = np.linalg.norm(refined.positions - clean.positions, axis=-1)[entries]
+    return float(np.sqrt(np.mean(distance ** 2)) * 1000.0)
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--setting", choices=sorted(SETTINGS), required=True)
+    parser.add_argument("--data", type=Path, default=ROOT.parent / "shared" / "data" / "hdm05_cuts11")
+    parser.add_argument("--models", nargs="+", default=["bigru", "transformer"])
+    parser.add_argument("--folds", nargs="+", default=["bd", "bk", "mm"])
+    parser.add_argument("--frames", type=int, default=250, help="threshold: clips cropped to this many frames")
+    args = parser.parse_args(argv)
+    setting = SETTINGS[args.setting]
+    values, protocols = setting["values"], setting["protocols"]
+
+    for model in args.models:
+        table = np.full((len(protocols), len(values), len(args.folds)), np.nan)
+        for f, fold in enumerate(args.folds):
+            checkpoint = str(ROOT / "checkpoints" / f"refine_{model}" / f"fold_{fold}" / "best.ckpt")
+            data = MocapRefinementDataModule(dataset="hdm05", root=str(args.data), test_groups=[fold])
+            if args.setting == "threshold":
+                clips = [central(m, args.frames) for m in data.val_motions]
+                refiners = [LearnedRefiner(checkpoint=checkpoint, repair_threshold=v).fit() for v in values]
+            else:
+                clips = list(data.val_motions)
+                trained = LearnedRefiner(checkpoint=checkpoint).fit().window_
+                refiners = [LearnedRefiner(checkpoint=checkpoint, window=int(v * trained)).fit() for v in values]
+            for p, (protocol, level) in enumerate(protocols):
+                scores = np.full((len(values), len(clips)), np.nan)
+                for i, clip in enumerate(clips):
+                    try:
+                        corruption = corrupt(clip, protocol, level, seed=i)
+                    except CorruptionError:                      # a clip too short for the protocol: not scored
+                        continue
+                    corrupted = corruption.motion
+                    entries = (~corrupted.missing if args.setting == "threshold"
+                               else corruption.removed | corruption.perturbed)
+                    for k, refiner in enumerate(refiners):
+                        scores[k, i] = rms_error_mm(clip, refiner.refine(corrupted), entries)
+                table[p, :, f] = np.nanmean(scores, axis=1)
+            print(f"[{model}] fold {fold}: {len(clips)} validation clips of {data.groups['train']}", flush=True)
+        what = "observed" if args.setting == "threshold" else "corrupted"
+        print(f"\n# {model}: RMS 3-D error over the {what} entries, mm, mean over folds {args.folds}")
+        print("| protocol | " + " | ".join(f"{v:g} {setting['unit']}" for v in values) + " |")
+        print("|---|" + "---:|" * len(values))
+        for p, (protocol, level) in enumerate(protocols):
+            print(f"| {protocol} {level} | " + " | ".join(f"{v:.2f}" for v in table[p].mean(axis=1)) + " |")
+        print("| **mean** | " + " | ".join(f"{v:.2f}" for v in table.mean(axis=(0, 2))) + " |\n", flush=True)
+
+
+if __name__ == "__main__":
+    main()
