@@ -128,7 +128,7 @@ def test_cubic_fill_ends_hold_the_nearest_observation_without_extrapolation_and_
 
 
 def test_cubic_fill_continues_the_last_observed_step_at_the_ends_then_holds():
-    _, b, x = _track(T=30, J=1, seed=2)
+    _, _, x = _track(T=30, J=1, seed=2)
     observed = torch.ones(1, 30, 1, dtype=torch.bool)
     observed[0, :10, 0] = False                       # 10 frames before the first observation
     observed[0, 22:, 0] = False                       # 8 after the last
