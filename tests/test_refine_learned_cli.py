@@ -293,3 +293,20 @@ def test_another_layout_fails_naming_the_missing_joints(trained, tmp_path, capsy
     rc, _, err = refine(capsys, tmp_path / "fast.c3d", tmp_path / "out.c3d", "--onnx", onnx)
     assert rc == 2 and "240 fps" in error_line(err) and "120 fps" in err
     assert ezc3d.c3d(str(tmp_path / "fast.c3d"))["data"]["points"].shape[1] == CMU31.num_joints
+
+
+def test_weights_of_another_network_version_fail_naming_the_keys(trained, gappy, tmp_path, capsys):
+    """A run saved by an earlier version of the network (here: the BiGRU before its LayerNorm) fails with one line
+    naming the checkpoint and the keys that do not match, not torch's bare "Error(s) in loading state_dict"."""
+    import torch
+
+    ckpt, _ = trained
+    checkpoint = torch.load(ckpt, map_location="cpu", weights_only=True)
+    checkpoint["state_dict"] = {k: v for k, v in checkpoint["state_dict"].items() if not k.startswith("model.inp.1.")}
+    old = tmp_path / "old_version.ckpt"
+    torch.save(checkpoint, old)
+    rc, _, err = refine(capsys, gappy, tmp_path / "out.c3d", "--method", old)
+    line = error_line(err)
+    assert rc == 2 and "old_version.ckpt" in line and "another network version" in line, line
+    assert "model.inp.1.weight" in line and "model.inp.1.bias" in line, line
+    assert not (tmp_path / "out.c3d").exists()

@@ -188,7 +188,11 @@ class LearnedRefiner(_WindowedRefiner):
     # -------------------------------------------------------------- loading / training
     @staticmethod
     def _load(path: str | Path):
-        from mocapkit.train.checkpoints import parse_checkpoint, read_checkpoint_bytes
+        from mocapkit.train.checkpoints import (
+            parse_checkpoint,
+            read_checkpoint_bytes,
+            restore_error_detail,
+        )
         from mocapkit.train.refine_module import MotionRefinementModule
 
         raw = read_checkpoint_bytes(path)
@@ -199,8 +203,7 @@ class LearnedRefiner(_WindowedRefiner):
         try:
             return MotionRefinementModule.load_from_checkpoint(io.BytesIO(raw), map_location="cpu", weights_only=True)
         except Exception as exc:  # weights of another network version, hyper-parameters the class does not take
-            first = (str(exc).strip().splitlines() or [type(exc).__name__])[0][:300]
-            raise RefinementError(f"{path}: cannot restore the refiner from it: {first}") from exc
+            raise RefinementError(f"{path}: cannot restore the refiner from it: {restore_error_detail(exc)}") from exc
 
     def _use(self, module) -> None:
         self.module_ = module.to(self.device).eval()

@@ -123,7 +123,11 @@ class EmbeddingRetrieval(RetrievalMethod):
     @staticmethod
     def _read_checkpoint(path: Path):
         """``(module, sha1)`` of an embedding run's checkpoint (read with ``weights_only=True`` and vetted)."""
-        from mocapkit.train.checkpoints import parse_checkpoint, read_checkpoint_bytes
+        from mocapkit.train.checkpoints import (
+            parse_checkpoint,
+            read_checkpoint_bytes,
+            restore_error_detail,
+        )
         from mocapkit.train.embedding_module import MotionEmbeddingModule
 
         raw = read_checkpoint_bytes(path)
@@ -135,8 +139,7 @@ class EmbeddingRetrieval(RetrievalMethod):
         try:
             module = MotionEmbeddingModule.load_from_checkpoint(io.BytesIO(raw), map_location="cpu", weights_only=True)
         except Exception as exc:
-            first = (str(exc).strip().splitlines() or [type(exc).__name__])[0][:300]
-            raise ValueError(f"{path}: cannot restore the motion encoder from it: {first}") from exc
+            raise ValueError(f"{path}: cannot restore the motion encoder from it: {restore_error_detail(exc)}") from exc
         return module.eval(), hashlib.sha1(raw).hexdigest()
 
     def _use_checkpoint(self, path: Path, module) -> None:

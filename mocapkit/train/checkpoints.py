@@ -22,6 +22,16 @@ def _first_line(exc: BaseException) -> str:
     return (text.splitlines()[0] if text else type(exc).__name__)[:300]
 
 
+def restore_error_detail(exc: BaseException) -> str:
+    """One line saying why a module could not be restored from a checkpoint: for weights of another network
+    version (torch's "Error(s) in loading state_dict", whose first line names nothing) the missing, unexpected and
+    mismatched keys; otherwise the error's first line."""
+    lines = [line.strip() for line in str(exc).strip().splitlines() if line.strip()]
+    if lines and lines[0].startswith("Error(s) in loading state_dict") and len(lines) > 1:
+        return ("weights of another network version (retrain the run): " + "; ".join(lines[1:]))[:500]
+    return _first_line(exc)
+
+
 def read_checkpoint_bytes(ckpt_path: str | Path) -> bytes:
     """The bytes of ``ckpt_path``; a missing file, a folder or an unreadable file is a ConfigError naming it."""
     ckpt_path = Path(ckpt_path)
@@ -83,7 +93,7 @@ def load_module(cfg: DictConfig, ckpt_path: str | Path) -> L.LightningModule:
     except ConfigError:
         raise
     except Exception as exc:  # hyper-parameters that do not fit the class, a state dict of another network, ...
-        raise ConfigError(f"{ckpt_path}: cannot restore {target} from it: {_first_line(exc)}") from exc
+        raise ConfigError(f"{ckpt_path}: cannot restore {target} from it: {restore_error_detail(exc)}") from exc
 
 
 def checkpoint_config(ckpt_path: str | Path, overrides: list[str] | None = None) -> DictConfig:
