@@ -26,12 +26,12 @@ Usage (from the repository root)::
 from __future__ import annotations
 
 import argparse
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from mocapkit.datasets.mocap.datamodule import MocapRefinementDataModule
+from mocapkit.evaluation.compare.refinement import central_crop
 from mocapkit.refinement.corruptions import CorruptionError, corrupt
 from mocapkit.refinement.learned import LearnedRefiner
 
@@ -44,12 +44,6 @@ SETTINGS = {
                "protocols": [("rdcrypt", 0.3), ("mxcrypt", 0.3), ("random_missing", 0.2), ("continuous_missing", 40),
                              ("long_gaps", "20x100"), ("long_gaps", "5x2s")]},
 }
-
-
-def central(motion, frames: int):
-    start = max(0, (motion.num_frames - frames) // 2)
-    return replace(motion, positions=motion.positions[start:start + frames],
-                   missing=motion.missing[start:start + frames])
 
 
 def rms_error_mm(clean, refined, entries: np.ndarray) -> float:
@@ -75,7 +69,7 @@ def main(argv: list[str] | None = None) -> None:
             checkpoint = str(ROOT / "checkpoints" / f"refine_{model}" / f"fold_{fold}" / "best.ckpt")
             data = MocapRefinementDataModule(dataset="hdm05", root=str(args.data), test_groups=[fold])
             if args.setting == "threshold":
-                clips = [central(m, args.frames) for m in data.val_motions]
+                clips = [central_crop(m, args.frames) for m in data.val_motions]
                 refiners = [LearnedRefiner(checkpoint=checkpoint, repair_threshold=v).fit() for v in values]
             else:
                 clips = list(data.val_motions)

@@ -135,7 +135,7 @@ def list_clips(dataset: str, root: Path) -> list[dict]:
         raise ComparisonError(f"benchmark.{exc}") from exc
 
 
-def _crop(motion, max_frames: int | None):
+def central_crop(motion, max_frames: int | None):
     """The central ``max_frames`` frames of ``motion`` (itself when shorter or ``max_frames`` is None)."""
     if not max_frames or motion.num_frames <= max_frames:
         return motion
@@ -277,7 +277,7 @@ class RefinementBenchmark(Benchmark):
     def test_motion(self, index: int):
         """The clean test clip ``index``: cropped to ``max_frames`` (central frames)."""
         if index not in self._test_cache:
-            self._test_cache[index] = _crop(self.motions[index], self.max_frames)
+            self._test_cache[index] = central_crop(self.motions[index], self.max_frames)
         return self._test_cache[index]
 
     def _suits(self, index: int, protocol: str) -> bool:
@@ -832,4 +832,4 @@ def _plot_time(results: dict, path: Path) -> Path | None:
     return save_figure(fig, path)
 
 
-__all__ = ["RefinementBenchmark", "clip_seed_for", "fold_table", "list_clips", "parse_protocol"]
+__all__ = ["RefinementBenchmark", "central_crop", "clip_seed_for", "fold_table", "list_clips", "parse_protocol"]
