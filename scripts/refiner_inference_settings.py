@@ -73,7 +73,7 @@ def main(argv: list[str] | None = None) -> None:
                 refiners = [LearnedRefiner(checkpoint=checkpoint, repair_threshold=v).fit() for v in values]
             else:
                 clips = list(data.val_motions)
-                trained = LearnedRefiner(checkpoint=checkpoint).fit().window_
+                trained = int(LearnedRefiner(checkpoint=checkpoint).fit().skeleton_["window"])   # training window
                 refiners = [LearnedRefiner(checkpoint=checkpoint, window=int(v * trained)).fit() for v in values]
             for p, (protocol, level) in enumerate(protocols):
                 scores = np.full((len(values), len(clips)), np.nan)
