@@ -1,4 +1,6 @@
 """Augmentation invariants and the data module's splits over a prepared cache."""
+import math
+
 import numpy as np
 import pytest
 import torch
@@ -25,6 +27,36 @@ def test_augment_keeps_absent_bodies_zero_and_is_rigid():
     start = next(s for s in range(41 - out.shape[1]) if torch.allclose(out[0, :, :, 1], x[0, s:s + out.shape[1], :, 1], atol=1e-5))
     a, b = x[0, start:start + out.shape[1]][present], out[0][present]
     assert torch.allclose(torch.cdist(a, a), torch.cdist(b, b), atol=1e-4)
+
+
+def test_augment_tilt_and_scale_stay_within_their_bounds():
+    torch.manual_seed(1)
+    x = torch.randn(1, 30, 25, 3) + torch.tensor([0.5, 1.0, 3.0])
+    x[0, 20:] = 0.0                                                   # padding frames stay zeros
+    present = x[0].abs().sum(-1) > 0
+    centroid = x[0][present].mean(0)
+    tilt = SkeletonAugment(tilt_deg=10)
+    for _ in range(5):
+        out = tilt(x)
+        assert (out[0, 20:] == 0).all()
+        a, b = x[0][present], out[0][present]
+        exact = "donot_use_mm_for_euclid_dist"
+        assert torch.allclose(torch.cdist(a, a, compute_mode=exact), torch.cdist(b, b, compute_mode=exact),
+                              atol=1e-5)                                            # a rotation
+        assert torch.allclose(b.mean(0), centroid, atol=1e-5)                     # about the centroid
+        # the vertical axis tilts by at most 10 degrees about x and z each
+        up = torch.linalg.lstsq(a - centroid, b - centroid).solution.T @ torch.tensor([0.0, 1.0, 0.0])
+        assert math.degrees(math.acos(float(up[1]))) <= 10 * math.sqrt(2) + 1e-3
+    moved = False
+    for _ in range(5):
+        out = SkeletonAugment(scale=0.1)(x)
+        ratio = (out[0][present] - centroid).std(0) / (x[0][present] - centroid).std(0)
+        assert ((ratio >= 0.9 - 1e-5) & (ratio <= 1.1 + 1e-5)).all()
+        moved |= bool((ratio - 1).abs().max() > 1e-3)
+    assert moved
+    for bad in ({"scale": 1.0}, {"scale": -0.1}, {"tilt_deg": -5}):
+        with pytest.raises(ValueError, match="augment"):
+            SkeletonAugment(**bad)
 
 
 def test_true_runs_are_slices():

@@ -23,17 +23,37 @@ def crop_length(frames: int, fraction: float, min_frames: int) -> int:
     return frames if frames <= min_frames else max(min_frames, round(fraction * frames))
 
 
+def _present(skeleton: torch.Tensor) -> torch.Tensor:
+    """``[M, T, J, 1]``: True where a joint was captured (absent joints are stored as zeros)."""
+    return skeleton.abs().sum(-1, keepdim=True) > 0
+
+
+def transform_about_centroid(skeleton: torch.Tensor, matrix: torch.Tensor) -> torch.Tensor:
+    """``skeleton`` ``[M, T, J, 3]`` mapped by the 3 × 3 ``matrix`` about the centroid of its present (non-zero)
+    joints; absent joints stay zeros."""
+    present = _present(skeleton)
+    if not present.any():
+        return skeleton
+    center = (skeleton * present).sum((0, 1, 2)) / present.sum()
+    moved = (skeleton - center) @ matrix.to(skeleton).T + center
+    return torch.where(present, moved, skeleton)
+
+
+def rotation_matrix(axis: int, angle: float) -> torch.Tensor:
+    """The 3 × 3 rotation by ``angle`` radians about coordinate axis ``axis`` (0 = x, 1 = y, 2 = z)."""
+    c, s = math.cos(angle), math.sin(angle)
+    i, j = [(1, 2), (2, 0), (0, 1)][axis]
+    rot = torch.eye(3)
+    rot[i, i], rot[i, j], rot[j, i], rot[j, j] = c, -s, s, c
+    return rot
+
+
 def rotate_about_vertical(skeleton: torch.Tensor, angle: float) -> torch.Tensor:
     """``skeleton`` ``[M, T, J, 3]`` (y up) rotated by ``angle`` radians about the vertical axis through the
     centroid of its present (non-zero) joints; absent joints stay zeros."""
-    present = skeleton.abs().sum(-1, keepdim=True) > 0                      # [M, T, J, 1]
-    if not present.any() or angle == 0:
+    if angle == 0:
         return skeleton
-    center = (skeleton * present).sum((0, 1, 2)) / present.sum()
-    c, s = math.cos(angle), math.sin(angle)
-    rot = skeleton.new_tensor([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
-    rotated = (skeleton - center) @ rot.T + center
-    return torch.where(present, rotated, skeleton)
+    return transform_about_centroid(skeleton, rotation_matrix(1, angle))
 
 
 def _check_fraction(name: str, values) -> tuple[float, ...]:
@@ -44,23 +64,34 @@ def _check_fraction(name: str, values) -> tuple[float, ...]:
 
 
 class SkeletonAugment:
-    """Random rotation about the vertical axis and random temporal cropping (training).
+    """Random temporal cropping and a random rigid-plus-scale change of view (training).
+
+    The view change is pyskl's ``RandomRot`` / ``RandomScale`` pair, about the centroid of the present joints:
+    a rotation about the vertical axis, tilts about the two horizontal axes, and an independent scale per
+    axis (which changes body proportions: the networks normalise the overall size away, not the shape).
 
     Args:
-        rotate_deg: maximum absolute rotation about the vertical (y) axis, degrees;
-            the rotation is about the centroid of the present joints. 0 disables it.
-        crop: ``(min, max)`` fraction of the frames kept by a random temporal crop;
-            ``(1, 1)`` disables it.
+        rotate_deg: maximum absolute rotation about the vertical (y) axis, degrees; 0 disables it.
+        crop: ``(min, max)`` fraction of the frames kept by a random temporal crop; ``(1, 1)`` disables it.
         min_frames: never crop below this many frames.
+        tilt_deg: maximum absolute rotation about each horizontal axis (x, then z), degrees; 0 disables it.
+        scale: maximum relative change of each axis's scale (0.1: factors in [0.9, 1.1]); 0 disables it.
     """
 
-    def __init__(self, rotate_deg: float = 0.0, crop: tuple[float, float] = (1.0, 1.0), min_frames: int = 8):
+    def __init__(self, rotate_deg: float = 0.0, crop: tuple[float, float] = (1.0, 1.0), min_frames: int = 8,
+                 tilt_deg: float = 0.0, scale: float = 0.0):
         lo, hi = crop
         if not 0 < lo <= hi <= 1:
             raise ValueError(f"augment.crop must satisfy 0 < min <= max <= 1, got {crop}")
+        if not 0 <= scale < 1:
+            raise ValueError(f"augment.scale must be in [0, 1), got {scale}")
+        if rotate_deg < 0 or tilt_deg < 0:
+            raise ValueError(f"augment.rotate_deg and augment.tilt_deg must be >= 0, got {rotate_deg}, {tilt_deg}")
         self.rotate_deg = float(rotate_deg)
         self.crop = (float(lo), float(hi))
         self.min_frames = int(min_frames)
+        self.tilt_deg = float(tilt_deg)
+        self.scale = float(scale)
 
     def __call__(self, skeleton: torch.Tensor) -> torch.Tensor:
         """``[M, T, J, 3]`` → ``[M, T', J, 3]`` with ``T' <= T``."""
@@ -72,6 +103,15 @@ class SkeletonAugment:
         if self.rotate_deg > 0:
             angle = math.radians(self.rotate_deg) * (2 * float(torch.rand(())) - 1)
             skeleton = rotate_about_vertical(skeleton, angle)
+        if self.tilt_deg > 0 or self.scale > 0:
+            matrix = torch.eye(3)
+            if self.tilt_deg > 0:
+                for axis in (0, 2):
+                    angle = math.radians(self.tilt_deg) * (2 * float(torch.rand(())) - 1)
+                    matrix = rotation_matrix(axis, angle) @ matrix
+            if self.scale > 0:
+                matrix = torch.diag(1 + self.scale * (2 * torch.rand(3) - 1)) @ matrix
+            skeleton = transform_about_centroid(skeleton, matrix)
         return skeleton
 
 
