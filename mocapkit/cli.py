@@ -224,7 +224,7 @@ def cmd_synthesize(args: argparse.Namespace) -> None:
     report = synthesize(args.inputs, args.out, n_variants=args.variants, n_frames=args.frames, seed=args.seed,
                         method=args.method, motion_type=args.type, max_clips=args.max_clips,
                         footskate_cleanup=not args.no_footskate, options=_key_values(args.set),
-                        progress=not args.quiet)
+                        progress=not args.quiet, output_format=args.format)
     print(f"[mocapkit] wrote {len(report['variants'])} variants of {len(report['training_clips'])} training clips to "
           f"{args.out} (fit {report['fit_seconds']:.1f} s, {report['sample_seconds_per_motion_second']:.4f} s of "
           f"compute per second of motion)")
@@ -386,8 +386,8 @@ def build_parser() -> argparse.ArgumentParser:
     for name, help_text in (("train", "train a model (Hydra overrides)"),
                             ("eval", "evaluate a checkpoint: ckpt_path=PATH [overrides]"),
                             ("export", "export a checkpoint to ONNX: ckpt_path=PATH [out=FILE]"),
-                            ("compare", "run configs/compare/NAME.yaml: methods x protocols x seeds "
-                                        "(NAME [overrides])")):
+                            ("compare", ("run configs/compare/NAME.yaml: methods x protocols x seeds "
+                                         "(NAME [overrides])"))):
         p = sub.add_parser(name, help=help_text)
         p.add_argument("overrides", nargs="*", help="key=value overrides")
 
@@ -454,6 +454,8 @@ def build_parser() -> argparse.ArgumentParser:
                             help="keep only files whose name contains this, e.g. hopBothLegs1hops")
     synthesize.add_argument("--out", required=True, help="output folder: variant_000.amc ..., the reference .asf, "
                                                          "report.json")
+    synthesize.add_argument("--format", default="amc", choices=["amc", "bvh"],
+                            help="variants as ASF/AMC (default, with the reference skeleton) or self-contained BVH")
     synthesize.add_argument("--variants", type=int, default=10, help="variants to write (default 10)")
     synthesize.add_argument("--frames", type=int, default=None, help="frames per variant (default: mean training "
                                                                      "length)")

@@ -8,6 +8,7 @@ import pytest
 from sklearn.exceptions import NotFittedError
 
 from mocapkit.datasets.formats.asf_amc import read_amc
+from mocapkit.datasets.formats.bvh import read_bvh
 from mocapkit.datasets.formats.motion import Motion
 from mocapkit.synthesis.base import SynthesisInputError, dof_matrix, time_warp
 from mocapkit.synthesis.cvae import CVAESynthesizer
@@ -167,6 +168,14 @@ def test_synthesize_command_runs_a_baseline(tmp_path, capsys):
     assert len(variants) == 2
     motion = read_amc(variants[0], asf=next(out.glob("*.asf")))
     assert np.isfinite(motion.positions).all() and motion.num_frames > 10
+    # the same variants as self-contained BVH: the same joints, positions and frame rate
+    assert main(["synthesize", *map(str, HOPS[:4]), "--method", "perlin", "--out", str(tmp_path / "bvh"),
+                 "--variants", "2", "--seed", "3", "--quiet", "--format", "bvh"]) == 0
+    assert sorted(p.name for p in (tmp_path / "bvh").iterdir()) == ["report.json", "variant_000.bvh",
+                                                                     "variant_001.bvh"]
+    as_bvh = read_bvh(tmp_path / "bvh" / "variant_000.bvh")
+    assert as_bvh.joint_names == motion.joint_names and as_bvh.fps == motion.fps
+    np.testing.assert_allclose(as_bvh.positions, motion.positions, atol=1e-4)
     assert main(["synthesize", *map(str, HOPS[:3]), "--method", "lau", "--out", str(tmp_path / "x"),
                  "--set", "amplitude=2"]) == 2                       # a Perlin parameter, not Lau's
     assert "amplitude" in capsys.readouterr().err

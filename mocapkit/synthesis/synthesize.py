@@ -2,7 +2,8 @@
 
 Zhou 2014 ch. 4 (../shared/spec/thesis-zhou-2014-retrieval-synthesis.md §3): about ten example clips of one motion
 type in, ``n_variants`` new clips out. The output folder gets ``variant_000.amc`` … (on the reference skeleton,
-the first clip's), a copy of that skeleton's ``.asf`` and ``report.json``.
+the first clip's) with a copy of that skeleton's ``.asf``, or self-contained ``variant_000.bvh`` … (the same
+joints, bone lengths and frame rate, for tools that take BVH), and ``report.json``.
 """
 from __future__ import annotations
 
@@ -17,7 +18,11 @@ from pathlib import Path
 import numpy as np
 
 from mocapkit.datasets.formats.asf_amc import read_amc, write_amc, write_asf
+from mocapkit.datasets.formats.bvh import write_bvh
 from mocapkit.synthesis.base import MotionSynthesizer, SynthesisInputError
+
+#: Output formats of the variants: ASF/AMC (the training clips' own) or BVH.
+OUTPUT_FORMATS = ("amc", "bvh")
 
 #: Synthesiser name → class: Zhou's SLFM and the baselines of the comparison (configs/compare/synthesis_hdm05.yaml).
 METHODS = {"slfm": "mocapkit.synthesis.slfm.SLFMSynthesizer",
@@ -74,12 +79,13 @@ def make_synthesizer(method: str, seed: int, footskate_cleanup: bool, options: d
 def synthesize(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, n_variants: int = 10,
                n_frames: int | None = None, seed: int = 0, method: str = "slfm", motion_type: str | None = None,
                max_clips: int = 10, footskate_cleanup: bool = True, options: dict | None = None,
-               progress: bool = True) -> dict:
+               progress: bool = True, output_format: str = "amc") -> dict:
     """Fit ``method`` on example clips and write ``n_variants`` variants to ``out_dir``.
 
     Args:
         inputs: AMC files and/or folders (searched recursively); each AMC's ASF is looked up beside it.
-        out_dir: the output folder (created): ``variant_000.amc`` …, the reference ``.asf``, ``report.json``.
+        out_dir: the output folder (created): ``variant_000.amc`` … and the reference ``.asf`` (or
+            ``variant_000.bvh`` …), ``report.json``.
         n_variants: variants to write.
         n_frames: frames per variant (default: the mean training length).
         seed: seeds the fit (``random_state``) and the sampling.
@@ -89,6 +95,9 @@ def synthesize(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, 
         footskate_cleanup: ground and pin planted feet in the variants.
         options: further constructor parameters of the synthesiser (e.g. ``{"n_inducing": 32}``).
         progress: progress lines on stderr.
+        output_format: ``"amc"`` (with the reference skeleton's ``.asf``) or ``"bvh"`` (one self-contained file
+            per variant, positions in metres; :func:`~mocapkit.datasets.formats.bvh.read_bvh` reads back the
+            AMC variant's joint positions).
 
     Returns:
         The report written to ``report.json``: training clips, fit seconds, sampling seconds, seconds of
@@ -105,6 +114,8 @@ def synthesize(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, 
         if progress:
             print(f"[synthesize] {message}", file=sys.stderr, flush=True)
 
+    if output_format not in OUTPUT_FORMATS:
+        raise ValueError(f"output format {output_format!r}: expected one of {', '.join(OUTPUT_FORMATS)}")
     files = find_clips(inputs, motion_type)[: max(int(max_clips), 0)]
     say(f"reading {len(files)} clip(s)")
     clips = [read_amc(f) for f in files]
@@ -121,22 +132,28 @@ def synthesize(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, 
     sample_seconds = time.perf_counter() - start
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    skeleton = clips[0].metadata["asf"]
-    asf_source = clips[0].metadata.get("asf_path")
-    asf_name = Path(asf_source).name if asf_source else "skeleton.asf"
-    if asf_source:
-        shutil.copyfile(asf_source, out / asf_name)
-    else:
-        write_asf(out / asf_name, skeleton)
+    asf_name = None
+    if output_format == "amc":
+        skeleton = clips[0].metadata["asf"]
+        asf_source = clips[0].metadata.get("asf_path")
+        asf_name = Path(asf_source).name if asf_source else "skeleton.asf"
+        if asf_source:
+            shutil.copyfile(asf_source, out / asf_name)
+        else:
+            write_asf(out / asf_name, skeleton)
     written = []
     for k, motion in enumerate(variants):
-        path = out / f"variant_{k:03d}.amc"
-        write_amc(path, motion)
+        path = out / f"variant_{k:03d}.{output_format}"
+        if output_format == "amc":
+            write_amc(path, motion)
+        else:
+            write_bvh(path, motion)
         written.append(path.name)
     motion_seconds = sum(len(m.positions) for m in variants) / synthesizer.fps_
     report = {
         "method": method,
         "training_clips": [str(f) for f in files],
+        "format": output_format,
         "skeleton": asf_name,
         "variants": written,
         "frames_per_variant": len(variants[0].positions),
@@ -163,6 +180,6 @@ def synthesize(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, 
             "horizontal_max": [round(float(np.hypot(r.root_shift[:, 0], r.root_shift[:, 2]).max()), 4) for r in reports],
             "vertical_max": [round(float(np.abs(r.root_shift[:, 1]).max()), 4) for r in reports]}
     (out / "report.json").write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")
-    say(f"wrote {len(written)} variant(s), {asf_name} and report.json to {out} "
+    say(f"wrote {len(written)} variant(s), {asf_name + ' ' if asf_name else ''}and report.json to {out} "
         f"({report['sample_seconds_per_motion_second']:.4f} s of compute per second of motion)")
     return report
