@@ -14,8 +14,8 @@ checkpoint selection held out, rebuilt from the run's data settings: performer `
     **corrupted** entries (removed or perturbed) of the whole clips (not cropped: a window longer than a clip is
     the whole clip).
 
-Runs: ``checkpoints/refine_<model>/fold_<P>/best.ckpt`` for the given models and folds; clip ``i`` corrupted with
-``corrupt(clip, protocol, level, seed=i)``. Printed per model: mm, mean over clips and then over folds, one row per
+Runs: ``checkpoints/refine_<model>/fold_<P>/best.ckpt`` (``--runs`` names another root) for the given models and
+folds; clip ``i`` corrupted with ``corrupt(clip, protocol, level, seed=i)``. Printed per model: mm, mean over clips and then over folds, one row per
 protocol, one column per value, and the mean over protocols.
 
 Usage (from the repository root)::
@@ -59,14 +59,18 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--models", nargs="+", default=["bigru", "transformer"])
     parser.add_argument("--folds", nargs="+", default=["bd", "bk", "mm"])
     parser.add_argument("--frames", type=int, default=250, help="threshold: clips cropped to this many frames")
+    parser.add_argument("--values", type=float, nargs="+", default=None,
+                        help="the setting's values to score (default: the grid of SETTINGS)")
+    parser.add_argument("--runs", type=Path, default=ROOT / "checkpoints",
+                        help="the folder holding refine_<model>/fold_<P>/ (the output_root of the runs)")
     args = parser.parse_args(argv)
     setting = SETTINGS[args.setting]
-    values, protocols = setting["values"], setting["protocols"]
+    values, protocols = args.values or setting["values"], setting["protocols"]
 
     for model in args.models:
         table = np.full((len(protocols), len(values), len(args.folds)), np.nan)
         for f, fold in enumerate(args.folds):
-            checkpoint = str(ROOT / "checkpoints" / f"refine_{model}" / f"fold_{fold}" / "best.ckpt")
+            checkpoint = str(args.runs / f"refine_{model}" / f"fold_{fold}" / "best.ckpt")
             data = MocapRefinementDataModule(dataset="hdm05", root=str(args.data), test_groups=[fold])
             if args.setting == "threshold":
                 clips = [central_crop(m, args.frames) for m in data.val_motions]
