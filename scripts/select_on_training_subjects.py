@@ -4,8 +4,9 @@ For every candidate (a name and Hydra overrides on top of ``--experiment``) and 
 one run trains on the other training subjects and is scored once on ``s`` (``data.train_subjects`` /
 ``data.test_subjects``: the test subjects of the benchmark are not in either list), with ``mocapkit train`` then
 ``mocapkit eval`` on the run's checkpoint. The table (top-1 per held-out training subject, the mean and the
-number of wrong clips) goes to ``OUT/selection.md`` and ``OUT/selection.json``; runs already scored are reused,
-so an interrupted selection continues where it stopped.
+number of wrong clips) goes to ``OUT/selection.md`` and ``OUT/selection.json``; runs already scored are reused
+(a run is named by its candidate and subject, and reusing it under other overrides is an error), so an interrupted
+selection continues where it stopped and a later round adds candidates to the same table.
 
 Example (README, *MSR Action3D*)::
 
@@ -35,6 +36,12 @@ def run_fold(experiment: str, name: str, overrides: list[str], subject: int, tra
     """Train on ``train``, score on ``subject``; return ``{"top1", "num_samples"}`` (cached in the run folder)."""
     run_dir = out / experiment / f"{name}_s{subject}"
     metrics = run_dir / "eval" / "metrics.json"
+    recorded = run_dir / "selection_overrides.json"
+    if metrics.is_file() and recorded.is_file() and json.loads(recorded.read_text()) != overrides:
+        raise SystemExit(f"{run_dir}: scored with the overrides {json.loads(recorded.read_text())}, not {overrides}; "
+                         "give the candidate another name or remove the folder")
+    if metrics.is_file() and not recorded.is_file():
+        print(f"[select] {run_dir}: reused; its overrides were not recorded (a run of an earlier version)")
     if not metrics.is_file():
         common = [f"experiment={experiment}", f"seed={seed}", f"output_root={out}", f"run_name={name}_s{subject}",
                   f"data.train_subjects=[{','.join(map(str, train))}]", f"data.test_subjects=[{subject}]",
@@ -44,6 +51,7 @@ def run_fold(experiment: str, name: str, overrides: list[str], subject: int, tra
         subprocess.run([*cli, "train", *common, *overrides], check=True, stdout=log, stderr=subprocess.STDOUT)
         subprocess.run([*cli, "eval", f"ckpt_path={run_dir / (checkpoint + '.ckpt')}"], check=True, stdout=log,
                        stderr=subprocess.STDOUT)
+        recorded.write_text(json.dumps(overrides))
     values = json.loads(metrics.read_text())
     print(f"[select] {name} held-out subject {subject}: top-1 {values['top1']:.4f} of {values['num_samples']}",
           flush=True)

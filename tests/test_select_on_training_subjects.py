@@ -51,6 +51,8 @@ def test_folds_hold_out_each_training_subject_and_reuse_scored_runs(tmp_path, mo
     calls.clear()
     script.main(argv)                              # every fold already scored: nothing runs again
     assert calls == []
+    with pytest.raises(SystemExit, match="data.augment.scale=0.2"):   # the same name under other overrides
+        script.main([*argv[:-1], "b=data.augment.scale=0.2 trainer.max_epochs=2"])
 
 
 def test_candidate_needs_a_name():
