@@ -452,8 +452,8 @@ def build_parser() -> argparse.ArgumentParser:
                                                       "looked up beside each AMC")
     synthesize.add_argument("--type", default=None, metavar="SUBSTRING",
                             help="keep only files whose name contains this, e.g. hopBothLegs1hops")
-    synthesize.add_argument("--out", required=True, help="output folder: variant_000.amc ..., the reference .asf, "
-                                                         "report.json")
+    synthesize.add_argument("--out", required=True, help="output folder: variant_000.amc ... and the reference .asf "
+                                                         "(or variant_000.bvh ...), report.json")
     synthesize.add_argument("--format", default="amc", choices=["amc", "bvh"],
                             help="variants as ASF/AMC (default, with the reference skeleton) or self-contained BVH")
     synthesize.add_argument("--variants", type=int, default=10, help="variants to write (default 10)")

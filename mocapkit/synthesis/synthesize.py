@@ -180,6 +180,8 @@ def synthesize(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, 
             "horizontal_max": [round(float(np.hypot(r.root_shift[:, 0], r.root_shift[:, 2]).max()), 4) for r in reports],
             "vertical_max": [round(float(np.abs(r.root_shift[:, 1]).max()), 4) for r in reports]}
     (out / "report.json").write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")
-    say(f"wrote {len(written)} variant(s), {asf_name + ' ' if asf_name else ''}and report.json to {out} "
+    files_written = f"{len(written)} variant(s), {asf_name} and report.json" if asf_name else \
+        f"{len(written)} variant(s) and report.json"
+    say(f"wrote {files_written} to {out} "
         f"({report['sample_seconds_per_motion_second']:.4f} s of compute per second of motion)")
     return report
