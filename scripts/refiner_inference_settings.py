@@ -32,6 +32,7 @@ import numpy as np
 
 from mocapkit.datasets.mocap.datamodule import MocapRefinementDataModule
 from mocapkit.evaluation.compare.refinement import central_crop
+from mocapkit.evaluation.refinement import joint_errors
 from mocapkit.refinement.corruptions import CorruptionError, corrupt
 from mocapkit.refinement.learned import LearnedRefiner
 
@@ -48,7 +49,7 @@ SETTINGS = {
 
 def rms_error_mm(clean, refined, entries: np.ndarray) -> float:
     """RMS 3-D distance (mm) between ``refined`` and ``clean`` over ``entries [T, J]``."""
-    distance = np.linalg.norm(refined.positions - clean.positions, axis=-1)[entries]
+    distance = joint_errors(clean, refined)[entries]
     return float(np.sqrt(np.mean(distance ** 2)) * 1000.0)
 
 

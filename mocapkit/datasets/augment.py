@@ -23,15 +23,10 @@ def crop_length(frames: int, fraction: float, min_frames: int) -> int:
     return frames if frames <= min_frames else max(min_frames, round(fraction * frames))
 
 
-def _present(skeleton: torch.Tensor) -> torch.Tensor:
-    """``[M, T, J, 1]``: True where a joint was captured (absent joints are stored as zeros)."""
-    return skeleton.abs().sum(-1, keepdim=True) > 0
-
-
 def transform_about_centroid(skeleton: torch.Tensor, matrix: torch.Tensor) -> torch.Tensor:
     """``skeleton`` ``[M, T, J, 3]`` mapped by the 3 × 3 ``matrix`` about the centroid of its present (non-zero)
     joints; absent joints stay zeros."""
-    present = _present(skeleton)
+    present = skeleton.abs().sum(-1, keepdim=True) > 0                      # [M, T, J, 1]
     if not present.any():
         return skeleton
     center = (skeleton * present).sum((0, 1, 2)) / present.sum()
