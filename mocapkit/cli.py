@@ -19,7 +19,8 @@
     mocapkit index --src DIR --out INDEX [--method NAME] [--ckpt PATH] [--skip-bad]
     mocapkit search --index INDEX QUERY [QUERY ...] [-k K] [--json]
     mocapkit synthesize INPUT [INPUT ...] --out DIR [--type SUBSTRING] [--variants N] [--frames F] [--seed S]
-                        [--method slfm|perlin|lau|cvae] [--no-footskate] [--set KEY=VALUE ...]   (Zhou 2014 ch. 4)
+                        [--window SECONDS] [--method slfm|perlin|lau|cvae] [--no-footskate] [--set KEY=VALUE ...]
+                        [--format amc|bvh]                                      (Zhou 2014 ch. 4)
     mocapkit kinect-fix train --mocap PATH [PATH ...] --out MODEL.npz [--noise PRESET] [--set KEY=VALUE ...]
                         [--skip-bad]
     mocapkit kinect-fix apply INPUT [INPUT ...] --model MODEL.npz --out DIR [--set KEY=VALUE ...] [--plot N]
@@ -224,7 +225,7 @@ def cmd_synthesize(args: argparse.Namespace) -> None:
     report = synthesize(args.inputs, args.out, n_variants=args.variants, n_frames=args.frames, seed=args.seed,
                         method=args.method, motion_type=args.type, max_clips=args.max_clips,
                         footskate_cleanup=not args.no_footskate, options=_key_values(args.set),
-                        progress=not args.quiet, output_format=args.format)
+                        progress=not args.quiet, output_format=args.format, window_seconds=args.window)
     print(f"[mocapkit] wrote {len(report['variants'])} variants of {len(report['training_clips'])} training clips to "
           f"{args.out} (fit {report['fit_seconds']:.1f} s, {report['sample_seconds_per_motion_second']:.4f} s of "
           f"compute per second of motion)")
@@ -462,6 +463,9 @@ def build_parser() -> argparse.ArgumentParser:
     synthesize.add_argument("--seed", type=int, default=0, help="seed of the fit and the sampling (default 0)")
     synthesize.add_argument("--max-clips", dest="max_clips", type=int, default=10,
                             help="use the first N matching clips, sorted by path (default 10, as the thesis)")
+    synthesize.add_argument("--window", type=float, default=None, metavar="SECONDS",
+                            help="cut each file into consecutive windows of this length and train on the first "
+                                 "--max-clips of them (long takes of one motion, e.g. CMU walks)")
     synthesize.add_argument("--method", default="slfm", choices=["slfm", "perlin", "lau", "cvae"],
                             help="synthesiser (default slfm; perlin, lau and cvae are the baselines)")
     synthesize.add_argument("--no-footskate", dest="no_footskate", action="store_true",

@@ -182,6 +182,26 @@ def test_synthesize_command_runs_a_baseline(tmp_path, capsys):
 
 
 @needs(HDM05)
+def test_synthesize_trains_on_windows_of_long_takes(tmp_path):
+    from mocapkit.synthesis.synthesize import synthesize
+
+    lengths = [read_amc(f).num_frames for f in HOPS[:3]]
+    window = min(lengths) // 2                                  # frames; two windows from the shortest clip
+    report = synthesize(HOPS[:3], tmp_path, n_variants=2, method="perlin", max_clips=5, progress=False,
+                        window_seconds=window / 120.0)
+    assert report["window_seconds"] == window / 120.0
+    expected = []
+    for f, n in zip(HOPS[:3], lengths):
+        expected += [f"{f.resolve()}[{s}:{s + window}]" for s in range(0, n - window + 1, window)]
+    assert report["training_clips"] == expected[:5]
+    first = str(HOPS[0].resolve())
+    assert report["frames_left_out"][first] == lengths[0] - window * (lengths[0] // window)
+    assert report["frames_per_variant"] == window
+    with pytest.raises(ValueError, match="at least 4 frames"):
+        synthesize(HOPS[:3], tmp_path, method="perlin", progress=False, window_seconds=0.01)
+
+
+@needs(HDM05)
 @pytest.mark.parametrize("name", ["lau", "cvae"])
 def test_frame_to_frame_models_cut_training_clips_at_angle_flips(hops, name):
     squat = read_amc(HDM05 / "dg" / "HDM_dg_squat1Reps_025_120.amc")   # lfemur turns 180° at frame 83

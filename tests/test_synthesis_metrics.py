@@ -1,5 +1,6 @@
 """Metrics of motion-variation synthesis (mocapkit/evaluation/synthesis.py) on hand-built motions, and the synthesis
-benchmark (mocapkit/evaluation/compare/synthesis.py) end to end through the comparison runner on real HDM05 hops.
+benchmark (mocapkit/evaluation/compare/synthesis.py) end to end through the comparison runner on real HDM05 hops,
+and its CMU form (takes cut into windows, a held-out take).
 """
 from __future__ import annotations
 
@@ -21,6 +22,7 @@ from mocapkit.evaluation.synthesis import (
 from tests.shared_data import SHARED, needs
 
 HDM05 = SHARED / "data" / "hdm05_cuts11"
+CMU = SHARED / "data" / "cmu_amc"
 JOINTS = ("Hips", "LeftUpLeg", "RightUpLeg", "LeftFoot", "RightFoot", "Head")
 PARENTS = (-1, 0, 0, 1, 2, 0)
 
@@ -164,3 +166,36 @@ def test_benchmark_rejects_a_type_with_too_few_clips():
         from mocapkit.evaluation.compare.synthesis import SynthesisBenchmark
 
         SynthesisBenchmark(str(HDM05), ["jogLeftCircle4StepsRstart"], n_train=12)
+
+
+@needs(CMU)
+def test_cmu_walks_are_cut_into_windows_and_a_held_out_take_is_the_reference():
+    from mocapkit.evaluation.compare.synthesis import SynthesisBenchmark
+
+    cfg = compose(["synthesis_cmu"])
+    assert cfg.benchmark.dataset == "cmu" and set(cfg.methods) == {"slfm", "lau", "perlin", "cvae", "copy"}
+    bench = SynthesisBenchmark(str(CMU), ["walk_uneven"], n_train=10, n_variants=2, dataset="cmu",
+                               types={"walk_uneven": ["03_01", "03_02", "03_03", "03_04"]}, window_seconds=2.0,
+                               heldout_takes=["03_04"])
+    frames = {"03_01": 432, "03_02": 365, "03_03": 4563, "03_04": 4722}          # 120 fps takes
+    assert len(bench.motions) == sum(n // 240 for n in frames.values()) == 40
+    assert all(m.num_frames == 240 for m in bench.motions)
+    assert bench.describe()["frames_left_out"] == {take: n % 240 for take, n in frames.items()}
+    splits = [bench.split("walk_uneven", seed) for seed in (0, 1)]
+    for split in splits:
+        train_takes = {bench.clips[i]["take"] for i in split.train}
+        assert len(split.train) == 10 and "03_04" not in train_takes
+        assert {bench.clips[i]["take"] for i in split.test} == {"03_04"} and len(split.test) == 4722 // 240
+    assert list(splits[0].train) != list(splits[1].train)                     # the seed draws the windows
+    # a window is the take's frames, on the take's skeleton
+    take = next(m for m, c in zip(bench.motions, bench.clips) if c["name"] == "03_03[240:480]")
+    from mocapkit.datasets.formats.asf_amc import read_amc
+
+    np.testing.assert_allclose(take.positions, read_amc(CMU / "03_03.amc").positions[240:480], atol=1e-9)
+    with pytest.raises(ComparisonError, match="not found"):
+        SynthesisBenchmark(str(CMU), ["walk"], dataset="cmu", types={"walk": ["03_09"]})
+    with pytest.raises(ComparisonError, match="to draw from"):          # one take of 3.6 s: too few windows
+        SynthesisBenchmark(str(CMU), ["walk"], dataset="cmu", types={"walk": ["03_01", "03_04"]},
+                           window_seconds=2.0, heldout_takes=["03_04"])
+    with pytest.raises(ComparisonError, match="ASF/AMC"):
+        SynthesisBenchmark(str(CMU), ["walk"], dataset="bandai")

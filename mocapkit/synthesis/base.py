@@ -158,6 +158,22 @@ def clip_segment(clip: Motion, start: int, stop: int) -> Motion:
                       source=f"{clip.source}{suffix}" if clip.source else None)
 
 
+def clip_windows(clip: Motion, seconds: float) -> list[Motion]:
+    """A long take cut into consecutive, non-overlapping windows of ``round(seconds · fps)`` frames each
+    (:func:`clip_segment`, names ``<name>[start:stop]``), for takes that hold many repetitions of one motion
+    (CMU's minute-long walks) where the synthesisers want about ten short example clips. The last
+    ``len % window`` frames are left out; a clip shorter than one window gives no window (callers report both).
+
+    Raises:
+        ValueError: ``seconds`` not positive, or shorter than 4 frames at the clip's frame rate.
+    """
+    frames = round(float(seconds) * clip.fps)
+    if not seconds > 0 or frames < 4:
+        raise ValueError(f"window of {seconds} s = {frames} frames at {clip.fps:g} fps; give at least 4 frames")
+    return [clip_segment(clip, start, start + frames)
+            for start in range(0, len(clip.positions) - frames + 1, frames)]
+
+
 def on_skeleton(clip: Motion, skeleton: AsfSkeleton) -> Motion:
     """An AMC clip posed on another ``skeleton`` by its own AMC values (same frame rate), so that clips of
     different performers compare without their body sizes."""

@@ -19,7 +19,7 @@ import numpy as np
 
 from mocapkit.datasets.formats.asf_amc import read_amc, write_amc, write_asf
 from mocapkit.datasets.formats.bvh import write_bvh
-from mocapkit.synthesis.base import MotionSynthesizer, SynthesisInputError
+from mocapkit.synthesis.base import MotionSynthesizer, SynthesisInputError, clip_windows
 
 #: Output formats of the variants: ASF/AMC (the training clips' own) or BVH.
 OUTPUT_FORMATS = ("amc", "bvh")
@@ -79,7 +79,7 @@ def make_synthesizer(method: str, seed: int, footskate_cleanup: bool, options: d
 def synthesize(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, n_variants: int = 10,
                n_frames: int | None = None, seed: int = 0, method: str = "slfm", motion_type: str | None = None,
                max_clips: int = 10, footskate_cleanup: bool = True, options: dict | None = None,
-               progress: bool = True, output_format: str = "amc") -> dict:
+               progress: bool = True, output_format: str = "amc", window_seconds: float | None = None) -> dict:
     """Fit ``method`` on example clips and write ``n_variants`` variants to ``out_dir``.
 
     Args:
@@ -91,16 +91,21 @@ def synthesize(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, 
         seed: seeds the fit (``random_state``) and the sampling.
         method: ``"slfm"`` (:class:`~mocapkit.synthesis.slfm.SLFMSynthesizer`).
         motion_type: keep only files whose name contains this (e.g. ``"hopBothLegs1hops"``).
-        max_clips: use the first ``max_clips`` matching files (sorted by path; the thesis trains on 10).
+        max_clips: use the first ``max_clips`` matching files (sorted by path; the thesis trains on 10); with
+            ``window_seconds``, the first ``max_clips`` windows.
         footskate_cleanup: ground and pin planted feet in the variants.
         options: further constructor parameters of the synthesiser (e.g. ``{"n_inducing": 32}``).
         progress: progress lines on stderr.
         output_format: ``"amc"`` (with the reference skeleton's ``.asf``) or ``"bvh"`` (one self-contained file
             per variant, positions in metres; :func:`~mocapkit.datasets.formats.bvh.read_bvh` reads back the
             AMC variant's joint positions).
+        window_seconds: cut every matching file into consecutive windows of this many seconds
+            (:func:`~mocapkit.synthesis.base.clip_windows`) and train on those: for long takes that repeat one
+            motion (CMU's walks). ``None``: every file is one clip.
 
     Returns:
-        The report written to ``report.json``: training clips, fit seconds, sampling seconds, seconds of
+        The report written to ``report.json``: training clips (with ``window_seconds``: the windows, and per file
+        the frames left out after its last whole window), fit seconds, sampling seconds, seconds of
         compute per second of synthesised motion, the variants' files, the synthesiser's parameters, for SLFM
         the noise scale it sampled with (and, with ``noise_scale="auto"``, ``V / V_train`` of each scale tried) and
         the joint-angle flips its training clips were cut at, and (with footskate cleanup) the mean horizontal
@@ -116,9 +121,29 @@ def synthesize(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, 
 
     if output_format not in OUTPUT_FORMATS:
         raise ValueError(f"output format {output_format!r}: expected one of {', '.join(OUTPUT_FORMATS)}")
-    files = find_clips(inputs, motion_type)[: max(int(max_clips), 0)]
-    say(f"reading {len(files)} clip(s)")
-    clips = [read_amc(f) for f in files]
+    files = find_clips(inputs, motion_type)
+    left_out = {}
+    if window_seconds is None:
+        files = files[: max(int(max_clips), 0)]
+        say(f"reading {len(files)} clip(s)")
+        clips = [read_amc(f) for f in files]
+        training = [str(f) for f in files]
+    else:
+        clips, short = [], []
+        for f in files:
+            if len(clips) >= max_clips:
+                break
+            take = read_amc(f)
+            windows = clip_windows(take, window_seconds)
+            used = windows[: max(int(max_clips) - len(clips), 0)]
+            left_out[str(f)] = len(take.positions) - sum(len(w.positions) for w in used)
+            if not windows:
+                short.append(str(f))
+            clips.extend(used)
+        training = [str(c.source) for c in clips]
+        if short:
+            say(f"shorter than one {window_seconds:g} s window, not used: {', '.join(short)}")
+        say(f"cut {len(left_out) - len(short)} file(s) into {len(clips)} window(s) of {window_seconds:g} s")
     synthesizer = make_synthesizer(method, seed, footskate_cleanup, options)
     if progress and hasattr(synthesizer, "verbose"):
         synthesizer.set_params(verbose=True)
@@ -152,7 +177,7 @@ def synthesize(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, 
     motion_seconds = sum(len(m.positions) for m in variants) / synthesizer.fps_
     report = {
         "method": method,
-        "training_clips": [str(f) for f in files],
+        "training_clips": training,
         "format": output_format,
         "skeleton": asf_name,
         "variants": written,
@@ -164,6 +189,9 @@ def synthesize(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, 
         "sample_seconds_per_motion_second": round(sample_seconds / motion_seconds, 5),
         "parameters": {k: v for k, v in synthesizer.get_params().items() if k != "verbose"},
     }
+    if window_seconds is not None:
+        report["window_seconds"] = float(window_seconds)
+        report["frames_left_out"] = left_out
     if hasattr(synthesizer, "noise_scale_"):
         report["noise_scale"] = synthesizer.noise_scale_
         report["variation_by_noise_scale"] = {str(k): round(v, 4)

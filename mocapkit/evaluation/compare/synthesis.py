@@ -1,12 +1,17 @@
 """The motion-variation synthesis benchmark of the comparison runner (Zhou 2014 ch. 4,
 ``../shared/spec/thesis-zhou-2014-retrieval-synthesis.md`` §3.7 and §7 gaps 20 and 22): synthesisers ×
-motion types × seeds on real HDM05 clips.
+motion types × seeds on real HDM05 and CMU clips.
 
-**Protocols** are HDM05 motion types (``hopBothLegs1hops``, ``squat1Reps``, ...; the class part of
-``HDM_<actor>_<class>_<nnn>_120.amc``). **Split** of a type for a seed: ``n_train`` clips (10, as the thesis)
-drawn with ``numpy.random.default_rng(seed)`` from the type's clips of every performer are the training side; all
-the other clips of the type are held out, as the real references of the naturalness measures (the synthesisers
-never see them).
+**Protocols** are motion types: on HDM05 (``dataset="hdm05"``) the class part of
+``HDM_<actor>_<class>_<nnn>_120.amc`` (``hopBothLegs1hops``, ``squat1Reps``, ...); on CMU, whose file names carry no
+motion type, a name that ``types`` maps to a list of takes (``walk_uneven: [03_01, ...]``). With
+``window_seconds`` every take is cut into consecutive windows of that length
+(:func:`~mocapkit.synthesis.base.clip_windows`; CMU's walks are minute-long takes of one motion) and the
+windows are the clips. **Split** of a type for a seed: ``n_train`` clips (10, as the thesis) drawn with
+``numpy.random.default_rng(seed)`` from the type's clips of every performer are the training side; all the other
+clips of the type are held out, as the real references of the naturalness measures (the synthesisers never see
+them). With ``heldout_takes``, the draw is from the other takes and only those takes' clips are the references (so
+no reference window is the neighbour of a training window in the same take).
 
 **A cell** (:meth:`SynthesisBenchmark.evaluate_estimator`): ``fit`` on the training clips, then
 ``sample(n_variants, seed=seed)`` (20 variants, as the thesis's Fig. 4.6) of the mean training length on the
@@ -52,23 +57,33 @@ DIGITS = {"v_variants": 1, "v_train": 1, "v_heldout": 1, "v_ratio": 3, "v_varian
 
 
 class SynthesisBenchmark(Benchmark):
-    """Variation synthesisers on HDM05 motion types (module docstring).
+    """Variation synthesisers on real motion types (module docstring).
 
     Args:
-        root: the HDM05 cuts folder (``../shared/data/hdm05_cuts11``: ``<actor>/HDM_<actor>_<class>_<nnn>_120.amc``).
-        protocols: the motion types (HDM05 class names) to run; each needs more than ``n_train + 1`` clips.
+        root: the folder of ``dataset`` (:func:`~mocapkit.datasets.mocap.folders.list_clips`;
+            ``../shared/data/hdm05_cuts11``: ``<actor>/HDM_<actor>_<class>_<nnn>_120.amc``; ``../shared/data/cmu_amc``).
+        protocols: the motion types to run; each needs ``n_train`` clips to draw from and two more held out.
         n_train: training clips per split.
         n_variants: variants sampled per cell.
+        dataset: ``"hdm05"`` or ``"cmu"`` (ASF/AMC: the synthesisers learn joint angles).
+        types: motion type → take names (file stems, e.g. ``03_01``), for data sets whose names carry no type.
+        window_seconds: cut every take into windows of this many seconds; ``None``: a file is a clip.
+        heldout_takes: takes whose clips are only ever held out (references), never drawn for training.
     """
 
-    title = "Motion variation synthesis on HDM05 motion types"
+    title = "Motion variation synthesis on real motion types"
     percent_metrics = ("within_real",)
 
-    def __init__(self, root: str, protocols: list[str], n_train: int = 10, n_variants: int = 20):
+    def __init__(self, root: str, protocols: list[str], n_train: int = 10, n_variants: int = 20,
+                 dataset: str = "hdm05", types: dict | None = None, window_seconds: float | None = None,
+                 heldout_takes: list[str] | None = None):
+        if dataset not in ("hdm05", "cmu"):
+            raise ComparisonError(f"benchmark.dataset={dataset!r}: synthesis learns ASF/AMC joint angles, so 'hdm05' "
+                                  "or 'cmu'")
         if root is None:
-            raise ComparisonError("benchmark.root is not set: give the HDM05 cuts folder")
+            raise ComparisonError(f"benchmark.root is not set: give the {dataset} folder")
         if not protocols:
-            raise ComparisonError("benchmark.protocols: give at least one HDM05 motion type, e.g. hopBothLegs1hops")
+            raise ComparisonError("benchmark.protocols: give at least one motion type, e.g. hopBothLegs1hops")
         if int(n_train) < 2 or int(n_variants) < 2:
             raise ComparisonError(f"benchmark.n_train={n_train}, n_variants={n_variants}: both must be >= 2 "
                                   "(V averages pairs)")
@@ -77,33 +92,73 @@ class SynthesisBenchmark(Benchmark):
             list_clips,
             read_clips,
         )
+        from mocapkit.synthesis.base import clip_windows
 
         self.root, self.n_train, self.n_variants = Path(root), int(n_train), int(n_variants)
+        self.dataset, self.window_seconds = dataset, window_seconds
+        self.heldout_takes = tuple(str(t) for t in heldout_takes or ())
         try:
-            found = list_clips("hdm05", self.root)
+            found = list_clips(dataset, self.root)
         except MocapFolderError as exc:
             raise ComparisonError(f"benchmark.{exc}") from exc
         wanted = [str(p) for p in protocols]
-        counts = {p: sum(1 for c in found if c["class"] == p) for p in wanted}
-        short = {p: n for p, n in counts.items() if n < self.n_train + 2}
-        if short:
-            raise ComparisonError(f"benchmark.protocols: {short} clips under {self.root}; each motion type needs at "
-                                  f"least n_train + 2 = {self.n_train + 2} (training + two held out)")
+        if types is not None:          # file names carry no motion type (CMU): the type is a list of takes
+            types = {str(k): [str(t) for t in v] for k, v in dict(types).items()}
+            unknown = sorted(set(wanted) - set(types))
+            if unknown:
+                raise ComparisonError(f"benchmark.protocols: {unknown} not among benchmark.types {sorted(types)}")
+            take_type = {take: name for name, takes in types.items() for take in takes}
+            names = {c["name"] for c in found}
+            missing = sorted(set(take_type) - names)
+            if missing:
+                raise ComparisonError(f"benchmark.types: takes {missing} not found under {self.root}")
+            found = [{**c, "class": take_type[c["name"]]} for c in found if c["name"] in take_type]
+        missing = sorted(set(self.heldout_takes) - {c["name"] for c in found})
+        if missing:
+            raise ComparisonError(f"benchmark.heldout_takes: {missing} are not takes of benchmark.protocols")
         found = [c for c in found if c["class"] in wanted]
         try:
-            self.motions = read_clips(found)
+            motions = read_clips(found)
         except MocapFolderError as exc:
             raise ComparisonError(f"benchmark: {exc}") from exc
-        self.clips = [{"name": c["name"], "class": c["class"], "group": c["group"]} for c in found]
-        self.classes = np.asarray([c["class"] for c in found])
+        self.motions, self.clips, self.frames_left_out = [], [], {}
+        for clip, motion in zip(found, motions):
+            if window_seconds is None:
+                pieces = [motion]
+            else:
+                try:
+                    pieces = clip_windows(motion, window_seconds)
+                except ValueError as exc:
+                    raise ComparisonError(f"benchmark.window_seconds: {exc}") from exc
+                self.frames_left_out[clip["name"]] = motion.num_frames - sum(p.num_frames for p in pieces)
+            for piece in pieces:
+                self.motions.append(piece)
+                self.clips.append({"name": piece.name or clip["name"], "take": clip["name"], "class": clip["class"],
+                                   "group": clip["group"]})
+        self.classes = np.asarray([c["class"] for c in self.clips])
+        short = {}
+        for p in wanted:
+            mine = [c for c in self.clips if c["class"] == p]
+            drawable = sum(1 for c in mine if c["take"] not in self.heldout_takes)
+            references = len(mine) - drawable if self.heldout_takes else len(mine) - self.n_train
+            if drawable < self.n_train or references < 2:
+                short[p] = {"to draw from": drawable, "held out": references}
+        if short:
+            raise ComparisonError(f"benchmark.protocols: {short} clips under {self.root}; each motion type needs "
+                                  f"n_train = {self.n_train} clips to draw from and at least two held out")
         self.protocols = tuple(wanted)
         self._references: dict[tuple[str, int], dict] = {}
 
     # -------------------------------------------------------------- data
     def describe(self) -> dict:
-        return {"dataset": "hdm05", "root": str(self.root), "n_train": self.n_train, "n_variants": self.n_variants,
-                "clips": {p: int((self.classes == p).sum()) for p in self.protocols},
-                "fps": float(self.motions[0].fps)}
+        out = {"dataset": self.dataset, "root": str(self.root), "n_train": self.n_train, "n_variants": self.n_variants,
+               "clips": {p: int((self.classes == p).sum()) for p in self.protocols},
+               "fps": float(self.motions[0].fps)}
+        if self.window_seconds is not None:
+            out.update(window_seconds=float(self.window_seconds), frames_left_out=self.frames_left_out)
+        if self.heldout_takes:
+            out["heldout_takes"] = list(self.heldout_takes)
+        return out
 
     def data(self, indices: np.ndarray):
         """The clips (AMC :class:`~mocapkit.datasets.formats.motion.Motion`, positions ``[T_i, 31, 3]`` metres) and
@@ -112,13 +167,16 @@ class SynthesisBenchmark(Benchmark):
         return [self.motions[i] for i in indices], self.classes[indices]
 
     def split(self, protocol: str, seed: int) -> Split:
-        """``n_train`` clips of the type drawn with ``default_rng([seed, crc32(type)])``; the rest held out."""
+        """``n_train`` clips of the type drawn with ``default_rng([seed, crc32(type)])``; the rest held out (with
+        ``heldout_takes``: drawn from the other takes' clips, and only the held-out takes' clips are the
+        references)."""
         if protocol not in self.protocols:
             raise ComparisonError(f"protocol {protocol!r}: not among benchmark.protocols {list(self.protocols)}")
         mine = np.flatnonzero(self.classes == protocol)
+        held = np.asarray([self.clips[i]["take"] in self.heldout_takes for i in mine], dtype=bool)
         rng = np.random.default_rng([int(seed), zlib.crc32(protocol.encode())])
-        train = np.sort(rng.choice(mine, size=self.n_train, replace=False)).astype(np.int64)
-        test = np.setdiff1d(mine, train).astype(np.int64)
+        train = np.sort(rng.choice(mine[~held], size=self.n_train, replace=False)).astype(np.int64)
+        test = (mine[held] if held.any() else np.setdiff1d(mine, train)).astype(np.int64)
         groups = lambda idx: sorted({self.clips[i]["group"] for i in idx})
         return Split(protocol, seed, train, test, {
             "train_clips": [self.clips[i]["name"] for i in train], "train_performers": groups(train),
