@@ -197,6 +197,7 @@ def test_synthesize_trains_on_windows_of_long_takes(tmp_path):
     first = str(HOPS[0].resolve())
     assert report["frames_left_out"][first] == lengths[0] - window * (lengths[0] // window)
     assert report["frames_per_variant"] == window
+    assert report["skeleton"] == "HDM_bd.asf" and (tmp_path / "HDM_bd.asf").is_file()   # the takes' own ASF
     with pytest.raises(ValueError, match="at least 4 frames"):
         synthesize(HOPS[:3], tmp_path, method="perlin", progress=False, window_seconds=0.01)
 
