@@ -124,17 +124,18 @@ class SynthesisBenchmark(Benchmark):
         self.motions, self.clips, self.frames_left_out = [], [], {}
         for clip, motion in zip(found, motions):
             if window_seconds is None:
-                pieces = [motion]
+                pieces, names = [motion], [clip["name"]]
             else:
                 try:
                     pieces = clip_windows(motion, window_seconds)
                 except ValueError as exc:
                     raise ComparisonError(f"benchmark.window_seconds: {exc}") from exc
                 self.frames_left_out[clip["name"]] = motion.num_frames - sum(p.num_frames for p in pieces)
-            for piece in pieces:
+                n = pieces[0].num_frames if pieces else 0
+                names = [f"{clip['name']}[{k * n}:{(k + 1) * n}]" for k in range(len(pieces))]   # 03_03[240:480]
+            for piece, name in zip(pieces, names):
                 self.motions.append(piece)
-                self.clips.append({"name": piece.name or clip["name"], "take": clip["name"], "class": clip["class"],
-                                   "group": clip["group"]})
+                self.clips.append({"name": name, "take": clip["name"], "class": clip["class"], "group": clip["group"]})
         self.classes = np.asarray([c["class"] for c in self.clips])
         short = {}
         for p in wanted:
