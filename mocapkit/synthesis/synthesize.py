@@ -135,7 +135,7 @@ def synthesize(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, 
                 break
             take = read_amc(f)
             windows = clip_windows(take, window_seconds)
-            used = windows[: max(int(max_clips) - len(clips), 0)]
+            used = windows[: max_clips - len(clips)]
             left_out[str(f)] = len(take.positions) - sum(len(w.positions) for w in used)
             if not windows:
                 short.append(str(f))

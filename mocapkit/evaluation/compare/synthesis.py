@@ -43,6 +43,7 @@ from __future__ import annotations
 import math
 import time
 import zlib
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -124,18 +125,17 @@ class SynthesisBenchmark(Benchmark):
         self.motions, self.clips, self.frames_left_out = [], [], {}
         for clip, motion in zip(found, motions):
             if window_seconds is None:
-                pieces, names = [motion], [clip["name"]]
+                pieces = [motion]
             else:
-                try:
-                    pieces = clip_windows(motion, window_seconds)
+                try:        # named after the take, so the windows are <take>[start:stop] (clip_segment's names)
+                    pieces = clip_windows(replace(motion, name=clip["name"]), window_seconds)
                 except ValueError as exc:
                     raise ComparisonError(f"benchmark.window_seconds: {exc}") from exc
                 self.frames_left_out[clip["name"]] = motion.num_frames - sum(p.num_frames for p in pieces)
-                n = pieces[0].num_frames if pieces else 0
-                names = [f"{clip['name']}[{k * n}:{(k + 1) * n}]" for k in range(len(pieces))]   # 03_03[240:480]
-            for piece, name in zip(pieces, names):
+            for piece in pieces:
                 self.motions.append(piece)
-                self.clips.append({"name": name, "take": clip["name"], "class": clip["class"], "group": clip["group"]})
+                self.clips.append({"name": clip["name"] if window_seconds is None else piece.name, "take": clip["name"],
+                                   "class": clip["class"], "group": clip["group"]})
         self.classes = np.asarray([c["class"] for c in self.clips])
         short = {}
         for p in wanted:
