@@ -191,3 +191,20 @@ def test_select_markers_and_missing():
     assert s.missing[:, 0].tolist() == [False, True, False] and not s.missing[:, 1].any()
     with pytest.raises(KeyError, match="'z'"):
         m.select(["z"])
+
+
+def test_coordinate_helpers_match_numpy_reductions():
+    """any_coordinate / all_coordinates / point_distance are the numpy reductions over the last axis of 3,
+    NaN and Inf included (they only read the three coordinates one at a time, for speed)."""
+    from mocapkit.datasets.formats.motion import all_coordinates, any_coordinate, point_distance
+
+    rng = np.random.default_rng(0)
+    a, b = rng.normal(size=(40, 7, 3)), rng.normal(size=(40, 7, 3))
+    a[3, 2, 1], a[5, 0, 0], b[7, 6, 2] = np.nan, np.inf, -np.inf
+    mask = rng.random((40, 7, 3)) < 0.5
+    np.testing.assert_array_equal(any_coordinate(mask), mask.any(-1))
+    np.testing.assert_array_equal(all_coordinates(mask), mask.all(-1))
+    np.testing.assert_array_equal(all_coordinates(np.isfinite(a)), np.isfinite(a).all(-1))
+    np.testing.assert_array_equal(any_coordinate(np.isnan(a)), np.isnan(a).any(-1))
+    np.testing.assert_allclose(point_distance(a, b), np.linalg.norm(a - b, axis=-1), rtol=1e-12)
+    assert any_coordinate(np.isnan(a)).sum() == 1 and not all_coordinates(np.isfinite(a))[5, 0]

@@ -70,6 +70,7 @@ from sklearn.utils.validation import check_is_fitted
 
 from mocapkit.datasets.cache_files import save_npz_atomic
 from mocapkit.datasets.formats.layouts import LANDMARK_NAMES, LANDMARK_PARENTS
+from mocapkit.datasets.formats.motion import all_coordinates
 from mocapkit.retrieval.skeleton import TEMPLATE_BONES, retarget
 
 N_JOINTS = 20
@@ -104,7 +105,7 @@ def _check_clip(clip, name: str) -> np.ndarray:
     if arr.ndim != 3 or arr.shape[1:] != (N_JOINTS, 3) or arr.shape[0] < 1:
         raise ValueError(f"{name}: expected a [T, 20, 3] array (T ≥ 1 frames of the 20 Kinect v1 joints), "
                          f"got shape {arr.shape}")
-    bad = ~np.isfinite(arr).all(axis=-1)
+    bad = ~all_coordinates(np.isfinite(arr))
     if bad.any():
         t, j = np.argwhere(bad)[0]
         raise ValueError(f"{name}: {int(bad.sum())} non-finite joint position(s), the first at frame {t}, joint "

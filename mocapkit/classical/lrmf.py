@@ -66,6 +66,7 @@ import scipy.fft
 import torch
 
 from mocapkit.classical.gap_filling import linear_fill
+from mocapkit.datasets.formats.motion import all_coordinates
 from mocapkit.refinement.base import MotionRefiner, RefinementError
 
 #: Length of the CMU ASF/AMC unit in metres: the unit the thesis's parameters were tuned in.
@@ -353,7 +354,7 @@ def flag_outliers(sparse: np.ndarray, observed: np.ndarray, threshold: float | N
         return None
     frames, features = sparse.shape
     size = np.sqrt((np.where(observed, sparse, 0.0) ** 2).reshape(frames, features // 3, 3).sum(axis=2))
-    return (size > threshold) & observed.reshape(frames, features // 3, 3).all(axis=2)
+    return (size > threshold) & all_coordinates(observed.reshape(frames, features // 3, 3))
 
 
 def drop_empty_columns(X: np.ndarray, observed: np.ndarray) -> np.ndarray:

@@ -63,7 +63,7 @@ import torch
 from scipy.interpolate import make_smoothing_spline
 
 from mocapkit.classical.gap_filling import linear_fill
-from mocapkit.datasets.formats.motion import Motion
+from mocapkit.datasets.formats.motion import Motion, all_coordinates
 from mocapkit.refinement.base import MotionRefiner, RefinementError
 
 #: Wang 2017 Fig. 3.1 on the CMU / HDM05 31-joint ASF skeleton (the joint lists exist only in the figure):
@@ -411,7 +411,7 @@ class PSCRefiner(MotionRefiner):
         # the root of the local frame is the origin itself: where it is missing, use the interpolated origin
         r = self.reference_[0] if self.reference_ is not None else 0
         world[:, r] = np.where(np.isnan(world[:, r]), origin, world[:, r])
-        flagged &= np.isfinite(world).all(2)               # a flagged marker nothing could recover stays as it was
+        flagged &= all_coordinates(np.isfinite(world))               # a flagged marker nothing could recover stays as it was
         obs = obs_in & ~flagged
         filled = np.where(np.repeat(obs, 3, 1), X, world.reshape(T, C3))
         return filled, flagged

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from mocapkit.datasets.formats.layouts import LANDMARK_PARENTS
+from mocapkit.datasets.formats.motion import point_distance
 
 
 def joint_error_cm(a: np.ndarray, b: np.ndarray, per_joint: bool = False):
@@ -21,7 +22,7 @@ def joint_error_cm(a: np.ndarray, b: np.ndarray, per_joint: bool = False):
     if a.shape != b.shape or a.ndim < 2 or a.shape[-1] != 3:
         raise ValueError(f"joint_error_cm: two [T, J, 3] arrays of one shape expected, got {list(a.shape)} and "
                          f"{list(b.shape)}")
-    err = np.linalg.norm(a - b, axis=-1).reshape(-1, a.shape[-2]) * 100.0
+    err = point_distance(a, b).reshape(-1, a.shape[-2]) * 100.0
     return err.mean(0) if per_joint else float(err.mean())
 
 
@@ -30,7 +31,7 @@ def bone_length_sd_cm(clip: np.ndarray) -> float:
     bones, in cm (0 for a rigid skeleton; a clip needs ≥ 2 frames)."""
     x = np.asarray(clip, dtype=np.float64)
     children = [j for j, p in enumerate(LANDMARK_PARENTS) if p >= 0]
-    lengths = np.linalg.norm(x[:, children] - x[:, [LANDMARK_PARENTS[j] for j in children]], axis=-1)
+    lengths = point_distance(x[:, children], x[:, [LANDMARK_PARENTS[j] for j in children]])
     return float(100.0 * lengths.std(axis=0).mean())
 
 

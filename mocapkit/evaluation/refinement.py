@@ -27,7 +27,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from mocapkit.datasets.formats.motion import Motion
+from mocapkit.datasets.formats.motion import Motion, all_coordinates
 
 
 def _arrays(clean: Motion | np.ndarray, refined: Motion | np.ndarray):
@@ -45,7 +45,7 @@ def _scored(clean: np.ndarray, refined: np.ndarray, mask: np.ndarray) -> np.ndar
     mask = np.asarray(mask, bool)
     if mask.shape != clean.shape[:2]:
         raise ValueError(f"mask must be [frames, joints] = {list(clean.shape[:2])}, got {list(mask.shape)}")
-    return mask & np.isfinite(clean).all(axis=2) & np.isfinite(refined).all(axis=2)
+    return mask & all_coordinates(np.isfinite(clean)) & all_coordinates(np.isfinite(refined))
 
 
 def joint_errors(clean: Motion | np.ndarray, refined: Motion | np.ndarray) -> np.ndarray:
@@ -69,7 +69,7 @@ def per_frame_rmse(clean: Motion | np.ndarray, refined: Motion | np.ndarray, mas
     """
     a, b = _arrays(clean, refined)
     scored = _scored(a, b, mask)
-    squared = np.where(np.isfinite(a).all(2) & np.isfinite(b).all(2), ((a - b) ** 2).sum(axis=2), 0.0)
+    squared = np.where(all_coordinates(np.isfinite(a)) & all_coordinates(np.isfinite(b)), ((a - b) ** 2).sum(axis=2), 0.0)
     if numerator == "frame":
         total = squared.sum(axis=1)
     elif numerator == "corrupted":
@@ -145,9 +145,9 @@ def score_refinement(refined: Motion, clean: Motion, corruption, numerator: str 
     if corruption.removed.shape != a.shape[:2]:
         raise ValueError(f"the corruption is for {list(corruption.removed.shape)} entries, the motions have "
                          f"{list(a.shape[:2])}")
-    truth = np.isfinite(a).all(axis=2)
+    truth = all_coordinates(np.isfinite(a))
     corrupted = corruption.corrupted & truth
-    filled = np.isfinite(b).all(axis=2)
+    filled = all_coordinates(np.isfinite(b))
     untouched = ~corruption.motion.missing & ~corruption.corrupted
     given = corruption.motion.positions[untouched]
     changed = int((~(refined.positions[untouched] == given).all(axis=1)).sum())

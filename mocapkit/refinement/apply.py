@@ -69,7 +69,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mocapkit.datasets.formats.motion import Motion
+from mocapkit.datasets.formats.motion import Motion, any_coordinate
 from mocapkit.datasets.frames import true_runs
 from mocapkit.io_atomic import atomic_open, atomic_path
 from mocapkit.refinement.base import MotionRefiner
@@ -411,7 +411,7 @@ def refine_motion(refiner: MotionRefiner, motion: Motion) -> tuple[Motion, np.nd
     out = refiner.refine(motion)
     filled = motion.missing & ~out.missing
     with np.errstate(invalid="ignore"):
-        repaired = ~motion.missing & ~out.missing & (out.positions != motion.positions).any(axis=2)
+        repaired = ~motion.missing & ~out.missing & any_coordinate(out.positions != motion.positions)
     return out, filled | repaired
 
 

@@ -26,7 +26,7 @@ import numpy as np
 from sklearn.base import BaseEstimator
 from sklearn.exceptions import NotFittedError
 
-from mocapkit.datasets.formats.motion import Motion
+from mocapkit.datasets.formats.motion import Motion, all_coordinates
 
 
 class RefinementError(ValueError):
@@ -60,7 +60,7 @@ def check_motion(motion: Motion, min_frames: int = 1, what: str = "refine") -> N
         raise RefinementError(f"{label}: {motion.num_frames} frames, {what} needs at least {min_frames}")
     if motion.missing.all():
         raise RefinementError(f"{label}: every entry is missing, nothing to refine from")
-    bad = ~np.isfinite(motion.positions).all(axis=2) & ~motion.missing
+    bad = ~all_coordinates(np.isfinite(motion.positions)) & ~motion.missing
     if bad.any():
         frame, joint = np.argwhere(bad)[0]
         raise RefinementError(f"{label}: non-finite value at frame {frame} of marker {motion.joint_names[joint]!r} "
@@ -121,7 +121,7 @@ class MotionRefiner(BaseEstimator):
         frames, joints = motion.positions.shape[:2]
         filled = np.asarray(filled, dtype=np.float64).reshape(frames, joints, 3)
         repaired = np.zeros((frames, joints), bool) if repaired is None else np.asarray(repaired, bool)
-        still_missing = motion.missing & ~np.isfinite(filled).all(axis=2)
+        still_missing = motion.missing & ~all_coordinates(np.isfinite(filled))
         replace_mask = (motion.missing | repaired) & ~still_missing
         positions = motion.positions.copy()
         positions[replace_mask] = filled[replace_mask].astype(np.float32)

@@ -54,7 +54,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from mocapkit.datasets.formats.motion import Motion
+from mocapkit.datasets.formats.motion import Motion, all_coordinates
 from mocapkit.datasets.frames import true_runs
 
 #: Standard deviation of the Gaussian noise of rdcrypt / mxcrypt, metres (thesis: σ = 2, reported in cm).
@@ -339,7 +339,7 @@ def _swaps(motion, rng, level, protocol):
         events.append((a, int(start), length))
         pairs.append(f"{motion.joint_names[a]}↔{motion.joint_names[b]} @ {start}")
     # a second swap over the same stretch can undo a first one: perturbed = actually changed
-    perturbed &= ~(positions == motion.positions).all(axis=2)
+    perturbed &= ~all_coordinates(positions == motion.positions)
     text = (f"{count} marker swaps of {_seconds(length, motion.fps)} each ({'; '.join(pairs)}); "
             f"{int(perturbed.sum())} entries moved, nothing removed")
     return None, perturbed, positions, tuple(events), text

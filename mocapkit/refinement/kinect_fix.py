@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from mocapkit.datasets.formats.layouts import LANDMARK_NAMES, MSR20, find_landmarks
-from mocapkit.datasets.formats.motion import Motion
+from mocapkit.datasets.formats.motion import Motion, all_coordinates
 
 MODEL_FPS = 30.0
 
@@ -64,7 +64,7 @@ def kinect_clip(motion: Motion) -> tuple[np.ndarray, np.ndarray, int]:
         positions, observed = landmark_positions(motion)
     except ValueError as exc:
         raise KinectFixError(str(exc) if str(label) in str(exc) else f"{label}: {exc}") from exc
-    observed &= np.isfinite(positions).all(axis=-1)
+    observed &= all_coordinates(np.isfinite(positions))
     if not observed.any():
         raise KinectFixError(f"{label}: no landmark is observed in any of its {motion.num_frames} frames (all-zero "
                              f"or missing frames only)")

@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mocapkit.datasets.formats.motion import Motion
+from mocapkit.datasets.formats.motion import Motion, point_distance
 from mocapkit.refinement.base import MotionRefiner, RefinementError
 
 #: Default inference window in training windows. Both networks run on any length, and with twice the training
@@ -148,7 +148,7 @@ class _WindowedRefiner(MotionRefiner):
         refined = refine_windows(self._predict, positions, missing, self.window_, self.overlap_)
         keep = empty_frames_kept(missing, int(self.max_empty_frames))
         refined[keep] = np.nan
-        moved = np.linalg.norm(refined - positions, axis=-1)
+        moved = point_distance(refined, positions)
         repaired = ~missing & (moved > float(self.repair_threshold))
         return refined.reshape(frames, 3 * joints), repaired
 

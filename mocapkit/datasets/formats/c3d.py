@@ -53,7 +53,7 @@ import numpy as np
 
 from mocapkit.datasets.formats.errors import MotionFormatError
 from mocapkit.datasets.formats.layouts import LAYOUTS
-from mocapkit.datasets.formats.motion import AXES, Motion
+from mocapkit.datasets.formats.motion import AXES, Motion, all_coordinates
 from mocapkit.datasets.formats.safe_io import regular_file_size
 
 #: Metres per unit for the POINT:UNITS values understood.
@@ -130,7 +130,7 @@ def read_c3d(path: str | os.PathLike, labels: list[str] | None = None, strip_pre
 
     # ---- positions and gaps
     xyz = np.ascontiguousarray(np.transpose(data[:3], (2, 1, 0)), dtype=np.float64)   # [frames, markers, 3]
-    invalid = ~np.isfinite(xyz).all(axis=2)
+    invalid = ~all_coordinates(np.isfinite(xyz))
     residuals = c3d["data"].get("meta_points", {}).get("residuals")
     if residuals is not None and np.shape(residuals)[1:] == (n_markers, n_frames):
         # ezc3d returns NaN for a negative (invalid) residual; a non-finite coordinate whose residual says
@@ -141,7 +141,7 @@ def read_c3d(path: str | os.PathLike, labels: list[str] | None = None, strip_pre
             raise C3DFormatError(path, f"non-finite coordinates of marker {full[marker]!r} marked valid (residual "
                                        f">= 0) in {int(damaged.sum())} samples, the first at frame {frame + 1}",
                                  frame=int(frame) + 1)
-    zero = (xyz == 0.0).all(axis=2) & ~invalid if zero_as_missing else np.zeros_like(invalid)
+    zero = all_coordinates(xyz == 0.0) & ~invalid if zero_as_missing else np.zeros_like(invalid)
     missing = invalid | zero
     positions = (xyz * UNIT_SCALE[units]).astype(np.float32)
     positions[missing] = np.nan

@@ -38,7 +38,7 @@ import numpy as np
 
 from mocapkit.datasets.formats.errors import MotionFormatError
 from mocapkit.datasets.formats.layouts import MSR20
-from mocapkit.datasets.formats.motion import Motion
+from mocapkit.datasets.formats.motion import Motion, all_coordinates
 from mocapkit.datasets.formats.safe_io import read_file_bytes
 
 JOINTS_PER_FRAME = 20
@@ -146,7 +146,7 @@ def read_msr_skeleton(path: str | Path, kind: str = "auto") -> Motion:
     frames = values.reshape(-1, JOINTS_PER_FRAME, 4)
     coords = frames[..., :3]
     confidence = frames[..., 3]
-    missing = (coords == 0).all(axis=-1)
+    missing = all_coordinates(coords == 0)
     all_zero = bool((frames == 0).all())
     metadata = {"confidence": confidence, "all_zero": all_zero, "coordinates": kind,
                 "missing_frames": int(missing.all(axis=1).sum())}
