@@ -22,6 +22,7 @@ from mocapkit.datasets.mocap.folders import MocapFolderError
 from mocapkit.models.refiners import (
     PoseNormalizer,
     cubic_fill,
+    encoder_layer_for_export,
     refine_bigru,
     refine_transformer,
 )
@@ -583,6 +584,23 @@ def test_onnx_refiner_matches_learned_refiner(tiny_module, tiny_refiner, gappy, 
     assert filled.sum() > 0
     np.testing.assert_allclose(b.positions[filled], a.positions[filled], atol=1e-4, rtol=0)
     assert a.metadata["refinement"]["unfilled"] == b.metadata["refinement"]["unfilled"]
+
+
+@pytest.mark.parametrize("shape", [(2, 17, 16), (5, 3, 16)])
+def test_encoder_layer_for_export_computes_what_the_layer_computes(shape):
+    """The export path of the transformer's layers (one projection, the scale on the queries, 2-D projections)
+    is the pre-norm, batch-first nn.TransformerEncoderLayer in eval mode, with and without PyTorch's fused path."""
+    torch.manual_seed(0)
+    layer = torch.nn.TransformerEncoderLayer(16, 4, 32, 0.1, activation="gelu", batch_first=True,
+                                             norm_first=True).eval()
+    for p in layer.parameters():                                    # weights away from their initial symmetry
+        p.data.add_(0.1 * torch.randn_like(p))
+    h = torch.randn(*shape)
+    with torch.no_grad():
+        fused = layer(h)                                            # PyTorch's fast path (no grad, eval)
+        mine = encoder_layer_for_export(layer, h)
+    torch.testing.assert_close(mine, fused, atol=2e-5, rtol=1e-5)
+    torch.testing.assert_close(mine.detach(), layer(h).detach(), atol=2e-5, rtol=1e-5)   # the plain path
 
 
 def test_first_guess_of_an_unobserved_chain_is_its_nearest_observed_ancestor():

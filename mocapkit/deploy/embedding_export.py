@@ -19,7 +19,7 @@ import numpy as np
 import onnxruntime as ort
 import torch
 
-from mocapkit.deploy.export import ParityError, save_checked_onnx
+from mocapkit.deploy.export import DEFAULT_OPSET, ParityError, save_checked_onnx
 
 #: The metadata key of the model's description (read by :class:`~mocapkit.retrieval.embedding.EmbeddingRetrieval`).
 META_KEY = "mocapkit_embedding"
@@ -43,7 +43,7 @@ def embedding_metadata(module) -> dict:
             "training_data": {k: source.get(k) for k in ("dataset", "label", "train_groups", "test_groups", "groups")}}
 
 
-def export_encoder(model: torch.nn.Module, out: str | Path, description: dict, opset: int = 18,
+def export_encoder(model: torch.nn.Module, out: str | Path, description: dict, opset: int = DEFAULT_OPSET,
                    trace_shape: tuple[int, int] = (2, 64), check_shape: tuple[int, int] = (3, 97),
                    atol: float = 1e-4, rtol: float = 1e-3) -> dict:
     """Export ``model`` (landmarks → embedding) to ``out``, check it with onnxruntime, return the figures.

@@ -19,6 +19,10 @@ import onnx
 
 from mocapkit.io_atomic import atomic_path, atomic_write_text
 
+#: ONNX opset of every dynamo export (the configs' ``export.opset``): from opset 20 GELU is ONNX's own operator,
+#: which onnxruntime runs fused (the refiner transformer's export 3–4 % faster than at opset 18, bench/RESULTS.md §13).
+DEFAULT_OPSET = 20
+
 
 class ParityError(RuntimeError):
     """onnxruntime and PyTorch disagree on the exported model."""

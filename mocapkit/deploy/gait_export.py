@@ -20,7 +20,7 @@ import torch
 from torch import nn
 
 from mocapkit.datasets.formats.casia_b import CONDITIONS, VIEWS
-from mocapkit.deploy.export import ParityError, save_checked_onnx
+from mocapkit.deploy.export import DEFAULT_OPSET, ParityError, save_checked_onnx
 
 
 class _OutputTuple(nn.Module):
@@ -46,7 +46,7 @@ def example_geis(batch: int, height: int, width: int, seed: int = 0) -> torch.Te
     return (body + 0.1 * torch.rand(batch, 1, height, width, generator=g)).clamp(0, 1)
 
 
-def export_gait_onnx(model: nn.Module, out: str | Path, subject_names: list[str] | None = None, opset: int = 18,
+def export_gait_onnx(model: nn.Module, out: str | Path, subject_names: list[str] | None = None, opset: int = DEFAULT_OPSET,
                      trace_batch: int = 2, check_batch: int = 3, atol: float = 1e-4, rtol: float = 1e-3) -> dict:
     """Export a :class:`~mocapkit.models.gait_cnn.MultiTaskGaitCNN` to ``out`` and check it; return the parity figures.
 

@@ -25,7 +25,7 @@ import onnx
 import onnxruntime as ort
 import torch
 
-from mocapkit.deploy.export import ParityError, save_checked_onnx
+from mocapkit.deploy.export import DEFAULT_OPSET, ParityError, save_checked_onnx
 
 
 def example_take(batch: int, frames: int, joints: int, seed: int = 0) -> tuple[torch.Tensor, torch.Tensor]:
@@ -42,7 +42,7 @@ def example_take(batch: int, frames: int, joints: int, seed: int = 0) -> tuple[t
     return torch.from_numpy(positions), torch.from_numpy(missing)
 
 
-def export_refiner(model: torch.nn.Module, out: str | Path, skeleton: dict, opset: int = 18,
+def export_refiner(model: torch.nn.Module, out: str | Path, skeleton: dict, opset: int = DEFAULT_OPSET,
                    trace_shape: tuple[int, int] = (2, 64), check_shape: tuple[int, int] = (3, 150),
                    atol: float = 1e-4, rtol: float = 1e-3) -> dict:
     """Export ``model`` (positions, missing → refined) to ``out``, check it with onnxruntime, return the figures.

@@ -20,7 +20,7 @@ import numpy as np
 import onnxruntime as ort
 import torch
 
-from mocapkit.deploy.export import ParityError, save_checked_onnx
+from mocapkit.deploy.export import DEFAULT_OPSET, ParityError, save_checked_onnx
 
 
 def example_skeletons(batch: int, frames: int, bodies: int = 2, joints: int = 25, seed: int = 0) -> torch.Tensor:
@@ -40,7 +40,7 @@ def example_skeletons(batch: int, frames: int, bodies: int = 2, joints: int = 25
     return x
 
 
-def export_onnx(model: torch.nn.Module, out: str | Path, class_names: list[str] | None = None, opset: int = 18,
+def export_onnx(model: torch.nn.Module, out: str | Path, class_names: list[str] | None = None, opset: int = DEFAULT_OPSET,
                 trace_shape: tuple[int, int] = (2, 64), check_shape: tuple[int, int] = (3, 97),
                 atol: float = 1e-4, rtol: float = 1e-3, max_frames: int | None = None) -> dict:
     """Export ``model`` (skeletons → logits) to ``out`` and check it; return the parity figures.

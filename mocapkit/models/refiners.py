@@ -54,8 +54,8 @@ def _masked_mean(values: torch.Tensor, weights: torch.Tensor, dims: tuple[int, .
 
 def coordinate_mask(observed: torch.Tensor) -> torch.Tensor:
     """``observed [B, T, J]`` as a mask of the coordinates' shape ``[B, T, J, 3]``, built by concatenation: a
-    ``torch.where`` whose condition broadcasts over the trailing axis of 3 runs several times slower in
-    onnxruntime (bench/RESULTS.md §13)."""
+    ``torch.where`` whose condition broadcasts over the trailing axis of 3, or an expand to it, runs several times
+    slower in onnxruntime (bench/RESULTS.md §13)."""
     seen = observed.unsqueeze(-1)
     return torch.cat([seen, seen, seen], dim=-1)
 
@@ -71,6 +71,13 @@ class PoseNormalizer(nn.Module):
             root), in the data's units; None: ones.
         unit: the normalised unit for a body of the training set's size, in the data's units (0.1: 10 cm, so that
             noise of a few centimetres and whole-body extents are both of order 1 for the network).
+
+    ``statistics``, ``forward`` and ``inverse`` take positions ``[B, T, J, 3]``; the ``*_cf`` methods they wrap
+    work **coordinate-first**, ``[B, 3, T, J]`` with masks ``[B, 1, T, J]``, which is how the refiners call them:
+    in that layout a coordinate is a contiguous block and masks broadcast over a leading axis, where the
+    ``[..., 3]`` layout makes onnxruntime gather, slice and broadcast over a trailing axis of 3, several times
+    slower (bench/RESULTS.md §13). The statistics are ``(centre [B,3,1,1], cos [B,1,1,1], sin [B,1,1,1],
+    scale [B,1,1,1])``, the same in both.
     """
 
     def __init__(self, parents: Sequence[int], up_axis: str = "y", hips: Sequence[int] | None = None,
@@ -86,55 +93,77 @@ class PoseNormalizer(nn.Module):
         self.hips = None if hips is None else (int(hips[0]), int(hips[1]))
         lengths = torch.ones(len(parents)) if bone_lengths is None else torch.as_tensor(bone_lengths, dtype=torch.float32)
         self.register_buffer("bone_lengths", lengths[self.child].clone())       # [bones]
+        # bones as products with [J, bones] matrices: +1 at the child, −1 at the parent (the bone vector, exact: one
+        # subtraction), and 1 at both (observed ends: 2 where the bone is seen) — one small matrix product each
+        # instead of gathers over the joint axis
+        ends = torch.zeros(len(parents), len(self.child))
+        ends[self.child, range(len(self.child))] = 1.0
+        vector = ends.clone()
+        vector[self.parent, range(len(self.child))] = -1.0
+        ends[self.parent, range(len(self.child))] = 1.0
+        self.register_buffer("bone_vector", vector, persistent=False)
+        self.register_buffer("bone_ends", ends, persistent=False)
 
     def statistics(self, positions: torch.Tensor, observed: torch.Tensor):
-        """``(centre [B,1,1,3], cos [B,1,1], sin [B,1,1], scale [B,1,1,1])`` of each window."""
-        w = coordinate_mask(observed).to(positions.dtype)                           # [B,T,J,3]
-        root_w = w[:, :, self.root:self.root + 1]
-        root_mean, root_count = _masked_mean(positions[:, :, self.root:self.root + 1], root_w, (1, 2))
-        all_mean, _ = _masked_mean(positions, w, (1, 2))
-        centre = torch.where(root_count > 0, root_mean, all_mean)                   # [B,1,1,3]
+        """The statistics of each window of ``positions [B, T, J, 3]`` (observed entries only)."""
+        return self.statistics_cf(positions.permute(0, 3, 1, 2), observed.unsqueeze(1))
+
+    def forward(self, positions: torch.Tensor, stats) -> torch.Tensor:
+        return self.forward_cf(positions.permute(0, 3, 1, 2), stats).permute(0, 2, 3, 1)
+
+    def inverse(self, normalised: torch.Tensor, stats) -> torch.Tensor:
+        return self.inverse_cf(normalised.permute(0, 3, 1, 2), stats).permute(0, 2, 3, 1)
+
+    def statistics_cf(self, coords: torch.Tensor, seen: torch.Tensor):
+        """``(centre [B,3,1,1], cos [B,1,1,1], sin [B,1,1,1], scale [B,1,1,1])`` of each window of ``coords``
+        ``[B, 3, T, J]``, from the entries where ``seen`` (bool ``[B, 1, T, J]``)."""
+        w = seen.to(coords.dtype)                                                   # [B,1,T,J]
+        r = self.root
+        root_mean, root_count = _masked_mean(coords[..., r:r + 1], w[..., r:r + 1], (2, 3))
+        all_mean, _ = _masked_mean(coords, w, (2, 3))
+        centre = torch.where(root_count > 0, root_mean, all_mean)                   # [B,3,1,1]
         h1, h2 = self.horizontal
         if self.hips is None:
-            cos = torch.ones_like(centre[..., 0])
-            sin = torch.zeros_like(centre[..., 0])
+            cos = torch.ones_like(centre[:, :1])
+            sin = torch.zeros_like(centre[:, :1])
         else:
             left, right = self.hips
-            both = (w[:, :, left] * w[:, :, right])                                 # [B,T,1]
-            line, _ = _masked_mean(positions[:, :, right] - positions[:, :, left], both, (1,))   # [B,1,3]
-            a, b = line[..., h1], line[..., h2]
+            both = w[..., left] * w[..., right]                                     # [B,1,T]
+            line, _ = _masked_mean(coords[..., right] - coords[..., left], both, (2,))   # [B,3,1]
+            a, b = line[:, h1:h1 + 1], line[:, h2:h2 + 1]                           # [B,1,1]
             norm = torch.sqrt(a * a + b * b)
             ok = norm > 1e-6
-            cos = torch.where(ok, a / norm.clamp_min(1e-6), 1.0).unsqueeze(-1)   # [B,1,1]
+            cos = torch.where(ok, a / norm.clamp_min(1e-6), 1.0).unsqueeze(-1)   # [B,1,1,1]
             sin = torch.where(ok, b / norm.clamp_min(1e-6), 0.0).unsqueeze(-1)
-        bone_w = w[:, :, self.child, 0] * w[:, :, self.parent, 0]                   # [B,T,bones]
-        length = torch.linalg.vector_norm(positions[:, :, self.child] - positions[:, :, self.parent], dim=-1)
+        vectors = torch.matmul(coords, self.bone_vector)                            # [B,3,T,bones]
+        length = torch.sqrt((vectors * vectors).sum(1))                              # [B,T,bones]
+        bone_w = (torch.matmul(w[:, 0], self.bone_ends) > 1.5).to(coords.dtype)     # both ends seen
         length = torch.where(bone_w > 0, length, 0.0)
         mean_len, count = _masked_mean(length, bone_w, (1,))                        # [B,1,bones]
-        seen = (count > 0).to(positions.dtype)
-        ratio = (mean_len * seen).sum(-1) / (self.bone_lengths * seen).sum(-1).clamp_min(1e-6)   # [B,1]
-        ratio = torch.where(seen.sum(-1) > 0, ratio, 1.0)
+        known = (count > 0).to(coords.dtype)
+        ratio = (mean_len * known).sum(-1) / (self.bone_lengths * known).sum(-1).clamp_min(1e-6)   # [B,1]
+        ratio = torch.where(known.sum(-1) > 0, ratio, 1.0)
         scale = (ratio * self.unit).reshape(-1, 1, 1, 1)
         return centre, cos, sin, scale
 
     def _turn(self, coords: list[torch.Tensor], cos: torch.Tensor, sin: torch.Tensor) -> list[torch.Tensor]:
-        """The three ``[B, T, J]`` coordinates turned about the up axis by the per-window ``cos``, ``sin``."""
+        """The three coordinates turned about the up axis by the per-window ``cos``, ``sin``."""
         h1, h2 = self.horizontal
         a, b = coords[h1], coords[h2]
         turned = {h1: cos * a + sin * b, h2: -sin * a + cos * b, self.up: coords[self.up]}
         return [turned[0], turned[1], turned[2]]
 
-    # both directions work on one coordinate at a time: the per-window centre and scale then broadcast over
-    # frames and joints, which onnxruntime does several times faster than over a trailing axis of 3
-    def forward(self, positions: torch.Tensor, stats) -> torch.Tensor:
+    def forward_cf(self, coords: torch.Tensor, stats) -> torch.Tensor:
+        """``coords [B, 3, T, J]`` normalised with ``stats`` (centred, turned, scaled)."""
         centre, cos, sin, scale = stats
-        coords = [positions[..., k] - centre[..., k] for k in range(3)]
-        return torch.stack([c / scale[..., 0] for c in self._turn(coords, cos, sin)], dim=-1)
+        moved = list((coords - centre).split(1, dim=1))                             # 3 × [B,1,T,J]
+        return torch.cat(self._turn(moved, cos, sin), dim=1) / scale
 
-    def inverse(self, normalised: torch.Tensor, stats) -> torch.Tensor:
+    def inverse_cf(self, normalised: torch.Tensor, stats) -> torch.Tensor:
+        """The inverse of :meth:`forward_cf`."""
         centre, cos, sin, scale = stats
-        turned = self._turn([normalised[..., k] * scale[..., 0] for k in range(3)], cos, -sin)
-        return torch.stack([c + centre[..., k] for k, c in enumerate(turned)], dim=-1)
+        turned = self._turn(list((normalised * scale).split(1, dim=1)), cos, -sin)
+        return torch.cat(turned, dim=1) + centre
 
 
 def observed_neighbours(observed: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -180,12 +209,18 @@ def cubic_fill(x: torch.Tensor, observed: torch.Tensor, tangents: str = "chord",
         values with one-sided difference tangents (``tangents`` where the frame beyond an end is not observed);
         before the first / after the last observation as ``extrapolate`` says; 0 for a joint never observed.
 
-    Computed coordinate-first (``[B, 3, T, J]``, masks ``[B, 1, T, J]``) and with the four neighbour frames of
-    every entry read by one gather: an exported graph pays per operator, and onnxruntime broadcasts a mask over a
-    leading axis several times faster than over a trailing axis of 3 (bench/RESULTS.md §13).
+    The work is done coordinate-first by :func:`cubic_fill_cf`.
     """
-    T = x.shape[1]
-    x = x.permute(0, 3, 1, 2)                                                # [B,3,T,J]
+    return cubic_fill_cf(x.permute(0, 3, 1, 2), observed, tangents, extrapolate).permute(0, 2, 3, 1)
+
+
+def cubic_fill_cf(x: torch.Tensor, observed: torch.Tensor, tangents: str = "chord", extrapolate: int = 6) -> torch.Tensor:
+    """:func:`cubic_fill` of coordinate-first ``x`` ``[B, 3, T, J]`` (``observed`` bool ``[B, T, J]``) →
+    ``[B, 3, T, J]``. Masks are ``[B, 1, T, J]`` and the four neighbour frames of every entry come from one
+    gather: an exported graph pays per operator, and onnxruntime broadcasts a mask over a leading axis several
+    times faster than over a trailing axis of 3 (bench/RESULTS.md §13).
+    """
+    T = x.shape[2]
     frames = torch.arange(T, device=x.device).view(1, 1, T, 1)
     seen_here = observed.unsqueeze(1)                                        # [B,1,T,J]
     prev, nxt = observed_neighbours(observed)
@@ -193,35 +228,45 @@ def cubic_fill(x: torch.Tensor, observed: torch.Tensor, tangents: str = "chord",
     prev_c, next_c = prev.clamp(0, T - 1), nxt.clamp(0, T - 1)
     before_prev, after_next = (prev_c - 1).clamp(0, T - 1), (next_c + 1).clamp(0, T - 1)
     index = torch.cat([prev_c, next_c, before_prev, after_next], dim=2)      # [B,1,4T,J]
-    ends = torch.gather(x, 2, index.expand(-1, 3, -1, -1))                   # [B,3,4T,J]
+    # one gather per coordinate: expanding the int64 index to the three coordinates costs more than the gathers
+    ends = torch.cat([torch.gather(c, 2, index) for c in x.split(1, dim=1)], dim=1)   # [B,3,4T,J]
     p0, p1, q0, q1 = ends[:, :, :T], ends[:, :, T:2 * T], ends[:, :, 2 * T:3 * T], ends[:, :, 3 * T:]
     beyond = torch.gather(seen_here, 2, index[:, :, 2 * T:])                 # [B,1,2T,J]
     span = (nxt - prev).clamp_min(1).to(x.dtype)                             # [B,1,T,J]
-    known0, known1 = beyond[:, :, :T] & (prev_c > 0), beyond[:, :, T:] & (next_c < T - 1)
-    step0, step1 = torch.where(known0, p0 - q0, 0.0), torch.where(known1, q1 - p1, 0.0)   # observed frame steps
-    unknown = (p1 - p0) / span if tangents == "chord" else 0.0               # a tangent whose neighbour is missing
-    m0, m1 = torch.where(known0, step0, unknown), torch.where(known1, step1, unknown)
+    # the choices below are products with 0/1 masks (m·a + (1 − m)·b, exact for the finite values here) rather than
+    # torch.where: onnxruntime's Where costs about four of its Mul (bench/RESULTS.md §13)
+    known0 = (beyond[:, :, :T] & (prev_c > 0)).to(x.dtype)
+    known1 = (beyond[:, :, T:] & (next_c < T - 1)).to(x.dtype)
+    step0, step1 = known0 * (p0 - q0), known1 * (q1 - p1)                   # observed frame steps (0: unknown)
+    if tangents == "chord":                                                  # a tangent whose neighbour is missing
+        unknown = (p1 - p0) / span
+        m0, m1 = step0 + (1 - known0) * unknown, step1 + (1 - known1) * unknown
+    else:
+        m0, m1 = step0, step1
     u = ((frames - prev).to(x.dtype) / span).clamp(0, 1)
     u2, u3 = u * u, u * u * u
     hermite = ((2 * u3 - 3 * u2 + 1) * p0 + (u3 - 2 * u2 + u) * span * m0
                + (-2 * u3 + 3 * u2) * p1 + (u3 - u2) * span * m1)
     after = p0 + step0 * (frames - prev).clamp(max=extrapolate).to(x.dtype)   # past the last observation
     before = p1 - step1 * (nxt - frames).clamp(max=extrapolate).to(x.dtype)   # before the first
-    held = torch.where(has_prev, after, before)
-    fill = torch.where(has_prev & has_next, hermite, held)
-    fill = torch.where(has_prev | has_next, fill, 0.0)
-    return torch.where(seen_here, x, fill).permute(0, 2, 3, 1)
+    before_ok, after_ok = has_prev.to(x.dtype), has_next.to(x.dtype)
+    inside = before_ok * after_ok
+    held = before_ok * after + (1 - before_ok) * before
+    fill = inside * hermite + (1 - inside) * held
+    seen = seen_here.to(x.dtype)
+    return seen * x + (1 - seen) * (fill * (1 - (1 - before_ok) * (1 - after_ok)))   # 0 for a joint never seen
 
 
 #: Scale of the guess and of its temporal detail in the networks' input features (:meth:`_Refiner.features`).
 FEATURE_SCALE = (0.1, 5.0)
 
 
-def temporal_detail(x: torch.Tensor) -> torch.Tensor:
-    """``x_t − (x_{t−1} + x_{t+1}) / 2`` along frames (dim 1; the end frames use their one neighbour): what a
+def temporal_detail(x: torch.Tensor, dim: int = 1) -> torch.Tensor:
+    """``x_t − (x_{t−1} + x_{t+1}) / 2`` along frames (axis ``dim``; the end frames use their one neighbour): what a
     noisy sample or a spike stands out by, handed to the networks so that denoising is an easy function to learn."""
-    prev = torch.cat([x[:, :1], x[:, :-1]], dim=1)
-    nxt = torch.cat([x[:, 1:], x[:, -1:]], dim=1)
+    T = x.shape[dim]
+    prev = torch.cat([x.narrow(dim, 0, 1), x.narrow(dim, 0, T - 1)], dim=dim)
+    nxt = torch.cat([x.narrow(dim, 1, T - 1), x.narrow(dim, T - 1, 1)], dim=dim)
     return x - 0.5 * (prev + nxt)
 
 
@@ -259,45 +304,77 @@ class _Refiner(nn.Module):
         self.tangents, self.extrapolate = tangents, extrapolate
 
     def first_guess(self, x: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
-        """:func:`cubic_fill`, then a joint never observed in the window takes the guess of its nearest ancestor
-        that is observed in it (the root's when none is), found by pointer jumping: each joint's pointer moves to
-        its parent where the joint is never observed, and ``ancestor_rounds`` compositions of the pointers reach
-        the nearest observed ancestor — a few gathers instead of a loop over the joints (a graph of ``J`` small
-        operators once exported)."""
-        guess = cubic_fill(x, observed, self.tangents, self.extrapolate)
-        B, T, J, _ = guess.shape
+        """:meth:`first_guess_cf` of ``x [B, T, J, 3]`` → ``[B, T, J, 3]``."""
+        return self.first_guess_cf(x.permute(0, 3, 1, 2), observed).permute(0, 2, 3, 1)
+
+    def first_guess_cf(self, x: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
+        """:func:`cubic_fill_cf` of ``x [B, 3, T, J]``, then a joint never observed in the window takes the guess of
+        its nearest ancestor that is observed in it (the root's when none is), found by pointer jumping: each joint's
+        pointer moves to its parent where the joint is never observed, and ``ancestor_rounds`` compositions of the
+        pointers reach the nearest observed ancestor — a few gathers instead of a loop over the joints (a graph of
+        ``J`` small operators once exported)."""
+        guess = cubic_fill_cf(x, observed, self.tangents, self.extrapolate)          # [B,3,T,J]
+        J = guess.shape[3]
         never = ~observed.any(dim=1, keepdim=True)                                   # [B,1,J]
         own = torch.arange(J, device=guess.device).view(1, 1, J)
         source = torch.where(never, self.parent_or_self.view(1, 1, J), own)           # [B,1,J]
         for _ in range(self.ancestor_rounds):
             source = torch.gather(source, 2, source)
-        return torch.gather(guess, 2, source.unsqueeze(-1).expand(B, T, J, 3))
+        # joint j takes the guess of joint source[j]: a product with the 0/1 matrix [i == source[j]] (exact: one
+        # term of each sum is 1·guess, the others 0) runs as one small matrix product where a gather over the
+        # coordinates' layout cost ~0.1 ms in onnxruntime (bench/RESULTS.md §13)
+        pick = (source.view(-1, J, 1) == own.view(1, 1, J)).to(guess.dtype)          # [B,J(to),J(from)]
+        return torch.matmul(guess, pick.transpose(1, 2).unsqueeze(1))
 
     def correction(self, guess: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
-        """``[B, T, J, 3]`` correction of the normalised first guess (subclasses)."""
+        """``[B, 3, T, J]`` correction of the normalised first guess ``guess [B, 3, T, J]`` (subclasses)."""
         raise NotImplementedError
 
     @staticmethod
     def features(guess: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
-        """Per joint ``[B, T, J, 7]``: the guess scaled to metres-like values (×0.1: a body spans about ±1), its
-        temporal detail ×5 (2 cm of noise ≈ 1) and the observed flag; inputs of order 1 keep the GRU's gates and
-        the attention out of saturation."""
-        return torch.cat([FEATURE_SCALE[0] * guess, FEATURE_SCALE[1] * temporal_detail(guess),
-                          observed.unsqueeze(-1).to(guess.dtype)], dim=-1)
+        """Coordinate-first features ``[B, 7, T, J]`` of the guess ``[B, 3, T, J]``: the guess scaled to metres-like
+        values (×0.1: a body spans about ±1), its temporal detail ×5 (2 cm of noise ≈ 1) and the observed flag;
+        inputs of order 1 keep the GRU's gates and the attention out of saturation. The networks read them per
+        frame, joint-major (:func:`per_joint`)."""
+        return torch.cat([FEATURE_SCALE[0] * guess, FEATURE_SCALE[1] * temporal_detail(guess, dim=2),
+                          observed.unsqueeze(1).to(guess.dtype)], dim=1)
 
     def forward(self, positions: torch.Tensor, missing: torch.Tensor) -> torch.Tensor:
-        refined, stats = self.normalised_forward(positions, missing)
-        return self.normalizer.inverse(refined, stats)
+        refined, stats = self._refine_cf(positions, missing)
+        return self.normalizer.inverse_cf(refined, stats).permute(0, 2, 3, 1)
 
     def normalised_forward(self, positions: torch.Tensor, missing: torch.Tensor):
-        """``(refined, stats)`` with ``refined`` still normalised: what the training loss compares."""
+        """``(refined [B, T, J, 3], stats)`` with ``refined`` still normalised: what the training loss compares."""
+        refined, stats = self._refine_cf(positions, missing)
+        return refined.permute(0, 2, 3, 1), stats
+
+    def _refine_cf(self, positions: torch.Tensor, missing: torch.Tensor):
+        """``(refined [B, 3, T, J] normalised, stats)``: everything from the one transpose of the input on runs
+        coordinate-first (:class:`PoseNormalizer`)."""
         observed = ~missing.bool()
-        seen = coordinate_mask(observed)
-        clean = torch.where(seen, positions, 0.0)
-        stats = self.normalizer.statistics(clean, observed)
-        x = torch.where(seen, self.normalizer(clean, stats), 0.0)
-        guess = self.first_guess(x, observed)
+        seen = observed.unsqueeze(1)                                                  # [B,1,T,J]
+        # missing entries (NaN allowed) are zeroed before the transpose, with a mask of the input's own shape
+        # built by concatenation: masked after it, onnxruntime moves the transpose below the Where and broadcasts
+        # the mask over the trailing axis of 3 (0.4 ms on 300 frames); an Expand to that shape costs 0.2 ms
+        # (bench/RESULTS.md §13)
+        clean = torch.where(coordinate_mask(observed), positions, 0.0).permute(0, 3, 1, 2)         # [B,3,T,J]
+        stats = self.normalizer.statistics_cf(clean, seen)
+        x = seen.to(clean.dtype) * self.normalizer.forward_cf(clean, stats)          # 0 where missing (finite)
+        guess = self.first_guess_cf(x, observed)
         return guess + self.correction(guess, observed), stats
+
+
+def per_joint(features: torch.Tensor) -> torch.Tensor:
+    """Coordinate-first ``[B, C, T, J]`` → per frame ``[B, T, J·C]`` (joint-major, as the networks' input layers
+    were trained)."""
+    B, C, T, J = features.shape
+    return features.permute(0, 2, 3, 1).reshape(B, T, J * C)
+
+
+def coordinate_first(out: torch.Tensor, J: int) -> torch.Tensor:
+    """A network's per-frame output ``[B, T, J·3]`` (joint-major) → ``[B, 3, T, J]``."""
+    B, T = out.shape[:2]
+    return out.reshape(B, T, J, 3).permute(0, 3, 1, 2)
 
 
 class BiGRURefiner(_Refiner):
@@ -329,9 +406,32 @@ class BiGRURefiner(_Refiner):
         nn.init.zeros_(self.out.bias)
 
     def correction(self, guess: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
-        B, T, J, _ = guess.shape
-        hidden, _ = self.gru(self.inp(self.features(guess, observed).reshape(B, T, 7 * J)))
-        return self.out(hidden).reshape(B, T, J, 3)
+        hidden, _ = self.gru(self.inp(per_joint(self.features(guess, observed))))
+        return coordinate_first(self.out(hidden), self.num_joints)
+
+
+def encoder_layer_for_export(layer: nn.TransformerEncoderLayer, h: torch.Tensor) -> torch.Tensor:
+    """What the pre-norm, batch-first ``layer(h)`` computes in eval mode, written out for ONNX export.
+
+    ``h`` ``[N, L, dim]`` → ``[N, L, dim]`` with the layer's own weights (no dropout). The exported
+    ``nn.MultiheadAttention`` works sequence-first and reshapes through shape arithmetic (six transposes and about
+    twenty shape operators per layer); here queries, keys and values come from one projection and one permute, the
+    scale goes onto the queries (``[N, heads, L, dim/heads]``) rather than onto the ``L × L`` scores, and the
+    output takes one transpose (bench/RESULTS.md §13).
+    """
+    if not layer.norm_first:
+        raise ValueError("encoder_layer_for_export writes out the pre-norm layer (norm_first=True) only")
+    attention = layer.self_attn
+    N, L, dim = h.shape
+    heads = attention.num_heads
+    x = layer.norm1(h)
+    # the projections on [N·L, dim] matrices: onnxruntime then adds the bias inside the matrix product (Gemm)
+    qkv = nn.functional.linear(x.reshape(N * L, dim), attention.in_proj_weight, attention.in_proj_bias)
+    q, k, v = qkv.reshape(N, L, 3, heads, dim // heads).permute(2, 0, 3, 1, 4)      # 3 × [N, heads, L, dim/heads]
+    scores = torch.matmul(q * (dim // heads) ** -0.5, k.transpose(-2, -1))            # [N, heads, L, L]
+    mixed = torch.matmul(torch.softmax(scores, dim=-1), v).transpose(1, 2).reshape(N * L, dim)
+    h = h + attention.out_proj(mixed).reshape(N, L, dim)
+    return h + layer.linear2(layer.activation(layer.linear1(layer.norm2(h))))
 
 
 def _sinusoid(T: int, dim: int, device, dtype) -> torch.Tensor:
@@ -379,24 +479,27 @@ class MaskedTransformerRefiner(_Refiner):
         nn.init.zeros_(self.out.bias)
 
     def correction(self, guess: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
-        B, T, J, _ = guess.shape
-        mask_token = self.mask_token.to(guess.dtype).expand(B, T, J, 3)
-        tokenised = torch.where(coordinate_mask(observed), FEATURE_SCALE[0] * guess, mask_token)
-        per_joint = torch.cat([tokenised, self.features(guess, observed)], dim=-1)                     # [B,T,J,10]
+        B, _, T, J = guess.shape
+        mask_token = self.mask_token.to(guess.dtype).t().reshape(1, 3, 1, J)
+        seen = observed.unsqueeze(1).to(guess.dtype)                                 # a 0/1 blend: cheaper than Where
+        tokenised = seen * (FEATURE_SCALE[0] * guess) + (1 - seen) * mask_token                        # [B,3,T,J]
+        inputs = torch.cat([tokenised, self.features(guess, observed)], dim=1)                         # [B,10,T,J]
         pos = _sinusoid(T, self.dim, guess.device, guess.dtype)                      # [T, dim]
+        exporting = torch.onnx.is_in_onnx_export() and not self.training
+        run = encoder_layer_for_export if exporting else (lambda block, h: block(h))
         if self.tokens == "frames":
-            h = self.embed(per_joint.reshape(B, T, 10 * J)) + pos
+            h = self.embed(per_joint(inputs)) + pos
             for block in self.blocks:
-                h = block(h)
-            return self.out(self.norm(h)).reshape(B, T, J, 3)
-        h = self.embed(per_joint) + self.joint_embedding + pos.unsqueeze(1)         # [B,T,J,dim]
+                h = run(block, h)
+            return coordinate_first(self.out(self.norm(h)), J)
+        h = self.embed(inputs.permute(0, 2, 3, 1)) + self.joint_embedding + pos.unsqueeze(1)   # [B,T,J,dim]
         for i, block in enumerate(self.blocks):
             if i % 2 == 0:                                                           # over the joints of a frame
-                h = block(h.reshape(B * T, J, self.dim)).reshape(B, T, J, self.dim)
+                h = run(block, h.reshape(B * T, J, self.dim)).reshape(B, T, J, self.dim)
             else:                                                                    # over the frames of a joint
-                h = block(h.permute(0, 2, 1, 3).reshape(B * J, T, self.dim))
+                h = run(block, h.permute(0, 2, 1, 3).reshape(B * J, T, self.dim))
                 h = h.reshape(B, J, T, self.dim).permute(0, 2, 1, 3)
-        return self.out(self.norm(h))
+        return self.out(self.norm(h)).permute(0, 3, 1, 2)
 
 
 def refine_bigru(**kwargs) -> BiGRURefiner:
