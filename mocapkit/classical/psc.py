@@ -411,7 +411,7 @@ class PSCRefiner(MotionRefiner):
         # the root of the local frame is the origin itself: where it is missing, use the interpolated origin
         r = self.reference_[0] if self.reference_ is not None else 0
         world[:, r] = np.where(np.isnan(world[:, r]), origin, world[:, r])
-        flagged &= all_coordinates(np.isfinite(world))               # a flagged marker nothing could recover stays as it was
+        flagged &= all_coordinates(np.isfinite(world))    # a flagged marker nothing could recover stays as it was
         obs = obs_in & ~flagged
         filled = np.where(np.repeat(obs, 3, 1), X, world.reshape(T, C3))
         return filled, flagged

@@ -220,7 +220,7 @@ def _write_ntu(path: str | os.PathLike, motion: Motion, body_ids: list[int] | No
                          f".skeleton (map_layout(NTU25) first)")
     bodies = [motion.positions] + [np.asarray(b, dtype=np.float32) for b in motion.metadata.get("other_bodies", [])]
     stacked = np.stack(bodies)                                   # [B, T, 25, 3]
-    present = ~any_coordinate(np.isnan(stacked)).all(axis=2)         # [B, T]
+    present = ~any_coordinate(np.isnan(stacked)).all(axis=2)     # [B, T]
     stacked = np.nan_to_num(stacked, nan=0.0)
     if body_ids is None:
         ids = list(motion.metadata.get("body_ids", []))
