@@ -586,6 +586,25 @@ def test_onnx_refiner_matches_learned_refiner(tiny_module, tiny_refiner, gappy, 
     assert a.metadata["refinement"]["unfilled"] == b.metadata["refinement"]["unfilled"]
 
 
+@pytest.mark.parametrize("name", ["transformer-frames", "transformer-joints"])
+def test_transformer_exports_with_parity(name, tmp_path):
+    """The transformer goes through torch.export with its export-only layer path (encoder_layer_for_export):
+    onnxruntime matches PyTorch on a batch and lengths other than the traced ones (export_refiner checks (3, 40) and
+    (1, 20); a mismatch raises ParityError), with a trained-looking correction (the last layer is not zero)."""
+    from mocapkit.deploy.refiner_export import export_refiner
+
+    torch.manual_seed(0)
+    net = NETWORKS[name]().eval()
+    with torch.no_grad():
+        torch.nn.init.normal_(net.out.weight, std=0.05)
+        net.mask_token.normal_(0, 0.5)
+    skeleton = {"joint_names": list(CMU31.joint_names), "parents": list(CMU31.parents), "fps": 120.0,
+                "up_axis": "y", "window": 24}
+    info = export_refiner(net, tmp_path / "t.onnx", skeleton, trace_shape=(2, 12), check_shape=(3, 40))
+    assert info["exporter"] == "dynamo" and info["max_abs_diff"] < 1e-4
+    assert [c["shape"][:2] for c in info["checks"]] == [[3, 40], [1, 20]]
+
+
 @pytest.mark.parametrize("shape", [(2, 17, 16), (5, 3, 16)])
 def test_encoder_layer_for_export_computes_what_the_layer_computes(shape):
     """The export path of the transformer's layers (one projection, the scale on the queries, 2-D projections)
