@@ -310,3 +310,23 @@ def test_weights_of_another_network_version_fail_naming_the_keys(trained, gappy,
     assert rc == 2 and "old_version.ckpt" in line and "another network version" in line, line
     assert "model.inp.1.weight" in line and "model.inp.1.bias" in line, line
     assert not (tmp_path / "out.c3d").exists()
+
+
+@needs(SHARED / "data" / "hdm05_cuts11")
+def test_profile_script_splits_the_time_by_operator_part_and_node(trained, capsys):
+    """scripts/profile_refiner_onnx.py on an exported refiner: the three tables, the GRU as its own part."""
+    import importlib.util
+
+    path = Path(__file__).resolve().parents[1] / "scripts" / "profile_refiner_onnx.py"
+    spec = importlib.util.spec_from_file_location("profile_refiner_onnx", path)
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    _, onnx = trained
+    script.main([str(onnx), "--frames", "120", "--clips", "2", "--runs", "3", "--top", "3",
+                 "--data", str(SHARED / "data")])
+    out = capsys.readouterr().out
+    operators = out.split("per operator type")[1].split("per part of the network")[0]
+    parts = out.split("per part of the network")[1].split("slowest 3 nodes")[0]
+    nodes = out.split("slowest 3 nodes")[1].strip().splitlines()
+    assert "GRU" in operators and any(line.split()[-1] == "gru" for line in parts.strip().splitlines()[1:])
+    assert len(nodes) == 4 and "session.run without the profiler" in out
