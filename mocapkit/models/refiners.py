@@ -217,8 +217,8 @@ def cubic_fill(x: torch.Tensor, observed: torch.Tensor, tangents: str = "chord",
 def cubic_fill_cf(x: torch.Tensor, observed: torch.Tensor, tangents: str = "chord", extrapolate: int = 6) -> torch.Tensor:
     """:func:`cubic_fill` of coordinate-first ``x`` ``[B, 3, T, J]`` (``observed`` bool ``[B, T, J]``) →
     ``[B, 3, T, J]``. Masks are ``[B, 1, T, J]`` and the four neighbour frames of every entry come from one
-    gather: an exported graph pays per operator, and onnxruntime broadcasts a mask over a leading axis several
-    times faster than over a trailing axis of 3 (bench/RESULTS.md §13).
+    gather per coordinate: an exported graph pays per operator, and onnxruntime broadcasts a mask over a leading
+    axis several times faster than over a trailing axis of 3 (bench/RESULTS.md §13).
     """
     T = x.shape[2]
     frames = torch.arange(T, device=x.device).view(1, 1, T, 1)
