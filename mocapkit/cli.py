@@ -447,16 +447,18 @@ def build_parser() -> argparse.ArgumentParser:
     search.add_argument("--ckpt", default=None, help="refuse unless the index was built with this model file")
     search.set_defaults(func=cmd_search)
 
-    synthesize = sub.add_parser("synthesize", help="new variants of a motion type from about ten example AMC clips "
+    synthesize = sub.add_parser("synthesize", help="new variants of a motion type from about ten example AMC or BVH clips "
                                                    "(Zhou 2014 ch. 4 SLFM Gaussian processes)")
-    synthesize.add_argument("inputs", nargs="+", help="AMC files and/or folders (searched recursively); the ASF is "
-                                                      "looked up beside each AMC")
+    synthesize.add_argument("inputs", nargs="+", help="AMC or BVH files and/or folders (searched recursively); the "
+                                                      "ASF is looked up beside each AMC; BVH clips are converted to "
+                                                      "ASF/AMC on one T-pose rest")
     synthesize.add_argument("--type", default=None, metavar="SUBSTRING",
                             help="keep only files whose name contains this, e.g. hopBothLegs1hops")
     synthesize.add_argument("--out", required=True, help="output folder: variant_000.amc ... and the reference .asf "
                                                          "(or variant_000.bvh ...), report.json")
-    synthesize.add_argument("--format", default="amc", choices=["amc", "bvh"],
-                            help="variants as ASF/AMC (default, with the reference skeleton) or self-contained BVH")
+    synthesize.add_argument("--format", default=None, choices=["amc", "bvh"],
+                            help="variants as ASF/AMC (with the reference skeleton) or self-contained BVH (default: "
+                                 "the inputs' format)")
     synthesize.add_argument("--variants", type=int, default=10, help="variants to write (default 10)")
     synthesize.add_argument("--frames", type=int, default=None, help="frames per variant (default: mean training "
                                                                      "length)")

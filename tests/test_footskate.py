@@ -115,3 +115,34 @@ def test_root_slack_lets_the_legs_absorb_small_slides():
     lagging = root_shift([walking], [contact], floor, slack=0.05)[:, 0]
     np.testing.assert_allclose(full, SPEED * t, atol=1e-9)
     assert np.abs(lagging - full)[30:-30].max() <= 0.05 + 1e-9 and lagging[-30] > 0.9 * full[-30]
+
+
+def test_a_three_dof_knee_is_pinned_as_the_hinge_is(skeleton):
+    """BVH rigs converted to ASF (mocapkit.datasets.formats.bvh_to_amc) have three-dof knees: the IK bends them
+    about the normal of the leg's plane, which for a knee bent about its x axis is the hinge's own axis."""
+    import copy
+
+    free = copy.deepcopy(skeleton)
+    for side in "lr":
+        free.bone(side + "tibia").dof = ("rx", "ry", "rz")
+        free.bone(side + "tibia").limits = [(-np.inf, np.inf)] * 3
+    values, floor = _gliding(skeleton)
+    free_values = {bone: v.copy() for bone, v in values.items()}
+    for side in "lr":
+        free_values[side + "tibia"] = np.concatenate([values[side + "tibia"], np.zeros((T, 2))], axis=1)
+    for move in ("vertical", "full"):
+        hinge, hinge_report = cleanup_footskate(values, skeleton, FPS, floor=floor, move_root=move)
+        out, report = cleanup_footskate(free_values, free, FPS, floor=floor, move_root=move)
+        assert report.skipped_legs == [] and report.sliding_after == pytest.approx(hinge_report.sliding_after, abs=1e-6)
+        for a, b in zip(_ankles(free, out), _ankles(skeleton, hinge)):
+            np.testing.assert_allclose(a, b, atol=1e-6)
+        # the same bend, to within the few thousandths of a degree by which HDM05's thigh and shin leave the plane
+        # normal to the hinge axis
+        np.testing.assert_allclose(out["ltibia"][:, 0], hinge["ltibia"][:, 0], atol=0.01)
+        np.testing.assert_allclose(out["ltibia"][:, 1:], 0.0, atol=0.01)
+    # a knee that is also twisted keeps bending about its leg's plane: the feet still stay put
+    free_values["ltibia"][:, 1] = 25.0
+    out, report = cleanup_footskate(free_values, free, FPS, floor=floor, move_root="vertical")
+    assert report.sliding_after < 0.5 * report.sliding_before
+    left, _ = _ankles(free, out)
+    assert abs(left[T // 2, 1] - floor) < 0.01

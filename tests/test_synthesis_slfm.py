@@ -248,7 +248,7 @@ def test_cli_end_to_end(tmp_path, capsys):
 def test_cli_errors(tmp_path, capsys):
     assert main(["synthesize", str(tmp_path), "--type", "noSuchMotion", "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
-    assert "no AMC clips matching *noSuchMotion*.amc" in err and str(tmp_path) in err
+    assert "no AMC or BVH clips matching *noSuchMotion*.amc / *noSuchMotion*.bvh" in err and str(tmp_path) in err
     assert main(["synthesize", str(tmp_path / "missing"), "--out", str(tmp_path / "o")]) == 2
     assert "no such file or folder" in capsys.readouterr().err
 

@@ -6,7 +6,8 @@ attributes ending in ``_``, ``NotFittedError`` before ``fit``) with two methods:
 ``fit(clips) -> self``
     about ten example clips of **one motion type**: a sequence of :class:`~mocapkit.datasets.formats.motion.Motion`
     read from ASF/AMC (:func:`~mocapkit.datasets.formats.asf_amc.read_amc`), so that each carries its raw joint
-    angles in ``metadata["amc_values"]`` and its skeleton in ``metadata["asf"]``. The clips may come from
+    angles in ``metadata["amc_values"]`` and its skeleton in ``metadata["asf"]``; BVH clips go through
+    :func:`as_amc_clips` first (an exact conversion to ASF/AMC on one T-pose rest). The clips may come from
     different performers (different bone lengths) but must share one bone hierarchy and the same dofs per bone.
 ``sample(n_variants, n_frames=None, seed=None) -> list[Motion]``
     ``n_variants`` new clips of ``n_frames`` frames each (default: the mean training length), drawn with
@@ -182,6 +183,27 @@ def on_skeleton(clip: Motion, skeleton: AsfSkeleton) -> Motion:
                       angle_unit=clip.metadata.get("amc_angle_unit", "deg"), name=clip.name, source=clip.source)
 
 
+def as_amc_clips(motions: Sequence[Motion], reference: Motion | None = None, reference_frame: int = 0
+                 ) -> list[Motion]:
+    """Training clips as AMC motions: ASF/AMC clips as they are, BVH clips
+    (:func:`~mocapkit.datasets.formats.bvh.read_bvh`) converted exactly to ASF/AMC
+    (:func:`~mocapkit.datasets.formats.bvh_to_amc.bvh_to_amc`) on **one** rig, whose rest pose is the posture of
+    ``reference`` (default: the first BVH clip) at ``reference_frame`` straightened into a T-pose, so that every
+    clip's angles are measured from the same rest. Anything else is passed on for :func:`check_clips` to refuse.
+
+    Raises:
+        mocapkit.datasets.formats.bvh_to_amc.BvhConversionError: a BVH clip that cannot be converted (names it).
+    """
+    motions = list(motions)
+    bvh = [m for m in motions if isinstance(m, Motion) and "bvh" in m.metadata and "amc_values" not in m.metadata]
+    if not bvh:
+        return motions
+    from mocapkit.datasets.formats.bvh_to_amc import bvh_rig, bvh_to_amc
+
+    rig = bvh_rig(bvh[0] if reference is None else reference, reference_frame)
+    return [bvh_to_amc(m, rig) if any(m is b for b in bvh) else m for m in motions]
+
+
 def check_clips(clips: Sequence[Motion], min_clips: int = 2, min_frames: int = 4, what: str = "fit") -> DofLayout:
     """Reject what no synthesiser can learn from, naming the clip; returns the shared :class:`DofLayout`.
 
@@ -199,7 +221,8 @@ def check_clips(clips: Sequence[Motion], min_clips: int = 2, min_frames: int = 4
         if not isinstance(clip, Motion) or "amc_values" not in clip.metadata or "asf" not in clip.metadata:
             raise SynthesisInputError(f"{what}: {clip_label(clip) if isinstance(clip, Motion) else type(clip).__name__}"
                                       f" is not an ASF/AMC motion (read it with mocapkit.datasets.formats.asf_amc."
-                                      f"read_amc); synthesis works on joint angles")
+                                      f"read_amc, or convert a BVH with mocapkit.synthesis.base.as_amc_clips); "
+                                      f"synthesis works on joint angles")
         if len(clip.positions) < min_frames:
             raise SynthesisInputError(f"{what}: {clip_label(clip)} has {len(clip.positions)} frames; this synthesiser "
                                       f"needs at least {min_frames}")

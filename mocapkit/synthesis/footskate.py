@@ -8,8 +8,9 @@ values (so the result is still a valid AMC motion on the same skeleton):
 
 1. **Legs**: the first two bones with dofs of the ``RL`` and ``LL`` partitions
    (:func:`~mocapkit.synthesis.representation.partitions`), the thigh (hip → knee) and the shin (knee → ankle,
-   CMU/HDM05 ``femur``/``tibia``). The shin must be a one-dof hinge (HDM05/CMU ``tibia rx``); a leg without one
-   is left alone and reported.
+   CMU/HDM05 ``femur``/``tibia``). The shin is a one-dof hinge (HDM05/CMU ``tibia rx``) or a three-dof joint
+   (BVH rigs converted by :mod:`mocapkit.datasets.formats.bvh_to_amc`); a leg with neither is left alone and
+   reported.
 2. **Contacts** (:func:`detect_contacts`): runs of frames where the ankle (the end of the shin) barely moves
    vertically, near the lowest point of the run, when that point is low (within ``max_height`` of the floor).
    Sampled variants float above the floor or sink into it by centimetres and their planted feet slide, so
@@ -20,7 +21,8 @@ values (so the result is still a valid AMC motion on the same skeleton):
 4. **Targets**: during a contact run the ankle is pinned at its mean horizontal position over the run, on the
    floor; over ``blend_frames`` frames before and after, the target blends linearly back to the free ankle.
 5. **Two-bone IK** per frame with a target: the knee hinge angle is solved in closed form so that the hip–ankle
-   distance equals the hip–target distance (clamped to what the bone lengths reach), then the thigh is turned
+   distance equals the hip–target distance (clamped to what the bone lengths reach; a three-dof knee turns
+   about the normal of its leg's plane, keeping its twist and splay), then the thigh is turned
    about the hip by the smallest rotation that points the ankle at the target. Only the root's translation and
    the thigh's and the shin's AMC values change; the foot keeps its angles relative to the shin.
 
@@ -55,7 +57,7 @@ class FootskateReport:
         contacts: per cleaned leg (its thigh bone name) a bool ``[T]`` contact mask.
         sliding_before: mean horizontal ankle speed during contacts before the cleanup, m/s (NaN without contacts).
         sliding_after: the same after the cleanup.
-        skipped_legs: legs left alone (no one-dof shin), with the reason.
+        skipped_legs: legs left alone (no one- or three-dof shin), with the reason.
         root_shift: float64 ``[T, 3]`` metres added to the root's position (:func:`root_shift`; zeros when the
             root was not moved).
     """
@@ -218,11 +220,11 @@ def _bone_frame(skeleton: AsfSkeleton, bone: str) -> np.ndarray:
 
 def _hinge_angle(h: np.ndarray, w: np.ndarray, axis: np.ndarray, target: np.ndarray, current: np.ndarray) -> np.ndarray:
     """The hinge angles ``[T]`` (radians) with ``hᵀ R_axis(θ) w == target`` (as near as reachable), nearest
-    ``current``; ``h, w`` are ``[T, 3]``, ``axis`` a unit ``[3]``.
+    ``current``; ``h, w`` are ``[T, 3]``, ``axis`` a unit ``[3]`` or one per frame, ``[T, 3]``.
 
     ``R_axis(θ) w = w_par + cos θ w_perp + sin θ (axis × w)``, so ``hᵀ R w = c + a cos θ + b sin θ``.
     """
-    w_par = (w @ axis)[:, None] * axis
+    w_par = np.sum(w * axis, axis=-1)[:, None] * axis
     w_perp = w - w_par
     c = np.sum(h * w_par, axis=-1)
     a = np.sum(h * w_perp, axis=-1)
@@ -233,6 +235,22 @@ def _hinge_angle(h: np.ndarray, w: np.ndarray, axis: np.ndarray, target: np.ndar
     candidates = np.stack([phase + spread, phase - spread], axis=1)
     delta = np.angle(np.exp(1j * (candidates - current[:, None])))
     return current + delta[np.arange(len(current)), np.argmin(np.abs(delta), axis=1)]
+
+
+def _flexion_axes(thigh: np.ndarray, shin: np.ndarray) -> np.ndarray:
+    """``[T, 3]`` unit normals of the planes of ``thigh`` and ``shin`` vectors (``[T, 3]``): the axes a three-dof
+    knee bends about. A straight leg has no plane: it takes the axis of the nearest frame that has one (the
+    ``x`` axis of the shin's frame, sideways in a T-pose rest, when no frame has)."""
+    normal = np.cross(thigh, shin)
+    size = np.linalg.norm(normal, axis=1)
+    valid = size > 1e-3 * np.linalg.norm(thigh, axis=1) * np.linalg.norm(shin, axis=1)
+    if not valid.any():
+        return np.tile([1.0, 0.0, 0.0], (len(thigh), 1))
+    frames = np.flatnonzero(valid)
+    nearest = frames[np.clip(np.searchsorted(frames, np.arange(len(thigh))), 0, len(frames) - 1)]
+    earlier = frames[np.clip(np.searchsorted(frames, np.arange(len(thigh))) - 1, 0, len(frames) - 1)]
+    pick = np.where(np.abs(earlier - np.arange(len(thigh))) < np.abs(nearest - np.arange(len(thigh))), earlier, nearest)
+    return normal[pick] / size[pick, None]
 
 
 def _minimal_rotation(u: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -299,8 +317,9 @@ def cleanup_footskate(values: dict[str, np.ndarray], skeleton: AsfSkeleton, fps:
     legs, skipped = [], []
     for name in ("LL", "RL"):
         chain = parts[name]
-        if len(chain) < 2 or skeleton.parent_names.get(chain[1]) != chain[0] or len(skeleton.bone(chain[1]).dof) != 1:
-            skipped.append(f"{name}: needs a thigh and a one-dof shin below it, has {list(chain[:2])}")
+        if (len(chain) < 2 or skeleton.parent_names.get(chain[1]) != chain[0]
+                or len(dof_axes(skeleton.bone(chain[1]).dof)) not in (1, 3)):
+            skipped.append(f"{name}: needs a thigh and a one- or three-dof shin below it, has {list(chain[:2])}")
             continue
         legs.append((chain[0], chain[1]))
     if not legs:
@@ -339,17 +358,27 @@ def cleanup_footskate(values: dict[str, np.ndarray], skeleton: AsfSkeleton, fps:
         hip, knee = positions[frames, j_hip], positions[frames, j_thigh]
         # knee: hinge angle giving |ankle - hip| == |target - hip|
         c_shin = _bone_frame(skeleton, shin)
-        hinge_axis = np.eye(3)["xyz".index(dof_axes(skeleton.bone(shin).dof))]
-        frame_shin = glob[frames, j_thigh] @ c_shin                       # G: shin offset = G · R(θ) · w
+        shin_axes = dof_axes(skeleton.bone(shin).dof)
+        frame_shin = glob[frames, j_thigh] @ c_shin                       # G: shin offset = G · M · w
         w = c_shin.T @ offsets[j_shin]
         l_thigh, l_shin = np.linalg.norm(offsets[j_thigh]), np.linalg.norm(offsets[j_shin])
         reach = np.clip(np.linalg.norm(target[frames] - hip, axis=1), abs(l_thigh - l_shin) + 1e-6,
                         l_thigh + l_shin - 1e-6)
         h = np.einsum("tji,tj->ti", frame_shin, knee - hip)               # Gᵀ (knee - hip)
-        theta = _hinge_angle(h, np.tile(w, (len(frames), 1)), hinge_axis, (reach**2 - l_thigh**2 - l_shin**2) / 2,
-                             np.radians(out[shin][frames, 0]))
-        out[shin][frames, 0] = np.degrees(theta)
-        bent = Rotation.from_rotvec(theta[:, None] * hinge_axis).apply(np.tile(w, (len(frames), 1)))
+        wanted = (reach**2 - l_thigh**2 - l_shin**2) / 2
+        if len(shin_axes) == 1:                                           # a hinge: M = R_axis(θ)
+            hinge_axis = np.eye(3)["xyz".index(shin_axes)]
+            theta = _hinge_angle(h, np.tile(w, (len(frames), 1)), hinge_axis, wanted, np.radians(out[shin][frames, 0]))
+            out[shin][frames, 0] = np.degrees(theta)
+            bent = Rotation.from_rotvec(theta[:, None] * hinge_axis).apply(np.tile(w, (len(frames), 1)))
+        else:                                                             # M' = R_a(φ) · M, a ⊥ thigh and shin
+            m_shin = Rotation.from_euler(shin_axes, np.radians(out[shin][frames]))
+            shin_now = m_shin.apply(w)
+            flexion = _flexion_axes(h, shin_now)
+            phi = _hinge_angle(h, shin_now, flexion, wanted, np.zeros(len(frames)))
+            turned = Rotation.from_rotvec(phi[:, None] * flexion) * m_shin
+            out[shin][frames] = np.degrees(euler_near(turned, shin_axes, np.radians(out[shin][frames])))
+            bent = turned.apply(w)
         new_ankle = knee + np.einsum("tij,tj->ti", frame_shin, bent)
         # thigh: turn about the hip so the ankle points at the target
         turn = _minimal_rotation(new_ankle - hip, target[frames] - hip)

@@ -408,9 +408,15 @@ def decode_flat(flat: np.ndarray, layout: DofLayout, skeleton: AsfSkeleton, star
 # --------------------------------------------------------------------------- partitions
 
 
-LATERAL_FRACTION = 0.15
+LATERAL_FRACTION = 0.05
 """A child subtree of a torso joint is a limb when the mean sideways (``x``) offset of its rest joints from the
-branch joint exceeds this fraction of its reach (HDM05: legs 0.27, arms 0.75, spine and neck < 0.03)."""
+branch joint exceeds this fraction of its reach (HDM05: legs 0.27, arms 0.75, spine and neck < 0.03; Bandai's
+legs, converted with a standing reference posture as the rest (:mod:`mocapkit.datasets.formats.bvh_to_amc`),
+0.08–0.09, its spine 0.01)."""
+
+LEG_REACH = 0.25
+"""A limb is a leg when its lowest rest joint lies in the bottom ``LEG_REACH`` of the skeleton's rest height (the
+feet), else an arm: arms that hang down in a standing rest pose end at the hips, not at the floor."""
 
 
 def partitions(skeleton: AsfSkeleton) -> dict[str, tuple[str, ...]]:
@@ -419,8 +425,8 @@ def partitions(skeleton: AsfSkeleton) -> dict[str, tuple[str, ...]]:
     Only the root and bones with dofs are listed (a fixed bone such as ``lhipjoint`` has nothing to model); the
     root is the first member of ``"TH"``. Built from the rest pose, not from names: walking down from the root
     through the torso, a child subtree of a branching joint whose rest joints lie to one side (mean ``|x|`` offset
-    > :data:`LATERAL_FRACTION` of its reach) is a limb; left is ``+x`` (CMU/HDM05 ``l*`` bones), a limb whose
-    joints hang below the branch joint is a leg, else an arm. Within a partition, bones are in breadth-first
+    > :data:`LATERAL_FRACTION` of its reach) is a limb; left is ``+x`` (CMU/HDM05 ``l*`` bones), a limb that
+    reaches the bottom :data:`LEG_REACH` of the rest pose's height is a leg, else an arm. Within a partition, bones are in breadth-first
     hierarchy order (ancestors before descendants).
 
     Raises:
@@ -435,6 +441,8 @@ def partitions(skeleton: AsfSkeleton) -> dict[str, tuple[str, ...]]:
             out.extend(skeleton.hierarchy.get(joint, []))
         return out
 
+    heights = np.array([p[1] for p in rest.values()])
+    foot_level = heights.min() + LEG_REACH * (heights.max() - heights.min())
     torso, limbs, frontier = ["root"], {}, ["root"]
     while frontier:
         joint = frontier.pop(0)
@@ -445,7 +453,8 @@ def partitions(skeleton: AsfSkeleton) -> dict[str, tuple[str, ...]]:
             reach = float(np.max(np.linalg.norm(offsets, axis=1)))
             mean = offsets.mean(axis=0)
             if len(children) > 1 and reach > 0 and abs(mean[0]) > LATERAL_FRACTION * reach:
-                name = ("L" if mean[0] > 0 else "R") + ("L" if mean[1] < 0 else "A")
+                reaches_feet = min(rest[m][1] for m in members) <= foot_level
+                name = ("L" if mean[0] > 0 else "R") + ("L" if reaches_feet else "A")
                 if name in limbs:
                     raise SynthesisInputError(f"{skeleton.source or skeleton.name}: two {name} limbs ({limbs[name][0]}"
                                               f", {child}); cannot split it into Zhou's five partitions")

@@ -1,9 +1,11 @@
-"""``mocapkit synthesize``: fit a variation synthesiser on example AMC clips and write new variants.
+"""``mocapkit synthesize``: fit a variation synthesiser on example AMC or BVH clips and write new variants.
 
 Zhou 2014 ch. 4 (../shared/spec/thesis-zhou-2014-retrieval-synthesis.md §3): about ten example clips of one motion
-type in, ``n_variants`` new clips out. The output folder gets ``variant_000.amc`` … (on the reference skeleton,
-the first clip's) with a copy of that skeleton's ``.asf``, or self-contained ``variant_000.bvh`` … (the same
-joints, bone lengths and frame rate, for tools that take BVH), and ``report.json``.
+type in, ``n_variants`` new clips out. BVH clips (Bandai's, Mixamo-style rigs) are converted exactly to ASF/AMC
+first (:func:`~mocapkit.synthesis.base.as_amc_clips`: one T-pose rest for all of them). The output folder gets
+``variant_000.amc`` … (on the reference skeleton, the first clip's) with a copy of that skeleton's ``.asf``, or
+self-contained ``variant_000.bvh`` … (the same joints, bone lengths and frame rate, for tools that take BVH; the
+default for BVH input), and ``report.json``.
 """
 from __future__ import annotations
 
@@ -18,11 +20,18 @@ from pathlib import Path
 import numpy as np
 
 from mocapkit.datasets.formats.asf_amc import read_amc, write_amc, write_asf
-from mocapkit.datasets.formats.bvh import write_bvh
-from mocapkit.synthesis.base import MotionSynthesizer, SynthesisInputError, clip_windows
+from mocapkit.datasets.formats.bvh import read_bvh, write_bvh
+from mocapkit.synthesis.base import (
+    MotionSynthesizer,
+    SynthesisInputError,
+    as_amc_clips,
+    clip_windows,
+)
 
 #: Output formats of the variants: ASF/AMC (the training clips' own) or BVH.
 OUTPUT_FORMATS = ("amc", "bvh")
+#: File suffixes of training clips: ASF/AMC joint angles, or BVH (converted).
+INPUT_SUFFIXES = (".amc", ".bvh")
 
 #: Synthesiser name → class: Zhou's SLFM and the baselines of the comparison (configs/compare/synthesis_hdm05.yaml).
 METHODS = {"slfm": "mocapkit.synthesis.slfm.SLFMSynthesizer",
@@ -32,18 +41,19 @@ METHODS = {"slfm": "mocapkit.synthesis.slfm.SLFMSynthesizer",
 
 
 def find_clips(inputs: Sequence[str | os.PathLike], motion_type: str | None = None) -> list[Path]:
-    """The AMC files named by ``inputs`` (files, or folders searched recursively for ``*.amc``), keeping only
-    names that contain ``motion_type`` when given; sorted, without duplicates.
+    """The AMC and BVH files named by ``inputs`` (files, or folders searched recursively for ``*.amc`` and
+    ``*.bvh``), keeping only names that contain ``motion_type`` when given; sorted, without duplicates.
 
     Raises:
         FileNotFoundError: an input does not exist.
-        SynthesisInputError: no AMC file matches (the message names the folders and the pattern).
+        SynthesisInputError: no file matches, or the matches mix AMC and BVH (the message names the folders and
+            the pattern, or one file of each).
     """
     found: list[Path] = []
     for item in inputs:
         path = Path(item)
         if path.is_dir():
-            found.extend(sorted(p for p in path.rglob("*") if p.suffix.lower() == ".amc" and p.is_file()))
+            found.extend(sorted(p for p in path.rglob("*") if p.suffix.lower() in INPUT_SUFFIXES and p.is_file()))
         elif path.is_file():
             found.append(path)
         else:
@@ -53,9 +63,19 @@ def find_clips(inputs: Sequence[str | os.PathLike], motion_type: str | None = No
     found = sorted(dict.fromkeys(p.resolve() for p in found))
     if not found:
         where = ", ".join(str(i) for i in inputs)
-        pattern = f"*{motion_type}*.amc" if motion_type else "*.amc"
-        raise SynthesisInputError(f"no AMC clips matching {pattern} in {where}")
+        pattern = f"*{motion_type}*" if motion_type else "*"
+        raise SynthesisInputError(f"no AMC or BVH clips matching {pattern}.amc / {pattern}.bvh in {where}")
+    kinds = {p.suffix.lower() for p in found}
+    if len(kinds) > 1:
+        first = {kind: next(p for p in found if p.suffix.lower() == kind) for kind in sorted(kinds)}
+        raise SynthesisInputError(f"the training clips mix {' and '.join(sorted(kinds))} files ({', '.join(map(str, first.values()))}"
+                                  f"); give clips of one skeleton, in one format")
     return found
+
+
+def read_clip(path: Path):
+    """One training file: an AMC (its ASF beside it) or a BVH, as a :class:`~mocapkit.datasets.formats.motion.Motion`."""
+    return read_bvh(path) if path.suffix.lower() == ".bvh" else read_amc(path)
 
 
 def make_synthesizer(method: str, seed: int, footskate_cleanup: bool, options: dict | None = None
@@ -79,11 +99,12 @@ def make_synthesizer(method: str, seed: int, footskate_cleanup: bool, options: d
 def synthesize(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, n_variants: int = 10,
                n_frames: int | None = None, seed: int = 0, method: str = "slfm", motion_type: str | None = None,
                max_clips: int = 10, footskate_cleanup: bool = True, options: dict | None = None,
-               progress: bool = True, output_format: str = "amc", window_seconds: float | None = None) -> dict:
+               progress: bool = True, output_format: str | None = None, window_seconds: float | None = None) -> dict:
     """Fit ``method`` on example clips and write ``n_variants`` variants to ``out_dir``.
 
     Args:
-        inputs: AMC files and/or folders (searched recursively); each AMC's ASF is looked up beside it.
+        inputs: AMC or BVH files and/or folders (searched recursively); each AMC's ASF is looked up beside it;
+            BVH clips are converted to ASF/AMC on one T-pose rest (:func:`~mocapkit.synthesis.base.as_amc_clips`).
         out_dir: the output folder (created): ``variant_000.amc`` … and the reference ``.asf`` (or
             ``variant_000.bvh`` …), ``report.json``.
         n_variants: variants to write.
@@ -98,7 +119,7 @@ def synthesize(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, 
         progress: progress lines on stderr.
         output_format: ``"amc"`` (with the reference skeleton's ``.asf``) or ``"bvh"`` (one self-contained file
             per variant, positions in metres; :func:`~mocapkit.datasets.formats.bvh.read_bvh` reads back the
-            AMC variant's joint positions).
+            AMC variant's joint positions); ``None``: the inputs' format.
         window_seconds: cut every matching file into consecutive windows of this many seconds
             (:func:`~mocapkit.synthesis.base.clip_windows`) and train on those: for long takes that repeat one
             motion (CMU's walks). ``None``: every file is one clip.
@@ -119,21 +140,26 @@ def synthesize(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, 
         if progress:
             print(f"[synthesize] {message}", file=sys.stderr, flush=True)
 
-    if output_format not in OUTPUT_FORMATS:
+    if output_format is not None and output_format not in OUTPUT_FORMATS:
         raise ValueError(f"output format {output_format!r}: expected one of {', '.join(OUTPUT_FORMATS)}")
     files = find_clips(inputs, motion_type)
+    if output_format is None:
+        output_format = files[0].suffix.lower().lstrip(".")
     left_out = {}
     if window_seconds is None:
         files = files[: max(int(max_clips), 0)]
         say(f"reading {len(files)} clip(s)")
-        clips = [read_amc(f) for f in files]
+        clips = as_amc_clips([read_clip(f) for f in files])
         training = [str(f) for f in files]
     else:
         clips, short = [], []
+        first_take = None
         for f in files:
             if len(clips) >= max_clips:
                 break
-            take = read_amc(f)
+            take = read_clip(f)
+            first_take = first_take or take
+            take = as_amc_clips([take], reference=first_take)[0]        # BVH: one rest pose, the first take's
             windows = clip_windows(take, window_seconds)
             used = windows[: max_clips - len(clips)]
             left_out[str(f)] = len(take.positions) - sum(len(w.positions) for w in used)
@@ -189,6 +215,8 @@ def synthesize(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, 
         "sample_seconds_per_motion_second": round(sample_seconds / motion_seconds, 5),
         "parameters": {k: v for k, v in synthesizer.get_params().items() if k != "verbose"},
     }
+    if "bvh_rig" in clips[0].metadata:
+        report["bvh_rest_pose"] = clips[0].metadata["bvh_rig"].reference
     if window_seconds is not None:
         report["window_seconds"] = float(window_seconds)
         report["frames_left_out"] = left_out

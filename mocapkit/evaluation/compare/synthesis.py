@@ -1,10 +1,11 @@
 """The motion-variation synthesis benchmark of the comparison runner (Zhou 2014 ch. 4,
 ``../shared/spec/thesis-zhou-2014-retrieval-synthesis.md`` §3.7 and §7 gaps 20 and 22): synthesisers ×
-motion types × seeds on real HDM05 and CMU clips.
+motion types × seeds on real HDM05, CMU and Bandai clips.
 
 **Protocols** are motion types: on HDM05 (``dataset="hdm05"``) the class part of
-``HDM_<actor>_<class>_<nnn>_120.amc`` (``hopBothLegs1hops``, ``squat1Reps``, ...); on CMU, whose file names carry no
-motion type, a name that ``types`` maps to a list of takes (``walk_uneven: [03_01, ...]``). With
+``HDM_<actor>_<class>_<nnn>_120.amc`` (``hopBothLegs1hops``, ``squat1Reps``, ...); on Bandai the content of
+``dataset-1_<content>_<style>_<nnn>.bvh`` (``walk``, ``bow``, ...; BVH clips converted to ASF/AMC); on CMU, whose
+file names carry no motion type, a name that ``types`` maps to a list of takes (``walk_uneven: [03_01, ...]``). With
 ``window_seconds`` every take is cut into consecutive windows of that length
 (:func:`~mocapkit.synthesis.base.clip_windows`; CMU's walks are minute-long takes of one motion) and the
 windows are the clips. **Split** of a type for a seed: ``n_train`` clips (10, as the thesis) drawn with
@@ -66,7 +67,9 @@ class SynthesisBenchmark(Benchmark):
         protocols: the motion types to run; each needs ``n_train`` clips to draw from and two more held out.
         n_train: training clips per split.
         n_variants: variants sampled per cell.
-        dataset: ``"hdm05"`` or ``"cmu"`` (ASF/AMC: the synthesisers learn joint angles).
+        dataset: ``"hdm05"``, ``"cmu"`` (ASF/AMC: the synthesisers learn joint angles) or ``"bandai"`` (BVH, the
+            protocols are contents such as ``walk``; every clip is converted exactly to ASF/AMC on one T-pose rest
+            made from the first clip's frame 0 by path, :func:`~mocapkit.synthesis.base.as_amc_clips`).
         types: motion type → take names (file stems, e.g. ``03_01``), for data sets whose names carry no type.
         window_seconds: cut every take into windows of this many seconds; ``None``: a file is a clip.
         heldout_takes: takes whose clips are only ever held out (references), never drawn for training.
@@ -78,9 +81,9 @@ class SynthesisBenchmark(Benchmark):
     def __init__(self, root: str, protocols: list[str], n_train: int = 10, n_variants: int = 20,
                  dataset: str = "hdm05", types: dict | None = None, window_seconds: float | None = None,
                  heldout_takes: list[str] | None = None):
-        if dataset not in ("hdm05", "cmu"):
-            raise ComparisonError(f"benchmark.dataset={dataset!r}: synthesis learns ASF/AMC joint angles, so 'hdm05' "
-                                  "or 'cmu'")
+        if dataset not in ("hdm05", "cmu", "bandai"):
+            raise ComparisonError(f"benchmark.dataset={dataset!r}: one of 'hdm05', 'cmu' (ASF/AMC) or 'bandai' (BVH, "
+                                  "converted to ASF/AMC)")
         if root is None:
             raise ComparisonError(f"benchmark.root is not set: give the {dataset} folder")
         if not protocols:
@@ -88,12 +91,13 @@ class SynthesisBenchmark(Benchmark):
         if int(n_train) < 2 or int(n_variants) < 2:
             raise ComparisonError(f"benchmark.n_train={n_train}, n_variants={n_variants}: both must be >= 2 "
                                   "(V averages pairs)")
+        from mocapkit.datasets.formats.errors import MotionFormatError
         from mocapkit.datasets.mocap.folders import (
             MocapFolderError,
             list_clips,
             read_clips,
         )
-        from mocapkit.synthesis.base import clip_windows
+        from mocapkit.synthesis.base import as_amc_clips, clip_windows
 
         self.root, self.n_train, self.n_variants = Path(root), int(n_train), int(n_variants)
         self.dataset, self.window_seconds = dataset, window_seconds
@@ -119,8 +123,8 @@ class SynthesisBenchmark(Benchmark):
             raise ComparisonError(f"benchmark.heldout_takes: {missing} are not takes of benchmark.protocols")
         found = [c for c in found if c["class"] in wanted]
         try:
-            motions = read_clips(found)
-        except MocapFolderError as exc:
+            motions = as_amc_clips(read_clips(found))      # BVH (Bandai): one T-pose rest, the first clip's
+        except (MocapFolderError, MotionFormatError) as exc:
             raise ComparisonError(f"benchmark: {exc}") from exc
         self.motions, self.clips, self.frames_left_out = [], [], {}
         for clip, motion in zip(found, motions):

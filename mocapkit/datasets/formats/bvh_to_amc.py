@@ -1,0 +1,313 @@
+"""BVH motion as ASF/AMC, exactly: the re-rigging that lets tools which learn AMC joint angles (the variation
+synthesisers of :mod:`mocapkit.synthesis`) take BVH rigs such as Bandai's.
+
+**Why a re-rig.** AMC angles are rotations away from the ASF's rest pose, and the synthesisers read a clip's
+heading, height and tilt from its root rotation against an *upright* rest that faces ``+z`` with its left side
+at ``+x`` (HDM05 and CMU: :mod:`mocapkit.synthesis.representation`). A BVH's zero pose can be anything: Bandai's
+lies on its side (at zero angles the spine points along ``+x``, the left leg along ``+x``, the right along ``-x``;
+every joint frame carries its own "joint orient"). So the ASF written here takes a **reference posture** of the
+BVH as its rest pose (:func:`bvh_rig`; by default frame 0 of a reference clip), turned about the vertical to face
+``+z``; its angles are then rotations away from that posture.
+
+**The mapping** (BVH forward kinematics as :mod:`mocapkit.datasets.formats.bvh`: ``G_j = G_p L_j``,
+``x_j = x_p + G_p t_j``; ASF as :mod:`mocapkit.datasets.formats.asf_amc`). With one constant rotation per joint,
+``A_j = H G_j(reference)`` (``H``: the yaw that makes the reference face ``+z``), the rotations
+``G'_j = G_j A_j⁻¹`` and rest offsets ``t'_c = A_p t_c`` place every joint where the BVH does
+(``G'_p t'_c = G_p t_c``), and every ``G'_j`` is the identity in the (turned) reference posture. Then:
+
+- the **ASF root** is the BVH joint where the body branches (the first joint from the top with more than one
+  child: Bandai's and CMU-BVH's ``Hips``); a single-child chain above it (Bandai's static ``joint_Root``) is left
+  out. Root rotation ``G'_r``, root translation ``x_r`` (the ASF's ``root_position`` is 0);
+- one **ASF bone per other joint** ``c`` (named as the joint, so the ASF joint positions are the BVH joints'),
+  from its parent ``p`` to ``c``: ``direction = t'_c / |t'_c|``, ``length = |t_c|``. Its rotation is ``p``'s:
+  ``L_c = G'_{parent(p)}⁻¹ G'_p``, as three dofs ``rx ry rz`` (ASF ``axis 0 0 0 XYZ``). The root's children
+  carry the identity and get **no dofs** (as CMU's ``lhipjoint``). Children of one joint carry **copies** of
+  its rotation (Bandai's ``Neck``, ``Shoulder_L`` and ``Shoulder_R`` under ``Chest``): a model that samples them
+  apart moves the shoulders against the chest, as CMU's clavicles do;
+- **End Sites** are left out, as :func:`~mocapkit.datasets.formats.bvh.read_bvh` leaves them out of a Motion's
+  joints by default, so a leaf joint's own rotation (``Head``, the hands, the toes), which moves nothing but its
+  End Site, is dropped: the joints' positions are what the conversion keeps. (Bandai's End Sites have zero length
+  in some takes and not in others; one skeleton for every take needs them gone.)
+
+Bone lengths are the clip's own (per file, so clips of different performers keep their bodies); a non-root joint
+whose translation changes during the clip cannot be an ASF bone and is an error naming the file and the joint.
+Units: the ASF is in CMU/HDM05 length units (``length 0.45``: one unit = 0.0254/0.45 m), so lengths and
+translations read like HDM05's. The result is checked: the ASF's forward kinematics must give the BVH's joint
+positions to within :data:`TOLERANCE_M`.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from mocapkit.datasets.formats.asf_amc import INCH, AsfBone, AsfSkeleton, amc_motion
+from mocapkit.datasets.formats.bvh import BvhSkeleton, local_transforms
+from mocapkit.datasets.formats.errors import MotionFormatError
+from mocapkit.datasets.formats.layouts import find_landmarks
+from mocapkit.datasets.formats.motion import Motion
+
+#: The ASF length multiplier of the result (CMU and HDM05's: one unit = 1/0.45 inch).
+LENGTH_MULTIPLIER = 0.45
+#: Largest joint-position difference (metres) between the ASF/AMC result and the BVH that :func:`bvh_to_amc` accepts.
+TOLERANCE_M = 1e-4
+#: A non-root joint's translation may wander this fraction of the skeleton's rest size and still be a fixed bone.
+TRANSLATION_TOLERANCE = 1e-4
+
+
+class BvhConversionError(MotionFormatError):
+    """A BVH that cannot become an ASF/AMC pair; the message names the file and the joint."""
+
+
+@dataclass(frozen=True)
+class BvhRig:
+    """The constant part of a BVH → ASF/AMC conversion, shared by every clip of one rig (module docstring).
+
+    Attributes:
+        joint_names: the BVH joints, file order (a clip converted with this rig must have exactly these).
+        root: index of the joint that becomes the ASF root.
+        rest_rotations: float64 ``[J, 3, 3]``, ``A_j = H G_j(reference)`` per BVH joint.
+        reference: where the rest posture comes from, e.g. ``"walk_01.bvh frame 0"`` (for reports).
+    """
+
+    joint_names: tuple[str, ...]
+    root: int
+    rest_rotations: np.ndarray
+    reference: str
+
+
+def _label(motion: Motion) -> str:
+    return str(motion.source or motion.name or "<BVH motion>")
+
+
+def _bvh_of(motion: Motion) -> BvhSkeleton:
+    if not isinstance(motion, Motion) or not isinstance(motion.metadata.get("bvh"), BvhSkeleton):
+        what = _label(motion) if isinstance(motion, Motion) else type(motion).__name__
+        raise BvhConversionError(what, None, "not a BVH motion (read it with mocapkit.datasets.formats.bvh.read_bvh)")
+    return motion.metadata["bvh"]
+
+
+def _globals(motion: Motion) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """float64 global rotations ``[F, J, 3, 3]``, positions ``[F, J, 3]`` (file units) and local translations
+    ``[F, J, 3]`` (file units) of a BVH motion, recomputed from its raw channels."""
+    skeleton = _bvh_of(motion)
+    local, trans = local_transforms(skeleton, motion.metadata["channels"], motion.metadata.get("position_mode",
+                                                                                                 "replace"))
+    glob = np.empty_like(local)
+    pos = np.empty_like(trans)
+    for j, p in enumerate(skeleton.parents):
+        if p < 0:
+            glob[:, j], pos[:, j] = local[:, j], trans[:, j]
+        else:
+            glob[:, j] = glob[:, p] @ local[:, j]
+            pos[:, j] = pos[:, p] + np.einsum("fab,fb->fa", glob[:, p], trans[:, j])
+    return glob, pos, trans
+
+
+def _branch_root(skeleton: BvhSkeleton, label: str) -> int:
+    """The first joint from the top with more than one child (the ASF root)."""
+    roots = [j for j, p in enumerate(skeleton.parents) if p < 0]
+    if len(roots) != 1:
+        raise BvhConversionError(label, None, f"{len(roots)} ROOTs; an ASF skeleton has one")
+    joint = roots[0]
+    while True:
+        children = [c for c, p in enumerate(skeleton.parents) if p == joint]
+        if len(children) != 1:
+            return joint
+        joint = children[0]
+
+
+def _facing_yaw(positions: np.ndarray, joint_names, label: str) -> np.ndarray:
+    """``H`` ``[3, 3]``: the rotation about ``+y`` that turns a posture (``[J, 3]``, y up) to face ``+z``, its left
+    side ``+x``, from its left and right hips and shoulders (:func:`~mocapkit.datasets.formats.layouts.find_landmarks`)."""
+    marks = find_landmarks(joint_names)
+    pairs = [(marks[f"l_{p}"], marks[f"r_{p}"]) for p in ("hip", "shoulder") if f"l_{p}" in marks and f"r_{p}" in marks]
+    if not pairs:
+        raise BvhConversionError(label, None, "cannot tell the rig's left from its right: no left/right hip or "
+                                 "shoulder joints found by name (Left/Right, _L/_R or L_/R_ marks)")
+    across = sum(positions[left] - positions[right] for left, right in pairs)
+    forward = np.cross(across, [0.0, 1.0, 0.0])
+    if np.hypot(forward[0], forward[2]) < 1e-9:
+        raise BvhConversionError(label, None, "the reference posture's left-right axis is vertical; pick another "
+                                 "reference frame")
+    return Rotation.from_rotvec([0.0, -np.arctan2(forward[0], forward[2]), 0.0]).as_matrix()
+
+
+def _limb_sides(skeleton: BvhSkeleton, label: str) -> dict[int, str]:
+    """Per joint, ``"left_arm"``, ``"right_arm"``, ``"left_leg"``, ``"right_leg"`` or ``"torso"``: the one limb
+    whose end landmark (wrist, else elbow; ankle, else knee) its subtree holds, or, holding none, its parent's
+    (hands, toes)."""
+    marks = find_landmarks(skeleton.joint_names)
+    ends = {"left_arm": ("l_wrist", "l_elbow"), "right_arm": ("r_wrist", "r_elbow"),
+            "left_leg": ("l_ankle", "l_knee"), "right_leg": ("r_ankle", "r_knee")}
+    ends = {limb: next((marks[m] for m in names if m in marks), None) for limb, names in ends.items()}
+    missing = [limb for limb, joint in ends.items() if joint is None]
+    if missing:
+        raise BvhConversionError(label, None, f"no {', '.join(missing)} found by joint name (elbow/wrist, knee/ankle "
+                                 "with Left/Right, _L/_R or L_/R_ marks); the rest pose needs both arms and legs")
+    J = skeleton.num_joints
+    inside = np.eye(J, dtype=bool)                   # inside[a, b]: b in the subtree of a
+    for j in range(J - 1, -1, -1):
+        p = skeleton.parents[j]
+        if p >= 0:
+            inside[p] |= inside[j]
+    side = {}
+    for j in range(J):                               # parents first
+        holds = [limb for limb, end in ends.items() if inside[j, end]]
+        parent = side.get(skeleton.parents[j], "torso")
+        side[j] = holds[0] if len(holds) == 1 else parent if not holds else "torso"
+    return side
+
+
+#: The rest direction of a bone by the part it belongs to (y up, facing +z, left +x): a T-pose.
+REST_DIRECTIONS = {"torso": (0.0, 1.0, 0.0), "left_arm": (1.0, 0.0, 0.0), "right_arm": (-1.0, 0.0, 0.0),
+                   "left_leg": (0.0, -1.0, 0.0), "right_leg": (0.0, -1.0, 0.0), "foot": (0.0, 0.0, 1.0)}
+
+
+def _swing(vector: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """The smallest rotation ``[3, 3]`` that turns the direction of ``vector`` into ``target`` (unit)."""
+    v = vector / np.linalg.norm(vector)
+    axis = np.cross(v, target)
+    sin, cos = np.linalg.norm(axis), float(np.dot(v, target))
+    if sin < 1e-12:
+        if cos > 0:
+            return np.eye(3)
+        other = np.eye(3)[np.argmin(np.abs(v))]
+        return Rotation.from_rotvec(np.pi * np.cross(v, other) / np.linalg.norm(np.cross(v, other))).as_matrix()
+    return Rotation.from_rotvec(axis / sin * np.arctan2(sin, cos)).as_matrix()
+
+
+def bvh_rig(reference: Motion, frame: int = 0) -> BvhRig:
+    """The rig of a BVH motion's conversion (module docstring): the rest pose is ``reference``'s posture at
+    ``frame``, turned to face ``+z`` and then straightened into a T-pose. Convert every clip of one training set
+    with one rig.
+
+    The straightening: every joint with a child of its own part (torso, an arm, a leg: :func:`_limb_sides`, from
+    the joint names) is swung by the smallest rotation that points the bone to that child along
+    :data:`REST_DIRECTIONS` (torso up, arms sideways, legs down, the bone below the ankle forward); the root
+    keeps the reference pelvis's tilt. The rest pose then does not depend on what the performer was doing at
+    ``frame`` (crossed legs, a bent neck), which matters to whatever reads the rest geometry
+    (:func:`~mocapkit.synthesis.representation.partitions`).
+
+    Raises:
+        BvhConversionError: not a BVH motion, several ROOTs, no left/right landmarks, ``frame`` out of range.
+    """
+    skeleton = _bvh_of(reference)
+    label = _label(reference)
+    if not -reference.num_frames <= frame < reference.num_frames:
+        raise BvhConversionError(label, None, f"reference frame {frame} of a {reference.num_frames}-frame clip")
+    glob, pos, trans = _globals(reference)
+    turn = _facing_yaw(pos[frame], skeleton.joint_names, label)
+    root = _branch_root(skeleton, label)
+    side = _limb_sides(skeleton, label)
+    marks = find_landmarks(skeleton.joint_names)
+    ankles = {marks.get("l_ankle"), marks.get("r_ankle")} - {None}
+    rest = turn @ glob[frame]
+    for j in range(skeleton.num_joints):
+        children = [c for c, p in enumerate(skeleton.parents) if p == j and side[c] == side[j]]
+        if j == root or not children or np.linalg.norm(trans[frame, children[0]]) == 0:
+            continue
+        c = children[0]
+        below_ankle = side[j].endswith("leg") and any(a in ankles for a in _ancestors(skeleton, c))
+        target = np.asarray(REST_DIRECTIONS["foot" if below_ankle else side[j]])
+        rest[j] = _swing(rest[j] @ trans[frame, c], target) @ rest[j]
+    return BvhRig(joint_names=tuple(skeleton.joint_names), root=root, rest_rotations=rest,
+                  reference=f"{label} frame {frame % reference.num_frames}")
+
+
+def _ancestors(skeleton: BvhSkeleton, joint: int) -> list[int]:
+    """``joint``'s parent, grandparent, … up to the ROOT."""
+    out, p = [], skeleton.parents[joint]
+    while p >= 0:
+        out.append(p)
+        p = skeleton.parents[p]
+    return out
+
+
+def _euler_degrees(matrices: np.ndarray) -> np.ndarray:
+    """AMC values ``[F, 3]`` (degrees, ``rx ry rz`` = fixed-axis x then y then z) of rotations ``[F, 3, 3]``,
+    unwrapped over time so that no value jumps by 360°."""
+    return np.unwrap(Rotation.from_matrix(matrices).as_euler("xyz", degrees=True), period=360.0, axis=0)
+
+
+def bvh_to_amc(motion: Motion, rig: BvhRig | None = None) -> Motion:
+    """A BVH motion (:func:`~mocapkit.datasets.formats.bvh.read_bvh`) as an AMC motion on a new ASF skeleton
+    (module docstring), what :func:`~mocapkit.datasets.formats.asf_amc.read_amc` would return for it.
+
+    Args:
+        motion: the BVH motion (raw channels in its metadata).
+        rig: the shared rest pose (:func:`bvh_rig`); ``None``: this motion's frame 0.
+
+    Returns:
+        An AMC :class:`~mocapkit.datasets.formats.motion.Motion` (``positions`` float32 ``[F, J', 3]`` metres,
+        ``J'`` = the joints from the ASF root down, named as the BVH's; the root is ``"root"``), with
+        ``metadata["asf"]`` (the skeleton, named after the clip), ``metadata["amc_values"]`` (degrees, root
+        translation in ASF units), ``metadata["bvh_rig"]`` (the rig) and ``metadata["bvh_dropped_joints"]`` (the
+        joints above the ASF root).
+
+    Raises:
+        BvhConversionError: not a BVH motion; joints that differ from the rig's; a non-root joint whose
+            translation changes during the clip; a result whose positions differ from the BVH's by more than
+            :data:`TOLERANCE_M` (each names the file, and the joint where there is one).
+    """
+    skeleton = _bvh_of(motion)
+    label = _label(motion)
+    rig = bvh_rig(motion) if rig is None else rig
+    if tuple(skeleton.joint_names) != rig.joint_names:
+        raise BvhConversionError(label, None, f"its joints differ from the rig's ({rig.reference}): "
+                                 f"{sorted(set(skeleton.joint_names) ^ set(rig.joint_names))[:6]}")
+    metres_per_file_unit = float(motion.metadata["scale"])
+    asf_unit = INCH / LENGTH_MULTIPLIER                       # metres per ASF length unit
+    glob, pos, trans = _globals(motion)
+    root = rig.root
+    parents = skeleton.parents
+    below = {root}
+    for j, p in enumerate(parents):                           # parents come first in BVH order
+        if p in below:
+            below.add(j)
+    wander = np.abs(trans - trans[:1]).max(axis=0).max(axis=1)
+    limit = TRANSLATION_TOLERANCE * max(skeleton.rest_size(), 1e-9)
+    for j in sorted(below - {root}):
+        if wander[j] > limit:
+            frame = int(np.abs(trans[:, j] - trans[0, j]).max(axis=1).argmax())
+            raise BvhConversionError(label, None, f"joint {skeleton.joint_names[j]!r} moves against its parent "
+                                     f"(its translation changes by {wander[j]:.4g} file units by frame {frame + 1}); an "
+                                     "ASF bone has a fixed length")
+    rest = rig.rest_rotations
+    g_new = glob @ np.swapaxes(rest, -1, -2)[None]            # G'_j = G_j A_jᵀ, [F, J, 3, 3]
+    offsets = trans.mean(axis=0)                              # fixed bones: their mean translation (file units)
+
+    bones, hierarchy, values = [], {"root": []}, {}
+    name_of = {j: ("root" if j == root else skeleton.joint_names[j]) for j in below}
+
+    def add_bone(name: str, parent_joint: int, vector: np.ndarray, rotation: np.ndarray | None) -> None:
+        length = float(np.linalg.norm(vector))
+        direction = vector / length if length > 0 else np.array([0.0, 1.0, 0.0])
+        dof = ("rx", "ry", "rz") if rotation is not None else ()
+        bones.append(AsfBone(id=len(bones) + 1, name=name, direction=direction,
+                             length=length * metres_per_file_unit / asf_unit, dof=dof,
+                             limits=[(-np.inf, np.inf)] * len(dof)))
+        hierarchy.setdefault(name_of[parent_joint], []).append(name)
+        if rotation is not None:
+            values[name] = _euler_degrees(rotation)
+
+    for c in sorted(below - {root}):
+        p = parents[c]
+        local = None if p == root else np.swapaxes(g_new[:, parents[p]], -1, -2) @ g_new[:, p]
+        add_bone(skeleton.joint_names[c], p, rest[p] @ offsets[c], local)
+    values["root"] = np.concatenate([pos[:, root] * metres_per_file_unit / asf_unit,
+                                     _euler_degrees(g_new[:, root])], axis=1)
+    asf = AsfSkeleton(name=motion.name or "bvh", units={"mass": 1.0, "length": LENGTH_MULTIPLIER, "angle": "deg"},
+                      documentation=f"converted from {label} by mocapkit.datasets.formats.bvh_to_amc; rest pose: "
+                                    f"{rig.reference}",
+                      bones=bones, hierarchy={k: v for k, v in hierarchy.items() if v}, source=None)
+    dropped = tuple(skeleton.joint_names[j] for j in range(len(parents)) if j not in below)
+    out = amc_motion(asf, values, fps=motion.fps, angle_unit="deg", name=motion.name, source=motion.source,
+                     metadata={"asf_path": None, "bvh_rig": rig, "bvh_dropped_joints": dropped})
+    kept = sorted(below)                                      # the ASF's joints, in order: root, then the bones
+    error = float(np.abs(out.positions.astype(np.float64) - pos[:, kept] * metres_per_file_unit).max(initial=0.0))
+    if error > TOLERANCE_M:
+        raise BvhConversionError(label, None, f"the ASF/AMC conversion misplaces joints by {error:.3g} m "
+                                 f"(> {TOLERANCE_M:g} m)")
+    return out
