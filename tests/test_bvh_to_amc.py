@@ -32,10 +32,11 @@ BODY = [("Root", None, (0, 0, 0)), ("Hips", "Root", (0, 95, 0)), ("Spine", "Hips
         ("Foot_R", "LowerLeg_R", (-9, 8, 0)), ("Toes_R", "Foot_R", (-9, 2, 12))]
 
 
-def bandai_like_bvh(frames: int = 40, yaw_deg: float = 0.0, seed: int = 0, slide_joint: str | None = None) -> str:
+def bandai_like_bvh(frames: int = 40, yaw_deg: float = 0.0, seed: int = 0, slide_joint: str | None = None,
+                    rotation_only: bool = False) -> str:
     """BVH text of the body above walking along its facing direction (turned by ``yaw_deg``), with random joint
     orients (the zero pose is not upright) and small random joint motion; ``slide_joint`` gets a moving
-    translation."""
+    translation; ``rotation_only``: joints below ``Hips`` have rotation channels only (the common BVH)."""
     rng = np.random.default_rng(seed)
     names = [b[0] for b in BODY]
     parent = [names.index(p) if p else -1 for _, p, _ in BODY]
@@ -59,7 +60,7 @@ def bandai_like_bvh(frames: int = 40, yaw_deg: float = 0.0, seed: int = 0, slide
             position = np.tile(rest[j], (frames, 1)) + np.outer(np.arange(frames) * 3.0, yaw @ [0, 0, 1])
         if names[j] == slide_joint:
             position = position + np.outer(np.arange(frames) * 0.5, [1.0, 0, 0])
-        columns.append(np.concatenate([position, angles], axis=1))
+        columns.append(angles if rotation_only and j > 1 else np.concatenate([position, angles], axis=1))
     depth = {-1: -1}
 
     def block(j: int) -> None:
@@ -68,7 +69,8 @@ def bandai_like_bvh(frames: int = 40, yaw_deg: float = 0.0, seed: int = 0, slide
         lines.append(f"{pad}{'ROOT' if parent[j] < 0 else 'JOINT'} {names[j]}")
         lines.append(pad + "{")
         lines.append(f"{pad}  OFFSET {' '.join(f'{v:.6f}' for v in offsets[j])}")
-        lines.append(f"{pad}  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation")
+        lines.append(f"{pad}  CHANNELS 3 Zrotation Xrotation Yrotation" if rotation_only and j > 1 else
+                     f"{pad}  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation")
         children = [c for c, p in enumerate(parent) if p == j]
         for c in children:
             block(c)
@@ -139,6 +141,29 @@ def test_clips_share_one_rig_and_read_back_through_asf_amc(tmp_path):
     np.testing.assert_allclose(back.positions, clips[1].positions, atol=1e-4)
 
 
+def test_amc_back_to_the_bvh_rig_is_the_take_itself(tmp_path):
+    from mocapkit.datasets.formats.bvh import write_bvh
+    from mocapkit.datasets.formats.bvh_to_amc import amc_to_bvh
+
+    take = _motion(bandai_like_bvh(yaw_deg=30.0))
+    rig = bvh_rig(take, frame=5)
+    back = amc_to_bvh(bvh_to_amc(take, rig), rig)
+    np.testing.assert_allclose(back.positions, take.positions, atol=1e-5)
+    skeleton = take.metadata["bvh"]
+    starts = skeleton.channel_starts
+    for j, name in enumerate(skeleton.joint_names):
+        if name in ("Head", "Hand_L", "Hand_R", "Toes_L", "Toes_R"):
+            continue                     # leaf rotations move only End Sites: the conversion drops them
+        difference = back.metadata["channels"][:, starts[j]:starts[j] + 6] - take.metadata["channels"][:, starts[j]:
+                                                                                                starts[j] + 6]
+        difference[:, 3:] = (difference[:, 3:] + 180.0) % 360.0 - 180.0     # angles: the same up to 360°
+        np.testing.assert_allclose(difference, 0.0, atol=1e-6)
+    write_bvh(tmp_path / "back.bvh", back)
+    np.testing.assert_allclose(read_bvh(tmp_path / "back.bvh").positions, take.positions, atol=1e-5)
+    with pytest.raises(BvhConversionError, match="not an AMC motion on the ASF skeleton"):
+        amc_to_bvh(take, rig)
+
+
 def test_bad_bvh_rigs_are_named():
     with pytest.raises(BvhConversionError, match=r"clip\.bvh.*'Neck' moves against its parent"):
         bvh_to_amc(_motion(bandai_like_bvh(slide_joint="Neck")))
@@ -161,12 +186,26 @@ def test_synthesize_takes_bvh_clips_and_writes_bvh(tmp_path):
         (folder / f"walk_{k}.bvh").write_text(bandai_like_bvh(frames=30, seed=k, yaw_deg=40.0 * k))
     report = synthesize([folder], tmp_path / "out", n_variants=2, method="perlin", progress=False)
     assert report["format"] == "bvh" and report["bvh_rest_pose"].endswith("walk_0.bvh frame 0")
+    assert report["bvh_output_rig"].startswith("the input's")
     variant = read_bvh(tmp_path / "out" / report["variants"][0])
-    assert variant.num_frames == 30 and "LowerLeg_L" in variant.joint_names
+    take = read_bvh(folder / "walk_0.bvh")              # written in the input's own rig
+    assert variant.num_frames == 30 and variant.joint_names == take.joint_names
+    assert variant.metadata["bvh"].channels == take.metadata["bvh"].channels
+    np.testing.assert_allclose(variant.metadata["bvh"].offsets, take.metadata["bvh"].offsets, atol=1e-9)
     report = synthesize([folder], tmp_path / "amc", n_variants=1, method="perlin", progress=False,
                         output_format="amc")
     back = read_amc(tmp_path / "amc" / report["variants"][0], asf=tmp_path / "amc" / report["skeleton"])
-    assert back.joint_names[1:4] == ("Spine", "Chest", "Neck")
+    assert back.joint_names[1:4] == ("Spine", "Chest", "Neck") and "bvh_output_rig" not in report
+    # a rig whose shoulders have no position channels cannot hold shoulders sampled apart from the chest: the
+    # variants are written on the ASF skeleton instead, and the report says why
+    plain = tmp_path / "plain"
+    plain.mkdir()
+    for k in range(3):
+        (plain / f"walk_{k}.bvh").write_text(bandai_like_bvh(frames=30, seed=k, rotation_only=True))
+    report = synthesize([plain], tmp_path / "plain_out", n_variants=2, method="perlin", progress=False)
+    assert "cannot hold the variants" in report["bvh_output_rig"]
+    variant = read_bvh(tmp_path / "plain_out" / report["variants"][0])
+    assert variant.joint_names[0] == "root" and "Shoulder_L" in variant.joint_names
     (folder / "walk_9.amc").write_text("")
     with pytest.raises(SynthesisInputError, match=r"mix \.amc and \.bvh"):
         find_clips([folder])

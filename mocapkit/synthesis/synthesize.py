@@ -5,7 +5,8 @@ type in, ``n_variants`` new clips out. BVH clips (Bandai's, Mixamo-style rigs) a
 first (:func:`~mocapkit.synthesis.base.as_amc_clips`: one T-pose rest for all of them). The output folder gets
 ``variant_000.amc`` … (on the reference skeleton, the first clip's) with a copy of that skeleton's ``.asf``, or
 self-contained ``variant_000.bvh`` … (the same joints, bone lengths and frame rate, for tools that take BVH; the
-default for BVH input), and ``report.json``.
+default for BVH input, and then in the input's own rig: hierarchy, joint frames and channel orders,
+:func:`~mocapkit.datasets.formats.bvh_to_amc.amc_to_bvh`), and ``report.json``.
 """
 from __future__ import annotations
 
@@ -21,6 +22,8 @@ import numpy as np
 
 from mocapkit.datasets.formats.asf_amc import read_amc, write_amc, write_asf
 from mocapkit.datasets.formats.bvh import read_bvh, write_bvh
+from mocapkit.datasets.formats.bvh_to_amc import amc_to_bvh
+from mocapkit.datasets.formats.errors import MotionFormatError
 from mocapkit.synthesis.base import (
     MotionSynthesizer,
     SynthesisInputError,
@@ -119,7 +122,7 @@ def synthesize(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, 
         progress: progress lines on stderr.
         output_format: ``"amc"`` (with the reference skeleton's ``.asf``) or ``"bvh"`` (one self-contained file
             per variant, positions in metres; :func:`~mocapkit.datasets.formats.bvh.read_bvh` reads back the
-            AMC variant's joint positions); ``None``: the inputs' format.
+            AMC variant's joint positions; from BVH input, in the input's own rig); ``None``: the inputs' format.
         window_seconds: cut every matching file into consecutive windows of this many seconds
             (:func:`~mocapkit.synthesis.base.clip_windows`) and train on those: for long takes that repeat one
             motion (CMU's walks). ``None``: every file is one clip.
@@ -192,13 +195,22 @@ def synthesize(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, 
             shutil.copyfile(asf_source, out / asf_name)
         else:
             write_asf(out / asf_name, skeleton)
+    rig = clips[0].metadata.get("bvh_rig")
+    bvh_rig_note, in_rig = None, None
+    if output_format == "bvh" and rig is not None:  # BVH in, BVH out: in the input's own rig where it holds them
+        try:
+            in_rig = [amc_to_bvh(motion, rig) for motion in variants]
+            bvh_rig_note = f"the input's ({rig.reference})"
+        except MotionFormatError as exc:
+            bvh_rig_note = f"the ASF skeleton's, as the input's rig cannot hold the variants: {exc}"
+            say(f"BVH variants written on the ASF skeleton: {exc}")
     written = []
     for k, motion in enumerate(variants):
         path = out / f"variant_{k:03d}.{output_format}"
         if output_format == "amc":
             write_amc(path, motion)
         else:
-            write_bvh(path, motion)
+            write_bvh(path, motion if in_rig is None else in_rig[k])
         written.append(path.name)
     motion_seconds = sum(len(m.positions) for m in variants) / synthesizer.fps_
     report = {
@@ -215,8 +227,10 @@ def synthesize(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, 
         "sample_seconds_per_motion_second": round(sample_seconds / motion_seconds, 5),
         "parameters": {k: v for k, v in synthesizer.get_params().items() if k != "verbose"},
     }
-    if "bvh_rig" in clips[0].metadata:
-        report["bvh_rest_pose"] = clips[0].metadata["bvh_rig"].reference
+    if rig is not None:
+        report["bvh_rest_pose"] = rig.reference
+    if bvh_rig_note:
+        report["bvh_output_rig"] = bvh_rig_note
     if window_seconds is not None:
         report["window_seconds"] = float(window_seconds)
         report["frames_left_out"] = left_out

@@ -202,6 +202,16 @@ def parse_bvh_text(text: bytes | str, source: str | os.PathLike = "<memory>", sc
 
     rest_size = skeleton.rest_size()
     scale, label, inferred = _decide_scale(scale, units, rest_size)
+    return bvh_motion(skeleton, values, frame_time, scale, name=Path(str(source)).stem, source=str(source),
+                      end_sites=end_sites, position_mode=position_mode, source_units=label,
+                      units_inferred=inferred)
+
+
+def bvh_motion(skeleton: BvhSkeleton, values: np.ndarray, frame_time: float, scale: float, name: str = "",
+               source: str | None = None, end_sites: bool = False, position_mode: str = "replace",
+               source_units: str | None = None, units_inferred: bool = False) -> Motion:
+    """The :class:`Motion` of a hierarchy and its raw channel values (float64 ``[frames, channels]``, degrees and
+    file units), what :func:`read_bvh` returns for the file they would make; ``scale`` is metres per file unit."""
     positions, rotations, glob = _fk(skeleton, values, position_mode)
     names, parents = list(skeleton.joint_names), list(skeleton.parents)
     if end_sites and skeleton.end_sites:
@@ -210,13 +220,12 @@ def parse_bvh_text(text: bytes | str, source: str | os.PathLike = "<memory>", sc
         rotations = np.concatenate([rotations, eye], axis=1)
         names += [f"{skeleton.joint_names[p]}/End Site" for p, _ in skeleton.end_sites]
         parents += [p for p, _ in skeleton.end_sites]
-    name = Path(str(source)).stem
     return Motion(
         positions=(positions * scale).astype(np.float32), joint_names=tuple(names), parents=tuple(parents),
-        rotations=rotations.astype(np.float32), fps=1.0 / frame_time, source_units=label, up_axis="y",
-        name=name, source=str(source),
+        rotations=rotations.astype(np.float32), fps=1.0 / frame_time,
+        source_units=source_units or f"{scale:g} m per unit", up_axis="y", name=name, source=source,
         metadata={"format": "bvh", "bvh": skeleton, "channels": values, "frame_time": frame_time,
-                  "scale": scale, "units_inferred": inferred, "rest_size": rest_size,
+                  "scale": scale, "units_inferred": units_inferred, "rest_size": skeleton.rest_size(),
                   "end_sites": bool(end_sites and skeleton.end_sites), "position_mode": position_mode},
     )
 

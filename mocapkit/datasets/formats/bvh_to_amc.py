@@ -67,14 +67,23 @@ class BvhRig:
     Attributes:
         joint_names: the BVH joints, file order (a clip converted with this rig must have exactly these).
         root: index of the joint that becomes the ASF root.
-        rest_rotations: float64 ``[J, 3, 3]``, ``A_j = H G_j(reference)`` per BVH joint.
+        rest_rotations: float64 ``[J, 3, 3]``, ``A_j`` per BVH joint (:func:`bvh_rig`).
         reference: where the rest posture comes from, e.g. ``"walk_01.bvh frame 0"`` (for reports).
+        skeleton: the reference clip's hierarchy (channel orders, End Sites), for :func:`amc_to_bvh`.
+        translations: float64 ``[J, 3]``, the reference clip's mean local translation per joint (file units).
+        pose: float64 ``[J, 3, 3]`` local rotations and ``[J, 3]`` translations of the reference frame (the joints
+            above the ASF root are written with these).
+        scale: metres per file unit of the reference clip.
     """
 
     joint_names: tuple[str, ...]
     root: int
     rest_rotations: np.ndarray
     reference: str
+    skeleton: BvhSkeleton
+    translations: np.ndarray
+    pose: tuple[np.ndarray, np.ndarray]
+    scale: float
 
 
 def _label(motion: Motion) -> str:
@@ -212,8 +221,12 @@ def bvh_rig(reference: Motion, frame: int = 0) -> BvhRig:
         below_ankle = side[j].endswith("leg") and any(a in ankles for a in _ancestors(skeleton, c))
         target = np.asarray(REST_DIRECTIONS["foot" if below_ankle else side[j]])
         rest[j] = _swing(rest[j] @ trans[frame, c], target) @ rest[j]
+    local, _ = local_transforms(skeleton, reference.metadata["channels"][[frame]],
+                                reference.metadata.get("position_mode", "replace"))
     return BvhRig(joint_names=tuple(skeleton.joint_names), root=root, rest_rotations=rest,
-                  reference=f"{label} frame {frame % reference.num_frames}")
+                  reference=f"{label} frame {frame % reference.num_frames}", skeleton=skeleton,
+                  translations=trans.mean(axis=0), pose=(local[0], trans[frame]),
+                  scale=float(reference.metadata["scale"]))
 
 
 def _ancestors(skeleton: BvhSkeleton, joint: int) -> list[int]:
@@ -310,4 +323,111 @@ def bvh_to_amc(motion: Motion, rig: BvhRig | None = None) -> Motion:
     if error > TOLERANCE_M:
         raise BvhConversionError(label, None, f"the ASF/AMC conversion misplaces joints by {error:.3g} m "
                                  f"(> {TOLERANCE_M:g} m)")
+    return out
+
+
+def amc_to_bvh(motion: Motion, rig: BvhRig) -> Motion:
+    """An AMC motion on the ASF skeleton of ``rig`` (what :func:`bvh_to_amc` made, or a synthesised variant of it)
+    back in the rig's own BVH hierarchy, joint frames and channel orders: the inverse of the re-rig, so that
+    :func:`~mocapkit.datasets.formats.bvh.write_bvh` writes a file the original rig's tools take.
+
+    Per BVH joint ``j`` from the ASF root down, ``G_j = G'_j A_j`` with ``G'_j`` the rotation of the ASF bone of
+    ``j``'s first child (the root: the ASF root's; a leaf, whose rotation the conversion dropped: its parent's,
+    so it keeps the rest pose's bend). The joints above the ASF root keep the reference frame's pose. Local
+    translations are the reference clip's (bone lengths of the reference body: that of the variants'
+    reference skeleton), the root's follows the motion. The other children of a joint with several
+    (Bandai's shoulders under ``Chest``) carry copies of its rotation in the ASF, which a synthesiser samples
+    apart: where such a joint has its own position channels (Bandai's all do) they place it where the motion
+    has it, so the result is exact; where it has none, it follows the first child's copy and the check below
+    fails.
+
+    Returns:
+        A BVH :class:`~mocapkit.datasets.formats.motion.Motion` (as :func:`~mocapkit.datasets.formats.bvh.read_bvh`
+        returns), its joints placed as ``motion``'s to within :data:`TOLERANCE_M` where the bodies agree.
+
+    Raises:
+        BvhConversionError: ``motion`` is not an AMC motion of the rig's joints, or a joint of the rig has one or
+            two rotation channels (a rotation cannot be written there exactly).
+    """
+    from mocapkit.datasets.formats.asf_amc import forward_kinematics
+    from mocapkit.datasets.formats.bvh import bvh_motion
+
+    label = _label(motion)
+    skeleton = rig.skeleton
+    root = rig.root
+    parents = skeleton.parents
+    below = [rig.root]
+    for j, p in enumerate(parents):
+        if p in below:
+            below.append(j)
+    below = sorted(below)
+    names = ("root",) + tuple(skeleton.joint_names[j] for j in below[1:])
+    asf = motion.metadata.get("asf")
+    if asf is None or "amc_values" not in motion.metadata or tuple(asf.joint_names) != names:
+        raise BvhConversionError(label, None, f"not an AMC motion on the ASF skeleton of the rig ({rig.reference})")
+    positions, local_asf = forward_kinematics(asf, motion.metadata["amc_values"],
+                                              angle_unit=motion.metadata.get("amc_angle_unit", "deg"))
+    F = len(positions)
+    world_asf = np.empty_like(local_asf)
+    for k, p in enumerate(asf.parents):
+        world_asf[:, k] = local_asf[:, k] if p < 0 else world_asf[:, p] @ local_asf[:, k]
+    index = {j: k for k, j in enumerate(below)}               # BVH joint → ASF joint
+    ref_local, ref_trans = rig.pose
+    glob = np.empty((F, len(parents), 3, 3))
+    for j, p in enumerate(parents):                           # parents first
+        if j not in index:                                    # above the ASF root: the reference frame's pose
+            glob[:, j] = ref_local[j] if p < 0 else glob[:, p] @ ref_local[j]
+            continue
+        children = [c for c, q in enumerate(parents) if q == j and c in index]
+        if j == root:
+            primed = world_asf[:, 0]
+        elif children:
+            primed = world_asf[:, index[children[0]]]
+        else:                                                 # a leaf: G'_j = G'_p
+            primed = glob[:, p] @ rig.rest_rotations[p].T
+        glob[:, j] = primed @ rig.rest_rotations[j]
+    primary = {j: next((c for c, q in enumerate(parents) if q == j), None) for j in index}
+    moves_itself = {j: {"Xposition", "Yposition", "Zposition"} <= set(skeleton.channels[j]) for j in index}
+    trans = np.tile(rig.translations, (F, 1, 1))
+    world = np.zeros((F, len(parents), 3))                    # file units
+    for j, p in enumerate(parents):
+        if j not in index:
+            trans[:, j] = ref_trans[j]
+        if j == root:
+            above = world[:, p] if p >= 0 else 0.0
+            g_parent = glob[:, p] if p >= 0 else np.eye(3)
+            trans[:, j] = np.einsum("...ba,...b->...a", g_parent, positions[:, 0] / rig.scale - above)
+        elif j in index and p in index and primary[p] != j and moves_itself[j]:
+            # a sibling whose copy of the parent's rotation was sampled apart: its position channels place it
+            trans[:, j] = np.einsum("fba,fb->fa", glob[:, p], (positions[:, index[j]] - positions[:, index[p]])
+                                    / rig.scale)
+        if p >= 0:
+            world[:, j] = world[:, p] + np.einsum("fab,fb->fa", glob[:, p], trans[:, j])
+        else:
+            world[:, j] = trans[:, j]
+    columns = []
+    for j, p in enumerate(parents):
+        local = glob[:, j] if p < 0 else np.swapaxes(glob[:, p], 1, 2) @ glob[:, j]
+        chans = skeleton.channels[j]
+        rotations = [c for c in chans if c.endswith("rotation")]
+        if len(rotations) not in (0, 3):
+            raise BvhConversionError(label, None, f"joint {skeleton.joint_names[j]!r} has {len(rotations)} rotation "
+                                     "channel(s); only joints with three or none can be written")
+        euler = (np.unwrap(Rotation.from_matrix(local).as_euler("".join(c[0] for c in rotations), degrees=True),
+                           period=360.0, axis=0) if rotations else np.zeros((F, 0)))
+        column, r = [], 0
+        for c in chans:
+            if c.endswith("rotation"):
+                column.append(euler[:, r])
+                r += 1
+            else:
+                column.append(trans[:, j, "XYZ".index(c[0])])
+        columns.extend(column)
+    values = np.stack(columns, axis=1) if columns else np.zeros((F, 0))
+    frame_time = 1.0 / motion.fps
+    out = bvh_motion(skeleton, values, frame_time, rig.scale, name=motion.name, source=motion.source)
+    error = float(np.abs(out.positions[:, below].astype(np.float64) - positions).max(initial=0.0))
+    if error > TOLERANCE_M:
+        raise BvhConversionError(label, None, f"writing it in the rig of {rig.reference} misplaces joints by "
+                                 f"{error:.3g} m (> {TOLERANCE_M:g} m): are its bone lengths the reference's?")
     return out
