@@ -228,3 +228,24 @@ def test_real_bandai_takes_convert_exactly_onto_one_t_pose():
     rest = dict(zip(skeleton.joint_names, skeleton.rest_positions()))
     assert rest["Head"][1] > rest["Chest"][1] > rest["Foot_L"][1] + 0.9
     json.dumps(clips[0].metadata["bvh_rig"].reference)
+
+
+SAMPLES = Path(__file__).resolve().parents[2] / "shared" / "samples" / "bvh"
+
+
+@pytest.mark.skipif(not SAMPLES.is_dir(), reason="../shared/samples/bvh not present")
+@pytest.mark.parametrize("name", ["cmu_131_01.bvh", "test_freebvh.bvh", "test_mocapbank.bvh",
+                                  "AV_8Walk_Meredith_HVHA_Rep1.bvh"])
+def test_rigs_from_the_wild_convert_split_and_come_back(name):
+    """CMU-BVH (zero-length hip joints, clavicles), Mixamo (``mixamorig:`` names, eyes beside the head, fingers),
+    and two other exporters: exact both ways, and the five partitions found on the T-pose rest."""
+    from mocapkit.datasets.formats.bvh_to_amc import amc_to_bvh
+
+    take = read_bvh(SAMPLES / name)
+    amc = bvh_to_amc(take)
+    np.testing.assert_allclose(amc.positions, take.positions[:, [take.joint_names.index(n) for n in
+                                                                 (take.joint_names[amc.metadata["bvh_rig"].root],)
+                                                                 + amc.joint_names[1:]]], atol=1e-4)
+    parts = partitions(amc.metadata["asf"])
+    assert all(len(parts[p]) >= 2 for p in ("RA", "LA", "RL", "LL"))
+    np.testing.assert_allclose(amc_to_bvh(amc, amc.metadata["bvh_rig"]).positions, take.positions, atol=1e-4)

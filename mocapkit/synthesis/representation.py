@@ -414,6 +414,10 @@ branch joint exceeds this fraction of its reach (HDM05: legs 0.27, arms 0.75, sp
 legs, converted with a standing reference posture as the rest (:mod:`mocapkit.datasets.formats.bvh_to_amc`),
 0.08–0.09, its spine 0.01)."""
 
+MIN_LIMB_REACH = 0.2
+"""A limb reaches at least this fraction of the rest pose's height from its branch joint (arms about 0.35, legs
+0.5): Mixamo's eyes, beside the head, are not arms."""
+
 LEG_REACH = 0.25
 """A limb is a leg when its lowest rest joint lies in the bottom ``LEG_REACH`` of the skeleton's rest height (the
 feet), else an arm: arms that hang down in a standing rest pose end at the hips, not at the floor."""
@@ -425,7 +429,7 @@ def partitions(skeleton: AsfSkeleton) -> dict[str, tuple[str, ...]]:
     Only the root and bones with dofs are listed (a fixed bone such as ``lhipjoint`` has nothing to model); the
     root is the first member of ``"TH"``. Built from the rest pose, not from names: walking down from the root
     through the torso, a child subtree of a branching joint whose rest joints lie to one side (mean ``|x|`` offset
-    > :data:`LATERAL_FRACTION` of its reach) is a limb; left is ``+x`` (CMU/HDM05 ``l*`` bones), a limb that
+    > :data:`LATERAL_FRACTION` of its reach, a reach of at least :data:`MIN_LIMB_REACH` of the height) is a limb; left is ``+x`` (CMU/HDM05 ``l*`` bones), a limb that
     reaches the bottom :data:`LEG_REACH` of the rest pose's height is a leg, else an arm. Within a partition, bones are in breadth-first
     hierarchy order (ancestors before descendants).
 
@@ -442,7 +446,8 @@ def partitions(skeleton: AsfSkeleton) -> dict[str, tuple[str, ...]]:
         return out
 
     heights = np.array([p[1] for p in rest.values()])
-    foot_level = heights.min() + LEG_REACH * (heights.max() - heights.min())
+    height = heights.max() - heights.min()
+    foot_level = heights.min() + LEG_REACH * height
     torso, limbs, frontier = ["root"], {}, ["root"]
     while frontier:
         joint = frontier.pop(0)
@@ -452,7 +457,8 @@ def partitions(skeleton: AsfSkeleton) -> dict[str, tuple[str, ...]]:
             offsets = np.array([rest[m] - rest[joint] for m in members])
             reach = float(np.max(np.linalg.norm(offsets, axis=1)))
             mean = offsets.mean(axis=0)
-            if len(children) > 1 and reach > 0 and abs(mean[0]) > LATERAL_FRACTION * reach:
+            if (len(children) > 1 and reach > MIN_LIMB_REACH * height
+                    and abs(mean[0]) > LATERAL_FRACTION * reach):
                 reaches_feet = min(rest[m][1] for m in members) <= foot_level
                 name = ("L" if mean[0] > 0 else "R") + ("L" if reaches_feet else "A")
                 if name in limbs:

@@ -192,10 +192,11 @@ def bvh_rig(reference: Motion, frame: int = 0) -> BvhRig:
     ``frame``, turned to face ``+z`` and then straightened into a T-pose. Convert every clip of one training set
     with one rig.
 
-    The straightening: every joint with a child of its own part (torso, an arm, a leg: :func:`_limb_sides`, from
-    the joint names) is swung by the smallest rotation that points the bone to that child along
-    :data:`REST_DIRECTIONS` (torso up, arms sideways, legs down, the bone below the ankle forward); the root
-    keeps the reference pelvis's tilt. The rest pose then does not depend on what the performer was doing at
+    The straightening: every torso joint with a torso child, and every limb joint from the shoulder or hip down
+    (:func:`_limb_sides`, from the joint names), is swung by the smallest rotation that points the bone to its
+    first child of the same part along :data:`REST_DIRECTIONS` (torso up, arms sideways, legs down, the bone
+    below the ankle forward); clavicle and pelvis segments keep the reference posture's directions, and the
+    root its pelvis's tilt. The rest pose then does not depend on what the performer was doing at
     ``frame`` (crossed legs, a bent neck), which matters to whatever reads the rest geometry
     (:func:`~mocapkit.synthesis.representation.partitions`).
 
@@ -212,10 +213,20 @@ def bvh_rig(reference: Motion, frame: int = 0) -> BvhRig:
     side = _limb_sides(skeleton, label)
     marks = find_landmarks(skeleton.joint_names)
     ankles = {marks.get("l_ankle"), marks.get("r_ankle")} - {None}
+    # a limb is straightened from its shoulder or hip joint down (the parent of its elbow or knee; of its end's
+    # parent without one); the clavicle and pelvis segments above keep the reference posture's directions
+    middles = {"left_arm": ("l_elbow", "l_wrist"), "right_arm": ("r_elbow", "r_wrist"),
+               "left_leg": ("l_knee", "l_ankle"), "right_leg": ("r_knee", "r_ankle")}
+    upper = {}
+    for limb, (middle, end) in middles.items():
+        joint = marks[middle] if middle in marks else skeleton.parents[marks[end]]
+        upper[limb] = skeleton.parents[joint]
     rest = turn @ glob[frame]
     for j in range(skeleton.num_joints):
         children = [c for c, p in enumerate(skeleton.parents) if p == j and side[c] == side[j]]
         if j == root or not children or np.linalg.norm(trans[frame, children[0]]) == 0:
+            continue
+        if side[j] != "torso" and j != upper[side[j]] and upper[side[j]] not in _ancestors(skeleton, j):
             continue
         c = children[0]
         below_ankle = side[j].endswith("leg") and any(a in ankles for a in _ancestors(skeleton, c))

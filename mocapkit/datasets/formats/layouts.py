@@ -190,8 +190,11 @@ _RIG_STEMS: dict[str, tuple[str, ...]] = {
 
 
 def _rig_side(name: str) -> tuple[str | None, str]:
-    """``("l" | "r" | None, stem)``: the side mark of a rig joint name and the name without it (lower case)."""
+    """``("l" | "r" | None, stem)``: the side mark of a rig joint name and the name without it (lower case); a
+    namespace before a colon (Mixamo's ``mixamorig:LeftUpLeg``) is dropped."""
     low = name.lower().replace(" ", "")
+    if ":" in low and low.rsplit(":", 1)[1] not in ("l", "r"):
+        low = low.rsplit(":", 1)[1]
     for side, words in (("l", ("left",)), ("r", ("right",))):
         for word in words:
             if word in low:
