@@ -192,6 +192,9 @@ def test_synthesize_takes_bvh_clips_and_writes_bvh(tmp_path):
     assert variant.num_frames == 30 and variant.joint_names == take.joint_names
     assert variant.metadata["bvh"].channels == take.metadata["bvh"].channels
     np.testing.assert_allclose(variant.metadata["bvh"].offsets, take.metadata["bvh"].offsets, atol=1e-9)
+    windows = synthesize([folder], tmp_path / "windows", n_variants=1, method="perlin", progress=False,
+                         window_seconds=0.5)
+    assert len(windows["training_clips"]) == 6 and windows["bvh_output_rig"].startswith("the input's")
     report = synthesize([folder], tmp_path / "amc", n_variants=1, method="perlin", progress=False,
                         output_format="amc")
     back = read_amc(tmp_path / "amc" / report["variants"][0], asf=tmp_path / "amc" / report["skeleton"])

@@ -151,10 +151,11 @@ def resample_clip(clip: Motion, fps: float) -> Motion:
 
 def clip_segment(clip: Motion, start: int, stop: int) -> Motion:
     """Frames ``start`` … ``stop - 1`` of an AMC clip, as an AMC motion on the same skeleton and frame rate (its
-    name and source gain ``[start:stop]``; the skeleton file, ``metadata["asf_path"]``, is kept)."""
+    name and source gain ``[start:stop]``; the skeleton file, ``metadata["asf_path"]``, and a converted BVH's
+    rig, ``metadata["bvh_rig"]``, are kept)."""
     values = {bone: np.asarray(v)[start:stop] for bone, v in clip.metadata["amc_values"].items()}
     suffix = f"[{start}:{stop}]"
-    kept = {"asf_path": clip.metadata["asf_path"]} if clip.metadata.get("asf_path") else {}
+    kept = {key: clip.metadata[key] for key in ("asf_path", "bvh_rig") if clip.metadata.get(key) is not None}
     return amc_motion(clip.metadata["asf"], values, fps=clip.fps,
                       angle_unit=clip.metadata.get("amc_angle_unit", "deg"), name=f"{clip.name}{suffix}",
                       source=f"{clip.source}{suffix}" if clip.source else None, metadata=kept)

@@ -70,9 +70,9 @@ def find_clips(inputs: Sequence[str | os.PathLike], motion_type: str | None = No
         raise SynthesisInputError(f"no AMC or BVH clips matching {pattern}.amc / {pattern}.bvh in {where}")
     kinds = {p.suffix.lower() for p in found}
     if len(kinds) > 1:
-        first = {kind: next(p for p in found if p.suffix.lower() == kind) for kind in sorted(kinds)}
-        raise SynthesisInputError(f"the training clips mix {' and '.join(sorted(kinds))} files ({', '.join(map(str, first.values()))}"
-                                  f"); give clips of one skeleton, in one format")
+        examples = ", ".join(str(next(p for p in found if p.suffix.lower() == kind)) for kind in sorted(kinds))
+        raise SynthesisInputError(f"the training clips mix {' and '.join(sorted(kinds))} files ({examples}); give "
+                                  f"clips of one skeleton, in one format")
     return found
 
 
@@ -161,7 +161,8 @@ def synthesize(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, 
             if len(clips) >= max_clips:
                 break
             take = read_clip(f)
-            first_take = first_take or take
+            if first_take is None:
+                first_take = take
             take = as_amc_clips([take], reference=first_take)[0]        # BVH: one rest pose, the first take's
             windows = clip_windows(take, window_seconds)
             used = windows[: max_clips - len(clips)]
