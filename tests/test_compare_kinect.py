@@ -99,3 +99,33 @@ def test_noise_preset_is_a_benchmark_option():
     expected, _ = simulate_kinect(pair.clean, KinectNoiseConfig.preset("msr_steadiness"),
                                   seed=file_seed(0, pair.path), fps=30.0)
     assert (pair.noisy == expected).all()
+
+
+BANDAI = SHARED / "data" / "bandai_motion_1"
+
+
+@needs(HDM05)
+@needs(BANDAI)
+def test_another_data_set_is_scored_by_models_of_every_performer(tmp_path):
+    bench = KinectReconstructionBenchmark(str(HDM05), protocols=["bd", "bandai"], clips_per_group=2,
+                                          transfer_root=str(BANDAI), transfer_name="bandai")
+    groups = bench.groups
+    transfer = bench.split("bandai", 0)
+    assert set(groups[transfer.test]) == {"bandai"} and len(transfer.test) == 2
+    assert set(groups[transfer.train]) == {"bd", "bk", "dg", "mm"}           # every performer, no Bandai take
+    held_out = bench.split("bd", 0)
+    assert set(groups[held_out.train]) == {"bk", "dg", "mm"}                  # Bandai never trains a fold
+    assert all(str(bench.files[i]).endswith(".bvh") for i in transfer.test)
+    kinect, mocap = bench.data(transfer.test, 0)
+    assert kinect[0].shape[1:] == (20, 3) and mocap[0].shape == kinect[0].shape
+    with pytest.raises(ComparisonError, match="transfer_name='bd' is a performer folder"):
+        KinectReconstructionBenchmark(str(HDM05), clips_per_group=1, transfer_root=str(BANDAI), transfer_name="bd")
+    cfg = compose(["kinect_hdm05", f"out={tmp_path}", f"benchmark.root={HDM05}", "benchmark.clips_per_group=2",
+                   f"+benchmark.transfer_root={BANDAI}", "+benchmark.transfer_name=bandai",
+                   "benchmark.protocols=[bd,bandai]", "seeds=[0]", "only=[forest]"])
+    with open_dict(cfg):
+        cfg.methods.forest.estimator.n_estimators = 5
+    run_comparison(cfg)
+    report = (tmp_path / "results.md").read_text()
+    assert "Over all held-out performers" in report and "Another data set: `bandai`" in report
+    assert (tmp_path / "per_joint_error_bandai.png").stat().st_size > 0

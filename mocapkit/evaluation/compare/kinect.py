@@ -6,7 +6,10 @@ into a (Kinect, mocap) pair by the calibrated Kinect v1 noise simulator
 the simulation seed** (and the estimators' ``random_state``): seeds draw new noise on the same clips.
 
 Protocols are held-out performers: protocol ``mm`` trains on the other performers' pairs and scores every clip of
-``mm``. Samples are the clips; ``group`` is the performer folder's name.
+``mm``. Samples are the clips; ``group`` is the performer folder's name. With ``transfer_root`` another data set
+(Bandai's BVH takes, another studio, other actors and another skeleton mapped to the same 20 joints) is one more
+protocol, ``transfer_name``: trained on **every** performer of ``root`` and scored on all of its clips; it is never
+part of the training side of the other protocols.
 
 Estimators follow :class:`~mocapkit.classical.kinect_reconstruction.KinectPostureReconstructor`'s contract:
 ``fit(kinect_clips, mocap_clips, states)`` and ``predict(kinect_clips, state=states)`` on lists of ``[T, 20, 3]``
@@ -40,13 +43,16 @@ class KinectReconstructionBenchmark(Benchmark):
 
     Args:
         root: a folder of motion files, one sub-folder per performer (``../shared/data/hdm05_cuts11``).
-        protocols: the held-out performers (sub-folder names); default: every sub-folder.
+        protocols: the held-out performers (sub-folder names), and ``transfer_name``; default: all of them.
         fps: the simulated Kinect's frame rate.
         clips_per_group: read only this many clips of each performer (a seeded subset; None: all), for quick runs.
         clip_seed: the seed of that subset.
         cache_fits: reuse a fit across methods and cells that differ only in prediction parameters.
         noise: the simulator's calibration, a :data:`~mocapkit.datasets.synthetic.kinect_noise.NOISE_PRESETS` name
             (``mean_error``: the default config; ``msr_steadiness``: as steady as MSR Action3D's real skeletons).
+        transfer_root: a folder of motion files of another data set (searched recursively), scored as the
+            protocol ``transfer_name`` by models trained on all of ``root`` (module docstring); None: none.
+        transfer_name: that protocol's (and group's) name.
     """
 
     title = "Kinect posture reconstruction (simulated Kinect v1 from real mocap, held-out performers)"
@@ -56,7 +62,7 @@ class KinectReconstructionBenchmark(Benchmark):
 
     def __init__(self, root: str, protocols: list[str] | None = None, fps: float = 30.0,
                  clips_per_group: int | None = None, clip_seed: int = 0, cache_fits: bool = True,
-                 noise: str = "mean_error"):
+                 noise: str = "mean_error", transfer_root: str | None = None, transfer_name: str = "transfer"):
         from mocapkit.datasets.formats.motion_io import find_motion_files
         from mocapkit.datasets.synthetic.kinect_noise import KinectNoiseConfig
 
@@ -72,19 +78,34 @@ class KinectReconstructionBenchmark(Benchmark):
         files = [f for f in find_motion_files(self.root) if f.parent != self.root]
         if not files:
             raise ComparisonError(f"benchmark.root={root}: no motion files in per-performer sub-folders")
-        groups = sorted({f.parent.name for f in files})
+        group_of = {f: f.parent.name for f in files}
+        groups = sorted(set(group_of.values()))
+        self.transfer_root, self.transfer_name = (None if transfer_root is None else Path(transfer_root)), None
+        if transfer_root is not None:
+            transfer_name = str(transfer_name)
+            if transfer_name in groups:
+                raise ComparisonError(f"benchmark.transfer_name={transfer_name!r} is a performer folder of {root}")
+            if not self.transfer_root.is_dir():
+                raise ComparisonError(f"benchmark.transfer_root={transfer_root}: not a folder")
+            extra = find_motion_files(self.transfer_root)
+            if not extra:
+                raise ComparisonError(f"benchmark.transfer_root={transfer_root}: no motion files")
+            group_of.update({f: transfer_name for f in extra})
+            files = files + extra
+            self.transfer_name = transfer_name
         if clips_per_group is not None:
             rng = np.random.default_rng(clip_seed)
             kept = []
-            for g in groups:
-                mine = [f for f in files if f.parent.name == g]
+            for g in groups + ([self.transfer_name] if self.transfer_name else []):
+                mine = [f for f in files if group_of[f] == g]
                 kept += [mine[i] for i in sorted(rng.choice(len(mine), min(clips_per_group, len(mine)),
                                                             replace=False))]
             files = kept
         self.files = sorted(files)
-        self.groups = np.array([f.parent.name for f in self.files])
-        self.protocols = tuple(protocols) if protocols else tuple(groups)
-        unknown = [p for p in self.protocols if p not in groups]
+        self.groups = np.array([group_of[f] for f in self.files])
+        self.protocols = tuple(protocols) if protocols else tuple(groups) + ((self.transfer_name,)
+                                                                             if self.transfer_name else ())
+        unknown = [p for p in self.protocols if p not in groups and p != self.transfer_name]
         if unknown:
             raise ComparisonError(f"benchmark.protocols: {unknown} are not performer folders of {root} ({groups})")
         self.fps, self.clips_per_group, self.clip_seed = float(fps), clips_per_group, clip_seed
@@ -116,7 +137,7 @@ class KinectReconstructionBenchmark(Benchmark):
         if protocol not in self.protocols:
             raise ComparisonError(f"unknown protocol {protocol!r}: this benchmark has {list(self.protocols)}")
         test = np.flatnonzero(self.groups == protocol)
-        train = np.flatnonzero(self.groups != protocol)
+        train = np.flatnonzero((self.groups != protocol) & (self.groups != self.transfer_name))
         return Split(protocol, seed, train, test, {"held_out": protocol,
                                                    "train_groups": sorted(set(self.groups[train].tolist())),
                                                    "simulation_seed": seed})
@@ -124,7 +145,9 @@ class KinectReconstructionBenchmark(Benchmark):
     def describe(self) -> dict:
         return {"root": str(self.root), "n_clips": len(self.files), "fps": self.fps,
                 "groups": {g: int((self.groups == g).sum()) for g in sorted(set(self.groups.tolist()))},
-                "clips_per_group": self.clips_per_group, "clip_seed": self.clip_seed, "noise": self.noise}
+                "clips_per_group": self.clips_per_group, "clip_seed": self.clip_seed, "noise": self.noise,
+                "transfer_root": None if self.transfer_root is None else str(self.transfer_root),
+                "transfer_name": self.transfer_name}
 
     # ------------------------------------------------------------------ scoring
     def _fitted(self, estimator, train: np.ndarray, seed: int) -> tuple[object, float, bool]:
@@ -198,7 +221,20 @@ class KinectReconstructionBenchmark(Benchmark):
         if not cells:
             return ""
         keys = list(dict.fromkeys(c["method"] for c in cells))
-        lines = ["## Over all held-out performers", "",
+        lines = []
+        transfer = self.transfer_name
+        for title, chosen in (("Over all held-out performers", lambda c: c["protocol"] != transfer),
+                              (f"Another data set: `{transfer}`, by models trained on every performer",
+                               lambda c: c["protocol"] == transfer)):
+            table = self._pooled_table(title, [c for c in cells if chosen(c)], keys)
+            lines += table
+        return "\n".join(lines) + "\n" if lines else ""
+
+    def _pooled_table(self, title: str, cells: list, keys: list) -> list[str]:
+        """Markdown lines of one pooled table (frame-weighted over the cells' protocols, mean ± sd over seeds)."""
+        if not cells:
+            return []
+        lines = [f"## {title}", "",
                  ("Frame-weighted mean joint error (cm) over every test frame of every protocol, per seed; mean ± sd "
                   "over seeds. `raw` is the simulated Kinect input on the same frames."), "",
                  "| method | error (cm) | raw (cm) | reduction | frames/s |", "|---|---|---|---|---|"]
@@ -219,37 +255,53 @@ class KinectReconstructionBenchmark(Benchmark):
             label = mine[0]["label"]
             lines.append(f"| {label} | {_mean_sd(errors, 2)} | {_mean_sd(raws, 2)} | "
                          f"{_mean_sd([100 * r for r in reduction], 1)} % | {np.median(speeds):,.0f} |")
-        return "\n".join(lines) + "\n"
+        return lines + [""]
 
     def plots(self, results: dict, out_dir: Path) -> list[Path]:
-        """``per_joint_error.png``: each method's error per joint (pooled over protocols, first seed) beside raw."""
-        from mocapkit.datasets.formats.layouts import LANDMARK_NAMES
-        from mocapkit.evaluation.plots import pyplot, save_figure
-
+        """``per_joint_error.png``: each method's error per joint (pooled over the held-out performers, first seed)
+        beside raw; ``per_joint_error_<transfer>.png`` the same on the other data set."""
         cells = [c for c in results.get("cells", []) if "detail" in c and "per_joint_cm" in (c["detail"] or {})]
         if not cells:
             return []
-        plt = pyplot()
         seed = min(c["seed"] for c in cells)
         cells = [c for c in cells if c["seed"] == seed]
-        keys = list(dict.fromkeys(c["method"] for c in cells))
-        fig, ax = plt.subplots(figsize=(11, 4.2))
-        x = np.arange(len(LANDMARK_NAMES))
+        out = []
+        performers = [c for c in cells if c["protocol"] != self.transfer_name]
+        if performers:
+            out.append(_per_joint_plot(performers, f"Per-joint error over all held-out performers (seed {seed})",
+                                       Path(out_dir) / "per_joint_error.png"))
+        transfer = [c for c in cells if c["protocol"] == self.transfer_name]
+        if transfer:
+            out.append(_per_joint_plot(transfer, f"Per-joint error on {self.transfer_name}, trained on every "
+                                                 f"performer (seed {seed})",
+                                       Path(out_dir) / f"per_joint_error_{self.transfer_name}.png"))
+        return out
 
-        def pooled(mine, field):
-            n = np.array([c["detail"]["n_test_frames"] for c in mine], dtype=np.float64)
-            return np.array([c["detail"][field] for c in mine]).T @ n / n.sum()
 
-        ax.plot(x, pooled([c for c in cells if c["method"] == keys[0]], "per_joint_raw_cm"), "k--", label="raw Kinect")
-        for key in keys:
-            mine = [c for c in cells if c["method"] == key]
-            ax.plot(x, pooled(mine, "per_joint_cm"), marker="o", ms=3, label=mine[0]["label"])
-        ax.set_xticks(x, LANDMARK_NAMES, rotation=60, ha="right", fontsize=8)
-        ax.set_ylabel("mean joint error (cm)")
-        ax.set_title(f"Per-joint error over all held-out performers (seed {seed})")
-        ax.legend(fontsize=7, ncol=2)
-        ax.grid(alpha=0.3)
-        return [save_figure(fig, Path(out_dir) / "per_joint_error.png")]
+def _per_joint_plot(cells: list, title: str, path: Path) -> Path:
+    """One figure: each method's frame-weighted per-joint error over ``cells`` beside the raw input's."""
+    from mocapkit.datasets.formats.layouts import LANDMARK_NAMES
+    from mocapkit.evaluation.plots import pyplot, save_figure
+
+    plt = pyplot()
+    keys = list(dict.fromkeys(c["method"] for c in cells))
+    fig, ax = plt.subplots(figsize=(11, 4.2))
+    x = np.arange(len(LANDMARK_NAMES))
+
+    def pooled(mine, field):
+        n = np.array([c["detail"]["n_test_frames"] for c in mine], dtype=np.float64)
+        return np.array([c["detail"][field] for c in mine]).T @ n / n.sum()
+
+    ax.plot(x, pooled([c for c in cells if c["method"] == keys[0]], "per_joint_raw_cm"), "k--", label="raw Kinect")
+    for key in keys:
+        mine = [c for c in cells if c["method"] == key]
+        ax.plot(x, pooled(mine, "per_joint_cm"), marker="o", ms=3, label=mine[0]["label"])
+    ax.set_xticks(x, LANDMARK_NAMES, rotation=60, ha="right", fontsize=8)
+    ax.set_ylabel("mean joint error (cm)")
+    ax.set_title(title)
+    ax.legend(fontsize=7, ncol=2)
+    ax.grid(alpha=0.3)
+    return save_figure(fig, path)
 
 
 def _mean_sd(values, digits: int) -> str:
