@@ -6,14 +6,15 @@ heading, height and tilt from its root rotation against an *upright* rest that f
 at ``+x`` (HDM05 and CMU: :mod:`mocapkit.synthesis.representation`). A BVH's zero pose can be anything: Bandai's
 lies on its side (at zero angles the spine points along ``+x``, the left leg along ``+x``, the right along ``-x``;
 every joint frame carries its own "joint orient"). So the ASF written here takes a **reference posture** of the
-BVH as its rest pose (:func:`bvh_rig`; by default frame 0 of a reference clip), turned about the vertical to face
-``+z``; its angles are then rotations away from that posture.
+BVH (:func:`bvh_rig`; by default frame 0 of a reference clip), turned about the vertical to face ``+z`` and
+straightened into a T-pose, as its rest pose; its angles are rotations away from that rest.
 
 **The mapping** (BVH forward kinematics as :mod:`mocapkit.datasets.formats.bvh`: ``G_j = G_p L_j``,
-``x_j = x_p + G_p t_j``; ASF as :mod:`mocapkit.datasets.formats.asf_amc`). With one constant rotation per joint,
-``A_j = H G_j(reference)`` (``H``: the yaw that makes the reference face ``+z``), the rotations
-``G'_j = G_j A_j⁻¹`` and rest offsets ``t'_c = A_p t_c`` place every joint where the BVH does
-(``G'_p t'_c = G_p t_c``), and every ``G'_j`` is the identity in the (turned) reference posture. Then:
+``x_j = x_p + G_p t_j``; ASF as :mod:`mocapkit.datasets.formats.asf_amc`). With **any** constant rotation per
+joint, here ``A_j = S_j H G_j(reference)`` (``H``: the yaw that makes the reference face ``+z``; ``S_j``: the swing
+that straightens the bone below ``j``, :func:`bvh_rig`), the rotations ``G'_j = G_j A_j⁻¹`` and rest offsets
+``t'_c = A_p t_c`` place every joint where the BVH does (``G'_p t'_c = G_p t_c``); the rest pose (every
+``G'_j`` the identity) has the bones along ``t'_c``. Then:
 
 - the **ASF root** is the BVH joint where the body branches (the first joint from the top with more than one
   child: Bandai's and CMU-BVH's ``Hips``); a single-child chain above it (Bandai's static ``joint_Root``) is left
