@@ -23,6 +23,7 @@ from tests.shared_data import SHARED, needs
 
 HDM05 = SHARED / "data" / "hdm05_cuts11"
 CMU = SHARED / "data" / "cmu_amc"
+BANDAI = SHARED / "data" / "bandai_motion_1"
 JOINTS = ("Hips", "LeftUpLeg", "RightUpLeg", "LeftFoot", "RightFoot", "Head")
 PARENTS = (-1, 0, 0, 1, 2, 0)
 
@@ -198,4 +199,22 @@ def test_cmu_walks_are_cut_into_windows_and_a_held_out_take_is_the_reference():
         SynthesisBenchmark(str(CMU), ["walk"], dataset="cmu", types={"walk": ["03_01", "03_04"]},
                            window_seconds=2.0, heldout_takes=["03_04"])
     with pytest.raises(ComparisonError, match="ASF/AMC"):
-        SynthesisBenchmark(str(CMU), ["walk"], dataset="bandai")
+        SynthesisBenchmark(str(CMU), ["walk"], dataset="msr")
+
+
+@needs(BANDAI)
+def test_bandai_bvh_takes_are_synthesis_clips_on_one_rest_pose(tmp_path):
+    """Bandai's BVH takes, converted to ASF/AMC on one T-pose rest, go through the same benchmark and runner."""
+    from mocapkit.evaluation.compare.synthesis import SynthesisBenchmark
+
+    cfg = compose(["synthesis_bandai", f"out={tmp_path}", f"benchmark.root={BANDAI}", "protocols=[bow]",
+                   "benchmark.protocols=[bow]", "benchmark.n_train=4", "benchmark.n_variants=3", "seeds=[0]",
+                   "only=[perlin,copy]"])
+    run_comparison(cfg)
+    cells = {c["method"]: c for c in json.loads((tmp_path / "results.json").read_text())["cells"]}
+    assert set(cells) == {"perlin", "copy"}
+    assert cells["copy"]["metrics"]["feature_distance"] < cells["copy"]["metrics"]["feature_distance_real"] * 3
+    bench = SynthesisBenchmark(str(BANDAI), ["bow"], n_train=10, n_variants=2, dataset="bandai")
+    assert len(bench.motions) == 15 and {c["class"] for c in bench.clips} == {"bow"}
+    rigs = {id(m.metadata["bvh_rig"]) for m in bench.motions}
+    assert len(rigs) == 1 and bench.motions[0].metadata["bvh_rig"].reference.endswith("bow_active_001.bvh frame 0")
