@@ -241,6 +241,15 @@ def bvh_rig(reference: Motion, frame: int = 0) -> BvhRig:
                   scale=float(reference.metadata["scale"]))
 
 
+def _subtree(parents, root: int) -> list[int]:
+    """``root`` and its descendants, in file order (BVH lists parents before children)."""
+    out = {root}
+    for j, p in enumerate(parents):
+        if p in out:
+            out.add(j)
+    return sorted(out)
+
+
 def _ancestors(skeleton: BvhSkeleton, joint: int) -> list[int]:
     """``joint``'s parent, grandparent, … up to the ROOT."""
     out, p = [], skeleton.parents[joint]
@@ -287,10 +296,7 @@ def bvh_to_amc(motion: Motion, rig: BvhRig | None = None) -> Motion:
     glob, pos, trans = _globals(motion)
     root = rig.root
     parents = skeleton.parents
-    below = {root}
-    for j, p in enumerate(parents):                           # parents come first in BVH order
-        if p in below:
-            below.add(j)
+    below = set(_subtree(parents, root))
     wander = np.abs(trans - trans[:1]).max(axis=0).max(axis=1)
     limit = TRANSLATION_TOLERANCE * max(skeleton.rest_size(), 1e-9)
     for j in sorted(below - {root}):
@@ -368,11 +374,7 @@ def amc_to_bvh(motion: Motion, rig: BvhRig) -> Motion:
     skeleton = rig.skeleton
     root = rig.root
     parents = skeleton.parents
-    below = [rig.root]
-    for j, p in enumerate(parents):
-        if p in below:
-            below.append(j)
-    below = sorted(below)
+    below = _subtree(parents, root)
     names = ("root",) + tuple(skeleton.joint_names[j] for j in below[1:])
     asf = motion.metadata.get("asf")
     if asf is None or "amc_values" not in motion.metadata or tuple(asf.joint_names) != names:
@@ -441,5 +443,7 @@ def amc_to_bvh(motion: Motion, rig: BvhRig) -> Motion:
     error = float(np.abs(out.positions[:, below].astype(np.float64) - positions).max(initial=0.0))
     if error > TOLERANCE_M:
         raise BvhConversionError(label, None, f"writing it in the rig of {rig.reference} misplaces joints by "
-                                 f"{error:.3g} m (> {TOLERANCE_M:g} m): are its bone lengths the reference's?")
+                                 f"{error:.3g} m (> {TOLERANCE_M:g} m): bone lengths other than the reference "
+                                 "clip's, or children of one joint moved apart (their copies of its rotation "
+                                 "sampled apart) with no position channels to hold them")
     return out
