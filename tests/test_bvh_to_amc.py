@@ -228,6 +228,10 @@ def test_real_bandai_takes_convert_exactly_onto_one_t_pose():
         assert clip.metadata["bvh_dropped_joints"] == ("joint_Root",)
     skeleton = clips[0].metadata["asf"]
     assert set(partitions(skeleton)) == {"RA", "LA", "RL", "LL", "TH"}
+    # the rest pose of any reference frame splits the same way (dash_musical frame 33 once made the spine an arm)
+    dash = read_bvh(BANDAI / "dataset-1_dash_musical_001.bvh")
+    for frame in (0, 33, -1):
+        assert partitions(bvh_to_amc(dash, bvh_rig(dash, frame)).metadata["asf"]) == partitions(skeleton)
     rest = dict(zip(skeleton.joint_names, skeleton.rest_positions()))
     assert rest["Head"][1] > rest["Chest"][1] > rest["Foot_L"][1] + 0.9
     json.dumps(clips[0].metadata["bvh_rig"].reference)
