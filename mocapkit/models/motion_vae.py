@@ -66,12 +66,14 @@ class MotionVAE(nn.Module):
         return self.decode(z, previous), mean, log_variance
 
     @torch.no_grad()
-    def rollout(self, start: torch.Tensor, frames: int, generator: torch.Generator | None = None) -> torch.Tensor:
-        """``[B, frames, F]``: ``start`` ``[B, 2, F]`` (``x_0, x_1``) continued autoregressively with ``z ~ N(0, I)``
-        drawn from ``generator`` at every step (``frames ≥ 2``; the first two rows are ``start``)."""
+    def rollout(self, start: torch.Tensor, frames: int, generator: torch.Generator | None = None,
+                scale: float = 1.0) -> torch.Tensor:
+        """``[B, frames, F]``: ``start`` ``[B, 2, F]`` (``x_0, x_1``) continued autoregressively with
+        ``z = scale · ε``, ``ε ~ N(0, I)`` drawn from ``generator`` at every step (``frames ≥ 2``; the first two rows
+        are ``start``; ``scale`` 1 is the prior, above 1 samples further from the training frames)."""
         out = [start[:, 0], start[:, 1]]
         for _ in range(2, frames):
-            z = torch.randn(start.shape[0], self.latent, generator=generator, dtype=start.dtype)
+            z = scale * torch.randn(start.shape[0], self.latent, generator=generator, dtype=start.dtype)
             out.append(self.decode(z, torch.stack([out[-1], out[-2]], dim=1)))
         return torch.stack(out[:frames], dim=1)
 

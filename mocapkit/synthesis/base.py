@@ -24,6 +24,7 @@ matrix (:func:`dof_matrix`, :func:`dof_values`) and its resampling in time (:fun
 """
 from __future__ import annotations
 
+import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -263,11 +264,21 @@ class MotionSynthesizer(BaseEstimator):
     :class:`~mocapkit.synthesis.footskate.FootskateReport` per variant (empty without the cleanup). A
     synthesiser without those parameters (the training-clip reference) is never cleaned.
 
-    Class attributes: ``min_clips`` (fewest training clips), ``min_frames`` (shortest training clip, frames).
+    **Noise scale**, one for every synthesiser that has the parameters ``noise_scale`` (a number ≥ 0, or
+    ``"auto"``) and ``target_variation``: its random draws are multiplied by the scale. With ``"auto"``,
+    :meth:`_set_noise_scale` (called at the end of ``_fit_clips``) tries the class's ``noise_scales``, smallest
+    first, and keeps the first whose ``auto_variants`` variants vary at least ``target_variation`` times as much as
+    the training clips (V of Zhou eq. 4.5, :func:`~mocapkit.evaluation.synthesis.variation`, the training clips
+    posed on the reference skeleton), the largest when none does. Only training clips are used.
+
+    Class attributes: ``min_clips`` (fewest training clips), ``min_frames`` (shortest training clip, frames),
+    ``noise_scales`` and ``auto_variants`` (what ``noise_scale="auto"`` tries).
     """
 
     min_clips = 2
     min_frames = 4
+    noise_scales: tuple[float, ...] = ()
+    auto_variants = 10
 
     def fit(self, clips: Sequence[Motion]) -> MotionSynthesizer:
         clips = list(clips)
@@ -323,6 +334,40 @@ class MotionSynthesizer(BaseEstimator):
             out.append(amc_motion(skeleton, values, fps=self.fps_, angle_unit="deg",
                                   name=f"{type(self).__name__}_variant_{k:03d}"))
         return out
+
+    # ------------------------------------------------------------------ noise scale
+    def _check_noise_scale(self) -> None:
+        """A ValueError naming the class unless ``noise_scale`` is ``"auto"`` or a number ≥ 0."""
+        scale = self.noise_scale
+        if scale != "auto" and (isinstance(scale, str) or not float(scale) >= 0):
+            raise ValueError(f"{type(self).__name__}: noise_scale must be 'auto' or a number >= 0, got {scale!r}")
+
+    def _noise_scale(self) -> float:
+        """The scale sampling uses: ``noise_scale`` when a number (so it can change after ``fit``), else the one
+        ``fit`` chose."""
+        if isinstance(self.noise_scale, str):
+            return self.noise_scale_
+        return float(self.noise_scale)
+
+    def _set_noise_scale(self, clips: list[Motion]) -> None:
+        """``noise_scale_``: the given scale, or with ``"auto"`` the one chosen on the training ``clips`` (class
+        docstring); ``variation_by_noise_scale_`` keeps each tried scale's ``V / V_train``."""
+        from mocapkit.evaluation.synthesis import variation
+
+        self.variation_by_noise_scale_ = {}
+        if self.noise_scale != "auto":
+            self.noise_scale_ = float(self.noise_scale)
+            return
+        reference = variation([on_skeleton(clip, self.skeleton_) for clip in clips]).v
+        for scale in self.noise_scales:
+            self.noise_scale_ = scale
+            ratio = variation(self.sample(self.auto_variants, seed=self.random_state)).v / reference
+            self.variation_by_noise_scale_[scale] = ratio
+            if getattr(self, "verbose", False):
+                print(f"[{type(self).__name__}] noise_scale {scale}: V / V_train = {ratio:.2f} "
+                      f"(target {self.target_variation})", file=sys.stderr, flush=True)
+            if ratio >= self.target_variation:
+                break
 
     # ------------------------------------------------------------------ subclasses
     def _fit_clips(self, clips: list[Motion]) -> None:

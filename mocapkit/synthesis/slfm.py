@@ -53,7 +53,6 @@ from mocapkit.synthesis.base import (
     clip_label,
     dof_values,
     model_frames,
-    on_skeleton,
     resample_clip,
     rotation_columns,
     time_warp,
@@ -650,7 +649,8 @@ class SLFMSynthesizer(MotionSynthesizer):
         noise_scale: the predictive draws' standard normals are multiplied by this (1 = the model's own
             predictive distribution, the thesis; 0 = its mean). ``"auto"`` (default): after fitting, the smallest
             of :data:`NOISE_SCALES` whose variants reach ``target_variation`` times the training clips' own V
-            (:meth:`_set_noise_scale`; training clips only). Not from the thesis.
+            (:meth:`~mocapkit.synthesis.base.MotionSynthesizer._set_noise_scale`; training clips only). Not from
+            the thesis.
         target_variation: the ``V / V_train`` that ``noise_scale="auto"`` asks for; default 1.28 = Zhou's 558.7
             / 435.8 (§3.7), the variation the thesis reports over its "visibly varied" reference set.
         output_margin: draws are clipped to each model output's training range widened by this fraction of
@@ -684,13 +684,15 @@ class SLFMSynthesizer(MotionSynthesizer):
     bend as the body goes down.
 
     Attributes (after ``fit``): ``models_`` (every model, in sampling order), ``partitions_``, ``fit_seconds_``,
-    ``noise_scale_`` and ``variation_by_noise_scale_`` (:meth:`_set_noise_scale`), ``angle_flips_`` (``(clip,
+    ``noise_scale_`` and ``variation_by_noise_scale_`` (the base class's ``_set_noise_scale``), ``angle_flips_`` (``(clip,
     frame, bone, degrees)``) and ``unused_pieces_`` (``(clip, start, stop)``) of the cutting, and those of
     :class:`~mocapkit.synthesis.base.MotionSynthesizer` (``floor_``, ``footskate_reports_``).
     """
 
     min_clips = 2
     min_frames = 4
+    noise_scales = NOISE_SCALES
+    auto_variants = AUTO_VARIANTS
 
     def __init__(self, frame_stride: int = 1, n_fit: int = 100, n_inducing: int = 32, max_iter: int = 30,
                  sample_noise: bool = True, noise_correlation: float = 0.9, dynamic_feature: str = "position",
@@ -776,8 +778,7 @@ class SLFMSynthesizer(MotionSynthesizer):
             raise ValueError(f"dynamic_feature must be 'position' or 'scf_difference', got {self.dynamic_feature!r}")
         if self.frame_stride < 1:
             raise ValueError(f"frame_stride must be >= 1, got {self.frame_stride}")
-        if self.noise_scale != "auto" and (isinstance(self.noise_scale, str) or not float(self.noise_scale) >= 0):
-            raise ValueError(f"noise_scale must be 'auto' or a number >= 0, got {self.noise_scale!r}")
+        self._check_noise_scale()
         check_flag(self, "cross_partition")
         start = time.perf_counter()
         if self.model_fps is not None and not float(self.model_fps) > 0:
@@ -817,36 +818,6 @@ class SLFMSynthesizer(MotionSynthesizer):
         self._fit_models([self._training_pairs(model, states) for model in self.models_], states, rng)
         self._set_noise_scale(clips)
         self.fit_seconds_ = time.perf_counter() - start
-
-    def _noise_scale(self) -> float:
-        """The scale sampling uses: ``noise_scale`` when a number (so it can change after ``fit``), else the one
-        ``fit`` chose."""
-        if isinstance(self.noise_scale, str):
-            return self.noise_scale_
-        return float(self.noise_scale)
-
-    def _set_noise_scale(self, clips: list[Motion]) -> None:
-        """``noise_scale_``: the given scale, or with ``"auto"`` the smallest of :data:`NOISE_SCALES` whose variants
-        vary at least ``target_variation`` times as much as the training clips (V of eq. 4.5 over
-        ``AUTO_VARIANTS`` variants of the mean length, against the training clips posed on the reference skeleton;
-        :func:`~mocapkit.evaluation.synthesis.variation`), the largest when none does. Only training clips are
-        used. ``variation_by_noise_scale_`` keeps each tried scale's ``V / V_train``."""
-        from mocapkit.evaluation.synthesis import variation
-
-        self.variation_by_noise_scale_ = {}
-        if self.noise_scale != "auto":
-            self.noise_scale_ = float(self.noise_scale)
-            return
-        reference = variation([on_skeleton(clip, self.skeleton_) for clip in clips]).v
-        for scale in NOISE_SCALES:
-            self.noise_scale_ = scale
-            ratio = variation(self.sample(AUTO_VARIANTS, seed=self.random_state)).v / reference
-            self.variation_by_noise_scale_[scale] = ratio
-            if self.verbose:
-                print(f"[slfm] noise_scale {scale}: V / V_train = {ratio:.2f} (target {self.target_variation})",
-                      file=sys.stderr, flush=True)
-            if ratio >= self.target_variation:
-                break
 
     def _training_pairs(self, model: _NodeModel, states: list[tuple[np.ndarray, np.ndarray]]
                         ) -> tuple[np.ndarray, np.ndarray]:
