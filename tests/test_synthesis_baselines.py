@@ -127,6 +127,32 @@ def test_cvae_is_seeded(hops):
     assert not np.array_equal(a.loss_curve_, c.loss_curve_)
 
 
+@needs(HDM05)
+def test_cvae_latent_scale_widens_the_variants_and_auto_reaches_the_target(fitted, hops):
+    import copy
+
+    def departure(scale):
+        """Mean distance (m) of the variants from those of scale 0 drawn with the same seed (same start frames,
+        same normals): what the latent scale adds."""
+        def variants(s):
+            model = copy.deepcopy(fitted["cvae"]).set_params(noise_scale=s, footskate_cleanup=False)
+            return np.stack([v.positions for v in model.sample(4, n_frames=40, seed=5)])
+        return float(np.linalg.norm(variants(scale) - variants(0.0), axis=-1).mean())
+
+    assert 0.0 < departure(1.0) < departure(6.0)
+    assert fitted["cvae"].noise_scale_ == 1.0 and fitted["cvae"].variation_by_noise_scale_ == {}
+
+    train, _ = hops
+    auto = CVAESynthesizer(**FAST_CVAE, noise_scale="auto", target_variation=1.1).fit(train)
+    tried = auto.variation_by_noise_scale_
+    assert list(tried) == list(CVAESynthesizer.noise_scales[: len(tried)]) and auto.noise_scale_ == list(tried)[-1]
+    ratios = list(tried.values())
+    assert all(r < 1.1 for r in ratios[:-1])
+    assert ratios[-1] >= 1.1 or auto.noise_scale_ == CVAESynthesizer.noise_scales[-1]
+    with pytest.raises(ValueError, match="CVAESynthesizer: noise_scale"):
+        CVAESynthesizer(**FAST_CVAE, noise_scale=-1.0).fit(train)
+
+
 @pytest.mark.parametrize("name", ["copy", "perlin", "lau", "cvae"])
 def test_not_fitted(name):
     with pytest.raises(NotFittedError):
