@@ -1,0 +1,188 @@
+"""The learned refiners of issue 11 retrained as Kinect posture correctors (issue 15's baseline "the learned
+refiners of the refinement issue retrained as correctors"), behind the Kinect reconstruction contract of
+:class:`~mocapkit.classical.kinect_reconstruction.KinectPostureReconstructor`: ``fit(kinect_clips, mocap_clips,
+states)`` and ``predict(kinect_clips, state=...)`` on lists of ``[T, 20, 3]`` metres (y up, joints in
+:data:`~mocapkit.datasets.formats.layouts.LANDMARK_NAMES` order), so the comparison runner scores it beside Zhou's
+GP and the random forest on the same simulated pairs and held-out performers.
+
+**Network.** :class:`~mocapkit.models.refiners.BiGRURefiner` or
+:class:`~mocapkit.models.refiners.MaskedTransformerRefiner` (``architecture``), built on the Kinect-20 tree
+(:data:`~mocapkit.datasets.formats.layouts.LANDMARK_PARENTS`, hips ``l_hip`` / ``r_hip``, the training pairs'
+mean bone lengths): the same per-window normalisation (centre, heading, body size) and first guess as when it
+refines mocap. No Kinect joint is missing, so the missing mask is all False and the network's correction of the
+observed posture is the whole output.
+
+**Training** (:class:`~mocapkit.train.refine_module.MotionRefinementModule`, a Lightning ``Trainer`` on the CPU for
+``steps`` Adam steps, no logger, no checkpoint written, seeded by ``random_state``): windows of ``window`` frames
+(stride ``window // 4``) of every training pair, the simulated Kinect as input and the mocap as target; every
+entry counts as corrupted, so the loss is the mean joint error of the output plus the module's bone-length and
+velocity terms. A pair shorter than the window is one window padded at its end with its last frame; the padded
+frames are marked missing and not corrupted, so only their bone and velocity terms see them.
+
+**Prediction**: each clip in overlapping windows of ``inference_window`` frames (``overlap`` shared, blended with
+linear ramps; :func:`~mocapkit.refinement.learned.refine_windows`), all of a clip's windows in one batch.
+"""
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+
+import numpy as np
+from sklearn.base import BaseEstimator
+from sklearn.utils.validation import check_is_fitted
+
+from mocapkit.classical.kinect_reconstruction import (
+    _check_clips,
+    _check_nonneg,
+    _check_pairs,
+    _check_states,
+)
+from mocapkit.datasets.formats.layouts import LANDMARK_NAMES, LANDMARK_PARENTS
+from mocapkit.refinement.learned import refine_windows
+
+ARCHITECTURES = {"bigru": "mocapkit.models.refiners.refine_bigru",
+                 "transformer": "mocapkit.models.refiners.refine_transformer"}
+
+
+class LearnedKinectCorrector(BaseEstimator):
+    """A refiner network trained on (simulated Kinect, mocap) pairs to correct Kinect-20 skeletons (module
+    docstring).
+
+    Args:
+        architecture: ``"bigru"`` or ``"transformer"`` (the two refiners of :mod:`mocapkit.models.refiners`).
+        network: keyword arguments of the network's builder (``{"hidden": 64}`` for the BiGRU, ``{"dim": 64}`` for
+            the transformer, ...); None: the builder's defaults, those of the mocap refiners.
+        window: training window in frames (64: about 2 s at Kinect's 30 fps).
+        steps, batch_size, lr: Adam steps, windows per step, learning rate.
+        inference_window, overlap: prediction windows and the frames neighbours share (None: ``2 · window`` and
+            ``window // 4``).
+        random_state: seeds the initialisation and the batches.
+
+    Attributes (after ``fit``): ``module_`` (the trained module, eval mode), ``n_windows_``, ``loss_curve_``
+    (float64 ``[steps]``), ``train_seconds_``.
+    """
+
+    def __init__(self, architecture: str = "bigru", network: dict | None = None, window: int = 64,
+                 steps: int = 1000, batch_size: int = 32, lr: float = 1e-3, inference_window: int | None = None,
+                 overlap: int | None = None, random_state: int | None = 0):
+        self.architecture = architecture
+        self.network = network
+        self.window = window
+        self.steps = steps
+        self.batch_size = batch_size
+        self.lr = lr
+        self.inference_window = inference_window
+        self.overlap = overlap
+        self.random_state = random_state
+
+    # ------------------------------------------------------------------ fit
+    def _check_params(self) -> None:
+        if self.architecture not in ARCHITECTURES:
+            raise ValueError(f"LearnedKinectCorrector: architecture must be one of {list(ARCHITECTURES)}, got "
+                             f"{self.architecture!r}")
+        if self.network is not None and not isinstance(self.network, Mapping):
+            raise ValueError(f"LearnedKinectCorrector: network must be a dict of builder arguments or None, got "
+                             f"{type(self.network).__name__}")
+        for name in ("steps", "batch_size"):
+            _check_nonneg(name, getattr(self, name), integer=True, minimum=1)
+        _check_nonneg("window", self.window, integer=True, minimum=4)
+        _check_nonneg("lr", self.lr)
+        if self.inference_window is not None:
+            _check_nonneg("inference_window", self.inference_window, integer=True, minimum=4)
+        if self.overlap is not None:
+            _check_nonneg("overlap", self.overlap, integer=True)
+
+    def _windows(self, kinect: list[np.ndarray], mocap: list[np.ndarray]) -> dict[str, np.ndarray]:
+        """Training windows ``{"positions", "clean": [N, W, 20, 3] float32, "missing", "corrupted": [N, W, 20]}``."""
+        W, stride = int(self.window), max(1, int(self.window) // 4)
+        noisy, clean, padded = [], [], []
+        for k, m in zip(kinect, mocap):
+            T = len(k)
+            if T < W:
+                pad = W - T
+                noisy.append(np.concatenate([k, np.repeat(k[-1:], pad, axis=0)]))
+                clean.append(np.concatenate([m, np.repeat(m[-1:], pad, axis=0)]))
+                padded.append(np.arange(W) >= T)
+                continue
+            starts = list(range(0, T - W + 1, stride))
+            if starts[-1] != T - W:
+                starts.append(T - W)
+            noisy += [k[s:s + W] for s in starts]
+            clean += [m[s:s + W] for s in starts]
+            padded += [np.zeros(W, dtype=bool)] * len(starts)
+        missing = np.repeat(np.stack(padded)[:, :, None], len(LANDMARK_NAMES), axis=2)
+        return {"positions": np.stack(noisy).astype(np.float32), "clean": np.stack(clean).astype(np.float32),
+                "missing": missing, "corrupted": ~missing}
+
+    def fit(self, kinect_clips, mocap_clips, states=None) -> LearnedKinectCorrector:
+        """Train on paired clips (lists of ``[T, 20, 3]`` metres); ``states`` is validated and not used."""
+        import lightning as L
+        import torch
+
+        from mocapkit.train.refine_module import MotionRefinementModule
+
+        self._check_params()
+        kinect, mocap = _check_pairs(kinect_clips, mocap_clips)
+        _check_states(states, [len(c) for c in kinect], "states")
+        windows = self._windows(kinect, mocap)
+        self.n_windows_ = len(windows["positions"])
+        child = [j for j, p in enumerate(LANDMARK_PARENTS) if p >= 0]
+        pooled = np.concatenate(mocap)
+        lengths = np.zeros(len(LANDMARK_NAMES))
+        lengths[child] = np.linalg.norm(pooled[:, child] - pooled[:, [LANDMARK_PARENTS[j] for j in child]],
+                                        axis=-1).mean(axis=0)
+        skeleton = {"joint_names": list(LANDMARK_NAMES), "parents": list(LANDMARK_PARENTS), "up_axis": "y",
+                    "hips": [LANDMARK_NAMES.index("l_hip"), LANDMARK_NAMES.index("r_hip")],
+                    "bone_lengths": [float(v) for v in lengths], "fps": None}
+        L.seed_everything(0 if self.random_state is None else int(self.random_state), workers=False, verbose=False)
+        module = MotionRefinementModule(
+            model={"_target_": ARCHITECTURES[self.architecture], **dict(self.network or {})},
+            optimizer={"_target_": "torch.optim.Adam", "_partial_": True, "lr": float(self.lr)},
+            skeleton=skeleton)
+        curve: list[float] = []
+
+        class _Record(L.Callback):
+            def on_train_batch_end(self, trainer, pl_module, outputs, batch, batch_idx):
+                curve.append(float(outputs["loss"]) if isinstance(outputs, dict) else float(outputs))
+
+        tensors = {k: torch.from_numpy(np.ascontiguousarray(v)) for k, v in windows.items()}
+        names = list(tensors)
+        data = torch.utils.data.TensorDataset(*(tensors[k] for k in names))
+        loader = torch.utils.data.DataLoader(
+            data, batch_size=int(self.batch_size), shuffle=True, drop_last=len(data) > int(self.batch_size),
+            collate_fn=lambda items: {k: torch.stack([item[i] for item in items]) for i, k in enumerate(names)})
+        trainer = L.Trainer(max_steps=int(self.steps), max_epochs=-1, accelerator="cpu", devices=1, logger=False,
+                            enable_checkpointing=False, enable_progress_bar=False, enable_model_summary=False,
+                            callbacks=[_Record()])
+        start = time.perf_counter()
+        trainer.fit(module, train_dataloaders=loader)
+        self.train_seconds_ = time.perf_counter() - start
+        self.loss_curve_ = np.asarray(curve, dtype=np.float64)
+        self.module_ = module.eval()
+        return self
+
+    # ------------------------------------------------------------------ predict
+    def predict(self, kinect, state=None):
+        """Correct a clip ``[T, 20, 3]`` (or a list of clips) → world ``[T, 20, 3]``; ``state`` is ignored."""
+        check_is_fitted(self, "module_")
+        if isinstance(kinect, (list, tuple)):
+            return [self._correct(c) for c in _check_clips(kinect, "kinect")]
+        return self._correct(_check_clips([kinect], "kinect")[0])
+
+    transform = predict
+
+    def _correct(self, x: np.ndarray) -> np.ndarray:
+        import torch
+
+        window = int(self.inference_window) if self.inference_window is not None else 2 * int(self.window)
+        overlap = int(self.overlap) if self.overlap is not None else int(self.window) // 4
+
+        def run(positions: np.ndarray, missing: np.ndarray) -> np.ndarray:
+            with torch.inference_mode():
+                return self.module_(torch.from_numpy(positions), torch.from_numpy(missing)).numpy()
+
+        missing = np.zeros(x.shape[:2], dtype=bool)
+        return refine_windows(run, x.astype(np.float32), missing, window, overlap).astype(x.dtype)
+
+
+__all__ = ["ARCHITECTURES", "LearnedKinectCorrector"]
