@@ -1,0 +1,82 @@
+"""Issue 11's refiner networks retrained as Kinect correctors (mocapkit/refinement/kinect_learned.py), on the
+synthetic clips with a known pose-dependent Kinect error of tests/test_kinect_reconstruction.py."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from sklearn.base import clone
+from sklearn.exceptions import NotFittedError
+
+from mocapkit.refinement.kinect_learned import LearnedKinectCorrector
+from tests.test_kinect_reconstruction import _error, paired_clips
+
+SMALL = {"network": {"hidden": 32}, "window": 32, "steps": 150, "batch_size": 16, "lr": 3e-3}
+
+
+@pytest.fixture(scope="module")
+def data():
+    return paired_clips(0, 8), paired_clips(1, 3)     # training takes and separate held-out takes
+
+
+@pytest.fixture(scope="module")
+def fitted(data):
+    (ktr, mtr), _ = data
+    return LearnedKinectCorrector(**SMALL, random_state=0).fit(ktr, mtr)
+
+
+def test_corrector_learns_the_kinect_error_and_cuts_it_on_held_out_clips(fitted, data):
+    _, (kte, mte) = data
+    assert len(fitted.loss_curve_) == SMALL["steps"]
+    assert fitted.loss_curve_[-20:].mean() < 0.75 * fitted.loss_curve_[:5].mean()
+    corrected = fitted.predict(kte)
+    assert [c.shape for c in corrected] == [k.shape for k in kte]
+    assert _error(corrected, mte) < 0.8 * _error(kte, mte)
+
+
+def test_long_clips_run_in_blended_windows_and_short_clips_train_padded(fitted, data):
+    _, (kte, mte) = data
+    long = np.concatenate(kte)                                # 360 frames: several 64-frame inference windows
+    out = fitted.predict(long)
+    assert out.shape == long.shape and np.isfinite(out).all()
+    # per-window normalisation: a window sees the clip's own part only, so the blended take is as good as the clips
+    assert joint_error(out, np.concatenate(mte)) < 0.85 * joint_error(long, np.concatenate(mte))
+    (ktr, mtr), _ = data
+    short = LearnedKinectCorrector(**{**SMALL, "steps": 2}).fit([k[:20] for k in ktr[:3]], [m[:20] for m in mtr[:3]])
+    assert short.n_windows_ == 3 and short.predict(ktr[0][:10]).shape == (10, 20, 3)
+
+
+def joint_error(a, b):
+    return float(np.linalg.norm(a - b, axis=-1).mean())
+
+
+def test_same_random_state_same_corrector(data):
+    (ktr, mtr), (kte, _) = data
+    quick = {**SMALL, "steps": 5}
+    a = LearnedKinectCorrector(**quick, random_state=3).fit(ktr[:3], mtr[:3])
+    b = clone(a).fit(ktr[:3], mtr[:3])
+    np.testing.assert_array_equal(a.predict(kte[0]), b.predict(kte[0]))
+    c = LearnedKinectCorrector(**quick, random_state=4).fit(ktr[:3], mtr[:3])
+    assert not np.array_equal(a.predict(kte[0]), c.predict(kte[0]))
+
+
+def test_transformer_architecture_trains_and_predicts(data):
+    (ktr, mtr), (kte, _) = data
+    model = LearnedKinectCorrector(architecture="transformer", network={"dim": 32, "layers": 1, "ff": 64},
+                                   window=32, steps=3, batch_size=8).fit(ktr[:2], mtr[:2])
+    assert model.predict(kte[1]).shape == kte[1].shape
+
+
+def test_bad_parameters_inputs_and_not_fitted(data):
+    (ktr, mtr), _ = data
+    with pytest.raises(NotFittedError):
+        LearnedKinectCorrector().predict(ktr[0])
+    for params, message in (({"architecture": "lstm"}, "architecture"), ({"network": "big"}, "network"),
+                            ({"window": 2}, "window"), ({"steps": 0}, "steps")):
+        with pytest.raises(ValueError, match=message):
+            LearnedKinectCorrector(**params).fit(ktr[:2], mtr[:2])
+    bad = ktr[0].copy()
+    bad[4, 7] = np.nan
+    with pytest.raises(ValueError, match=r"kinect_clips\[0\].*frame 4, joint 7 \(l_hand\)"):
+        LearnedKinectCorrector(**SMALL).fit([bad], [mtr[0]])
+    with pytest.raises(ValueError, match="has 120 frames but"):
+        LearnedKinectCorrector(**SMALL).fit([ktr[0]], [mtr[0][:50]])
