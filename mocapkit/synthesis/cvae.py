@@ -14,11 +14,11 @@ with a Lightning ``Trainer`` for ``steps`` optimiser steps of ``batch_size`` fra
 (``lightning.seed_everything``). ``loss_curve_`` keeps the loss of every step.
 
 **Sampling.** Per variant the first two frames of a training clip drawn uniformly, then the decoder run
-autoregressively with ``z = noise_scale · ε``, ``ε ~ N(0, I)``, at every step (a torch generator seeded from the sampling seed), for the
-number of model-rate frames that spans ``n_frames`` at the training rate; the features are decoded
-(:func:`~mocapkit.synthesis.representation.decode`, from the drawn clip's start position and heading) and the AMC
-values resampled to ``n_frames`` by a cubic spline (:func:`~mocapkit.synthesis.base.time_warp`: velocity and
-acceleration stay continuous at the model's frames, where linear interpolation would kink).
+autoregressively with ``z = noise_scale · ε``, ``ε ~ N(0, I)``, at every step (a torch generator seeded from the
+sampling seed), for the number of model-rate frames that spans ``n_frames`` at the training rate; the features are
+decoded (:func:`~mocapkit.synthesis.representation.decode`, from the drawn clip's start position and heading) and
+the AMC values resampled to ``n_frames`` by a cubic spline (:func:`~mocapkit.synthesis.base.time_warp`: velocity
+and acceleration stay continuous at the model's frames, where linear interpolation would kink).
 """
 from __future__ import annotations
 

@@ -684,8 +684,8 @@ class SLFMSynthesizer(MotionSynthesizer):
     bend as the body goes down.
 
     Attributes (after ``fit``): ``models_`` (every model, in sampling order), ``partitions_``, ``fit_seconds_``,
-    ``noise_scale_`` and ``variation_by_noise_scale_`` (the base class's ``_set_noise_scale``), ``angle_flips_`` (``(clip,
-    frame, bone, degrees)``) and ``unused_pieces_`` (``(clip, start, stop)``) of the cutting, and those of
+    ``noise_scale_`` and ``variation_by_noise_scale_`` (the base class's ``_set_noise_scale``), ``angle_flips_``
+    (``(clip, frame, bone, degrees)``) and ``unused_pieces_`` (``(clip, start, stop)``) of the cutting, and those of
     :class:`~mocapkit.synthesis.base.MotionSynthesizer` (``floor_``, ``footskate_reports_``).
     """
 
