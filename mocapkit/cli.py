@@ -21,9 +21,10 @@
     mocapkit synthesize INPUT [INPUT ...] --out DIR [--type SUBSTRING] [--variants N] [--frames F] [--seed S]
                         [--window SECONDS] [--method slfm|perlin|lau|cvae] [--no-footskate] [--set KEY=VALUE ...]
                         [--format amc|bvh]                                      (Zhou 2014 ch. 4)
-    mocapkit kinect-fix train --mocap PATH [PATH ...] --out MODEL.npz [--noise PRESET] [--set KEY=VALUE ...]
+    mocapkit kinect-fix train --mocap PATH [PATH ...] --out MODEL [--method gp|bigru|transformer] [--noise PRESET]
+                              [--set KEY=VALUE ...]
                         [--skip-bad]
-    mocapkit kinect-fix apply INPUT [INPUT ...] --model MODEL.npz --out DIR [--set KEY=VALUE ...] [--plot N]
+    mocapkit kinect-fix apply INPUT [INPUT ...] --model MODEL --out DIR [--set KEY=VALUE ...] [--plot N]
                         [--skip-bad]                                            (Zhou 2014 ch. 5)
 
 Errors are one line (``mocapkit: error: ...``, exit code 2); ``mocapkit --debug COMMAND ...`` (or
@@ -235,8 +236,9 @@ def cmd_kinect_fix_train(args: argparse.Namespace) -> None:
     from mocapkit.refinement.kinect_fix import train_kinect_model
 
     report = train_kinect_model(args.mocap, args.out, seed=args.seed, skip_bad=args.skip_bad, noise=args.noise,
-                                **_key_values(args.set))
-    print(f"[mocapkit] Kinect reconstruction model of {report['files']} simulated clips ({report['frames']} frames, "
+                                method=args.method, **_key_values(args.set))
+    print(f"[mocapkit] Kinect reconstruction model ({report['method']}) of {report['files']} simulated clips "
+          f"({report['frames']} frames, "
           f"noise {report['noise']}, "
           f"fit {report['fit_seconds']:.0f} s) written to {report['model']}"
           + "".join(f"\n  skipped {path}: {reason}" for path, reason in report["skipped"]))
@@ -485,14 +487,17 @@ def build_parser() -> argparse.ArgumentParser:
     ktrain = kinect_sub.add_parser("train", help="fit a model on simulated Kinect pairs of real mocap files")
     ktrain.add_argument("--mocap", nargs="+", required=True, help="mocap files and/or folders (ASF/AMC, BVH, C3D "
                                                                    "with body landmarks), searched recursively")
-    ktrain.add_argument("--out", required=True, help="the model file (.npz)")
+    ktrain.add_argument("--out", required=True, help="the model file (.npz for gp, e.g. .pt for the learned ones)")
+    ktrain.add_argument("--method", default="gp", choices=["gp", "bigru", "transformer"],
+                        help="gp: Zhou ch. 5's GP reconstructor (default); bigru / transformer: the learned refiner "
+                             "networks retrained as correctors (mocapkit.refinement.kinect_learned)")
     ktrain.add_argument("--seed", type=int, default=0, help="simulation and model seed (default 0)")
     ktrain.add_argument("--noise", default="mean_error",
                         help="the Kinect simulator's calibration: mean_error (raw error only, the default) or "
                              "msr_steadiness (as steady as MSR Action3D's real skeletons)")
     ktrain.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                        help="a parameter of KinectPostureReconstructor, repeatable, e.g. gp_input=posture, "
-                             "energy_unit=0.1, w_temporal=0.1, max_train_frames=5000")
+                        help="a parameter of the model, repeatable, e.g. gp_input=posture, energy_unit=0.1, "
+                             "w_temporal=0.1, max_train_frames=5000 (gp); steps=2000, window=64 (bigru, transformer)")
     ktrain.add_argument("--skip-bad", dest="skip_bad", action="store_true", help="skip (and list) unusable files")
     ktrain.set_defaults(func=cmd_kinect_fix_train)
     kapply = kinect_sub.add_parser("apply", help="correct Kinect skeleton files (MSR Action3D .txt, NTU .skeleton, "
@@ -502,7 +507,8 @@ def build_parser() -> argparse.ArgumentParser:
     kapply.add_argument("--out", required=True, help="output folder")
     kapply.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                         help="a prediction parameter, repeatable: w_spatial, w_temporal, w_reliability, energy_unit, "
-                             "reliability, kappa, jump_threshold, still_threshold")
+                             "reliability, kappa, jump_threshold, still_threshold (gp); inference_window, overlap "
+                             "(bigru, transformer)")
     kapply.add_argument("--plot", type=int, default=0, metavar="N",
                         help="draw the first N files before/after as PNG strips (default 0)")
     kapply.add_argument("--skip-bad", dest="skip_bad", action="store_true",

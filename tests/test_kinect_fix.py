@@ -141,3 +141,28 @@ def test_cli_trains_and_applies_and_names_the_bad_file(tmp_path, capsys):
     assert main(["kinect-fix", "apply", str(good), "--model", str(model), "--out", str(tmp_path / "q"),
                  "--set", "w_banana=1"]) == 2
     assert "w_banana" in capsys.readouterr().err
+
+
+@needs(MSR)
+def test_cli_trains_a_learned_corrector_and_applies_it_to_real_kinect_files(tmp_path, capsys):
+    from mocapkit.cli import main
+    from mocapkit.refinement.kinect_learned import LearnedKinectCorrector
+
+    model = tmp_path / "bigru.pt"
+    clips = [str(p) for p in sorted((HDM05 / "dg").glob("*.amc"))[:3]]
+    tiny = ["--set", "steps=3", "--set", "window=16", "--set", "network={'hidden': 16}"]
+    assert main(["kinect-fix", "train", "--mocap", *clips, "--out", str(model), "--method", "bigru", *tiny]) == 0
+    assert "(bigru)" in capsys.readouterr().out and model.is_file()
+    assert LearnedKinectCorrector.load(model).get_params()["network"] == {"hidden": 16}
+    assert main(["kinect-fix", "train", "--mocap", *clips, "--out", str(tmp_path / "x.pt"), "--method", "bigru",
+                 "--set", "gp_iterations=2"]) == 2
+    assert "gp_iterations" in capsys.readouterr().err
+    good = MSR / "a05_s02_e01_skeleton3D.txt"
+    assert main(["kinect-fix", "apply", str(good), "--model", str(model), "--out", str(tmp_path / "o"),
+                 "--set", "inference_window=32"]) == 0
+    assert "corrected 1 file" in capsys.readouterr().out
+    fixed = read_motion(tmp_path / "o" / f"{good.stem}.c3d")
+    assert fixed.positions.shape[1:] == (20, 3) and np.isfinite(fixed.positions).all()
+    assert main(["kinect-fix", "apply", str(good), "--model", str(tmp_path / "absent.pt"), "--out",
+                 str(tmp_path / "p")]) == 2
+    assert "absent.pt: no such file" in capsys.readouterr().err

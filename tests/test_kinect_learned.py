@@ -80,3 +80,21 @@ def test_bad_parameters_inputs_and_not_fitted(data):
         LearnedKinectCorrector(**SMALL).fit([bad], [mtr[0]])
     with pytest.raises(ValueError, match="has 120 frames but"):
         LearnedKinectCorrector(**SMALL).fit([ktr[0]], [mtr[0][:50]])
+
+
+def test_saved_corrector_predicts_exactly_as_the_fitted_one_and_bad_files_are_named(fitted, data, tmp_path):
+    _, (kte, _) = data
+    path = fitted.save(tmp_path / "sub" / "corrector.pt")
+    loaded = LearnedKinectCorrector.load(path)
+    assert loaded.get_params() == fitted.get_params() and loaded.n_windows_ == fitted.n_windows_
+    np.testing.assert_array_equal(loaded.predict(kte[0]), fitted.predict(kte[0]))
+    not_a_model = tmp_path / "notes.pt"
+    not_a_model.write_bytes(b"not a torch file")
+    with pytest.raises(ValueError, match="notes.pt: not a Kinect corrector"):
+        LearnedKinectCorrector.load(not_a_model)
+    import torch
+
+    other = tmp_path / "other.pt"
+    torch.save({"format": "something-else", "params": {}}, other)
+    with pytest.raises(ValueError, match="other.pt.*format 'something-else'"):
+        LearnedKinectCorrector.load(other)

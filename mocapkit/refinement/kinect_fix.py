@@ -1,12 +1,15 @@
 """``mocapkit kinect-fix``: train Zhou 2014 ch. 5's Kinect posture reconstructor on simulated pairs of real mocap,
 then correct real Kinect skeletons with it.
 
-``train_kinect_model(mocap, out)``
+``train_kinect_model(mocap, out, method="gp")``
     every motion file under ``mocap`` (HDM05/CMU ASF/AMC, BVH, C3D with body landmarks, ...) becomes a (Kinect,
     mocap) pair through the calibrated Kinect v1 simulator
     (:func:`~mocapkit.datasets.synthetic.kinect_noise.simulate_pairs`, 30 fps); a
     :class:`~mocapkit.classical.kinect_reconstruction.KinectPostureReconstructor` is fitted on them and saved as one
-    ``.npz`` (:meth:`~mocapkit.classical.kinect_reconstruction.KinectPostureReconstructor.save`).
+    ``.npz`` (:meth:`~mocapkit.classical.kinect_reconstruction.KinectPostureReconstructor.save`), or with
+    ``method="bigru"`` / ``"transformer"`` a learned refiner network retrained as a corrector
+    (:class:`~mocapkit.refinement.kinect_learned.LearnedKinectCorrector`, one ``torch.save`` file read back with
+    ``weights_only=True``).
 ``fix_kinect_files(model, inputs, out_dir)``
     every input (MSR Action3D skeleton text, NTU ``.skeleton``, C3D or any file with the 20 Kinect landmarks) is
     resampled to the model's 30 fps when it differs (MSR Action3D is 15 fps), read as Kinect-20 joints
@@ -92,21 +95,31 @@ def _as_msr_motion(positions: np.ndarray, fps: float, name: str, source: str) ->
                   name=name, source=source, layout_name=MSR20.name)
 
 
+METHODS = ("gp", "bigru", "transformer")
+"""What ``kinect-fix train --method`` fits: Zhou's GP reconstructor, or a learned refiner network retrained as a
+corrector (:class:`~mocapkit.refinement.kinect_learned.LearnedKinectCorrector`, ``architecture`` = the name)."""
+
+
 def train_kinect_model(mocap, out: str | os.PathLike, seed: int = 0, skip_bad: bool = False,
-                       noise: str = "mean_error", **params) -> dict:
-    """Fit :class:`~mocapkit.classical.kinect_reconstruction.KinectPostureReconstructor` on simulated pairs of the
-    motion files in ``mocap`` (files or folders, searched recursively) and save it to ``out`` (``.npz``).
+                       noise: str = "mean_error", method: str = "gp", **params) -> dict:
+    """Fit a Kinect corrector on simulated pairs of the motion files in ``mocap`` (files or folders, searched
+    recursively) and save it to ``out``: with ``method="gp"``
+    :class:`~mocapkit.classical.kinect_reconstruction.KinectPostureReconstructor` (``.npz``), with ``"bigru"`` or
+    ``"transformer"`` :class:`~mocapkit.refinement.kinect_learned.LearnedKinectCorrector` (a ``torch.save`` file,
+    ``.pt`` by convention).
 
     Args:
         seed: the simulation seed and the model's ``random_state``.
+        method: one of :data:`METHODS`.
         noise: the simulator's calibration (:meth:`~mocapkit.datasets.synthetic.kinect_noise.KinectNoiseConfig.preset`:
             ``mean_error`` or ``msr_steadiness``).
         skip_bad: skip (and report) unreadable or unusable files instead of failing.
-        params: other parameters of the reconstructor (``max_train_frames``, ``gp_iterations``, weights, ...).
+        params: other parameters of the model (the GP's ``max_train_frames``, ``gp_iterations``, weights, ...; the
+            learned corrector's ``steps``, ``window``, ...).
 
     Returns:
-        ``{"model", "noise", "files", "frames", "skipped": [[path, reason], ...], "fit_seconds"}`` (also printed by
-        the CLI).
+        ``{"model", "method", "noise", "files", "frames", "skipped": [[path, reason], ...], "fit_seconds"}`` (also
+        printed by the CLI).
     """
     from mocapkit.classical.kinect_reconstruction import KinectPostureReconstructor
     from mocapkit.datasets.formats.motion_io import expand_motion_paths
@@ -114,26 +127,51 @@ def train_kinect_model(mocap, out: str | os.PathLike, seed: int = 0, skip_bad: b
         KinectNoiseConfig,
         simulate_pairs,
     )
+    from mocapkit.refinement.kinect_learned import LearnedKinectCorrector
 
+    if method not in METHODS:
+        raise KinectFixError(f"--method {method}: one of {list(METHODS)}")
     try:
         config = KinectNoiseConfig.preset(noise)
     except ValueError as exc:
         raise KinectFixError(f"--noise {noise}: {exc}") from None
+    try:
+        model = (KinectPostureReconstructor(random_state=seed, **params) if method == "gp"
+                 else LearnedKinectCorrector(architecture=method, random_state=seed, **params))
+    except TypeError as exc:
+        raise KinectFixError(f"--set: {exc}") from None
     files = expand_motion_paths(mocap, "--mocap", empty_error=KinectFixError)
     pairs, skipped = simulate_pairs(files, config, seed=seed, fps=MODEL_FPS,
                                     skip_bad=skip_bad, progress=True)
     if not pairs:
         raise KinectFixError(f"--mocap {', '.join(map(str, mocap))}: no usable motion file "
                              f"({len(skipped)} skipped)")
-    print(f"[kinect-fix] fitting the 20 joint GPs on {len(pairs)} simulated clips "
+    what = "the 20 joint GPs" if method == "gp" else f"the {method} corrector"
+    print(f"[kinect-fix] fitting {what} on {len(pairs)} simulated clips "
           f"({sum(len(p.clean) for p in pairs)} frames)...", file=sys.stderr, flush=True)
     start = time.perf_counter()
-    model = KinectPostureReconstructor(random_state=seed, **params)
     model.fit([p.noisy for p in pairs], [p.clean for p in pairs], [p.state for p in pairs])
     seconds = time.perf_counter() - start
     path = model.save(out)
-    return {"model": str(path), "noise": noise, "files": len(pairs), "frames": int(sum(len(p.clean) for p in pairs)),
+    return {"model": str(path), "method": method, "noise": noise, "files": len(pairs), "frames": int(sum(len(p.clean) for p in pairs)),
             "skipped": [[str(p), r] for p, r in skipped], "fit_seconds": round(seconds, 1)}
+
+
+def load_model(path: str | os.PathLike):
+    """A saved Kinect model: a ``.npz`` is Zhou's GP reconstructor
+    (:meth:`~mocapkit.classical.kinect_reconstruction.KinectPostureReconstructor.load`), any other file a learned
+    corrector (:meth:`~mocapkit.refinement.kinect_learned.LearnedKinectCorrector.load`); a
+    :class:`KinectFixError` names the file when it is neither."""
+    from mocapkit.classical.kinect_reconstruction import KinectPostureReconstructor
+    from mocapkit.refinement.kinect_learned import LearnedKinectCorrector
+
+    loader = KinectPostureReconstructor if Path(path).suffix.lower() == ".npz" else LearnedKinectCorrector
+    if not Path(path).is_file():
+        raise KinectFixError(f"--model {path}: no such file")
+    try:
+        return loader.load(path)
+    except ValueError as exc:
+        raise KinectFixError(str(exc)) from None
 
 
 @dataclass
@@ -168,15 +206,15 @@ def fix_kinect_files(model, inputs, out_dir: str | os.PathLike, skip_bad: bool =
     """Correct Kinect skeleton files with a saved model (see the module docstring).
 
     Args:
-        model: a ``.npz`` from :func:`train_kinect_model` (or a fitted reconstructor).
+        model: a file from :func:`train_kinect_model` (a GP ``.npz``, else a learned corrector; :func:`load_model`)
+            or a fitted model.
         inputs: files or folders (searched recursively for files ``read_motion`` reads).
         out_dir: where ``<name>.c3d``, ``report.json`` and the ``<name>_before_after.png`` plots go.
         skip_bad: skip (and report) files that cannot be read or used instead of failing.
         plot: draw the first ``plot`` files before/after.
-        energy: prediction parameters set on the model (``w_spatial``, ``w_temporal``, ``w_reliability``,
-            ``energy_unit``, ...).
+        energy: prediction parameters set on the model (the GP's ``w_spatial``, ``w_temporal``, ``w_reliability``,
+            ``energy_unit``, ...; the learned corrector's ``inference_window``, ``overlap``).
     """
-    from mocapkit.classical.kinect_reconstruction import KinectPostureReconstructor
     from mocapkit.datasets.formats.motion_io import (
         expand_motion_paths,
         read_motion,
@@ -186,10 +224,13 @@ def fix_kinect_files(model, inputs, out_dir: str | os.PathLike, skip_bad: bool =
     from mocapkit.io_atomic import atomic_write_text
 
     name = str(model)
-    if not isinstance(model, KinectPostureReconstructor):
-        model = KinectPostureReconstructor.load(model)
+    if isinstance(model, (str, os.PathLike)):
+        model = load_model(model)
     if energy:
-        model.set_params(**energy)
+        try:
+            model.set_params(**energy)
+        except ValueError as exc:
+            raise KinectFixError(f"--set: {exc}") from None
     files = expand_motion_paths(inputs, "input", empty_error=KinectFixError)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)

@@ -24,8 +24,10 @@ linear ramps; :func:`~mocapkit.refinement.learned.refine_windows`), all of a cli
 """
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Mapping
+from pathlib import Path
 
 import numpy as np
 from sklearn.base import BaseEstimator
@@ -39,6 +41,9 @@ from mocapkit.classical.kinect_reconstruction import (
 )
 from mocapkit.datasets.formats.layouts import LANDMARK_NAMES, LANDMARK_PARENTS
 from mocapkit.refinement.learned import refine_windows
+
+MODEL_FORMAT = "mocapkit-kinect-corrector-1"
+"""The ``format`` field of a saved corrector (:meth:`LearnedKinectCorrector.save`)."""
 
 ARCHITECTURES = {"bigru": "mocapkit.models.refiners.refine_bigru",
                  "transformer": "mocapkit.models.refiners.refine_transformer"}
@@ -59,7 +64,8 @@ class LearnedKinectCorrector(BaseEstimator):
         random_state: seeds the initialisation and the batches.
 
     Attributes (after ``fit``): ``module_`` (the trained module, eval mode), ``n_windows_``, ``loss_curve_``
-    (float64 ``[steps]``), ``train_seconds_``.
+    (float64 ``[steps]``; empty after :meth:`load`), ``train_seconds_``. :meth:`save` / :meth:`load` write and
+    read one file (``mocapkit kinect-fix train --method bigru`` writes it).
     """
 
     def __init__(self, architecture: str = "bigru", network: dict | None = None, window: int = 64,
@@ -114,12 +120,23 @@ class LearnedKinectCorrector(BaseEstimator):
         return {"positions": np.stack(noisy).astype(np.float32), "clean": np.stack(clean).astype(np.float32),
                 "missing": missing, "corrupted": ~missing}
 
+    def _module(self, bone_lengths: list[float]):
+        """A fresh :class:`~mocapkit.train.refine_module.MotionRefinementModule` of this corrector's network on the
+        Kinect-20 tree with the given mean bone lengths (``[20]`` m, 0 for the root)."""
+        from mocapkit.train.refine_module import MotionRefinementModule
+
+        skeleton = {"joint_names": list(LANDMARK_NAMES), "parents": list(LANDMARK_PARENTS), "up_axis": "y",
+                    "hips": [LANDMARK_NAMES.index("l_hip"), LANDMARK_NAMES.index("r_hip")],
+                    "bone_lengths": list(bone_lengths), "fps": None}
+        return MotionRefinementModule(
+            model={"_target_": ARCHITECTURES[self.architecture], **dict(self.network or {})},
+            optimizer={"_target_": "torch.optim.Adam", "_partial_": True, "lr": float(self.lr)},
+            skeleton=skeleton)
+
     def fit(self, kinect_clips, mocap_clips, states=None) -> LearnedKinectCorrector:
         """Train on paired clips (lists of ``[T, 20, 3]`` metres); ``states`` is validated and not used."""
         import lightning as L
         import torch
-
-        from mocapkit.train.refine_module import MotionRefinementModule
 
         self._check_params()
         kinect, mocap = _check_pairs(kinect_clips, mocap_clips)
@@ -131,14 +148,8 @@ class LearnedKinectCorrector(BaseEstimator):
         lengths = np.zeros(len(LANDMARK_NAMES))
         lengths[child] = np.linalg.norm(pooled[:, child] - pooled[:, [LANDMARK_PARENTS[j] for j in child]],
                                         axis=-1).mean(axis=0)
-        skeleton = {"joint_names": list(LANDMARK_NAMES), "parents": list(LANDMARK_PARENTS), "up_axis": "y",
-                    "hips": [LANDMARK_NAMES.index("l_hip"), LANDMARK_NAMES.index("r_hip")],
-                    "bone_lengths": [float(v) for v in lengths], "fps": None}
         L.seed_everything(0 if self.random_state is None else int(self.random_state), workers=False, verbose=False)
-        module = MotionRefinementModule(
-            model={"_target_": ARCHITECTURES[self.architecture], **dict(self.network or {})},
-            optimizer={"_target_": "torch.optim.Adam", "_partial_": True, "lr": float(self.lr)},
-            skeleton=skeleton)
+        module = self._module([float(v) for v in lengths])
         curve: list[float] = []
 
         class _Record(L.Callback):
@@ -160,6 +171,52 @@ class LearnedKinectCorrector(BaseEstimator):
         self.loss_curve_ = np.asarray(curve, dtype=np.float64)
         self.module_ = module.eval()
         return self
+
+    # ------------------------------------------------------------------ persistence
+    def save(self, path: str | os.PathLike) -> Path:
+        """Write the fitted corrector as one ``torch.save`` file of plain values and tensors (its parameters, the
+        bone lengths, the network's weights; nothing to unpickle beyond what ``weights_only=True`` loads), atomically;
+        parent folders are created."""
+        import torch
+
+        from mocapkit.io_atomic import atomic_open
+
+        check_is_fitted(self, "module_")
+        params = self.get_params(deep=False)
+        params["network"] = None if self.network is None else {str(k): v for k, v in dict(self.network).items()}
+        state = {"format": MODEL_FORMAT, "params": params,
+                 "bone_lengths": [float(v) for v in self.module_.hparams["skeleton"]["bone_lengths"]],
+                 "n_windows": int(self.n_windows_), "train_seconds": float(self.train_seconds_),
+                 "state_dict": {k: v.detach().clone() for k, v in self.module_.model.state_dict().items()}}
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_open(path, "wb") as f:
+            torch.save(state, f)
+        return path
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> LearnedKinectCorrector:
+        """A corrector written by :meth:`save` (read with ``weights_only=True``; the network is one of
+        :data:`ARCHITECTURES`, never a class named by the file); a ValueError names the file when it is not one."""
+        import torch
+
+        path = Path(path)
+        try:
+            state = torch.load(path, map_location="cpu", weights_only=True)
+            if not isinstance(state, dict) or state.get("format") != MODEL_FORMAT:
+                raise ValueError(f"format {state.get('format') if isinstance(state, dict) else None!r}, expected "
+                                 f"{MODEL_FORMAT!r}")
+            model = cls(**state["params"])
+            model._check_params()
+            module = model._module(state["bone_lengths"])
+            module.model.load_state_dict(state["state_dict"])
+        except Exception as exc:
+            raise ValueError(f"{path}: not a Kinect corrector written by LearnedKinectCorrector.save / mocapkit "
+                             f"kinect-fix train --method bigru|transformer ({exc})") from exc
+        model.module_ = module.eval()
+        model.n_windows_, model.train_seconds_ = state["n_windows"], state["train_seconds"]
+        model.loss_curve_ = np.zeros(0)
+        return model
 
     # ------------------------------------------------------------------ predict
     def predict(self, kinect, state=None):
@@ -185,4 +242,4 @@ class LearnedKinectCorrector(BaseEstimator):
         return refine_windows(run, x.astype(np.float32), missing, window, overlap).astype(x.dtype)
 
 
-__all__ = ["ARCHITECTURES", "LearnedKinectCorrector"]
+__all__ = ["ARCHITECTURES", "MODEL_FORMAT", "LearnedKinectCorrector"]
