@@ -98,3 +98,26 @@ def test_saved_corrector_predicts_exactly_as_the_fitted_one_and_bad_files_are_na
     torch.save({"format": "something-else", "params": {}}, other)
     with pytest.raises(ValueError, match="other.pt.*format 'something-else'"):
         LearnedKinectCorrector.load(other)
+
+
+def test_untracked_joints_can_go_to_the_network_as_missing(data):
+    (ktr, mtr), (kte, _) = data
+    states = [np.full(k.shape[:2], 2, dtype=np.int8) for k in ktr]
+    for s in states:
+        s[10:20, 7] = 1                                       # the left hand inferred for ten frames
+    quick = {**SMALL, "steps": 5}
+    model = LearnedKinectCorrector(**quick, untracked_as_missing=True).fit(ktr[:3], mtr[:3], states[:3])
+    test_state = np.full(kte[0].shape[:2], 2, dtype=np.int8)
+    test_state[30:40, 7] = 0
+    far = kte[0].copy()
+    far[30:40, 7] += 5.0                                      # a wild sample where the sensor lost the joint
+    # what the network returns does not depend on the value at an entry it gets as missing
+    np.testing.assert_allclose(model.predict(far, state=test_state), model.predict(kte[0], state=test_state),
+                               atol=1e-5)
+    assert not np.allclose(model.predict(far), model.predict(kte[0]), atol=1e-3)       # without the state it does
+    plain = LearnedKinectCorrector(**quick).fit(ktr[:3], mtr[:3], states[:3])
+    np.testing.assert_array_equal(plain.predict(far, state=test_state), plain.predict(far))
+    with pytest.raises(ValueError, match="untracked_as_missing"):
+        LearnedKinectCorrector(untracked_as_missing="yes").fit(ktr[:2], mtr[:2])
+    with pytest.raises(ValueError, match=r"state\[0\]: expected a \[T, 20\] tracking-state array with T = 120"):
+        model.predict(kte[0], state=test_state[:5])

@@ -9,8 +9,9 @@ GP and the random forest on the same simulated pairs and held-out performers.
 :class:`~mocapkit.models.refiners.MaskedTransformerRefiner` (``architecture``), built on the Kinect-20 tree
 (:data:`~mocapkit.datasets.formats.layouts.LANDMARK_PARENTS`, hips ``l_hip`` / ``r_hip``, the training pairs'
 mean bone lengths): the same per-window normalisation (centre, heading, body size) and first guess as when it
-refines mocap. No Kinect joint is missing, so the missing mask is all False and the network's correction of the
-observed posture is the whole output.
+refines mocap. By default no Kinect joint is missing, so the missing mask is all False and the network's correction
+of the observed posture is the whole output; with ``untracked_as_missing`` the joints the sensor did not track
+(tracking state INFERRED or NOT_TRACKED) are given as missing, and the network fills them.
 
 **Training** (:class:`~mocapkit.train.refine_module.MotionRefinementModule`, a Lightning ``Trainer`` on the CPU for
 ``steps`` Adam steps, no logger, no checkpoint written, seeded by ``random_state``): windows of ``window`` frames
@@ -34,6 +35,7 @@ from sklearn.base import BaseEstimator
 from sklearn.utils.validation import check_is_fitted
 
 from mocapkit.classical.kinect_reconstruction import (
+    TRACKED,
     _check_clips,
     _check_nonneg,
     _check_pairs,
@@ -61,6 +63,10 @@ class LearnedKinectCorrector(BaseEstimator):
         steps, batch_size, lr: Adam steps, windows per step, learning rate.
         inference_window, overlap: prediction windows and the frames neighbours share (None: ``2 · window`` and
             ``window // 4``).
+        untracked_as_missing: joints whose tracking state is not TRACKED (INFERRED, NOT_TRACKED) go to the network
+            as missing, in training and prediction, so it fills them from the tracked joints and frames (the
+            refiners' missing mask) instead of correcting their positions; the loss still counts them. False
+            (default): the state is not used. Without states every joint counts as tracked.
         random_state: seeds the initialisation and the batches.
 
     Attributes (after ``fit``): ``module_`` (the trained module, eval mode), ``n_windows_``, ``loss_curve_``
@@ -70,7 +76,7 @@ class LearnedKinectCorrector(BaseEstimator):
 
     def __init__(self, architecture: str = "bigru", network: dict | None = None, window: int = 64,
                  steps: int = 1000, batch_size: int = 32, lr: float = 1e-3, inference_window: int | None = None,
-                 overlap: int | None = None, random_state: int | None = 0):
+                 overlap: int | None = None, untracked_as_missing: bool = False, random_state: int | None = 0):
         self.architecture = architecture
         self.network = network
         self.window = window
@@ -79,6 +85,7 @@ class LearnedKinectCorrector(BaseEstimator):
         self.lr = lr
         self.inference_window = inference_window
         self.overlap = overlap
+        self.untracked_as_missing = untracked_as_missing
         self.random_state = random_state
 
     # ------------------------------------------------------------------ fit
@@ -97,17 +104,29 @@ class LearnedKinectCorrector(BaseEstimator):
             _check_nonneg("inference_window", self.inference_window, integer=True, minimum=4)
         if self.overlap is not None:
             _check_nonneg("overlap", self.overlap, integer=True)
+        if not isinstance(self.untracked_as_missing, (bool, np.bool_)):
+            raise ValueError(  # noqa: TRY004 (a bad parameter value, as every check here)
+                f"LearnedKinectCorrector: untracked_as_missing must be True or False, got "
+                f"{self.untracked_as_missing!r}")
 
-    def _windows(self, kinect: list[np.ndarray], mocap: list[np.ndarray]) -> dict[str, np.ndarray]:
+    def _unseen(self, state: np.ndarray | None, frames: int) -> np.ndarray:
+        """``[T, 20]`` bool: the joints the network gets as missing (``untracked_as_missing``; none otherwise)."""
+        if not self.untracked_as_missing or state is None:
+            return np.zeros((frames, len(LANDMARK_NAMES)), dtype=bool)
+        return state != TRACKED
+
+    def _windows(self, kinect: list[np.ndarray], mocap: list[np.ndarray], states: list[np.ndarray | None]
+                 ) -> dict[str, np.ndarray]:
         """Training windows ``{"positions", "clean": [N, W, 20, 3] float32, "missing", "corrupted": [N, W, 20]}``."""
         W, stride = int(self.window), max(1, int(self.window) // 4)
-        noisy, clean, padded = [], [], []
-        for k, m in zip(kinect, mocap):
-            T = len(k)
+        noisy, clean, unseen, padded = [], [], [], []
+        for k, m, state in zip(kinect, mocap, states):
+            T, hidden = len(k), self._unseen(state, len(k))
             if T < W:
                 pad = W - T
                 noisy.append(np.concatenate([k, np.repeat(k[-1:], pad, axis=0)]))
                 clean.append(np.concatenate([m, np.repeat(m[-1:], pad, axis=0)]))
+                unseen.append(np.concatenate([hidden, np.ones((pad, hidden.shape[1]), dtype=bool)]))
                 padded.append(np.arange(W) >= T)
                 continue
             starts = list(range(0, T - W + 1, stride))
@@ -115,10 +134,11 @@ class LearnedKinectCorrector(BaseEstimator):
                 starts.append(T - W)
             noisy += [k[s:s + W] for s in starts]
             clean += [m[s:s + W] for s in starts]
+            unseen += [hidden[s:s + W] for s in starts]
             padded += [np.zeros(W, dtype=bool)] * len(starts)
-        missing = np.repeat(np.stack(padded)[:, :, None], len(LANDMARK_NAMES), axis=2)
+        padded = np.repeat(np.stack(padded)[:, :, None], len(LANDMARK_NAMES), axis=2)
         return {"positions": np.stack(noisy).astype(np.float32), "clean": np.stack(clean).astype(np.float32),
-                "missing": missing, "corrupted": ~missing}
+                "missing": np.stack(unseen) | padded, "corrupted": ~padded}
 
     def _module(self, bone_lengths: list[float]):
         """A fresh :class:`~mocapkit.train.refine_module.MotionRefinementModule` of this corrector's network on the
@@ -134,14 +154,15 @@ class LearnedKinectCorrector(BaseEstimator):
             skeleton=skeleton)
 
     def fit(self, kinect_clips, mocap_clips, states=None) -> LearnedKinectCorrector:
-        """Train on paired clips (lists of ``[T, 20, 3]`` metres); ``states`` is validated and not used."""
+        """Train on paired clips (lists of ``[T, 20, 3]`` metres) and their tracking states (lists of ``[T, 20]``,
+        used with ``untracked_as_missing``)."""
         import lightning as L
         import torch
 
         self._check_params()
         kinect, mocap = _check_pairs(kinect_clips, mocap_clips)
-        _check_states(states, [len(c) for c in kinect], "states")
-        windows = self._windows(kinect, mocap)
+        states = _check_states(states, [len(c) for c in kinect], "states")
+        windows = self._windows(kinect, mocap, states)
         self.n_windows_ = len(windows["positions"])
         child = [j for j, p in enumerate(LANDMARK_PARENTS) if p >= 0]
         pooled = np.concatenate(mocap)
@@ -220,15 +241,19 @@ class LearnedKinectCorrector(BaseEstimator):
 
     # ------------------------------------------------------------------ predict
     def predict(self, kinect, state=None):
-        """Correct a clip ``[T, 20, 3]`` (or a list of clips) → world ``[T, 20, 3]``; ``state`` is ignored."""
+        """Correct a clip ``[T, 20, 3]`` (or a list of clips) → world ``[T, 20, 3]``; ``state`` ``[T, 20]`` (or a
+        list) is used with ``untracked_as_missing``."""
         check_is_fitted(self, "module_")
         if isinstance(kinect, (list, tuple)):
-            return [self._correct(c) for c in _check_clips(kinect, "kinect")]
-        return self._correct(_check_clips([kinect], "kinect")[0])
+            clips = _check_clips(kinect, "kinect")
+            states = _check_states(state, [len(c) for c in clips], "state")
+            return [self._correct(c, s) for c, s in zip(clips, states)]
+        clip = _check_clips([kinect], "kinect")[0]
+        return self._correct(clip, _check_states(None if state is None else [state], [len(clip)], "state")[0])
 
     transform = predict
 
-    def _correct(self, x: np.ndarray) -> np.ndarray:
+    def _correct(self, x: np.ndarray, state: np.ndarray | None) -> np.ndarray:
         import torch
 
         window = int(self.inference_window) if self.inference_window is not None else 2 * int(self.window)
@@ -238,7 +263,7 @@ class LearnedKinectCorrector(BaseEstimator):
             with torch.inference_mode():
                 return self.module_(torch.from_numpy(positions), torch.from_numpy(missing)).numpy()
 
-        missing = np.zeros(x.shape[:2], dtype=bool)
+        missing = self._unseen(state, len(x))
         return refine_windows(run, x.astype(np.float32), missing, window, overlap).astype(x.dtype)
 
 
