@@ -488,7 +488,7 @@ def build_parser() -> argparse.ArgumentParser:
     ktrain.add_argument("--mocap", nargs="+", required=True, help="mocap files and/or folders (ASF/AMC, BVH, C3D "
                                                                    "with body landmarks), searched recursively")
     ktrain.add_argument("--out", required=True, help="the model file (.npz for gp, e.g. .pt for the learned ones)")
-    ktrain.add_argument("--method", default="gp", choices=["gp", "bigru", "transformer"],
+    ktrain.add_argument("--method", default="gp",
                         help="gp: Zhou ch. 5's GP reconstructor (default); bigru / transformer: the learned refiner "
                              "networks retrained as correctors (mocapkit.refinement.kinect_learned)")
     ktrain.add_argument("--seed", type=int, default=0, help="simulation and model seed (default 0)")

@@ -38,6 +38,7 @@ import numpy as np
 
 from mocapkit.datasets.formats.layouts import LANDMARK_NAMES, MSR20, find_landmarks
 from mocapkit.datasets.formats.motion import Motion, all_coordinates
+from mocapkit.refinement.kinect_learned import ARCHITECTURES
 
 MODEL_FPS = 30.0
 
@@ -95,7 +96,7 @@ def _as_msr_motion(positions: np.ndarray, fps: float, name: str, source: str) ->
                   name=name, source=source, layout_name=MSR20.name)
 
 
-METHODS = ("gp", "bigru", "transformer")
+METHODS = ("gp", *ARCHITECTURES)
 """What ``kinect-fix train --method`` fits: Zhou's GP reconstructor, or a learned refiner network retrained as a
 corrector (:class:`~mocapkit.refinement.kinect_learned.LearnedKinectCorrector`, ``architecture`` = the name)."""
 
@@ -153,8 +154,9 @@ def train_kinect_model(mocap, out: str | os.PathLike, seed: int = 0, skip_bad: b
     model.fit([p.noisy for p in pairs], [p.clean for p in pairs], [p.state for p in pairs])
     seconds = time.perf_counter() - start
     path = model.save(out)
-    return {"model": str(path), "method": method, "noise": noise, "files": len(pairs), "frames": int(sum(len(p.clean) for p in pairs)),
-            "skipped": [[str(p), r] for p, r in skipped], "fit_seconds": round(seconds, 1)}
+    return {"model": str(path), "method": method, "noise": noise, "files": len(pairs),
+            "frames": int(sum(len(p.clean) for p in pairs)), "skipped": [[str(p), r] for p, r in skipped],
+            "fit_seconds": round(seconds, 1)}
 
 
 def load_model(path: str | os.PathLike):
@@ -165,9 +167,9 @@ def load_model(path: str | os.PathLike):
     from mocapkit.classical.kinect_reconstruction import KinectPostureReconstructor
     from mocapkit.refinement.kinect_learned import LearnedKinectCorrector
 
-    loader = KinectPostureReconstructor if Path(path).suffix.lower() == ".npz" else LearnedKinectCorrector
     if not Path(path).is_file():
         raise KinectFixError(f"--model {path}: no such file")
+    loader = KinectPostureReconstructor if Path(path).suffix.lower() == ".npz" else LearnedKinectCorrector
     try:
         return loader.load(path)
     except ValueError as exc:
