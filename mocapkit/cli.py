@@ -24,6 +24,7 @@
     mocapkit kinect-fix train --mocap PATH [PATH ...] --out MODEL [--method gp|bigru|transformer] [--noise PRESET]
                               [--set KEY=VALUE ...]
                         [--skip-bad]
+    mocapkit kinect-fix export --model MODEL.pt --out MODEL.onnx                 (a learned corrector as ONNX)
     mocapkit kinect-fix apply INPUT [INPUT ...] --model MODEL --out DIR [--set KEY=VALUE ...] [--plot N]
                         [--skip-bad]                                            (Zhou 2014 ch. 5)
 
@@ -242,6 +243,15 @@ def cmd_kinect_fix_train(args: argparse.Namespace) -> None:
           f"noise {report['noise']}, "
           f"fit {report['fit_seconds']:.0f} s) written to {report['model']}"
           + "".join(f"\n  skipped {path}: {reason}" for path, reason in report["skipped"]))
+
+
+def cmd_kinect_fix_export(args: argparse.Namespace) -> None:
+    from mocapkit.refinement.kinect_fix import export_kinect_model
+
+    report = export_kinect_model(args.model, args.out)
+    print(f"[mocapkit] ONNX Kinect corrector written to {report['onnx']} (opset {report['opset']}, "
+          f"{report['exporter']} exporter; onnxruntime against PyTorch on {report['checked_shape']}: max |diff| "
+          f"{report['max_abs_diff']:.2e} m)")
 
 
 def cmd_kinect_fix_apply(args: argparse.Namespace) -> None:
@@ -500,10 +510,16 @@ def build_parser() -> argparse.ArgumentParser:
                              "w_temporal=0.1, max_train_frames=5000 (gp); steps=2000, window=64 (bigru, transformer)")
     ktrain.add_argument("--skip-bad", dest="skip_bad", action="store_true", help="skip (and list) unusable files")
     ktrain.set_defaults(func=cmd_kinect_fix_train)
+    kexport = kinect_sub.add_parser("export", help="write a learned corrector (--method bigru|transformer) as ONNX, "
+                                                   "run by `kinect-fix apply --model FILE.onnx` with onnxruntime")
+    kexport.add_argument("--model", required=True, help="a learned corrector from `mocapkit kinect-fix train`")
+    kexport.add_argument("--out", required=True, help="the .onnx file to write")
+    kexport.set_defaults(func=cmd_kinect_fix_export)
     kapply = kinect_sub.add_parser("apply", help="correct Kinect skeleton files (MSR Action3D .txt, NTU .skeleton, "
                                                  "C3D) with a trained model; writes OUT/<name>.c3d + report.json")
     kapply.add_argument("inputs", nargs="+", help="Kinect skeleton files and/or folders (searched recursively)")
-    kapply.add_argument("--model", required=True, help="a model from `mocapkit kinect-fix train`")
+    kapply.add_argument("--model", required=True,
+                        help="a model from `mocapkit kinect-fix train`, or an .onnx from `kinect-fix export`")
     kapply.add_argument("--out", required=True, help="output folder")
     kapply.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                         help="a prediction parameter, repeatable: w_spatial, w_temporal, w_reliability, energy_unit, "

@@ -166,3 +166,27 @@ def test_cli_trains_a_learned_corrector_and_applies_it_to_real_kinect_files(tmp_
     assert main(["kinect-fix", "apply", str(good), "--model", str(tmp_path / "absent.pt"), "--out",
                  str(tmp_path / "p")]) == 2
     assert "absent.pt: no such file" in capsys.readouterr().err
+
+
+@needs(MSR)
+def test_cli_exports_a_learned_corrector_to_onnx_and_applies_it(tmp_path, capsys):
+    from mocapkit.cli import main
+
+    model, onnx_file = tmp_path / "bigru.pt", tmp_path / "bigru.onnx"
+    clips = [str(p) for p in sorted((HDM05 / "dg").glob("*.amc"))[:2]]
+    tiny = ["--set", "steps=3", "--set", "window=16", "--set", "network={'hidden': 16}"]
+    assert main(["kinect-fix", "train", "--mocap", *clips, "--out", str(model), "--method", "bigru", *tiny]) == 0
+    assert main(["kinect-fix", "export", "--model", str(model), "--out", str(onnx_file)]) == 0
+    assert "ONNX Kinect corrector written" in capsys.readouterr().out and onnx_file.is_file()
+    good = MSR / "a05_s02_e01_skeleton3D.txt"
+    for name, path in (("pt", model), ("onnx", onnx_file)):
+        assert main(["kinect-fix", "apply", str(good), "--model", str(path), "--out", str(tmp_path / name)]) == 0
+    capsys.readouterr()
+    eager, exported = (read_motion(tmp_path / name / f"{good.stem}.c3d").positions for name in ("pt", "onnx"))
+    np.testing.assert_allclose(exported, eager, atol=2e-3)    # C3D stores mm as float32: a rounding below 1 mm
+    gp = tmp_path / "gp.npz"
+    gp.write_bytes(b"")
+    assert main(["kinect-fix", "export", "--model", str(gp), "--out", str(tmp_path / "gp.onnx")]) == 2
+    assert "gp.npz: a GP reconstructor (.npz) has no network to export" in capsys.readouterr().err
+    assert main(["kinect-fix", "export", "--model", str(onnx_file), "--out", str(tmp_path / "again.onnx")]) == 2
+    assert "already an ONNX export" in capsys.readouterr().err

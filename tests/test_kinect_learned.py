@@ -121,3 +121,52 @@ def test_untracked_joints_can_go_to_the_network_as_missing(data):
         LearnedKinectCorrector(untracked_as_missing="yes").fit(ktr[:2], mtr[:2])
     with pytest.raises(ValueError, match=r"state\[0\]: expected a \[T, 20\] tracking-state array with T = 120"):
         model.predict(kte[0], state=test_state[:5])
+
+
+def test_onnx_export_corrects_as_the_corrector_does_and_bad_files_are_named(fitted, data, tmp_path):
+    from mocapkit.refinement.kinect_learned import OnnxKinectCorrector
+
+    _, (kte, _) = data
+    figures = fitted.export_onnx(tmp_path / "corrector.onnx")
+    assert figures["max_abs_diff"] < 1e-4 and figures["checked_shape"] != figures["traced_shape"]
+    exported = OnnxKinectCorrector(figures["onnx"]).fit()
+    assert exported.corrector_["window"] == SMALL["window"] and not exported.corrector_["untracked_as_missing"]
+    long = np.concatenate(kte)                                # 360 frames: windows blended as in predict
+    np.testing.assert_allclose(exported.predict(long), fitted.predict(long), atol=1e-4)
+    assert [c.shape for c in exported.predict(kte)] == [k.shape for k in kte]
+    # the prediction windows can be set as on the corrector
+    np.testing.assert_allclose(exported.set_params(inference_window=40, overlap=8).predict(long),
+                               fitted.set_params(inference_window=40, overlap=8).predict(long), atol=1e-4)
+    fitted.set_params(inference_window=None, overlap=None)
+    with pytest.raises(NotFittedError):
+        OnnxKinectCorrector(figures["onnx"]).predict(long)
+    garbage = tmp_path / "garbage.onnx"
+    garbage.write_bytes(b"not a model")
+    with pytest.raises(ValueError, match="garbage.onnx: onnxruntime cannot load it"):
+        OnnxKinectCorrector(garbage).fit()
+    import onnx
+    from onnx import TensorProto, helper
+
+    identity = helper.make_model(helper.make_graph(
+        [helper.make_node("Identity", ["positions"], ["refined"])], "g",
+        [helper.make_tensor_value_info("positions", TensorProto.FLOAT, None)],
+        [helper.make_tensor_value_info("refined", TensorProto.FLOAT, None)]))
+    onnx.save(identity, tmp_path / "identity.onnx")
+    with pytest.raises(ValueError, match="identity.onnx: not a Kinect corrector export"):
+        OnnxKinectCorrector(tmp_path / "identity.onnx").fit()
+    with pytest.raises(ValueError, match="absent.onnx: no such ONNX file"):
+        OnnxKinectCorrector(tmp_path / "absent.onnx").fit()
+
+
+def test_onnx_export_keeps_the_tracking_state_rule(data, tmp_path):
+    from mocapkit.refinement.kinect_learned import OnnxKinectCorrector
+
+    (ktr, mtr), (kte, _) = data
+    model = LearnedKinectCorrector(**{**SMALL, "steps": 3}, untracked_as_missing=True).fit(ktr[:2], mtr[:2])
+    exported = OnnxKinectCorrector(model.export_onnx(tmp_path / "untracked.onnx")["onnx"]).fit()
+    state = np.full(kte[0].shape[:2], 2, dtype=np.int8)
+    state[30:40, 7] = 0
+    far = kte[0].copy()
+    far[30:40, 7] += 5.0
+    np.testing.assert_allclose(exported.predict(far, state=state), model.predict(far, state=state), atol=1e-4)
+    np.testing.assert_allclose(exported.predict(far, state=state), exported.predict(kte[0], state=state), atol=1e-4)

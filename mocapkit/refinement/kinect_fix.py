@@ -10,6 +10,9 @@ then correct real Kinect skeletons with it.
     ``method="bigru"`` / ``"transformer"`` a learned refiner network retrained as a corrector
     (:class:`~mocapkit.refinement.kinect_learned.LearnedKinectCorrector`, one ``torch.save`` file read back with
     ``weights_only=True``).
+``export_kinect_model(model, out)``
+    a learned corrector as ONNX (normalisation inside the graph, parity with PyTorch checked); ``apply`` runs the
+    ``.onnx`` with onnxruntime and numpy only.
 ``fix_kinect_files(model, inputs, out_dir)``
     every input (MSR Action3D skeleton text, NTU ``.skeleton``, C3D or any file with the 20 Kinect landmarks) is
     resampled to the model's 30 fps when it differs (MSR Action3D is 15 fps), read as Kinect-20 joints
@@ -161,19 +164,41 @@ def train_kinect_model(mocap, out: str | os.PathLike, seed: int = 0, skip_bad: b
 
 def load_model(path: str | os.PathLike):
     """A saved Kinect model: a ``.npz`` is Zhou's GP reconstructor
-    (:meth:`~mocapkit.classical.kinect_reconstruction.KinectPostureReconstructor.load`), any other file a learned
-    corrector (:meth:`~mocapkit.refinement.kinect_learned.LearnedKinectCorrector.load`); a
-    :class:`KinectFixError` names the file when it is neither."""
+    (:meth:`~mocapkit.classical.kinect_reconstruction.KinectPostureReconstructor.load`), an ``.onnx`` an exported
+    learned corrector (:class:`~mocapkit.refinement.kinect_learned.OnnxKinectCorrector`, onnxruntime and numpy
+    only), any other file a learned corrector (:meth:`~mocapkit.refinement.kinect_learned.LearnedKinectCorrector.load`);
+    a :class:`KinectFixError` names the file when it is none of them."""
     from mocapkit.classical.kinect_reconstruction import KinectPostureReconstructor
-    from mocapkit.refinement.kinect_learned import LearnedKinectCorrector
+    from mocapkit.refinement.kinect_learned import (
+        LearnedKinectCorrector,
+        OnnxKinectCorrector,
+    )
 
     if not Path(path).is_file():
         raise KinectFixError(f"--model {path}: no such file")
-    loader = KinectPostureReconstructor if Path(path).suffix.lower() == ".npz" else LearnedKinectCorrector
+    suffix = Path(path).suffix.lower()
     try:
-        return loader.load(path)
+        if suffix == ".onnx":
+            return OnnxKinectCorrector(str(path)).fit()
+        return (KinectPostureReconstructor if suffix == ".npz" else LearnedKinectCorrector).load(path)
     except ValueError as exc:
         raise KinectFixError(str(exc)) from None
+
+
+def export_kinect_model(model: str | os.PathLike, out: str | os.PathLike) -> dict:
+    """Export a learned corrector written by :func:`train_kinect_model` (``--method bigru|transformer``) as ONNX
+    (:meth:`~mocapkit.refinement.kinect_learned.LearnedKinectCorrector.export_onnx`); ``kinect-fix apply --model
+    OUT`` then runs it with onnxruntime. Zhou's GP model (``.npz``) has no network to export: a
+    :class:`KinectFixError` says so. Returns the export's figures (parity with PyTorch included)."""
+    from mocapkit.refinement.kinect_learned import LearnedKinectCorrector
+
+    if Path(model).suffix.lower() == ".npz":
+        raise KinectFixError(f"--model {model}: a GP reconstructor (.npz) has no network to export to ONNX; only the "
+                             f"learned correctors do (kinect-fix train --method {'|'.join(METHODS[1:])})")
+    corrector = load_model(model)
+    if not isinstance(corrector, LearnedKinectCorrector):
+        raise KinectFixError(f"--model {model}: already an ONNX export")
+    return corrector.export_onnx(out)
 
 
 @dataclass

@@ -22,6 +22,10 @@ frames are marked missing and not corrupted, so only their bone and velocity ter
 
 **Prediction**: each clip in overlapping windows of ``inference_window`` frames (``overlap`` shared, blended with
 linear ramps; :func:`~mocapkit.refinement.learned.refine_windows`), all of a clip's windows in one batch.
+
+**Export**: :meth:`LearnedKinectCorrector.export_onnx` (``mocapkit kinect-fix export``) writes the network as ONNX with
+the corrector's parameters in its metadata; :class:`OnnxKinectCorrector` predicts from that file with onnxruntime
+and numpy only, in the same windows (``mocapkit kinect-fix apply --model FILE.onnx``).
 """
 from __future__ import annotations
 
@@ -109,19 +113,13 @@ class LearnedKinectCorrector(BaseEstimator):
                 f"LearnedKinectCorrector: untracked_as_missing must be True or False, got "
                 f"{self.untracked_as_missing!r}")
 
-    def _unseen(self, state: np.ndarray | None, frames: int) -> np.ndarray:
-        """``[T, 20]`` bool: the joints the network gets as missing (``untracked_as_missing``; none otherwise)."""
-        if not self.untracked_as_missing or state is None:
-            return np.zeros((frames, len(LANDMARK_NAMES)), dtype=bool)
-        return state != TRACKED
-
     def _windows(self, kinect: list[np.ndarray], mocap: list[np.ndarray], states: list[np.ndarray | None]
                  ) -> dict[str, np.ndarray]:
         """Training windows ``{"positions", "clean": [N, W, 20, 3] float32, "missing", "corrupted": [N, W, 20]}``."""
         W, stride = int(self.window), max(1, int(self.window) // 4)
         noisy, clean, unseen, padded = [], [], [], []
         for k, m, state in zip(kinect, mocap, states):
-            T, hidden = len(k), self._unseen(state, len(k))
+            T, hidden = len(k), network_missing(state, len(k), self.untracked_as_missing)
             if T < W:
                 pad = W - T
                 noisy.append(np.concatenate([k, np.repeat(k[-1:], pad, axis=0)]))
@@ -256,15 +254,122 @@ class LearnedKinectCorrector(BaseEstimator):
     def _correct(self, x: np.ndarray, state: np.ndarray | None) -> np.ndarray:
         import torch
 
-        window = int(self.inference_window) if self.inference_window is not None else 2 * int(self.window)
-        overlap = int(self.overlap) if self.overlap is not None else int(self.window) // 4
-
         def run(positions: np.ndarray, missing: np.ndarray) -> np.ndarray:
             with torch.inference_mode():
                 return self.module_(torch.from_numpy(positions), torch.from_numpy(missing)).numpy()
 
-        missing = self._unseen(state, len(x))
-        return refine_windows(run, x.astype(np.float32), missing, window, overlap).astype(x.dtype)
+        return correct_in_windows(run, x, state, self.untracked_as_missing, self.window, self.inference_window,
+                                  self.overlap)
+
+    # ------------------------------------------------------------------ export
+    def export_onnx(self, path: str | os.PathLike, **check) -> dict:
+        """Write the network as ONNX (:func:`~mocapkit.deploy.refiner_export.export_refiner`: inputs ``positions``
+        ``[batch, frames, 20, 3]`` metres and ``missing`` ``[batch, frames, 20]``, output ``refined``; normalisation
+        inside the graph; parity with PyTorch checked by onnxruntime on shapes other than the traced one), with this
+        corrector's parameters in the metadata so :class:`OnnxKinectCorrector` predicts as :meth:`predict` does.
+        ``check``: ``trace_shape``, ``check_shape``, ``atol``, ``rtol`` of the export. Returns its figures."""
+        from mocapkit.deploy.refiner_export import export_refiner
+
+        check_is_fitted(self, "module_")
+        skeleton = {**dict(self.module_.hparams["skeleton"]), "window": int(self.window),
+                    "kinect_corrector": {"format": MODEL_FORMAT, "architecture": self.architecture,
+                                         "window": int(self.window), "inference_window": self.inference_window,
+                                         "overlap": self.overlap,
+                                         "untracked_as_missing": bool(self.untracked_as_missing)}}
+        return export_refiner(self.module_.model, path, skeleton, **check)
 
 
-__all__ = ["ARCHITECTURES", "MODEL_FORMAT", "LearnedKinectCorrector"]
+class OnnxKinectCorrector(BaseEstimator):
+    """A corrector exported by :meth:`LearnedKinectCorrector.export_onnx` (``mocapkit kinect-fix export``), run with
+    onnxruntime and numpy only; ``predict`` as :meth:`LearnedKinectCorrector.predict` (the same windows and
+    tracking-state use, read from the file's metadata).
+
+    Args:
+        path: the ``.onnx`` file.
+        inference_window, overlap: prediction windows and shared frames (None: the exported corrector's).
+        threads: onnxruntime intra-op threads (0: its default).
+
+    Attributes (after ``fit``): ``session_``, ``corrector_`` (the exported corrector's parameters).
+    """
+
+    def __init__(self, path: str | os.PathLike, inference_window: int | None = None, overlap: int | None = None,
+                 threads: int = 0):
+        self.path = path
+        self.inference_window = inference_window
+        self.overlap = overlap
+        self.threads = threads
+
+    def fit(self, kinect_clips=None, mocap_clips=None, states=None) -> OnnxKinectCorrector:
+        """Open the session and read the corrector's parameters (no training: the clips are ignored). A ValueError
+        names the file when it is not an exported Kinect corrector."""
+        import json
+
+        import onnxruntime as ort
+
+        path = Path(self.path)
+        if not path.is_file():
+            raise ValueError(f"{path}: no such ONNX file")
+        for name in ("inference_window", "overlap"):
+            if getattr(self, name) is not None:
+                _check_nonneg(name, getattr(self, name), integer=True, minimum=4 if name == "inference_window" else 0)
+        _check_nonneg("threads", self.threads, integer=True)
+        options = ort.SessionOptions()
+        if self.threads:
+            options.intra_op_num_threads = int(self.threads)
+        try:
+            session = ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
+            skeleton = json.loads(session.get_modelmeta().custom_metadata_map.get("mocapkit_skeleton", "{}"))
+        except Exception as exc:
+            raise ValueError(f"{path}: onnxruntime cannot load it: {exc}") from exc
+        corrector = skeleton.get("kinect_corrector")
+        if not isinstance(corrector, dict) or corrector.get("format") != MODEL_FORMAT \
+                or list(skeleton.get("joint_names", [])) != list(LANDMARK_NAMES):
+            raise ValueError(f"{path}: not a Kinect corrector export (no {MODEL_FORMAT!r} metadata on the Kinect-20 "
+                             f"joints); write one with `mocapkit kinect-fix export --model MODEL.pt --out FILE.onnx`")
+        self.session_, self.corrector_ = session, corrector
+        return self
+
+    def predict(self, kinect, state=None):
+        """Correct a clip ``[T, 20, 3]`` (or a list of clips) → world ``[T, 20, 3]`` metres."""
+        check_is_fitted(self, "session_")
+        if isinstance(kinect, (list, tuple)):
+            clips = _check_clips(kinect, "kinect")
+            states = _check_states(state, [len(c) for c in clips], "state")
+            return [self._correct(c, s) for c, s in zip(clips, states)]
+        clip = _check_clips([kinect], "kinect")[0]
+        return self._correct(clip, _check_states(None if state is None else [state], [len(clip)], "state")[0])
+
+    transform = predict
+
+    def _correct(self, x: np.ndarray, state: np.ndarray | None) -> np.ndarray:
+        def run(positions: np.ndarray, missing: np.ndarray) -> np.ndarray:
+            return self.session_.run(["refined"], {"positions": positions, "missing": missing})[0]
+
+        c = self.corrector_
+        return correct_in_windows(
+            run, x, state, bool(c["untracked_as_missing"]), int(c["window"]),
+            c["inference_window"] if self.inference_window is None else self.inference_window,
+            c["overlap"] if self.overlap is None else self.overlap)
+
+
+def network_missing(state: np.ndarray | None, frames: int, untracked_as_missing: bool) -> np.ndarray:
+    """``[T, 20]`` bool: the joints the network gets as missing — those not TRACKED with ``untracked_as_missing``,
+    none otherwise (or without states)."""
+    if not untracked_as_missing or state is None:
+        return np.zeros((frames, len(LANDMARK_NAMES)), dtype=bool)
+    return state != TRACKED
+
+
+def correct_in_windows(run, x: np.ndarray, state: np.ndarray | None, untracked_as_missing: bool, window: int,
+                       inference_window: int | None, overlap: int | None) -> np.ndarray:
+    """One clip ``x`` ``[T, 20, 3]`` through ``run(positions [N, W, 20, 3] float32, missing [N, W, 20]) -> [N, W,
+    20, 3]`` in overlapping windows of ``inference_window`` frames (None: ``2 · window``) sharing ``overlap``
+    (None: ``window // 4``); the result in ``x``'s dtype."""
+    size = int(inference_window) if inference_window is not None else 2 * int(window)
+    shared = int(overlap) if overlap is not None else int(window) // 4
+    missing = network_missing(state, len(x), untracked_as_missing)
+    return refine_windows(run, x.astype(np.float32), missing, size, shared).astype(x.dtype)
+
+
+__all__ = ["ARCHITECTURES", "MODEL_FORMAT", "LearnedKinectCorrector", "OnnxKinectCorrector", "correct_in_windows",
+           "network_missing"]
