@@ -286,13 +286,42 @@ def test_another_layout_fails_naming_the_missing_joints(trained, tmp_path, capsy
         assert "'root'" in line and "'lhipjoint'" in line, line
     assert not (tmp_path / "out.c3d").exists()
 
-    # the right joints at another frame rate fail as well, naming both rates
+    # the right joints in another up axis fail, naming both
     take = with_gaps(synthetic_take(13, 80))
-    write_c3d(tmp_path / "fast.c3d", Motion(positions=take.positions, joint_names=take.joint_names, fps=240.0,
-                                            up_axis="y"))
-    rc, _, err = refine(capsys, tmp_path / "fast.c3d", tmp_path / "out.c3d", "--onnx", onnx)
-    assert rc == 2 and "240 fps" in error_line(err) and "120 fps" in err
-    assert ezc3d.c3d(str(tmp_path / "fast.c3d"))["data"]["points"].shape[1] == CMU31.num_joints
+    write_c3d(tmp_path / "zup.c3d", Motion(positions=take.positions, joint_names=take.joint_names, fps=120.0,
+                                           up_axis="z"))
+    rc, _, err = refine(capsys, tmp_path / "zup.c3d", tmp_path / "out.c3d", "--onnx", onnx)
+    assert rc == 2 and "z-up" in error_line(err) and "y-up" in err
+    assert not (tmp_path / "out.c3d").exists()
+
+
+def test_a_take_at_another_frame_rate_is_refined_at_the_model_rate_and_brought_back(trained, tmp_path, capsys):
+    from mocapkit.refinement.learned import OnnxRefiner
+
+    _, onnx = trained
+    slow = with_gaps(synthetic_take(13, FRAMES))                     # 120 fps, the network's rate
+    fast = slow.resample(240.0)                                      # the same take at 240 fps (gaps included)
+    refiner = OnnxRefiner(str(onnx)).fit()
+    at_120, at_240 = refiner.refine(slow), refiner.refine(fast)
+    assert at_240.metadata["refinement"]["resampled"]["refined_at_fps"] == 120.0
+    # every second 240 fps frame is a 120 fps frame: its filled samples are the network's at 120 fps; the frames
+    # between are the mean of their neighbours; observed samples come back bit-identical
+    even = fast.missing[::2]
+    np.testing.assert_allclose(at_240.positions[::2][even], at_120.positions[even], atol=1e-6)
+    odd = fast.missing[1:-1:2] & ~at_240.missing[1:-1:2]
+    np.testing.assert_allclose(at_240.positions[1:-1:2][odd],
+                               0.5 * (at_120.positions[:-1] + at_120.positions[1:])[odd], atol=1e-6)
+    np.testing.assert_array_equal(at_240.positions[~fast.missing], fast.positions[~fast.missing])
+    assert at_240.missing[:2 * LEADING].all() and not at_240.missing[2 * LEADING:].any()
+
+    path = tmp_path / "fast.c3d"
+    write_c3d(path, fast)
+    rc, out, _ = refine(capsys, path, tmp_path / "out.c3d", "--onnx", onnx)
+    assert rc == 0 and "refined at the model's 120 fps" in out and "240 fps frames" in out
+    written = read_c3d(tmp_path / "out.c3d")
+    assert written.fps == 240.0 and not written.missing[2 * LEADING:].any()
+    observed = ~read_c3d(path).missing
+    np.testing.assert_array_equal(written.positions[observed], read_c3d(path).positions[observed])
 
 
 def test_weights_of_another_network_version_fail_naming_the_keys(trained, gappy, tmp_path, capsys):

@@ -538,9 +538,23 @@ def test_learned_refiner_leaves_empty_runs_missing(tiny_refiner, gappy):
     assert out.metadata["refinement"]["unfilled"] == {name: 10 for name in CMU31.joint_names}
 
 
-def test_learned_refiner_rejects_another_frame_rate_and_layout(tiny_refiner):
-    with pytest.raises(RefinementError, match="fps"):
-        tiny_refiner.refine(synthetic_motion(100, 1, fps=60.0))
+def test_learned_refiner_refines_another_frame_rate_at_its_own_and_rejects_another_up_axis_and_layout(tiny_refiner):
+    from dataclasses import replace
+
+    slow = synthetic_motion(100, 1, fps=60.0)
+    positions = slow.positions.copy()
+    positions[40:52, 5] = np.nan                               # a 0.2 s gap: 24 frames at the network's 120 fps
+    slow = replace(slow, positions=positions, missing=np.isnan(positions).any(axis=2))
+    out = tiny_refiner.refine(slow)
+    assert out.fps == 60.0 and out.num_frames == 100 and not out.missing.any()
+    assert out.metadata["refinement"]["resampled"] == {**out.metadata["refinement"]["resampled"], "fps": 60.0,
+                                                       "refined_at_fps": 120.0}
+    assert out.metadata["refinement"]["filled"] == 12
+    np.testing.assert_array_equal(out.positions[~slow.missing], slow.positions[~slow.missing])
+    with pytest.raises(RefinementError, match="z-up.*fitted at 120 fps, y-up"):
+        tiny_refiner.refine(replace(synthetic_motion(100, 1), up_axis="z"))
+    with pytest.raises(RefinementError, match="2 frames at 240 fps are 1 at the 120 fps"):
+        tiny_refiner.refine(synthetic_motion(2, 1, fps=240.0))
     motion = synthetic_motion(100, 1)
     keep = [j for j, n in enumerate(motion.joint_names) if n not in ("lthumb", "rthumb")]
     partial = Motion(motion.positions[:, keep], [motion.joint_names[j] for j in keep], 120.0, name="partial")

@@ -17,7 +17,8 @@ experiment=refine_bigru``) is :class:`~mocapkit.refinement.learned.LearnedRefine
 onnxruntime and numpy only (torch is never imported on that path). ``--set`` takes their parameters
 (:data:`LEARNED_PARAMETERS`: ``window``, ``overlap``, ``repair_threshold``, ``max_empty_frames``; ``device`` of
 the checkpoint, ``threads`` of the ONNX session). The input must hold the joints the network was trained on
-(names; any order, extra markers are left as they are), at its frame rate and up axis; the report names the
+(names; any order, extra markers are left as they are) and its up axis; a take at another frame rate is refined
+at the network's and brought back (:mod:`mocapkit.refinement.base`; the report says so); the report names the
 file as the method.
 
 **C3D in, C3D out** (the everyday case: a Vicon or Qualisys export with gaps). The file is not re-encoded from
@@ -291,6 +292,7 @@ class RefineReport:
     skipped: list[tuple[str, str]] = field(default_factory=list)  # (training file, why) with --skip-bad
     write_mode: str = ""                          # how the output was written
     hint: str = ""
+    refined_at_fps: float | None = None           # the rate a fixed-rate refiner worked at, when not the take's
 
     @property
     def filled(self) -> int:
@@ -307,6 +309,9 @@ class RefineReport:
 
     def to_text(self) -> str:
         lines = [f"{self.source}: {self.frames} frames at {self.fps:g} fps; method {self.method} ({self.refiner})"]
+        if self.refined_at_fps is not None:
+            lines.append(f"refined at the model's {self.refined_at_fps:g} fps: the take resampled linearly, the gaps "
+                         f"filled there and interpolated back to its {self.fps:g} fps frames (observed samples kept)")
         if self.training:
             lines.append(f"trained on {len(self.training)} motion file(s)")
         lines += [f"skipped training file {path}: {why}" for path, why in self.skipped]
@@ -494,7 +499,9 @@ def refine_file(src: str | os.PathLike, out: str | os.PathLike, method: str | No
     return RefineReport(source=str(src), output=str(out), method=method, refiner=type(refiner).__name__,
                         fps=float(motion.fps), frames=motion.num_frames,
                         markers=_report_markers(motion, refined, changed), training=used, skipped=skipped,
-                        write_mode=mode, hint=hint)
+                        write_mode=mode, hint=hint,
+                        refined_at_fps=refined.metadata.get("refinement", {}).get("resampled", {}).get(
+                            "refined_at_fps"))
 
 
 def _write_npz(path: Path, motion: Motion, filled: np.ndarray) -> None:

@@ -13,6 +13,13 @@ in attributes ending in ``_``) with two methods:
     frame, gaps beyond what the method can do) stay missing and are listed in
     ``out.metadata["refinement"]["unfilled"]``, never invented silently.
 
+A refiner whose learned model depends on the frame rate (``fixed_sampling``: the windowed networks, PSC, filter
+bases) refines a take at another rate at its own: the take is resampled to the fitted rate
+(:meth:`~mocapkit.datasets.formats.motion.Motion.resample`, linear), refined there, and the result interpolated
+linearly back to the take's own frames, where it fills the missing entries; observed entries come back
+bit-identical (outliers are not repaired on that path) and ``metadata["refinement"]["resampled"]`` records both
+rates. Another up axis is an error naming both.
+
 Subclasses implement :meth:`MotionRefiner._refine_matrix` on the frames × (3·joints) matrix, in
 float64 metres, and set ``requires_fit = True`` when ``fit`` must come first. The shared checks
 (finite observed values, at least one observed entry, fitted layout) live here.
@@ -112,10 +119,12 @@ class MotionRefiner(BaseEstimator):
                 absent = [n for n in self.joint_names_ if n not in motion.joint_names]
                 raise RefinementError(f"{motion.source or motion.name}: {type(self).__name__} was fitted on another "
                                       f"skeleton layout (missing joints: {absent[:8]}{'...' if len(absent) > 8 else ''})")
-        if self.fixed_sampling and hasattr(self, "fps_") and (float(motion.fps) != self.fps_
-                                                              or motion.up_axis != self.up_axis_):
-            raise RefinementError(f"{motion.source or motion.name}: {motion.fps:g} fps, {motion.up_axis}-up; "
-                                  f"{type(self).__name__} was fitted at {self.fps_:g} fps, {self.up_axis_}-up")
+        if self.fixed_sampling and hasattr(self, "fps_"):
+            if motion.up_axis != self.up_axis_:
+                raise RefinementError(f"{motion.source or motion.name}: {motion.fps:g} fps, {motion.up_axis}-up; "
+                                      f"{type(self).__name__} was fitted at {self.fps_:g} fps, {self.up_axis_}-up")
+            if float(motion.fps) != self.fps_:
+                return self._refine_resampled(motion)
         X, observed = motion_matrix(motion)
         filled, repaired = self._refine_matrix(X, observed)
         frames, joints = motion.positions.shape[:2]
@@ -131,6 +140,35 @@ class MotionRefiner(BaseEstimator):
                   "repaired": int((repaired & ~motion.missing).sum()), "unfilled": unfilled}
         return replace(motion, positions=positions, missing=still_missing,
                        metadata={**motion.metadata, "refinement": report})
+
+    def _refine_resampled(self, motion: Motion) -> Motion:
+        """Refine ``motion`` at the fitted rate ``fps_`` and bring the filled entries back to its own frames (the
+        module docstring)."""
+        label = motion.source or motion.name or "motion"
+        at_rate = motion.resample(self.fps_)
+        if at_rate.num_frames < self.min_frames:
+            raise RefinementError(f"{label}: {motion.num_frames} frames at {motion.fps:g} fps are "
+                                  f"{at_rate.num_frames} at the {self.fps_:g} fps {type(self).__name__} was fitted "
+                                  f"at; it needs at least {self.min_frames}")
+        done = self.refine(at_rate)
+        # the take's frames in the refined take's frame units, and linear interpolation between its neighbours
+        t = np.clip(np.arange(motion.num_frames) * (self.fps_ / float(motion.fps)), 0, at_rate.num_frames - 1)
+        lo = np.floor(t).astype(np.int64)
+        hi = np.minimum(lo + 1, at_rate.num_frames - 1)
+        w = (t - lo)[:, None, None]
+        back = done.positions[lo].astype(np.float64) * (1 - w) + done.positions[hi].astype(np.float64) * w
+        unknown = done.missing[lo] | (done.missing[hi] & (w[..., 0] > 0))
+        fill = motion.missing & ~unknown & all_coordinates(np.isfinite(back))
+        positions = motion.positions.copy()
+        positions[fill] = back[fill].astype(np.float32)
+        still_missing = motion.missing & ~fill
+        positions[still_missing] = np.nan
+        unfilled = {motion.joint_names[j]: int(still_missing[:, j].sum()) for j in np.flatnonzero(still_missing.any(0))}
+        report = {**done.metadata["refinement"], "filled": int(fill.sum()), "repaired": 0, "unfilled": unfilled,
+                  "resampled": {"fps": float(motion.fps), "refined_at_fps": float(self.fps_),
+                                "note": "refined at the fitted rate, interpolated back; observed samples kept"}}
+        return replace(motion, positions=positions, missing=still_missing, metadata={**motion.metadata,
+                                                                                      "refinement": report})
 
     def _refine_matrix(self, X: np.ndarray, observed: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         """Fill ``X`` (float64 ``[frames, 3·joints]``, 0 where not ``observed``).
