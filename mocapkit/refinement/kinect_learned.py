@@ -55,7 +55,29 @@ ARCHITECTURES = {"bigru": "mocapkit.models.refiners.refine_bigru",
                  "transformer": "mocapkit.models.refiners.refine_transformer"}
 
 
-class LearnedKinectCorrector(BaseEstimator):
+class _ClipCorrector:
+    """``predict`` / ``transform`` of both correctors: the input checks, one clip or a list, then ``_correct``."""
+
+    _fitted: str = ""       # the attribute ``fit`` sets
+
+    def predict(self, kinect, state=None):
+        """Correct a clip ``[T, 20, 3]`` metres (or a list of clips) → ``[T, 20, 3]`` metres; ``state`` ``[T, 20]``
+        (or a list) is used with ``untracked_as_missing``."""
+        check_is_fitted(self, self._fitted)
+        if isinstance(kinect, (list, tuple)):
+            clips = _check_clips(kinect, "kinect")
+            states = _check_states(state, [len(c) for c in clips], "state")
+            return [self._correct(c, s) for c, s in zip(clips, states)]
+        clip = _check_clips([kinect], "kinect")[0]
+        return self._correct(clip, _check_states(None if state is None else [state], [len(clip)], "state")[0])
+
+    transform = predict
+
+    def _correct(self, x: np.ndarray, state: np.ndarray | None) -> np.ndarray:
+        raise NotImplementedError
+
+
+class LearnedKinectCorrector(_ClipCorrector, BaseEstimator):
     """A refiner network trained on (simulated Kinect, mocap) pairs to correct Kinect-20 skeletons (module
     docstring).
 
@@ -77,6 +99,8 @@ class LearnedKinectCorrector(BaseEstimator):
     (float64 ``[steps]``; empty after :meth:`load`), ``train_seconds_``. :meth:`save` / :meth:`load` write and
     read one file (``mocapkit kinect-fix train --method bigru`` writes it).
     """
+
+    _fitted = "module_"
 
     def __init__(self, architecture: str = "bigru", network: dict | None = None, window: int = 64,
                  steps: int = 1000, batch_size: int = 32, lr: float = 1e-3, inference_window: int | None = None,
@@ -238,19 +262,6 @@ class LearnedKinectCorrector(BaseEstimator):
         return model
 
     # ------------------------------------------------------------------ predict
-    def predict(self, kinect, state=None):
-        """Correct a clip ``[T, 20, 3]`` (or a list of clips) → world ``[T, 20, 3]``; ``state`` ``[T, 20]`` (or a
-        list) is used with ``untracked_as_missing``."""
-        check_is_fitted(self, "module_")
-        if isinstance(kinect, (list, tuple)):
-            clips = _check_clips(kinect, "kinect")
-            states = _check_states(state, [len(c) for c in clips], "state")
-            return [self._correct(c, s) for c, s in zip(clips, states)]
-        clip = _check_clips([kinect], "kinect")[0]
-        return self._correct(clip, _check_states(None if state is None else [state], [len(clip)], "state")[0])
-
-    transform = predict
-
     def _correct(self, x: np.ndarray, state: np.ndarray | None) -> np.ndarray:
         import torch
 
@@ -279,7 +290,7 @@ class LearnedKinectCorrector(BaseEstimator):
         return export_refiner(self.module_.model, path, skeleton, **check)
 
 
-class OnnxKinectCorrector(BaseEstimator):
+class OnnxKinectCorrector(_ClipCorrector, BaseEstimator):
     """A corrector exported by :meth:`LearnedKinectCorrector.export_onnx` (``mocapkit kinect-fix export``), run with
     onnxruntime and numpy only; ``predict`` as :meth:`LearnedKinectCorrector.predict` (the same windows and
     tracking-state use, read from the file's metadata).
@@ -291,6 +302,8 @@ class OnnxKinectCorrector(BaseEstimator):
 
     Attributes (after ``fit``): ``session_``, ``corrector_`` (the exported corrector's parameters).
     """
+
+    _fitted = "session_"
 
     def __init__(self, path: str | os.PathLike, inference_window: int | None = None, overlap: int | None = None,
                  threads: int = 0):
@@ -328,18 +341,6 @@ class OnnxKinectCorrector(BaseEstimator):
                              f"joints); write one with `mocapkit kinect-fix export --model MODEL.pt --out FILE.onnx`")
         self.session_, self.corrector_ = session, corrector
         return self
-
-    def predict(self, kinect, state=None):
-        """Correct a clip ``[T, 20, 3]`` (or a list of clips) → world ``[T, 20, 3]`` metres."""
-        check_is_fitted(self, "session_")
-        if isinstance(kinect, (list, tuple)):
-            clips = _check_clips(kinect, "kinect")
-            states = _check_states(state, [len(c) for c in clips], "state")
-            return [self._correct(c, s) for c, s in zip(clips, states)]
-        clip = _check_clips([kinect], "kinect")[0]
-        return self._correct(clip, _check_states(None if state is None else [state], [len(clip)], "state")[0])
-
-    transform = predict
 
     def _correct(self, x: np.ndarray, state: np.ndarray | None) -> np.ndarray:
         def run(positions: np.ndarray, missing: np.ndarray) -> np.ndarray:
