@@ -16,10 +16,10 @@ import warnings
 from pathlib import Path
 
 import numpy as np
-import onnxruntime as ort
 import torch
 
 from mocapkit.deploy.export import DEFAULT_OPSET, ParityError, save_checked_onnx
+from mocapkit.deploy.runtime import cpu_session
 
 #: The metadata key of the model's description (read by :class:`~mocapkit.retrieval.embedding.EmbeddingRetrieval`).
 META_KEY = "mocapkit_embedding"
@@ -68,7 +68,7 @@ def export_encoder(model: torch.nn.Module, out: str | Path, description: dict, o
                      f"resampled to {description.get('frames')} frames)",
             "output": f"embedding float32 [batch, {dim}] L2-normalised"}
     save_checked_onnx(proto, meta, out)
-    session = ort.InferenceSession(str(out), providers=["CPUExecutionProvider"])
+    session = cpu_session(str(out))
     checks = []
     for shape, seed in ((check_shape, 1), ((1, max(8, check_shape[1] // 3 + 5)), 2)):
         landmarks = example_landmarks(*shape, seed=seed)

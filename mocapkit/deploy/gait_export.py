@@ -15,12 +15,12 @@ import warnings
 from pathlib import Path
 
 import numpy as np
-import onnxruntime as ort
 import torch
 from torch import nn
 
 from mocapkit.datasets.formats.casia_b import CONDITIONS, VIEWS
 from mocapkit.deploy.export import DEFAULT_OPSET, ParityError, save_checked_onnx
+from mocapkit.deploy.runtime import cpu_session
 
 
 class _OutputTuple(nn.Module):
@@ -79,7 +79,7 @@ def export_gait_onnx(model: nn.Module, out: str | Path, subject_names: list[str]
             "outputs": json.dumps(names), "producer": "mocapkit"}
     save_checked_onnx(proto, meta, out)
 
-    session = ort.InferenceSession(str(out), providers=["CPUExecutionProvider"])
+    session = cpu_session(str(out))
     check_input = example_geis(check_batch, height, width, seed=1)
     with torch.no_grad():
         reference = [t.numpy() for t in wrapped(check_input)]

@@ -20,6 +20,7 @@ import onnxruntime as ort
 
 from mocapkit.datasets.formats.ntu_skeleton import read_skeleton, select_main_bodies
 from mocapkit.datasets.frames import uniform_frame_indices
+from mocapkit.deploy.runtime import cpu_session
 
 
 def softmax(logits: np.ndarray) -> np.ndarray:
@@ -56,7 +57,7 @@ def open_session(onnx_path: str | Path) -> ort.InferenceSession:
     if not onnx_path.is_file():
         raise FileNotFoundError(f"--onnx {onnx_path}: no such file")
     try:
-        return ort.InferenceSession(str(onnx_path), providers=["CPUExecutionProvider"])
+        return cpu_session(str(onnx_path))
     except Exception as exc:  # onnxruntime's InvalidProtobuf, Fail, ...
         raise ValueError(f"--onnx {onnx_path}: not an ONNX model onnxruntime can load: {_first_line(exc)}") from exc
 

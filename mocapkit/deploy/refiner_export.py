@@ -22,10 +22,10 @@ from pathlib import Path
 
 import numpy as np
 import onnx
-import onnxruntime as ort
 import torch
 
 from mocapkit.deploy.export import DEFAULT_OPSET, ParityError, save_checked_onnx
+from mocapkit.deploy.runtime import cpu_session
 
 
 def example_take(batch: int, frames: int, joints: int, seed: int = 0) -> tuple[torch.Tensor, torch.Tensor]:
@@ -78,7 +78,7 @@ def export_refiner(model: torch.nn.Module, out: str | Path, skeleton: dict, opse
             "input": f"positions float32 [batch, frames, {joints}, 3] metres; missing bool [batch, frames, {joints}]",
             "output": f"refined float32 [batch, frames, {joints}, 3] metres"}
     save_checked_onnx(proto, meta, out)
-    session = ort.InferenceSession(str(out), providers=["CPUExecutionProvider"])
+    session = cpu_session(str(out))
     checks = []
     for shape, seed in ((check_shape, 1), ((1, max(2, check_shape[1] // 3 + 7)), 2)):
         positions, missing = example_take(shape[0], shape[1], joints, seed=seed)

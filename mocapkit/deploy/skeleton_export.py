@@ -17,10 +17,10 @@ import warnings
 from pathlib import Path
 
 import numpy as np
-import onnxruntime as ort
 import torch
 
 from mocapkit.deploy.export import DEFAULT_OPSET, ParityError, save_checked_onnx
+from mocapkit.deploy.runtime import cpu_session
 
 
 def example_skeletons(batch: int, frames: int, bodies: int = 2, joints: int = 25, seed: int = 0) -> torch.Tensor:
@@ -81,7 +81,7 @@ def export_onnx(model: torch.nn.Module, out: str | Path, class_names: list[str] 
             "max_frames": json.dumps(None if max_frames is None else int(max_frames))}
     save_checked_onnx(proto, meta, out)
 
-    session = ort.InferenceSession(str(out), providers=["CPUExecutionProvider"])
+    session = cpu_session(str(out))
     checks = []
     for bodies_checked in (2, 1):
         check_input = example_skeletons(check_shape[0], check_shape[1], bodies_checked, joints, seed=bodies_checked)

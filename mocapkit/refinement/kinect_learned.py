@@ -317,7 +317,7 @@ class OnnxKinectCorrector(_ClipCorrector, BaseEstimator):
         names the file when it is not an exported Kinect corrector."""
         import json
 
-        import onnxruntime as ort
+        from mocapkit.deploy.runtime import cpu_session
 
         path = Path(self.path)
         if not path.is_file():
@@ -326,11 +326,8 @@ class OnnxKinectCorrector(_ClipCorrector, BaseEstimator):
             if getattr(self, name) is not None:
                 _check_nonneg(name, getattr(self, name), integer=True, minimum=4 if name == "inference_window" else 0)
         _check_nonneg("threads", self.threads, integer=True)
-        options = ort.SessionOptions()
-        if self.threads:
-            options.intra_op_num_threads = int(self.threads)
         try:
-            session = ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
+            session = cpu_session(path, int(self.threads))
             skeleton = json.loads(session.get_modelmeta().custom_metadata_map.get("mocapkit_skeleton", "{}"))
         except Exception as exc:
             raise ValueError(f"{path}: onnxruntime cannot load it: {exc}") from exc

@@ -292,16 +292,13 @@ class OnnxRefiner(_WindowedRefiner):
         """Open the session and read the layout from the file's metadata (``motions`` are not needed)."""
         import json
 
-        import onnxruntime as ort
+        from mocapkit.deploy.runtime import cpu_session
 
         path = Path(self.path)
         if not path.is_file():
             raise FileNotFoundError(f"{path}: no such ONNX file")
-        options = ort.SessionOptions()
-        if self.threads:
-            options.intra_op_num_threads = int(self.threads)
         try:
-            self.session_ = ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
+            self.session_ = cpu_session(path, int(self.threads))
         except Exception as exc:
             raise RefinementError(f"{path}: onnxruntime cannot load it: {exc}") from exc
         meta = self.session_.get_modelmeta().custom_metadata_map

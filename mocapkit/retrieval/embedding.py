@@ -105,12 +105,12 @@ class EmbeddingRetrieval(RetrievalMethod):
         return [Path(p) for p in paths]
 
     def _load_onnx(self, path: Path) -> None:
-        import onnxruntime as ort
+        from mocapkit.deploy.runtime import cpu_session
 
         if not path.is_file():
             raise FileNotFoundError(f"{path}: no such ONNX file")
         try:
-            session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+            session = cpu_session(str(path))
         except Exception as exc:
             raise ValueError(f"{path}: onnxruntime cannot load it: {exc}") from exc
         meta = session.get_modelmeta().custom_metadata_map
