@@ -30,6 +30,7 @@ bench: $(STAMP)
 	$(PY) bench/bench_gait_training.py
 	$(PY) bench/bench_nmf.py
 	$(PY) bench/bench_retrieval.py --onnx checkpoints/retrieval_supcon/fold_bd/model.onnx --hnsw-max 100000
+	$(PY) bench/bench_kinect_corrector.py
 
 clean:
 	rm -rf .demo build *.egg-info
