@@ -12,7 +12,7 @@ then correct real Kinect skeletons with it.
     ``weights_only=True``).
 ``export_kinect_model(model, out)``
     a learned corrector as ONNX (normalisation inside the graph, parity with PyTorch checked); ``apply`` runs the
-    ``.onnx`` with onnxruntime and numpy only.
+    ``.onnx`` with onnxruntime.
 ``fix_kinect_files(model, inputs, out_dir)``
     every input (MSR Action3D skeleton text, NTU ``.skeleton``, C3D or any file with the 20 Kinect landmarks) is
     resampled to the model's 30 fps when it differs (MSR Action3D is 15 fps), read as Kinect-20 joints
@@ -165,8 +165,8 @@ def train_kinect_model(mocap, out: str | os.PathLike, seed: int = 0, skip_bad: b
 def load_model(path: str | os.PathLike):
     """A saved Kinect model: a ``.npz`` is Zhou's GP reconstructor
     (:meth:`~mocapkit.classical.kinect_reconstruction.KinectPostureReconstructor.load`), an ``.onnx`` an exported
-    learned corrector (:class:`~mocapkit.refinement.kinect_learned.OnnxKinectCorrector`, onnxruntime and numpy
-    only), any other file a learned corrector (:meth:`~mocapkit.refinement.kinect_learned.LearnedKinectCorrector.load`);
+    learned corrector (:class:`~mocapkit.refinement.kinect_learned.OnnxKinectCorrector`, the network in
+    onnxruntime), any other file a learned corrector (:meth:`~mocapkit.refinement.kinect_learned.LearnedKinectCorrector.load`);
     a :class:`KinectFixError` names the file when it is none of them."""
     from mocapkit.classical.kinect_reconstruction import KinectPostureReconstructor
     from mocapkit.refinement.kinect_learned import (

@@ -25,7 +25,7 @@ linear ramps; :func:`~mocapkit.refinement.learned.refine_windows`), all of a cli
 
 **Export**: :meth:`LearnedKinectCorrector.export_onnx` (``mocapkit kinect-fix export``) writes the network as ONNX with
 the corrector's parameters in its metadata; :class:`OnnxKinectCorrector` predicts from that file with onnxruntime
-and numpy only, in the same windows (``mocapkit kinect-fix apply --model FILE.onnx``).
+(no PyTorch in the prediction), in the same windows (``mocapkit kinect-fix apply --model FILE.onnx``).
 """
 from __future__ import annotations
 
@@ -292,7 +292,8 @@ class LearnedKinectCorrector(_ClipCorrector, BaseEstimator):
 
 class OnnxKinectCorrector(_ClipCorrector, BaseEstimator):
     """A corrector exported by :meth:`LearnedKinectCorrector.export_onnx` (``mocapkit kinect-fix export``), run with
-    onnxruntime and numpy only; ``predict`` as :meth:`LearnedKinectCorrector.predict` (the same windows and
+    onnxruntime (the network never runs in PyTorch; ``kinect-fix`` still imports it, through
+    :mod:`mocapkit.classical`); ``predict`` as :meth:`LearnedKinectCorrector.predict` (the same windows and
     tracking-state use, read from the file's metadata).
 
     Args:
