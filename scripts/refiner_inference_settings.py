@@ -9,6 +9,9 @@ checkpoint selection held out, rebuilt from the run's data settings: performer `
     are (too high) against clean entries moved by the network's own error (too low), and touches only observed
     entries, so the score is the RMS 3-D error over the **observed** entries of the corrupted clip (clean and noisy
     alike); clips cropped to their central ``--frames`` frames.
+``--setting short_gaps`` — ``short_gap_frames``: interior gaps of a joint up to this many frames are filled by the
+    cubic spline instead of the network; the score is the RMS 3-D error over the **corrupted** entries of the whole
+    clips, under random loss and 10–40-frame gaps.
 ``--setting window`` — the inference ``window`` (frames per window; longer takes are refined in overlapping
     windows blended with ramps), as multiples of the training window; the score is the RMS 3-D error over the
     **corrupted** entries (removed or perturbed) of the whole clips (not cropped: a window longer than a clip is
@@ -41,6 +44,9 @@ SETTINGS = {
     "threshold": {"values": [0.0, 0.005, 0.01, 0.015, 0.02, 0.03, float("inf")], "unit": "m",
                   "protocols": [("rdcrypt", 0.3), ("mxcrypt", 0.3), ("spikes", 0.01), ("random_missing", 0.2),
                                 ("continuous_missing", 40)]},
+    "short_gaps": {"values": [0, 4, 8, 12, 24], "unit": "frames",
+                   "protocols": [("random_missing", 0.2), ("random_missing", 0.5), ("continuous_missing", 10),
+                                 ("continuous_missing", 20), ("continuous_missing", 40)]},
     "window": {"values": [1, 2, 4], "unit": "× training window",
                "protocols": [("rdcrypt", 0.3), ("mxcrypt", 0.3), ("random_missing", 0.2), ("continuous_missing", 40),
                              ("long_gaps", "20x100"), ("long_gaps", "5x2s")]},
@@ -76,6 +82,9 @@ def main(argv: list[str] | None = None) -> None:
             if args.setting == "threshold":
                 clips = [central_crop(m, args.frames) for m in data.val_motions]
                 refiners = [LearnedRefiner(checkpoint=checkpoint, repair_threshold=v).fit() for v in values]
+            elif args.setting == "short_gaps":
+                clips = list(data.val_motions)
+                refiners = [LearnedRefiner(checkpoint=checkpoint, short_gap_frames=int(v)).fit() for v in values]
             else:
                 clips = list(data.val_motions)
                 trained = int(LearnedRefiner(checkpoint=checkpoint).fit().skeleton_["window"])   # training window

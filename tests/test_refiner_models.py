@@ -563,6 +563,36 @@ def test_learned_refiner_refines_another_frame_rate_at_its_own_and_rejects_anoth
     assert "rthumb" in str(info.value)
 
 
+def test_short_gaps_are_interior_runs_up_to_the_length():
+    from mocapkit.refinement.learned import short_gaps
+
+    missing = np.zeros((12, 3), bool)
+    missing[0:2, 0] = True          # leading: never short
+    missing[4:6, 0] = True          # 2 frames: short for N >= 2
+    missing[3:8, 1] = True          # 5 frames
+    missing[9:, 2] = True           # trailing
+    np.testing.assert_array_equal(short_gaps(missing, 2), np.isin(np.arange(12), [4, 5])[:, None] * [1, 0, 0] > 0)
+    assert short_gaps(missing, 5)[3:8, 1].all() and not short_gaps(missing, 4)[:, 1].any()
+    assert not short_gaps(missing, 100)[:, 2].any() and not short_gaps(missing, 0).any()
+
+
+def test_short_gaps_can_be_left_to_the_spline(tiny_refiner, gappy):
+    from mocapkit.classical.gap_filling import SplineInterpolation
+    from mocapkit.refinement.learned import SHORT_GAP_FRAMES
+
+    clean, motion = gappy                                       # gaps of 20 frames (joint 3) and 21 (joint 20)
+    spline = SplineInterpolation().refine(motion)
+    try:
+        network = tiny_refiner.set_params(short_gap_frames=0).refine(motion)
+        mixed = tiny_refiner.set_params(short_gap_frames=20).refine(motion)
+    finally:
+        tiny_refiner.set_params(short_gap_frames=SHORT_GAP_FRAMES)
+    np.testing.assert_allclose(mixed.positions[40:60, 3], spline.positions[40:60, 3], atol=1e-6)
+    np.testing.assert_array_equal(mixed.positions[10:31, 20], network.positions[10:31, 20])
+    assert not np.allclose(network.positions[40:60, 3], spline.positions[40:60, 3], atol=1e-4)
+    np.testing.assert_array_equal(mixed.positions[~motion.missing], motion.positions[~motion.missing])
+
+
 def test_learned_refiner_maps_reordered_joints_and_leaves_extra_markers(tiny_refiner, gappy):
     _, motion = gappy
     order = list(range(CMU31.num_joints))[::-1]
