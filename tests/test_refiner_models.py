@@ -580,7 +580,7 @@ def test_short_gaps_can_be_left_to_the_spline(tiny_refiner, gappy):
     from mocapkit.classical.gap_filling import SplineInterpolation
     from mocapkit.refinement.learned import SHORT_GAP_FRAMES
 
-    clean, motion = gappy                                       # gaps of 20 frames (joint 3) and 21 (joint 20)
+    _, motion = gappy                                           # gaps of 20 frames (joint 3) and 21 (joint 20)
     spline = SplineInterpolation().refine(motion)
     try:
         network = tiny_refiner.set_params(short_gap_frames=0).refine(motion)
