@@ -13,7 +13,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-import ezc3d
 import numpy as np
 import pytest
 
