@@ -12,6 +12,9 @@ checkpoint selection held out, rebuilt from the run's data settings: performer `
 ``--setting short_gaps`` — ``short_gap_frames``: interior gaps of a joint up to this many frames are filled by the
     cubic spline instead of the network; the score is the RMS 3-D error over the **corrupted** entries of the whole
     clips, under random loss and 10–40-frame gaps.
+``--setting short_gap_points`` — the spline of the short gaps through the take's observed samples (``24``) or
+    through them after the network's repairs (``-24``), against no spline (``0``); the ``short_gaps`` protocols and
+    ``mxcrypt`` (gaps in noisy data).
 ``--setting window`` — the inference ``window`` (frames per window; longer takes are refined in overlapping
     windows blended with ramps), as multiples of the training window; the score is the RMS 3-D error over the
     **corrupted** entries (removed or perturbed) of the whole clips (not cropped: a window longer than a clip is
@@ -47,6 +50,9 @@ SETTINGS = {
     "short_gaps": {"values": [0, 4, 8, 12, 24], "unit": "frames",
                    "protocols": [("random_missing", 0.2), ("random_missing", 0.5), ("continuous_missing", 10),
                                  ("continuous_missing", 20), ("continuous_missing", 40)]},
+    "short_gap_points": {"values": [0, 24, -24], "unit": "frames (< 0: through the repaired samples)",
+                         "protocols": [("random_missing", 0.2), ("random_missing", 0.5), ("continuous_missing", 10),
+                                       ("continuous_missing", 20), ("continuous_missing", 40), ("mxcrypt", 0.3)]},
     "window": {"values": [1, 2, 4], "unit": "× training window",
                "protocols": [("rdcrypt", 0.3), ("mxcrypt", 0.3), ("random_missing", 0.2), ("continuous_missing", 40),
                              ("long_gaps", "20x100"), ("long_gaps", "5x2s")]},
@@ -85,6 +91,10 @@ def main(argv: list[str] | None = None) -> None:
             elif args.setting == "short_gaps":
                 clips = list(data.val_motions)
                 refiners = [LearnedRefiner(checkpoint=checkpoint, short_gap_frames=int(v)).fit() for v in values]
+            elif args.setting == "short_gap_points":
+                clips = list(data.val_motions)
+                refiners = [LearnedRefiner(checkpoint=checkpoint, short_gap_frames=int(abs(v)),
+                                           short_gap_points="repaired" if v < 0 else "observed").fit() for v in values]
             else:
                 clips = list(data.val_motions)
                 trained = int(LearnedRefiner(checkpoint=checkpoint).fit().skeleton_["window"])   # training window

@@ -593,6 +593,29 @@ def test_short_gaps_can_be_left_to_the_spline(tiny_refiner, gappy):
     np.testing.assert_array_equal(mixed.positions[~motion.missing], motion.positions[~motion.missing])
 
 
+def test_the_short_gap_spline_can_pass_through_the_repaired_samples(tiny_refiner, gappy):
+    from mocapkit.refinement.learned import SHORT_GAP_FRAMES, spline_fill
+
+    _, motion = gappy
+    try:    # threshold 0: every observed sample the (tiny) network moves is repaired, i.e. takes its value
+        tiny_refiner.set_params(short_gap_frames=20, repair_threshold=0.0)
+        observed = tiny_refiner.set_params(short_gap_points="observed").refine(motion)
+        repaired = tiny_refiner.set_params(short_gap_points="repaired").refine(motion)
+        with pytest.raises(ValueError, match="short_gap_points must be 'observed' or 'repaired'"):
+            tiny_refiner.set_params(short_gap_points="network").refine(motion)
+    finally:
+        tiny_refiner.set_params(short_gap_frames=SHORT_GAP_FRAMES, short_gap_points="observed", repair_threshold=0.02)
+    assert repaired.metadata["refinement"]["repaired"] > 0
+    gap = np.zeros(motion.missing.shape, bool)
+    gap[40:60, 3] = True                                      # joint 3's 20-frame gap: the spline's
+    # the spline passes through the samples as the contract returns them (the repaired ones at the network's value)
+    expected = spline_fill(repaired.positions, motion.missing, gap)
+    np.testing.assert_allclose(repaired.positions[40:60, 3], expected[40:60, 3], atol=1e-5)
+    np.testing.assert_allclose(observed.positions[40:60, 3], spline_fill(motion.positions, motion.missing, gap)[40:60, 3],
+                               atol=1e-5)
+    assert not np.allclose(observed.positions[40:60, 3], repaired.positions[40:60, 3], atol=1e-4)
+
+
 def test_learned_refiner_maps_reordered_joints_and_leaves_extra_markers(tiny_refiner, gappy):
     _, motion = gappy
     order = list(range(CMU31.num_joints))[::-1]

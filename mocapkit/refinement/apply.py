@@ -16,7 +16,7 @@ experiment=refine_bigru``) is :class:`~mocapkit.refinement.learned.LearnedRefine
 ``--onnx FILE`` (its ``mocapkit export``) is :class:`~mocapkit.refinement.learned.OnnxRefiner`, run with
 onnxruntime and numpy only (torch is never imported on that path). ``--set`` takes their parameters
 (:data:`LEARNED_PARAMETERS`: ``window``, ``overlap``, ``repair_threshold``, ``max_empty_frames``,
-``short_gap_frames``; ``device`` of
+``short_gap_frames``, ``short_gap_points``; ``device`` of
 the checkpoint, ``threads`` of the ONNX session). The input must hold the joints the network was trained on
 (names; any order, extra markers are left as they are) and its up axis; a take at another frame rate is refined
 at the network's and brought back (:mod:`mocapkit.refinement.base`; the report says so); the report names the
@@ -181,7 +181,7 @@ def build_refiner(method: str, overrides: Sequence[str] = ()) -> MotionRefiner:
 LEARNED_PARAMETERS: dict[str, tuple[type, bool, float | None]] = {
     "window": (int, True, 2), "overlap": (int, True, 0), "repair_threshold": (float, False, 0.0),
     "max_empty_frames": (int, False, 0), "device": (str, False, None), "threads": (int, False, 0),
-    "short_gap_frames": (int, False, 0),
+    "short_gap_frames": (int, False, 0), "short_gap_points": (str, False, None),
 }
 
 

@@ -183,13 +183,17 @@ class _WindowedRefiner(MotionRefiner):
         positions = X.reshape(frames, joints, 3)
         missing = ~observed.reshape(frames, joints, 3)[..., 0]
         refined = refine_windows(self._predict, positions, missing, self.window_, self.overlap_)
-        if self.short_gap_frames:
-            short = short_gaps(missing, int(self.short_gap_frames))
-            refined[short] = spline_fill(positions, missing, short)[short]
-        keep = empty_frames_kept(missing, int(self.max_empty_frames))
-        refined[keep] = np.nan
         moved = point_distance(refined, positions)
         repaired = ~missing & (moved > float(self.repair_threshold))
+        if self.short_gap_frames:
+            if self.short_gap_points not in ("observed", "repaired"):
+                raise ValueError(f"{type(self).__name__}: short_gap_points must be 'observed' or 'repaired', got "
+                                 f"{self.short_gap_points!r}")
+            short = short_gaps(missing, int(self.short_gap_frames))
+            through = positions if self.short_gap_points == "observed" else \
+                np.where(repaired[..., None], refined, positions)
+            refined[short] = spline_fill(through, missing, short)[short]
+        refined[empty_frames_kept(missing, int(self.max_empty_frames))] = np.nan
         return refined.reshape(frames, 3 * joints), repaired
 
 
@@ -207,6 +211,8 @@ class LearnedRefiner(_WindowedRefiner):
         short_gap_frames: interior gaps of a joint up to this many frames are filled by the cubic spline
             (:class:`~mocapkit.classical.gap_filling.SplineInterpolation`) instead of the network (default
             :data:`SHORT_GAP_FRAMES`, chosen on validation clips); 0: every gap by the network.
+        short_gap_points: the samples that spline passes through: ``"observed"`` (the take's own) or
+            ``"repaired"`` (the take's, with the samples the network repairs replaced by its values).
         max_empty_frames: interior runs of frames with every joint missing up to this long are filled.
         device: torch device of the network.
         first_guess: None (the network's own) or keyword arguments of the network's ``set_first_guess``, e.g.
@@ -217,7 +223,8 @@ class LearnedRefiner(_WindowedRefiner):
     def __init__(self, checkpoint: str | Sequence[str] | None = None, experiment: str | None = None,
                  overrides: Sequence[str] = (), window: int | None = None, overlap: int | None = None,
                  repair_threshold: float = 0.02, max_empty_frames: int = 12, device: str = "cpu",
-                 first_guess: dict | None = None, short_gap_frames: int = SHORT_GAP_FRAMES):
+                 first_guess: dict | None = None, short_gap_frames: int = SHORT_GAP_FRAMES,
+                 short_gap_points: str = "observed"):
         self.checkpoint = checkpoint
         self.experiment = experiment
         self.overrides = overrides
@@ -228,6 +235,7 @@ class LearnedRefiner(_WindowedRefiner):
         self.device = device
         self.first_guess = first_guess
         self.short_gap_frames = short_gap_frames
+        self.short_gap_points = short_gap_points
 
     # -------------------------------------------------------------- loading / training
     @staticmethod
@@ -319,13 +327,14 @@ class OnnxRefiner(_WindowedRefiner):
 
     Args:
         path: the ``.onnx`` file (its metadata holds the layout, frame rate, up axis and training window).
-        window, overlap, repair_threshold, max_empty_frames, short_gap_frames: as :class:`LearnedRefiner`.
+        window, overlap, repair_threshold, max_empty_frames, short_gap_frames, short_gap_points: as
+            :class:`LearnedRefiner`.
         threads: onnxruntime intra-op threads (0: its default).
     """
 
     def __init__(self, path: str, window: int | None = None, overlap: int | None = None,
                  repair_threshold: float = 0.02, max_empty_frames: int = 12, threads: int = 0,
-                 short_gap_frames: int = SHORT_GAP_FRAMES):
+                 short_gap_frames: int = SHORT_GAP_FRAMES, short_gap_points: str = "observed"):
         self.path = path
         self.window = window
         self.overlap = overlap
@@ -333,6 +342,7 @@ class OnnxRefiner(_WindowedRefiner):
         self.max_empty_frames = max_empty_frames
         self.threads = threads
         self.short_gap_frames = short_gap_frames
+        self.short_gap_points = short_gap_points
 
     def fit(self, motions: Sequence[Motion] | None = None, y=None) -> OnnxRefiner:
         """Open the session and read the layout from the file's metadata (``motions`` are not needed)."""
