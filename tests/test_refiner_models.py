@@ -578,15 +578,15 @@ def test_short_gaps_are_interior_runs_up_to_the_length():
 
 def test_short_gaps_can_be_left_to_the_spline(tiny_refiner, gappy):
     from mocapkit.classical.gap_filling import SplineInterpolation
-    from mocapkit.refinement.learned import SHORT_GAP_FRAMES
+    from mocapkit.refinement.learned import SHORT_GAP_FRAMES, SHORT_GAP_POINTS
 
     _, motion = gappy                                           # gaps of 20 frames (joint 3) and 21 (joint 20)
     spline = SplineInterpolation().refine(motion)
     try:
         network = tiny_refiner.set_params(short_gap_frames=0).refine(motion)
-        mixed = tiny_refiner.set_params(short_gap_frames=20).refine(motion)
+        mixed = tiny_refiner.set_params(short_gap_frames=20, short_gap_points="observed").refine(motion)
     finally:
-        tiny_refiner.set_params(short_gap_frames=SHORT_GAP_FRAMES)
+        tiny_refiner.set_params(short_gap_frames=SHORT_GAP_FRAMES, short_gap_points=SHORT_GAP_POINTS)
     np.testing.assert_allclose(mixed.positions[40:60, 3], spline.positions[40:60, 3], atol=1e-6)
     np.testing.assert_array_equal(mixed.positions[10:31, 20], network.positions[10:31, 20])
     assert not np.allclose(network.positions[40:60, 3], spline.positions[40:60, 3], atol=1e-4)
@@ -594,7 +594,11 @@ def test_short_gaps_can_be_left_to_the_spline(tiny_refiner, gappy):
 
 
 def test_the_short_gap_spline_can_pass_through_the_repaired_samples(tiny_refiner, gappy):
-    from mocapkit.refinement.learned import SHORT_GAP_FRAMES, spline_fill
+    from mocapkit.refinement.learned import (
+        SHORT_GAP_FRAMES,
+        SHORT_GAP_POINTS,
+        spline_fill,
+    )
 
     _, motion = gappy
     try:    # threshold 0: every observed sample the (tiny) network moves is repaired, i.e. takes its value
@@ -604,15 +608,16 @@ def test_the_short_gap_spline_can_pass_through_the_repaired_samples(tiny_refiner
         with pytest.raises(ValueError, match="short_gap_points must be 'observed' or 'repaired'"):
             tiny_refiner.set_params(short_gap_points="network").refine(motion)
     finally:
-        tiny_refiner.set_params(short_gap_frames=SHORT_GAP_FRAMES, short_gap_points="observed", repair_threshold=0.02)
+        tiny_refiner.set_params(short_gap_frames=SHORT_GAP_FRAMES, short_gap_points=SHORT_GAP_POINTS,
+                                repair_threshold=0.02)
     assert repaired.metadata["refinement"]["repaired"] > 0
     gap = np.zeros(motion.missing.shape, bool)
     gap[40:60, 3] = True                                      # joint 3's 20-frame gap: the spline's
     # the spline passes through the samples as the contract returns them (the repaired ones at the network's value)
     expected = spline_fill(repaired.positions, motion.missing, gap)
     np.testing.assert_allclose(repaired.positions[40:60, 3], expected[40:60, 3], atol=1e-5)
-    np.testing.assert_allclose(observed.positions[40:60, 3], spline_fill(motion.positions, motion.missing, gap)[40:60, 3],
-                               atol=1e-5)
+    plain = spline_fill(motion.positions, motion.missing, gap)
+    np.testing.assert_allclose(observed.positions[40:60, 3], plain[40:60, 3], atol=1e-5)
     assert not np.allclose(observed.positions[40:60, 3], repaired.positions[40:60, 3], atol=1e-4)
 
 

@@ -42,9 +42,16 @@ INFERENCE_WINDOW_FACTOR = 2
 
 #: Default ``short_gap_frames``: interior gaps of up to 24 frames (0.2 s at 120 fps) are filled by the cubic spline,
 #: longer ones by the network. Chosen on the runs' validation clips (training performers only; values 0, 4, 8, 12,
-#: 24; mean RMS over random loss 0.2 / 0.5 and 10-, 20-, 40-frame gaps: 8.41 → 8.11 mm for the BiGRU, 8.40 → 8.11 for
-#: the transformer; ``scripts/refiner_inference_settings.py --setting short_gaps``; bench/RESULTS.md §13).
+#: 24; mean RMS over random loss 0.2 / 0.5 and 10-, 20-, 40-frame gaps: 8.41 → 8.11 mm for the BiGRU, 8.40 → 8.11
+#: for the transformer; ``scripts/refiner_inference_settings.py --setting short_gaps``; bench/RESULTS.md §13).
 SHORT_GAP_FRAMES = 24
+
+#: Default ``short_gap_points``: the short-gap spline passes through the take's samples with the ones the network
+#: repairs at its values. Chosen on the same validation clips with ``mxcrypt`` (gaps in noisy data) added to the
+#: protocols, after the test table showed the spline through the raw samples losing there (mean RMS over the six
+#: protocols: BiGRU 10.18 mm without the spline, 10.82 through the observed samples, 10.09 through the repaired ones;
+#: transformer 10.27, 10.81, 10.10; ``--setting short_gap_points``; bench/RESULTS.md §13).
+SHORT_GAP_POINTS = "repaired"
 
 
 # ------------------------------------------------------------------------------------------ windows (numpy only)
@@ -212,7 +219,8 @@ class LearnedRefiner(_WindowedRefiner):
             (:class:`~mocapkit.classical.gap_filling.SplineInterpolation`) instead of the network (default
             :data:`SHORT_GAP_FRAMES`, chosen on validation clips); 0: every gap by the network.
         short_gap_points: the samples that spline passes through: ``"observed"`` (the take's own) or
-            ``"repaired"`` (the take's, with the samples the network repairs replaced by its values).
+            ``"repaired"`` (the take's, with the samples the network repairs replaced by its values; default
+            :data:`SHORT_GAP_POINTS`, chosen on validation clips).
         max_empty_frames: interior runs of frames with every joint missing up to this long are filled.
         device: torch device of the network.
         first_guess: None (the network's own) or keyword arguments of the network's ``set_first_guess``, e.g.
@@ -224,7 +232,7 @@ class LearnedRefiner(_WindowedRefiner):
                  overrides: Sequence[str] = (), window: int | None = None, overlap: int | None = None,
                  repair_threshold: float = 0.02, max_empty_frames: int = 12, device: str = "cpu",
                  first_guess: dict | None = None, short_gap_frames: int = SHORT_GAP_FRAMES,
-                 short_gap_points: str = "observed"):
+                 short_gap_points: str = SHORT_GAP_POINTS):
         self.checkpoint = checkpoint
         self.experiment = experiment
         self.overrides = overrides
@@ -334,7 +342,7 @@ class OnnxRefiner(_WindowedRefiner):
 
     def __init__(self, path: str, window: int | None = None, overlap: int | None = None,
                  repair_threshold: float = 0.02, max_empty_frames: int = 12, threads: int = 0,
-                 short_gap_frames: int = SHORT_GAP_FRAMES, short_gap_points: str = "observed"):
+                 short_gap_frames: int = SHORT_GAP_FRAMES, short_gap_points: str = SHORT_GAP_POINTS):
         self.path = path
         self.window = window
         self.overlap = overlap
@@ -374,5 +382,5 @@ class OnnxRefiner(_WindowedRefiner):
                                                "missing": missing.astype(bool)})[0]
 
 
-__all__ = ["INFERENCE_WINDOW_FACTOR", "SHORT_GAP_FRAMES", "LearnedRefiner", "OnnxRefiner", "blend_weights",
-           "empty_frames_kept", "refine_windows", "short_gaps", "spline_fill", "train_on_motions", "window_starts"]
+__all__ = ["INFERENCE_WINDOW_FACTOR", "SHORT_GAP_FRAMES", "SHORT_GAP_POINTS", "LearnedRefiner", "OnnxRefiner",
+           "blend_weights", "empty_frames_kept", "refine_windows", "short_gaps", "spline_fill", "train_on_motions", "window_starts"]
