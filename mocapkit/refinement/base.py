@@ -151,16 +151,11 @@ class MotionRefiner(BaseEstimator):
                                   f"{at_rate.num_frames} at the {self.fps_:g} fps {type(self).__name__} was fitted "
                                   f"at; it needs at least {self.min_frames}")
         done = self.refine(at_rate)
-        # the take's frames in the refined take's frame units, and linear interpolation between its neighbours
-        t = np.clip(np.arange(motion.num_frames) * (self.fps_ / float(motion.fps)), 0, at_rate.num_frames - 1)
-        lo = np.floor(t).astype(np.int64)
-        hi = np.minimum(lo + 1, at_rate.num_frames - 1)
-        w = (t - lo)[:, None, None]
-        back = done.positions[lo].astype(np.float64) * (1 - w) + done.positions[hi].astype(np.float64) * w
-        unknown = done.missing[lo] | (done.missing[hi] & (w[..., 0] > 0))
-        fill = motion.missing & ~unknown & all_coordinates(np.isfinite(back))
+        # back at the take's own frames (their times in the refined take's frame units)
+        back = done.sample_at(np.arange(motion.num_frames) * (self.fps_ / float(motion.fps)), motion.fps)
+        fill = motion.missing & ~back.missing
         positions = motion.positions.copy()
-        positions[fill] = back[fill].astype(np.float32)
+        positions[fill] = back.positions[fill]
         still_missing = motion.missing & ~fill
         positions[still_missing] = np.nan
         unfilled = {motion.joint_names[j]: int(still_missing[:, j].sum()) for j in np.flatnonzero(still_missing.any(0))}

@@ -282,7 +282,7 @@ class LearnedKinectCorrector(_ClipCorrector, BaseEstimator):
         from mocapkit.deploy.refiner_export import export_refiner
 
         check_is_fitted(self, "module_")
-        skeleton = {**dict(self.module_.hparams["skeleton"]), "window": int(self.window),
+        skeleton = {**dict(self.module_.hparams["skeleton"]),
                     "kinect_corrector": {"format": MODEL_FORMAT, "architecture": self.architecture,
                                          "window": int(self.window), "inference_window": self.inference_window,
                                          "overlap": self.overlap,

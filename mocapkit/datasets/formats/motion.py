@@ -163,9 +163,15 @@ class Motion:
                            rotations=self.rotations if same else None, fps=self.fps if same else float(fps),
                            metadata=dict(self.metadata))
         count = int(np.floor(self.duration * fps + 1e-6)) + 1
-        t = np.arange(count) * (self.fps / fps)           # positions in source frames
-        lo = np.clip(np.floor(t).astype(np.int64), 0, self.num_frames - 1)
-        hi = np.clip(lo + 1, 0, self.num_frames - 1)
+        return self.sample_at(np.arange(count) * (self.fps / fps), fps)
+
+    def sample_at(self, t: np.ndarray, fps: float) -> Motion:
+        """The motion at the times ``t`` (``[N]``, in this motion's frames, clipped to its first and last frame),
+        linearly interpolated, as a Motion at ``fps``. A sample is missing where either neighbouring source frame
+        is (the one it lies on, when it lies on a frame). Local rotations are dropped."""
+        t = np.clip(np.asarray(t, dtype=np.float64), 0, self.num_frames - 1)
+        lo = np.floor(t).astype(np.int64)
+        hi = np.minimum(lo + 1, self.num_frames - 1)
         w = (t - lo).astype(np.float32)[:, None, None]
         positions = self.filled()[lo] * (1 - w) + self.filled()[hi] * w
         missing = self.missing[lo] | (self.missing[hi] & (w[:, :, 0] > 0))
