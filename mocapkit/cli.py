@@ -15,7 +15,9 @@
     mocapkit compare NAME [overrides ...]                 (configs/compare/NAME.yaml: methods × protocols × seeds)
     mocapkit gait-report --data GEI_CACHE --out DIR [--protocols ...] [overrides ...]   (= compare gait)
     mocapkit refine IN OUT --method NAME [--set KEY=VALUE ...] [--train PATH ...] [--repair-outliers]
+                    [--screen-outliers [METRES]]
     mocapkit refine IN OUT --method RUN/best.ckpt | --onnx FILE [--set KEY=VALUE ...] [--repair-outliers]
+                    [--screen-outliers [METRES]]
     mocapkit index --src DIR --out INDEX [--method NAME] [--ckpt PATH] [--skip-bad]
     mocapkit search --index INDEX QUERY [QUERY ...] [-k K] [--json]
     mocapkit synthesize INPUT [INPUT ...] --out DIR [--type SUBSTRING] [--variants N] [--frames F] [--seed S]
@@ -194,7 +196,7 @@ def cmd_refine(args: argparse.Namespace) -> None:
 
     report = refine_file(args.input, args.output, args.method, overrides=tuple(args.set),
                          train=tuple(args.train), skip_bad=args.skip_bad, repair_outliers=args.repair_outliers,
-                         onnx=args.onnx)
+                         onnx=args.onnx, screen_outliers=args.screen_outliers)
     print(report.to_text())
 
 
@@ -434,6 +436,11 @@ def build_parser() -> argparse.ArgumentParser:
     refine.add_argument("--repair-outliers", dest="repair_outliers", action="store_true",
                         help="also replace the observed samples a robust method flags as outliers "
                              "(default: only the gaps are filled)")
+    refine.add_argument("--screen-outliers", dest="screen_outliers", nargs="?", type=float, default=None,
+                        const=True, metavar="METRES",
+                        help="hide the observed samples farther than METRES from their joint's running median "
+                             "(noise, spikes; without METRES: mocapkit.refinement.screening.SCREEN_THRESHOLD) and "
+                             "refill them with the method; implies --repair-outliers")
     refine.add_argument("--skip-bad", dest="skip_bad", action="store_true",
                         help="skip unreadable training files (each is reported)")
     refine.set_defaults(func=cmd_refine)

@@ -15,6 +15,11 @@ checkpoint selection held out, rebuilt from the run's data settings: performer `
 ``--setting short_gap_points`` — the spline of the short gaps through the take's observed samples (``24``) or
     through them after the network's repairs (``-24``), against no spline (``0``); the ``short_gaps`` protocols and
     ``mxcrypt`` (gaps in noisy data).
+``--setting screen`` — a median outlier screen in front of the refiner
+    (:class:`~mocapkit.refinement.screening.MedianScreen`): its ``threshold`` in metres (0: no screen) at the
+    ``--half-window`` given; the score is the RMS 3-D error over the **corrupted** entries, under noise (rdcrypt,
+    mxcrypt), random loss and gaps (whether the screen helps the first and costs nothing on the others).
+    ``--models`` may also name the classical ``pchip`` and ``lrmf`` (no runs; the same validation clips).
 ``--setting window`` — the inference ``window`` (frames per window; longer takes are refined in overlapping
     windows blended with ramps), as multiples of the training window; the score is the RMS 3-D error over the
     **corrupted** entries (removed or perturbed) of the whole clips (not cropped: a window longer than a clip is
@@ -28,6 +33,7 @@ Usage (from the repository root)::
 
     python scripts/refiner_inference_settings.py --setting threshold        # bigru + transformer, folds bd bk mm
     python scripts/refiner_inference_settings.py --setting window --models transformer --folds bd
+    python scripts/refiner_inference_settings.py --setting screen --models pchip lrmf bigru --half-window 3
 """
 from __future__ import annotations
 
@@ -53,6 +59,9 @@ SETTINGS = {
     "short_gap_points": {"values": [0, 24, -24], "unit": "frames (< 0: through the repaired samples)",
                          "protocols": [("random_missing", 0.2), ("random_missing", 0.5), ("continuous_missing", 10),
                                        ("continuous_missing", 20), ("continuous_missing", 40), ("mxcrypt", 0.3)]},
+    "screen": {"values": [0.0, 0.005, 0.0075, 0.01, 0.015], "unit": "m",
+               "protocols": [("rdcrypt", 0.3), ("mxcrypt", 0.3), ("random_missing", 0.2), ("continuous_missing", 10),
+                             ("continuous_missing", 40)]},
     "window": {"values": [1, 2, 4], "unit": "× training window",
                "protocols": [("rdcrypt", 0.3), ("mxcrypt", 0.3), ("random_missing", 0.2), ("continuous_missing", 40),
                              ("long_gaps", "20x100"), ("long_gaps", "5x2s")]},
@@ -65,6 +74,22 @@ def rms_error_mm(clean, refined, entries: np.ndarray) -> float:
     return float(np.sqrt(np.mean(distance ** 2)) * 1000.0)
 
 
+def base_refiner(model: str, checkpoint: str):
+    """The refiner a ``--models`` name stands for: a run of ``refine_<model>`` or the classical ``pchip`` / ``lrmf``."""
+    if model == "pchip":
+        from mocapkit.classical.gap_filling import PchipInterpolation
+        return PchipInterpolation(extrapolate="hold")
+    if model == "lrmf":
+        from mocapkit.classical.lrmf import LRMF
+        return LRMF()
+    return LearnedRefiner(checkpoint=checkpoint).fit()
+
+
+def _screened(refiner, threshold: float, half_window: int):
+    from mocapkit.refinement.screening import MedianScreen
+    return refiner if threshold <= 0 else MedianScreen(refiner, half_window=half_window, threshold=threshold)
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--setting", choices=sorted(SETTINGS), required=True)
@@ -74,6 +99,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--frames", type=int, default=250, help="threshold: clips cropped to this many frames")
     parser.add_argument("--values", type=float, nargs="+", default=None,
                         help="the setting's values to score (default: the grid of SETTINGS)")
+    parser.add_argument("--half-window", type=int, default=3, help="screen: the median's neighbours on each side")
     parser.add_argument("--runs", type=Path, default=ROOT / "checkpoints",
                         help="the folder holding refine_<model>/fold_<P>/ (the output_root of the runs)")
     args = parser.parse_args(argv)
@@ -91,6 +117,9 @@ def main(argv: list[str] | None = None) -> None:
             elif args.setting == "short_gaps":
                 clips = list(data.val_motions)
                 refiners = [LearnedRefiner(checkpoint=checkpoint, short_gap_frames=int(v)).fit() for v in values]
+            elif args.setting == "screen":
+                clips = list(data.val_motions)
+                refiners = [_screened(base_refiner(model, checkpoint), v, args.half_window) for v in values]
             elif args.setting == "short_gap_points":
                 clips = list(data.val_motions)
                 refiners = [LearnedRefiner(checkpoint=checkpoint, short_gap_frames=int(abs(v)),

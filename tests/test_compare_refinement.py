@@ -59,6 +59,11 @@ def quick(tmp_path_factory):
     with open_dict(cfg):
         cfg.methods["spy"] = {"label": "recording", "estimator": {"_target_": "tests.test_compare_refinement."
                                                                             "RecordingRefiner"}, "reseed": False}
+        # the same behind the median outlier screen: the wrapper's fit must follow the folds too
+        cfg.methods["spy_screened"] = {
+            "label": "recording, screened", "reseed": False,
+            "estimator": {"_target_": "mocapkit.refinement.screening.MedianScreen",
+                          "refiner": {"_target_": "tests.test_compare_refinement.RecordingRefiner", "tag": "screened"}}}
     recorded_fits().clear()
     results = run_comparison(cfg)
     return out, results
@@ -71,7 +76,8 @@ def test_every_cell_is_written(quick):
     protocols = ["random_missing@0.2", "random_missing@0.4", "continuous_missing@20", "continuous_missing@40"]
     assert saved["protocols"] == protocols and saved["seeds"] == [0, 1]
     cells = {(c["method"], c["protocol"], c["seed"]) for c in saved["cells"]}
-    assert cells == {(m, p, s) for m in ("linear", "pchip", "trnn", "spy") for p in protocols for s in (0, 1)}
+    assert cells == {(m, p, s) for m in ("linear", "pchip", "trnn", "spy", "spy_screened") for p in protocols
+                     for s in (0, 1)}
     for cell in saved["cells"]:
         detail = cell["detail"]
         assert set(detail["folds"]) == {"bd", "bk", "dg", "mm"}
@@ -96,8 +102,8 @@ def test_data_driven_fits_never_see_the_test_performer(quick):
     _, results = quick
     fits = recorded_fits()
     assert fits, "the data-driven method was never fitted"
-    assert len(fits) == 4                       # one fit per held-out performer, cached across cells
-    for cell in (c for c in results["cells"] if c["method"] == "spy"):
+    assert len(fits) == 8                       # one fit per held-out performer and method, cached across cells
+    for cell in (c for c in results["cells"] if c["method"] in ("spy", "spy_screened")):
         for fold, info in cell["detail"]["folds"].items():
             assert fold not in info["fit_groups"] and info["fit_groups"] == sorted({"bd", "bk", "dg", "mm"} - {fold})
             tested = {r["clip"].split("_")[1] for r in cell["detail"]["clips"] if r["fold"] == fold}
@@ -106,7 +112,7 @@ def test_data_driven_fits_never_see_the_test_performer(quick):
         assert len(performers) == 3
         held_out = ({"bd", "bk", "dg", "mm"} - performers).pop()
         assert not any(f"HDM_{held_out}_" in n for n in names)
-    for cell in (c for c in results["cells"] if c["method"] != "spy"):
+    for cell in (c for c in results["cells"] if c["method"] not in ("spy", "spy_screened")):
         assert all(f["fit_groups"] == [] for f in cell["detail"]["folds"].values())
 
 

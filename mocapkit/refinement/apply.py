@@ -424,7 +424,8 @@ def refine_motion(refiner: MotionRefiner, motion: Motion) -> tuple[Motion, np.nd
 
 def refine_file(src: str | os.PathLike, out: str | os.PathLike, method: str | None = None,
                 overrides: Sequence[str] = (), train: Sequence[str | os.PathLike] = (), skip_bad: bool = False,
-                repair_outliers: bool = False, onnx: str | os.PathLike | None = None) -> RefineReport:
+                repair_outliers: bool = False, onnx: str | os.PathLike | None = None,
+                screen_outliers: float | bool | None = None) -> RefineReport:
     """Refine the motion file ``src`` with the refiner ``method`` and write ``out`` (``.c3d`` or ``.npz``).
 
     See the module docstring for what is written. ``method`` is a name of ``configs/refiner`` or a trained
@@ -434,6 +435,10 @@ def refine_file(src: str | os.PathLike, out: str | os.PathLike, method: str | No
     skips unreadable training files (each is reported) instead of failing. ``repair_outliers`` also writes
     the observed samples a robust method (LRMF, TrNN, PSC, filter bases, the learned refiners) flags as
     outliers; by default only the gaps are filled and every observed sample is written unchanged.
+    ``screen_outliers`` (``--screen-outliers``: a threshold in metres, or True for
+    :data:`~mocapkit.refinement.screening.SCREEN_THRESHOLD`) puts the refiner behind
+    :class:`~mocapkit.refinement.screening.MedianScreen`: samples that far from their joint's running median are
+    hidden, refilled and written (it implies ``repair_outliers``).
 
     Raises:
         ConfigError: unknown method or parameter; a checkpoint that is missing or not a refiner's.
@@ -465,6 +470,19 @@ def refine_file(src: str | os.PathLike, out: str | os.PathLike, method: str | No
         method = str(model)
     else:
         refiner = build_refiner(method, overrides)
+    filling = refiner                     # the method itself (the screen, when asked, stands in front of it)
+    if screen_outliers is not None:
+        from mocapkit.refinement.screening import (
+            SCREEN_HALF_WINDOW,
+            SCREEN_THRESHOLD,
+            MedianScreen,
+        )
+
+        threshold = SCREEN_THRESHOLD if screen_outliers is True else float(screen_outliers)
+        if not threshold > 0:
+            raise RefineError(f"--screen-outliers {screen_outliers}: the threshold must be a distance > 0 (metres)")
+        refiner = MedianScreen(refiner, half_window=SCREEN_HALF_WINDOW, threshold=threshold)
+        repair_outliers = True
     if refiner.requires_fit and not train and kind is None:
         raise RefineError(f"refiner {method!r} ({type(refiner).__name__}) is data-driven and needs training motions: "
                           f"pass --train PATH (files or folders of clean motions of the layout of {src.name})")
@@ -495,10 +513,11 @@ def refine_file(src: str | os.PathLike, out: str | os.PathLike, method: str | No
         _write_npz(out, refined, motion.missing & ~refined.missing)
         mode = "positions in metres, NaN where missing"
     hint = ""
-    if "extrapolate" in inspect.signature(type(refiner).__init__).parameters and \
-            getattr(refiner, "extrapolate", None) is None:
+    if "extrapolate" in inspect.signature(type(filling).__init__).parameters and \
+            getattr(filling, "extrapolate", None) is None:
         hint = f"{method} does not extrapolate: --set extrapolate=hold holds the nearest observed value there"
-    return RefineReport(source=str(src), output=str(out), method=method, refiner=type(refiner).__name__,
+    refiner_name = type(filling).__name__ if filling is refiner else f"{type(refiner).__name__}({type(filling).__name__})"
+    return RefineReport(source=str(src), output=str(out), method=method, refiner=refiner_name,
                         fps=float(motion.fps), frames=motion.num_frames,
                         markers=_report_markers(motion, refined, changed), training=used, skipped=skipped,
                         write_mode=mode, hint=hint,
