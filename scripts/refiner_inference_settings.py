@@ -74,15 +74,17 @@ def rms_error_mm(clean, refined, entries: np.ndarray) -> float:
     return float(np.sqrt(np.mean(distance ** 2)) * 1000.0)
 
 
-def base_refiner(model: str, checkpoint: str):
-    """The refiner a ``--models`` name stands for: a run of ``refine_<model>`` or the classical ``pchip`` / ``lrmf``."""
+def base_refiner(model: str, checkpoint: str, short_gap_frames: int | None = None):
+    """The refiner a ``--models`` name stands for: a run of ``refine_<model>`` (with ``short_gap_frames`` when
+    given) or the classical ``pchip`` / ``lrmf``."""
     if model == "pchip":
         from mocapkit.classical.gap_filling import PchipInterpolation
         return PchipInterpolation(extrapolate="hold")
     if model == "lrmf":
         from mocapkit.classical.lrmf import LRMF
         return LRMF()
-    return LearnedRefiner(checkpoint=checkpoint).fit()
+    extra = {} if short_gap_frames is None else {"short_gap_frames": int(short_gap_frames)}
+    return LearnedRefiner(checkpoint=checkpoint, **extra).fit()
 
 
 def _screened(refiner, threshold: float, half_window: int):
@@ -100,6 +102,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--values", type=float, nargs="+", default=None,
                         help="the setting's values to score (default: the grid of SETTINGS)")
     parser.add_argument("--half-window", type=int, default=3, help="screen: the median's neighbours on each side")
+    parser.add_argument("--short-gap-frames", type=int, default=None,
+                        help="screen: the learned refiners' short_gap_frames (default: theirs)")
     parser.add_argument("--runs", type=Path, default=ROOT / "checkpoints",
                         help="the folder holding refine_<model>/fold_<P>/ (the output_root of the runs)")
     args = parser.parse_args(argv)
@@ -119,7 +123,8 @@ def main(argv: list[str] | None = None) -> None:
                 refiners = [LearnedRefiner(checkpoint=checkpoint, short_gap_frames=int(v)).fit() for v in values]
             elif args.setting == "screen":
                 clips = list(data.val_motions)
-                refiners = [_screened(base_refiner(model, checkpoint), v, args.half_window) for v in values]
+                refiners = [_screened(base_refiner(model, checkpoint, args.short_gap_frames), v, args.half_window)
+                            for v in values]
             elif args.setting == "short_gap_points":
                 clips = list(data.val_motions)
                 refiners = [LearnedRefiner(checkpoint=checkpoint, short_gap_frames=int(abs(v)),

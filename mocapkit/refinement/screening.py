@@ -24,9 +24,13 @@ from sklearn.base import clone
 from mocapkit.datasets.formats.motion import Motion, point_distance
 from mocapkit.refinement.base import MotionRefiner, check_motion
 
-#: Default ``half_window`` and ``threshold`` (metres) of :class:`MedianScreen` and ``mocapkit refine --screen-outliers``.
-SCREEN_HALF_WINDOW = 3
-SCREEN_THRESHOLD = 0.01
+#: Default ``half_window`` and ``threshold`` (metres) of :class:`MedianScreen` and ``mocapkit refine --screen-outliers``:
+#: two observed neighbours on each side, 5 mm. Chosen on HDM05 validation clips at 120 fps (training performers
+#: only; K ∈ {2, 3, 5} × {5, 7.5, 10, 15 mm}; mean RMS over noise, random loss and gaps): the choice of PCHIP, the
+#: BiGRU and the transformer (LRMF chose 10 mm); ``scripts/refiner_inference_settings.py --setting screen``,
+#: bench/RESULTS.md §13.
+SCREEN_HALF_WINDOW = 2
+SCREEN_THRESHOLD = 0.005
 
 
 def median_outliers(positions: np.ndarray, missing: np.ndarray, half_window: int = 3, threshold: float = 0.01,
