@@ -11,6 +11,7 @@ import os
 import re
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -202,6 +203,22 @@ def test_repair_outliers_changes_observed_samples_only_when_asked(trained, gappy
     assert np.array_equal(kept.positions[observed], source.positions[observed])
 
 
+def test_screen_outliers_in_front_of_the_onnx_refiner_pulls_a_spike_back(trained, gappy, tmp_path, capsys):
+    _, onnx = trained
+    source = read_c3d(gappy)
+    joint, frame = source.joint_names.index("lhumerus"), 150
+    assert not source.missing[frame - 3:frame + 4, joint].any()
+    positions = source.positions.copy()
+    positions[frame, joint] += [0.2, 0.0, 0.0]                             # a 20 cm spike
+    write_c3d(tmp_path / "spiky.c3d", replace(source, positions=positions))
+    rc, printed, err = refine(capsys, tmp_path / "spiky.c3d", tmp_path / "out.c3d", "--onnx", onnx,
+                              "--screen-outliers")
+    assert rc == 0, err
+    assert "MedianScreen(OnnxRefiner)" in printed and "repaired" in printed
+    out = read_c3d(tmp_path / "out.c3d")
+    assert np.linalg.norm(out.positions[frame, joint] - source.positions[frame, joint]) < 0.05
+
+
 def test_joints_in_another_order_with_an_extra_marker(trained, tmp_path, capsys):
     ckpt, _ = trained
     order = np.random.default_rng(2).permutation(CMU31.num_joints)
@@ -228,7 +245,7 @@ def test_onnx_path_never_imports_torch(trained, gappy, tmp_path):
     out = tmp_path / "no_torch.c3d"
     code = ("import sys\n"
             "from mocapkit.refinement.apply import refine_file\n"
-            f"report = refine_file({str(gappy)!r}, {str(out)!r}, onnx={str(onnx)!r})\n"
+            f"report = refine_file({str(gappy)!r}, {str(out)!r}, onnx={str(onnx)!r}, screen_outliers=True)\n"
             "assert report.filled > 0, report.to_text()\n"
             "heavy = sorted(m for m in sys.modules if m.split('.')[0] in ('torch', 'lightning'))\n"
             "assert not heavy, heavy[:5]\n"
