@@ -87,9 +87,10 @@ def base_refiner(model: str, checkpoint: str, short_gap_frames: int | None = Non
     return LearnedRefiner(checkpoint=checkpoint, **extra).fit()
 
 
-def _screened(refiner, threshold: float, half_window: int):
+def _screened(refiner, threshold: float, half_window: int, n_sigmas: float | None):
     from mocapkit.refinement.screening import MedianScreen
-    return refiner if threshold <= 0 else MedianScreen(refiner, half_window=half_window, threshold=threshold)
+    return refiner if threshold <= 0 else MedianScreen(refiner, half_window=half_window, threshold=threshold,
+                                                       n_sigmas=n_sigmas)
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -102,13 +103,19 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--values", type=float, nargs="+", default=None,
                         help="the setting's values to score (default: the grid of SETTINGS)")
     parser.add_argument("--half-window", type=int, default=3, help="screen: the median's neighbours on each side")
+    parser.add_argument("--n-sigmas", type=float, default=None,
+                        help="screen: the Hampel rule's n_sigmas (default: the fixed threshold alone)")
+    parser.add_argument("--clean", action="store_true",
+                        help="screen: also score the uncorrupted clips (RMS over every observed sample)")
     parser.add_argument("--short-gap-frames", type=int, default=None,
                         help="screen: the learned refiners' short_gap_frames (default: theirs)")
     parser.add_argument("--runs", type=Path, default=ROOT / "checkpoints",
                         help="the folder holding refine_<model>/fold_<P>/ (the output_root of the runs)")
     args = parser.parse_args(argv)
     setting = SETTINGS[args.setting]
-    values, protocols = args.values or setting["values"], setting["protocols"]
+    values, protocols = args.values or setting["values"], list(setting["protocols"])
+    if args.clean:
+        protocols.append(("clean", None))
 
     for model in args.models:
         table = np.full((len(protocols), len(values), len(args.folds)), np.nan)
@@ -123,8 +130,8 @@ def main(argv: list[str] | None = None) -> None:
                 refiners = [LearnedRefiner(checkpoint=checkpoint, short_gap_frames=int(v)).fit() for v in values]
             elif args.setting == "screen":
                 clips = list(data.val_motions)
-                refiners = [_screened(base_refiner(model, checkpoint, args.short_gap_frames), v, args.half_window)
-                            for v in values]
+                refiners = [_screened(base_refiner(model, checkpoint, args.short_gap_frames), v, args.half_window,
+                                      args.n_sigmas) for v in values]
             elif args.setting == "short_gap_points":
                 clips = list(data.val_motions)
                 refiners = [LearnedRefiner(checkpoint=checkpoint, short_gap_frames=int(abs(v)),
@@ -136,13 +143,16 @@ def main(argv: list[str] | None = None) -> None:
             for p, (protocol, level) in enumerate(protocols):
                 scores = np.full((len(values), len(clips)), np.nan)
                 for i, clip in enumerate(clips):
-                    try:
-                        corruption = corrupt(clip, protocol, level, seed=i)
-                    except CorruptionError:                      # a clip too short for the protocol: not scored
-                        continue
-                    corrupted = corruption.motion
-                    entries = (~corrupted.missing if args.setting == "threshold"
-                               else corruption.removed | corruption.perturbed)
+                    if protocol == "clean":                      # what false flags cost: every observed sample
+                        corrupted, entries = clip, ~clip.missing
+                    else:
+                        try:
+                            corruption = corrupt(clip, protocol, level, seed=i)
+                        except CorruptionError:                  # a clip too short for the protocol: not scored
+                            continue
+                        corrupted = corruption.motion
+                        entries = (~corrupted.missing if args.setting == "threshold"
+                                   else corruption.removed | corruption.perturbed)
                     for k, refiner in enumerate(refiners):
                         scores[k, i] = rms_error_mm(clip, refiner.refine(corrupted), entries)
                 table[p, :, f] = np.nanmean(scores, axis=1)

@@ -74,17 +74,17 @@ def test_windows_skip_missing_samples_and_do_not_reach_across_long_gaps():
     missing[::2, 0] = True                                  # every other frame of joint 0 missing
     positions[missing] = np.nan
     positions[101, 0] += [0.03, 0.0, 0.0]                   # an observed spike among them
-    assert np.array_equal(np.argwhere(median_outliers(positions, missing)), [[101, 0]])
+    assert np.array_equal(np.argwhere(median_outliers(positions, missing, 3, 0.01)), [[101, 0]])
     # a sample right after a 60-frame gap: every window spans more than 4·half_window frames, so it is not judged
     positions, missing = clean.positions.copy(), clean.missing.copy()
     missing[40:100, 1] = True
     positions[100, 1] += [0.03, 0.0, 0.0]
-    assert not median_outliers(positions, missing)[100, 1]
-    assert median_outliers(positions, missing, max_span=200)[100, 1]
+    assert not median_outliers(positions, missing, 3, 0.01)[100, 1]
+    assert median_outliers(positions, missing, 3, 0.01, max_span=200)[100, 1]
     # beside a 10-frame gap the window narrows to one neighbour on each side (12 frames): still judged
     missing[40:100, 1] = False
     missing[90:100, 1] = True
-    assert np.array_equal(np.argwhere(median_outliers(positions, missing)), [[100, 1]])
+    assert np.array_equal(np.argwhere(median_outliers(positions, missing, 3, 0.01)), [[100, 1]])
 
 
 def test_bad_shapes_and_windows_are_errors():
@@ -176,3 +176,22 @@ def test_cli_screen_outliers_pulls_a_spike_back(tmp_path, capsys):
     assert np.linalg.norm(after[:, marker, 20 + frame] - neighbours) < 20.0          # mm
     assert main(["refine", str(spiky), str(tmp_path / "x.c3d"), "--method", "pchip", "--screen-outliers", "0"]) == 2
     assert "--screen-outliers" in capsys.readouterr().err
+
+
+def test_the_hampel_rule_spares_fast_motion_and_still_flags_noise():
+    # a 30 fps take: one joint swings fast (1.2 m at 3 Hz), one is nearly still; σ = 2 cm noise on the still one
+    fps = 30.0
+    t = np.arange(120)[:, None] / fps
+    fast = np.stack([0.6 * np.sin(2 * np.pi * 3.0 * t[:, 0]), 1.0 + 0.0 * t[:, 0], 0.0 * t[:, 0]], axis=-1)
+    still = np.stack([0.01 * t[:, 0], 1.0 + 0.0 * t[:, 0], 0.2 + 0.0 * t[:, 0]], axis=-1)
+    positions = np.stack([fast, still], axis=1).astype(np.float32)
+    noisy = positions.copy()
+    hit = np.zeros((120, 2), bool)
+    hit[10:110:7, 1] = True
+    noisy[hit] += np.float32([0.02, -0.015, 0.01])
+    missing = np.zeros((120, 2), bool)
+    fixed = median_outliers(noisy, missing, 2, 0.005)
+    hampel = median_outliers(noisy, missing, 2, 0.005, n_sigmas=3.0)
+    assert fixed[:, 0].mean() > 0.2                     # the fixed distance flags a fifth of the fast joint's samples
+    assert not hampel[:, 0].any()                       # its own spread raises the bar there
+    assert np.array_equal(hampel[:, 1], hit[:, 1])      # and the noise on the still joint is still found, exactly

@@ -31,10 +31,12 @@ from mocapkit.refinement.base import MotionRefiner, check_motion
 #: bench/RESULTS.md §13.
 SCREEN_HALF_WINDOW = 2
 SCREEN_THRESHOLD = 0.005
+SCREEN_N_SIGMAS = None
 
 
-def median_outliers(positions: np.ndarray, missing: np.ndarray, half_window: int = 3, threshold: float = 0.01,
-                    max_span: int | None = None) -> np.ndarray:
+def median_outliers(positions: np.ndarray, missing: np.ndarray, half_window: int = SCREEN_HALF_WINDOW,
+                    threshold: float = SCREEN_THRESHOLD, max_span: int | None = None,
+                    n_sigmas: float | None = None) -> np.ndarray:
     """bool ``[T, J]``: the observed samples farther than ``threshold`` (the positions' units, metres for
     everything ``read_motion`` returns) from the per-coordinate median of the ``half_window`` observed samples
     on each side of them, same joint (see the module docstring).
@@ -45,6 +47,9 @@ def median_outliers(positions: np.ndarray, missing: np.ndarray, half_window: int
         half_window: observed neighbours on each side (≥ 1).
         threshold: distance beyond which a sample is flagged.
         max_span: the most frames a window may span, first to last sample (None: ``4 · half_window``).
+        n_sigmas: None: ``threshold`` alone. A number: the Hampel rule, flagged beyond
+            ``max(threshold, n_sigmas · 1.4826 · MAD)`` where MAD is the median of the window's distances to its
+            median (the window's own spread: fast motion and low frame rates raise the bar).
     """
     positions = np.asarray(positions)
     missing = np.asarray(missing, dtype=bool)
@@ -73,7 +78,11 @@ def median_outliers(positions: np.ndarray, missing: np.ndarray, half_window: int
         for h in np.unique(half[half > 0]):
             at = index[half == h]
             window = at[:, None] + np.arange(-h, h + 1)[None]                    # [m, 2h+1]
-            deviation[at] = point_distance(x[at], np.median(x[window], axis=1))
+            centre = np.median(x[window], axis=1)                                 # [m, 3]
+            deviation[at] = point_distance(x[at], centre)
+            if n_sigmas is not None:
+                spread = np.median(point_distance(x[window], centre[:, None]), axis=1)   # MAD, [m]
+                deviation[at] *= deviation[at] > float(n_sigmas) * 1.4826 * spread
         flags[frames[deviation > threshold], j] = True
     return flags
 
@@ -86,15 +95,16 @@ class MedianScreen(MotionRefiner):
     Args:
         refiner: the refiner that fills (any :class:`~mocapkit.refinement.base.MotionRefiner`); ``fit`` fits a
             clone of it (``refiner_``); ``refine`` before ``fit`` uses it as given.
-        half_window, threshold, max_span: those of :func:`median_outliers` (threshold in metres).
+        half_window, threshold, max_span, n_sigmas: those of :func:`median_outliers` (threshold in metres).
     """
 
     def __init__(self, refiner: MotionRefiner, half_window: int = SCREEN_HALF_WINDOW, threshold: float = SCREEN_THRESHOLD,
-                 max_span: int | None = None):
+                 max_span: int | None = None, n_sigmas: float | None = SCREEN_N_SIGMAS):
         self.refiner = refiner
         self.half_window = half_window
         self.threshold = threshold
         self.max_span = max_span
+        self.n_sigmas = n_sigmas
 
     @property
     def requires_fit(self) -> bool:
@@ -113,7 +123,8 @@ class MedianScreen(MotionRefiner):
         """``motion`` with its median outliers hidden and refilled by the refiner, and its gaps filled."""
         check_motion(motion, self.min_frames, what=type(self).__name__)
         refiner = getattr(self, "refiner_", self.refiner)
-        flags = median_outliers(motion.positions, motion.missing, self.half_window, self.threshold, self.max_span)
+        flags = median_outliers(motion.positions, motion.missing, self.half_window, self.threshold, self.max_span,
+                                self.n_sigmas)
         hidden = replace(motion, positions=np.where(flags[..., None], np.float32(np.nan), motion.positions),
                          missing=motion.missing | flags)
         done = refiner.refine(hidden)
