@@ -6,6 +6,8 @@ bit-identical, what the report counts), the comparison runner's fold logic throu
 """
 from __future__ import annotations
 
+import re
+
 import ezc3d
 import numpy as np
 import pytest
@@ -195,3 +197,26 @@ def test_the_hampel_rule_spares_fast_motion_and_still_flags_noise():
     assert fixed[:, 0].mean() > 0.2                     # the fixed distance flags a fifth of the fast joint's samples
     assert not hampel[:, 0].any()                       # its own spread raises the bar there
     assert np.array_equal(hampel[:, 1], hit[:, 1])      # and the noise on the still joint is still found, exactly
+
+
+DASH = SHARED / "data" / "bandai_motion_1" / "data" / "dataset-1_dash_proud_001.bvh"
+SQUAT = SHARED / "data" / "hdm05_cuts11" / "bd" / "HDM_bd_squat1Reps_004_120.amc"
+
+
+@needs(DASH)
+@needs(SQUAT)
+def test_cli_reports_what_the_screen_hid_and_warns_at_low_frame_rates(tmp_path, capsys):
+    # a clean 120 fps HDM05 squat: nothing hidden, no warning
+    assert main(["refine", str(SQUAT), str(tmp_path / "squat.npz"), "--method", "pchip", "--screen-outliers"]) == 0
+    printed = capsys.readouterr().out
+    assert re.search(r"^median screen: hid 0 of \d+ observed samples \(0\.00 %\)", printed, re.MULTILINE), printed
+    assert "warning:" not in printed
+    # a clean 30 fps Bandai dash: fast limbs at a quarter of the rate the defaults were chosen at
+    assert main(["refine", str(DASH), str(tmp_path / "dash.npz"), "--method", "pchip", "--screen-outliers"]) == 0
+    printed = capsys.readouterr().out
+    share = float(re.search(r"^median screen: hid \d+ of \d+ observed samples \((\S+) %\)", printed, re.MULTILINE)[1])
+    assert share > 2.0
+    assert re.search(r"^warning: the screen hid .* chosen at 120 fps, and at 30 fps", printed, re.MULTILINE), printed
+    # a threshold raised for the rate quiets it
+    assert main(["refine", str(DASH), str(tmp_path / "dash2.npz"), "--method", "pchip", "--screen-outliers", "0.08"]) == 0
+    assert "warning:" not in capsys.readouterr().out
