@@ -28,7 +28,8 @@ from mocapkit.refinement.base import MotionRefiner, check_motion
 #: two observed neighbours on each side, 5 mm. Chosen on HDM05 validation clips at 120 fps (training performers
 #: only; K ∈ {2, 3, 5} × {5, 7.5, 10, 15 mm}; mean RMS over noise, random loss and gaps): the choice of PCHIP, the
 #: BiGRU and the transformer (LRMF chose 10 mm); ``scripts/refiner_inference_settings.py --setting screen``,
-#: bench/RESULTS.md §13.
+#: bench/RESULTS.md §13. ``n_sigmas`` None: the fixed threshold alone (the Hampel rule, tried on the same clips,
+#: spares fast clean motion but missed most of the noise with two neighbours a side).
 SCREEN_HALF_WINDOW = 2
 SCREEN_THRESHOLD = 0.005
 SCREEN_N_SIGMAS = None
