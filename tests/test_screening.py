@@ -24,6 +24,7 @@ from mocapkit.refinement.screening import (
     median_outliers,
 )
 from tests.shared_data import SHARED, needs
+from tests.test_refine_cli import spiky_walk
 
 WALK = SHARED / "samples" / "c3d" / "Walking_Hybrid_1_1.c3d"
 
@@ -155,27 +156,19 @@ def test_fit_clones_and_requires_fit_follows_the_refiner():
 
 @needs(WALK)
 def test_cli_screen_outliers_pulls_a_spike_back(tmp_path, capsys):
-    spiky = tmp_path / "spiky.c3d"
-    c3d = ezc3d.c3d(str(WALK))
-    points = c3d["data"]["points"]
-    valid = np.isfinite(points[:3]).all(axis=0) & (points[:3] != 0).any(axis=0)   # [markers, frames]
-    marker, frame = np.argwhere(valid[:, 20:70])[0]
-    points[0, marker, 20 + frame] += 300.0                                  # a 30 cm spike (mm file)
-    c3d["data"]["points"] = points
-    c3d.write(str(spiky))
-    before = ezc3d.c3d(str(spiky))["data"]["points"][:3]
+    spiky, marker, frame, before = spiky_walk(tmp_path)
 
     plain, screened = tmp_path / "plain.c3d", tmp_path / "screened.c3d"
     assert main(["refine", str(spiky), str(plain), "--method", "pchip", "--repair-outliers"]) == 0
-    assert ezc3d.c3d(str(plain))["data"]["points"][0, marker, 20 + frame] == before[0, marker, 20 + frame]
+    assert ezc3d.c3d(str(plain))["data"]["points"][0, marker, frame] == before[0, marker, frame]
     capsys.readouterr()
     assert main(["refine", str(spiky), str(screened), "--method", "pchip", "--screen-outliers"]) == 0
     printed = capsys.readouterr().out
     assert "MedianScreen(PchipInterpolation)" in printed and "repaired" in printed
     after = ezc3d.c3d(str(screened))["data"]["points"][:3]
-    assert abs(after[0, marker, 20 + frame] - before[0, marker, 20 + frame]) > 250.0   # back near the trajectory
-    neighbours = before[:, marker, [20 + frame - 1, 20 + frame + 1]].mean(axis=1)
-    assert np.linalg.norm(after[:, marker, 20 + frame] - neighbours) < 20.0          # mm
+    assert abs(after[0, marker, frame] - before[0, marker, frame]) > 250.0   # back near the trajectory
+    neighbours = before[:, marker, [frame - 1, frame + 1]].mean(axis=1)
+    assert np.linalg.norm(after[:, marker, frame] - neighbours) < 20.0          # mm
     assert main(["refine", str(spiky), str(tmp_path / "x.c3d"), "--method", "pchip", "--screen-outliers", "0"]) == 2
     assert "--screen-outliers" in capsys.readouterr().err
 
