@@ -61,30 +61,27 @@ def median_outliers(positions: np.ndarray, missing: np.ndarray, half_window: int
     if k < 1:
         raise ValueError(f"median_outliers: half_window must be ≥ 1, got {half_window}")
     span = 4 * k if max_span is None else int(max_span)
+    # every joint's observed samples in one array, joint after joint (windows never cross a joint's ends)
+    joint, frame = np.nonzero(~missing.T)                                        # [N] each, by joint then frame
+    x = positions[frame, joint].astype(np.float64)                               # [N, 3]
+    index = np.arange(joint.size)
+    first = np.searchsorted(joint, joint, side="left")                           # the joint's first sample
+    last = np.searchsorted(joint, joint, side="right") - 1                       # and its last
+    half = np.zeros(joint.size, dtype=np.int64)        # per sample, the widest symmetric window within the span
+    for h in range(1, k + 1):
+        inside = np.flatnonzero((index - first >= h) & (last - index >= h))
+        half[inside[frame[inside + h] - frame[inside - h] <= span]] = h
+    deviation = np.zeros(joint.size)
+    for h in np.unique(half[half > 0]):
+        at = index[half == h]
+        window = at[:, None] + np.arange(-h, h + 1)[None]                        # [m, 2h+1]
+        centre = np.median(x[window], axis=1)                                     # [m, 3]
+        deviation[at] = point_distance(x[at], centre)
+        if n_sigmas is not None:
+            spread = np.median(point_distance(x[window], centre[:, None]), axis=1)   # MAD, [m]
+            deviation[at] *= deviation[at] > float(n_sigmas) * 1.4826 * spread
     flags = np.zeros(missing.shape, dtype=bool)
-    for j in range(missing.shape[1]):
-        frames = np.flatnonzero(~missing[:, j])
-        n = frames.size
-        if n < 3:
-            continue
-        x = positions[frames, j].astype(np.float64)                              # [n, 3]
-        index = np.arange(n)
-        half = np.zeros(n, dtype=np.int64)              # per sample, the widest symmetric window within the span
-        for h in range(1, k + 1):
-            inside = (index >= h) & (index < n - h)
-            fits = np.zeros(n, dtype=bool)
-            fits[inside] = frames[index[inside] + h] - frames[index[inside] - h] <= span
-            half[fits] = h
-        deviation = np.zeros(n)
-        for h in np.unique(half[half > 0]):
-            at = index[half == h]
-            window = at[:, None] + np.arange(-h, h + 1)[None]                    # [m, 2h+1]
-            centre = np.median(x[window], axis=1)                                 # [m, 3]
-            deviation[at] = point_distance(x[at], centre)
-            if n_sigmas is not None:
-                spread = np.median(point_distance(x[window], centre[:, None]), axis=1)   # MAD, [m]
-                deviation[at] *= deviation[at] > float(n_sigmas) * 1.4826 * spread
-        flags[frames[deviation > threshold], j] = True
+    flags[frame[deviation > threshold], joint[deviation > threshold]] = True
     return flags
 
 
