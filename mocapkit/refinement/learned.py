@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from mocapkit.datasets.formats.motion import Motion, point_distance
+from mocapkit.datasets.frames import true_runs
 from mocapkit.refinement.base import MotionRefiner, RefinementError
 
 #: Default inference window in training windows. Both networks run on any length, and with twice the training
@@ -104,9 +105,7 @@ def short_gaps(missing: np.ndarray, longest: int) -> np.ndarray:
     if longest <= 0:
         return out
     for j in np.flatnonzero(missing.any(axis=0)):
-        gap = np.concatenate([[False], missing[:, j], [False]]).astype(np.int8)
-        starts, ends = np.flatnonzero(np.diff(gap) == 1), np.flatnonzero(np.diff(gap) == -1)   # [start, end)
-        for a, b in zip(starts, ends):
+        for a, b in true_runs(missing[:, j]):                                     # [a, b)
             if a > 0 and b < len(missing) and b - a <= longest:
                 out[a:b, j] = True
     return out
