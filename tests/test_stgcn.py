@@ -45,9 +45,15 @@ def test_forward_shapes(layout, bodies):
         stgcn(3, layout="kinect15")
 
 
-def test_zero_padded_frames_and_absent_bodies_do_not_change_the_output():
+@pytest.mark.parametrize("temporal", ["conv", "multiscale"])
+def test_zero_padded_frames_and_absent_bodies_do_not_change_the_output(temporal):
     torch.manual_seed(0)
-    model = stgcn(5, layout="ntu25", streams=["joint", "velocity", "bone"], scale=True, dropout=0.2).eval()
+    model = stgcn(5, layout="ntu25", streams=["joint", "velocity", "bone"], scale=True, dropout=0.2,
+                  temporal=temporal).eval()
+    for m in model.modules():                   # BN statistics away from 0 / 1, so a leak of padding would show
+        if isinstance(m, torch.nn.BatchNorm2d):
+            m.running_mean.uniform_(-1, 1)
+            m.bias.data.uniform_(-1, 1)
     x = torch.randn(4, 2, 37, 25, 3) * 0.3 + torch.tensor([0.0, 0.0, 3.0])
     x[:, 1] = 0.0                                                  # second body absent
     x[2, :, 21:] = 0.0                                             # a shorter sample
@@ -59,6 +65,29 @@ def test_zero_padded_frames_and_absent_bodies_do_not_change_the_output():
     torch.testing.assert_close(padded, ref, atol=1e-5, rtol=1e-5)
     torch.testing.assert_close(one_body, ref, atol=1e-5, rtol=1e-5)
     torch.testing.assert_close(alone, ref[2:3], atol=1e-5, rtol=1e-5)
+
+
+def test_multiscale_temporal_unit_shapes_receptive_field_and_bad_settings():
+    from mocapkit.models.stgcn import MultiScaleTemporalConv
+
+    unit = MultiScaleTemporalConv(8, 32, stride=2).eval()
+    widths = [branch[0].out_channels for branch in unit.squeeze]
+    assert widths == [7, 5, 5, 5, 5, 5] and sum(widths) == 32
+    x = torch.zeros(1, 8, 21, 4)
+    mask = torch.ones(1, 1, 21, 1)
+    assert unit(x, mask).shape == (1, 32, 11, 4)
+    # the widest branch (dilation 4) reaches 4 frames each side and no farther
+    unit = MultiScaleTemporalConv(4, 12).eval()
+    x = torch.randn(1, 4, 21, 3)
+    base = unit(x, mask)
+    moved = x.clone()
+    moved[:, :, 10] += 1.0
+    changed = (unit(moved, mask) - base).abs().amax(dim=(0, 1, 3)) > 1e-6
+    assert changed.nonzero().flatten().tolist() == list(range(6, 15))
+    with pytest.raises(ValueError, match="at least 6 channels"):
+        MultiScaleTemporalConv(4, 5)
+    with pytest.raises(ValueError, match="unknown temporal unit 'tcn'"):
+        stgcn(3, layout="msr20", temporal="tcn")
 
 
 def test_centering_makes_it_translation_invariant():
@@ -92,12 +121,13 @@ def test_it_learns_a_toy_two_class_problem():
         assert (model(x).argmax(1) == labels).float().mean() > 0.95
 
 
-def test_onnx_export_on_msr20_one_body(tmp_path):
+@pytest.mark.parametrize("temporal", ["conv", "multiscale"])
+def test_onnx_export_on_msr20_one_body(tmp_path, temporal):
     """`mocapkit export`'s function takes the joint count from ``model.layout``; bodies and frames are dynamic."""
     from mocapkit.deploy.skeleton_export import export_onnx
 
     model = stgcn(4, layout="msr20", streams=["joint", "velocity", "bone"], scale=True,
-                  channels=[16, 16], strides=[2, 1])
+                  channels=[16, 16], strides=[2, 1], temporal=temporal)
     report = export_onnx(model, tmp_path / "gcn.onnx", class_names=list("abcd"), trace_shape=(2, 32),
                          check_shape=(3, 41))
     assert report["layout"] == "msr20" and report["traced_shape"][3] == 20

@@ -10,6 +10,11 @@ so the same code runs on NTU-25, MSR-20 and CMU-31 skeletons.
   the neighbour nearer the root/centre) and *outward* (from its children). The three sum to
   the symmetric ``Â``; inward is outward transposed. Each block also learns an additive
   correction of the three matrices (initialised to zero; ``adaptive``).
+* **Temporal unit.** ``temporal="conv"``: one ``kernel_size`` convolution over frames (ST-GCN).
+  ``temporal="multiscale"``: ST-GCN++'s multi-scale unit (Duan et al., "PYSKL: towards good practices for
+  skeleton action recognition", ACM MM 2022) — six parallel branches on a sixth of the channels each (1×1 then a
+  3-frame convolution at dilations 1, 2, 3, 4; 1×1 then a 3-frame max-pool; 1×1 alone), concatenated, BN, ReLU and
+  a 1×1 convolution; the branches see the frame mask, so padding stays inert.
 * **Input.** Skeletons ``[N, M, T, J, 3]`` as the data modules give them (zeros where a body or
   frame is absent). Optional pre-normalisation inside the model: centre on the median position of
   body 0's root joint over its present frames (``center``), divide by body 0's median pelvis-neck
@@ -72,16 +77,57 @@ class GraphConv(nn.Module):
         return torch.einsum("nkctj,kij->ncti", y, a)
 
 
+TEMPORAL_UNITS = ("conv", "multiscale")
+
+
+class MultiScaleTemporalConv(nn.Module):
+    """ST-GCN++'s multi-scale temporal unit: ``[N, C, T, J]`` (zero at absent frames) → ``[N, C', T / stride, J]``.
+
+    Six branches, each on about ``C' / 6`` channels (the first takes the remainder): 1×1 conv → BN → ReLU, then a
+    3-frame convolution with dilation 1, 2, 3 or 4, or a 3-frame max-pool, or nothing (the 1×1 branch, strided);
+    concatenated → BN → ReLU → 1×1 conv. The branch activations are multiplied by the frame mask before the
+    temporal step, so absent frames contribute the zeros that a convolution's own padding would.
+    """
+
+    DILATIONS = (1, 2, 3, 4)
+
+    def __init__(self, in_channels: int, out_channels: int, stride: int = 1):
+        super().__init__()
+        branches = len(self.DILATIONS) + 2
+        mid = out_channels // branches
+        if mid < 1:
+            raise ValueError(f"the multi-scale temporal unit needs at least {branches} channels, got {out_channels}")
+        widths = [out_channels - mid * (branches - 1)] + [mid] * (branches - 1)
+        self.squeeze = nn.ModuleList(nn.Sequential(nn.Conv2d(in_channels, w, 1), nn.BatchNorm2d(w), nn.ReLU())
+                                     for w in widths)
+        temporal = [nn.Conv2d(w, w, (3, 1), (stride, 1), (d, 0), (d, 1)) for w, d in zip(widths, self.DILATIONS)]
+        temporal.append(nn.MaxPool2d((3, 1), (stride, 1), (1, 0)))
+        temporal.append(nn.Conv2d(widths[-1], widths[-1], 1, (stride, 1)))
+        self.temporal = nn.ModuleList(temporal)
+        self.mix = nn.Sequential(nn.BatchNorm2d(out_channels), nn.ReLU(), nn.Conv2d(out_channels, out_channels, 1))
+
+    def forward(self, x: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+        """``x`` ``[N, C, T, J]``, ``mask`` ``[N, 1, T, 1]`` (1 = present)."""
+        out = [step(squeeze(x) * mask) for squeeze, step in zip(self.squeeze, self.temporal)]
+        return self.mix(torch.cat(out, dim=1))
+
+
 class STGCNBlock(nn.Module):
-    """Graph convolution → BN → ReLU → temporal convolution (stride) → BN, plus a residual, → ReLU."""
+    """Graph convolution → BN → ReLU → temporal unit (stride) → BN, plus a residual, → ReLU."""
 
     def __init__(self, in_channels: int, out_channels: int, adjacency: torch.Tensor, stride: int = 1,
-                 kernel_size: int = 9, dropout: float = 0.0, residual: bool = True, adaptive: bool = True):
+                 kernel_size: int = 9, dropout: float = 0.0, residual: bool = True, adaptive: bool = True,
+                 temporal: str = "conv"):
         super().__init__()
+        if temporal not in TEMPORAL_UNITS:
+            raise ValueError(f"unknown temporal unit {temporal!r}; choose from {TEMPORAL_UNITS}")
         self.gcn = GraphConv(in_channels, out_channels, adjacency, adaptive)
         self.bn1 = nn.BatchNorm2d(out_channels)
-        pad = (kernel_size - 1) // 2
-        self.tcn = nn.Conv2d(out_channels, out_channels, (kernel_size, 1), (stride, 1), (pad, 0))
+        if temporal == "conv":
+            pad = (kernel_size - 1) // 2
+            self.tcn = nn.Conv2d(out_channels, out_channels, (kernel_size, 1), (stride, 1), (pad, 0))
+        else:
+            self.tcn = MultiScaleTemporalConv(out_channels, out_channels, stride)
         self.bn2 = nn.BatchNorm2d(out_channels)
         self.dropout = nn.Dropout(dropout)
         self.stride = stride
@@ -96,7 +142,8 @@ class STGCNBlock(nn.Module):
     def forward(self, x: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """``x`` ``[N, C, T, J]`` (zero at absent frames), ``mask`` ``[N, 1, T, 1]`` → both downsampled."""
         y = F.relu(self.bn1(self.gcn(x))) * mask
-        y = self.dropout(self.bn2(self.tcn(y)))
+        y = self.tcn(y, mask) if isinstance(self.tcn, MultiScaleTemporalConv) else self.tcn(y)
+        y = self.dropout(self.bn2(y))
         out_mask = mask[:, :, :: self.stride]
         if self.residual is not None:
             y = y + self.residual(x)
@@ -112,19 +159,21 @@ class STGCN(nn.Module):
         in_channels: coordinates per joint (3).
         channels: output channels of each block (CPU-sized default: 64, 64, 128, 128).
         strides: temporal stride of each block.
-        kernel_size: temporal kernel (frames).
+        kernel_size: temporal kernel (frames) of the ``conv`` temporal unit.
         streams: input features concatenated as channels, any of ``joint``, ``velocity`` (frame differences of
             the joints), ``bone`` (joint minus parent) and ``bone_velocity`` (frame differences of the bones).
         center: subtract the median position of body 0's root joint over its present frames.
         scale: divide by the median pelvis-neck length of body 0 (needs the layout's landmarks).
         adaptive: learn an additive correction of the adjacency in each block.
         dropout: dropout inside blocks; ``head_dropout``: before the classifier.
+        temporal: the blocks' temporal unit, ``conv`` (ST-GCN) or ``multiscale`` (ST-GCN++; ``kernel_size`` unused).
     """
 
     def __init__(self, layout: SkeletonLayout | str, num_classes: int, in_channels: int = 3,
                  channels: tuple[int, ...] = (64, 64, 128, 128), strides: tuple[int, ...] = (1, 1, 2, 1),
                  kernel_size: int = 9, streams: tuple[str, ...] = ("joint",), center: bool = True,
-                 scale: bool = False, adaptive: bool = True, dropout: float = 0.0, head_dropout: float = 0.0):
+                 scale: bool = False, adaptive: bool = True, dropout: float = 0.0, head_dropout: float = 0.0,
+                 temporal: str = "conv"):
         super().__init__()
         self.layout = get_layout(layout)
         streams = tuple(streams)
@@ -150,7 +199,7 @@ class STGCN(nn.Module):
         blocks, c_in = [], features
         for k, (c_out, stride) in enumerate(zip(channels, strides)):
             blocks.append(STGCNBlock(c_in, c_out, adjacency, stride, kernel_size, dropout,
-                                     residual=k > 0, adaptive=adaptive))
+                                     residual=k > 0, adaptive=adaptive, temporal=temporal))
             c_in = c_out
         self.blocks = nn.ModuleList(blocks)
         self.head_dropout = nn.Dropout(head_dropout)
@@ -215,10 +264,10 @@ def stgcn(num_classes: int, layout: SkeletonLayout | str = "ntu25", in_channels:
           channels: tuple[int, ...] | list[int] = (64, 64, 128, 128),
           strides: tuple[int, ...] | list[int] = (1, 1, 2, 1), kernel_size: int = 9,
           streams: tuple[str, ...] | list[str] = ("joint",), center: bool = True, scale: bool = False,
-          adaptive: bool = True, dropout: float = 0.0, head_dropout: float = 0.0) -> STGCN:
+          adaptive: bool = True, dropout: float = 0.0, head_dropout: float = 0.0, temporal: str = "conv") -> STGCN:
     """Hydra builder of :class:`STGCN` (``configs/model/stgcn.yaml``); lists are accepted for tuples."""
     return STGCN(layout, num_classes, in_channels, tuple(channels), tuple(strides), kernel_size, tuple(streams),
-                 center, scale, adaptive, dropout, head_dropout)
+                 center, scale, adaptive, dropout, head_dropout, temporal)
 
 
 class MultiStreamSTGCN(nn.Module):
@@ -254,8 +303,8 @@ def stgcn_ensemble(num_classes: int, layout: SkeletonLayout | str = "ntu25",
                    channels: tuple[int, ...] | list[int] = (64, 64, 128, 128),
                    strides: tuple[int, ...] | list[int] = (1, 1, 2, 1), kernel_size: int = 9, center: bool = True,
                    scale: bool = False, adaptive: bool = True, dropout: float = 0.0,
-                   head_dropout: float = 0.0) -> MultiStreamSTGCN:
+                   head_dropout: float = 0.0, temporal: str = "conv") -> MultiStreamSTGCN:
     """Hydra builder of :class:`MultiStreamSTGCN` (``configs/model/stgcn_ensemble.yaml``)."""
     return MultiStreamSTGCN(layout, num_classes, streams, in_channels=in_channels, channels=tuple(channels),
                             strides=tuple(strides), kernel_size=kernel_size, center=center, scale=scale,
-                            adaptive=adaptive, dropout=dropout, head_dropout=head_dropout)
+                            adaptive=adaptive, dropout=dropout, head_dropout=head_dropout, temporal=temporal)
