@@ -45,15 +45,18 @@ def test_forward_shapes(layout, bodies):
         stgcn(3, layout="kinect15")
 
 
-@pytest.mark.parametrize("temporal", ["conv", "multiscale"])
-def test_zero_padded_frames_and_absent_bodies_do_not_change_the_output(temporal):
+@pytest.mark.parametrize("temporal,topology", [("conv", "shared"), ("multiscale", "shared"),
+                                               ("conv", "channelwise")])
+def test_zero_padded_frames_and_absent_bodies_do_not_change_the_output(temporal, topology):
     torch.manual_seed(0)
     model = stgcn(5, layout="ntu25", streams=["joint", "velocity", "bone"], scale=True, dropout=0.2,
-                  temporal=temporal).eval()
+                  temporal=temporal, topology=topology).eval()
     for m in model.modules():                   # BN statistics away from 0 / 1, so a leak of padding would show
         if isinstance(m, torch.nn.BatchNorm2d):
             m.running_mean.uniform_(-1, 1)
             m.bias.data.uniform_(-1, 1)
+        if hasattr(m, "alpha"):                 # the channel-wise refinement switched on
+            m.alpha.data.fill_(0.5)
     x = torch.randn(4, 2, 37, 25, 3) * 0.3 + torch.tensor([0.0, 0.0, 3.0])
     x[:, 1] = 0.0                                                  # second body absent
     x[2, :, 21:] = 0.0                                             # a shorter sample
@@ -76,8 +79,10 @@ def test_multiscale_temporal_unit_shapes_receptive_field_and_bad_settings():
     x = torch.zeros(1, 8, 21, 4)
     mask = torch.ones(1, 1, 21, 1)
     assert unit(x, mask).shape == (1, 32, 11, 4)
-    # the widest branch (dilation 4) reaches 4 frames each side and no farther
-    unit = MultiScaleTemporalConv(4, 12).eval()
+    # the widest branch (dilation 4) reaches 4 frames each side and no farther (10 channels a branch, so the
+    # ReLU before the step cannot hide the change from a whole branch)
+    torch.manual_seed(0)
+    unit = MultiScaleTemporalConv(4, 60).eval()
     x = torch.randn(1, 4, 21, 3)
     base = unit(x, mask)
     moved = x.clone()
@@ -88,6 +93,29 @@ def test_multiscale_temporal_unit_shapes_receptive_field_and_bad_settings():
         MultiScaleTemporalConv(4, 5)
     with pytest.raises(ValueError, match="unknown temporal unit 'tcn'"):
         stgcn(3, layout="msr20", temporal="tcn")
+
+
+def test_channelwise_topology_starts_from_the_shared_graph_and_then_depends_on_the_sample():
+    from mocapkit.models.stgcn import GraphConv
+
+    torch.manual_seed(0)
+    a = spatial_adjacency(MSR20)
+    shared = GraphConv(6, 16, a)
+    refined = GraphConv(6, 16, a, topology="channelwise")
+    refined.load_state_dict(shared.state_dict(), strict=False)
+    x = torch.randn(3, 6, 10, 20)
+    torch.testing.assert_close(refined(x), shared(x))                 # alpha = 0: CTR-GCN's starting point
+    assert refined.relation_channels == 8
+    refined.alpha.data.fill_(1.0)
+    out = refined(x)
+    assert not torch.allclose(out, shared(x), atol=1e-3)
+    # the refinement is per sample: a sample's output does not depend on the rest of the batch
+    torch.testing.assert_close(refined(x[1:2]), out[1:2])
+    # and per channel: the same input channels, different gathering per output channel
+    q = refined.relation_out(torch.tanh(torch.randn(1, 24, 20, 1) - torch.randn(1, 24, 1, 20)))
+    assert q.view(3, 16, 20, 20).std(dim=1).mean() > 1e-3
+    with pytest.raises(ValueError, match="unknown graph topology 'ctr'"):
+        GraphConv(6, 16, a, topology="ctr")
 
 
 def test_centering_makes_it_translation_invariant():
@@ -121,13 +149,16 @@ def test_it_learns_a_toy_two_class_problem():
         assert (model(x).argmax(1) == labels).float().mean() > 0.95
 
 
-@pytest.mark.parametrize("temporal", ["conv", "multiscale"])
-def test_onnx_export_on_msr20_one_body(tmp_path, temporal):
+@pytest.mark.parametrize("temporal,topology", [("conv", "shared"), ("multiscale", "channelwise")])
+def test_onnx_export_on_msr20_one_body(tmp_path, temporal, topology):
     """`mocapkit export`'s function takes the joint count from ``model.layout``; bodies and frames are dynamic."""
     from mocapkit.deploy.skeleton_export import export_onnx
 
     model = stgcn(4, layout="msr20", streams=["joint", "velocity", "bone"], scale=True,
-                  channels=[16, 16], strides=[2, 1], temporal=temporal)
+                  channels=[16, 16], strides=[2, 1], temporal=temporal, topology=topology)
+    for m in model.modules():
+        if hasattr(m, "alpha"):
+            m.alpha.data.fill_(0.5)
     report = export_onnx(model, tmp_path / "gcn.onnx", class_names=list("abcd"), trace_shape=(2, 32),
                          check_shape=(3, 41))
     assert report["layout"] == "msr20" and report["traced_shape"][3] == 20

@@ -9,7 +9,8 @@ so the same code runs on NTU-25, MSR-20 and CMU-31 skeletons.
   ``[J, J]`` matrices: *self* (the diagonal), *inward* (each joint gathers from its parent,
   the neighbour nearer the root/centre) and *outward* (from its children). The three sum to
   the symmetric ``Â``; inward is outward transposed. Each block also learns an additive
-  correction of the three matrices (initialised to zero; ``adaptive``).
+  correction of the three matrices (initialised to zero; ``adaptive``); ``topology="channelwise"`` adds
+  CTR-GCN's per-sample, per-channel refinement (:class:`GraphConv`).
 * **Temporal unit.** ``temporal="conv"``: one ``kernel_size`` convolution over frames (ST-GCN).
   ``temporal="multiscale"``: ST-GCN++'s multi-scale unit (Duan et al., "PYSKL: towards good practices for
   skeleton action recognition", ACM MM 2022) — six parallel branches on a sixth of the channels each (1×1 then a
@@ -59,22 +60,52 @@ def spatial_adjacency(layout: SkeletonLayout | str) -> torch.Tensor:
     return torch.stack((norm * torch.eye(j), norm * inward, norm * outward))
 
 
-class GraphConv(nn.Module):
-    """Spatial graph convolution over ``K`` partitions: ``[N, C, T, J]`` → ``[N, C', T, J]``."""
+TOPOLOGIES = ("shared", "channelwise")
 
-    def __init__(self, in_channels: int, out_channels: int, adjacency: torch.Tensor, adaptive: bool = True):
+
+class GraphConv(nn.Module):
+    """Spatial graph convolution over ``K`` partitions: ``[N, C, T, J]`` → ``[N, C', T, J]``.
+
+    ``topology="shared"``: every channel and sample gathers through the same ``[K, J, J]`` adjacency (plus the
+    learned correction when ``adaptive``). ``topology="channelwise"``: CTR-GCN's channel-wise topology refinement
+    (Chen et al., "Channel-wise topology refinement graph convolution for skeleton-based action recognition",
+    ICCV 2021): per partition, two 1×1 convolutions to ``R = max(8, C / 8)`` channels, averaged over the present
+    frames, give joint descriptors ``u_i, v_j``; ``tanh(u_i - v_j)`` lifted by a 1×1 convolution to ``C'`` channels
+    is a per-sample, per-channel ``[C', J, J]`` correction, scaled by a learned ``alpha`` (initialised to 0, so
+    training starts from the shared graph) and added to the partition's adjacency.
+    """
+
+    def __init__(self, in_channels: int, out_channels: int, adjacency: torch.Tensor, adaptive: bool = True,
+                 topology: str = "shared"):
         super().__init__()
+        if topology not in TOPOLOGIES:
+            raise ValueError(f"unknown graph topology {topology!r}; choose from {TOPOLOGIES}")
         self.k = adjacency.shape[0]
         self.register_buffer("adjacency", adjacency.clone())
         self.correction = nn.Parameter(torch.zeros_like(adjacency)) if adaptive else None
         self.conv = nn.Conv2d(in_channels, out_channels * self.k, kernel_size=1)
         self.out_channels = out_channels
+        self.channelwise = topology == "channelwise"
+        if self.channelwise:
+            r = max(8, in_channels // 8)
+            self.relation_in = nn.Conv2d(in_channels, 2 * self.k * r, kernel_size=1)     # u and v of each partition
+            self.relation_out = nn.Conv2d(self.k * r, self.k * out_channels, kernel_size=1, groups=self.k)
+            self.alpha = nn.Parameter(torch.zeros(1))
+            self.relation_channels = r
 
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
+    def forward(self, x: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:
+        """``x`` ``[N, C, T, J]`` (zero at absent frames), ``mask`` ``[N, 1, T, 1]`` (1 = present; None: all)."""
         n, _, t, j = x.shape
         a = self.adjacency if self.correction is None else self.adjacency + self.correction
         y = self.conv(x).view(n, self.k, self.out_channels, t, j)
-        return torch.einsum("nkctj,kij->ncti", y, a)
+        if not self.channelwise:
+            return torch.einsum("nkctj,kij->ncti", y, a)
+        frames = torch.full_like(x[:, :1, :, :1], 1.0) if mask is None else mask
+        mean = (self.relation_in(x) * frames).sum(2) / frames.sum(2).clamp(min=1.0)      # [N, 2KR, J]
+        u, v = mean.view(n, 2, self.k * self.relation_channels, j).unbind(1)
+        relation = torch.tanh(u[..., :, None] - v[..., None, :])                        # [N, KR, J, J]
+        q = self.relation_out(relation).view(n, self.k, self.out_channels, j, j)
+        return torch.einsum("nkctj,nkcij->ncti", y, a[None, :, None] + self.alpha * q)
 
 
 TEMPORAL_UNITS = ("conv", "multiscale")
@@ -117,11 +148,11 @@ class STGCNBlock(nn.Module):
 
     def __init__(self, in_channels: int, out_channels: int, adjacency: torch.Tensor, stride: int = 1,
                  kernel_size: int = 9, dropout: float = 0.0, residual: bool = True, adaptive: bool = True,
-                 temporal: str = "conv"):
+                 temporal: str = "conv", topology: str = "shared"):
         super().__init__()
         if temporal not in TEMPORAL_UNITS:
             raise ValueError(f"unknown temporal unit {temporal!r}; choose from {TEMPORAL_UNITS}")
-        self.gcn = GraphConv(in_channels, out_channels, adjacency, adaptive)
+        self.gcn = GraphConv(in_channels, out_channels, adjacency, adaptive, topology)
         self.bn1 = nn.BatchNorm2d(out_channels)
         if temporal == "conv":
             pad = (kernel_size - 1) // 2
@@ -141,7 +172,7 @@ class STGCNBlock(nn.Module):
 
     def forward(self, x: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """``x`` ``[N, C, T, J]`` (zero at absent frames), ``mask`` ``[N, 1, T, 1]`` → both downsampled."""
-        y = F.relu(self.bn1(self.gcn(x))) * mask
+        y = F.relu(self.bn1(self.gcn(x, mask))) * mask
         y = self.tcn(y, mask) if isinstance(self.tcn, MultiScaleTemporalConv) else self.tcn(y)
         y = self.dropout(self.bn2(y))
         out_mask = mask[:, :, :: self.stride]
@@ -167,13 +198,15 @@ class STGCN(nn.Module):
         adaptive: learn an additive correction of the adjacency in each block.
         dropout: dropout inside blocks; ``head_dropout``: before the classifier.
         temporal: the blocks' temporal unit, ``conv`` (ST-GCN) or ``multiscale`` (ST-GCN++; ``kernel_size`` unused).
+        topology: ``shared`` (one adjacency per partition) or ``channelwise`` (CTR-GCN's refinement, see
+            :class:`GraphConv`).
     """
 
     def __init__(self, layout: SkeletonLayout | str, num_classes: int, in_channels: int = 3,
                  channels: tuple[int, ...] = (64, 64, 128, 128), strides: tuple[int, ...] = (1, 1, 2, 1),
                  kernel_size: int = 9, streams: tuple[str, ...] = ("joint",), center: bool = True,
                  scale: bool = False, adaptive: bool = True, dropout: float = 0.0, head_dropout: float = 0.0,
-                 temporal: str = "conv"):
+                 temporal: str = "conv", topology: str = "shared"):
         super().__init__()
         self.layout = get_layout(layout)
         streams = tuple(streams)
@@ -199,7 +232,8 @@ class STGCN(nn.Module):
         blocks, c_in = [], features
         for k, (c_out, stride) in enumerate(zip(channels, strides)):
             blocks.append(STGCNBlock(c_in, c_out, adjacency, stride, kernel_size, dropout,
-                                     residual=k > 0, adaptive=adaptive, temporal=temporal))
+                                     residual=k > 0, adaptive=adaptive, temporal=temporal,
+                                     topology=topology))
             c_in = c_out
         self.blocks = nn.ModuleList(blocks)
         self.head_dropout = nn.Dropout(head_dropout)
@@ -264,10 +298,11 @@ def stgcn(num_classes: int, layout: SkeletonLayout | str = "ntu25", in_channels:
           channels: tuple[int, ...] | list[int] = (64, 64, 128, 128),
           strides: tuple[int, ...] | list[int] = (1, 1, 2, 1), kernel_size: int = 9,
           streams: tuple[str, ...] | list[str] = ("joint",), center: bool = True, scale: bool = False,
-          adaptive: bool = True, dropout: float = 0.0, head_dropout: float = 0.0, temporal: str = "conv") -> STGCN:
+          adaptive: bool = True, dropout: float = 0.0, head_dropout: float = 0.0, temporal: str = "conv",
+          topology: str = "shared") -> STGCN:
     """Hydra builder of :class:`STGCN` (``configs/model/stgcn.yaml``); lists are accepted for tuples."""
     return STGCN(layout, num_classes, in_channels, tuple(channels), tuple(strides), kernel_size, tuple(streams),
-                 center, scale, adaptive, dropout, head_dropout, temporal)
+                 center, scale, adaptive, dropout, head_dropout, temporal, topology)
 
 
 class MultiStreamSTGCN(nn.Module):
@@ -303,8 +338,9 @@ def stgcn_ensemble(num_classes: int, layout: SkeletonLayout | str = "ntu25",
                    channels: tuple[int, ...] | list[int] = (64, 64, 128, 128),
                    strides: tuple[int, ...] | list[int] = (1, 1, 2, 1), kernel_size: int = 9, center: bool = True,
                    scale: bool = False, adaptive: bool = True, dropout: float = 0.0,
-                   head_dropout: float = 0.0, temporal: str = "conv") -> MultiStreamSTGCN:
+                   head_dropout: float = 0.0, temporal: str = "conv", topology: str = "shared") -> MultiStreamSTGCN:
     """Hydra builder of :class:`MultiStreamSTGCN` (``configs/model/stgcn_ensemble.yaml``)."""
     return MultiStreamSTGCN(layout, num_classes, streams, in_channels=in_channels, channels=tuple(channels),
                             strides=tuple(strides), kernel_size=kernel_size, center=center, scale=scale,
-                            adaptive=adaptive, dropout=dropout, head_dropout=head_dropout, temporal=temporal)
+                            adaptive=adaptive, dropout=dropout, head_dropout=head_dropout, temporal=temporal,
+                            topology=topology)
