@@ -111,6 +111,12 @@ def test_every_cell_is_run_and_summarised_as_mean_and_sd(tmp_path):
     assert {(c["method"], c["protocol"], c["seed"]) for c in saved["cells"]} == \
         {(m, p, s) for m in methods for p in ("easy", "fixed") for s in (0, 1, 2)}
     assert len(saved["cells"]) == 4 * 2 * 3 and saved["machine"]["cpu_count"] >= 1
+    import lightning
+    import torch
+    # the versions that shape learned numbers are recorded, in the json and in the report's first paragraph
+    assert saved["machine"]["torch"] == torch.__version__ and saved["machine"]["numpy"] == np.__version__
+    assert f"torch {torch.__version__}, Lightning {lightning.__version__}, numpy {np.__version__}" in \
+        (tmp_path / "out" / "results.md").read_text()
     for protocol in ("easy", "fixed"):
         for seed in (0, 1, 2):
             cells = [c for c in saved["cells"] if c["protocol"] == protocol and c["seed"] == seed]

@@ -79,13 +79,21 @@ def cells_markdown(results: dict, benchmark: Benchmark) -> str:
     return "\n".join(lines) + "\n"
 
 
+def versions(host: dict) -> str:
+    """``"torch 2.14.1, Lightning 2.6.6, numpy 2.4.6, scikit-learn 1.9.1"`` from a results file's ``machine``
+    (the packages it recorded; results of earlier versions recorded torch and scikit-learn only)."""
+    names = (("torch", "torch"), ("lightning", "Lightning"), ("numpy", "numpy"), ("sklearn", "scikit-learn"))
+    return ", ".join(f"{label} {host[key]}" for key, label in names if host.get(key))
+
+
 def results_markdown(results: dict, benchmark: Benchmark) -> str:
     """The whole ``results.md``."""
     host = results["machine"]
     lines = [f"# Comparison `{results['name']}`: {results['benchmark']['title']}", "",
              (f"Benchmark `{results['benchmark']['target']}`; protocols {', '.join(results['protocols'])}; seeds "
               f"{results['seeds']}; {len(results['cells'])} cells in {results['elapsed_s'] / 60:.1f} min on "
-              f"{host['processor']} ({host['cpu_count']} CPUs, OMP_NUM_THREADS={host['omp_num_threads']}). "
+              f"{host['processor']} ({host['cpu_count']} CPUs, OMP_NUM_THREADS={host['omp_num_threads']}; "
+              f"{versions(host)}). "
               "Every method of a (protocol, seed) cell is scored on the same test samples with the same metric "
               "code (the sha1 column below); learned methods are trained with `mocapkit train` and scored with "
               "`mocapkit eval`, estimators are fitted on the whole training side."), "",

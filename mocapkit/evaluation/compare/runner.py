@@ -63,12 +63,19 @@ def _json_default(value):
 
 
 def machine() -> dict:
-    """Where the numbers were measured (platform, CPUs, versions, thread settings)."""
+    """Where the numbers were measured (platform, CPUs, versions, thread settings).
+
+    Learned runs do not reproduce to the last sample across package versions (README, *MSR Action3D*: the same
+    seeds moved 2–4 test clips in a fresh environment), so the versions that shape the numbers are recorded.
+    """
+    import lightning
+    import numpy
     import sklearn
     import torch
 
     return {"platform": platform.platform(), "processor": platform.processor() or platform.machine(),
             "cpu_count": os.cpu_count(), "python": platform.python_version(), "torch": torch.__version__,
+            "lightning": lightning.__version__, "numpy": numpy.__version__,
             "sklearn": sklearn.__version__, "torch_threads": torch.get_num_threads(),
             "omp_num_threads": os.environ.get("OMP_NUM_THREADS"),
             "cuda": torch.cuda.get_device_name(0) if torch.cuda.is_available() else None}
