@@ -47,6 +47,11 @@ from mocapkit.evaluation.compare.refinement import central_crop
 from mocapkit.evaluation.refinement import joint_errors
 from mocapkit.refinement.corruptions import CorruptionError, corrupt
 from mocapkit.refinement.learned import LearnedRefiner
+from mocapkit.refinement.screening import (
+    SCREEN_HALF_WINDOW,
+    SCREEN_N_SIGMAS,
+    MedianScreen,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 SETTINGS = {
@@ -88,7 +93,6 @@ def base_refiner(model: str, checkpoint: str, short_gap_frames: int | None = Non
 
 
 def _screened(refiner, threshold: float, half_window: int, n_sigmas: float | None):
-    from mocapkit.refinement.screening import MedianScreen
     return refiner if threshold <= 0 else MedianScreen(refiner, half_window=half_window, threshold=threshold,
                                                        n_sigmas=n_sigmas)
 
@@ -102,8 +106,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--frames", type=int, default=250, help="threshold: clips cropped to this many frames")
     parser.add_argument("--values", type=float, nargs="+", default=None,
                         help="the setting's values to score (default: the grid of SETTINGS)")
-    parser.add_argument("--half-window", type=int, default=3, help="screen: the median's neighbours on each side")
-    parser.add_argument("--n-sigmas", type=float, default=None,
+    parser.add_argument("--half-window", type=int, default=SCREEN_HALF_WINDOW,
+                        help="screen: the median's neighbours on each side (default: MedianScreen's)")
+    parser.add_argument("--n-sigmas", type=float, default=SCREEN_N_SIGMAS,
                         help="screen: the Hampel rule's n_sigmas (default: the fixed threshold alone)")
     parser.add_argument("--clean", action="store_true",
                         help="screen: also score the uncorrupted clips (RMS over every observed sample)")
