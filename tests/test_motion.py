@@ -196,7 +196,11 @@ def test_select_markers_and_missing():
 def test_coordinate_helpers_match_numpy_reductions():
     """any_coordinate / all_coordinates / point_distance are the numpy reductions over the last axis of 3,
     NaN and Inf included (they only read the three coordinates one at a time, for speed)."""
-    from mocapkit.datasets.formats.motion import all_coordinates, any_coordinate, point_distance
+    from mocapkit.datasets.formats.motion import (
+        all_coordinates,
+        any_coordinate,
+        point_distance,
+    )
 
     rng = np.random.default_rng(0)
     a, b = rng.normal(size=(40, 7, 3)), rng.normal(size=(40, 7, 3))
@@ -208,3 +212,50 @@ def test_coordinate_helpers_match_numpy_reductions():
     np.testing.assert_array_equal(any_coordinate(np.isnan(a)), np.isnan(a).any(-1))
     np.testing.assert_allclose(point_distance(a, b), np.linalg.norm(a - b, axis=-1), rtol=1e-12)
     assert any_coordinate(np.isnan(a)).sum() == 1 and not all_coordinates(np.isfinite(a))[5, 0]
+
+
+# --------------------------------------------------------------------------- mirror image
+
+def test_mirror_joints_pairs_asf_bvh_and_kinect_names():
+    from mocapkit.datasets.formats.layouts import CMU31, mirror_joints
+
+    names = list(CMU31.joint_names)
+    swap = mirror_joints(names)
+    assert names[swap[names.index("lhumerus")]] == "rhumerus" and names[swap[names.index("rtoes")]] == "ltoes"
+    for mid in ("root", "lowerback", "lowerneck", "head"):           # an l / r first letter alone is not a side
+        assert swap[names.index(mid)] == names.index(mid)
+    assert all(swap[swap[j]] == j for j in range(len(names)))
+    rig = ["Hips", "LeftUpLeg", "RightUpLeg", "Spine", "UpperArm_L", "UpperArm_R", "L_Hand", "R_Hand"]
+    assert mirror_joints(rig) == [0, 2, 1, 3, 5, 4, 7, 6]
+    ntu = list(NTU25.joint_names)
+    assert ntu[mirror_joints(ntu)[ntu.index("ElbowLeft")]] == "ElbowRight"
+    with pytest.raises(ValueError, match="'LeftFoot'.*no joint is its counterpart"):
+        mirror_joints(["Hips", "LeftFoot"])
+
+
+@pytest.mark.parametrize("up_axis", ["y", "z"])
+def test_mirrored_swaps_sides_negates_one_horizontal_axis_and_is_an_involution(up_axis):
+    motion = _ntu(up_axis=up_axis, missing=np.eye(11, 25, dtype=bool))
+    mirrored = motion.mirrored()
+    names = list(NTU25.joint_names)
+    left, right = names.index("HandLeft"), names.index("HandRight")
+    first = 0                                                        # x is the first horizontal axis for y and z up
+    assert np.allclose(mirrored.positions[~mirrored.missing[:, right], right, first],
+                       -motion.positions[~motion.missing[:, left], left, first])
+    keep = [a for a in range(3) if a != first]
+    assert np.allclose(mirrored.positions[~mirrored.missing[:, right]][:, right][:, keep],
+                       motion.positions[~motion.missing[:, left]][:, left][:, keep])
+    assert np.array_equal(mirrored.missing[:, right], motion.missing[:, left])
+    twice = mirrored.mirrored()
+    assert np.array_equal(twice.missing, motion.missing)
+    assert np.allclose(twice.filled(), motion.filled())
+    # a mirror image keeps distances: bone lengths and per-frame speeds
+    bones = lambda m: np.linalg.norm(m.filled()[:, 1:] - m.filled()[:, [p for p in NTU25.parents[1:]]], axis=-1)
+    assert np.allclose(np.sort(bones(mirrored), axis=1), np.sort(bones(motion), axis=1), atol=1e-6)
+
+
+def test_mirrored_rejects_an_asymmetric_hierarchy():
+    names = ("Hips", "LeftUpLeg", "RightUpLeg", "Spine")
+    motion = Motion(np.zeros((3, 4, 3)), names, 30.0, parents=(-1, 0, 3, 0))     # the right leg hangs off the spine
+    with pytest.raises(ValueError, match="not left-right symmetric"):
+        motion.mirrored()

@@ -465,6 +465,35 @@ def test_datamodule_short_clips_give_no_window():
     assert len(val) == 3 * sum(m.num_frames >= 32 for m in dm.val_motions)
 
 
+def test_training_windows_can_be_mirrored_and_only_training_windows_are():
+    from mocapkit.datasets.mocap.datamodule import RandomWindows
+
+    motions = [synthetic_motion(150, s) for s in range(3)]
+    plain, mirrored = (RandomWindows(motions, 32, 12, seed=3, mirror=p) for p in (0.0, 1.0))
+    for i in range(12):                  # the same window is drawn (the mirror draw comes after it), then mirrored
+        a, b = plain[i]["clean"].numpy(), mirrored[i]["clean"].numpy()
+        window = Motion(a, CMU31.joint_names, 120.0, parents=CMU31.parents)
+        assert np.allclose(b, window.mirrored().positions)
+        assert not np.allclose(a, b)
+    half = RandomWindows(motions, 32, 40, seed=3, mirror=0.5)
+    unmirrored = RandomWindows(motions, 32, 40, seed=3)
+    flips = [not np.allclose(unmirrored[i]["clean"].numpy(), half[i]["clean"].numpy()) for i in range(40)]
+    assert 8 < sum(flips) < 32
+    dm = _synthetic_datamodule(mirror=1.0)
+    assert dm.dataset("train").mirror == 1.0 and dm.describe()["mirror"] == 1.0
+    val = next(iter(dm.val_dataloader()))["clean"]
+    assert torch.equal(val, next(iter(_synthetic_datamodule().val_dataloader()))["clean"])
+    with pytest.raises(ValueError, match=r"data.mirror=1.5"):
+        _synthetic_datamodule(mirror=1.5)
+
+
+def test_mirroring_a_skeleton_without_sides_is_refused_naming_the_key():
+    names = ("Hips", "LeftUpLeg", "Spine")
+    motion = Motion(np.random.default_rng(0).normal(size=(40, 3, 3)), names, 120.0, parents=(-1, 0, 0))
+    with pytest.raises(MocapFolderError, match=r"data.mirror=0.5: joint 'LeftUpLeg'"):
+        MocapRefinementDataModule(dataset=None, motions=[motion, motion], window=16, mirror=0.5, val_fraction=0.5)
+
+
 @pytest.fixture(scope="module")
 def hdm05_subset(tmp_path_factory):
     """Three real clips of every HDM05 actor (the smallest), linked with the actor's ASF into a fresh folder."""

@@ -208,6 +208,35 @@ def _rig_side(name: str) -> tuple[str | None, str]:
     return None, low.replace("_", "")
 
 
+def mirror_joints(joint_names) -> list[int]:
+    """The left-right counterpart of every joint: ``result[j]`` is the index of joint ``j``'s mirror image (``j``
+    itself for a joint on the mid-line), an involution.
+
+    A counterpart shares the name's stem and has the other side mark: ``Left`` / ``Right``, ``_L`` / ``_R``,
+    ``L_`` / ``R_`` (BVH rigs, :func:`_rig_side`), or a one-letter ``l`` / ``r`` prefix as in ASF skeletons
+    (``lhumerus`` / ``rhumerus``: the name with its first letter swapped must be a joint too, so ``lowerback`` and
+    ``root`` stay themselves). A side-marked joint without a counterpart raises ``ValueError`` naming it.
+    """
+    names = list(joint_names)
+    parsed = [_rig_side(name) for name in names]
+    index = {name.lower(): i for i, name in enumerate(names)}
+    result = list(range(len(names)))
+    for j, (side, stem) in enumerate(parsed):
+        if side is not None:
+            other = "r" if side == "l" else "l"
+            match = [i for i, (s, st) in enumerate(parsed) if s == other and st == stem]
+            if not match:
+                raise ValueError(f"joint {names[j]!r} is marked {'left' if side == 'l' else 'right'} but no joint "
+                                 f"is its counterpart (stem {stem!r}); cannot mirror this skeleton")
+            result[j] = match[0]
+        elif names[j][:1].lower() in ("l", "r"):
+            swapped = ("r" if names[j][:1].lower() == "l" else "l") + names[j][1:].lower()
+            result[j] = index.get(swapped, j)
+    if any(result[result[j]] != j for j in range(len(names))):
+        raise ValueError(f"joints {names}: the left-right counterparts are not one-to-one; cannot mirror this skeleton")
+    return result
+
+
 def find_landmarks(joint_names, layout_name: str | None = None) -> dict[str, int]:
     """Landmark name → joint index of a skeleton, for every landmark of :data:`LANDMARK_NAMES` it has.
 

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from mocapkit.datasets.formats.layouts import LANDMARKS, SkeletonLayout
+from mocapkit.datasets.formats.layouts import LANDMARKS, SkeletonLayout, mirror_joints
 
 AXES = {"x": 0, "y": 1, "z": 2}
 
@@ -197,6 +197,24 @@ class Motion:
         p[..., h1] = c * a + s * b
         p[..., h2] = -s * a + c * b
         return replace(centred, positions=p, rotations=None)
+
+    def mirrored(self) -> Motion:
+        """The motion's mirror image: the first horizontal axis negated (x, for y-up and z-up data alike) and every
+        left joint's trajectory given to its right counterpart and back (:func:`~mocapkit.datasets.formats.layouts.
+        mirror_joints`). A left-handed wave becomes a right-handed one; bone lengths and speeds are unchanged.
+        Local rotations are dropped. Raises ``ValueError`` for a skeleton whose sides cannot be paired by name or
+        whose hierarchy is not left-right symmetric."""
+        swap = mirror_joints(self.joint_names)
+        if self.parents is not None and any(
+                (self.parents[j] < 0) != (self.parents[swap[j]] < 0)
+                or (self.parents[j] >= 0 and swap[self.parents[j]] != self.parents[swap[j]])
+                for j in range(self.num_joints)):
+            raise ValueError(f"{self._label()}: the joint hierarchy is not left-right symmetric; cannot mirror it")
+        axis = next(a for a in range(3) if a != AXES[self.up_axis])
+        positions = self.positions[:, swap].copy()
+        positions[..., axis] *= -1
+        return replace(self, positions=positions, missing=self.missing[:, swap].copy(), rotations=None,
+                       metadata=dict(self.metadata))
 
     def map_layout(self, target: SkeletonLayout) -> Motion:
         """The same motion on another layout, joint by joint through shared body landmarks.

@@ -50,11 +50,14 @@ def _item(clean, corruption) -> dict:
 
 
 class RandomWindows(Dataset):
-    """``count`` windows of ``length`` frames from ``motions``, freshly corrupted at every access."""
+    """``count`` windows of ``length`` frames from ``motions``, freshly corrupted at every access; with probability
+    ``mirror`` a window is first replaced by its mirror image (:meth:`~mocapkit.datasets.formats.motion.Motion.
+    mirrored`: left and right swapped), which doubles the poses the network sees."""
 
-    def __init__(self, motions: list, length: int, count: int, seed: int = 0, corruption: dict | None = None):
+    def __init__(self, motions: list, length: int, count: int, seed: int = 0, corruption: dict | None = None,
+                 mirror: float = 0.0):
         self.motions = [m for m in motions if m.num_frames >= length]
-        self.length, self.count, self.seed, self.calls = length, count, seed, 0
+        self.length, self.count, self.seed, self.calls, self.mirror = length, count, seed, 0, float(mirror)
         self.corruption = dict(corruption or {})
         spans = np.asarray([m.num_frames - length + 1 for m in self.motions], dtype=np.float64)
         self.weights = spans / spans.sum() if len(spans) else spans
@@ -70,6 +73,8 @@ class RandomWindows(Dataset):
         motion = self.motions[rng.choice(len(self.motions), p=self.weights)]
         start = int(rng.integers(motion.num_frames - self.length + 1))
         clean = _window(motion, start, self.length)
+        if self.mirror > 0 and rng.random() < self.mirror:       # no draw at 0: the stream of earlier runs is kept
+            clean = clean.mirrored()
         return _item(clean, training_corruption(clean, rng, **self.corruption))
 
 
@@ -117,6 +122,8 @@ class MocapRefinementDataModule(L.LightningDataModule):
         seed: the run's seed (``mocapkit train`` passes it): the stream of training windows and corruptions.
         corruption: keyword arguments of :func:`~mocapkit.refinement.corruptions.training_corruption`
             (``whole_joint_rate``, ``weights``: protocol → relative weight), for every part.
+        mirror: probability that a training window is mirrored left-right (:class:`RandomWindows`; 0: never).
+            Validation and test windows are never mirrored.
     """
 
     def __init__(self, dataset: str | None = "hdm05", root: str | None = None, test_groups: list | None = None,
@@ -124,8 +131,11 @@ class MocapRefinementDataModule(L.LightningDataModule):
                  fps: float | None = None, window: int = 120, windows_per_epoch: int = 4096,
                  val_fraction: float = 0.1, eval_windows_per_clip: int = 2, batch_size: int = 32,
                  eval_batch_size: int = 64, num_workers: int = 0, split_seed: int = 0, seed: int = 0,
-                 corruption: dict | None = None):
+                 corruption: dict | None = None, mirror: float = 0.0):
         super().__init__()
+        if not 0.0 <= float(mirror) <= 1.0:
+            raise ValueError(f"data.mirror={mirror}: a probability in [0, 1]")
+        self.mirror = float(mirror)
         if int(window) < 8:
             raise ValueError(f"data.window={window}: at least 8 frames")
         if not 0.0 < float(val_fraction) < 1.0:
@@ -176,6 +186,11 @@ class MocapRefinementDataModule(L.LightningDataModule):
             raise MocapFolderError(f"the training clips mix frame rates {sorted(rates)}: set data.fps to resample them")
         self.fps = rates.pop()
         self.reference = all_motions[0]
+        if self.mirror > 0:
+            try:
+                _window(self.reference, 0, 1).mirrored()
+            except ValueError as error:
+                raise MocapFolderError(f"data.mirror={self.mirror}: {error}") from None
 
     # ------------------------------------------------------------------ what the model needs
     def label_spaces(self) -> dict:
@@ -212,14 +227,15 @@ class MocapRefinementDataModule(L.LightningDataModule):
         return {"split": f"groups: train {self.groups['train']}, test {self.groups['test']}",
                 "dataset": self.dataset_name, "root": self.root, "fps": self.fps, "window": self.window,
                 "clips": {"train": len(self.train_motions), "val": len(self.val_motions), "test": len(self.test_motions)},
-                "clips_shorter_than_window": short, "extra": self.extra_sources, "sample_counts": self.sample_counts()}
+                "clips_shorter_than_window": short, "extra": self.extra_sources, "mirror": self.mirror,
+                "sample_counts": self.sample_counts()}
 
     # ------------------------------------------------------------------ loaders
     def dataset(self, part: str) -> Dataset:
         if not hasattr(self, "_datasets"):
             self._datasets = {
                 "train": RandomWindows(self.train_motions, self.window, self.windows_per_epoch, self.seed,
-                                       self.corruption),
+                                       self.corruption, self.mirror),
                 "val": FixedWindows(self.val_motions, self.window, self.eval_windows_per_clip, self.split_seed,
                                     self.corruption),
                 "test": FixedWindows(self.test_motions, self.window, self.eval_windows_per_clip, self.split_seed + 1,
