@@ -424,7 +424,7 @@ def build_parser() -> argparse.ArgumentParser:
     refine.add_argument("output", help="OUT.c3d (markers; from a C3D only the filled samples change) or OUT.npz")
     which = refine.add_mutually_exclusive_group(required=True)
     which.add_argument("--method", help="configs/refiner/NAME.yaml: linear, pchip, pca, svt, lrmf, trnn, psc, "
-                                        "filter-bases, dynammo; or RUN/best.ckpt, a trained refiner "
+                                        "filter-bases, dynammo, pose-prior; or RUN/best.ckpt, a trained refiner "
                                         "(mocapkit train experiment=refine_bigru)")
     which.add_argument("--onnx", metavar="FILE", help="an exported refiner (mocapkit export of a refiner run), "
                                                       "run with onnxruntime and numpy only")

@@ -20,6 +20,11 @@ checkpoint selection held out, rebuilt from the run's data settings: performer `
     ``--half-window`` given; the score is the RMS 3-D error over the **corrupted** entries, under noise (rdcrypt,
     mxcrypt), random loss and gaps (whether the screen helps the first and costs nothing on the others).
     ``--models`` may also name the classical ``pchip`` and ``lrmf`` (no runs; the same validation clips).
+``--setting pose_prior`` — the classical :class:`~mocapkit.classical.pose_prior.PosePriorRefiner` (``--models
+    pose_prior``, no runs): its ``drift`` in m/s at the ``--n-components`` given (with ``--noise-floor``: its
+    ``noise_floor`` in metres at ``--drift``), fitted on the fold's training clips other than the validation clips
+    (``--train-clips-per-performer N``: N seeded clips of each, as the benchmark's fits); the score is the RMS 3-D error over the **corrupted** entries of the
+    whole clips under random loss, 10- and 40-frame gaps and both long-gap protocols (it fills gaps only).
 ``--setting window`` — the inference ``window`` (frames per window; longer takes are refined in overlapping
     windows blended with ramps), as multiples of the training window; the score is the RMS 3-D error over the
     **corrupted** entries (removed or perturbed) of the whole clips (not cropped: a window longer than a clip is
@@ -34,6 +39,7 @@ Usage (from the repository root)::
     python scripts/refiner_inference_settings.py --setting threshold        # bigru + transformer, folds bd bk mm
     python scripts/refiner_inference_settings.py --setting window --models transformer --folds bd
     python scripts/refiner_inference_settings.py --setting screen --models pchip lrmf bigru --half-window 3
+    python scripts/refiner_inference_settings.py --setting pose_prior --models pose_prior --n-components 60
 """
 from __future__ import annotations
 
@@ -67,6 +73,9 @@ SETTINGS = {
     "screen": {"values": [0.0, 0.005, 0.0075, 0.01, 0.015], "unit": "m",
                "protocols": [("rdcrypt", 0.3), ("mxcrypt", 0.3), ("random_missing", 0.2), ("continuous_missing", 10),
                              ("continuous_missing", 40)]},
+    "pose_prior": {"values": [0.04, 0.12, 0.38], "unit": "m/s",
+                   "protocols": [("random_missing", 0.2), ("continuous_missing", 10), ("continuous_missing", 40),
+                                 ("long_gaps", "20x100"), ("long_gaps", "5x2s")]},
     "window": {"values": [1, 2, 4], "unit": "× training window",
                "protocols": [("rdcrypt", 0.3), ("mxcrypt", 0.3), ("random_missing", 0.2), ("continuous_missing", 40),
                              ("long_gaps", "20x100"), ("long_gaps", "5x2s")]},
@@ -114,6 +123,12 @@ def main(argv: list[str] | None = None) -> None:
                         help="screen: also score the uncorrupted clips (RMS over every observed sample)")
     parser.add_argument("--short-gap-frames", type=int, default=None,
                         help="screen: the learned refiners' short_gap_frames (default: theirs)")
+    parser.add_argument("--n-components", type=int, default=60, help="pose_prior: PPCA components")
+    parser.add_argument("--noise-floor", action="store_true",
+                        help="pose_prior: the values are noise_floor (m) at --drift instead of drifts")
+    parser.add_argument("--drift", type=float, default=0.2, help="pose_prior with --noise-floor: the drift, m/s")
+    parser.add_argument("--train-clips-per-performer", type=int, default=None,
+                        help="pose_prior: fit on this many seeded clips per training performer (None: all)")
     parser.add_argument("--runs", type=Path, default=ROOT / "checkpoints",
                         help="the folder holding refine_<model>/fold_<P>/ (the output_root of the runs)")
     args = parser.parse_args(argv)
@@ -137,6 +152,20 @@ def main(argv: list[str] | None = None) -> None:
                 clips = list(data.val_motions)
                 refiners = [_screened(base_refiner(model, checkpoint, args.short_gap_frames), v, args.half_window,
                                       args.n_sigmas) for v in values]
+            elif args.setting == "pose_prior":
+                from mocapkit.classical.pose_prior import PosePriorRefiner
+                clips = list(data.val_motions)
+                fit = data.train_motions
+                if args.train_clips_per_performer:           # as the benchmark's fits: N seeded clips per performer
+                    rng, by_group = np.random.default_rng(0), {}
+                    for m in fit:
+                        by_group.setdefault(m.metadata["group"], []).append(m)
+                    fit = [ms[i] for _, ms in sorted(by_group.items())
+                           for i in sorted(rng.choice(len(ms), min(len(ms), args.train_clips_per_performer),
+                                                      replace=False))]
+                refiners = [PosePriorRefiner(n_components=args.n_components, drift=args.drift, noise_floor=v)
+                            .fit(fit) for v in values] if args.noise_floor else \
+                    [PosePriorRefiner(n_components=args.n_components, drift=v).fit(fit) for v in values]
             elif args.setting == "short_gap_points":
                 clips = list(data.val_motions)
                 refiners = [LearnedRefiner(checkpoint=checkpoint, short_gap_frames=int(abs(v)),
@@ -164,7 +193,8 @@ def main(argv: list[str] | None = None) -> None:
             print(f"[{model}] fold {fold}: {len(clips)} validation clips of {data.groups['train']}", flush=True)
         what = "observed" if args.setting == "threshold" else "corrupted"
         print(f"\n# {model}: RMS 3-D error over the {what} entries, mm, mean over folds {args.folds}")
-        print("| protocol | " + " | ".join(f"{v:g} {setting['unit']}" for v in values) + " |")
+        unit = "m (noise_floor)" if args.setting == "pose_prior" and args.noise_floor else setting["unit"]
+        print("| protocol | " + " | ".join(f"{v:g} {unit}" for v in values) + " |")
         print("|---|" + "---:|" * len(values))
         for p, (protocol, level) in enumerate(protocols):
             print(f"| {protocol} {level} | " + " | ".join(f"{v:.2f}" for v in table[p].mean(axis=1)) + " |")

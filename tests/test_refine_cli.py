@@ -35,7 +35,7 @@ PC = C3D / "pc_real.c3d"                     # float storage, invalid residuals,
 AMC = SHARED / "data" / "hdm05_cuts11" / "mm" / "HDM_mm_squat1Reps_040_120.amc"
 BVH = SHARED / "samples" / "bvh" / "test_freebvh.bvh"
 
-NAMES = ["dynammo", "filter-bases", "linear", "lrmf", "pca", "pchip", "psc", "svt", "trnn"]
+NAMES = ["dynammo", "filter-bases", "linear", "lrmf", "pca", "pchip", "pose-prior", "psc", "svt", "trnn"]
 
 
 def refine(capsys, *argv) -> tuple[int, str, str]:

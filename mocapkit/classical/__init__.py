@@ -36,6 +36,7 @@ from mocapkit.classical.kinect_reconstruction import (
 from mocapkit.classical.ksvd import KSVD
 from mocapkit.classical.lrmf import LRMF
 from mocapkit.classical.nmf import GNMF, NMC, NMF, OrthogonalNMF
+from mocapkit.classical.pose_prior import PosePriorRefiner
 from mocapkit.classical.psc import PSCRefiner
 from mocapkit.classical.svt import SVTCompletion
 from mocapkit.classical.trnn import TrNN
@@ -63,6 +64,7 @@ __all__ = [
     "PCAGapFilling",
     "PSCRefiner",
     "PchipInterpolation",
+    "PosePriorRefiner",
     "RandomForestPoseCorrector",
     "SVTCompletion",
     "SequenceClips",

@@ -3,7 +3,7 @@
 
 The refiners are declared once, as Hydra configs: ``configs/refiner/<NAME>.yaml`` = ``{_target_: the
 MotionRefiner class, its parameters with their defaults}`` (``linear``, ``pchip``, ``pca``, ``svt``, ``lrmf``,
-``trnn``, ``psc``, ``filter-bases``, ``dynammo``); :func:`build_refiner` composes ``configs/refiner.yaml`` with
+``trnn``, ``psc``, ``filter-bases``, ``dynammo``, ``pose-prior``); :func:`build_refiner` composes ``configs/refiner.yaml`` with
 ``refiner=NAME`` and the ``--set`` overrides (Hydra's grammar) and instantiates the node. The benchmark builds its
 refiners from the same files.
 
