@@ -24,11 +24,10 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from refiner_inference_settings import score_on_clips
 
 from mocapkit.datasets.formats.layouts import hip_joints
 from mocapkit.datasets.mocap.datamodule import FixedWindows, MocapRefinementDataModule
-from mocapkit.evaluation.refinement import joint_errors
-from mocapkit.refinement.corruptions import CorruptionError, corrupt
 from mocapkit.refinement.learned import LearnedRefiner
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -41,10 +40,6 @@ def zeroed(refiner: LearnedRefiner) -> LearnedRefiner:
     torch.nn.init.zeros_(out.weight)
     torch.nn.init.zeros_(out.bias)
     return plain
-
-
-def rms_mm(clean, refined, entries) -> float:
-    return float(np.sqrt(np.mean(joint_errors(clean, refined)[entries] ** 2)) * 1000.0)
 
 
 def pose_frame(P: np.ndarray, left: int, right: int) -> np.ndarray:
@@ -75,16 +70,8 @@ def main(argv: list[str] | None = None) -> None:
 
     print("## 1. Whole validation clips: RMS mm over the removed entries\n")
     print("| protocol | the run | its first guess (output layer zeroed) |\n|---|---:|---:|")
-    for protocol, level in (("long_gaps", "20x100"), ("long_gaps", "5x2s"), ("continuous_missing", 40)):
-        scores = []
-        for i, clip in enumerate(data.val_motions):
-            try:
-                corruption = corrupt(clip, protocol, level, seed=i)
-            except CorruptionError:
-                continue
-            entries = corruption.removed | corruption.perturbed
-            scores.append([rms_mm(clip, r.refine(corruption.motion), entries) for r in (run, guess_only)])
-        a, b = np.mean(scores, axis=0)
+    protocols = [("long_gaps", "20x100"), ("long_gaps", "5x2s"), ("continuous_missing", 40)]
+    for (protocol, level), (a, b) in zip(protocols, score_on_clips(data.val_motions, protocols, [run, guess_only])):
         print(f"| {protocol} {level} | {a:.2f} | {b:.2f} |")
 
     print("\n## 2. Validation windows (the training mixture): mean 3-D error, cm\n")

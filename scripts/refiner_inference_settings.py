@@ -88,6 +88,24 @@ def rms_error_mm(clean, refined, entries: np.ndarray) -> float:
     return float(np.sqrt(np.mean(distance ** 2)) * 1000.0)
 
 
+def score_on_clips(clips, protocols, refiners) -> np.ndarray:
+    """``[len(protocols), len(refiners)]``: RMS 3-D error (mm, :func:`rms_error_mm`) over the corrupted entries
+    (removed or perturbed), mean over ``clips``; clip ``i`` corrupted with ``corrupt(clip, protocol, level,
+    seed=i)``, a clip too short for a protocol left out. ``refiners``: anything with ``refine(motion) -> Motion``."""
+    table = np.zeros((len(protocols), len(refiners)))
+    for p, (protocol, level) in enumerate(protocols):
+        scores = []
+        for i, clip in enumerate(clips):
+            try:
+                corruption = corrupt(clip, protocol, level, seed=i)
+            except CorruptionError:
+                continue
+            entries = corruption.removed | corruption.perturbed
+            scores.append([rms_error_mm(clip, r.refine(corruption.motion), entries) for r in refiners])
+        table[p] = np.mean(scores, axis=0)
+    return table
+
+
 def base_refiner(model: str, checkpoint: str, short_gap_frames: int | None = None):
     """The refiner a ``--models`` name stands for: a run of ``refine_<model>`` (with ``short_gap_frames`` when
     given) or the classical ``pchip`` / ``lrmf``."""
