@@ -141,7 +141,7 @@ def main(argv: list[str] | None = None) -> None:
         optimizer.step()
         schedule.step()
         if step % 64 == 0 or step == args.steps - 1:
-            print(f"[probe] step {step + 1}/{args.steps} loss {float(loss):.4f}", flush=True)
+            print(f"[probe] step {step + 1}/{args.steps} loss {loss.item():.4f}", flush=True)
     args.out.mkdir(parents=True, exist_ok=True)
     torch.save(module.model.state_dict(), args.out / f"fold_{args.fold}_network.pt")
     module.eval()
