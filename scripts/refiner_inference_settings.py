@@ -21,10 +21,12 @@ checkpoint selection held out, rebuilt from the run's data settings: performer `
     mxcrypt), random loss and gaps (whether the screen helps the first and costs nothing on the others).
     ``--models`` may also name the classical ``pchip`` and ``lrmf`` (no runs; the same validation clips).
 ``--setting pose_prior`` — the classical :class:`~mocapkit.classical.pose_prior.PosePriorRefiner` (``--models
-    pose_prior``, no runs): its ``drift`` in m/s at the ``--n-components`` given (with ``--noise-floor``: its
-    ``noise_floor`` in metres at ``--drift``), fitted on the fold's training clips other than the validation clips
-    (``--train-clips-per-performer N``: N seeded clips of each, as the benchmark's fits); the score is the RMS 3-D error over the **corrupted** entries of the
-    whole clips under random loss, 10- and 40-frame gaps and both long-gap protocols (it fills gaps only).
+    pose_prior``, no runs): its ``drift`` in m/s at the ``--n-components`` and ``--noise-floor`` given (0 by
+    default, as in the first two selection rounds), or with ``--sweep noise_floor`` its ``noise_floor`` in metres at
+    ``--drift``; fitted on the fold's training clips other than the validation clips (``--train-clips-per-performer
+    N``: N seeded clips of each, as the benchmark's fits); the score is the RMS 3-D error over the **corrupted**
+    entries of the whole clips under random loss, 10- and 40-frame gaps and both long-gap protocols (it fills gaps
+    only).
 ``--setting window`` — the inference ``window`` (frames per window; longer takes are refined in overlapping
     windows blended with ramps), as multiples of the training window; the score is the RMS 3-D error over the
     **corrupted** entries (removed or perturbed) of the whole clips (not cropped: a window longer than a clip is
@@ -39,7 +41,7 @@ Usage (from the repository root)::
     python scripts/refiner_inference_settings.py --setting threshold        # bigru + transformer, folds bd bk mm
     python scripts/refiner_inference_settings.py --setting window --models transformer --folds bd
     python scripts/refiner_inference_settings.py --setting screen --models pchip lrmf bigru --half-window 3
-    python scripts/refiner_inference_settings.py --setting pose_prior --models pose_prior --n-components 60
+    python scripts/refiner_inference_settings.py --setting pose_prior --models pose_prior --sweep noise_floor
 """
 from __future__ import annotations
 
@@ -141,10 +143,11 @@ def main(argv: list[str] | None = None) -> None:
                         help="screen: also score the uncorrupted clips (RMS over every observed sample)")
     parser.add_argument("--short-gap-frames", type=int, default=None,
                         help="screen: the learned refiners' short_gap_frames (default: theirs)")
-    parser.add_argument("--n-components", type=int, default=60, help="pose_prior: PPCA components")
-    parser.add_argument("--noise-floor", action="store_true",
-                        help="pose_prior: the values are noise_floor (m) at --drift instead of drifts")
-    parser.add_argument("--drift", type=float, default=0.2, help="pose_prior with --noise-floor: the drift, m/s")
+    parser.add_argument("--n-components", type=int, default=90, help="pose_prior: PPCA components")
+    parser.add_argument("--sweep", choices=["drift", "noise_floor"], default="drift",
+                        help="pose_prior: the parameter the values are (drift m/s, or noise_floor m)")
+    parser.add_argument("--drift", type=float, default=0.2, help="pose_prior, --sweep noise_floor: the drift, m/s")
+    parser.add_argument("--noise-floor", type=float, default=0.0, help="pose_prior, --sweep drift: the noise floor, m")
     parser.add_argument("--train-clips-per-performer", type=int, default=None,
                         help="pose_prior: fit on this many seeded clips per training performer (None: all)")
     parser.add_argument("--runs", type=Path, default=ROOT / "checkpoints",
@@ -181,9 +184,9 @@ def main(argv: list[str] | None = None) -> None:
                     fit = [ms[i] for _, ms in sorted(by_group.items())
                            for i in sorted(rng.choice(len(ms), min(len(ms), args.train_clips_per_performer),
                                                       replace=False))]
-                refiners = [PosePriorRefiner(n_components=args.n_components, drift=args.drift, noise_floor=v)
-                            .fit(fit) for v in values] if args.noise_floor else \
-                    [PosePriorRefiner(n_components=args.n_components, drift=v).fit(fit) for v in values]
+                fixed = {"drift": args.drift} if args.sweep == "noise_floor" else {"noise_floor": args.noise_floor}
+                refiners = [PosePriorRefiner(n_components=args.n_components, **fixed, **{args.sweep: v}).fit(fit)
+                            for v in values]
             elif args.setting == "short_gap_points":
                 clips = list(data.val_motions)
                 refiners = [LearnedRefiner(checkpoint=checkpoint, short_gap_frames=int(abs(v)),
@@ -211,7 +214,7 @@ def main(argv: list[str] | None = None) -> None:
             print(f"[{model}] fold {fold}: {len(clips)} validation clips of {data.groups['train']}", flush=True)
         what = "observed" if args.setting == "threshold" else "corrupted"
         print(f"\n# {model}: RMS 3-D error over the {what} entries, mm, mean over folds {args.folds}")
-        unit = "m (noise_floor)" if args.setting == "pose_prior" and args.noise_floor else setting["unit"]
+        unit = "m (noise_floor)" if args.setting == "pose_prior" and args.sweep == "noise_floor" else setting["unit"]
         print("| protocol | " + " | ".join(f"{v:g} {unit}" for v in values) + " |")
         print("|---|" + "---:|" * len(values))
         for p, (protocol, level) in enumerate(protocols):
