@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import copy
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -40,17 +41,6 @@ def zeroed(refiner: LearnedRefiner) -> LearnedRefiner:
     torch.nn.init.zeros_(out.weight)
     torch.nn.init.zeros_(out.bias)
     return plain
-
-
-def pose_frame(P: np.ndarray, left: int, right: int) -> np.ndarray:
-    """``[N, J, 3]`` y-up positions centred on joint 0 and turned about y so the hip line lies along x."""
-    Q = P - P[:, :1]
-    line = Q[:, right] - Q[:, left]
-    a = np.arctan2(line[:, 2], line[:, 0])
-    c, s = np.cos(a)[:, None], np.sin(a)[:, None]
-    out = Q.copy()
-    out[..., 0], out[..., 2] = c * Q[..., 0] + s * Q[..., 2], -s * Q[..., 0] + c * Q[..., 2]
-    return out
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -90,7 +80,8 @@ def main(argv: list[str] | None = None) -> None:
     print("\n## 3. What the other joints know (windows corrupted by long_gaps only), cm\n")
     ref = data.reference
     left, right = hip_joints(ref.joint_names, ref.layout_name)
-    train = pose_frame(np.concatenate([m.positions for m in data.train_motions]), left, right)
+    pose_frame = lambda P: replace(ref, positions=P, missing=None, rotations=None).torso_aligned(left, right).positions
+    train = pose_frame(np.concatenate([m.positions for m in data.train_motions]))
     J = ref.num_joints
     windows = FixedWindows(data.val_motions, window, 2, seed=1, corruption={"whole_joint_rate": 0.0,
                                                                              "weights": {"long_gaps": 1.0}})
@@ -108,7 +99,7 @@ def main(argv: list[str] | None = None) -> None:
             if not gap.any():
                 continue
             clean = batch["clean"][i].numpy()
-            local = pose_frame(clean, left, right)[gap]
+            local = pose_frame(clean)[gap]
             predicted = (local[:, others].reshape(len(local), -1) - Xm) @ A + Ym
             ridge += (100 * np.linalg.norm(predicted - local[:, j], axis=-1)).tolist()
             guess += (100 * np.linalg.norm(first[i][gap, j] - clean[gap, j], axis=-1)).tolist()

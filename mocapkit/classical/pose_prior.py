@@ -37,7 +37,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from mocapkit.datasets.formats.layouts import hip_joints
-from mocapkit.datasets.formats.motion import AXES, Motion
+from mocapkit.datasets.formats.motion import Motion, hip_heading, turn_about_up
 from mocapkit.refinement.base import MotionRefiner, RefinementError
 
 
@@ -131,26 +131,14 @@ class PosePriorRefiner(MotionRefiner):
         """``[N, J, 3]`` → (root-centred, heading-turned ``[N, J, 3]``, root ``[N, 3]``, cos ``[N]``, sin ``[N]``)."""
         root = P[:, self.root_].copy()
         Q = P - root[:, None]
-        h1, h2 = [a for a in range(3) if a != AXES[self.up_axis_]]
         if self.hips_ is None:
             cos, sin = np.ones(len(P)), np.zeros(len(P))
         else:
-            line = Q[:, self.hips_[1]] - Q[:, self.hips_[0]]
-            norm = np.hypot(line[:, h1], line[:, h2])
-            ok = norm > 1e-9
-            cos = np.where(ok, line[:, h1] / np.where(ok, norm, 1), 1.0)
-            sin = np.where(ok, line[:, h2] / np.where(ok, norm, 1), 0.0)
-        out = Q.copy()
-        out[..., h1] = cos[:, None] * Q[..., h1] + sin[:, None] * Q[..., h2]
-        out[..., h2] = -sin[:, None] * Q[..., h1] + cos[:, None] * Q[..., h2]
-        return out, root, cos, sin
+            cos, sin = hip_heading(Q, self.hips_[0], self.hips_[1], self.up_axis_)
+        return turn_about_up(Q, cos, sin, self.up_axis_), root, cos, sin
 
     def _from_pose_frame(self, L: np.ndarray, root: np.ndarray, cos: np.ndarray, sin: np.ndarray) -> np.ndarray:
-        h1, h2 = [a for a in range(3) if a != AXES[self.up_axis_]]
-        out = L.copy()
-        out[..., h1] = cos[:, None] * L[..., h1] - sin[:, None] * L[..., h2]
-        out[..., h2] = sin[:, None] * L[..., h1] + cos[:, None] * L[..., h2]
-        return out + root[:, None]
+        return turn_about_up(L, cos, sin, self.up_axis_, inverse=True) + root[:, None]
 
     # ------------------------------------------------------------------ refine
 
@@ -172,7 +160,8 @@ class PosePriorRefiner(MotionRefiner):
         guess = self.temporal_guess(X.reshape(T, -1, 3), seen)
         out = guess.copy()
         anchors = [self.root_] + list(self.hips_ or ())
-        if seen[:, anchors].any(axis=0).all():       # the pose frame needs the root and the hips somewhere
+        framed = bool(seen[:, anchors].any(axis=0).all())    # the pose frame needs the root and the hips somewhere
+        if framed:
             distance = nearest_sample_distance(seen)
             step = float(self.drift) / self.fps_
             temporal = np.repeat(float(self.observation_noise) ** 2 + (step * distance) ** 2, 3, axis=1)  # [T, 3J]
@@ -192,7 +181,7 @@ class PosePriorRefiner(MotionRefiner):
             out = self._from_pose_frame(pose.reshape(T, -1, 3), root, cos, sin)
         out = out.reshape(T, L)
         never = ~seen.any(axis=0)
-        if not seen[:, anchors].any(axis=0).all():  # no prior: a joint never observed has no temporal guess either
+        if not framed:                              # no prior: a joint never observed has no temporal guess either
             out[:, np.repeat(never, 3)] = np.nan
         out[empty_frames_kept(~seen, int(self.max_empty_frames))] = np.nan           # frames left missing
         return out, None

@@ -49,6 +49,27 @@ def point_distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1] + d[..., 2] * d[..., 2])
 
 
+def hip_heading(positions: np.ndarray, left: int, right: int, up_axis: str) -> tuple[np.ndarray, np.ndarray]:
+    """``(cos, sin)`` ``[N]`` of the angle about the up axis of the hip line (joint ``left`` → ``right``) of every
+    frame of ``positions`` ``[N, J, 3]``, measured from the first horizontal axis (0 for a vertical or empty line)."""
+    h1, h2 = [a for a in range(3) if a != AXES[up_axis]]
+    line = positions[:, right] - positions[:, left]
+    angle = np.arctan2(line[:, h2], line[:, h1])
+    return np.cos(angle), np.sin(angle)
+
+
+def turn_about_up(positions: np.ndarray, cos: np.ndarray, sin: np.ndarray, up_axis: str,
+                  inverse: bool = False) -> np.ndarray:
+    """``positions`` ``[N, J, 3]`` turned about the up axis, frame ``n`` by the angle whose ``cos[n]``, ``sin[n]``
+    are given, so that that direction comes onto the first horizontal axis (with ``inverse``: back from it)."""
+    h1, h2 = [a for a in range(3) if a != AXES[up_axis]]
+    c, s = cos[:, None], (-sin if inverse else sin)[:, None]
+    out = positions.copy()
+    out[..., h1] = c * positions[..., h1] + s * positions[..., h2]
+    out[..., h2] = -s * positions[..., h1] + c * positions[..., h2]
+    return out
+
+
 @dataclass
 class Motion:
     """A motion clip: joint (or marker) positions over time, in metres. See the module docstring."""
@@ -187,16 +208,8 @@ class Motion:
         """Root-centred and turned about the up axis so that, in every frame, the hip line
         (left → right) lies along the first horizontal axis (x, or x for z-up data)."""
         centred = self.root_centered(root)
-        up = AXES[self.up_axis]
-        h1, h2 = [a for a in range(3) if a != up]
-        hips = centred.positions[:, self._joint(right_hip)] - centred.positions[:, self._joint(left_hip)]
-        angle = np.arctan2(hips[:, h2], hips[:, h1])                     # [T]
-        c, s = np.cos(angle)[:, None], np.sin(angle)[:, None]
-        p = centred.positions.copy()
-        a, b = p[..., h1].copy(), p[..., h2].copy()
-        p[..., h1] = c * a + s * b
-        p[..., h2] = -s * a + c * b
-        return replace(centred, positions=p, rotations=None)
+        cos, sin = hip_heading(centred.positions, self._joint(left_hip), self._joint(right_hip), self.up_axis)
+        return replace(centred, positions=turn_about_up(centred.positions, cos, sin, self.up_axis), rotations=None)
 
     def mirrored(self) -> Motion:
         """The motion's mirror image: the first horizontal axis negated (x, for y-up and z-up data alike) and every
