@@ -54,7 +54,7 @@ def forward(net, positions: torch.Tensor, missing: torch.Tensor, filled: torch.T
     usable = torch.isfinite(filled).all(-1).unsqueeze(1) & ~seen                   # [B,1,T,J]
     from_prior = net.normalizer.forward_cf(torch.nan_to_num(filled).permute(0, 3, 1, 2), stats)
     guess = torch.where(usable, from_prior, cubic)
-    return guess + net.correction(guess, observed), stats
+    return net.corrected(guess, observed), stats
 
 
 class OnPrior:

@@ -236,6 +236,11 @@ NETWORKS = {
                                                      tokens="frames", dim=16, layers=1, heads=2, ff=32),
     "transformer-joints": lambda: refine_transformer(joint_names=CMU31.joint_names, parents=CMU31.parents, hips=HIPS,
                                                      tokens="joints", dim=16, layers=1, heads=2, ff=32),
+    "bigru-pose-frame": lambda: refine_bigru(joint_names=CMU31.joint_names, parents=CMU31.parents, hips=HIPS,
+                                             hidden=16, layers=2, pose_frame=True),
+    "transformer-frames-pose-frame": lambda: refine_transformer(
+        joint_names=CMU31.joint_names, parents=CMU31.parents, hips=HIPS, tokens="frames", dim=16, layers=1, heads=2,
+        ff=32, pose_frame=True),
 }
 
 
@@ -290,6 +295,62 @@ def test_missing_entry_values_do_not_change_the_output(name):
     assert torch.equal(outs[0], outs[1]) and torch.equal(outs[0], outs[2])
     # the correction is active: observed entries move (an untrained network would leave them)
     assert (outs[0][~missing] - x[~missing]).abs().max() > 1e-3
+
+
+def _turned_per_frame(T: int, seed: int = 0):
+    """``(guess [1, 3, T, J], angles [T])``: one pose, every frame turned about the up (y) axis through its root by
+    its own angle and moved along a path."""
+    pose = torch.from_numpy(synthetic_motion(1, seed).positions[0]).float()                 # [J, 3]
+    pose = pose - pose[0]
+    angles = torch.linspace(-2.5, 2.5, T)
+    c, s = torch.cos(angles).view(T, 1), torch.sin(angles).view(T, 1)
+    x, y, z = pose[:, 0], pose[:, 1], pose[:, 2]
+    turned = torch.stack([c * x + s * z, y.expand(T, -1), -s * x + c * z], dim=0)           # [3, T, J]
+    path = torch.stack([torch.linspace(0, 3, T), torch.zeros(T), torch.linspace(1, -1, T)]).unsqueeze(-1)
+    return (turned + path).unsqueeze(0), angles
+
+
+def test_body_frame_reads_every_frame_alike_whichever_way_it_faces():
+    """The pose-frame input: one pose turned per frame and moved along a path reads the same in every frame's
+    body frame, with the root at the origin and the hip line along the first horizontal axis."""
+    net = NETWORKS["transformer-frames-pose-frame"]()
+    guess, _ = _turned_per_frame(20)
+    root, cos, sin = net.body_frame(guess)
+    body = torch.cat(net.normalizer._turn(list((guess - root).split(1, dim=1)), cos, sin), dim=1)    # [1,3,T,J]
+    torch.testing.assert_close(body, body[:, :, :1].expand_as(body), atol=1e-5, rtol=0)
+    assert body[0, :, 0, 0].abs().max() < 1e-6                                         # the root at the origin
+    hip_line = body[0, :, 0, HIPS[1]] - body[0, :, 0, HIPS[0]]
+    assert hip_line[0] > 0.05 and hip_line[2].abs() < 1e-5                             # along x, left -> right
+    # the window-frame guess itself differs from frame to frame (the test would pass on a no-op otherwise)
+    assert (guess - guess[:, :, :1]).abs().max() > 0.5
+
+
+def test_pose_frame_correction_is_turned_back_per_frame(monkeypatch):
+    """A correction the network gives in the body frame (a constant step along the hip line) comes out along each
+    frame's own hip line in the window frame."""
+    net = NETWORKS["transformer-frames-pose-frame"]()
+    guess, _ = _turned_per_frame(16, seed=2)
+    T, J = guess.shape[2], guess.shape[3]
+    step = torch.zeros(1, 3, T, J)
+    step[:, 0] = 1.0
+    monkeypatch.setattr(net, "correction", lambda g, o, body=None: step)
+    moved = net.corrected(guess, torch.ones(1, T, J, dtype=torch.bool)) - guess              # [1,3,T,J]
+    line = guess[0, :, :, HIPS[1]] - guess[0, :, :, HIPS[0]]                               # [3,T]
+    line[1] = 0.0
+    expected = line / line.norm(dim=0, keepdim=True)
+    torch.testing.assert_close(moved[0, :, :, 4], expected, atol=1e-5, rtol=0)
+
+
+def test_pose_frame_networks_export_with_parity(tmp_path):
+    from mocapkit.deploy.refiner_export import export_refiner
+
+    torch.manual_seed(3)
+    net = NETWORKS["transformer-frames-pose-frame"]().eval()
+    with torch.no_grad():
+        torch.nn.init.normal_(net.out.weight, std=0.05)
+    skeleton = {"joint_names": list(CMU31.joint_names), "parents": list(CMU31.parents)}
+    figures = export_refiner(net, tmp_path / "pose_frame.onnx", skeleton, trace_shape=(2, 8), check_shape=(2, 40))
+    assert (tmp_path / "pose_frame.onnx").is_file() and figures
 
 
 # ------------------------------------------------------------------------------------------------ corruption

@@ -19,7 +19,9 @@ normalisation and its inverse are part of the network (so they are part of the O
 3. A temporal network sees ``[first guess, its temporal detail (x_t − mean of the neighbours), observed mask]``
    per frame and predicts a correction of
    every entry (its last layer starts at zero: an untrained refiner *is* the cubic fill). Observed
-   entries are corrected too: that is how noise is removed.
+   entries are corrected too: that is how noise is removed. With ``pose_frame`` it also sees every frame's
+   guess in that frame's own body frame (root-centred, hip line turned onto the first horizontal axis) and
+   predicts the correction there, turned back per frame (:meth:`_Refiner.corrected`).
 
 Networks (``joints`` J, frames T, batch B):
 
@@ -275,9 +277,10 @@ class _Refiner(nn.Module):
 
     def __init__(self, joint_names: Sequence[str], parents: Sequence[int], up_axis: str = "y",
                  hips: Sequence[int] | None = None, bone_lengths: Sequence[float] | None = None,
-                 fps: float | None = None, tangents: str = "chord", extrapolate: int = 6):
+                 fps: float | None = None, tangents: str = "chord", extrapolate: int = 6, pose_frame: bool = False):
         super().__init__()
         self.set_first_guess(tangents, extrapolate)
+        self.pose_frame = bool(pose_frame)
         self.joint_names = tuple(joint_names)
         self.parents = tuple(int(p) for p in parents)
         self.up_axis, self.fps = up_axis, None if fps is None else float(fps)
@@ -326,18 +329,57 @@ class _Refiner(nn.Module):
         pick = (source.view(-1, J, 1) == own.view(1, 1, J)).to(guess.dtype)          # [B,J(to),J(from)]
         return torch.matmul(guess, pick.transpose(1, 2).unsqueeze(1))
 
-    def correction(self, guess: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
-        """``[B, 3, T, J]`` correction of the normalised first guess ``guess [B, 3, T, J]`` (subclasses)."""
+    def correction(self, guess: torch.Tensor, observed: torch.Tensor, body: torch.Tensor | None = None) -> torch.Tensor:
+        """``[B, 3, T, J]`` correction of the normalised first guess ``guess [B, 3, T, J]`` (subclasses); with
+        ``body`` (``pose_frame``) the correction is in the frames' body frames."""
         raise NotImplementedError
 
+    @property
+    def feature_channels(self) -> int:
+        """Channels per joint of :meth:`features`: 7, or 10 with ``pose_frame``."""
+        return 10 if self.pose_frame else 7
+
     @staticmethod
-    def features(guess: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
+    def features(guess: torch.Tensor, observed: torch.Tensor, body: torch.Tensor | None = None) -> torch.Tensor:
         """Coordinate-first features ``[B, 7, T, J]`` of the guess ``[B, 3, T, J]``: the guess scaled to metres-like
         values (×0.1: a body spans about ±1), its temporal detail ×5 (2 cm of noise ≈ 1) and the observed flag;
-        inputs of order 1 keep the GRU's gates and the attention out of saturation. The networks read them per
-        frame, joint-major (:func:`per_joint`)."""
-        return torch.cat([FEATURE_SCALE[0] * guess, FEATURE_SCALE[1] * temporal_detail(guess, dim=2),
-                          observed.unsqueeze(1).to(guess.dtype)], dim=1)
+        inputs of order 1 keep the GRU's gates and the attention out of saturation. With ``body`` (the guess in
+        every frame's own body frame, :meth:`body_frame`) its three coordinates ×0.1 follow: ``[B, 10, T, J]``.
+        The networks read them per frame, joint-major (:func:`per_joint`)."""
+        parts = [FEATURE_SCALE[0] * guess, FEATURE_SCALE[1] * temporal_detail(guess, dim=2),
+                 observed.unsqueeze(1).to(guess.dtype)]
+        if body is not None:
+            parts.append(FEATURE_SCALE[0] * body)
+        return torch.cat(parts, dim=1)
+
+    def body_frame(self, guess: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """``(root [B, 3, T, 1], cos [B, 1, T, 1], sin [B, 1, T, 1])`` of every frame of the normalised guess
+        ``[B, 3, T, J]``: the frame's root and the turn about the up axis that lays its hip line (left → right) along
+        the first horizontal axis (no turn where the hips are unknown or the line is vertical). ``pose_frame``
+        networks read each frame in this frame and correct it there (:meth:`corrected`): where a missing joint is,
+        given the others of its frame, is then one function of them whichever way the body faces."""
+        n = self.normalizer
+        root = guess[..., n.root:n.root + 1]
+        if n.hips is None:
+            return root, torch.ones_like(root[:, :1]), torch.zeros_like(root[:, :1])
+        left, right = n.hips
+        line = guess[..., right:right + 1] - guess[..., left:left + 1]                # [B,3,T,1]
+        h1, h2 = n.horizontal
+        a, b = line[:, h1:h1 + 1], line[:, h2:h2 + 1]
+        norm = torch.sqrt(a * a + b * b)
+        ok = norm > 1e-6
+        return root, torch.where(ok, a / norm.clamp_min(1e-6), 1.0), torch.where(ok, b / norm.clamp_min(1e-6), 0.0)
+
+    def corrected(self, guess: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
+        """The first guess ``[B, 3, T, J]`` (normalised) plus the network's correction; with ``pose_frame`` the
+        network also reads the guess in every frame's body frame and its correction is turned back from it."""
+        if not self.pose_frame:
+            return guess + self.correction(guess, observed)
+        root, cos, sin = self.body_frame(guess)
+        turn = self.normalizer._turn
+        body = torch.cat(turn(list((guess - root).split(1, dim=1)), cos, sin), dim=1)
+        local = self.correction(guess, observed, body)
+        return guess + torch.cat(turn(list(local.split(1, dim=1)), cos, -sin), dim=1)
 
     def forward(self, positions: torch.Tensor, missing: torch.Tensor) -> torch.Tensor:
         refined, stats = self._refine_cf(positions, missing)
@@ -360,8 +402,7 @@ class _Refiner(nn.Module):
         clean = torch.where(coordinate_mask(observed), positions, 0.0).permute(0, 3, 1, 2)         # [B,3,T,J]
         stats = self.normalizer.statistics_cf(clean, seen)
         x = seen.to(clean.dtype) * self.normalizer.forward_cf(clean, stats)          # 0 where missing (finite)
-        guess = self.first_guess_cf(x, observed)
-        return guess + self.correction(guess, observed), stats
+        return self.corrected(self.first_guess_cf(x, observed), observed), stats
 
 
 def per_joint(features: torch.Tensor) -> torch.Tensor:
@@ -388,25 +429,27 @@ class BiGRURefiner(_Refiner):
             frames before the first / after the last observation (:func:`cubic_fill`). ``tangents="zero",
             extrapolate=0`` is the first guess of the runs trained before these options (their configs lack the
             keys: restore them with ``LearnedRefiner(first_guess={"tangents": "zero", "extrapolate": 0})``).
+        pose_frame: also read every frame in its own body frame and correct it there
+            (:meth:`~_Refiner.corrected`; ``checkpoints/select_pose_frame/RULE.txt`` measures it).
     """
 
     def __init__(self, joint_names: Sequence[str], parents: Sequence[int], up_axis: str = "y",
                  hips: Sequence[int] | None = None, bone_lengths: Sequence[float] | None = None,
                  fps: float | None = None, hidden: int = 128, layers: int = 2, dropout: float = 0.1,
-                 tangents: str = "chord", extrapolate: int = 6):
-        super().__init__(joint_names, parents, up_axis, hips, bone_lengths, fps, tangents, extrapolate)
+                 tangents: str = "chord", extrapolate: int = 6, pose_frame: bool = False):
+        super().__init__(joint_names, parents, up_axis, hips, bone_lengths, fps, tangents, extrapolate, pose_frame)
         J = self.num_joints
         # LayerNorm before the GRU: without it the GRU's output collapsed to ~0 within an epoch in some runs
         # (mean |h| 2e-5 on validation windows, the correction constant from then on: bench/RESULTS.md §13)
-        self.inp = nn.Sequential(nn.Linear(7 * J, hidden), nn.LayerNorm(hidden), nn.GELU())
+        self.inp = nn.Sequential(nn.Linear(self.feature_channels * J, hidden), nn.LayerNorm(hidden), nn.GELU())
         self.gru = nn.GRU(hidden, hidden, num_layers=layers, batch_first=True, bidirectional=True,
                           dropout=dropout if layers > 1 else 0.0)
         self.out = nn.Linear(2 * hidden, 3 * J)
         nn.init.zeros_(self.out.weight)
         nn.init.zeros_(self.out.bias)
 
-    def correction(self, guess: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
-        hidden, _ = self.gru(self.inp(per_joint(self.features(guess, observed))))
+    def correction(self, guess: torch.Tensor, observed: torch.Tensor, body: torch.Tensor | None = None) -> torch.Tensor:
+        hidden, _ = self.gru(self.inp(per_joint(self.features(guess, observed, body))))
         return coordinate_first(self.out(hidden), self.num_joints)
 
 
@@ -445,7 +488,8 @@ class MaskedTransformerRefiner(_Refiner):
     """Masked-autoencoder transformer; see the module docstring.
 
     Args:
-        joint_names, parents, up_axis, hips, bone_lengths, fps, tangents, extrapolate: as :class:`BiGRURefiner`.
+        joint_names, parents, up_axis, hips, bone_lengths, fps, tangents, extrapolate, pose_frame: as
+            :class:`BiGRURefiner`.
         tokens: ``"frames"`` (a token per frame, joints as features) or ``"joints"`` (a token per joint and
             frame, attention over the joints of a frame and then over the frames of a joint in every layer).
         dim: token width. layers: encoder layers (``"joints"``: pairs of joint / frame layers). heads: attention
@@ -455,8 +499,9 @@ class MaskedTransformerRefiner(_Refiner):
     def __init__(self, joint_names: Sequence[str], parents: Sequence[int], up_axis: str = "y",
                  hips: Sequence[int] | None = None, bone_lengths: Sequence[float] | None = None,
                  fps: float | None = None, tokens: str = "frames", dim: int = 128, layers: int = 3, heads: int = 4,
-                 ff: int = 256, dropout: float = 0.1, tangents: str = "chord", extrapolate: int = 6):
-        super().__init__(joint_names, parents, up_axis, hips, bone_lengths, fps, tangents, extrapolate)
+                 ff: int = 256, dropout: float = 0.1, tangents: str = "chord", extrapolate: int = 6,
+                 pose_frame: bool = False):
+        super().__init__(joint_names, parents, up_axis, hips, bone_lengths, fps, tangents, extrapolate, pose_frame)
         if tokens not in ("frames", "joints"):
             raise ValueError(f"tokens must be 'frames' or 'joints', got {tokens!r}")
         J = self.num_joints
@@ -465,11 +510,11 @@ class MaskedTransformerRefiner(_Refiner):
         layer = lambda: nn.TransformerEncoderLayer(dim, heads, ff, dropout, activation="gelu", batch_first=True,
                                                    norm_first=True)
         if tokens == "frames":
-            self.embed = nn.Linear(10 * J, dim)
+            self.embed = nn.Linear((3 + self.feature_channels) * J, dim)
             self.blocks = nn.ModuleList(layer() for _ in range(layers))
             self.out = nn.Linear(dim, 3 * J)
         else:
-            self.embed = nn.Linear(10, dim)
+            self.embed = nn.Linear(3 + self.feature_channels, dim)
             self.joint_embedding = nn.Parameter(torch.zeros(J, dim))
             nn.init.normal_(self.joint_embedding, std=0.02)
             self.blocks = nn.ModuleList(layer() for _ in range(2 * layers))    # joint, frame, joint, frame, ...
@@ -478,12 +523,12 @@ class MaskedTransformerRefiner(_Refiner):
         nn.init.zeros_(self.out.weight)
         nn.init.zeros_(self.out.bias)
 
-    def correction(self, guess: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
+    def correction(self, guess: torch.Tensor, observed: torch.Tensor, body: torch.Tensor | None = None) -> torch.Tensor:
         B, _, T, J = guess.shape
         mask_token = self.mask_token.to(guess.dtype).t().reshape(1, 3, 1, J)
         seen = observed.unsqueeze(1).to(guess.dtype)                                 # a 0/1 blend: cheaper than Where
         tokenised = seen * (FEATURE_SCALE[0] * guess) + (1 - seen) * mask_token                        # [B,3,T,J]
-        inputs = torch.cat([tokenised, self.features(guess, observed)], dim=1)                         # [B,10,T,J]
+        inputs = torch.cat([tokenised, self.features(guess, observed, body)], dim=1)             # [B,10|13,T,J]
         pos = _sinusoid(T, self.dim, guess.device, guess.dtype)                      # [T, dim]
         exporting = torch.onnx.is_in_onnx_export() and not self.training
         run = encoder_layer_for_export if exporting else (lambda block, h: block(h))
