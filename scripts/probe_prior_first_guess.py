@@ -122,7 +122,7 @@ def main(argv: list[str] | None = None) -> None:
     hp = recipe.module_.hparams
     window = int(hp.skeleton["window"])
     data = MocapRefinementDataModule(dataset="hdm05", root=str(args.data), test_groups=[args.fold], window=window)
-    prior = PosePriorRefiner().fit(data.train_motions)
+    prior = PosePriorRefiner(short_gap_seconds=0).fit(data.train_motions)        # as it ran (before the hand-over)
     module = type(recipe.module_)(hp.model, hp.optimizer, data.label_spaces()["skeleton"], hp.scheduler,
                                   hp.clean_weight, hp.bone_weight, hp.velocity_weight)
     optimizer = torch.optim.AdamW(module.parameters(), lr=float(hp.optimizer["lr"]),

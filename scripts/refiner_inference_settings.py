@@ -26,7 +26,11 @@ checkpoint selection held out, rebuilt from the run's data settings: performer `
     ``--drift``; fitted on the fold's training clips other than the validation clips (``--train-clips-per-performer
     N``: N seeded clips of each, as the benchmark's fits); the score is the RMS 3-D error over the **corrupted**
     entries of the whole clips under random loss, 10- and 40-frame gaps and both long-gap protocols (it fills gaps
-    only).
+    only); without the short-gap spline (``short_gap_seconds=0``), as selection rounds 1-3 ran.
+``--setting pose_prior_short_gaps`` — the pose prior's ``short_gap_seconds`` (interior gaps up to this long filled
+    by the cubic spline instead of the fusion; the values in frames at HDM05's 120 fps) at the ``--drift`` and ``--noise-floor`` given; fitted as
+    ``--setting pose_prior``; the score is the RMS 3-D error over the **corrupted** entries under random loss, gaps of
+    10–60 frames and both long-gap protocols.
 ``--setting window`` — the inference ``window`` (frames per window; longer takes are refined in overlapping
     windows blended with ramps), as multiples of the training window; the score is the RMS 3-D error over the
     **corrupted** entries (removed or perturbed) of the whole clips (not cropped: a window longer than a clip is
@@ -42,6 +46,8 @@ Usage (from the repository root)::
     python scripts/refiner_inference_settings.py --setting window --models transformer --folds bd
     python scripts/refiner_inference_settings.py --setting screen --models pchip lrmf bigru --half-window 3
     python scripts/refiner_inference_settings.py --setting pose_prior --models pose_prior --sweep noise_floor
+    python scripts/refiner_inference_settings.py --setting pose_prior_short_gaps --models pose_prior --noise-floor 0.005 \
+        --train-clips-per-performer 10 --folds bd bk dg mm
 """
 from __future__ import annotations
 
@@ -78,6 +84,11 @@ SETTINGS = {
     "pose_prior": {"values": [0.04, 0.12, 0.38], "unit": "m/s",
                    "protocols": [("random_missing", 0.2), ("continuous_missing", 10), ("continuous_missing", 40),
                                  ("long_gaps", "20x100"), ("long_gaps", "5x2s")]},
+    "pose_prior_short_gaps": {"values": [0, 12, 24, 48, 72, 96], "unit": "frames",
+                              "protocols": [("random_missing", 0.2), ("random_missing", 0.5), ("continuous_missing", 10),
+                                            ("continuous_missing", 20), ("continuous_missing", 40),
+                                            ("continuous_missing", 60), ("long_gaps", "20x100"),
+                                            ("long_gaps", "5x2s")]},
     "window": {"values": [1, 2, 4], "unit": "× training window",
                "protocols": [("rdcrypt", 0.3), ("mxcrypt", 0.3), ("random_missing", 0.2), ("continuous_missing", 40),
                              ("long_gaps", "20x100"), ("long_gaps", "5x2s")]},
@@ -173,7 +184,7 @@ def main(argv: list[str] | None = None) -> None:
                 clips = list(data.val_motions)
                 refiners = [_screened(base_refiner(model, checkpoint, args.short_gap_frames), v, args.half_window,
                                       args.n_sigmas) for v in values]
-            elif args.setting == "pose_prior":
+            elif args.setting in ("pose_prior", "pose_prior_short_gaps"):
                 from mocapkit.classical.pose_prior import PosePriorRefiner
                 clips = list(data.val_motions)
                 fit = data.train_motions
@@ -184,9 +195,18 @@ def main(argv: list[str] | None = None) -> None:
                     fit = [ms[i] for _, ms in sorted(by_group.items())
                            for i in sorted(rng.choice(len(ms), min(len(ms), args.train_clips_per_performer),
                                                       replace=False))]
-                fixed = {"drift": args.drift} if args.sweep == "noise_floor" else {"noise_floor": args.noise_floor}
-                refiners = [PosePriorRefiner(n_components=args.n_components, **fixed, **{args.sweep: v}).fit(fit)
-                            for v in values]
+                if args.setting == "pose_prior_short_gaps":
+                    # the grid in frames at 120 fps (HDM05), the parameter in seconds
+                    sweep, fixed = "short_gap_seconds", {"drift": args.drift, "noise_floor": args.noise_floor}
+                    values = [int(v) for v in values]
+                    sweep_values = [v / 120.0 for v in values]
+                else:
+                    sweep = args.sweep                        # rounds 1-3 ran without the short-gap spline
+                    fixed = {"drift": args.drift} if sweep == "noise_floor" else {"noise_floor": args.noise_floor}
+                    fixed["short_gap_seconds"] = 0
+                    sweep_values = values
+                refiners = [PosePriorRefiner(n_components=args.n_components, **fixed, **{sweep: v}).fit(fit)
+                            for v in sweep_values]
             elif args.setting == "short_gap_points":
                 clips = list(data.val_motions)
                 refiners = [LearnedRefiner(checkpoint=checkpoint, short_gap_frames=int(abs(v)),

@@ -40,7 +40,8 @@ def swinging_body(frames: int, seed: int, fps: float = 120.0) -> Motion:
 
 @pytest.fixture(scope="module")
 def fitted():
-    return PosePriorRefiner(n_components=8).fit([swinging_body(300, s) for s in range(4)])
+    # the fusion itself: no short-gap hand-over to the spline (that has its own test)
+    return PosePriorRefiner(n_components=8, short_gap_seconds=0).fit([swinging_body(300, s) for s in range(4)])
 
 
 def test_nearest_sample_distance():
@@ -113,8 +114,8 @@ def test_errors_not_fitted_other_layout_no_complete_frame_and_bad_parameters(fit
 
 def test_the_noise_floor_bounds_the_prior_confidence_and_keeps_short_gaps_with_the_guess():
     train = [swinging_body(300, s) for s in range(2)]                 # exactly low-rank poses
-    tight = PosePriorRefiner(n_components=90, noise_floor=0.0).fit(train)
-    floored = PosePriorRefiner(n_components=90, noise_floor=0.01).fit(train)
+    tight = PosePriorRefiner(n_components=90, noise_floor=0.0, short_gap_seconds=0).fit(train)
+    floored = PosePriorRefiner(n_components=90, noise_floor=0.01, short_gap_seconds=0).fit(train)
     assert tight.noise_variance_ < 1e-8 and floored.noise_variance_ == pytest.approx(1e-4)
     clean = swinging_body(200, 21)
     tibia = CMU31.joint_names.index("ltibia")
@@ -129,3 +130,44 @@ def test_the_noise_floor_bounds_the_prior_confidence_and_keeps_short_gaps_with_t
              for name, r in (("tight", tight), ("floored", floored))}
     assert error["tight"] > 0.005                       # the exact prior pulls the knee back into its subspace
     assert error["floored"] < 0.1 * error["tight"]      # the floor leaves the gap to the temporal guess
+
+
+def test_short_gaps_go_to_the_spline_and_longer_ones_stay_with_the_fusion(fitted):
+    """``short_gap_seconds``: interior gaps up to that length come out as the not-a-knot spline through the joint's
+    samples fills them; a longer gap, a gap at the take's start and every observed sample are the fusion's."""
+    from mocapkit.classical.gap_filling import SplineInterpolation
+
+    clean = swinging_body(300, 12)
+    hand, knee = CMU31.joint_names.index("lhand"), CMU31.joint_names.index("ltibia")
+    missing = np.zeros((300, CMU31.num_joints), bool)
+    missing[100:110, hand] = True                                         # 10 frames: short
+    missing[150:200, hand] = True                                         # 50 frames: long
+    missing[:8, knee] = True                                              # at the start: not interior
+    gappy = Motion(np.where(missing[..., None], np.nan, clean.positions), clean.joint_names, clean.fps,
+                   parents=clean.parents, layout_name="cmu31")
+    handed = PosePriorRefiner(**{**fitted.get_params(), "short_gap_seconds": 0.2}).fit(
+        [swinging_body(300, s) for s in range(4)]).refine(gappy).positions
+    fused = fitted.refine(gappy).positions
+    spline = SplineInterpolation().refine(gappy).positions
+    np.testing.assert_allclose(handed[100:110, hand], spline[100:110, hand], atol=1e-9)
+    assert np.abs(fused[100:110, hand] - spline[100:110, hand]).max() > 1e-4     # the fusion differs there
+    np.testing.assert_allclose(handed[150:200, hand], fused[150:200, hand], atol=1e-9)
+    np.testing.assert_allclose(handed[:8, knee], fused[:8, knee], atol=1e-9)
+    np.testing.assert_array_equal(handed[~missing], clean.positions[~missing])
+    with pytest.raises(ValueError, match="short_gap_seconds"):
+        PosePriorRefiner(short_gap_seconds=-1).fit([clean])
+    # in seconds: at 30 fps 0.2 s is 6 frames, so a 10-frame gap stays with the fusion
+    prior30 = PosePriorRefiner(n_components=8).fit([Motion(swinging_body(1200, s).positions[::4], CMU31.joint_names,
+                                                           30.0, parents=CMU31.parents) for s in range(4)])
+    assert prior30.get_params()["short_gap_seconds"] == 0.2
+    slow_missing = missing[::4]
+    slow_missing[60:70, hand] = True                                      # 10 frames at 30 fps: 0.33 s
+    slow = Motion(np.where(slow_missing[..., None], np.nan, clean.positions[::4]), clean.joint_names, 30.0,
+                  parents=clean.parents, layout_name="cmu31")
+    spline30 = SplineInterpolation().refine(slow).positions[60:70, hand]
+    handed30 = prior30.refine(slow).positions
+    fused30 = PosePriorRefiner(n_components=8, short_gap_seconds=0).fit(
+        [Motion(swinging_body(1200, s).positions[::4], CMU31.joint_names, 30.0, parents=CMU31.parents)
+         for s in range(4)]).refine(slow).positions
+    np.testing.assert_allclose(handed30[60:70, hand], fused30[60:70, hand], atol=1e-9)
+    assert np.abs(handed30[60:70, hand] - spline30).max() > 1e-4

@@ -24,6 +24,9 @@ quarter of that error (bench/RESULTS.md §13). This method makes that regression
    ``g_t − s_t`` (``v_temporal = v − σ²``: next to a sample most of the guess is kept, far from one none), and
    the pose, turned back to the take's frame, fills the missing entries. Observed entries come back untouched (a gap filler: it does not
    denoise; put :class:`~mocapkit.refinement.screening.MedianScreen` in front for noisy takes).
+5. **Short gaps**: interior gaps of a joint up to ``short_gap_seconds`` (0.2 s) take the not-a-knot cubic spline
+   through the joint's samples instead (:func:`~mocapkit.refinement.learned.spline_fill`, the learned refiners'
+   hand-over): there it beats the fusion, whose prior pulls a well-bracketed sample towards the training poses.
 
 Cost: ``fit`` is one ``[3J, 3J]`` eigen-decomposition; ``refine`` is a ``[K, K]`` solve per frame
 (``O(T · 3J · K²)``). Frames in which every joint is missing are filled inside the take up to
@@ -68,6 +71,11 @@ class PosePriorRefiner(MotionRefiner):
             guess even next to a sample); the floor keeps every direction uncertain by at least this much.
             Default 0.005 (chosen on the validation clips with the prior fitted on 10 clips per performer, as
             the benchmark fits it: 0, 0.002, 0.005, 0.01 m; bench/RESULTS.md §13).
+        short_gap_seconds: interior gaps of a joint up to this long are filled by the cubic spline through its
+            observed samples (:func:`~mocapkit.refinement.learned.spline_fill`, as the learned refiners hand short
+            gaps over) instead of the fusion; 0: none. Default 0.2 (24 frames at 120 fps; chosen on the validation
+            clips of HDM05's training performers among 0, 12, 24, 48, 72, 96 frames, bench/RESULTS.md §13; in
+            seconds so that a 30 fps take hands over 6 frames, not 0.8 s).
         max_empty_frames: interior runs of frames with no observed joint longer than this stay missing, as do
             such frames before the first / after the last observed frame. Default 12.
         max_frames: training frames used (a seeded random subset above it). Default 200,000.
@@ -81,12 +89,13 @@ class PosePriorRefiner(MotionRefiner):
     fixed_sampling = True
 
     def __init__(self, n_components: int = 90, drift: float = 0.2, observation_noise: float = 0.002,
-                 noise_floor: float = 0.005, max_empty_frames: int = 12, max_frames: int = 200_000,
-                 random_state: int | None = 0):
+                 noise_floor: float = 0.005, short_gap_seconds: float = 0.2, max_empty_frames: int = 12,
+                 max_frames: int = 200_000, random_state: int | None = 0):
         self.n_components = n_components
         self.drift = drift
         self.noise_floor = noise_floor
         self.observation_noise = observation_noise
+        self.short_gap_seconds = short_gap_seconds
         self.max_empty_frames = max_empty_frames
         self.max_frames = max_frames
         self.random_state = random_state
@@ -101,6 +110,8 @@ class PosePriorRefiner(MotionRefiner):
         if not (float(self.drift) > 0 and float(self.observation_noise) > 0 and float(self.noise_floor) >= 0):
             raise ValueError(f"drift and observation_noise must be positive and noise_floor ≥ 0, got {self.drift!r}, "
                              f"{self.observation_noise!r}, {self.noise_floor!r}")
+        if not (float(self.short_gap_seconds) >= 0):
+            raise ValueError(f"short_gap_seconds must be ≥ 0, got {self.short_gap_seconds!r}")
         motions = list(motions or [])
         if motions:
             first = motions[0]
@@ -153,7 +164,11 @@ class PosePriorRefiner(MotionRefiner):
         return cubic_fill(x, torch.from_numpy(observed[None]))[0].numpy()
 
     def _refine_matrix(self, X: np.ndarray, observed: np.ndarray) -> tuple[np.ndarray, None]:
-        from mocapkit.refinement.learned import empty_frames_kept
+        from mocapkit.refinement.learned import (
+            empty_frames_kept,
+            short_gaps,
+            spline_fill,
+        )
 
         T, L = X.shape
         seen = observed[:, ::3]                                                     # [T, J]
@@ -179,6 +194,10 @@ class PosePriorRefiner(MotionRefiner):
             keep = np.where(np.isfinite(temporal), noise / (noise + temporal), 0.0)
             pose = subspace + keep * (np.where(np.isfinite(g), g, 0.0) - subspace)
             out = self._from_pose_frame(pose.reshape(T, -1, 3), root, cos, sin)
+        longest = round(float(self.short_gap_seconds) * self.fps_)
+        if longest > 0:
+            short = short_gaps(~seen, longest)
+            out[short] = spline_fill(X.reshape(T, -1, 3), ~seen, short)[short]
         out = out.reshape(T, L)
         never = ~seen.any(axis=0)
         if not framed:                              # no prior: a joint never observed has no temporal guess either
