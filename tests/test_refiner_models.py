@@ -316,7 +316,7 @@ def test_body_frame_reads_every_frame_alike_whichever_way_it_faces():
     net = NETWORKS["transformer-frames-pose-frame"]()
     guess, _ = _turned_per_frame(20)
     root, cos, sin = net.body_frame(guess)
-    body = torch.cat(net.normalizer._turn(list((guess - root).split(1, dim=1)), cos, sin), dim=1)    # [1,3,T,J]
+    body = net.normalizer.turn_cf(guess - root, cos, sin)                                  # [1,3,T,J]
     torch.testing.assert_close(body, body[:, :, :1].expand_as(body), atol=1e-5, rtol=0)
     assert body[0, :, 0, 0].abs().max() < 1e-6                                         # the root at the origin
     hip_line = body[0, :, 0, HIPS[1]] - body[0, :, 0, HIPS[0]]

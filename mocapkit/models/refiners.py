@@ -54,6 +54,14 @@ def _masked_mean(values: torch.Tensor, weights: torch.Tensor, dims: tuple[int, .
     return total / count.clamp_min(1e-6), count
 
 
+def heading(a: torch.Tensor, b: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(cos, sin)`` of the horizontal direction ``(a, b)`` (two horizontal coordinates of a hip line, any shape):
+    the turn about the up axis that lays it along the first horizontal axis; no turn (1, 0) where it vanishes."""
+    norm = torch.sqrt(a * a + b * b)
+    ok = norm > 1e-6
+    return torch.where(ok, a / norm.clamp_min(1e-6), 1.0), torch.where(ok, b / norm.clamp_min(1e-6), 0.0)
+
+
 def coordinate_mask(observed: torch.Tensor) -> torch.Tensor:
     """``observed [B, T, J]`` as a mask of the coordinates' shape ``[B, T, J, 3]``, built by concatenation: a
     ``torch.where`` whose condition broadcasts over the trailing axis of 3, or an expand to it, runs several times
@@ -132,11 +140,8 @@ class PoseNormalizer(nn.Module):
             left, right = self.hips
             both = w[..., left] * w[..., right]                                     # [B,1,T]
             line, _ = _masked_mean(coords[..., right] - coords[..., left], both, (2,))   # [B,3,1]
-            a, b = line[:, h1:h1 + 1], line[:, h2:h2 + 1]                           # [B,1,1]
-            norm = torch.sqrt(a * a + b * b)
-            ok = norm > 1e-6
-            cos = torch.where(ok, a / norm.clamp_min(1e-6), 1.0).unsqueeze(-1)   # [B,1,1,1]
-            sin = torch.where(ok, b / norm.clamp_min(1e-6), 0.0).unsqueeze(-1)
+            cos, sin = heading(line[:, h1:h1 + 1], line[:, h2:h2 + 1])             # [B,1,1]
+            cos, sin = cos.unsqueeze(-1), sin.unsqueeze(-1)                         # [B,1,1,1]
         vectors = torch.matmul(coords, self.bone_vector)                            # [B,3,T,bones]
         length = torch.sqrt((vectors * vectors).sum(1))                              # [B,T,bones]
         bone_w = (torch.matmul(w[:, 0], self.bone_ends) > 1.5).to(coords.dtype)     # both ends seen
@@ -149,23 +154,26 @@ class PoseNormalizer(nn.Module):
         return centre, cos, sin, scale
 
     def _turn(self, coords: list[torch.Tensor], cos: torch.Tensor, sin: torch.Tensor) -> list[torch.Tensor]:
-        """The three coordinates turned about the up axis by the per-window ``cos``, ``sin``."""
+        """The three coordinates turned about the up axis by ``cos``, ``sin`` (broadcast: per window or per frame)."""
         h1, h2 = self.horizontal
         a, b = coords[h1], coords[h2]
         turned = {h1: cos * a + sin * b, h2: -sin * a + cos * b, self.up: coords[self.up]}
         return [turned[0], turned[1], turned[2]]
 
+    def turn_cf(self, coords: torch.Tensor, cos: torch.Tensor, sin: torch.Tensor) -> torch.Tensor:
+        """``coords [B, 3, T, J]`` turned about the up axis by ``cos``, ``sin`` (``[B, 1, 1 | T, 1]``); the inverse
+        turn is ``(cos, −sin)``."""
+        return torch.cat(self._turn(list(coords.split(1, dim=1)), cos, sin), dim=1)
+
     def forward_cf(self, coords: torch.Tensor, stats) -> torch.Tensor:
         """``coords [B, 3, T, J]`` normalised with ``stats`` (centred, turned, scaled)."""
         centre, cos, sin, scale = stats
-        moved = list((coords - centre).split(1, dim=1))                             # 3 × [B,1,T,J]
-        return torch.cat(self._turn(moved, cos, sin), dim=1) / scale
+        return self.turn_cf(coords - centre, cos, sin) / scale
 
     def inverse_cf(self, normalised: torch.Tensor, stats) -> torch.Tensor:
         """The inverse of :meth:`forward_cf`."""
         centre, cos, sin, scale = stats
-        turned = self._turn(list((normalised * scale).split(1, dim=1)), cos, -sin)
-        return torch.cat(turned, dim=1) + centre
+        return self.turn_cf(normalised * scale, cos, -sin) + centre
 
 
 def observed_neighbours(observed: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -365,10 +373,7 @@ class _Refiner(nn.Module):
         left, right = n.hips
         line = guess[..., right:right + 1] - guess[..., left:left + 1]                # [B,3,T,1]
         h1, h2 = n.horizontal
-        a, b = line[:, h1:h1 + 1], line[:, h2:h2 + 1]
-        norm = torch.sqrt(a * a + b * b)
-        ok = norm > 1e-6
-        return root, torch.where(ok, a / norm.clamp_min(1e-6), 1.0), torch.where(ok, b / norm.clamp_min(1e-6), 0.0)
+        return (root, *heading(line[:, h1:h1 + 1], line[:, h2:h2 + 1]))
 
     def corrected(self, guess: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
         """The first guess ``[B, 3, T, J]`` (normalised) plus the network's correction; with ``pose_frame`` the
@@ -376,10 +381,8 @@ class _Refiner(nn.Module):
         if not self.pose_frame:
             return guess + self.correction(guess, observed)
         root, cos, sin = self.body_frame(guess)
-        turn = self.normalizer._turn
-        body = torch.cat(turn(list((guess - root).split(1, dim=1)), cos, sin), dim=1)
-        local = self.correction(guess, observed, body)
-        return guess + torch.cat(turn(list(local.split(1, dim=1)), cos, -sin), dim=1)
+        local = self.correction(guess, observed, self.normalizer.turn_cf(guess - root, cos, sin))
+        return guess + self.normalizer.turn_cf(local, cos, -sin)
 
     def forward(self, positions: torch.Tensor, missing: torch.Tensor) -> torch.Tensor:
         refined, stats = self._refine_cf(positions, missing)
