@@ -157,17 +157,16 @@ def test_short_gaps_go_to_the_spline_and_longer_ones_stay_with_the_fusion(fitted
     with pytest.raises(ValueError, match="short_gap_seconds"):
         PosePriorRefiner(short_gap_seconds=-1).fit([clean])
     # in seconds: at 30 fps 0.2 s is 6 frames, so a 10-frame gap stays with the fusion
-    prior30 = PosePriorRefiner(n_components=8).fit([Motion(swinging_body(1200, s).positions[::4], CMU31.joint_names,
-                                                           30.0, parents=CMU31.parents) for s in range(4)])
+    train30 = [Motion(swinging_body(1200, s).positions[::4], CMU31.joint_names, 30.0, parents=CMU31.parents)
+               for s in range(4)]
+    prior30 = PosePriorRefiner(n_components=8).fit(train30)
     assert prior30.get_params()["short_gap_seconds"] == 0.2
-    slow_missing = missing[::4]
+    slow_missing = missing[::4].copy()
     slow_missing[60:70, hand] = True                                      # 10 frames at 30 fps: 0.33 s
     slow = Motion(np.where(slow_missing[..., None], np.nan, clean.positions[::4]), clean.joint_names, 30.0,
                   parents=clean.parents, layout_name="cmu31")
     spline30 = SplineInterpolation().refine(slow).positions[60:70, hand]
     handed30 = prior30.refine(slow).positions
-    fused30 = PosePriorRefiner(n_components=8, short_gap_seconds=0).fit(
-        [Motion(swinging_body(1200, s).positions[::4], CMU31.joint_names, 30.0, parents=CMU31.parents)
-         for s in range(4)]).refine(slow).positions
+    fused30 = PosePriorRefiner(n_components=8, short_gap_seconds=0).fit(train30).refine(slow).positions
     np.testing.assert_allclose(handed30[60:70, hand], fused30[60:70, hand], atol=1e-9)
     assert np.abs(handed30[60:70, hand] - spline30).max() > 1e-4
