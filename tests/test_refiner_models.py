@@ -297,8 +297,8 @@ def test_missing_entry_values_do_not_change_the_output(name):
     assert (outs[0][~missing] - x[~missing]).abs().max() > 1e-3
 
 
-def _turned_per_frame(T: int, seed: int = 0):
-    """``(guess [1, 3, T, J], angles [T])``: one pose, every frame turned about the up (y) axis through its root by
+def _turned_per_frame(T: int, seed: int = 0) -> torch.Tensor:
+    """``guess [1, 3, T, J]``: one pose, every frame turned about the up (y) axis through its root by
     its own angle and moved along a path."""
     pose = torch.from_numpy(synthetic_motion(1, seed).positions[0]).float()                 # [J, 3]
     pose = pose - pose[0]
@@ -307,14 +307,14 @@ def _turned_per_frame(T: int, seed: int = 0):
     x, y, z = pose[:, 0], pose[:, 1], pose[:, 2]
     turned = torch.stack([c * x + s * z, y.expand(T, -1), -s * x + c * z], dim=0)           # [3, T, J]
     path = torch.stack([torch.linspace(0, 3, T), torch.zeros(T), torch.linspace(1, -1, T)]).unsqueeze(-1)
-    return (turned + path).unsqueeze(0), angles
+    return (turned + path).unsqueeze(0)
 
 
 def test_body_frame_reads_every_frame_alike_whichever_way_it_faces():
     """The pose-frame input: one pose turned per frame and moved along a path reads the same in every frame's
     body frame, with the root at the origin and the hip line along the first horizontal axis."""
     net = NETWORKS["transformer-frames-pose-frame"]()
-    guess, _ = _turned_per_frame(20)
+    guess = _turned_per_frame(20)
     root, cos, sin = net.body_frame(guess)
     body = net.normalizer.turn_cf(guess - root, cos, sin)                                  # [1,3,T,J]
     torch.testing.assert_close(body, body[:, :, :1].expand_as(body), atol=1e-5, rtol=0)
@@ -329,7 +329,7 @@ def test_pose_frame_correction_is_turned_back_per_frame(monkeypatch):
     """A correction the network gives in the body frame (a constant step along the hip line) comes out along each
     frame's own hip line in the window frame."""
     net = NETWORKS["transformer-frames-pose-frame"]()
-    guess, _ = _turned_per_frame(16, seed=2)
+    guess = _turned_per_frame(16, seed=2)
     T, J = guess.shape[2], guess.shape[3]
     step = torch.zeros(1, 3, T, J)
     step[:, 0] = 1.0
@@ -341,7 +341,8 @@ def test_pose_frame_correction_is_turned_back_per_frame(monkeypatch):
     torch.testing.assert_close(moved[0, :, :, 4], expected, atol=1e-5, rtol=0)
 
 
-def test_pose_frame_networks_export_with_parity(tmp_path):
+def test_pose_frame_transformer_exports_with_parity(tmp_path):
+    """export_refiner raises ParityError where onnxruntime and PyTorch differ (on shapes other than the traced)."""
     from mocapkit.deploy.refiner_export import export_refiner
 
     torch.manual_seed(3)
