@@ -166,6 +166,8 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_args(argv)
     setting = SETTINGS[args.setting]
     values, protocols = args.values or setting["values"], list(setting["protocols"])
+    if args.setting == "pose_prior_short_gaps":              # the grid in frames at 120 fps (HDM05), the parameter
+        values = [int(v) for v in values]                    # in seconds
     if args.clean:
         protocols.append(("clean", None))
 
@@ -196,9 +198,7 @@ def main(argv: list[str] | None = None) -> None:
                            for i in sorted(rng.choice(len(ms), min(len(ms), args.train_clips_per_performer),
                                                       replace=False))]
                 if args.setting == "pose_prior_short_gaps":
-                    # the grid in frames at 120 fps (HDM05), the parameter in seconds
                     sweep, fixed = "short_gap_seconds", {"drift": args.drift, "noise_floor": args.noise_floor}
-                    values = [int(v) for v in values]
                     sweep_values = [v / 120.0 for v in values]
                 else:
                     sweep = args.sweep                        # rounds 1-3 ran without the short-gap spline
