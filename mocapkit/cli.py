@@ -449,8 +449,9 @@ def build_parser() -> argparse.ArgumentParser:
     index.add_argument("--src", required=True, help="folder searched recursively for files read_motion reads")
     index.add_argument("--out", required=True, help="the index folder to write (manifest.json + state.npz)")
     index.add_argument("--method", default=None,
-                       help="dtw_positions, dtw_relational, hod, gpf, amfs, laplacian_score, tsr_stpm, embedding "
-                            "(default: the recommended label-free method, mocapkit.retrieval.RECOMMENDED)")
+                       help="dtw_mutual_proximity, dtw_positions, dtw_relational, hod, gpf, amfs, laplacian_score, "
+                            "tsr_stpm, embedding (default: the recommended label-free method, "
+                            "mocapkit.retrieval.RECOMMENDED)")
     index.add_argument("--ckpt", default=None, help="--method embedding: RUN/best.ckpt or an exported model.onnx")
     index.add_argument("--skip-bad", dest="skip_bad", action="store_true",
                        help="skip files that cannot be read or used (each is reported)")

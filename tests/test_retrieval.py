@@ -128,6 +128,55 @@ def test_dtw_finds_the_time_warped_copy():
     assert np.allclose(restored.distances([a]), method.distances([a]))
 
 
+def test_mutual_proximity_demotes_a_hub():
+    from mocapkit.retrieval.hubness import (
+        database_statistics,
+        mutual_proximity,
+        reference_indices,
+    )
+
+    # database clip 0 is a hub, 0.8-1.1 from every other clip; clips 1-4 are 3.0 apart from each other. The query
+    # is 0.95 from the hub and 1.0 from clip 1, its true neighbour, and 3.0 from the rest: by raw distance the hub
+    # comes first; for the hub a distance of 0.95 is its average, for clip 1 a distance of 1.0 is rare.
+    n = 5
+    database = np.full((n, n), 3.0)
+    database[0, 1:] = database[1:, 0] = [0.8, 0.9, 1.0, 1.1]
+    np.fill_diagonal(database, 0.0)
+    query = np.array([[0.95, 1.0, 3.0, 3.0, 3.0]])
+    mean, std = database_statistics(database, reference_indices(n, 512))
+    assert mean[0] == pytest.approx(0.95) and mean[1] == pytest.approx((0.8 + 3 + 3 + 3) / 4)   # itself left out
+    assert np.argmin(query[0]) == 0
+    mp = mutual_proximity(query, mean, std)
+    assert np.argmin(mp[0]) == 1 and (mp >= 0).all()
+    # -log of the product of the two normal tails
+    from scipy.stats import norm
+
+    expected = -np.log(norm.sf(1.0, query.mean(), query.std()) * norm.sf(1.0, mean[1], std[1]))
+    assert mp[0, 1] == pytest.approx(expected)
+    assert reference_indices(10, 4).tolist() == [0, 3, 6, 9]
+
+
+def test_dtw_with_two_features_scales_and_sums_them():
+    clips = [_walker(frames=60 + 10 * i, seed=i) for i in range(4)]
+    query = _walker(frames=70, seed=9)
+    both = DTWRetrieval(features=["positions", "relational"]).fit(clips)
+    singles = [DTWRetrieval(features=f).fit(clips) for f in ("positions", "relational")]
+    among = [s.distances(clips) for s in singles]
+    off = ~np.eye(len(clips), dtype=bool)
+    assert both.scales_ == pytest.approx([np.median(d[off]) for d in among])
+    expected = sum(s.distances([query]) / scale for s, scale in zip(singles, both.scales_))
+    assert np.allclose(both.distances([query]), expected)
+    with pytest.raises(ValueError, match="features"):
+        DTWRetrieval(features=["positions", "speed"]).fit(clips)
+    with pytest.raises(ValueError, match="hubness"):
+        DTWRetrieval(hubness="snn").fit(clips)
+    hub = DTWRetrieval(features=["positions", "relational"], hubness="mutual_proximity").fit(clips)
+    restored = DTWRetrieval(features=["positions", "relational"], hubness="mutual_proximity")
+    restored._set_state(hub._state())
+    assert np.allclose(restored.distances([query]), hub.distances([query]))
+    assert not np.allclose(hub.distances([query]), both.distances([query]))
+
+
 # ------------------------------------------------------------------------------------------ index / search
 def test_index_and_search_cli(hdm05_folder, tmp_path, capsys):
     out = tmp_path / "index"
@@ -178,11 +227,14 @@ def test_index_bad_files_empty_folders_and_foreign_skeletons(hdm05_folder, tmp_p
 
 
 def test_index_round_trip_gives_the_same_ranking(hdm05_folder, tmp_path):
-    index = build_index(hdm05_folder, tmp_path / "idx", method="dtw_relational", quiet=True)
+    index = build_index(hdm05_folder, tmp_path / "idx", quiet=True)         # the recommended default
+    assert index.method_name == "dtw_mutual_proximity"
     query = min((hdm05_folder / "mm").glob("*.amc"))
     before = index.search([str(query)], k=0)
     after = search_index(tmp_path / "idx", [str(query)], k=0)
     assert before == after
+    motion_class = query.name.split("_")[2]                                    # HDM_<actor>_<class>_<nnn>_120.amc
+    assert [Path(h["path"]).name.split("_")[2] for h in before[0]["results"][:3]] == [motion_class] * 3
 
 
 # ------------------------------------------------------------------------------------------ benchmark

@@ -34,12 +34,14 @@ from mocapkit.io_atomic import atomic_path, atomic_write_text
 from mocapkit.retrieval.base import file_sha1
 
 FORMAT = "mocapkit-retrieval-index"
-VERSION = 1
+VERSION = 2   # 2: DTW indexes keep one database per feature (and mutual-proximity statistics)
 #: Method name → (class, default parameters). Label-free methods need no labels; ``embedding`` needs a trained
 #: encoder (``--ckpt RUN/best.ckpt`` or an exported ``.onnx``).
 METHODS: dict[str, tuple[str, dict]] = {
     "dtw_positions": ("mocapkit.retrieval.dtw.DTWRetrieval", {"features": "positions"}),
     "dtw_relational": ("mocapkit.retrieval.dtw.DTWRetrieval", {"features": "relational"}),
+    "dtw_mutual_proximity": ("mocapkit.retrieval.dtw.DTWRetrieval", {"features": ["positions", "relational"],
+                                                                     "hubness": "mutual_proximity"}),
     "hod": ("mocapkit.retrieval.feature_selection.FeatureRetrieval", {"views": ["hod"], "selector": None}),
     "gpf": ("mocapkit.retrieval.feature_selection.FeatureRetrieval", {"views": ["gpf"], "selector": None}),
     "amfs": ("mocapkit.retrieval.feature_selection.FeatureRetrieval", {"views": ["hod", "gpf"], "selector": "amfs"}),
@@ -50,9 +52,11 @@ METHODS: dict[str, tuple[str, dict]] = {
     "tsr_stpm_thesis": ("mocapkit.retrieval.tsr_stpm.TSRSTPMRetrieval", {}),
     "embedding": ("mocapkit.retrieval.embedding.EmbeddingRetrieval", {}),
 }
-#: The default of ``mocapkit index``: the label-free method without a training run with the best mean mAP over our
-#: four retrieval protocols (HDM05 cross-performer, Bandai content and style, MSR cross-subject; README *Results*).
-RECOMMENDED = "dtw_positions"
+#: The default of ``mocapkit index``: the label-free method without a training run chosen on the training groups of
+#: our four retrieval protocols (HDM05 cross-performer, Bandai content and style, MSR cross-subject): DTW on
+#: positions and relational features with mutual proximity (``checkpoints/select_retrieval_rerank/RULE.txt``;
+#: README *Motion retrieval*).
+RECOMMENDED = "dtw_mutual_proximity"
 
 
 class RetrievalIndexError(ValueError):
@@ -152,7 +156,8 @@ class MotionIndex:
             raise RetrievalIndexError(f"{manifest_path}: not valid JSON ({exc})") from exc
         if manifest.get("format") != FORMAT or manifest.get("version") != VERSION:
             raise RetrievalIndexError(f"{manifest_path}: format {manifest.get('format')!r} version "
-                                      f"{manifest.get('version')!r}, expected {FORMAT!r} version {VERSION}")
+                                      f"{manifest.get('version')!r}, expected {FORMAT!r} version {VERSION} "
+                                      "(build it again: mocapkit index --src DIR --out INDEX)")
         name = manifest["method"]
         method = _class(name)(**manifest["params"])    # only classes of METHODS: nothing else is imported
         with np.load(path / "state.npz", allow_pickle=False) as data:
