@@ -4,9 +4,11 @@ The library is real HDM05 clips (``../shared/data/hdm05_cuts11``, 232 clips) rep
 (time scaling 0.8–1.25×, a temporal crop of 80–100 %, 1 cm joint jitter) up to the size asked:
 
 - **DTW** (:class:`~mocapkit.retrieval.dtw.DTWRetrieval`, the baseline a user would otherwise reach for, and the
-  recommended label-free method when it is DTW on relational features): the augmented clips themselves; build =
-  ``fit`` (normalise + per-frame features), query = one query clip ranked against the whole library (median over
-  queries), measured up to ``--dtw-max`` clips;
+  ``mocapkit index`` default, DTW on positions and relational features with mutual proximity): the augmented clips
+  themselves, one row per name of ``--dtw-methods`` (:data:`~mocapkit.retrieval.index.METHODS`); build = ``fit``
+  (normalise + per-frame features; with mutual proximity also DTW from every clip to at most 512 reference clips),
+  query = one query clip ranked against the whole library (median over queries), measured up to ``--dtw-max``
+  clips;
 - **embedding** (:class:`~mocapkit.retrieval.embedding.EmbeddingRetrieval` from an exported ONNX encoder):
   ``--encode`` augmented clips are encoded (their throughput is reported); larger libraries repeat those
   embeddings with Gaussian noise (σ = 0.05 per dimension, renormalised) — the index sees vectors with the spread
@@ -67,7 +69,8 @@ def main() -> None:
     parser.add_argument("--onnx", required=True, help="an exported retrieval encoder (mocapkit export)")
     parser.add_argument("--sizes", default="1000,10000,100000,1000000")
     parser.add_argument("--dtw-max", type=int, default=10000, help="largest library DTW is measured on")
-    parser.add_argument("--dtw-features", default="relational")
+    parser.add_argument("--dtw-methods", default="dtw_relational,dtw_mutual_proximity",
+                        help="DTW rows: names of mocapkit.retrieval.index.METHODS")
     parser.add_argument("--encode", type=int, default=5000, help="augmented clips actually encoded")
     parser.add_argument("--hnsw-max", type=int, default=1000000)
     parser.add_argument("--plot", default=str(ROOT / "docs" / "img" / "retrieval_latency.png"))
@@ -76,8 +79,8 @@ def main() -> None:
     import faiss
 
     from mocapkit.datasets.mocap.folders import list_clips, read_clips
-    from mocapkit.retrieval.dtw import DTWRetrieval
     from mocapkit.retrieval.embedding import EmbeddingRetrieval
+    from mocapkit.retrieval.index import make_method
 
     faiss.omp_set_num_threads(1)
     sizes = [int(s) for s in args.sizes.split(",")]
@@ -129,19 +132,20 @@ def main() -> None:
                   f" + encode query {query_encode_ms:.2f} ms" + (f", recall@10 vs exact {recall:.3f}" if recall else ""),
                   flush=True)
     # ---------------------------------------------------------------- DTW
-    for size in [s for s in sizes if s <= args.dtw_max]:
-        dtw = DTWRetrieval(features=args.dtw_features)
-        lib = augmented(real, size, seed=0)
-        start = time.perf_counter()
-        dtw.fit(lib)
-        build_s = time.perf_counter() - start
-        repeats = 5 if size <= 1000 else 2
-        query_ms = median_ms(lambda i, dtw=dtw: dtw.search([queries[i]], 10), repeats)
-        rows.append({"size": size, "method": f"dtw/{args.dtw_features}", "build_s": build_s, "query_ms": query_ms})
-        flat = next(r for r in rows if r["size"] == size and r["method"] == "embedding/flat")
-        ratio = query_ms / (flat["query_ms"] + query_encode_ms)
-        print(f"size {size:>8}: DTW ({args.dtw_features}) build {build_s:8.2f} s, query {query_ms:9.1f} ms "
-              f"= {ratio:,.0f}x the embedding flat index (search + query encoding)", flush=True)
+    for name in args.dtw_methods.split(","):
+        for size in [s for s in sizes if s <= args.dtw_max]:
+            dtw = make_method(name)
+            lib = augmented(real, size, seed=0)
+            start = time.perf_counter()
+            dtw.fit(lib)
+            build_s = time.perf_counter() - start
+            repeats = 5 if size <= 1000 else 2
+            query_ms = median_ms(lambda i, dtw=dtw: dtw.search([queries[i]], 10), repeats)
+            rows.append({"size": size, "method": name, "build_s": build_s, "query_ms": query_ms})
+            flat = next(r for r in rows if r["size"] == size and r["method"] == "embedding/flat")
+            ratio = query_ms / (flat["query_ms"] + query_encode_ms)
+            print(f"size {size:>8}: {name} build {build_s:8.2f} s, query {query_ms:9.1f} ms "
+                  f"= {ratio:,.0f}x the embedding flat index (search + query encoding)", flush=True)
 
     print("\n| library size | method | build (s) | query (ms) | recall@10 |")
     print("|---:|---|---:|---:|---:|")
