@@ -53,7 +53,7 @@ def test_overrides_merged_labels_and_bad_performers(folder, tmp_path):
 def test_compare_trains_and_scores_the_held_out_performer(folder, tmp_path):
     out = tmp_path / "cmp"
     assert main(["compare", "hdm05_recognition", f"benchmark.root={folder}", f"out={out}", "seeds=[0]",
-                 "protocols=[test_mm]", "+methods.hdm05_gcn.learned.checkpoint=last",
+                 "protocols=[test_mm]", "only=[hdm05_gcn,pooled_logreg]", "+methods.hdm05_gcn.learned.checkpoint=last",
                  "learned_overrides=['trainer.max_epochs=1','trainer.enable_progress_bar=false',"
                  "'model.channels=[16,16]','model.strides=[2,1]','data.val_fraction=0']"]) == 0
     saved = json.loads((out / "results.json").read_text())
