@@ -74,3 +74,22 @@ def test_real_cuts_leave_one_performer_out():
     assert {dm.clips[i]["group"] for i in np.concatenate([dm.train_idx, dm.val_idx])} == {"bd", "bk", "mm"}
     lengths = [len(s) for s in dm.sequences]
     assert min(lengths) > 10 and dm.fps == 30.0
+
+
+def test_the_hdm05_ensemble_is_the_msr_recipe_on_hdm05_data():
+    """experiment=hdm05_gcn_ensemble is documented as the MSR Action3D ensemble "taken as it is": everything but the
+    data source (and the layout it brings) must stay equal to msr3d_gcn_ensemble's."""
+    from omegaconf import OmegaConf
+
+    from mocapkit.train.config import compose_config
+
+    hdm, msr = (OmegaConf.to_container(compose_config([f"experiment={name}"]), resolve=False)
+                for name in ("hdm05_gcn_ensemble", "msr3d_gcn_ensemble"))
+    for key in ("model", "optimizer", "scheduler", "module"):
+        assert hdm[key] == msr[key], key
+    assert hdm["trainer"]["max_epochs"] == msr["trainer"]["max_epochs"] == 60
+    for key in ("val_fraction", "batch_size", "max_frames"):
+        assert hdm["data"][key] == msr["data"][key], key
+    assert {k: hdm["data"]["augment"][k] for k in ("tilt_deg", "scale", "crop")} == \
+        {k: msr["data"]["augment"][k] for k in ("tilt_deg", "scale", "crop")}
+    assert "hdm05" in hdm["data"]["_target_"] and hdm["experiment_name"] == "hdm05_gcn_ensemble"
