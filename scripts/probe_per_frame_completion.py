@@ -12,7 +12,7 @@ frames get ``k`` random non-root joints hidden (k = 1, 3, 6, 10); printed: RMS m
   zero), the network reading the masked pose, the conditional and the mask.
 
 (``regularised`` and ``residual`` fit the Gaussian on the training poses with their mirror images added.)
-Rule and results: ``checkpoints/probe_pose_residual/RULE.txt``, bench/RESULTS.md §13.
+Results: bench/RESULTS.md §13 (the rule is restated there).
 
 Usage (from the repository root; 2–3 min each on one core)::
 

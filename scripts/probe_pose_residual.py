@@ -18,7 +18,7 @@ training mixture (:func:`~mocapkit.refinement.corruptions.training_corruption`, 
 and filled by the prior; the loss is the mean 3-D distance at missing entries.
 
 Scored on the fold's validation clips (training performers only; :func:`score_on_clips`, RMS mm over the
-corrupted entries) beside the prior alone. Rule and result: ``checkpoints/probe_pose_residual/RULE.txt``.
+corrupted entries) beside the prior alone. Rule and result: bench/RESULTS.md §13.
 
 Usage (from the repository root; a few minutes on one core)::
 
@@ -115,7 +115,7 @@ def training_frames(prior, motions, windows: int, length: int, rng, whole_joint_
         corrupted = training_corruption(clean, rng, whole_joint_rate=whole_joint_rate, weights=GAP_PROTOCOLS).motion
         filled = prior.refine(corrupted).positions
         usable = np.isfinite(filled).all(axis=(1, 2))
-        # distances from the whole window's mask (round 1 computed them on the kept frames only: RULE.txt)
+        # distances from the whole window's mask (round 1 computed them on the kept frames only: RESULTS §13)
         inputs, local, root, cos, sin, corrected = frame_inputs(
             prior, np.where(usable[:, None, None], filled, 0.0), corrupted.missing, min_distance)
         some = usable & ~clean.missing.any(axis=1) & corrected.any(axis=1)

@@ -11,8 +11,8 @@ content and style, MSR cross-subject; :class:`~mocapkit.evaluation.compare.retri
 the fold's **database** groups are used: each of them in turn queries the others (HDM05: the other three
 performers; Bandai: the database styles or contents dealt into 3 inner folds; MSR: the training subjects 1 3 5 7
 9, one at a time). mAP pooled over the inner queries, averaged over the outer folds. The test queries are never
-read by this script. Rule and its result: ``checkpoints/select_retrieval_rerank/RULE.txt`` and
-``validation.txt`` there.
+read by this script. The rule and its result: README *Motion retrieval on real data* and bench/RESULTS.md §14
+(the rule file was written into the git-ignored ``checkpoints/select_retrieval_rerank/``).
 
 Usage (from the repository root; about 2 min, most of it the DTW matrices)::
 

@@ -433,7 +433,7 @@ class BiGRURefiner(_Refiner):
             extrapolate=0`` is the first guess of the runs trained before these options (their configs lack the
             keys: restore them with ``LearnedRefiner(first_guess={"tangents": "zero", "extrapolate": 0})``).
         pose_frame: also read every frame in its own body frame and correct it there
-            (:meth:`~_Refiner.corrected`; ``checkpoints/select_pose_frame/RULE.txt`` measures it).
+            (:meth:`~_Refiner.corrected`; measured in bench/RESULTS.md §13: no gain, off by default).
     """
 
     def __init__(self, joint_names: Sequence[str], parents: Sequence[int], up_axis: str = "y",

@@ -17,7 +17,7 @@ the database (to a reference subset of at most ``n_reference`` clips on large li
 The query's own statistics come from its row of distances to the whole database.
 
 Chosen for the label-free retrieval default on training groups only (README *Motion retrieval*;
-``checkpoints/select_retrieval_rerank/RULE.txt`` holds the rule and the validation table).
+bench/RESULTS.md §14 holds the rule's outcome and the validation table).
 """
 from __future__ import annotations
 

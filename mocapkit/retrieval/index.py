@@ -54,8 +54,8 @@ METHODS: dict[str, tuple[str, dict]] = {
 }
 #: The default of ``mocapkit index``: the label-free method without a training run chosen on the training groups of
 #: our four retrieval protocols (HDM05 cross-performer, Bandai content and style, MSR cross-subject): DTW on
-#: positions and relational features with mutual proximity (``checkpoints/select_retrieval_rerank/RULE.txt``;
-#: README *Motion retrieval*).
+#: positions and relational features with mutual proximity (the rule and the validation table: README *Motion
+#: retrieval on real data*, bench/RESULTS.md §14).
 RECOMMENDED = "dtw_mutual_proximity"
 
 
