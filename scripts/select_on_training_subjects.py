@@ -50,7 +50,7 @@ def training_overrides(experiment: str, overrides: list[str]) -> tuple[str, list
 
 def run_fold(experiment: str, name: str, overrides: list[str], subject: str, train: list[str], out: Path,
              seed: int, checkpoint: str, split_keys: tuple[str, str] = ("data.train_subjects", "data.test_subjects"),
-             common: list[str] = ()) -> dict:
+             common: tuple[str, ...] = ()) -> dict:
     """Train on ``train``, score on ``subject``; return ``{"top1", "num_samples"}`` (cached in the run folder).
 
     ``checkpoint``: ``last``, ``best`` or ``auto`` (``best.ckpt`` where the run has one, i.e. a validation part,
@@ -72,14 +72,14 @@ def run_fold(experiment: str, name: str, overrides: list[str], subject: str, tra
         common_args = [f"experiment={experiment}", f"seed={seed}", f"output_root={out}", f"run_name={run_dir.name}",
                        f"{train_key}=[{','.join(map(str, train))}]", f"{test_key}=[{subject}]",
                        "trainer.enable_progress_bar=false", *common]
-        log = (out / f"{run_dir.name}.log").open("w")
         cli = [sys.executable, "-m", "mocapkit"]
-        subprocess.run([*cli, "train", *common_args, *rest], check=True, stdout=log, stderr=subprocess.STDOUT)
-        chosen = checkpoint
-        if checkpoint == "auto":
-            chosen = "best" if (run_dir / "best.ckpt").is_file() else "last"
-        subprocess.run([*cli, "eval", f"ckpt_path={run_dir / (chosen + '.ckpt')}"], check=True, stdout=log,
-                       stderr=subprocess.STDOUT)
+        with (out / f"{run_dir.name}.log").open("w") as log:
+            subprocess.run([*cli, "train", *common_args, *rest], check=True, stdout=log, stderr=subprocess.STDOUT)
+            chosen = checkpoint
+            if checkpoint == "auto":
+                chosen = "best" if (run_dir / "best.ckpt").is_file() else "last"
+            subprocess.run([*cli, "eval", f"ckpt_path={run_dir / (chosen + '.ckpt')}"], check=True, stdout=log,
+                           stderr=subprocess.STDOUT)
         recorded.write_text(json.dumps(overrides))
     values = json.loads(metrics.read_text())
     print(f"[select] {name} seed {seed}, held-out subject {subject}: top-1 {values['top1']:.4f} of "
@@ -143,7 +143,7 @@ def main(argv: list[str] | None = None) -> None:
     with ThreadPoolExecutor(max_workers=args.jobs) as pool:
         futures = {(fold, name, seed, s): pool.submit(
                        run_fold, args.experiment, name, overrides, s, [t for t in inner if t != s],
-                       args.out / fold, seed, args.checkpoint, tuple(args.split_keys), args.common)
+                       args.out / fold, seed, args.checkpoint, tuple(args.split_keys), tuple(args.common))
                    for fold, inner in folds.items() for seed in args.seeds for name, overrides in args.candidate
                    for s in inner}
         scores = {key: future.result() for key, future in futures.items()}
