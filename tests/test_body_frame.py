@@ -1,5 +1,6 @@
 """Body 0's reference frame (mocapkit.models.body_frame): masked medians, and both models shrug off glitch frames."""
 import numpy as np
+import pytest
 import torch
 
 from mocapkit.datasets.formats.layouts import NTU25
@@ -64,3 +65,27 @@ def test_energy_image_is_not_moved_by_a_glitch_in_the_first_frame():
     energy = EnergyImage(size=48, bone_samples=2, align=False)
     zeros = torch.zeros_like(clean)
     torch.testing.assert_close(energy(batch(glitch, zeros)), energy(batch(clean, zeros)), atol=1e-5, rtol=1e-5)
+
+
+def test_first_frame_origin_is_body0_first_present_frame():
+    """origin="first" (the energy image's option): body 0's root where it is first present, 0 without body 0."""
+    from mocapkit.models.body_frame import body0_first
+
+    clean, _ = glitched()
+    walking = clean + torch.linspace(0, 1, len(clean)).view(-1, 1, 1) * torch.tensor([1.0, 0.0, 0.0])
+    x = torch.stack([batch(walking, torch.zeros_like(walking))[0], torch.zeros_like(batch(walking, walking)[0])])
+    x[0, 0, :3] = 0                                                      # body 0 enters at frame 3
+    present = x.abs().sum((-1, -2)) > 0
+    root = NTU25.index("SpineBase")
+    origin = body0_first(x, present, root)
+    torch.testing.assert_close(origin[0], walking[3, root])
+    torch.testing.assert_close(origin[1], torch.zeros(3))
+    median = body0_origin(x, present, root)[0]
+    assert abs(float(median[0] - origin[0, 0])) > 0.4                    # a walk: the median is mid-path
+    energy_first = EnergyImage(size=48, bone_samples=2, align=False, origin="first")
+    energy_median = EnergyImage(size=48, bone_samples=2, align=False)
+    assert not torch.allclose(energy_first(x[:1]), energy_median(x[:1]))
+    centred = energy_first.normalize(x[:1], present[:1])
+    assert centred[0, 0, 3, root].abs().max() < 1e-6                     # the first present frame at the origin
+    with pytest.raises(ValueError, match="origin"):
+        EnergyImage(origin="mean")

@@ -44,6 +44,17 @@ def body0_origin(skeletons: torch.Tensor, present: torch.Tensor, joint: int) -> 
     return masked_median(skeletons[:, 0, :, joint, :], present[:, 0])
 
 
+def body0_first(skeletons: torch.Tensor, present: torch.Tensor, joint: int) -> torch.Tensor:
+    """Position of body 0's ``joint`` in its first present frame (0 where body 0 is never present):
+    ``[N, M, T, J, C]``, ``[N, M, T]`` → ``[N, C]``. The origin before the medians; an option of the energy image
+    (``origin="first"``), whose picture then shows the motion relative to where it started."""
+    body0 = present[:, 0].to(torch.bool)                                                   # [N, T]
+    first = torch.argmax(body0.to(torch.int64), dim=1)                                     # 0 when never present
+    index = first.view(-1, 1, 1).expand(-1, 1, skeletons.shape[-1])
+    position = torch.gather(skeletons[:, 0, :, joint, :], 1, index).squeeze(1)             # [N, C]
+    return torch.where(body0.any(dim=1, keepdim=True), position, torch.zeros_like(position))
+
+
 def body0_size(skeletons: torch.Tensor, present: torch.Tensor, lower: int, upper: int,
                floor: float = 1e-3) -> torch.Tensor:
     """Median distance between body 0's ``lower`` and ``upper`` joints over its present frames, ``[N]``.

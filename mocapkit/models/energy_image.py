@@ -37,10 +37,12 @@ from mocapkit.datasets.formats.layouts import (
     SkeletonLayout,
     get_layout,
 )
-from mocapkit.models.body_frame import body0_origin, body0_size
+from mocapkit.models.body_frame import body0_first, body0_origin, body0_size
 
 #: Planes as (horizontal axis, vertical axis) over (x, y, z); vertical axes grow upwards.
 PLANES = {"xy": (0, 1), "zy": (2, 1), "xz": (0, 2)}
+#: Where the image is centred on body 0's reference joint (:class:`EnergyImage` ``origin``).
+ORIGINS = ("median", "first")
 
 
 class EnergyImage(nn.Module):
@@ -57,8 +59,10 @@ class EnergyImage(nn.Module):
         temporal_weighting: ``"none"`` or ``"linear"`` (frame ``t`` weighted by ``(t+1)/T``, later = brighter).
         scale: divide by the median spine length of body 0 (``True``) or keep metres (``False``).
         align: rotate about the vertical axis so body 0's mean hip line is parallel to x.
-        center_joint: joint of body 0 whose median position over its present frames is the origin
-            (default: the layout root).
+        center_joint: joint of body 0 whose position is the origin (default: the layout root).
+        origin: ``"median"`` (its median position over body 0's present frames; robust to glitch frames) or
+            ``"first"`` (its position in body 0's first present frame: the picture shows the motion relative to
+            where it started, as before the medians).
         spine: ``(lower, upper)`` joints whose distance is the body size (default: pelvis → neck landmarks,
             SpineBase → SpineShoulder on NTU-25).
         hips: ``(left, right)`` joints used by ``align`` (default: the hip landmarks).
@@ -68,8 +72,10 @@ class EnergyImage(nn.Module):
                  bone_samples: int = 0, splat: str = "bilinear", smoothing: float = 0.0,
                  temporal_weighting: str = "none", scale: bool = True, align: bool = False,
                  center_joint: int | None = None, spine: tuple[int, int] | None = None,
-                 hips: tuple[int, int] | None = None):
+                 hips: tuple[int, int] | None = None, origin: str = "median"):
         super().__init__()
+        if origin not in ORIGINS:
+            raise ValueError(f"energy image origin must be one of {ORIGINS}, got {origin!r}")
         if splat not in ("nearest", "bilinear"):
             raise ValueError(f"energy image splat must be 'nearest' or 'bilinear', got {splat!r}")
         if temporal_weighting not in ("none", "linear"):
@@ -86,6 +92,7 @@ class EnergyImage(nn.Module):
         self.temporal_weighting = temporal_weighting
         self.scale = bool(scale)
         self.align = bool(align)
+        self.origin = origin
         self.center_joint = layout.parents.index(-1) if center_joint is None else int(center_joint)
         landmark = LANDMARKS.get(layout.name, {})
         if (spine is None or hips is None) and not landmark:
@@ -104,14 +111,15 @@ class EnergyImage(nn.Module):
 
     def extra_repr(self) -> str:
         return (f"size={self.size}, extent={self.extent}, bone_samples={self.bone_samples}, splat={self.splat_mode}, smoothing={self.smoothing}, "
-                f"temporal_weighting={self.temporal_weighting}, scale={self.scale}, align={self.align}")
+                f"temporal_weighting={self.temporal_weighting}, scale={self.scale}, align={self.align}, origin={self.origin}")
 
     # ------------------------------------------------------------------ steps
 
     def normalize(self, skeletons: torch.Tensor, present: torch.Tensor) -> torch.Tensor:
         """Centre, scale and optionally align. ``[N, M, T, J, 3]`` → same shape, body-size units."""
         body0 = present[:, 0].to(skeletons.dtype)                                     # [N, T]
-        center = body0_origin(skeletons, present, self.center_joint)                   # [N, 3], median
+        locate = body0_origin if self.origin == "median" else body0_first
+        center = locate(skeletons, present, self.center_joint)                         # [N, 3]
         out = skeletons - center.view(-1, 1, 1, 1, 3)
         if self.align:
             hip = skeletons[:, 0, :, self.hips[1], :] - skeletons[:, 0, :, self.hips[0], :]  # [N, T, 3]
