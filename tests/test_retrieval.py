@@ -254,3 +254,23 @@ def test_cross_performer_benchmark_on_real_hdm05():
         assert fold not in nearest_actors                 # never its own performer
     tp = bench.evaluate_estimator(DTWRetrieval(), bench.split("zhou_tp20", 0))["metrics"]["tp_ratio"]
     assert 0.5 < tp <= 1.0
+
+
+def test_dtw_distances_in_query_blocks_equal_one_call(monkeypatch):
+    """Queries go to dtaidistance in blocks (memory, progress): the distances are those of one call, in order."""
+    import mocapkit.retrieval.dtw as dtw_module
+
+    rng = np.random.default_rng(3)
+    queries = [rng.normal(size=(int(rng.integers(5, 12)), 4)) for _ in range(7)]
+    database = [rng.normal(size=(int(rng.integers(5, 12)), 4)) for _ in range(5)]
+    method = dtw_module.DTWRetrieval(window=0.5, parallel=False)
+    whole = method._feature_distances(queries, database)
+    monkeypatch.setattr(dtw_module, "QUERY_BLOCK", 3)
+    blocked = method._feature_distances(queries, database)
+    assert whole.shape == (7, 5)
+    np.testing.assert_array_equal(blocked, whole)
+    from dtaidistance import dtw_ndim
+
+    window = int(np.ceil(0.5 * max(len(s) for s in queries + database)))          # the band of the longest clip
+    expected = dtw_ndim.distance(queries[6], database[2], window=window) / np.sqrt(len(queries[6]) + len(database[2]))
+    assert blocked[6, 2] == pytest.approx(expected)

@@ -37,6 +37,8 @@ from mocapkit.retrieval.hubness import (
 )
 
 FEATURES = ("positions", "relational")
+#: Queries per dtaidistance call in :meth:`DTWRetrieval._feature_distances`.
+QUERY_BLOCK = 256
 
 
 def frame_features(sequence: np.ndarray, features: str, fps: float) -> np.ndarray:
@@ -118,18 +120,29 @@ class DTWRetrieval(RetrievalMethod):
         return d
 
     def _feature_distances(self, queries: list[np.ndarray], database: list[np.ndarray]) -> np.ndarray:
-        """float64 ``[n_queries, n_database]`` DTW distances of one feature's sequences."""
-        from dtaidistance import dtw_ndim
+        """float64 ``[n_queries, n_database]`` DTW distances of one feature's sequences.
 
-        nq, ndb = len(queries), len(database)
-        series = list(queries) + list(database)
+        Queries go to dtaidistance in blocks of :data:`QUERY_BLOCK` (its matrix is ``(queries + database)²``), with
+        a progress bar on a terminal when there are several blocks (``fit`` with mutual proximity on a large library
+        runs minutes: every clip against the reference clips).
+        """
+        from dtaidistance import dtw_ndim
+        from tqdm import tqdm
+
         window = None
         if self.window is not None:
-            longest = max(len(s) for s in series)
+            longest = max(len(s) for s in (*queries, *database))
             window = max(1, int(np.ceil(float(self.window) * longest)))
-        full = dtw_ndim.distance_matrix_fast(series, window=window, block=((0, nq), (nq, nq + ndb)), compact=False,
-                                             parallel=bool(self.parallel))
-        d = np.asarray(full[:nq, nq:], dtype=np.float64)
+        starts = range(0, len(queries), QUERY_BLOCK)
+        blocks = []
+        for start in tqdm(starts, desc="DTW", unit="block", disable=None if len(starts) > 1 else True, leave=False):
+            chunk = list(queries[start:start + QUERY_BLOCK])
+            nq = len(chunk)
+            full = dtw_ndim.distance_matrix_fast(chunk + list(database), window=window,
+                                                 block=((0, nq), (nq, nq + len(database))), compact=False,
+                                                 parallel=bool(self.parallel))
+            blocks.append(np.asarray(full[:nq, nq:], dtype=np.float64))
+        d = np.concatenate(blocks, axis=0) if blocks else np.zeros((0, len(database)))
         if self.length_normalised:
             lq = np.array([len(s) for s in queries], dtype=np.float64)
             ldb = np.array([len(s) for s in database], dtype=np.float64)
