@@ -89,3 +89,27 @@ def test_first_frame_origin_is_body0_first_present_frame():
     assert centred[0, 0, 3, root].abs().max() < 1e-6                     # the first present frame at the origin
     with pytest.raises(ValueError, match="origin"):
         EnergyImage(origin="mean")
+
+
+def test_start_origin_is_where_the_walk_began_and_ignores_a_first_frame_glitch():
+    """origin="start": the median over body 0's first 5 present frames — start-anchored like "first", yet a
+    glitch in the first frame moves neither the origin nor the energy image."""
+    from mocapkit.models.body_frame import body0_start
+
+    clean, _ = glitched(frames=30)
+    walking = clean + torch.linspace(0, 1.5, len(clean)).view(-1, 1, 1) * torch.tensor([1.0, 0.0, 0.0])
+    glitch = walking.clone()
+    glitch[0] += torch.tensor([2.0, 0.3, 2.0])
+    root = NTU25.index("SpineBase")
+    zeros = torch.zeros_like(walking)
+    x_clean, x_glitch = batch(walking, zeros), batch(glitch, zeros)
+    present = x_clean.abs().sum((-1, -2)) > 0
+    start = body0_start(x_clean, present, root)[0]
+    torch.testing.assert_close(start, walking[2, root])                  # the middle of frames 0-4
+    assert abs(float(start[0] - body0_origin(x_clean, present, root)[0, 0])) > 0.6   # not the middle of the walk
+    torch.testing.assert_close(body0_start(x_glitch, present, root)[0], walking[3, root])   # one frame on, not 2 m
+    energy = EnergyImage(size=48, bone_samples=2, align=False, origin="start")
+    moved = EnergyImage(size=48, bone_samples=2, align=False, origin="first")
+    change = (energy(x_glitch) - energy(x_clean)).abs().sum()            # the glitch frame's own points, ~2 %
+    assert change < 0.05 * (moved(x_glitch) - moved(x_clean)).abs().sum()
+    assert change < 0.05 * energy(x_clean).abs().sum()

@@ -55,6 +55,15 @@ def body0_first(skeletons: torch.Tensor, present: torch.Tensor, joint: int) -> t
     return torch.where(body0.any(dim=1, keepdim=True), position, torch.zeros_like(position))
 
 
+def body0_start(skeletons: torch.Tensor, present: torch.Tensor, joint: int, frames: int = 5) -> torch.Tensor:
+    """Median position of body 0's ``joint`` over its first ``frames`` present frames, ``[N, C]``: where the motion
+    started, like :func:`body0_first`, but a glitch in fewer than half of those frames does not move it (the
+    energy image's ``origin="start"``)."""
+    body0 = present[:, 0].to(torch.bool)                                                   # [N, T]
+    early = body0 & (torch.cumsum(body0.to(torch.int64), dim=1) <= int(frames))
+    return masked_median(skeletons[:, 0, :, joint, :], early)
+
+
 def body0_size(skeletons: torch.Tensor, present: torch.Tensor, lower: int, upper: int,
                floor: float = 1e-3) -> torch.Tensor:
     """Median distance between body 0's ``lower`` and ``upper`` joints over its present frames, ``[N]``.

@@ -37,12 +37,12 @@ from mocapkit.datasets.formats.layouts import (
     SkeletonLayout,
     get_layout,
 )
-from mocapkit.models.body_frame import body0_first, body0_origin, body0_size
+from mocapkit.models.body_frame import body0_first, body0_origin, body0_size, body0_start
 
 #: Planes as (horizontal axis, vertical axis) over (x, y, z); vertical axes grow upwards.
 PLANES = {"xy": (0, 1), "zy": (2, 1), "xz": (0, 2)}
 #: Where the image is centred on body 0's reference joint (:class:`EnergyImage` ``origin``).
-ORIGINS = ("median", "first")
+ORIGINS = ("median", "first", "start")
 
 
 class EnergyImage(nn.Module):
@@ -60,9 +60,10 @@ class EnergyImage(nn.Module):
         scale: divide by the median spine length of body 0 (``True``) or keep metres (``False``).
         align: rotate about the vertical axis so body 0's mean hip line is parallel to x.
         center_joint: joint of body 0 whose position is the origin (default: the layout root).
-        origin: ``"median"`` (its median position over body 0's present frames; robust to glitch frames) or
+        origin: ``"median"`` (its median position over body 0's present frames; robust to glitch frames),
             ``"first"`` (its position in body 0's first present frame: the picture shows the motion relative to
-            where it started, as before the medians).
+            where it started, as before the medians) or ``"start"`` (its median over body 0's first 5 present
+            frames: where it started, robust to a glitch frame there).
         spine: ``(lower, upper)`` joints whose distance is the body size (default: pelvis → neck landmarks,
             SpineBase → SpineShoulder on NTU-25).
         hips: ``(left, right)`` joints used by ``align`` (default: the hip landmarks).
@@ -118,7 +119,7 @@ class EnergyImage(nn.Module):
     def normalize(self, skeletons: torch.Tensor, present: torch.Tensor) -> torch.Tensor:
         """Centre, scale and optionally align. ``[N, M, T, J, 3]`` → same shape, body-size units."""
         body0 = present[:, 0].to(skeletons.dtype)                                     # [N, T]
-        locate = body0_origin if self.origin == "median" else body0_first
+        locate = {"median": body0_origin, "first": body0_first, "start": body0_start}[self.origin]
         center = locate(skeletons, present, self.center_joint)                         # [N, 3]
         out = skeletons - center.view(-1, 1, 1, 1, 3)
         if self.align:
