@@ -15,6 +15,11 @@ frame*) or shrink it (a mean length). A median ignores up to half of the frames 
 standing in place the median root is where the first frame's root was; for a body that walks it is the
 middle of its path.
 
+The energy image is the exception for the origin: its picture of a whole clip keeps where the motion *started*
+only if it is centred there, so it takes body 0's root in its first present frame (:func:`body0_first`) by
+default, or the median over its first few frames (:func:`body0_start`, robust to a glitch there); both chosen
+against the median on validation subjects (README, *NTU-style synthetic set*).
+
 The median is computed by sorting (absent frames are sorted last and not counted), which exports to ONNX
 (TopK), unlike ``torch.median``; with an even count it is the mean of the two middle values.
 """
