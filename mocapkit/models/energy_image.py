@@ -42,8 +42,8 @@ from mocapkit.models.body_frame import body0_first, body0_origin, body0_size, bo
 
 #: Planes as (horizontal axis, vertical axis) over (x, y, z); vertical axes grow upwards.
 PLANES = {"xy": (0, 1), "zy": (2, 1), "xz": (0, 2)}
-#: Where the image is centred on body 0's reference joint (:class:`EnergyImage` ``origin``).
-ORIGINS = ("median", "first", "start")
+#: Where the image is centred on body 0's reference joint (:class:`EnergyImage` ``origin``): name → locator.
+ORIGINS = {"median": body0_origin, "first": body0_first, "start": body0_start}
 
 
 class EnergyImage(nn.Module):
@@ -78,7 +78,7 @@ class EnergyImage(nn.Module):
                  hips: tuple[int, int] | None = None, origin: str = "first"):
         super().__init__()
         if origin not in ORIGINS:
-            raise ValueError(f"energy image origin must be one of {ORIGINS}, got {origin!r}")
+            raise ValueError(f"energy image origin must be one of {tuple(ORIGINS)}, got {origin!r}")
         if splat not in ("nearest", "bilinear"):
             raise ValueError(f"energy image splat must be 'nearest' or 'bilinear', got {splat!r}")
         if temporal_weighting not in ("none", "linear"):
@@ -121,8 +121,7 @@ class EnergyImage(nn.Module):
     def normalize(self, skeletons: torch.Tensor, present: torch.Tensor) -> torch.Tensor:
         """Centre, scale and optionally align. ``[N, M, T, J, 3]`` → same shape, body-size units."""
         body0 = present[:, 0].to(skeletons.dtype)                                     # [N, T]
-        locate = {"median": body0_origin, "first": body0_first, "start": body0_start}[self.origin]
-        center = locate(skeletons, present, self.center_joint)                         # [N, 3]
+        center = ORIGINS[self.origin](skeletons, present, self.center_joint)           # [N, 3]
         out = skeletons - center.view(-1, 1, 1, 1, 3)
         if self.align:
             hip = skeletons[:, 0, :, self.hips[1], :] - skeletons[:, 0, :, self.hips[0], :]  # [N, T, 3]
