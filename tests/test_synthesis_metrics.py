@@ -13,11 +13,14 @@ from mocapkit.datasets.formats.motion import Motion
 from mocapkit.evaluation.compare import ComparisonError, compose, run_comparison
 from mocapkit.evaluation.synthesis import (
     bone_length_drift,
+    clip_naturalness,
     feature_distances,
     foot_skating,
     mean_jerk,
+    naturalness,
     root_normalised_positions,
     variation,
+    within_spread,
 )
 from tests.shared_data import SHARED, needs
 
@@ -126,6 +129,27 @@ def test_feature_distance_reference_spread():
         feature_distances(real, real[:1])
 
 
+def test_within_spread_is_no_larger_than_the_largest_real_value():
+    real = np.array([3.0, 5.0, np.nan])
+    assert within_spread([1.0, 5.0, 5.01, np.nan], real).tolist() == [True, True, False, True]
+    # without a real clip lacking contacts, a variant without contacts is outside; no finite real value: all out
+    assert within_spread([np.nan, 1.0], [3.0, 5.0]).tolist() == [False, True]
+    assert within_spread([0.0], [np.nan]).tolist() == [False]
+
+
+def test_clip_naturalness_is_per_clip_and_naturalness_its_mean():
+    fps, T = 10.0, 30
+    planted = np.zeros((T, 2, 3))
+    planted[:, 1, 0] = 0.2
+    sliding = planted.copy()
+    sliding[:, :, 2] = 0.03 * np.arange(T)[:, None]                     # both feet slide 3 cm a frame: 0.3 m/s
+    clips = [body(np.full(T, 1.7), fps, planted), body(np.full(T, 1.7), fps, sliding)]
+    table = clip_naturalness(clips)
+    assert table["foot_skating_cms"] == pytest.approx([0.0, 30.0])
+    assert naturalness(clips)["foot_skating_cms"] == pytest.approx(15.0)
+    assert within_spread(table["foot_skating_cms"], [10.0]).tolist() == [True, False]
+
+
 # ------------------------------------------------------------------------------------------ the benchmark
 def test_config_composes_with_every_method():
     cfg = compose(["synthesis_hdm05", "benchmark.root=/nonexistent"])
@@ -156,6 +180,14 @@ def test_benchmark_runs_end_to_end(tmp_path):
                     "sample_seconds_per_second"):
             assert np.isfinite(m[key]), key
         assert m["v_ratio"] == pytest.approx(m["v_variants"] / m["v_train"])
+        # every proxy within the real spread: the share recomputed from the per-clip values saved beside it
+        d = cell["detail"]
+        ok = within_spread(d["variant_feature_distances"], d["real_feature_distances"])
+        for name in ("foot_skating_cms", "jerk", "bone_drift_mm"):
+            ok &= within_spread(d["variant_proxies"][name], d["real_proxies"][name])
+        assert m["within_real_all"] == pytest.approx(ok.mean())
+        assert m["within_real_all"] <= min(m["within_real"], m["within_real_skating"], m["within_real_jerk"])
+        assert m["real_jerk_max"] == pytest.approx(max(d["real_proxies"]["jerk"]))
     copy, perlin = (next(c for c in saved["cells"] if c["method"] == k) for k in ("copy", "perlin"))
     assert copy["metrics"]["v_train"] == perlin["metrics"]["v_train"]       # one reference per split
     assert (tmp_path / "variation.png").is_file()

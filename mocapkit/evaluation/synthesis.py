@@ -220,14 +220,35 @@ def mean_jerk(motion: Motion) -> float:
     return float(np.linalg.norm(jerk, axis=-1).mean())
 
 
+def clip_naturalness(motions: Sequence[Motion], height_threshold: float = 0.03,
+                     vertical_speed: float = 0.15) -> dict[str, np.ndarray]:
+    """The proxies of every clip: ``{"foot_skating_cms", "bone_drift_mm", "jerk"}``, each ``[len(motions)]``
+    (cm/s, mm, m/s³; the foot skating is NaN for a clip without contacts)."""
+    return {"foot_skating_cms": np.array([foot_skating(m, height_threshold, vertical_speed) for m in motions]),
+            "bone_drift_mm": np.array([bone_length_drift(m) for m in motions]),
+            "jerk": np.array([mean_jerk(m) for m in motions])}
+
+
 def naturalness(motions: Sequence[Motion], height_threshold: float = 0.03, vertical_speed: float = 0.15) -> dict:
     """The proxies averaged over ``motions``: ``{"foot_skating_cms", "bone_drift_mm", "jerk"}`` (cm/s, mm,
     m/s³; a clip without contacts does not count towards the foot skating)."""
-    skating = [foot_skating(m, height_threshold, vertical_speed) for m in motions]
-    skating = [s for s in skating if np.isfinite(s)]
-    return {"foot_skating_cms": float(np.mean(skating)) if skating else float("nan"),
-            "bone_drift_mm": float(np.mean([bone_length_drift(m) for m in motions])),
-            "jerk": float(np.mean([mean_jerk(m) for m in motions]))}
+    table = clip_naturalness(motions, height_threshold, vertical_speed)
+    skating = table["foot_skating_cms"][np.isfinite(table["foot_skating_cms"])]
+    return {"foot_skating_cms": float(skating.mean()) if skating.size else float("nan"),
+            "bone_drift_mm": float(table["bone_drift_mm"].mean()), "jerk": float(table["jerk"].mean())}
+
+
+def within_spread(values: np.ndarray, real: np.ndarray) -> np.ndarray:
+    """bool ``[n]``: whether each value of a proxy that is worse when larger (foot skating, jerk, bone drift, a
+    feature distance) is within the spread of the real clips' values ``[m]``, i.e. no larger than the largest.
+
+    NaN (a clip without foot contacts) is within only if some real clip has NaN too; a NaN among the real
+    values does not widen the spread of the finite ones.
+    """
+    values, real = np.asarray(values, dtype=np.float64), np.asarray(real, dtype=np.float64)
+    finite = real[np.isfinite(real)]
+    bound = finite.max() if finite.size else -np.inf
+    return np.where(np.isnan(values), bool(np.isnan(real).any()), values <= bound)
 
 
 # ------------------------------------------------------------------------------------------ feature statistics
@@ -261,7 +282,7 @@ class FeatureDistances:
         is at most the largest real clip's."""
         return {"feature_distance": float(self.variants.mean()), "feature_distance_real": float(self.real.mean()),
                 "feature_distance_real_sd": float(self.real.std(ddof=1)) if len(self.real) > 1 else 0.0,
-                "within_real": float((self.variants <= self.real.max()).mean())}
+                "within_real": float(within_spread(self.variants, self.real).mean())}
 
 
 def feature_distances(variants: Sequence[Motion], real: Sequence[Motion]) -> FeatureDistances:
@@ -285,6 +306,6 @@ def feature_distances(variants: Sequence[Motion], real: Sequence[Motion]) -> Fea
     return FeatureDistances(variants=ours, real=own)
 
 
-__all__ = ["FOOT_LANDMARKS", "FeatureDistances", "Variation", "bone_length_drift", "dtw_cost", "feature_distance",
-           "feature_distances", "foot_contacts", "foot_joints", "foot_skating", "heading_angles", "mean_jerk",
-           "naturalness", "pose_features", "root_normalised_positions", "variation"]
+__all__ = ["FOOT_LANDMARKS", "FeatureDistances", "Variation", "bone_length_drift", "clip_naturalness", "dtw_cost",
+           "feature_distance", "feature_distances", "foot_contacts", "foot_joints", "foot_skating", "heading_angles",
+           "mean_jerk", "naturalness", "pose_features", "root_normalised_positions", "variation", "within_spread"]

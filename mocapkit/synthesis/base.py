@@ -36,6 +36,11 @@ from mocapkit.datasets.formats.asf_amc import AsfSkeleton, amc_motion
 from mocapkit.datasets.formats.motion import Motion
 
 
+#: Default ``smoothing_seconds`` of every generator (:class:`MotionSynthesizer`, *Smoothing*): set by the rule in
+#: bench/RESULTS.md §16 (*Smoothing the variants*), on training clips only.
+SMOOTHING_SECONDS = 0.0
+
+
 class SynthesisInputError(ValueError):
     """Training clips a synthesiser cannot learn from; the message names the clip (file) and what is wrong."""
 
@@ -132,6 +137,24 @@ def time_warp(matrix: np.ndarray, n_frames: int, angles: np.ndarray | None = Non
     if kind not in ("linear", "cubic"):
         raise ValueError(f"time_warp: kind={kind!r}, expected 'linear' or 'cubic'")
     return np.stack([np.interp(target, source, column) for column in matrix.T], axis=1)
+
+
+def smooth_values(values: dict[str, np.ndarray], layout: DofLayout, fps: float, seconds: float
+                  ) -> dict[str, np.ndarray]:
+    """One variant's AMC values (bone → ``[T, len(dof)]``, degrees and ASF units) low-passed in time by a Gaussian of
+    standard deviation ``seconds`` (``seconds · fps`` frames; scipy ``gaussian_filter1d``, ``mode="nearest"``, so
+    the ends are not pulled towards zero). Angle columns are unwrapped (period 360°) first, so a turn through
+    ±180° is not smeared into a spin. ``seconds <= 0`` returns a copy."""
+    matrix = np.concatenate([np.asarray(values[bone], dtype=np.float64).reshape(-1, len(dofs))
+                             for bone, dofs in zip(layout.bones, layout.dofs)], axis=1)
+    sigma = float(seconds) * float(fps)
+    if sigma > 0 and len(matrix) > 1:
+        from scipy.ndimage import gaussian_filter1d
+
+        angles = rotation_columns(layout)
+        matrix[:, angles] = np.unwrap(matrix[:, angles], period=360.0, axis=0)
+        matrix = gaussian_filter1d(matrix, sigma, axis=0, mode="nearest")
+    return dof_values(matrix, layout)
 
 
 def model_frames(frames: int, fps: float, model_fps: float) -> int:
@@ -264,6 +287,13 @@ class MotionSynthesizer(BaseEstimator):
     :class:`~mocapkit.synthesis.footskate.FootskateReport` per variant (empty without the cleanup). A
     synthesiser without those parameters (the training-clip reference) is never cleaned.
 
+    **Smoothing**, one for every synthesiser that has the parameter ``smoothing_seconds`` (≥ 0): before the cleanup,
+    :meth:`sample` low-passes each variant's AMC values in time (:func:`smooth_values`, a Gaussian of that standard
+    deviation in seconds; 0 = off). Sampled frames carry frame-to-frame noise that no real clip has (jerk, and feet
+    that tremble during a stance); the smoothing takes it out before the cleanup looks for stances. The default,
+    :data:`SMOOTHING_SECONDS`, was chosen on training clips only (its docstring). With ``noise_scale="auto"`` the
+    scale is chosen on smoothed variants, so the smoothing does not lower the variation asked for.
+
     **Noise scale**, one for every synthesiser that has the parameters ``noise_scale`` (a number ≥ 0, or
     ``"auto"``) and ``target_variation``: its random draws are multiplied by the scale. With ``"auto"``,
     :meth:`_set_noise_scale` (called at the end of ``_fit_clips``) tries the class's ``noise_scales``, smallest
@@ -291,6 +321,7 @@ class MotionSynthesizer(BaseEstimator):
 
             self._cleans_feet()                      # checks the parameters before a long fit
             self.floor_ = planted_ankle_height(clips)
+        self._smoothing_seconds()
         self._fit_clips(clips)
         return self
 
@@ -305,6 +336,15 @@ class MotionSynthesizer(BaseEstimator):
             raise ValueError(f"{type(self).__name__}: footskate_root must be one of {list(ROOT_MOVES)}, got "
                              f"{self.footskate_root!r}")
         return cleans
+
+    def _smoothing_seconds(self) -> float:
+        """The Gaussian smoothing's standard deviation in seconds (class docstring; 0 without the parameter);
+        checks it."""
+        seconds = getattr(self, "smoothing_seconds", 0.0)
+        if isinstance(seconds, (str, bool)) or not float(seconds) >= 0:
+            raise ValueError(f"{type(self).__name__}: smoothing_seconds must be a number >= 0 (seconds), got "
+                             f"{seconds!r}")
+        return float(seconds)
 
     def sample(self, n_variants: int, n_frames: int | None = None, seed: int | None = None,
                skeleton: AsfSkeleton | None = None) -> list[Motion]:
@@ -323,8 +363,11 @@ class MotionSynthesizer(BaseEstimator):
                                       f"training clips' bones/dofs")
         rng = np.random.default_rng(seed)
         cleans = self._cleans_feet()
+        smoothing = self._smoothing_seconds()
         out, self.footskate_reports_ = [], []
         for k, values in enumerate(self._sample_values(n_variants, n_frames, rng)):
+            if smoothing > 0:
+                values = smooth_values(values, self.layout_, self.fps_, smoothing)
             if cleans:
                 from mocapkit.synthesis.footskate import cleanup_footskate
 

@@ -28,6 +28,7 @@ import numpy as np
 
 from mocapkit.datasets.formats.motion import Motion
 from mocapkit.synthesis.base import (
+    SMOOTHING_SECONDS,
     MotionSynthesizer,
     dof_values,
     model_frames,
@@ -56,6 +57,8 @@ class CVAESynthesizer(MotionSynthesizer):
         random_state: seed of the initialisation, the batches and the training noise.
         footskate_cleanup, footskate_root: the footskate cleanup after sampling, the same as SLFM's
             (:class:`~mocapkit.synthesis.base.MotionSynthesizer`).
+        smoothing_seconds: the Gaussian smoothing of every variant before the cleanup, seconds (0: off;
+            :class:`~mocapkit.synthesis.base.MotionSynthesizer`).
         noise_scale: the latent draws are multiplied by this (1, default: the prior; above 1 the decoder is driven
             further from the codes of the training frames, for more variation). ``"auto"``: after training, the
             smallest of :attr:`noise_scales` whose variants reach ``target_variation`` times the training clips'
@@ -81,7 +84,8 @@ class CVAESynthesizer(MotionSynthesizer):
     def __init__(self, fps: float | None = 30.0, latent: int = 16, hidden: int = 256, layers: int = 2,
                  beta: float = 0.01, condition_noise: float = 0.05, steps: int = 400, batch_size: int = 256,
                  lr: float = 1e-3, max_turn_speed: float | None = 5400.0, random_state: int | None = 0,
-                 footskate_cleanup: bool = True, footskate_root: str = "full", noise_scale: float | str = 1.0,
+                 footskate_cleanup: bool = True, footskate_root: str = "full",
+                 smoothing_seconds: float = SMOOTHING_SECONDS, noise_scale: float | str = 1.0,
                  target_variation: float = 1.28):
         self.fps = fps
         self.latent = latent
@@ -96,6 +100,7 @@ class CVAESynthesizer(MotionSynthesizer):
         self.random_state = random_state
         self.footskate_cleanup = footskate_cleanup
         self.footskate_root = footskate_root
+        self.smoothing_seconds = smoothing_seconds
         self.noise_scale = noise_scale
         self.target_variation = target_variation
 

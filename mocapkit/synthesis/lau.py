@@ -35,7 +35,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from mocapkit.datasets.formats.motion import Motion
-from mocapkit.synthesis.base import MotionSynthesizer
+from mocapkit.synthesis.base import SMOOTHING_SECONDS, MotionSynthesizer
 from mocapkit.synthesis.representation import (
     continuous_pieces,
     decode,
@@ -88,6 +88,8 @@ class LauDBNSynthesizer(MotionSynthesizer):
             learnt as a frame difference; None: no cutting.
         footskate_cleanup, footskate_root: the footskate cleanup after sampling, the same as SLFM's
             (:class:`~mocapkit.synthesis.base.MotionSynthesizer`).
+        smoothing_seconds: the Gaussian smoothing of every variant before the cleanup, seconds (0: off;
+            :class:`~mocapkit.synthesis.base.MotionSynthesizer`).
 
     Attributes (after ``fit``):
         width_: the chosen width. cv_log_likelihood_: ``{width: mean held-out log-likelihood per frame and
@@ -102,12 +104,13 @@ class LauDBNSynthesizer(MotionSynthesizer):
 
     def __init__(self, widths: Sequence[float] = WIDTHS, start_noise: float = 0.1,
                  max_turn_speed: float | None = 5400.0, footskate_cleanup: bool = True,
-                 footskate_root: str = "full"):
+                 footskate_root: str = "full", smoothing_seconds: float = SMOOTHING_SECONDS):
         self.widths = widths
         self.start_noise = start_noise
         self.max_turn_speed = max_turn_speed
         self.footskate_cleanup = footskate_cleanup
         self.footskate_root = footskate_root
+        self.smoothing_seconds = smoothing_seconds
 
     @staticmethod
     def _pairs(frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -35,6 +35,7 @@ import numpy as np
 from mocapkit.datasets.formats.asf_amc import amc_motion
 from mocapkit.datasets.formats.motion import Motion
 from mocapkit.synthesis.base import (
+    SMOOTHING_SECONDS,
     MotionSynthesizer,
     dof_matrix,
     dof_values,
@@ -93,6 +94,8 @@ class PerlinNoiseSynthesizer(CopyTrainingClips):
         frequency: noise frequency, Hz (lattice points ``1/frequency`` seconds apart; ``> 0``).
         footskate_cleanup, footskate_root: the footskate cleanup after sampling, the same as SLFM's
             (:class:`~mocapkit.synthesis.base.MotionSynthesizer`).
+        smoothing_seconds: the Gaussian smoothing of every variant before the cleanup, seconds (0: off;
+            :class:`~mocapkit.synthesis.base.MotionSynthesizer`).
 
     Attributes (after ``fit``): those of :class:`CopyTrainingClips`, and ``sigma_``: float64 ``[7 + 3B]``
     within-class sd of every channel of the :mod:`~mocapkit.synthesis.representation` features (ASF units per
@@ -100,11 +103,12 @@ class PerlinNoiseSynthesizer(CopyTrainingClips):
     """
 
     def __init__(self, amplitude: float = 1.0, frequency: float = 2.0, footskate_cleanup: bool = True,
-                 footskate_root: str = "full"):
+                 footskate_root: str = "full", smoothing_seconds: float = SMOOTHING_SECONDS):
         self.amplitude = amplitude
         self.frequency = frequency
         self.footskate_cleanup = footskate_cleanup
         self.footskate_root = footskate_root
+        self.smoothing_seconds = smoothing_seconds
 
     def _encoded(self, matrix: np.ndarray):
         """``(flat features [T, 7 + 3B], start_xz, start_yaw)`` of AMC values ``[T, channels]`` on the reference

@@ -47,6 +47,7 @@ from scipy.spatial.transform import Rotation
 from mocapkit.datasets.formats.asf_amc import AsfSkeleton
 from mocapkit.datasets.formats.motion import Motion
 from mocapkit.synthesis.base import (
+    SMOOTHING_SECONDS,
     MotionSynthesizer,
     SynthesisInputError,
     check_flag,
@@ -642,6 +643,8 @@ class SLFMSynthesizer(MotionSynthesizer):
         dynamic_feature: ``"position"`` or ``"scf_difference"``.
         footskate_cleanup, footskate_root: the footskate cleanup after sampling
             (:class:`~mocapkit.synthesis.base.MotionSynthesizer`).
+        smoothing_seconds: the Gaussian smoothing of every variant before the cleanup, seconds (0: off;
+            :class:`~mocapkit.synthesis.base.MotionSynthesizer`).
         model_fps: the frame rate the models work at (None: the clips' own, the thesis's 120 Hz). Lower, the
             clips are resampled for training (:func:`~mocapkit.synthesis.base.resample_clip`) and the variants are
             drawn at this rate, then brought back to the clips' rate by a cubic spline before the footskate
@@ -696,7 +699,8 @@ class SLFMSynthesizer(MotionSynthesizer):
 
     def __init__(self, frame_stride: int = 1, n_fit: int = 100, n_inducing: int = 32, max_iter: int = 30,
                  sample_noise: bool = True, noise_correlation: float = 0.9, dynamic_feature: str = "position",
-                 footskate_cleanup: bool = True, footskate_root: str = "full", model_fps: float | None = 30.0,
+                 footskate_cleanup: bool = True, footskate_root: str = "full",
+                 smoothing_seconds: float = SMOOTHING_SECONDS, model_fps: float | None = 30.0,
                  noise_scale: float | str = "auto",
                  target_variation: float = 1.28, output_margin: float | None = 0.0,
                  max_turn_speed: float | None = 5400.0, cross_partition: bool = True, random_state: int | None = 0,
@@ -710,6 +714,7 @@ class SLFMSynthesizer(MotionSynthesizer):
         self.dynamic_feature = dynamic_feature
         self.footskate_cleanup = footskate_cleanup
         self.footskate_root = footskate_root
+        self.smoothing_seconds = smoothing_seconds
         self.model_fps = model_fps
         self.noise_scale = noise_scale
         self.target_variation = target_variation
