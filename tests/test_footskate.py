@@ -146,3 +146,17 @@ def test_a_three_dof_knee_is_pinned_as_the_hinge_is(skeleton):
     assert report.sliding_after < 0.5 * report.sliding_before
     left, _ = _ankles(free, out)
     assert abs(left[T // 2, 1] - floor) < 0.01
+
+
+def test_stance_root_correction_leaves_a_still_stance_between_swings_alone():
+    """A foot planted still for frames 20–39 and swinging forward at 3 m/s around it (a real step): the body should
+    keep its travel. With the blend ramps the root loses the swing's steps next to the stance (what slowed real
+    clips down); over the contact frames only it loses nothing."""
+    t = np.arange(T)
+    x = np.where(t < 20, 3.0 * (t - 20) / FPS, np.where(t < 40, 0.0, 3.0 * (t - 39) / FPS))
+    ankle = np.stack([x, np.zeros(T), np.zeros(T)], axis=1)
+    contact = (t >= 20) & (t < 40)
+    ramped = root_shift([ankle], [contact], floor=0.0, blend_frames=6, ramps=True)
+    stance = root_shift([ankle], [contact], floor=0.0, blend_frames=6, ramps=False)
+    np.testing.assert_allclose(stance, 0.0, atol=1e-12)
+    assert np.abs(ramped[:, 0]).max() > 0.05                    # the swing's steps taken out of the root's travel

@@ -10,7 +10,7 @@ from sklearn.exceptions import NotFittedError
 from mocapkit.datasets.formats.asf_amc import read_amc
 from mocapkit.datasets.formats.bvh import read_bvh
 from mocapkit.datasets.formats.motion import Motion
-from mocapkit.synthesis.base import SynthesisInputError, dof_matrix, time_warp
+from mocapkit.synthesis.base import SynthesisInputError, dof_matrix, dof_values, smooth_values, time_warp
 from mocapkit.synthesis.cvae import CVAESynthesizer
 from mocapkit.synthesis.lau import LauDBNSynthesizer
 from mocapkit.synthesis.perlin import (
@@ -74,7 +74,8 @@ def test_copies_are_the_training_clips(fitted, hops):
 @needs(HDM05)
 def test_perlin_deviation_scales_with_its_amplitude(hops):
     train, _ = hops
-    positions = {a: np.stack([v.positions for v in PerlinNoiseSynthesizer(amplitude=a, footskate_cleanup=False)
+    positions = {a: np.stack([v.positions for v in PerlinNoiseSynthesizer(amplitude=a, footskate_cleanup=False,
+                                                                           smoothing_seconds=0.0)
                               .fit(train).sample(4, 60, seed=3)]) for a in (0.0, 0.25, 0.5)}
     copies = np.stack([v.positions for v in CopyTrainingClips().fit(train).sample(4, 60, seed=3)])
     np.testing.assert_allclose(positions[0.0], copies, atol=1e-4)            # amplitude 0: the copies
@@ -176,7 +177,9 @@ def test_bad_training_clips_are_rejected(hops, name):
                                              (LauDBNSynthesizer(widths=(0.0, 1.0)), "widths"),
                                              (CVAESynthesizer(fps=0.0), "fps"),
                                              (LauDBNSynthesizer(footskate_root="sideways"), "footskate_root"),
-                                             (CVAESynthesizer(footskate_cleanup="yes"), "footskate_cleanup")])
+                                             (CVAESynthesizer(footskate_cleanup="yes"), "footskate_cleanup"),
+                                             (PerlinNoiseSynthesizer(smoothing_seconds=-0.1), "smoothing_seconds"),
+                                             (LauDBNSynthesizer(smoothing_seconds="0.1"), "smoothing_seconds")])
 def test_bad_parameters_are_rejected(hops, method, message):
     with pytest.raises(ValueError, match=message):
         method.fit(hops[0])
@@ -263,3 +266,40 @@ def test_every_generator_gets_the_same_footskate_cleanup(fitted, hops, name):
     assert skating[1] < skating[0]
     fitted["copy"].sample(2, seed=0)
     assert fitted["copy"].footskate_reports_ == []                        # the reference is never cleaned
+
+
+@needs(HDM05)
+def test_smoothing_low_passes_the_values_and_unwraps_angles_first(hops):
+    clip = hops[0][0]
+    matrix, layout = dof_matrix(clip)
+    rng = np.random.default_rng(0)
+    noisy = matrix + rng.normal(0.0, 2.0, matrix.shape)
+    smoothed = np.concatenate(list(smooth_values(dof_values(noisy, layout), layout, 120.0, 0.02).values()), axis=1)
+    jitter = lambda m: np.abs(np.diff(m, n=2, axis=0)).mean()
+    assert jitter(smoothed) < 0.2 * jitter(noisy)
+    assert np.abs(smoothed - matrix).mean() < 0.7 * np.abs(noisy - matrix).mean()      # closer to the clean curve
+    np.testing.assert_array_equal(
+        np.concatenate(list(smooth_values(dof_values(noisy, layout), layout, 120.0, 0.0).values()), axis=1), noisy)
+    # an angle turning steadily through ±180° (wrapped into [-180, 180)) stays a steady turn, not a spin back
+    turning = matrix.copy()
+    column = int(np.flatnonzero([name.lower().startswith("r") for dofs in layout.dofs for name in dofs])[0])
+    steady = np.linspace(150.0, 210.0, len(turning))
+    turning[:, column] = (steady + 180.0) % 360.0 - 180.0
+    out = np.concatenate(list(smooth_values(dof_values(turning, layout), layout, 120.0, 0.02).values()), axis=1)
+    np.testing.assert_allclose(out[12:-12, column], steady[12:-12], atol=1e-6)     # a ramp, away from the ends
+
+
+@needs(HDM05)
+@pytest.mark.parametrize("name", ["perlin", "lau", "cvae"])
+def test_every_generator_gets_the_same_smoothing(fitted, name):
+    from mocapkit.evaluation.synthesis import mean_jerk
+
+    synthesizer = fitted[name]
+    before = synthesizer.smoothing_seconds
+    try:
+        raw = synthesizer.set_params(smoothing_seconds=0.0, footskate_cleanup=False).sample(3, n_frames=80, seed=4)
+        smooth = synthesizer.set_params(smoothing_seconds=0.05).sample(3, n_frames=80, seed=4)
+    finally:
+        synthesizer.set_params(smoothing_seconds=before, footskate_cleanup=True)
+    jerk = [np.mean([mean_jerk(v) for v in variants]) for variants in (raw, smooth)]
+    assert jerk[1] < 0.5 * jerk[0]

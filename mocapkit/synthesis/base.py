@@ -36,9 +36,12 @@ from mocapkit.datasets.formats.asf_amc import AsfSkeleton, amc_motion
 from mocapkit.datasets.formats.motion import Motion
 
 
-#: Default ``smoothing_seconds`` of every generator (:class:`MotionSynthesizer`, *Smoothing*): set by the rule in
-#: bench/RESULTS.md §16 (*Smoothing the variants*), on training clips only.
-SMOOTHING_SECONDS = 0.0
+#: Default ``smoothing_seconds`` of every generator (:class:`MotionSynthesizer`, *Smoothing*): two frames at 30 fps
+#: (67 ms), chosen by the rule in bench/RESULTS.md §16 (*Smoothing the variants*) on training clips only
+#: (``scripts/select_synthesis_smoothing.py``: the share of SLFM variants within the training clips' spread on every
+#: proxy, mean over HDM05 hops and squats and Bandai walks, 0.03 / 0.19 / 0.26 / 0.28 at 0, 33, 67, 100 ms; the
+#: smallest within 0.05 of the best).
+SMOOTHING_SECONDS = 2 / 30
 
 
 class SynthesisInputError(ValueError):
@@ -280,7 +283,7 @@ class MotionSynthesizer(BaseEstimator):
     """Base class of variation synthesisers (see the module docstring).
 
     **Footskate cleanup**, one for every synthesiser that has the parameters ``footskate_cleanup`` (bool) and
-    ``footskate_root`` (``"full"``, ``"vertical"`` or ``"none"``): :meth:`sample` passes each variant through
+    ``footskate_root`` (one of :data:`~mocapkit.synthesis.footskate.ROOT_MOVES`): :meth:`sample` passes each variant through
     :func:`~mocapkit.synthesis.footskate.cleanup_footskate` on the output skeleton, with the floor ``floor_``
     that :meth:`fit` measured on the training clips (the mean over the clips of their lowest ankle height,
     metres) and ``move_root=footskate_root``; ``footskate_reports_`` then holds one

@@ -36,6 +36,7 @@ from mocapkit.synthesis.base import (
     rotation_columns,
     time_warp,
 )
+from mocapkit.synthesis.footskate import DEFAULT_ROOT_MOVE
 from mocapkit.synthesis.representation import (
     continuous_pieces,
     decode,
@@ -84,7 +85,7 @@ class CVAESynthesizer(MotionSynthesizer):
     def __init__(self, fps: float | None = 30.0, latent: int = 16, hidden: int = 256, layers: int = 2,
                  beta: float = 0.01, condition_noise: float = 0.05, steps: int = 400, batch_size: int = 256,
                  lr: float = 1e-3, max_turn_speed: float | None = 5400.0, random_state: int | None = 0,
-                 footskate_cleanup: bool = True, footskate_root: str = "full",
+                 footskate_cleanup: bool = True, footskate_root: str = DEFAULT_ROOT_MOVE,
                  smoothing_seconds: float = SMOOTHING_SECONDS, noise_scale: float | str = 1.0,
                  target_variation: float = 1.28):
         self.fps = fps

@@ -36,6 +36,7 @@ import numpy as np
 
 from mocapkit.datasets.formats.motion import Motion
 from mocapkit.synthesis.base import SMOOTHING_SECONDS, MotionSynthesizer
+from mocapkit.synthesis.footskate import DEFAULT_ROOT_MOVE
 from mocapkit.synthesis.representation import (
     continuous_pieces,
     decode,
@@ -104,7 +105,7 @@ class LauDBNSynthesizer(MotionSynthesizer):
 
     def __init__(self, widths: Sequence[float] = WIDTHS, start_noise: float = 0.1,
                  max_turn_speed: float | None = 5400.0, footskate_cleanup: bool = True,
-                 footskate_root: str = "full", smoothing_seconds: float = SMOOTHING_SECONDS):
+                 footskate_root: str = DEFAULT_ROOT_MOVE, smoothing_seconds: float = SMOOTHING_SECONDS):
         self.widths = widths
         self.start_noise = start_noise
         self.max_turn_speed = max_turn_speed

@@ -42,6 +42,7 @@ from mocapkit.synthesis.base import (
     rotation_columns,
     time_warp,
 )
+from mocapkit.synthesis.footskate import DEFAULT_ROOT_MOVE
 from mocapkit.synthesis.representation import decode, encode, root_start
 
 
@@ -103,7 +104,7 @@ class PerlinNoiseSynthesizer(CopyTrainingClips):
     """
 
     def __init__(self, amplitude: float = 1.0, frequency: float = 2.0, footskate_cleanup: bool = True,
-                 footskate_root: str = "full", smoothing_seconds: float = SMOOTHING_SECONDS):
+                 footskate_root: str = DEFAULT_ROOT_MOVE, smoothing_seconds: float = SMOOTHING_SECONDS):
         self.amplitude = amplitude
         self.frequency = frequency
         self.footskate_cleanup = footskate_cleanup

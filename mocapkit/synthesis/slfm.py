@@ -58,6 +58,7 @@ from mocapkit.synthesis.base import (
     rotation_columns,
     time_warp,
 )
+from mocapkit.synthesis.footskate import DEFAULT_ROOT_MOVE
 from mocapkit.synthesis.representation import (
     ROOT_FEATURES,
     FeatureClip,
@@ -699,7 +700,7 @@ class SLFMSynthesizer(MotionSynthesizer):
 
     def __init__(self, frame_stride: int = 1, n_fit: int = 100, n_inducing: int = 32, max_iter: int = 30,
                  sample_noise: bool = True, noise_correlation: float = 0.9, dynamic_feature: str = "position",
-                 footskate_cleanup: bool = True, footskate_root: str = "full",
+                 footskate_cleanup: bool = True, footskate_root: str = DEFAULT_ROOT_MOVE,
                  smoothing_seconds: float = SMOOTHING_SECONDS, model_fps: float | None = 30.0,
                  noise_scale: float | str = "auto",
                  target_variation: float = 1.28, output_margin: float | None = 0.0,
