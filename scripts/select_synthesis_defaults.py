@@ -31,7 +31,13 @@ import numpy as np
 from hydra.utils import instantiate
 
 from mocapkit.evaluation.compare import compose
-from mocapkit.evaluation.synthesis import clip_naturalness, feature_distances, variation, within_spread
+from mocapkit.evaluation.synthesis import (
+    PROXY_RESOLUTION,
+    clip_naturalness,
+    feature_distances,
+    variation,
+    within_spread,
+)
 from mocapkit.synthesis.base import on_skeleton
 from mocapkit.synthesis.slfm import SLFMSynthesizer
 
@@ -52,10 +58,12 @@ def score(variants, train) -> dict:
     posed = [on_skeleton(m, skeleton) for m in train]
     distances = feature_distances(variants, posed)
     ours, theirs = clip_naturalness(variants), clip_naturalness(train)
-    within = {name: within_spread(ours[name], theirs[name]) for name in ours}
+    within = {name: within_spread(ours[name], theirs[name], PROXY_RESOLUTION.get(name, 0.0)) for name in ours}
     within["feature_distance"] = within_spread(distances.variants, distances.real)
     every = np.logical_and.reduce(list(within.values()))
     return {"v_ratio": variation(variants).v / variation(posed).v, "every_proxy": float(every.mean()),
+            "per_variant": {**{k: v.tolist() for k, v in ours.items()}, "feature_distance": distances.variants.tolist()},
+            "training_clips": {**{k: v.tolist() for k, v in theirs.items()}, "feature_distance": distances.real.tolist()},
             **{f"within_{name}": float(ok.mean()) for name, ok in within.items()},
             "jerk": float(ours["jerk"].mean()), "foot_skating_cms": float(np.nanmean(ours["foot_skating_cms"]))}
 
@@ -119,7 +127,8 @@ def main() -> None:
             if name == "footskate_root":
                 row.update(cleanup_on_real_clips(train, candidate))
             rows.append(row)
-            print(json.dumps({k: round(v, 4) if isinstance(v, float) else v for k, v in row.items()}), flush=True)
+            print(json.dumps({k: round(v, 4) if isinstance(v, float) else v for k, v in row.items()
+                              if k not in ("per_variant", "training_clips")}), flush=True)
         (args.out / f"{item.replace(':', '_')}.json").write_text(json.dumps(rows, indent=1))
     rows = [row for item in args.types
             for row in json.loads((args.out / f"{item.replace(':', '_')}.json").read_text())]

@@ -238,16 +238,24 @@ def naturalness(motions: Sequence[Motion], height_threshold: float = 0.03, verti
             "bone_drift_mm": float(table["bone_drift_mm"].mean()), "jerk": float(table["jerk"].mean())}
 
 
-def within_spread(values: np.ndarray, real: np.ndarray) -> np.ndarray:
+#: Bone-length drift below this (mm) is numerical noise, not drift: forward kinematics of float32 positions gives
+#: rigid bones a drift of about 1e-4 mm (the proxies' resolution, :data:`PROXY_RESOLUTION`).
+BONE_DRIFT_RESOLUTION_MM = 0.01
+#: Per proxy, the difference below which two values are the same for :func:`within_spread`.
+PROXY_RESOLUTION = {"bone_drift_mm": BONE_DRIFT_RESOLUTION_MM}
+
+
+def within_spread(values: np.ndarray, real: np.ndarray, resolution: float = 0.0) -> np.ndarray:
     """bool ``[n]``: whether each value of a proxy that is worse when larger (foot skating, jerk, bone drift, a
-    feature distance) is within the spread of the real clips' values ``[m]``, i.e. no larger than the largest.
+    feature distance) is within the spread of the real clips' values ``[m]``, i.e. no larger than the largest
+    (plus ``resolution``: the proxy's numerical resolution, :data:`PROXY_RESOLUTION`).
 
     NaN (a clip without foot contacts) is within only if some real clip has NaN too; a NaN among the real
     values does not widen the spread of the finite ones.
     """
     values, real = np.asarray(values, dtype=np.float64), np.asarray(real, dtype=np.float64)
     finite = real[np.isfinite(real)]
-    bound = finite.max() if finite.size else -np.inf
+    bound = finite.max() + float(resolution) if finite.size else -np.inf
     return np.where(np.isnan(values), bool(np.isnan(real).any()), values <= bound)
 
 
@@ -308,4 +316,5 @@ def feature_distances(variants: Sequence[Motion], real: Sequence[Motion]) -> Fea
 
 __all__ = ["FOOT_LANDMARKS", "FeatureDistances", "Variation", "bone_length_drift", "clip_naturalness", "dtw_cost",
            "feature_distance", "feature_distances", "foot_contacts", "foot_joints", "foot_skating", "heading_angles",
-           "mean_jerk", "naturalness", "pose_features", "root_normalised_positions", "variation", "within_spread"]
+           "mean_jerk", "naturalness", "pose_features", "root_normalised_positions", "variation", "within_spread",
+           "BONE_DRIFT_RESOLUTION_MM", "PROXY_RESOLUTION"]

@@ -163,7 +163,9 @@ def root_shift(ankles: list[np.ndarray], contacts: list[np.ndarray], floor: floa
 
     - **Horizontal** (x, z): the root's step in each frame loses the weighted mean horizontal step of the
       planted ankles (weights: 1 in a contact and, with ``ramps``, linear ramps ``blend_frames`` long around it,
-      as the IK pins; without, 1 for the steps whose both frames are in the contact and 0 for the others), so that a planted foot stands still while the body moves over
+      as the IK pins; without, 1 for the steps whose both frames are in the contact and 0 for the others, the
+      per-frame corrections then averaged over ``2·blend_frames + 1`` frames so that the body does not jolt where a
+      contact begins or ends), so that a planted foot stands still while the body moves over
       it; the shift is the running sum of those corrections (0 at frame 0). The ramps cover the frames where the
       foot lands and lifts off, when it swings forward fast: their steps, taken out of the root's, slow the body
       down (real HDM05 jogs by 24 %, real Bandai walks by half; bench/RESULTS.md §16).
@@ -196,7 +198,10 @@ def root_shift(ankles: list[np.ndarray], contacts: list[np.ndarray], floor: floa
             lift[start:stop] += floor - ankle[start:stop, 1].mean()
             count[start:stop] += 1
     shift = np.zeros((T, 3))
-    shift[:, [0, 2]] = -np.cumsum(step / np.maximum(total, 1.0)[:, None], axis=0)
+    correction = step / np.maximum(total, 1.0)[:, None]
+    if not ramps:       # switched on and off at the contacts' ends: spread each step over 2·blend_frames + 1 frames
+        correction = _smoothed(correction, 2 * blend_frames + 1)
+    shift[:, [0, 2]] = -np.cumsum(correction, axis=0)
     if slack > 0 and T > 1:
         shift[:, [0, 2]] = _smoothed(_follow(shift[:, [0, 2]], slack), 2 * blend_frames + 1)
     planted = np.flatnonzero(count)

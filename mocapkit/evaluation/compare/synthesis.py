@@ -218,6 +218,7 @@ class SynthesisBenchmark(Benchmark):
         """Fit on the training clips, sample ``n_variants`` of the mean training length with the cell's seed,
         score them against the references (module docstring)."""
         from mocapkit.evaluation.synthesis import (
+            PROXY_RESOLUTION,
             clip_naturalness,
             feature_distances,
             naturalness,
@@ -236,7 +237,8 @@ class SynthesisBenchmark(Benchmark):
         v = variation(variants)
         distances = feature_distances(variants, reference["heldout"])
         proxies = clip_naturalness(variants)
-        within = {name: within_spread(values, reference["proxies"][name]) for name, values in proxies.items()}
+        within = {name: within_spread(values, reference["proxies"][name], PROXY_RESOLUTION.get(name, 0.0))
+                  for name, values in proxies.items()}
         within_all = within_spread(distances.variants, distances.real) & np.logical_and.reduce(list(within.values()))
         frames = variants[0].num_frames
         metrics = {"v_variants": v.v, "v_variants_per_step": v.v_per_step, **reference["metrics"],
