@@ -37,10 +37,10 @@ from mocapkit.datasets.formats.motion import Motion
 
 
 #: Default ``smoothing_seconds`` of every generator (:class:`MotionSynthesizer`, *Smoothing*): two frames at 30 fps
-#: (67 ms), chosen by the rule in bench/RESULTS.md §16 (*Smoothing the variants*) on training clips only
-#: (``scripts/select_synthesis_smoothing.py``: the share of SLFM variants within the training clips' spread on every
-#: proxy, mean over HDM05 hops and squats and Bandai walks, 0.03 / 0.19 / 0.26 / 0.28 at 0, 33, 67, 100 ms; the
-#: smallest within 0.05 of the best).
+#: (67 ms), chosen by the rule in bench/RESULTS.md §16 (*Smoothing the variants, and every proxy at once*) on
+#: training clips only (``scripts/select_synthesis_defaults.py --param smoothing_seconds``: the share of SLFM
+#: variants within the training clips' spread on every proxy, mean over HDM05 hops and squats and Bandai walks,
+#: 0.05 / 0.23 / 0.31 / 0.34 at 0, 33, 67, 100 ms; the smallest within 0.05 of the best).
 SMOOTHING_SECONDS = 2 / 30
 
 

@@ -16,8 +16,10 @@ values (so the result is still a valid AMC motion on the same skeleton):
    Sampled variants float above the floor or sink into it by centimetres and their planted feet slide, so
    neither the floor height nor the horizontal speed can tell a stance.
 3. **Root** (:func:`root_shift`, ``move_root``): the root is lowered or raised so that each stance stands on
-   the floor, and (``"full"``) its horizontal step loses the planted feet's step, so the body moves over a
-   still foot instead of the foot sliding under the body.
+   the floor, and (``"stance"``, the default, and ``"full"``) its horizontal step loses the planted feet's step,
+   so the body moves over a still foot instead of the foot sliding under the body: over the contacts' own steps
+   (``"stance"``) or also over the blend ramps around them, where the foot lands and lifts off (``"full"``, the
+   former default, which slows real clips down: :func:`root_shift`).
 4. **Targets**: during a contact run the ankle is pinned at its mean horizontal position over the run, on the
    floor; over ``blend_frames`` frames before and after, the target blends linearly back to the free ankle.
 5. **Two-bone IK** per frame with a target: the knee hinge angle is solved in closed form so that the hip–ankle
@@ -47,9 +49,14 @@ from mocapkit.synthesis.representation import dof_axes, euler_near, partitions
 
 #: The ways :func:`cleanup_footskate` may move the root (its ``move_root``).
 ROOT_MOVES = ("full", "stance", "vertical", "none")
-#: The ``footskate_root`` of every generator (:class:`~mocapkit.synthesis.base.MotionSynthesizer`) unless set: chosen
-#: on training clips only (:func:`cleanup_footskate`'s docstring).
-DEFAULT_ROOT_MOVE = "full"
+#: The ``footskate_root`` of every generator (:class:`~mocapkit.synthesis.base.MotionSynthesizer`) unless set:
+#: ``"stance"``, chosen on training clips only by the rule in bench/RESULTS.md §16 (*Smoothing the variants, and
+#: every proxy at once*, round 2; ``scripts/select_synthesis_defaults.py --param footskate_root full stance``): the
+#: share of SLFM variants within the training clips' spread on every proxy, mean over HDM05 hops and squats and
+#: Bandai walks, 0.41 against ``"full"``'s 0.31 (walks 0.80 / 0.60, squats 0.15 / 0.00, hops 0.28 / 0.33); on the
+#: real training clips themselves it keeps more of their travel (root speed after / before: walks 0.80 against
+#: 0.48, hops 0.96 against 0.90).
+DEFAULT_ROOT_MOVE = "stance"
 
 
 @dataclass
@@ -299,14 +306,15 @@ def cleanup_footskate(values: dict[str, np.ndarray], skeleton: AsfSkeleton, fps:
         max_height, height_tolerance, vertical_speed, min_contact_frames: contact detection
             (:func:`detect_contacts`).
         blend_frames: frames over which a pin fades in before and out after a contact.
-        move_root: how the root's translation is shifted before the IK (:func:`root_shift`): ``"full"``
-            grounds and halts the planted feet, so the body's travel follows its feet, over the contacts and the
+        move_root: how the root's translation is shifted before the IK (:func:`root_shift`; default
+            :data:`DEFAULT_ROOT_MOVE`): ``"full"`` grounds and halts the planted feet, so the body's travel follows its feet, over the contacts and the
             blend ramps around them; ``"stance"`` the same over the contacts only (``ramps=False``); ``"vertical"``
             only grounds them and keeps the sampled path (the IK then pins what the legs reach); ``"none"``
             leaves the root alone.
         root_slack: the ``slack`` of :func:`root_shift` (metres).
 
-    The defaults ``move_root="full"`` and ``blend_frames=12`` were chosen on training clips only: SLFM variants
+    ``blend_frames=12`` and ``move_root="full"`` (the default before ``"stance"``: :data:`DEFAULT_ROOT_MOVE`) were
+    chosen on training clips only: SLFM variants
     (literal model, no cross-partition inputs) of the seed-0 splits of the four HDM05 types of ``mocapkit compare
     synthesis_hdm05``, scored against their own 10 training clips by the mean over the types of the mean
     ``|log(variant / clips)|`` of four proxies (foot skating, jerk, share of contact frames, feature distance
