@@ -3,12 +3,12 @@ bench/RESULTS.md §16, *Smoothing the variants, and every proxy at once*).
 
 For each motion type below, the benchmark's seed-0 split gives 10 training clips. For every candidate value of
 ``--param``, SLFM is fitted on them with its defaults and that value (the automatic noise scale is then chosen on
-the variants so made), samples ``--variants`` variants, and each variant is scored against **the training clips themselves**
-(posed on the reference skeleton, as the benchmark poses its references): within their spread on every proxy at
-once (:func:`~mocapkit.evaluation.synthesis.within_spread`: feature distance against the training clips'
-leave-one-out distances, foot skating, jerk and bone drift no larger than the largest training clip's). No
-held-out clip is read. The candidate with the highest mean share over the types wins; an earlier-listed candidate (a smaller
-smoothing, the former default) within ``--tie`` of the best wins instead.
+the variants so made), samples ``--variants`` variants, and each variant is scored against **the training clips
+themselves** (posed on the reference skeleton, as the benchmark poses its references): within their spread on
+every proxy at once (:func:`~mocapkit.evaluation.synthesis.within_spread`: feature distance against the training
+clips' leave-one-out distances, foot skating, jerk and bone drift no larger than the largest training clip's). No
+held-out clip is read. The candidate with the highest mean share over the types wins; an earlier-listed candidate
+(a smaller smoothing, the former default) within ``--tie`` of the best wins instead.
 
 With ``--param footskate_root`` the footskate cleanup of each candidate is also applied to the training clips
 themselves (real motion, whose feet and travel agree: a cleanup should leave it nearly as it is), and their root's
@@ -62,8 +62,10 @@ def score(variants, train) -> dict:
     within["feature_distance"] = within_spread(distances.variants, distances.real)
     every = np.logical_and.reduce(list(within.values()))
     return {"v_ratio": variation(variants).v / variation(posed).v, "every_proxy": float(every.mean()),
-            "per_variant": {**{k: v.tolist() for k, v in ours.items()}, "feature_distance": distances.variants.tolist()},
-            "training_clips": {**{k: v.tolist() for k, v in theirs.items()}, "feature_distance": distances.real.tolist()},
+            "per_variant": {**{k: v.tolist() for k, v in ours.items()},
+                            "feature_distance": distances.variants.tolist()},
+            "training_clips": {**{k: v.tolist() for k, v in theirs.items()},
+                               "feature_distance": distances.real.tolist()},
             **{f"within_{name}": float(ok.mean()) for name, ok in within.items()},
             "jerk": float(ours["jerk"].mean()), "foot_skating_cms": float(np.nanmean(ours["foot_skating_cms"]))}
 
@@ -138,8 +140,8 @@ def main() -> None:
     chosen = next(c for c in candidates if means[c] >= best - args.tie)      # the first listed within the tie
     print(f"{name}: mean share within the training clips' spread on every proxy:",
           {c: round(m, 3) for c, m in means.items()}, "→ chosen", chosen)
-    (args.out / "selection.json").write_text(json.dumps({"types": args.types, "means": {str(s): m for s, m in means.items()},
-                                                         "chosen": chosen}, indent=1))
+    summary = {"types": args.types, "means": {str(c): m for c, m in means.items()}, "chosen": chosen}
+    (args.out / "selection.json").write_text(json.dumps(summary, indent=1))
 
 
 if __name__ == "__main__":

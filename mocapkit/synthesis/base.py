@@ -283,7 +283,8 @@ class MotionSynthesizer(BaseEstimator):
     """Base class of variation synthesisers (see the module docstring).
 
     **Footskate cleanup**, one for every synthesiser that has the parameters ``footskate_cleanup`` (bool) and
-    ``footskate_root`` (one of :data:`~mocapkit.synthesis.footskate.ROOT_MOVES`): :meth:`sample` passes each variant through
+    ``footskate_root`` (one of :data:`~mocapkit.synthesis.footskate.ROOT_MOVES`, default
+    :data:`~mocapkit.synthesis.footskate.DEFAULT_ROOT_MOVE`): :meth:`sample` passes each variant through
     :func:`~mocapkit.synthesis.footskate.cleanup_footskate` on the output skeleton, with the floor ``floor_``
     that :meth:`fit` measured on the training clips (the mean over the clips of their lowest ankle height,
     metres) and ``move_root=footskate_root``; ``footskate_reports_`` then holds one

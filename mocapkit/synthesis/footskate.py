@@ -307,20 +307,19 @@ def cleanup_footskate(values: dict[str, np.ndarray], skeleton: AsfSkeleton, fps:
             (:func:`detect_contacts`).
         blend_frames: frames over which a pin fades in before and out after a contact.
         move_root: how the root's translation is shifted before the IK (:func:`root_shift`; default
-            :data:`DEFAULT_ROOT_MOVE`): ``"full"`` grounds and halts the planted feet, so the body's travel follows its feet, over the contacts and the
-            blend ramps around them; ``"stance"`` the same over the contacts only (``ramps=False``); ``"vertical"``
-            only grounds them and keeps the sampled path (the IK then pins what the legs reach); ``"none"``
-            leaves the root alone.
+            :data:`DEFAULT_ROOT_MOVE`): ``"stance"`` grounds and halts the planted feet over their contacts
+            (``ramps=False``), so the body's travel follows its feet; ``"full"`` the same over the contacts and
+            the blend ramps around them; ``"vertical"`` only grounds them and keeps the sampled path (the IK then
+            pins what the legs reach); ``"none"`` leaves the root alone.
         root_slack: the ``slack`` of :func:`root_shift` (metres).
 
     ``blend_frames=12`` and ``move_root="full"`` (the default before ``"stance"``: :data:`DEFAULT_ROOT_MOVE`) were
-    chosen on training clips only: SLFM variants
-    (literal model, no cross-partition inputs) of the seed-0 splits of the four HDM05 types of ``mocapkit compare
-    synthesis_hdm05``, scored against their own 10 training clips by the mean over the types of the mean
-    ``|log(variant / clips)|`` of four proxies (foot skating, jerk, share of contact frames, feature distance
-    against the clips' leave-one-out distance): full/12 0.78, full/6 0.83, vertical/12 0.93, vertical/6 0.95,
-    none/12 1.06, none/6 1.12, no cleanup 1.46. The seed-1 splits hold some of those clips among their held-out
-    references.
+    chosen on training clips only: SLFM variants (literal model, no cross-partition inputs) of the seed-0 splits of
+    the four HDM05 types of ``mocapkit compare synthesis_hdm05``, scored against their own 10 training clips by the
+    mean over the types of the mean ``|log(variant / clips)|`` of four proxies (foot skating, jerk, share of contact
+    frames, feature distance against the clips' leave-one-out distance): full/12 0.78, full/6 0.83, vertical/12
+    0.93, vertical/6 0.95, none/12 1.06, none/6 1.12, no cleanup 1.46. The seed-1 splits hold some of those clips
+    among their held-out references. ``"stance"`` replaced ``"full"`` by a second rule (:data:`DEFAULT_ROOT_MOVE`).
     ``root_slack`` on the same variants (full/12): 0 → 0.78, 0.05 → 0.79, 0.1 → 0.80, 0.2 → 0.82; slack helps
     squats (feature distance 2.28 → 1.60 at 0.05, the clips' own 0.66) and costs the elbow-to-knee (2.15 → 2.22).
 

@@ -57,8 +57,9 @@ from mocapkit.evaluation.compare.base import Benchmark, ComparisonError, Split
 
 #: Metric name → digits in the tables.
 DIGITS = {"v_variants": 1, "v_train": 1, "v_heldout": 1, "v_ratio": 3, "v_variants_per_step": 3,
-          "foot_skating_cms": 1, "real_foot_skating_cms": 1, "real_foot_skating_cms_max": 1, "real_jerk_max": 0, "bone_drift_mm": 4, "real_bone_drift_mm": 4,
-          "jerk": 0, "real_jerk": 0, "feature_distance": 3, "feature_distance_real": 3,
+          "foot_skating_cms": 1, "real_foot_skating_cms": 1, "real_foot_skating_cms_max": 1, "bone_drift_mm": 4,
+          "real_bone_drift_mm": 4, "jerk": 0, "real_jerk": 0, "real_jerk_max": 0, "feature_distance": 3,
+          "feature_distance_real": 3,
           "feature_distance_real_sd": 3, "fit_seconds": 2, "sample_seconds_per_second": 3}
 
 
@@ -295,9 +296,9 @@ class SynthesisBenchmark(Benchmark):
                       (f"Training set V = {fmt('v_train', get(first, 'v_train'))}, held-out set V = "
                        f"{fmt('v_heldout', get(first, 'v_heldout'))}; held-out real clips: foot skating "
                        f"{fmt('real_foot_skating_cms', get(first, 'real_foot_skating_cms'))} cm/s (at most "
-                       f"{fmt('real_foot_skating_cms', get(first, 'real_foot_skating_cms_max'))}), jerk "
+                       f"{fmt('real_foot_skating_cms_max', get(first, 'real_foot_skating_cms_max'))}), jerk "
                        f"{fmt('real_jerk', get(first, 'real_jerk'))} m/s³ (at most "
-                       f"{fmt('real_jerk', get(first, 'real_jerk_max'))}), bone drift "
+                       f"{fmt('real_jerk_max', get(first, 'real_jerk_max'))}), bone drift "
                        f"{fmt('real_bone_drift_mm', get(first, 'real_bone_drift_mm'))} mm, feature distance "
                        f"{fmt('feature_distance_real', get(first, 'feature_distance_real'))} ± "
                        f"{fmt('feature_distance_real_sd', get(first, 'feature_distance_real_sd'))}."), "",
