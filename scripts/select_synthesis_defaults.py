@@ -31,13 +31,7 @@ import numpy as np
 from hydra.utils import instantiate
 
 from mocapkit.evaluation.compare import compose
-from mocapkit.evaluation.synthesis import (
-    PROXY_RESOLUTION,
-    clip_naturalness,
-    feature_distances,
-    variation,
-    within_spread,
-)
+from mocapkit.evaluation.synthesis import clip_naturalness, feature_distances, proxies_within, variation
 from mocapkit.synthesis.base import on_skeleton
 from mocapkit.synthesis.slfm import SLFMSynthesizer
 
@@ -58,9 +52,8 @@ def score(variants, train) -> dict:
     posed = [on_skeleton(m, skeleton) for m in train]
     distances = feature_distances(variants, posed)
     ours, theirs = clip_naturalness(variants), clip_naturalness(train)
-    within = {name: within_spread(ours[name], theirs[name], PROXY_RESOLUTION.get(name, 0.0)) for name in ours}
-    within["feature_distance"] = within_spread(distances.variants, distances.real)
-    every = np.logical_and.reduce(list(within.values()))
+    within = proxies_within(ours, theirs, distances)
+    every = within.pop("every_proxy")
     return {"v_ratio": variation(variants).v / variation(posed).v, "every_proxy": float(every.mean()),
             "per_variant": {**{k: v.tolist() for k, v in ours.items()},
                             "feature_distance": distances.variants.tolist()},

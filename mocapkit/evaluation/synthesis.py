@@ -229,13 +229,18 @@ def clip_naturalness(motions: Sequence[Motion], height_threshold: float = 0.03,
             "jerk": np.array([mean_jerk(m) for m in motions])}
 
 
-def naturalness(motions: Sequence[Motion], height_threshold: float = 0.03, vertical_speed: float = 0.15) -> dict:
-    """The proxies averaged over ``motions``: ``{"foot_skating_cms", "bone_drift_mm", "jerk"}`` (cm/s, mm,
-    m/s³; a clip without contacts does not count towards the foot skating)."""
-    table = clip_naturalness(motions, height_threshold, vertical_speed)
+def proxy_means(table: dict[str, np.ndarray]) -> dict[str, float]:
+    """The means over clips of a :func:`clip_naturalness` table (a clip without contacts does not count towards the
+    foot skating; NaN when none has contacts)."""
     skating = table["foot_skating_cms"][np.isfinite(table["foot_skating_cms"])]
     return {"foot_skating_cms": float(skating.mean()) if skating.size else float("nan"),
             "bone_drift_mm": float(table["bone_drift_mm"].mean()), "jerk": float(table["jerk"].mean())}
+
+
+def naturalness(motions: Sequence[Motion], height_threshold: float = 0.03, vertical_speed: float = 0.15) -> dict:
+    """The proxies averaged over ``motions``: ``{"foot_skating_cms", "bone_drift_mm", "jerk"}`` (cm/s, mm,
+    m/s³; a clip without contacts does not count towards the foot skating)."""
+    return proxy_means(clip_naturalness(motions, height_threshold, vertical_speed))
 
 
 #: Bone-length drift below this (mm) is numerical noise, not drift: forward kinematics of float32 positions gives
@@ -314,7 +319,19 @@ def feature_distances(variants: Sequence[Motion], real: Sequence[Motion]) -> Fea
     return FeatureDistances(variants=ours, real=own)
 
 
+def proxies_within(variant_proxies: dict[str, np.ndarray], real_proxies: dict[str, np.ndarray],
+                   distances: FeatureDistances) -> dict[str, np.ndarray]:
+    """Per variant, whether it lies within the real clips' spread (:func:`within_spread`, each proxy at its
+    :data:`PROXY_RESOLUTION`): bool ``[n_variants]`` per :func:`clip_naturalness` proxy, ``"feature_distance"``
+    (:func:`feature_distances` of the variants against the real clips) and ``"every_proxy"`` (all of them)."""
+    within = {name: within_spread(values, real_proxies[name], PROXY_RESOLUTION.get(name, 0.0))
+              for name, values in variant_proxies.items()}
+    within["feature_distance"] = within_spread(distances.variants, distances.real)
+    within["every_proxy"] = np.logical_and.reduce(list(within.values()))
+    return within
+
+
 __all__ = ["FOOT_LANDMARKS", "FeatureDistances", "Variation", "bone_length_drift", "clip_naturalness", "dtw_cost",
            "feature_distance", "feature_distances", "foot_contacts", "foot_joints", "foot_skating", "heading_angles",
-           "mean_jerk", "naturalness", "pose_features", "root_normalised_positions", "variation", "within_spread",
-           "BONE_DRIFT_RESOLUTION_MM", "PROXY_RESOLUTION"]
+           "mean_jerk", "naturalness", "pose_features", "proxies_within", "proxy_means", "root_normalised_positions",
+           "variation", "within_spread", "BONE_DRIFT_RESOLUTION_MM", "PROXY_RESOLUTION"]

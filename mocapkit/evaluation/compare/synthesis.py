@@ -197,7 +197,7 @@ class SynthesisBenchmark(Benchmark):
     def references(self, split: Split) -> dict:
         """The split's real-clip numbers (computed once per protocol and seed): ``{"metrics", "heldout"}`` with
         ``heldout`` the held-out clips posed on the reference skeleton."""
-        from mocapkit.evaluation.synthesis import clip_naturalness, naturalness, variation
+        from mocapkit.evaluation.synthesis import clip_naturalness, proxy_means, variation
         from mocapkit.synthesis.base import on_skeleton
 
         key = (split.protocol, split.seed)
@@ -207,7 +207,8 @@ class SynthesisBenchmark(Benchmark):
             skeleton = train[0].metadata["asf"]
             posed_train = [on_skeleton(m, skeleton) for m in train]
             posed_heldout = [on_skeleton(m, skeleton) for m in heldout]
-            real, proxies = naturalness(heldout), clip_naturalness(heldout)
+            proxies = clip_naturalness(heldout)
+            real = proxy_means(proxies)
             metrics = {"v_train": variation(posed_train).v, "v_heldout": variation(posed_heldout).v,
                        **{f"real_{k}": v for k, v in real.items()},
                        **{f"real_{k}_max": float(np.nanmax(v)) if np.isfinite(v).any() else float("nan")
@@ -219,12 +220,11 @@ class SynthesisBenchmark(Benchmark):
         """Fit on the training clips, sample ``n_variants`` of the mean training length with the cell's seed,
         score them against the references (module docstring)."""
         from mocapkit.evaluation.synthesis import (
-            PROXY_RESOLUTION,
             clip_naturalness,
             feature_distances,
-            naturalness,
+            proxies_within,
+            proxy_means,
             variation,
-            within_spread,
         )
 
         train, _ = self.data(split.train)
@@ -238,14 +238,13 @@ class SynthesisBenchmark(Benchmark):
         v = variation(variants)
         distances = feature_distances(variants, reference["heldout"])
         proxies = clip_naturalness(variants)
-        within = {name: within_spread(values, reference["proxies"][name], PROXY_RESOLUTION.get(name, 0.0))
-                  for name, values in proxies.items()}
-        within_all = within_spread(distances.variants, distances.real) & np.logical_and.reduce(list(within.values()))
+        within = proxies_within(proxies, reference["proxies"], distances)
         frames = variants[0].num_frames
         metrics = {"v_variants": v.v, "v_variants_per_step": v.v_per_step, **reference["metrics"],
-                   "v_ratio": v.v / reference["metrics"]["v_train"], **naturalness(variants),
+                   "v_ratio": v.v / reference["metrics"]["v_train"], **proxy_means(proxies),
                    **distances.summary(), "within_real_skating": float(within["foot_skating_cms"].mean()),
-                   "within_real_jerk": float(within["jerk"].mean()), "within_real_all": float(within_all.mean()),
+                   "within_real_jerk": float(within["jerk"].mean()),
+                   "within_real_all": float(within["every_proxy"].mean()),
                    "fit_seconds": fit_seconds,
                    "sample_seconds_per_second": sample_seconds / (len(variants) * frames / variants[0].fps)}
         detail = {"n_frames": frames, "fps": float(variants[0].fps), "n_variants": len(variants),
