@@ -1,6 +1,6 @@
 """Benchmark: a long fuzz run of every motion-file reader (the bounded version is tests/test_fuzz.py).
 
-``--cases`` seeded mutations (``tests/fuzzing.py``: truncation, bit flips, NaN/Inf and odd numbers,
+``--cases`` seeded mutations (``mocapkit/testing/fuzzing.py``: truncation, bit flips, NaN/Inf and odd numbers,
 huge counts, line ends, encodings, C3D header/parameter/data damage, PNG chunk damage), spread
 evenly over the formats, from the real samples in ``shared/samples`` (CASIA-B: generated
 silhouettes), plus the special files (directory, FIFO, ``/dev/zero``, empty, dangling symlink,
@@ -29,8 +29,7 @@ from collections import Counter
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from tests import fuzzing
-
+from mocapkit.testing import fuzzing
 DEFAULT_SRC = Path(__file__).resolve().parents[1].parent / "shared" / "samples"
 ALL = ("ntu", "amc", "bvh", "c3d", "msr", "png")
 

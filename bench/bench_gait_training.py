@@ -16,7 +16,7 @@ import torch
 import torch.nn.functional as F
 
 from mocapkit.models.gait_cnn import multitask_gait_cnn
-from mocapkit.deploy.gait_export import example_geis
+from mocapkit.gait.export import example_geis
 
 
 def measure(tasks: tuple[str, ...], size: tuple[int, int], batch: int, steps: int, num_subjects: int = 124) -> dict:

@@ -3,17 +3,17 @@ real Kinect skeletons, with the Kinect SDK's double-exponential filter beside th
 
 Clips. The first ``--files`` MSR Action3D skeleton files of ``--data`` (sorted by name) that ``kinect-fix`` reads,
 resampled to the models' 30 fps and read as Kinect-20 joints with their tracking states exactly as ``mocapkit
-kinect-fix apply`` does (:func:`mocapkit.refinement.kinect_fix.kinect_clip`).
+kinect-fix apply`` does (:func:`mocapkit.kinect.kinect_fix.kinect_clip`).
 
 Methods, each through its ``predict(clip, state=...)``:
 
 * every ``--model`` (a ``.pt`` from ``mocapkit kinect-fix train --method bigru|transformer``): ``<name> eager``
-  (:class:`~mocapkit.refinement.kinect_learned.LearnedKinectCorrector`, PyTorch on the CPU) and ``<name> ORT``
-  (:class:`~mocapkit.refinement.kinect_learned.OnnxKinectCorrector` on its
-  :meth:`~mocapkit.refinement.kinect_learned.LearnedKinectCorrector.export_onnx`, written to a temporary folder);
+  (:class:`~mocapkit.kinect.learned.LearnedKinectCorrector`, PyTorch on the CPU) and ``<name> ORT``
+  (:class:`~mocapkit.kinect.learned.OnnxKinectCorrector` on its
+  :meth:`~mocapkit.kinect.learned.LearnedKinectCorrector.export_onnx`, written to a temporary folder);
   without ``--model`` a tiny BiGRU corrector (16 units, 20 steps) is trained here on six HDM05 clips so that the
   benchmark always runs: its figures time the code path, not a real model;
-* ``SDK filter``: :class:`~mocapkit.classical.kinect_reconstruction.DoubleExponentialSmoother` (numpy).
+* ``SDK filter``: :class:`~mocapkit.kinect.reconstruction.DoubleExponentialSmoother` (numpy).
 
 Timing. One untimed warm-up per method, then ``--repeat`` rounds; in every round each clip is corrected by every
 method in turn (interleaved). A method's time on a clip is the median over the rounds; throughput = all frames /
@@ -41,9 +41,9 @@ import torch
 
 HERE = Path(__file__).resolve().parent
 
-from mocapkit.classical.kinect_reconstruction import DoubleExponentialSmoother
-from mocapkit.refinement.kinect_fix import MODEL_FPS, kinect_clip
-from mocapkit.refinement.kinect_learned import (
+from mocapkit.kinect.reconstruction import DoubleExponentialSmoother
+from mocapkit.kinect.kinect_fix import MODEL_FPS, kinect_clip
+from mocapkit.kinect.learned import (
     LearnedKinectCorrector,
     OnnxKinectCorrector,
 )

@@ -24,7 +24,10 @@ import numpy as np
 import torch
 
 
-from mocapkit.classical import GNMF, NMC, NMF, knn_graph
+from mocapkit.clustering.nmf import GNMF, NMC, NMF
+
+
+from mocapkit.clustering.graphs import knn_graph
 
 SIZES = {"small": [(500, 100, 20)], "default": [(500, 100, 20), (2000, 300, 50), (5000, 500, 100)]}
 

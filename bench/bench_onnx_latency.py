@@ -19,7 +19,7 @@ import torch
 from hydra.utils import instantiate
 
 from mocapkit.train.config import compose_config
-from mocapkit.deploy.skeleton_export import example_skeletons, export_onnx
+from mocapkit.recognition.export import example_skeletons, export_onnx
 
 
 def best_of(fn, repeats: int) -> float:

@@ -10,7 +10,7 @@ and mm reach 600), cropped to their first ``--frames`` frames (120 fps, 31 joint
 Methods, each refining every sequence through the refiner contract (``refine(motion) -> Motion``, the layout
 checks, windows, blending and report included):
 
-* ``TrNN`` (:class:`mocapkit.classical.trnn.TrNN`) and ``PCA`` (:class:`mocapkit.classical.gap_filling.
+* ``TrNN`` (:class:`mocapkit.refinement.trnn.TrNN`) and ``PCA`` (:class:`mocapkit.refinement.gap_filling.
   PCAGapFilling`), built from ``configs/refiner/trnn.yaml`` / ``pca.yaml`` (the comparison runner's settings);
 * every ``--ckpt``: ``<label> eager`` (:class:`~mocapkit.refinement.learned.LearnedRefiner` on the checkpoint,
   PyTorch on the CPU) and, with ``--onnx``, ``<label> ORT`` (:class:`~mocapkit.refinement.learned.OnnxRefiner`
@@ -48,7 +48,7 @@ import torch
 
 HERE = Path(__file__).resolve().parent
 
-from mocapkit.evaluation.refinement import matrix_rmse
+from mocapkit.refinement.metrics import matrix_rmse
 from mocapkit.refinement.corruptions import corrupt
 from mocapkit.refinement.learned import LearnedRefiner, OnnxRefiner, train_on_motions
 

@@ -9,9 +9,9 @@ the **scaling exponent** ``b`` of ``seconds ≈ a · frames^b`` by least squares
 over the rows of ≥ 1,000 frames). Each sequence is corrupted by ``random_missing`` (mr = 0.3, seed 0; Wang
 2017 §4.2.3) and every method's ``refine`` is timed once (wall seconds, setup included).
 
-Methods: ``TrNN`` (the thesis's MoCap settings, :class:`mocapkit.classical.trnn.TrNN`), ``TrNN r=0`` (the same
+Methods: ``TrNN`` (the thesis's MoCap settings, :class:`mocapkit.refinement.trnn.TrNN`), ``TrNN r=0`` (the same
 solver without truncation: the nuclear-norm model of Feng et al. 2014b, not Feng's own solver), ``SVT``
-(:class:`mocapkit.classical.svt.SVTCompletion`, a full economy SVD per iteration, capped at ``--svt-iters``;
+(:class:`mocapkit.refinement.svt.SVTCompletion`, a full economy SVD per iteration, capped at ``--svt-iters``;
 a capped time is a lower bound, marked ``>``). The thesis's seconds (Matlab 7.10, 2.4 GHz i5) are printed beside
 ours, indicative only.
 
@@ -30,8 +30,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from mocapkit.classical.svt import SVTCompletion
-from mocapkit.classical.trnn import TrNN
+from mocapkit.refinement.svt import SVTCompletion
+from mocapkit.refinement.trnn import TrNN
 from mocapkit.refinement.corruptions import corrupt
 
 HERE = Path(__file__).resolve().parent

@@ -16,7 +16,7 @@ import torch
 from hydra.utils import instantiate
 
 from mocapkit.train.config import compose_config
-from mocapkit.deploy.skeleton_export import example_skeletons
+from mocapkit.recognition.export import example_skeletons
 
 
 def measure(model_name: str, batch: int, frames: int, steps: int, num_classes: int = 60) -> dict:

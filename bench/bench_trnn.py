@@ -18,7 +18,7 @@ rank-estimating SVD):
   rule gives on real motion), to show the O(m n d) per-iteration cost; the default's literal LSJ rule in CMU
   units gives d up to m = 93 on long sequences;
 * ``SVT``: singular value thresholding (Cai, Candès & Shen 2010) with a full (all singular values, economy)
-  SVD every iteration, tol 1e-4: :class:`mocapkit.classical.svt.SVTCompletion` when it is there, else the
+  SVD every iteration, tol 1e-4: :class:`mocapkit.refinement.svt.SVTCompletion` when it is there, else the
   minimal reference below; capped at ``--svt-iters`` iterations (a capped run's per-sequence time is a lower
   bound, marked ``>``).
 
@@ -44,10 +44,10 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from mocapkit.classical.trnn import TrNN
+from mocapkit.refinement.trnn import TrNN
 from mocapkit.datasets import read_motion
-from mocapkit.datasets.formats.motion import Motion
-from mocapkit.evaluation.refinement import matrix_rmse
+from mocapkit.motion.container import Motion
+from mocapkit.refinement.metrics import matrix_rmse
 from mocapkit.refinement.base import MotionRefiner
 from mocapkit.refinement.corruptions import corrupt
 
@@ -60,7 +60,7 @@ TABLE_4_1 = [
 ]
 
 try:
-    from mocapkit.classical.svt import SVTCompletion
+    from mocapkit.refinement.svt import SVTCompletion
 except ImportError:  # the minimal full-SVD SVT reference (Cai, Candès & Shen 2010), same rules as the library's
     SVTCompletion = None
 
@@ -176,7 +176,7 @@ def main(argv: list[str] | None = None) -> None:
     svt_cls = SVTCompletion or _MinimalSVT
     print(f"# TrNN vs full-SVD SVT; {platform.processor() or platform.machine()}, torch {torch.__version__}, "
           f"{args.threads} thread(s), device {args.device}; SVT = "
-          f"{'mocapkit.classical.svt.SVTCompletion' if SVTCompletion else 'minimal reference in this script'}, "
+          f"{'mocapkit.refinement.svt.SVTCompletion' if SVTCompletion else 'minimal reference in this script'}, "
           f"cap {args.svt_iters} iterations", flush=True)
     print("# corruption: random_missing mr = 0.3 (seed 0); times are one refine() call, setup included", flush=True)
     print("# thesis columns: Wang 2017 Table 4.1, Matlab 7.10 on a 2.4 GHz i5 — indicative only", flush=True)

@@ -151,9 +151,7 @@ def cmd_pyskl_import(args: argparse.Namespace) -> None:
 
 
 def cmd_gait_report(args: argparse.Namespace) -> None:
-    from mocapkit.evaluation.compare import (
-        gait_report,  # `compare gait` with these options
-    )
+    from mocapkit.gait.benchmark import gait_report  # `compare gait` with these options
 
     gait_report(args.data, args.out, protocols=tuple(args.protocols), experiments=tuple(args.experiments),
                 overrides=tuple(args.overrides), seed=args.seed, include_pca_lda=not args.no_pca_lda)
@@ -236,7 +234,7 @@ def cmd_synthesize(args: argparse.Namespace) -> None:
 
 
 def cmd_kinect_fix_train(args: argparse.Namespace) -> None:
-    from mocapkit.refinement.kinect_fix import train_kinect_model
+    from mocapkit.kinect.kinect_fix import train_kinect_model
 
     report = train_kinect_model(args.mocap, args.out, seed=args.seed, skip_bad=args.skip_bad, noise=args.noise,
                                 method=args.method, **_key_values(args.set))
@@ -248,7 +246,7 @@ def cmd_kinect_fix_train(args: argparse.Namespace) -> None:
 
 
 def cmd_kinect_fix_export(args: argparse.Namespace) -> None:
-    from mocapkit.refinement.kinect_fix import export_kinect_model
+    from mocapkit.kinect.kinect_fix import export_kinect_model
 
     report = export_kinect_model(args.model, args.out)
     print(f"[mocapkit] ONNX Kinect corrector written to {report['onnx']} (opset {report['opset']}, "
@@ -257,7 +255,7 @@ def cmd_kinect_fix_export(args: argparse.Namespace) -> None:
 
 
 def cmd_kinect_fix_apply(args: argparse.Namespace) -> None:
-    from mocapkit.refinement.kinect_fix import fix_kinect_files
+    from mocapkit.kinect.kinect_fix import fix_kinect_files
 
     report = fix_kinect_files(args.model, args.inputs, args.out, skip_bad=args.skip_bad, plot=args.plot,
                               **_key_values(args.set))
@@ -282,7 +280,7 @@ def _key_values(items) -> dict:
 
 
 def cmd_predict(args: argparse.Namespace) -> None:
-    from mocapkit.deploy.predict import predict_files, print_predictions
+    from mocapkit.recognition.predict import predict_files, print_predictions
 
     print_predictions(predict_files(args.onnx, args.files, top=args.top))
 
@@ -508,7 +506,7 @@ def build_parser() -> argparse.ArgumentParser:
     ktrain.add_argument("--out", required=True, help="the model file (.npz for gp, e.g. .pt for the learned ones)")
     ktrain.add_argument("--method", default="gp",
                         help="gp: Zhou ch. 5's GP reconstructor (default); bigru / transformer: the learned refiner "
-                             "networks retrained as correctors (mocapkit.refinement.kinect_learned)")
+                             "networks retrained as correctors (mocapkit.kinect.learned)")
     ktrain.add_argument("--seed", type=int, default=0, help="simulation and model seed (default 0)")
     ktrain.add_argument("--noise", default="mean_error",
                         help="the Kinect simulator's calibration: mean_error (raw error only, the default) or "

@@ -48,8 +48,8 @@ from mocapkit.datasets.casia_b.gei import (
     normalize_silhouettes,
 )
 from mocapkit.datasets.casia_b.cache import GEICache
-from mocapkit.datasets.formats.layouts import CMU31, LAYOUTS, MSR20, NTU25, SkeletonLayout
-from mocapkit.datasets.formats.motion import Motion
+from mocapkit.motion.layouts import CMU31, LAYOUTS, MSR20, NTU25, SkeletonLayout
+from mocapkit.motion.container import Motion
 from mocapkit.datasets.formats.motion_io import read_motion, write_motion
 from mocapkit.datasets.ntu.cache import NTUCache
 from mocapkit.datasets.ntu.prepare import PrepareReport, prepare_ntu

@@ -25,7 +25,7 @@ import torch
 from torch.utils.data import DataLoader, Dataset
 
 from mocapkit.datasets.augment import SkeletonAugment, TestTimeViews
-from mocapkit.datasets.frames import uniform_frame_indices
+from mocapkit.motion.frames import uniform_frame_indices
 
 
 class SplitDataModule(L.LightningDataModule):

@@ -2,8 +2,8 @@
 
 :func:`export_checkpoint` composes the run's saved config again with the overrides, restores the
 LightningModule of ``module._target_`` and calls the exporter named by ``export.exporter._target_``
-(:func:`~mocapkit.deploy.skeleton_export.export_action_module` or
-:func:`~mocapkit.deploy.gait_export.export_gait_module`). Every exporter writes the file with
+(:func:`~mocapkit.recognition.export.export_action_module` or
+:func:`~mocapkit.gait.export.export_gait_module`). Every exporter writes the file with
 :func:`save_checked_onnx` (metadata, ``onnx.checker``) and compares onnxruntime with PyTorch on
 shapes other than those traced; a mismatch raises :class:`ParityError`. The parity figures go
 beside the model as ``<stem>.parity.json``. Both files are written atomically (a temporary file in the same

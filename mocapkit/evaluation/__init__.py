@@ -1,7 +1,6 @@
-"""Metrics, tables and plots: classification, clustering and gait (closed-set tables, cross-view rank-1)."""
+"""Shared evaluation: classification and clustering metrics, result plots, ``mocapkit eval`` and the comparison
+engine (:mod:`mocapkit.evaluation.compare`). Each task's own metrics live in its package (``mocapkit.<task>.metrics``)."""
 from mocapkit.evaluation.classification import classification_report, plot_confusion_matrix, topk_accuracy
 from mocapkit.evaluation.clustering import clustering_accuracy, clustering_report
-from mocapkit.evaluation.gait import closed_set_report, cross_view_rank1
 
-__all__ = ["classification_report", "closed_set_report", "clustering_accuracy", "clustering_report",
-           "cross_view_rank1", "plot_confusion_matrix", "topk_accuracy"]
+__all__ = ["classification_report", "clustering_accuracy", "clustering_report", "plot_confusion_matrix", "topk_accuracy"]

@@ -3,8 +3,8 @@
 :func:`evaluate` composes the run's saved config again with the overrides (Hydra's grammar), builds
 the data module, loads the LightningModule class named by ``module._target_`` from the checkpoint
 (the run's config and the checkpoint are vetted first: :mod:`mocapkit.train.safety`),
-and calls the evaluator named by ``eval.evaluator._target_`` (:func:`~mocapkit.evaluation.evaluate_action.evaluate_action`
-or :func:`~mocapkit.evaluation.evaluate_gait.evaluate_gait`). Everything goes to ``<run>/eval/``
+and calls the evaluator named by ``eval.evaluator._target_`` (:func:`~mocapkit.recognition.evaluate.evaluate_action`
+or :func:`~mocapkit.gait.evaluate.evaluate_gait`). Everything goes to ``<run>/eval/``
 (or ``eval.out_dir``), with the config it ran with (``eval_config.yaml``).
 """
 from __future__ import annotations

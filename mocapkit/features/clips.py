@@ -33,7 +33,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from mocapkit.datasets.formats.layouts import LANDMARKS, SkeletonLayout, get_layout
+from mocapkit.motion.layouts import LANDMARKS, SkeletonLayout, get_layout
 
 
 def _check_window(window: int, stride: int | None) -> tuple[int, int]:

@@ -29,7 +29,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from mocapkit.features.clips import ClipFeatures
-from mocapkit.datasets.formats.layouts import LAYOUTS, SkeletonLayout
+from mocapkit.motion.layouts import LAYOUTS, SkeletonLayout
 from mocapkit.models.nmf_layer import NMFLayer
 
 

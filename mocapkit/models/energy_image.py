@@ -32,7 +32,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from mocapkit.datasets.formats.layouts import (
+from mocapkit.motion.layouts import (
     LANDMARKS,
     NTU25,
     SkeletonLayout,

@@ -1,7 +1,7 @@
 """A motion encoder for retrieval: normalised landmarks ``[B, frames, 20, 3]`` → unit-norm embeddings ``[B, dim]``.
 
-The input is what :func:`~mocapkit.retrieval.skeleton.normalised_landmarks` gives (20 body landmarks,
-:data:`~mocapkit.datasets.formats.layouts.LANDMARK_NAMES`, pelvis at the origin, y up, facing +z, template body
+The input is what :func:`~mocapkit.motion.geometry.normalised_landmarks` gives (20 body landmarks,
+:data:`~mocapkit.motion.layouts.LANDMARK_NAMES`, pelvis at the origin, y up, facing +z, template body
 size, metres), resampled to a fixed number of frames (:func:`~mocapkit.retrieval.embedding.resample_frames`);
 the network itself takes any number of frames (global pooling over time).
 
@@ -10,18 +10,18 @@ the network itself takes any number of frames (global pooling over time).
 * **Trunk** (``trunk``):
 
   - ``"stgcn"``: blocks of :mod:`mocapkit.models.stgcn` (:class:`~mocapkit.models.stgcn.STGCNBlock`) on the
-    landmark tree (:data:`~mocapkit.datasets.formats.layouts.LANDMARK_PARENTS`, Yan et al.'s spatial partitions),
+    landmark tree (:data:`~mocapkit.motion.layouts.LANDMARK_PARENTS`, Yan et al.'s spatial partitions),
     mean-pooled over frames and landmarks;
   - ``"tcn"``: the landmarks' channels flattened, 1-D temporal convolutions (residual blocks), mean-pooled over
     frames.
 
 * **Head.** A projection MLP (linear → BN → ReLU → linear), L2-normalised: the embedding, compared by cosine
-  (its inner product) and trained by a contrastive loss (:mod:`mocapkit.train.embedding_module`).
+  (its inner product) and trained by a contrastive loss (:mod:`mocapkit.retrieval.module`).
 
 The default (a small ``tcn``) was picked by measurement on HDM05 (held-out actors bd and mm, one CPU thread, about
 five minutes a fold): the same retrieval accuracy as ``stgcn`` at a sixth of the cost per epoch;
 ``configs/model/motion_encoder.yaml`` records the figures. Exports to ONNX with dynamic batch
-and frames (:mod:`mocapkit.deploy.embedding_export`).
+and frames (:mod:`mocapkit.retrieval.export`).
 """
 from __future__ import annotations
 
@@ -29,7 +29,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from mocapkit.datasets.formats.layouts import (
+from mocapkit.motion.layouts import (
     LANDMARK_NAMES,
     LANDMARK_PARENTS,
     SkeletonLayout,

@@ -33,7 +33,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from mocapkit.datasets.formats.layouts import LANDMARKS, SkeletonLayout, get_layout
+from mocapkit.motion.layouts import LANDMARKS, SkeletonLayout, get_layout
 from mocapkit.models.body_frame import body0_origin, body0_size
 
 STREAMS = ("joint", "velocity", "bone", "bone_velocity")
@@ -309,7 +309,7 @@ class MultiStreamSTGCN(nn.Module):
     """One :class:`STGCN` per input stream, late fusion: skeletons ``[N, M, T, J, 3]`` → logits ``[N, C]``.
 
     In training mode the forward pass returns the members' logits stacked, ``[S, N, C]``, so that
-    :class:`~mocapkit.train.action_module.ActionRecognitionModule` trains each member on its own
+    :class:`~mocapkit.recognition.module.ActionRecognitionModule` trains each member on its own
     cross-entropy (as if trained apart, the way pyskl trains its stream ensembles); in eval mode (evaluation,
     prediction, ONNX export) it returns their mean ``[N, C]``.
 

@@ -71,8 +71,8 @@ from pathlib import Path
 
 import numpy as np
 
-from mocapkit.datasets.formats.motion import Motion, any_coordinate
-from mocapkit.datasets.frames import true_runs
+from mocapkit.motion.container import Motion, any_coordinate
+from mocapkit.motion.frames import true_runs
 from mocapkit.io_atomic import atomic_open, atomic_path
 from mocapkit.refinement.base import MotionRefiner
 

@@ -4,7 +4,7 @@ A refiner is a scikit-learn estimator (parameters stored untouched in ``__init__
 in attributes ending in ``_``) with two methods:
 
 ``fit(motions)``
-    learn from clean training motions (a sequence of :class:`~mocapkit.datasets.formats.motion.Motion`
+    learn from clean training motions (a sequence of :class:`~mocapkit.motion.container.Motion`
     of one skeleton layout); a no-op for methods that need no training data. Returns ``self``.
 ``refine(motion) -> Motion``
     a new Motion in which every entry that ``motion.missing`` marks is filled and, for the robust
@@ -15,7 +15,7 @@ in attributes ending in ``_``) with two methods:
 
 A refiner whose learned model depends on the frame rate (``fixed_sampling``: the windowed networks, PSC, filter
 bases) refines a take at another rate at its own: the take is resampled to the fitted rate
-(:meth:`~mocapkit.datasets.formats.motion.Motion.resample`, linear), refined there, and the result interpolated
+(:meth:`~mocapkit.motion.container.Motion.resample`, linear), refined there, and the result interpolated
 linearly back to the take's own frames, where it fills the missing entries; observed entries come back
 bit-identical (outliers are not repaired on that path) and ``metadata["refinement"]["resampled"]`` records both
 rates. Another up axis is an error naming both.
@@ -33,7 +33,7 @@ import numpy as np
 from sklearn.base import BaseEstimator
 from sklearn.exceptions import NotFittedError
 
-from mocapkit.datasets.formats.motion import Motion, all_coordinates
+from mocapkit.motion.container import Motion, all_coordinates
 
 
 class RefinementError(ValueError):

@@ -1,7 +1,7 @@
 """Seeded corruption protocols for motion-refinement experiments: missing entries, gaps, noise and outliers.
 
 One function, :func:`corrupt`, applies a named protocol from :data:`PROTOCOLS` to a clean
-:class:`~mocapkit.datasets.formats.motion.Motion` and returns a :class:`Corruption`: the corrupted motion plus
+:class:`~mocapkit.motion.container.Motion` and returns a :class:`Corruption`: the corrupted motion plus
 exactly which entries were removed or perturbed. An **entry** is one joint (marker) in one frame, all three
 coordinates together (Wang 2017, thesis §8 item 7: mask at marker granularity).
 
@@ -54,8 +54,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from mocapkit.datasets.formats.motion import Motion, all_coordinates
-from mocapkit.datasets.frames import true_runs
+from mocapkit.motion.container import Motion, all_coordinates
+from mocapkit.motion.frames import true_runs
 
 #: Standard deviation of the Gaussian noise of rdcrypt / mxcrypt, metres (thesis: σ = 2, reported in cm).
 NOISE_SIGMA_M = 0.02

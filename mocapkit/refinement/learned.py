@@ -31,20 +31,20 @@ from pathlib import Path
 
 import numpy as np
 
-from mocapkit.datasets.formats.motion import Motion, point_distance
-from mocapkit.datasets.frames import true_runs
+from mocapkit.motion.container import Motion, point_distance
+from mocapkit.motion.frames import refine_windows, true_runs
 from mocapkit.refinement.base import MotionRefiner, RefinementError
 
 #: Default inference window in training windows. Both networks run on any length, and with twice the training
 #: window they filled long gaps better on the runs' validation clips (training performers only; 2 s gaps: 32 → 25 cm
 #: RMS) at the cost of up to 0.3 mm under 20 % random loss for the transformer
-#: (``scripts/refiner_inference_settings.py --setting window``; bench/RESULTS.md §13).
+#: (``scripts/selection/refiner_inference_settings.py --setting window``; bench/RESULTS.md §13).
 INFERENCE_WINDOW_FACTOR = 2
 
 #: Default ``short_gap_frames``: interior gaps of up to 24 frames (0.2 s at 120 fps) are filled by the cubic spline,
 #: longer ones by the network. Chosen on the runs' validation clips (training performers only; values 0, 4, 8, 12,
 #: 24; mean RMS over random loss 0.2 / 0.5 and 10-, 20-, 40-frame gaps: 8.41 → 8.11 mm for the BiGRU, 8.40 → 8.11
-#: for the transformer; ``scripts/refiner_inference_settings.py --setting short_gaps``; bench/RESULTS.md §13).
+#: for the transformer; ``scripts/selection/refiner_inference_settings.py --setting short_gaps``; bench/RESULTS.md §13).
 SHORT_GAP_FRAMES = 24
 
 #: Default ``short_gap_points``: the short-gap spline passes through the take's samples with the ones the network
@@ -56,48 +56,6 @@ SHORT_GAP_POINTS = "repaired"
 
 
 # ------------------------------------------------------------------------------------------ windows (numpy only)
-def window_starts(frames: int, window: int, overlap: int) -> list[int]:
-    """First frames of the windows that cover ``frames`` frames (one window when ``frames ≤ window``)."""
-    if frames <= window:
-        return [0]
-    hop = max(1, window - overlap)
-    starts = list(range(0, frames - window + 1, hop))
-    if starts[-1] != frames - window:
-        starts.append(frames - window)
-    return starts
-
-
-def blend_weights(length: int, overlap: int, first: bool, last: bool) -> np.ndarray:
-    """``[length]`` weights of one window: linear ramps over ``overlap`` frames at the ends that have a neighbour."""
-    weights = np.ones(length, dtype=np.float64)
-    ramp = min(int(overlap), length // 2)
-    if ramp > 0:
-        up = (np.arange(ramp) + 1.0) / (ramp + 1.0)
-        if not first:
-            weights[:ramp] = up
-        if not last:
-            weights[length - ramp:] = up[::-1]
-    return weights
-
-
-def refine_windows(predict, positions: np.ndarray, missing: np.ndarray, window: int, overlap: int) -> np.ndarray:
-    """Run ``predict(positions [N, W, J, 3] float32, missing [N, W, J] bool) -> [N, W, J, 3]`` over overlapping
-    windows of one take (``positions [T, J, 3]``, ``missing [T, J]``) and blend the windows into ``[T, J, 3]``."""
-    frames = positions.shape[0]
-    starts = window_starts(frames, window, overlap)
-    length = min(frames, window)
-    batch_p = np.stack([positions[s:s + length] for s in starts]).astype(np.float32)
-    batch_m = np.stack([missing[s:s + length] for s in starts])
-    out = np.asarray(predict(batch_p, batch_m), dtype=np.float64)
-    total = np.zeros(positions.shape, dtype=np.float64)
-    weight = np.zeros(frames, dtype=np.float64)
-    for i, s in enumerate(starts):
-        w = blend_weights(length, overlap, first=i == 0, last=i == len(starts) - 1)
-        total[s:s + length] += w[:, None, None] * out[i]
-        weight[s:s + length] += w
-    return total / weight[:, None, None]
-
-
 def short_gaps(missing: np.ndarray, longest: int) -> np.ndarray:
     """bool ``[T, J]``: the missing entries in interior gaps (a joint observed before and after) of at most
     ``longest`` consecutive frames."""
@@ -114,7 +72,7 @@ def short_gaps(missing: np.ndarray, longest: int) -> np.ndarray:
 def spline_fill(positions: np.ndarray, missing: np.ndarray, fill: np.ndarray) -> np.ndarray:
     """``positions [T, J, 3]`` with the entries ``fill [T, J]`` (interior gaps) from a cubic spline (scipy
     ``CubicSpline``, not-a-knot) through every observed frame of their joint, as
-    :class:`~mocapkit.classical.gap_filling.SplineInterpolation` fills them (that module imports torch; this one is
+    :class:`~mocapkit.refinement.gap_filling.SplineInterpolation` fills them (that module imports torch; this one is
     on the onnxruntime-only path of :class:`OnnxRefiner`)."""
     from scipy.interpolate import CubicSpline
 
@@ -215,7 +173,7 @@ class LearnedRefiner(_WindowedRefiner):
             shared by neighbouring windows (None: a quarter of the window).
         repair_threshold: an observed entry the network moves farther than this (metres) is replaced (repaired).
         short_gap_frames: interior gaps of a joint up to this many frames are filled by the cubic spline
-            (:class:`~mocapkit.classical.gap_filling.SplineInterpolation`) instead of the network (default
+            (:class:`~mocapkit.refinement.gap_filling.SplineInterpolation`) instead of the network (default
             :data:`SHORT_GAP_FRAMES`, chosen on validation clips); 0: every gap by the network.
         short_gap_points: the samples that spline passes through: ``"observed"`` (the take's own) or
             ``"repaired"`` (the take's, with the samples the network repairs replaced by its values; default
@@ -382,4 +340,4 @@ class OnnxRefiner(_WindowedRefiner):
 
 
 __all__ = ["INFERENCE_WINDOW_FACTOR", "SHORT_GAP_FRAMES", "SHORT_GAP_POINTS", "LearnedRefiner", "OnnxRefiner",
-           "blend_weights", "empty_frames_kept", "refine_windows", "short_gaps", "spline_fill", "train_on_motions", "window_starts"]
+           "empty_frames_kept", "short_gaps", "spline_fill", "train_on_motions"]

@@ -21,13 +21,13 @@ from dataclasses import replace
 import numpy as np
 from sklearn.base import clone
 
-from mocapkit.datasets.formats.motion import Motion, point_distance
+from mocapkit.motion.container import Motion, point_distance
 from mocapkit.refinement.base import MotionRefiner, check_motion
 
 #: Default ``half_window`` and ``threshold`` (metres) of :class:`MedianScreen` and ``mocapkit refine --screen-outliers``:
 #: two observed neighbours on each side, 5 mm. Chosen on HDM05 validation clips at 120 fps (training performers
 #: only; K ∈ {2, 3, 5} × {5, 7.5, 10, 15 mm}; mean RMS over noise, random loss and gaps): the choice of PCHIP, the
-#: BiGRU and the transformer (LRMF chose 10 mm); ``scripts/refiner_inference_settings.py --setting screen``,
+#: BiGRU and the transformer (LRMF chose 10 mm); ``scripts/selection/refiner_inference_settings.py --setting screen``,
 #: bench/RESULTS.md §13. ``n_sigmas`` None: the fixed threshold alone (the Hampel rule, tried on the same clips,
 #: spares fast clean motion but missed most of the noise with two neighbours a side).
 SCREEN_HALF_WINDOW = 2

@@ -1,14 +1,14 @@
 """Motion retrieval: query by example over a library of motion files.
 
-- :mod:`~mocapkit.retrieval.skeleton`: the 20-landmark normalised skeleton every method works on (any layout);
+- :mod:`~mocapkit.motion.geometry`: the 20-landmark normalised skeleton every method works on (any layout);
 - :mod:`~mocapkit.retrieval.base`: the contract (``fit`` on a database, ``distances`` / ``search`` for queries);
 - methods: :mod:`~mocapkit.retrieval.dtw` (DTW on positions or relational features, the baseline),
-  :mod:`~mocapkit.retrieval.feature_selection` (HOD and GPF bag-of-words views, AMFS and Laplacian-score
+  :mod:`~mocapkit.retrieval.selected_features` (HOD and GPF bag-of-words views, AMFS and Laplacian-score
   selection; Wang 2017 ch. 5), :mod:`~mocapkit.retrieval.tsr_stpm` (Zhou 2014 ch. 3),
   :mod:`~mocapkit.retrieval.embedding` (a trained encoder with a FAISS index);
 - :mod:`~mocapkit.retrieval.index`: index a folder once and search it (``mocapkit index`` / ``mocapkit search``).
 
-Metrics live in :mod:`mocapkit.evaluation.retrieval`, the benchmark in :mod:`mocapkit.evaluation.compare.retrieval`.
+Metrics live in :mod:`mocapkit.retrieval.metrics`, the benchmark in :mod:`mocapkit.retrieval.benchmark`.
 """
 from mocapkit.retrieval.base import RetrievalMethod
 from mocapkit.retrieval.index import (
@@ -20,7 +20,7 @@ from mocapkit.retrieval.index import (
     make_method,
     search_index,
 )
-from mocapkit.retrieval.skeleton import RetrievalInputError, normalised_landmarks
+from mocapkit.motion.geometry import RetrievalInputError, normalised_landmarks
 
 __all__ = ["METHODS", "RECOMMENDED", "MotionIndex", "RetrievalIndexError", "RetrievalInputError", "RetrievalMethod",
            "build_index", "make_method", "normalised_landmarks", "search_index"]

@@ -4,7 +4,7 @@ A retrieval method is a scikit-learn estimator (parameters stored untouched in `
 attributes ending in ``_``, ``NotFittedError`` before ``fit``):
 
 ``fit(motions, y=None) -> self``
-    the **database**: a sequence of :class:`~mocapkit.datasets.formats.motion.Motion` (any layout with body
+    the **database**: a sequence of :class:`~mocapkit.motion.container.Motion` (any layout with body
     landmarks, any frame rate). The method learns what it learns from them (a dictionary, a codebook, a feature
     selection; labels ``y`` only where ``supervised``) and keeps the encoding of every database clip.
 ``distances(queries) -> float64 [n_queries, n_database]``
@@ -15,7 +15,7 @@ attributes ending in ``_``, ``NotFittedError`` before ``fit``):
 ``encode(motions)``
     the method's representation of clips (what ``fit`` stores for the database), for inspection and reuse.
 
-Every method first turns a motion into :func:`~mocapkit.retrieval.skeleton.normalised_landmarks` ``[T, 20, 3]``
+Every method first turns a motion into :func:`~mocapkit.motion.geometry.normalised_landmarks` ``[T, 20, 3]``
 (parameters ``fps`` and ``heading`` of every method). Subclasses implement:
 
 ``_fit_sequences(sequences, y)``   learn from the database's landmark sequences (default: nothing to learn); it
@@ -38,8 +38,8 @@ import numpy as np
 from sklearn.base import BaseEstimator
 from sklearn.exceptions import NotFittedError
 
-from mocapkit.datasets.formats.motion import Motion
-from mocapkit.retrieval.skeleton import RetrievalInputError, normalised_landmarks
+from mocapkit.motion.container import Motion
+from mocapkit.motion.geometry import RetrievalInputError, normalised_landmarks
 
 
 class RetrievalMethod(BaseEstimator):

@@ -3,7 +3,7 @@
 :class:`DTWRetrieval` ranks the database by the multivariate DTW distance (dtaidistance's C implementation,
 ``dtw_ndim.distance_matrix_fast``: squared Euclidean inner distance, the square root of the warped sum) between a
 query's frame sequence and each database clip's, on per-frame features of the normalised landmarks
-(:func:`~mocapkit.retrieval.skeleton.normalised_landmarks`, 30 fps by default):
+(:func:`~mocapkit.motion.geometry.normalised_landmarks`, 30 fps by default):
 
 - ``"positions"``: the 20 landmarks' coordinates, ``[T, 60]`` metres (Zhou 2014 §1.7 normalisation);
 - ``"relational"``: the soft relational pose features of :func:`~mocapkit.retrieval.features.relational_features`
@@ -61,7 +61,7 @@ class DTWRetrieval(RetrievalMethod):
         length_normalised: divide by ``sqrt(len_q + len_db)``.
         hubness: None or ``"mutual_proximity"`` (:mod:`mocapkit.retrieval.hubness`).
         n_reference: the most database clips the scales and the mutual-proximity statistics are taken against.
-        fps, heading: the normalisation (:func:`~mocapkit.retrieval.skeleton.normalised_landmarks`).
+        fps, heading: the normalisation (:func:`~mocapkit.motion.geometry.normalised_landmarks`).
         parallel: let dtaidistance use OpenMP threads.
     """
 

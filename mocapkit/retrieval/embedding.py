@@ -1,7 +1,7 @@
 """Retrieval by a learned motion embedding: a trained encoder, cosine similarity and a FAISS index.
 
 :class:`EmbeddingRetrieval` encodes every clip with a network trained by ``mocapkit train
-experiment=retrieval_supcon`` (or ``retrieval_simclr``; :mod:`mocapkit.train.embedding_module`) into a unit-norm
+experiment=retrieval_supcon`` (or ``retrieval_simclr``; :mod:`mocapkit.retrieval.module`) into a unit-norm
 vector and ranks the database by cosine similarity (distance ``1 − cos``):
 
 - ``checkpoint="RUN/best.ckpt"``: the run's network in PyTorch; a list of runs: ``fit`` picks the run whose held-out
@@ -9,7 +9,7 @@ vector and ranks the database by cosine similarity (distance ``1 − cos``):
   leave-one-performer-out folds use one run per fold: the queries' performer was never trained on);
 - ``onnx="model.onnx"`` (``mocapkit export`` of such a run): onnxruntime and numpy only, torch is never imported.
 
-Every motion becomes :func:`~mocapkit.retrieval.skeleton.normalised_landmarks` (``fps``, ``heading``), then
+Every motion becomes :func:`~mocapkit.motion.geometry.normalised_landmarks` (``fps``, ``heading``), then
 ``frames`` frames by :func:`resample_frames` (the function the training data module uses). The database's
 embeddings go into a FAISS index (``index``): ``"flat"`` (``IndexFlatIP``: exact), ``"hnsw"``
 (``IndexHNSWFlat`` with inner product: approximate, for large libraries) or ``"auto"`` (the default: flat below
@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mocapkit.datasets.formats.motion import Motion
+from mocapkit.motion.container import Motion
 from mocapkit.retrieval.base import RetrievalMethod, file_sha1, top_k
 
 INDEXES = ("auto", "flat", "hnsw")
@@ -67,7 +67,7 @@ class EmbeddingRetrieval(RetrievalMethod):
         frames: frames every clip is resampled to; None: the model's training ``frames``.
         index: ``"flat"`` (exact inner product), ``"hnsw"`` (approximate, large libraries) or ``"auto"`` (HNSW
             from ``AUTO_HNSW_MIN_CLIPS`` clips, flat below).
-        fps, heading: of :func:`~mocapkit.retrieval.skeleton.normalised_landmarks` (the model's training values are
+        fps, heading: of :func:`~mocapkit.motion.geometry.normalised_landmarks` (the model's training values are
             expected; another value warns).
         batch_size: clips per forward pass.
 
@@ -128,7 +128,7 @@ class EmbeddingRetrieval(RetrievalMethod):
             read_checkpoint_bytes,
             restore_error_detail,
         )
-        from mocapkit.train.embedding_module import MotionEmbeddingModule
+        from mocapkit.retrieval.module import MotionEmbeddingModule
 
         raw = read_checkpoint_bytes(path)
         checkpoint = parse_checkpoint(raw, path)
@@ -145,7 +145,7 @@ class EmbeddingRetrieval(RetrievalMethod):
     def _use_checkpoint(self, path: Path, module) -> None:
         import torch
 
-        from mocapkit.deploy.embedding_export import embedding_metadata
+        from mocapkit.retrieval.export import embedding_metadata
 
         self.model_info_ = embedding_metadata(module)
         self.checkpoint_used_ = str(path)

@@ -2,9 +2,9 @@
 descriptors and their LLC bag of words (the two views of AMFS, ``../shared/spec/thesis-wang-2017-mocap-processing.md``
 §4.5).
 
-Every function takes one sequence ``seq`` of :func:`~mocapkit.retrieval.skeleton.normalised_landmarks`:
+Every function takes one sequence ``seq`` of :func:`~mocapkit.motion.geometry.normalised_landmarks`:
 float ``[T, 20, 3]`` in metres of the ~1.7 m template body, landmarks in
-:data:`~mocapkit.datasets.formats.layouts.LANDMARK_NAMES` order, y up, pelvis at the origin. The body need not
+:data:`~mocapkit.motion.layouts.LANDMARK_NAMES` order, y up, pelvis at the origin. The body need not
 face +z: every direction used below (forward, left, spine) is measured on the body itself, so the features do not
 depend on ``heading``. Because the template is fixed, thresholds are in metres, radians and metres per second.
 
@@ -28,7 +28,7 @@ from sklearn.cluster import KMeans, MiniBatchKMeans
 from sklearn.exceptions import NotFittedError
 from sklearn.utils import check_random_state
 
-from mocapkit.datasets.formats.layouts import LANDMARK_NAMES
+from mocapkit.motion.layouts import LANDMARK_NAMES
 
 _I = {name: k for k, name in enumerate(LANDMARK_NAMES)}
 PELVIS, NECK, HEAD = _I["pelvis"], _I["neck"], _I["head"]
@@ -165,7 +165,7 @@ def relational_features(seq, fps: float = 30.0, soft: bool = False) -> np.ndarra
     """Boolean relational pose features (Müller & Röder style) per frame: float32 ``[T, 39]``.
 
     Args:
-        seq: landmarks ``[T, 20, 3]`` (metres, y up, :func:`~mocapkit.retrieval.skeleton.normalised_landmarks`).
+        seq: landmarks ``[T, 20, 3]`` (metres, y up, :func:`~mocapkit.motion.geometry.normalised_landmarks`).
         fps: frame rate of ``seq`` (Hz), for the velocity features (``*_fast``, m/s).
         soft: ``False``: 1.0 where the relation holds (``value > threshold``), else 0.0. ``True``: the sigmoid of
             the signed margin ``(value − threshold) / scale`` with ``scale`` 5 cm, 0.1 rad or 0.25 m/s, in (0, 1)

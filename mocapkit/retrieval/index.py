@@ -42,10 +42,10 @@ METHODS: dict[str, tuple[str, dict]] = {
     "dtw_relational": ("mocapkit.retrieval.dtw.DTWRetrieval", {"features": "relational"}),
     "dtw_mutual_proximity": ("mocapkit.retrieval.dtw.DTWRetrieval", {"features": ["positions", "relational"],
                                                                      "hubness": "mutual_proximity"}),
-    "hod": ("mocapkit.retrieval.feature_selection.FeatureRetrieval", {"views": ["hod"], "selector": None}),
-    "gpf": ("mocapkit.retrieval.feature_selection.FeatureRetrieval", {"views": ["gpf"], "selector": None}),
-    "amfs": ("mocapkit.retrieval.feature_selection.FeatureRetrieval", {"views": ["hod", "gpf"], "selector": "amfs"}),
-    "laplacian_score": ("mocapkit.retrieval.feature_selection.FeatureRetrieval",
+    "hod": ("mocapkit.retrieval.selected_features.FeatureRetrieval", {"views": ["hod"], "selector": None}),
+    "gpf": ("mocapkit.retrieval.selected_features.FeatureRetrieval", {"views": ["gpf"], "selector": None}),
+    "amfs": ("mocapkit.retrieval.selected_features.FeatureRetrieval", {"views": ["hod", "gpf"], "selector": "amfs"}),
+    "laplacian_score": ("mocapkit.retrieval.selected_features.FeatureRetrieval",
                         {"views": ["hod", "gpf"], "selector": "laplacian"}),
     "tsr_stpm": ("mocapkit.retrieval.tsr_stpm.TSRSTPMRetrieval", {"n_atoms": 64, "n_nonzero": 4,
                                                                   "normalize_kernel": True}),
@@ -168,7 +168,7 @@ class MotionIndex:
     # ------------------------------------------------------------------ queries
     def check_query(self, motion, path: str) -> None:
         """Refuse a query whose skeleton lacks a landmark every indexed clip has (names both)."""
-        from mocapkit.datasets.formats.layouts import find_landmarks
+        from mocapkit.motion.layouts import find_landmarks
 
         have = set(find_landmarks(motion.joint_names, motion.layout_name))
         lacking = [lm for lm in self.landmarks if lm not in have]
@@ -231,7 +231,7 @@ def build_index(src: str | os.PathLike, out: str | os.PathLike | None = None, me
         RetrievalIndexError: no motion file under ``src``; a file that cannot be read or used (named) unless
             ``skip_bad``; nothing usable at all; an unknown method.
     """
-    from mocapkit.datasets.formats.layouts import find_landmarks
+    from mocapkit.motion.layouts import find_landmarks
     from mocapkit.datasets.formats.motion_io import find_motion_files
 
     src = Path(src)
@@ -270,7 +270,7 @@ def build_index(src: str | os.PathLike, out: str | os.PathLike | None = None, me
     estimator.fit(motions)
     _progress(f"fitted {name} on {len(motions)} clips in {time.perf_counter() - start:.1f} s", quiet)
     common = set.intersection(*landmark_sets)
-    from mocapkit.datasets.formats.layouts import LANDMARK_NAMES
+    from mocapkit.motion.layouts import LANDMARK_NAMES
 
     model_sha1 = getattr(estimator, "model_sha1_", None)
     index = MotionIndex(name, estimator, files, [lm for lm in LANDMARK_NAMES if lm in common], skipped,

@@ -5,9 +5,9 @@ Spec: ``../shared/spec/thesis-zhou-2014-retrieval-synthesis.md`` §2 (algorithm 
 
 Pipeline (:class:`TSRSTPMRetrieval`):
 
-1. every clip → :func:`~mocapkit.retrieval.skeleton.normalised_landmarks` at ``fps`` (120 Hz by default, HDM05's
+1. every clip → :func:`~mocapkit.motion.geometry.normalised_landmarks` at ``fps`` (120 Hz by default, HDM05's
    rate, at which the thesis tuned ``sigma``), flattened to ``[T, 60]`` positions in **centimetres** (spec §7.5);
-2. ``fit``: a K-SVD dictionary (:class:`~mocapkit.classical.ksvd.KSVD`) of ``n_atoms`` unit-norm atoms learned
+2. ``fit``: a K-SVD dictionary (:class:`~mocapkit.retrieval.ksvd.KSVD`) of ``n_atoms`` unit-norm atoms learned
    on the database's frames (at most ``max_dictionary_frames`` randomly chosen ones, ``ksvd_iter`` iterations);
 3. every frame → its OMP code ``x_t ∈ ℝ^q`` with ``n_nonzero`` non-zeros;
 4. **TSR**: slices ``s_i = x_i x_jᵀ`` (``q × q``) for ``i = 1, 1+σ, …, 1+kσ`` with ``k = max{k : 1+kσ < t}`` and
@@ -34,7 +34,7 @@ Choices where the thesis is ambiguous (spec §7, Chapter 3):
 * **σ** (§7.6) is in frames **at ``fps``**: 7 frames at the default 120 Hz is the thesis's 58 ms. Queries of any
   rate (Kinect at 30 Hz) are resampled to ``fps`` first, so σ keeps its duration. A clip needs at least ``σ + 1``
   frames at ``fps`` (:attr:`TSRSTPMRetrieval.min_frames`); a shorter one raises
-  :class:`~mocapkit.retrieval.skeleton.RetrievalInputError` naming the file.
+  :class:`~mocapkit.motion.geometry.RetrievalInputError` naming the file.
 * **Codes** (§7.7): ``m = 35`` of ``q = 700`` with ``d = 60`` as stated; no centring; OMP codes may be negative,
   the pooled cubes hold absolute values; the K-SVD seed is ``random_state``.
 * **No kernel normalisation** (the thesis mentions none) by default, so a long clip with many distinct
@@ -68,7 +68,7 @@ import numpy as np
 import scipy.sparse as sp
 from sklearn.exceptions import NotFittedError
 
-from mocapkit.classical.ksvd import KSVD, batch_omp
+from mocapkit.retrieval.ksvd import KSVD, batch_omp
 from mocapkit.retrieval.base import RetrievalMethod
 
 BLOCK_NORMS = ("none", "l1", "l2")
@@ -304,10 +304,10 @@ class TSRSTPMRetrieval(RetrievalMethod):
         normalize_kernel: ``False`` (thesis-literal: raw ``K``) or ``True``: the cosine-normalised
             ``K(a, b) / sqrt(K(a, a) K(b, b))``, an addition of this implementation (not in the thesis).
         fps: frame rate every clip is resampled to (thesis: HDM05's 120 Hz).
-        heading: :func:`~mocapkit.retrieval.skeleton.normalised_landmarks`'s heading (``"frame"``: per frame).
+        heading: :func:`~mocapkit.motion.geometry.normalised_landmarks`'s heading (``"frame"``: per frame).
         random_state: seed of the K-SVD initialisation and frame sub-sampling.
 
-    Attributes (after ``fit``): ``ksvd_`` (the fitted :class:`~mocapkit.classical.ksvd.KSVD`), ``database_``
+    Attributes (after ``fit``): ``ksvd_`` (the fitted :class:`~mocapkit.retrieval.ksvd.KSVD`), ``database_``
     (:class:`STPMPyramids`), ``n_database_``.
     """
 

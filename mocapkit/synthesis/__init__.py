@@ -9,16 +9,10 @@ The contract every synthesiser follows (fit on example clips, sample variants as
 - baselines: :mod:`~mocapkit.synthesis.perlin` (``PerlinNoiseSynthesizer``; ``CopyTrainingClips``, the training
   set as a reference row), :mod:`~mocapkit.synthesis.lau` (``LauDBNSynthesizer``, Lau et al. 2009),
   :mod:`~mocapkit.synthesis.cvae` (``CVAESynthesizer``, an autoregressive conditional VAE);
-- :mod:`~mocapkit.synthesis.synthesize`: ``mocapkit synthesize``. Metrics: :mod:`mocapkit.evaluation.synthesis`;
+- :mod:`~mocapkit.synthesis.synthesize`: ``mocapkit synthesize``. Metrics: :mod:`mocapkit.synthesis.metrics`;
   the comparison: ``mocapkit compare synthesis_hdm05``.
 """
-from mocapkit.synthesis.base import (
-    DofLayout,
-    MotionSynthesizer,
-    SynthesisInputError,
-    check_clips,
-    dof_matrix,
-    dof_values,
-)
+from mocapkit.synthesis.base import MotionSynthesizer
+from mocapkit.synthesis.clips import DofLayout, SynthesisInputError, check_clips, dof_matrix, dof_values
 
 __all__ = ["DofLayout", "MotionSynthesizer", "SynthesisInputError", "check_clips", "dof_matrix", "dof_values"]

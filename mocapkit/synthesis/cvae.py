@@ -2,13 +2,13 @@
 over the thesis's pose features, trained in ``fit`` on the ~10 example clips.
 
 **Features.** Each training clip is resampled to ``fps`` frames per second (every AMC channel time-warped
-linearly, :func:`~mocapkit.synthesis.base.resample_clip`; at 120 fps consecutive frames are nearly equal and an
+linearly, :func:`~mocapkit.synthesis.clips.resample_clip`; at 120 fps consecutive frames are nearly equal and an
 autoregressive model learns to extrapolate and ignore its latent code) and encoded
 (:func:`~mocapkit.synthesis.representation.encode`, ``FeatureClip.flat``: ``[T, 7 + 3B]``); every dimension is
 z-scored over the training frames (sd floored at 1e-3 of the largest).
 
 **Network and training.** :class:`~mocapkit.models.motion_vae.MotionVAE` (encoder ``q(z | x_t, x_{t−1})``,
-decoder ``p(x_t | z, x_{t−1}, x_{t−2})``), trained by :class:`~mocapkit.train.motion_vae_module.MotionVAEModule`
+decoder ``p(x_t | z, x_{t−1}, x_{t−2})``), trained by :class:`~mocapkit.synthesis.module.MotionVAEModule`
 with a Lightning ``Trainer`` for ``steps`` optimiser steps of ``batch_size`` frame triples (Adam, learning rate
 ``lr``), on the CPU, no logger, no checkpoint written, seeded by ``random_state``
 (``lightning.seed_everything``). ``loss_curve_`` keeps the loss of every step.
@@ -17,7 +17,7 @@ with a Lightning ``Trainer`` for ``steps`` optimiser steps of ``batch_size`` fra
 autoregressively with ``z = noise_scale · ε``, ``ε ~ N(0, I)``, at every step (a torch generator seeded from the
 sampling seed), for the number of model-rate frames that spans ``n_frames`` at the training rate; the features are
 decoded (:func:`~mocapkit.synthesis.representation.decode`, from the drawn clip's start position and heading) and
-the AMC values resampled to ``n_frames`` by a cubic spline (:func:`~mocapkit.synthesis.base.time_warp`: velocity
+the AMC values resampled to ``n_frames`` by a cubic spline (:func:`~mocapkit.synthesis.clips.time_warp`: velocity
 and acceleration stay continuous at the model's frames, where linear interpolation would kink).
 """
 from __future__ import annotations
@@ -26,16 +26,9 @@ import time
 
 import numpy as np
 
-from mocapkit.datasets.formats.motion import Motion
-from mocapkit.synthesis.base import (
-    SMOOTHING_SECONDS,
-    MotionSynthesizer,
-    dof_values,
-    model_frames,
-    resample_clip,
-    rotation_columns,
-    time_warp,
-)
+from mocapkit.motion.container import Motion
+from mocapkit.synthesis.base import MotionSynthesizer
+from mocapkit.synthesis.clips import SMOOTHING_SECONDS, dof_values, model_frames, resample_clip, rotation_columns, time_warp
 from mocapkit.synthesis.footskate import DEFAULT_ROOT_MOVE
 from mocapkit.synthesis.representation import (
     continuous_pieces,
@@ -67,7 +60,7 @@ class CVAESynthesizer(MotionSynthesizer):
         target_variation: the ``V / V_train`` that ``noise_scale="auto"`` asks for (default 1.28, Zhou's ratio
             as for SLFM).
 
-    Attributes (after ``fit``): module_: the trained :class:`~mocapkit.train.motion_vae_module.MotionVAEModule`
+    Attributes (after ``fit``): module_: the trained :class:`~mocapkit.synthesis.module.MotionVAEModule`
     (eval mode); mean_, scale_: float64 ``[F]`` standardisation; starts_: float64 ``[C, 2, F]`` the first two
     (unstandardised) frames of every clip at the model rate; start_places_: per clip ``(start_xz, start_yaw)``;
     model_fps_: the model rate; loss_curve_: float64 ``[steps]``; train_seconds_: wall time of the training;
@@ -109,7 +102,7 @@ class CVAESynthesizer(MotionSynthesizer):
         import lightning as L
         import torch
 
-        from mocapkit.train.motion_vae_module import MotionVAEModule
+        from mocapkit.synthesis.module import MotionVAEModule
 
         if self.fps is not None and not float(self.fps) > 0:
             raise ValueError(f"CVAESynthesizer: fps={self.fps!r} must be positive (or None)")

@@ -44,14 +44,14 @@ from scipy.ndimage import uniform_filter1d
 from scipy.spatial.transform import Rotation
 
 from mocapkit.datasets.formats.asf_amc import AsfSkeleton, forward_kinematics
-from mocapkit.datasets.frames import true_runs
+from mocapkit.motion.frames import true_runs
 from mocapkit.synthesis.representation import dof_axes, euler_near, partitions
 
 #: The ways :func:`cleanup_footskate` may move the root (its ``move_root``).
 ROOT_MOVES = ("full", "stance", "vertical", "none")
 #: The ``footskate_root`` of every generator (:class:`~mocapkit.synthesis.base.MotionSynthesizer`) unless set:
 #: ``"stance"``, chosen on training clips only by the rule in bench/RESULTS.md §16 (*Smoothing the variants, and
-#: every proxy at once*, round 2; ``scripts/select_synthesis_defaults.py --param footskate_root full stance``): the
+#: every proxy at once*, round 2; ``scripts/selection/select_synthesis_defaults.py --param footskate_root full stance``): the
 #: share of SLFM variants within the training clips' spread on every proxy, mean over HDM05 hops and squats and
 #: Bandai walks, 0.41 against ``"full"``'s 0.31 (walks 0.80 / 0.60, squats 0.15 / 0.00, hops 0.28 / 0.33); on the
 #: real training clips themselves it keeps more of their travel (root speed after / before: walks 0.80 against
@@ -81,7 +81,7 @@ class FootskateReport:
 
 def planted_ankle_height(clips) -> float | None:
     """The floor of :func:`cleanup_footskate` from real clips: the mean over ``clips`` (AMC
-    :class:`~mocapkit.datasets.formats.motion.Motion`, ``metadata["asf"]`` their skeleton) of each clip's lowest
+    :class:`~mocapkit.motion.container.Motion`, ``metadata["asf"]`` their skeleton) of each clip's lowest
     ankle height over both legs, metres; None when the skeleton has no legs (``LL``/``RL`` partitions with a
     shin)."""
     skeleton = clips[0].metadata["asf"]

@@ -34,8 +34,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from mocapkit.datasets.formats.motion import Motion
-from mocapkit.synthesis.base import SMOOTHING_SECONDS, MotionSynthesizer
+from mocapkit.motion.container import Motion
+from mocapkit.synthesis.base import MotionSynthesizer
+from mocapkit.synthesis.clips import SMOOTHING_SECONDS
 from mocapkit.synthesis.footskate import DEFAULT_ROOT_MOVE
 from mocapkit.synthesis.representation import (
     continuous_pieces,

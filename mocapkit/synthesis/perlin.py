@@ -5,7 +5,7 @@ with Perlin noise added to every DOF curve (``../shared/spec/thesis-zhou-2014-re
 Both draw, for every variant, one training clip: the clips in a random order, cycled (variant ``k`` is clip
 ``order[k mod n_clips]``), so every clip is used equally often and ``n_clips`` variants are all different clips.
 A clip whose length differs from the requested ``n_frames`` is **time-warped by linear resampling**
-(:func:`~mocapkit.synthesis.base.time_warp`: every AMC channel interpolated linearly at ``n_frames`` evenly spaced times from its first
+(:func:`~mocapkit.synthesis.clips.time_warp`: every AMC channel interpolated linearly at ``n_frames`` evenly spaced times from its first
 to its last frame, angles unwrapped first so that a 179° → −179° step is not swept through 0°). Variants are
 posed on the reference skeleton by their AMC angles (:mod:`mocapkit.synthesis.base`).
 
@@ -33,15 +33,9 @@ from __future__ import annotations
 import numpy as np
 
 from mocapkit.datasets.formats.asf_amc import amc_motion
-from mocapkit.datasets.formats.motion import Motion
-from mocapkit.synthesis.base import (
-    SMOOTHING_SECONDS,
-    MotionSynthesizer,
-    dof_matrix,
-    dof_values,
-    rotation_columns,
-    time_warp,
-)
+from mocapkit.motion.container import Motion
+from mocapkit.synthesis.base import MotionSynthesizer
+from mocapkit.synthesis.clips import SMOOTHING_SECONDS, dof_matrix, dof_values, rotation_columns, time_warp
 from mocapkit.synthesis.footskate import DEFAULT_ROOT_MOVE
 from mocapkit.synthesis.representation import decode, encode, root_start
 
@@ -70,7 +64,7 @@ class CopyTrainingClips(MotionSynthesizer):
     """The training clips themselves, time-warped to ``n_frames`` (the benchmark's reference row; module docstring).
 
     Attributes (after ``fit``): ``train_matrices_``: the clips' AMC values, one float64 ``[T_i, channels]`` per clip
-    (:func:`~mocapkit.synthesis.base.dof_matrix`); ``angles_``: bool ``[channels]``, the angle columns.
+    (:func:`~mocapkit.synthesis.clips.dof_matrix`); ``angles_``: bool ``[channels]``, the angle columns.
     """
 
     def _fit_clips(self, clips: list[Motion]) -> None:

@@ -40,15 +40,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from mocapkit.datasets.formats.asf_amc import AsfSkeleton
-from mocapkit.datasets.formats.motion import Motion
-from mocapkit.synthesis.base import (
-    DofLayout,
-    SynthesisInputError,
-    clip_label,
-    clip_segment,
-    dof_matrix,
-    resample_clip,
-)
+from mocapkit.motion.container import Motion
+from mocapkit.synthesis.clips import DofLayout, SynthesisInputError, clip_label, clip_segment, dof_matrix, resample_clip
 
 ROOT_FEATURES = 7
 """Columns of :attr:`FeatureClip.root`: ``dx, dz, dyaw, height, tilt_x, tilt_y, tilt_z``."""
@@ -66,7 +59,7 @@ class FeatureClip:
         joints: float64 ``[T, B, 3]``: exp-map (radians, continuous over time; ``|v| <= pi`` unless the rotation
             angle crosses ``pi`` during the clip, see the module docstring) of each non-root bone's AMC rotation
             ``M_b``.
-        bones: the ``B`` non-root bones with dofs, in :class:`~mocapkit.synthesis.base.DofLayout` order.
+        bones: the ``B`` non-root bones with dofs, in :class:`~mocapkit.synthesis.clips.DofLayout` order.
     """
 
     root: np.ndarray
@@ -313,7 +306,7 @@ class ContinuousPieces:
 def continuous_pieces(clips: list[Motion], fps: float, min_frames: int, max_turn_speed: float | None = 5400.0,
                       what: str = "fit") -> ContinuousPieces:
     """The clips cut at their :func:`angle_flips` and resampled to ``fps``
-    (:func:`~mocapkit.synthesis.base.resample_clip`), so that a model of successive frames never learns a flip as
+    (:func:`~mocapkit.synthesis.clips.resample_clip`), so that a model of successive frames never learns a flip as
     motion; pieces of fewer than ``min_frames`` frames at ``fps`` are left out. One warning per clip with flips
     names it, every flip and every piece left out (``what`` prefixes it). ``max_turn_speed=None``: no cutting.
     """

@@ -45,19 +45,9 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from mocapkit.datasets.formats.asf_amc import AsfSkeleton
-from mocapkit.datasets.formats.motion import Motion
-from mocapkit.synthesis.base import (
-    SMOOTHING_SECONDS,
-    MotionSynthesizer,
-    SynthesisInputError,
-    check_flag,
-    clip_label,
-    dof_values,
-    model_frames,
-    resample_clip,
-    rotation_columns,
-    time_warp,
-)
+from mocapkit.motion.container import Motion
+from mocapkit.synthesis.base import MotionSynthesizer
+from mocapkit.synthesis.clips import SMOOTHING_SECONDS, SynthesisInputError, check_flag, clip_label, dof_values, model_frames, resample_clip, rotation_columns, time_warp
 from mocapkit.synthesis.footskate import DEFAULT_ROOT_MOVE
 from mocapkit.synthesis.representation import (
     ROOT_FEATURES,
@@ -647,7 +637,7 @@ class SLFMSynthesizer(MotionSynthesizer):
         smoothing_seconds: the Gaussian smoothing of every variant before the cleanup, seconds (0: off;
             :class:`~mocapkit.synthesis.base.MotionSynthesizer`).
         model_fps: the frame rate the models work at (None: the clips' own, the thesis's 120 Hz). Lower, the
-            clips are resampled for training (:func:`~mocapkit.synthesis.base.resample_clip`) and the variants are
+            clips are resampled for training (:func:`~mocapkit.synthesis.clips.resample_clip`) and the variants are
             drawn at this rate, then brought back to the clips' rate by a cubic spline before the footskate
             cleanup. Not from the thesis.
         noise_scale: the predictive draws' standard normals are multiplied by this (1 = the model's own
@@ -678,7 +668,7 @@ class SLFMSynthesizer(MotionSynthesizer):
     frames differ less than the per-frame predictive noise, so independent draws jitter.
     ``noise_scale="auto"``, ``output_margin=0`` and ``frame_stride=1`` were chosen the same way, on the first 10
     cuts by path of hopBothLegs1hops and of squat1Reps (performer bd), by the variants' feature distance to those
-    clips (:func:`~mocapkit.evaluation.synthesis.feature_distances`) and the share of variants within the clips'
+    clips (:func:`~mocapkit.synthesis.metrics.feature_distances`) and the share of variants within the clips'
     own leave-one-out spread: on hops the scale 1 gave V / V_train 1.91 and 0 % within, 0.5 (the one ``"auto"``
     picks) 1.33 and 80 % (85 % with the output clip); on squats ``frame_stride`` 2 → 1 took the distance from
     7.6 to 2.7 and the jerk from 7.4k to 0.84k m/s³ (the clips': 0.51k), at a cost on hops of 85 → 75 % within.

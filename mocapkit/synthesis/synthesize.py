@@ -2,7 +2,7 @@
 
 Zhou 2014 ch. 4 (../shared/spec/thesis-zhou-2014-retrieval-synthesis.md §3): about ten example clips of one motion
 type in, ``n_variants`` new clips out. BVH clips (Bandai's, Mixamo-style rigs) are converted exactly to ASF/AMC
-first (:func:`~mocapkit.synthesis.base.as_amc_clips`: one T-pose rest for all of them). The output folder gets
+first (:func:`~mocapkit.synthesis.clips.as_amc_clips`: one T-pose rest for all of them). The output folder gets
 ``variant_000.amc`` … (on the reference skeleton, the first clip's) with a copy of that skeleton's ``.asf``, or
 self-contained ``variant_000.bvh`` … (the same joints, bone lengths and frame rate, for tools that take BVH; the
 default for BVH input, and then in the input's own rig: hierarchy, joint frames and channel orders,
@@ -24,12 +24,8 @@ from mocapkit.datasets.formats.asf_amc import read_amc, write_amc, write_asf
 from mocapkit.datasets.formats.bvh import read_bvh, write_bvh
 from mocapkit.datasets.formats.bvh_to_amc import amc_to_bvh
 from mocapkit.datasets.formats.errors import MotionFormatError
-from mocapkit.synthesis.base import (
-    MotionSynthesizer,
-    SynthesisInputError,
-    as_amc_clips,
-    clip_windows,
-)
+from mocapkit.synthesis.base import MotionSynthesizer
+from mocapkit.synthesis.clips import SynthesisInputError, as_amc_clips, clip_windows
 
 #: Output formats of the variants: ASF/AMC (the training clips' own) or BVH.
 OUTPUT_FORMATS = ("amc", "bvh")
@@ -77,7 +73,7 @@ def find_clips(inputs: Sequence[str | os.PathLike], motion_type: str | None = No
 
 
 def read_clip(path: Path):
-    """One training file: an AMC (its ASF beside it) or a BVH, as a :class:`~mocapkit.datasets.formats.motion.Motion`."""
+    """One training file: an AMC (its ASF beside it) or a BVH, as a :class:`~mocapkit.motion.container.Motion`."""
     return read_bvh(path) if path.suffix.lower() == ".bvh" else read_amc(path)
 
 
@@ -107,7 +103,7 @@ def synthesize(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, 
 
     Args:
         inputs: AMC or BVH files and/or folders (searched recursively); each AMC's ASF is looked up beside it;
-            BVH clips are converted to ASF/AMC on one T-pose rest (:func:`~mocapkit.synthesis.base.as_amc_clips`).
+            BVH clips are converted to ASF/AMC on one T-pose rest (:func:`~mocapkit.synthesis.clips.as_amc_clips`).
         out_dir: the output folder (created): ``variant_000.amc`` … and the reference ``.asf`` (or
             ``variant_000.bvh`` …), ``report.json``.
         n_variants: variants to write.
@@ -124,7 +120,7 @@ def synthesize(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, 
             per variant, positions in metres; :func:`~mocapkit.datasets.formats.bvh.read_bvh` reads back the
             AMC variant's joint positions; from BVH input, in the input's own rig); ``None``: the inputs' format.
         window_seconds: cut every matching file into consecutive windows of this many seconds
-            (:func:`~mocapkit.synthesis.base.clip_windows`) and train on those: for long takes that repeat one
+            (:func:`~mocapkit.synthesis.clips.clip_windows`) and train on those: for long takes that repeat one
             motion (CMU's walks). ``None``: every file is one clip.
 
     Returns:

@@ -22,6 +22,8 @@ from hydra import compose, initialize_config_dir
 from hydra.core.override_parser.overrides_parser import OverridesParser
 from omegaconf import DictConfig, OmegaConf, open_dict
 
+from mocapkit.train.errors import ConfigError
+
 #: The configs folder: ``$MOCAPKIT_CONFIG_DIR`` or ``configs/`` at the repository root.
 CONFIG_DIR = Path(os.environ.get("MOCAPKIT_CONFIG_DIR", Path(__file__).resolve().parents[2] / "configs"))
 
@@ -39,10 +41,6 @@ def _path_component(text) -> str:
 # configs/train.yaml names each sweep job's folder ${mocapkit_path_component:${hydra:job.override_dirname}}
 if not OmegaConf.has_resolver("mocapkit_path_component"):
     OmegaConf.register_new_resolver("mocapkit_path_component", _path_component)
-
-
-class ConfigError(ValueError):
-    """A configuration problem; the message names the key or file."""
 
 
 def _compose(config_dir: Path, config_name: str, overrides: list[str]) -> DictConfig:

@@ -1,7 +1,7 @@
 """Losses shared by the Lightning modules of more than one task.
 
-:func:`contrastive_loss` trains the retrieval embeddings (:mod:`mocapkit.train.embedding_module`: SupCon and
-SimCLR) and the gait network's metric term (:mod:`mocapkit.train.gait_module`, ``metric_weight``).
+:func:`contrastive_loss` trains the retrieval embeddings (:mod:`mocapkit.retrieval.module`: SupCon and
+SimCLR) and the gait network's metric term (:mod:`mocapkit.gait.module`, ``metric_weight``).
 """
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """Lightning module of the learned motion refiners (:mod:`mocapkit.models.refiners`).
 
-Training batches come from :class:`~mocapkit.datasets.mocap.datamodule.MocapRefinementDataModule`
+Training batches come from :class:`~mocapkit.refinement.datamodule.MocapRefinementDataModule`
 (corrupted windows and their clean originals). The loss is computed in the network's normalised
 frame (the window's centre, heading and body size; :class:`~mocapkit.models.refiners.PoseNormalizer`),
 on the clean window brought into that same frame:

@@ -31,14 +31,14 @@ Per-key policies (:data:`RUN_POLICY`, :data:`CHECKPOINT_POLICY`, :data:`REFINER_
     ``callbacks.*``     a ``Callback`` subclass under ``lightning.pytorch.callbacks.`` or
                         ``mocapkit.train.callbacks.``
     ``logger.*``        a ``Logger`` subclass under ``lightning.pytorch.loggers.``
-    ``eval.evaluator``  exactly ``mocapkit.evaluation.evaluate_action.evaluate_action``,
-                        ``mocapkit.evaluation.evaluate_gait.evaluate_gait``,
-                        ``mocapkit.evaluation.evaluate_refinement.evaluate_refinement`` or
-                        ``mocapkit.train.embedding_module.evaluate_embedding``
-    ``export.exporter`` exactly ``mocapkit.deploy.skeleton_export.export_action_module``,
-                        ``mocapkit.deploy.gait_export.export_gait_module``,
+    ``eval.evaluator``  exactly ``mocapkit.recognition.evaluate.evaluate_action``,
+                        ``mocapkit.gait.evaluate.evaluate_gait``,
+                        ``mocapkit.refinement.evaluate.evaluate_refinement`` or
+                        ``mocapkit.retrieval.module.evaluate_embedding``
+    ``export.exporter`` exactly ``mocapkit.recognition.export.export_action_module``,
+                        ``mocapkit.gait.export.export_gait_module``,
                         ``mocapkit.deploy.refiner_export.export_refinement_module`` or
-                        ``mocapkit.deploy.embedding_export.export_embedding_module``
+                        ``mocapkit.retrieval.export.export_embedding_module``
     checkpoint          ``hyper_parameters.model`` / ``.optimizer`` / ``.scheduler``: as above;
                         no other ``_target_`` anywhere in the checkpoint, and no Lightning
                         ``_instantiator`` / ``_class_path`` keys
@@ -58,7 +58,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from mocapkit.train.config import ConfigError
+from mocapkit.train.errors import ConfigError
 
 #: Lightning's own "instantiate this" keys in checkpoint hyper-parameters: never accepted.
 LIGHTNING_INSTANTIATOR_KEYS = ("_instantiator", "_class_path")
@@ -150,15 +150,15 @@ CALLBACK = Rule("a Lightning callback class (lightning.pytorch.callbacks or moca
 LOGGER = Rule("a Lightning logger class (lightning.pytorch.loggers)", ("lightning.pytorch.loggers.",),
               accepts=_subclass_of("lightning.pytorch.loggers.Logger"))
 EVALUATOR = Rule("mocapkit's evaluator of the task",
-                 exact=("mocapkit.evaluation.evaluate_action.evaluate_action",
-                        "mocapkit.evaluation.evaluate_gait.evaluate_gait",
-                        "mocapkit.evaluation.evaluate_refinement.evaluate_refinement",
-                        "mocapkit.train.embedding_module.evaluate_embedding"))
+                 exact=("mocapkit.recognition.evaluate.evaluate_action",
+                        "mocapkit.gait.evaluate.evaluate_gait",
+                        "mocapkit.refinement.evaluate.evaluate_refinement",
+                        "mocapkit.retrieval.module.evaluate_embedding"))
 EXPORTER = Rule("mocapkit's ONNX exporter of the task",
-                exact=("mocapkit.deploy.skeleton_export.export_action_module",
-                       "mocapkit.deploy.gait_export.export_gait_module",
+                exact=("mocapkit.recognition.export.export_action_module",
+                       "mocapkit.gait.export.export_gait_module",
                        "mocapkit.deploy.refiner_export.export_refinement_module",
-                       "mocapkit.deploy.embedding_export.export_embedding_module"))
+                       "mocapkit.retrieval.export.export_embedding_module"))
 REFINER = Rule("a mocapkit MotionRefiner class", ("mocapkit.",),
                accepts=_subclass_of("mocapkit.refinement.base.MotionRefiner"))
 

@@ -1,7 +1,7 @@
 """Drawing motions: skeleton animations (``.gif`` / ``.mp4``) and still strips (``.png``) with matplotlib.
 
 * :func:`render_motion` animates one or several motions. Several people: a list of
-  :class:`~mocapkit.datasets.formats.motion.Motion`, a Motion with ``metadata["other_bodies"]``
+  :class:`~mocapkit.motion.container.Motion`, a Motion with ``metadata["other_bodies"]``
   (what ``read_motion`` returns for a two-person NTU file), or an NTU ``SkeletonSequence``
   whose ``[bodies, frames, 25, 3]`` tracks become one person each; one colour per person.
 * :func:`render_strip` draws ``n`` evenly spaced frames side by side into one PNG.
@@ -35,7 +35,7 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from mocapkit.datasets.formats.motion import AXES, Motion
+from mocapkit.motion.container import AXES, Motion
 
 VIEWS = ("3d", "front", "side", "top")
 #: Colours of successive people.

@@ -11,7 +11,7 @@ Cross subject (OpenGait's CASIA-B protocol, Yu et al. 2006 "LT" split)
     ``round(74/124 · n)`` subjects in ID order train). Among the test subjects the
     gallery is ``nm-01..04`` and the probes ``nm-05/06``, ``bg-01/02`` and
     ``cl-01/02``; rank-1 is computed per (probe view, gallery view) with identical
-    views excluded (:mod:`mocapkit.evaluation.gait`).
+    views excluded (:mod:`mocapkit.gait.metrics`).
 """
 from __future__ import annotations
 

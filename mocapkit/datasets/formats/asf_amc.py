@@ -34,7 +34,7 @@ applied first: ``order XYZ`` gives ``Rz · Ry · Rx`` (scipy's extrinsic ``"xyz"
 A joint's position is the END of the bone of that name (CMU ``lfemur`` ends at
 the left knee); the root's is the root position. Joint order: root, then the
 bones in ASF order, which for CMU and HDM05 files is exactly
-:data:`~mocapkit.datasets.formats.layouts.CMU31` (``layout_name="cmu31"``).
+:data:`~mocapkit.motion.layouts.CMU31` (``layout_name="cmu31"``).
 
 Raw values. :func:`read_amc` keeps the file's values on the Motion so that
 :func:`write_amc` can write them back (read → write → read reproduces positions
@@ -67,8 +67,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from mocapkit.datasets.formats.errors import MotionFormatError
-from mocapkit.datasets.formats.layouts import CMU31
-from mocapkit.datasets.formats.motion import Motion
+from mocapkit.motion.layouts import CMU31
+from mocapkit.motion.container import Motion
 from mocapkit.datasets.formats.safe_io import read_file_bytes
 
 INCH = 0.0254

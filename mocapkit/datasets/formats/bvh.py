@@ -1,4 +1,4 @@
-"""Biovision Hierarchy (``.bvh``) files: reading to a :class:`~mocapkit.datasets.formats.motion.Motion`, and writing.
+"""Biovision Hierarchy (``.bvh``) files: reading to a :class:`~mocapkit.motion.container.Motion`, and writing.
 
 The format::
 
@@ -78,7 +78,7 @@ from pathlib import Path
 import numpy as np
 
 from mocapkit.datasets.formats.errors import MotionFormatError
-from mocapkit.datasets.formats.motion import Motion
+from mocapkit.motion.container import Motion
 from mocapkit.datasets.formats.safe_io import read_file_bytes
 
 #: Metres per file unit for the named units accepted by ``read_bvh(units=...)``.

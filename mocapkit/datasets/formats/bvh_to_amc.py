@@ -46,8 +46,8 @@ from scipy.spatial.transform import Rotation
 from mocapkit.datasets.formats.asf_amc import INCH, AsfBone, AsfSkeleton, amc_motion
 from mocapkit.datasets.formats.bvh import BvhSkeleton, local_transforms
 from mocapkit.datasets.formats.errors import MotionFormatError
-from mocapkit.datasets.formats.layouts import find_landmarks
-from mocapkit.datasets.formats.motion import Motion
+from mocapkit.motion.layouts import find_landmarks
+from mocapkit.motion.container import Motion
 
 #: The ASF length multiplier of the result (CMU and HDM05's: one unit = 1/0.45 inch).
 LENGTH_MULTIPLIER = 0.45
@@ -130,7 +130,7 @@ def _branch_root(skeleton: BvhSkeleton, label: str) -> int:
 
 def _facing_yaw(positions: np.ndarray, joint_names, label: str) -> np.ndarray:
     """``H`` ``[3, 3]``: the rotation about ``+y`` that turns a posture (``[J, 3]``, y up) to face ``+z``, its left
-    side ``+x``, from its left and right hips and shoulders (:func:`~mocapkit.datasets.formats.layouts.find_landmarks`)."""
+    side ``+x``, from its left and right hips and shoulders (:func:`~mocapkit.motion.layouts.find_landmarks`)."""
     marks = find_landmarks(joint_names)
     pairs = [(marks[f"l_{p}"], marks[f"r_{p}"]) for p in ("hip", "shoulder") if f"l_{p}" in marks and f"r_{p}" in marks]
     if not pairs:
@@ -274,7 +274,7 @@ def bvh_to_amc(motion: Motion, rig: BvhRig | None = None) -> Motion:
         rig: the shared rest pose (:func:`bvh_rig`); ``None``: this motion's frame 0.
 
     Returns:
-        An AMC :class:`~mocapkit.datasets.formats.motion.Motion` (``positions`` float32 ``[F, J', 3]`` metres,
+        An AMC :class:`~mocapkit.motion.container.Motion` (``positions`` float32 ``[F, J', 3]`` metres,
         ``J'`` = the joints from the ASF root down, named as the BVH's; the root is ``"root"``), with
         ``metadata["asf"]`` (the skeleton, named after the clip), ``metadata["amc_values"]`` (degrees, root
         translation in ASF units), ``metadata["bvh_rig"]`` (the rig) and ``metadata["bvh_dropped_joints"]`` (the
@@ -360,7 +360,7 @@ def amc_to_bvh(motion: Motion, rig: BvhRig) -> Motion:
     fails.
 
     Returns:
-        A BVH :class:`~mocapkit.datasets.formats.motion.Motion` (as :func:`~mocapkit.datasets.formats.bvh.read_bvh`
+        A BVH :class:`~mocapkit.motion.container.Motion` (as :func:`~mocapkit.datasets.formats.bvh.read_bvh`
         returns), its joints placed as ``motion``'s to within :data:`TOLERANCE_M` where the bodies agree.
 
     Raises:

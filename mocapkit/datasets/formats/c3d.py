@@ -1,6 +1,6 @@
 """C3D marker files (reading and writing) through the maintained ``ezc3d`` library.
 
-:func:`read_c3d` returns a :class:`~mocapkit.datasets.formats.motion.Motion` of marker
+:func:`read_c3d` returns a :class:`~mocapkit.motion.container.Motion` of marker
 trajectories (``parents=None``, unless the labels are the joints of a known layout, see below):
 
 - positions in **metres**, converted from ``POINT:UNITS`` (``mm``, ``cm``, ``dm``, ``m``;
@@ -16,7 +16,7 @@ trajectories (``parents=None``, unless the labels are the joints of a known layo
   which some writers use for gaps (Qualisys' Sample26 file stores the residual word as
   65535.0 rather than -1, so ezc3d sees a valid point at the origin);
 - labels that are exactly the joint names of a layout of
-  :data:`~mocapkit.datasets.formats.layouts.LAYOUTS` (the same set, in any order: what
+  :data:`~mocapkit.motion.layouts.LAYOUTS` (the same set, in any order: what
   :func:`write_c3d` writes for joint positions, e.g. ``mocapkit refine`` of an AMC to C3D)
   make it that layout: ``layout_name`` is set and ``parents`` is the layout's hierarchy,
   re-indexed to the file's marker order (which is kept);
@@ -52,8 +52,8 @@ from pathlib import Path
 import numpy as np
 
 from mocapkit.datasets.formats.errors import MotionFormatError
-from mocapkit.datasets.formats.layouts import LAYOUTS
-from mocapkit.datasets.formats.motion import AXES, Motion, all_coordinates
+from mocapkit.motion.layouts import LAYOUTS
+from mocapkit.motion.container import AXES, Motion, all_coordinates
 from mocapkit.datasets.formats.safe_io import regular_file_size
 
 #: Metres per unit for the POINT:UNITS values understood.
@@ -190,7 +190,7 @@ def read_c3d(path: str | os.PathLike, labels: list[str] | None = None, strip_pre
 
 def known_layout(names) -> tuple[str | None, tuple[int, ...] | None]:
     """``(layout name, parents)`` when ``names`` are exactly the joint names of a layout of
-    :data:`~mocapkit.datasets.formats.layouts.LAYOUTS` (same set, any order; parents re-indexed to the order
+    :data:`~mocapkit.motion.layouts.LAYOUTS` (same set, any order; parents re-indexed to the order
     of ``names``), else ``(None, None)``."""
     names = tuple(names)
     if len(set(names)) != len(names):

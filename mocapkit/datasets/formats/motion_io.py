@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mocapkit.datasets.formats.motion import Motion, any_coordinate
+from mocapkit.motion.container import Motion, any_coordinate
 
 #: format -> (description, module, reader function, writer function or None)
 FORMATS: dict[str, tuple[str, str, str, str | None]] = {
@@ -170,7 +170,7 @@ def _read_ntu(path: str | os.PathLike, max_bodies: int = 2, **selection_options)
     ``selection_options`` go to ``select_main_bodies`` (``denoise_spread``, ``min_frames``,
     ``denoise_flicker``, ...); its defaults are those of ``mocapkit prepare ntu``.
     """
-    from mocapkit.datasets.formats.layouts import NTU25
+    from mocapkit.motion.layouts import NTU25
     from mocapkit.datasets.formats.ntu_skeleton import read_skeleton, select_main_bodies
 
     seq = read_skeleton(path)
@@ -209,7 +209,7 @@ def _write_ntu(path: str | os.PathLike, motion: Motion, body_ids: list[int] | No
     joints within a written frame become zeros (the file has no per-joint gap marker).
     Only positions survive: depth/colour pixels are re-projected and orientations are identity.
     """
-    from mocapkit.datasets.formats.layouts import NTU25
+    from mocapkit.motion.layouts import NTU25
     from mocapkit.datasets.formats.ntu_skeleton import (
         sequence_from_positions,
         write_skeleton,

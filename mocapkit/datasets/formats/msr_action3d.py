@@ -3,7 +3,7 @@
 Files (Li, Zhang & Liu, CVPR-W 2010; shared/data/SOURCES.md) are named
 ``aAA_sSS_eEE_skeleton3D.txt`` (action, subject, take; 1-based). They have no
 header and 20 rows of 4 whitespace-separated numbers per frame, at 15 fps, in
-MSR's own joint order (:data:`~mocapkit.datasets.formats.layouts.MSR20`):
+MSR's own joint order (:data:`~mocapkit.motion.layouts.MSR20`):
 
 * ``_skeleton3D.txt`` ("Real3D"): ``x y z c`` with x y z in metres (y up, z the
   depth from the camera, about 2-3 m) and c a confidence in [0, 1];
@@ -11,7 +11,7 @@ MSR's own joint order (:data:`~mocapkit.datasets.formats.layouts.MSR20`):
   image (v grows downwards) and d a depth value in undocumented units.
 
 A joint whose three coordinates are all zero is missing (NaN in the
-:class:`~mocapkit.datasets.formats.motion.Motion`, True in ``missing``); 19 of the
+:class:`~mocapkit.motion.container.Motion`, True in ``missing``); 19 of the
 567 Real3D files have such frames, and ``a13_s09_e02`` is zero throughout
 (``metadata["all_zero"]``; :class:`MSRAction3D` leaves it out, with the
 reason in ``excluded``).
@@ -37,8 +37,8 @@ from pathlib import Path
 import numpy as np
 
 from mocapkit.datasets.formats.errors import MotionFormatError
-from mocapkit.datasets.formats.layouts import MSR20
-from mocapkit.datasets.formats.motion import Motion, all_coordinates
+from mocapkit.motion.layouts import MSR20
+from mocapkit.motion.container import Motion, all_coordinates
 from mocapkit.datasets.formats.safe_io import read_file_bytes
 
 JOINTS_PER_FRAME = 20

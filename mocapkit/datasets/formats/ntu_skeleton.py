@@ -42,7 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from mocapkit.datasets.formats.errors import MotionFormatError
-from mocapkit.datasets.formats.layouts import NTU25
+from mocapkit.motion.layouts import NTU25
 from mocapkit.datasets.formats.safe_io import read_file_bytes
 
 NUM_JOINTS = 25

@@ -5,7 +5,7 @@ The folder is laid out as the real cuts (``<actor>/HDM_<actor>.asf`` and
 generator writes it (``<class>_<actor>_<nnn>.amc`` beside ``HDM_<actor>.asf``, ``mocapkit synth hdm05``); the
 files are found by :func:`~mocapkit.datasets.mocap.folders.list_clips`. Classes are read from the file names
 (``labels=file``: every distinct class name is a class) or merged to HDM05's 65 or 25 classes
-(:mod:`mocapkit.datasets.hdm05.classes`). Every clip is read once, resampled to ``fps`` and kept in memory.
+(:mod:`mocapkit.datasets.mocap.hdm05_classes`). Every clip is read once, resampled to ``fps`` and kept in memory.
 
 Performers: ``test_actors`` are held out (default: the first performer of the folder, sorted: one fold of
 leave-one-performer-out; the comparison ``mocapkit compare hdm05_recognition`` runs every fold), the model trains
@@ -29,8 +29,8 @@ import numpy as np
 import torch
 
 from mocapkit.datasets.datamodule import SkeletonDataModule
-from mocapkit.datasets.formats.layouts import CMU31
-from mocapkit.datasets.hdm05.classes import merge_25, merge_65
+from mocapkit.motion.layouts import CMU31
+from mocapkit.datasets.mocap.hdm05_classes import merge_25, merge_65
 from mocapkit.datasets.mocap.folders import (
     MocapFolderError,
     held_out_groups,

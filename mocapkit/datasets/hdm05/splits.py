@@ -5,7 +5,7 @@ import itertools
 
 import numpy as np
 
-from mocapkit.datasets.hdm05.classes import ACTORS, HDM05ClipName, parse_clip_name
+from mocapkit.datasets.mocap.hdm05_classes import ACTORS, HDM05ClipName, parse_clip_name
 
 
 def _actor_array(actors) -> np.ndarray:

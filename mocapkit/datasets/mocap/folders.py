@@ -44,7 +44,7 @@ def list_clips(dataset: str, root: str | Path) -> list[dict]:
         raise MocapFolderError(f"root={str(root)!r} is not a folder (dataset {dataset}: {FILE_PATTERNS[dataset]})")
     clips = []
     if dataset == "hdm05":
-        from mocapkit.datasets.hdm05.classes import parse_clip_name
+        from mocapkit.datasets.mocap.hdm05_classes import parse_clip_name
 
         for path in sorted(root.rglob("*.amc")):
             try:
@@ -68,7 +68,7 @@ def list_clips(dataset: str, root: str | Path) -> list[dict]:
 
 
 def read_clips(clips: list[dict], fps: float | None = None, progress: bool = False) -> list:
-    """The :class:`~mocapkit.datasets.formats.motion.Motion` of every clip of :func:`list_clips` (positions in
+    """The :class:`~mocapkit.motion.container.Motion` of every clip of :func:`list_clips` (positions in
     metres, rotations dropped), resampled to ``fps`` when given, ``metadata["group"]`` / ``["class"]`` set.
 
     Raises:

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mocapkit.datasets.formats.motion import Motion
+from mocapkit.motion.container import Motion
 from mocapkit.datasets.formats.msr_action3d import MSRFormatError, MSRSampleName, parse_msr_name, read_msr_skeleton
 
 log = logging.getLogger(__name__)

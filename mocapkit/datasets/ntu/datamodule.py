@@ -14,7 +14,7 @@ from torch.utils.data import Dataset
 
 from mocapkit.datasets.augment import SkeletonAugment
 from mocapkit.datasets.datamodule import SkeletonDataModule
-from mocapkit.datasets.frames import uniform_frame_indices
+from mocapkit.motion.frames import uniform_frame_indices
 from mocapkit.datasets.ntu.cache import NTUCache
 from mocapkit.datasets.ntu.splits import split_indices
 from mocapkit.datasets.splits import validation_split

@@ -44,7 +44,7 @@ from mocapkit.datasets.formats.asf_amc import (
     write_amc,
     write_asf,
 )
-from mocapkit.datasets.hdm05.classes import ACTORS, class_names, merge_25_stem, merge_65
+from mocapkit.datasets.mocap.hdm05_classes import ACTORS, class_names, merge_25_stem, merge_65
 
 #: Default classes: several variants per stem, so that the 130 → 65 → 25 merges all
 #: collapse something (counts, L/R limb, L/R start, front/side, circle vs straight).
@@ -67,7 +67,7 @@ class HDM05SynthConfig:
 
     Attributes:
         classes: 130-class names to synthesise (``mocapkit synth hdm05 --classes``).
-        actors: actors, a subset of :data:`~mocapkit.datasets.hdm05.classes.ACTORS` (``--actors``).
+        actors: actors, a subset of :data:`~mocapkit.datasets.mocap.hdm05_classes.ACTORS` (``--actors``).
         clips_per_actor: takes per class and actor (``nnn`` = 001 …).
         seed: master seed (``--seed``); the output is a pure function of the config.
         fps: frame rate of the motions (Hz).
@@ -93,7 +93,7 @@ class HDM05SynthConfig:
         known = set(class_names(130))
         bad = [c for c in self.classes if c not in known]
         if bad:
-            raise ValueError(f"not HDM05 classes: {bad}; see mocapkit.datasets.hdm05.classes.class_names(130)")
+            raise ValueError(f"not HDM05 classes: {bad}; see mocapkit.datasets.mocap.hdm05_classes.class_names(130)")
         bad = [a for a in self.actors if a not in ACTORS]
         if bad:
             raise ValueError(f"unknown HDM05 actors {bad}; known: {ACTORS}")

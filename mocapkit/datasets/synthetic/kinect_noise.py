@@ -4,13 +4,13 @@ Zhou 2014 ch. 5 trains its posture reconstruction (a GP per joint on the offset 
 SDK v1.8 + optical mocap recordings that are not public (``../shared/spec/thesis-zhou-2014-retrieval-synthesis.md``
 §4.1, §7 item 32). This module makes stand-in pairs from clean mocap: :func:`kinect20_from_motion` maps any layout to
 the Kinect v1 20-joint skeleton (digest §1.6; the order of
-:data:`~mocapkit.datasets.formats.layouts.LANDMARK_NAMES`), y-up, metres, at 30 fps, and :func:`simulate_kinect`
+:data:`~mocapkit.motion.layouts.LANDMARK_NAMES`), y-up, metres, at 30 fps, and :func:`simulate_kinect`
 corrupts it the way a Kinect v1 does. **Results on simulated data are not comparable with the thesis's Table 5.2**
 (digest §4.6, §7 item 32): the thesis's numbers come from real sensor data on its own motions.
 
 Units: positions in metres, y up, in the world frame of the input (the simulated skeleton is not moved into the
 camera's frame, so ``clean − noisy`` is the offset a reconstruction has to learn); times in seconds; errors reported
-in centimetres (:func:`mocapkit.evaluation.kinect.joint_error_cm`, digest §4.6 eqs 5.7–5.9 as a per-frame mean,
+in centimetres (:func:`mocapkit.kinect.metrics.joint_error_cm`, digest §4.6 eqs 5.7–5.9 as a per-frame mean,
 §7 item 29).
 
 What is simulated, in this order (each a switch of :class:`KinectNoiseConfig`, named in :data:`COMPONENTS`):
@@ -49,13 +49,13 @@ g. ``swaps``: left/right confusions of the legs (knee, ankle, foot) and optional
 Everything random is drawn from one seed (a fixed stream per component, so switching one component off leaves the
 others' noise unchanged); every component off returns the input exactly (all joints TRACKED).
 
-Calibration (``scripts/calibrate_kinect_noise.py``): the thesis reports raw Kinect errors of 12.5–14.5 cm against
+Calibration (``scripts/selection/calibrate_kinect_noise.py``): the thesis reports raw Kinect errors of 12.5–14.5 cm against
 mocap on its occlusion-heavy motions (digest §4.6, Table 5.2). The defaults were tuned by hand, component by
 component, so that the raw error of the default config over all 232 HDM05 cuts (``../shared/data/hdm05_cuts11``,
-30 fps, world frame, all 20 joints, frame-weighted mean, :func:`mocapkit.evaluation.kinect.joint_error_cm`) falls
+30 fps, world frame, all 20 joints, frame-weighted mean, :func:`mocapkit.kinect.metrics.joint_error_cm`) falls
 inside that range, with occlusion and inference the largest part of it and hands and feet the worst joints; the
 geometric parts (capsule radii, coverage threshold, camera) were set first by checking which joints each HDM05
-class hides, then the magnitudes. ``python scripts/calibrate_kinect_noise.py --seed 0`` (232 files, 14,288 frames, 84 s) measured:
+class hides, then the magnitudes. ``python scripts/selection/calibrate_kinect_noise.py --seed 0`` (232 files, 14,288 frames, 84 s) measured:
 
 - overall raw error **13.90 cm** (seeds 1 and 2: 13.80, 13.63 cm); median clip 10.9 cm;
 - states: TRACKED 80.0 %, INFERRED 16.0 %, NOT_TRACKED 4.0 %; error 9.1 cm on TRACKED entries and 32.9 cm on the
@@ -71,13 +71,13 @@ class hides, then the magnitudes. ``python scripts/calibrate_kinect_noise.py --s
 Second calibration, on steadiness (preset ``"msr_steadiness"``, :meth:`KinectNoiseConfig.preset`): the defaults
 above match the raw *mean* error only, and make a far less steady skeleton than a real Kinect. MSR Action3D's 566
 usable Real3D files (``../shared/data/msr_action3d``, 15 fps, the only real Kinect skeletons here) have a mean
-bone-length sd of 0.41 cm and jitter of 3.53 cm (:mod:`mocapkit.evaluation.kinect`, per clip, mean over clips); the
+bone-length sd of 0.41 cm and jitter of 3.53 cm (:mod:`mocapkit.kinect.metrics`, per clip, mean over clips); the
 default simulator, taken at 15 fps (every second frame) over all 232 HDM05 cuts, gives 4.95 and 11.19 cm (3.45 and
 8.28 with occlusion and swaps off, the tracked-joint regime of MSR's mostly unoccluded actions; clean mocap: 0.07 and
 2.71). The preset keeps occlusion, inference, swaps and the systematic biases, cuts the frame-to-frame sensor noise
 (jitter, its speed term, depth noise, bone-length noise) to a tenth, which brings the tracked regime to 0.73 and 2.87
 cm, and widens the surface radii by 15 % to keep the raw error in the thesis's range: ``python
-scripts/calibrate_kinect_noise.py --preset msr_steadiness --no-ablation --seed 0`` measured **13.09 cm** overall
+scripts/selection/calibrate_kinect_noise.py --preset msr_steadiness --no-ablation --seed 0`` measured **13.09 cm** overall
 (TRACKED 8.61 cm, others 30.96 cm; the same 80.0 / 16.0 / 4.0 % states) and 2.47 / 5.47 cm steadiness with every
 component on. Two caveats: MSR's actions are not HDM05's, so jitter (which includes the motion's own acceleration)
 is compared loosely and bone-length sd (0 for rigid mocap) is the firmer target; and MSR's skeletons come from an
@@ -102,10 +102,10 @@ from pathlib import Path
 import numpy as np
 from scipy.signal import lfilter
 
-from mocapkit.datasets.formats.layouts import LANDMARK_NAMES, LANDMARK_PARENTS
-from mocapkit.datasets.formats.motion import Motion
-from mocapkit.datasets.frames import true_runs
-from mocapkit.retrieval.skeleton import landmark_positions, to_y_up
+from mocapkit.motion.layouts import LANDMARK_NAMES, LANDMARK_PARENTS
+from mocapkit.motion.container import Motion
+from mocapkit.motion.frames import true_runs
+from mocapkit.motion.geometry import landmark_positions, to_y_up
 
 #: Kinect SDK joint tracking states (``NUI_SKELETON_POSITION_TRACKING_STATE``).
 TRACKED, INFERRED, NOT_TRACKED = 2, 1, 0
@@ -351,7 +351,7 @@ def _label(motion: Motion) -> str:
 def kinect20_from_motion(motion: Motion, fps: float | None = 30.0) -> np.ndarray:
     """The Kinect v1 20-joint skeleton of ``motion``: float32 ``[T, 20, 3]``, metres, y up, at ``fps`` (None keeps the
     motion's rate), joints in :data:`KINECT20_NAMES` order (body landmarks of
-    :func:`~mocapkit.retrieval.skeleton.landmark_positions`, so any layout it knows works).
+    :func:`~mocapkit.motion.geometry.landmark_positions`, so any layout it knows works).
 
     Raises:
         KinectInputError (a ValueError): no body landmarks, a landmark missing or unobserved in some frame,

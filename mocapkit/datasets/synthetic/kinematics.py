@@ -9,7 +9,7 @@ The map, in the order the synthetic generator uses it:
    per-joint Euler angles ``[T, 25, 3]`` (radians).
 3. :func:`euler_to_matrix` → local rotations ``[T, 25, 3, 3]``.
 4. :func:`forward_kinematics`: compose the local rotations down the tree
-   (parents from :data:`~mocapkit.datasets.formats.layouts.NTU25`) into joint positions
+   (parents from :data:`~mocapkit.motion.layouts.NTU25`) into joint positions
    ``[T, 25, 3]``, vectorised over frames.
 
 Body frame (the frame a person's rest pose is written in):
@@ -36,7 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mocapkit.datasets.formats.layouts import NTU25
+from mocapkit.motion.layouts import NTU25
 
 J = {name: i for i, name in enumerate(NTU25.joint_names)}  #: joint name → index in NTU25
 NUM_JOINTS = NTU25.num_joints

@@ -27,7 +27,7 @@ of the configuration lists.
 
 Difficulty: the defaults are calibrated so a simple baseline (logistic
 regression on root-centred, time-pooled joint statistics; see
-``scripts/calibrate_synth_ntu.py``) reaches roughly 55–85 % on held-out subjects
+``scripts/selection/calibrate_synth_ntu.py``) reaches roughly 55–85 % on held-out subjects
 (chance is ``1 / num_classes``); ``difficulty`` scales all the human variation at once.
 """
 from __future__ import annotations

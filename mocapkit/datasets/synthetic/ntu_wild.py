@@ -16,7 +16,7 @@ body selection must survive. :func:`wild_sequence` rewrites one sample with
 body IDs of the real people (those the NTU authors' rules keep on the clean file:
 length >= 12 frames and spread denoising, which remove ``synth ntu``'s own chair-like blobs and
 passers-by), the flicker's body ID and kind. :func:`body0_correct` scores a prepared cache's
-``report.json`` against it. ``scripts/ntu_wild_files.py`` is the command-line front end.
+``report.json`` against it. ``scripts/results/ntu_wild_files.py`` is the command-line front end.
 """
 from __future__ import annotations
 

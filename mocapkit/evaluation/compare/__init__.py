@@ -12,14 +12,14 @@
 Configuration schema (``configs/compare.yaml``; a comparison file sets the keys)::
 
     name: gait                         # names the output folder (out: checkpoints/compare/${name})
-    benchmark: {_target_: mocapkit.evaluation.compare.gait.GaitBenchmark, root: ..., ...}
+    benchmark: {_target_: mocapkit.gait.benchmark.GaitBenchmark, root: ..., ...}
     protocols: [closed_set, cross_subject]
     seeds: [0, 1, 2]
     methods:                           # KEY → one of:
       cnn:   {label: ..., learned: {experiment: casiab_multitask, overrides: [trainer.max_epochs=80],
                                     checkpoint: best,    # best (best val/acc) | last (the last epoch)
                                     eval_overrides: []}} # for `mocapkit eval` only, e.g. ['eval.views={...}']
-      pca:   {label: ..., estimator: {_target_: mocapkit.classical.GEIPCALDA, n_pca: null},
+      pca:   {label: ..., estimator: {_target_: mocapkit.gait.gei_pca_lda.GEIPCALDA, n_pca: null},
               params: {...},           # set_params after instantiation (nested names: step__param)
               select: {stages: [{bow__clusterer__n_components: [100, 200]}, ...], cv: 3}   # or {reuse: KEY}
               reseed: true}            # set every (nested) random_state to the cell's seed (default)
@@ -53,8 +53,8 @@ retrieval — is a subclass named by ``benchmark._target_``, with no change to t
     evaluate_learned(report, run_dir, split) -> {"metrics", "detail"}   (learned methods)
     headline(protocol) -> [metric]; markdown(results) -> str; plots(results, out) -> [Path]   (presentation)
 
-Benchmarks here: :class:`~mocapkit.evaluation.compare.gait.GaitBenchmark` (``configs/compare/gait.yaml``,
-``gei_pca_lda.yaml``) and :class:`~mocapkit.evaluation.compare.msr.MSRActionBenchmark` (``msr3d_nmf.yaml``).
+Benchmarks here: :class:`~mocapkit.gait.benchmark.GaitBenchmark` (``configs/compare/gait.yaml``,
+``gei_pca_lda.yaml``) and :class:`~mocapkit.recognition.benchmark_msr.MSRActionBenchmark` (``msr3d_nmf.yaml``).
 """
 from __future__ import annotations
 
@@ -68,7 +68,7 @@ from mocapkit.evaluation.compare.base import (
 )
 from mocapkit.evaluation.compare.runner import Comparison, compose, main, run_comparison
 
-__all__ = ["Benchmark", "Comparison", "ComparisonError", "Split", "cli_main", "compose", "gait_report",
+__all__ = ["Benchmark", "Comparison", "ComparisonError", "Split", "cli_main", "compose",
            "indices_sha1", "main", "run_comparison"]
 
 USAGE = """usage: mocapkit compare NAME [key=value ...]
@@ -90,37 +90,3 @@ def cli_main(argv: list[str]) -> None:
         print(USAGE)
         return
     main(argv)
-
-
-def gait_report(data_root, out_dir, protocols=("closed_set", "cross_subject"),
-                experiments=("casiab_multitask", "casiab_single_subject"), overrides=(), seed: int = 0,
-                include_pca_lda: bool = True) -> dict:
-    """``mocapkit gait-report``: ``compare gait`` with the old options (a thin alias).
-
-    ``overrides`` go to every learned run (``learned_overrides``); ``data.holdout_seed=`` /
-    ``data.num_train_subjects=`` among them also set the benchmark's split, as they did for the baseline.
-    Experiments that ``configs/compare/gait.yaml`` does not list are added as learned methods.
-    """
-    from omegaconf import OmegaConf, open_dict
-
-    cfg = compose(["gait", f"out={Path(out_dir)}", f"benchmark.root={Path(data_root)}", f"seeds=[{int(seed)}]"])
-    with open_dict(cfg):
-        cfg.protocols = list(protocols)
-        cfg.learned_overrides = list(overrides)
-        for item in overrides:
-            key, _, value = item.lstrip("+").partition("=")
-            if key in ("data.holdout_seed", "data.num_train_subjects"):
-                OmegaConf.update(cfg, f"benchmark.{key.split('.', 1)[1]}", None if value == "null" else int(value))
-        by_experiment = {}   # experiment → its first method (gait.yaml lists the plain recipe before variants)
-        for k, m in cfg.methods.items():
-            if m.get("learned"):
-                by_experiment.setdefault(m.learned.experiment, k)
-        only = []
-        for experiment in experiments:
-            if experiment not in by_experiment:
-                cfg.methods[experiment] = {"label": experiment, "learned": {"experiment": experiment}}
-                by_experiment[experiment] = experiment
-            only.append(by_experiment[experiment])
-        only += [k for k, m in cfg.methods.items() if m.get("estimator")] if include_pca_lda else []
-        cfg.only = only
-    return run_comparison(cfg)

@@ -170,7 +170,7 @@ def instantiate_benchmark(spec) -> Benchmark:
 
     if not isinstance(spec, dict) or "_target_" not in spec:
         raise ComparisonError("benchmark: needs _target_: a Benchmark class, e.g. "
-                              "mocapkit.evaluation.compare.gait.GaitBenchmark")
+                              "mocapkit.gait.benchmark.GaitBenchmark")
     try:
         benchmark = instantiate(spec)
     except Exception as exc:

@@ -1,0 +1,305 @@
+"""``mocapkit kinect-fix``: train Zhou 2014 ch. 5's Kinect posture reconstructor on simulated pairs of real mocap,
+then correct real Kinect skeletons with it.
+
+``train_kinect_model(mocap, out, method="gp")``
+    every motion file under ``mocap`` (HDM05/CMU ASF/AMC, BVH, C3D with body landmarks, ...) becomes a (Kinect,
+    mocap) pair through the calibrated Kinect v1 simulator
+    (:func:`~mocapkit.datasets.synthetic.kinect_noise.simulate_pairs`, 30 fps); a
+    :class:`~mocapkit.kinect.reconstruction.KinectPostureReconstructor` is fitted on them and saved as one
+    ``.npz`` (:meth:`~mocapkit.kinect.reconstruction.KinectPostureReconstructor.save`), or with
+    ``method="bigru"`` / ``"transformer"`` a learned refiner network retrained as a corrector
+    (:class:`~mocapkit.kinect.learned.LearnedKinectCorrector`, one ``torch.save`` file read back with
+    ``weights_only=True``).
+``export_kinect_model(model, out)``
+    a learned corrector as ONNX (normalisation inside the graph, parity with PyTorch checked); ``apply`` runs the
+    ``.onnx`` with onnxruntime.
+``fix_kinect_files(model, inputs, out_dir)``
+    every input (MSR Action3D skeleton text, NTU ``.skeleton``, C3D or any file with the 20 Kinect landmarks) is
+    resampled to the model's 30 fps when it differs (MSR Action3D is 15 fps), read as Kinect-20 joints
+    (:func:`kinect_clip`), reconstructed, and written as ``OUT/<name>.c3d`` (MSR-20 joint names, y up, metres
+    stored as mm, at the model's rate): ``read_motion`` reads it back and ``mocapkit render`` draws it.
+    ``report.json`` lists every file: frames, filled entries, and without ground truth the steadiness before/after
+    (:func:`~mocapkit.kinect.metrics.bone_length_sd_cm`, :func:`~mocapkit.kinect.metrics.jitter_cm`);
+    ``--plot N`` draws the first N as before/after strips (raw blue, corrected red).
+
+Wild input: a landmark missing in some frames (MSR's all-zero frames, NTU's lost tracks, C3D gaps) is filled by
+linear interpolation over time and marked NOT_TRACKED, so the reconstructor's reliability term gives it weight 0
+there and the GP prior and temporal term decide; the count is reported per file. A landmark missing in every
+frame, a skeleton without the 20 landmarks or an unreadable file is an error naming the file, or with
+``skip_bad`` a skipped file listed in the report. Nothing is dropped silently.
+"""
+from __future__ import annotations
+
+import json
+import os
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from mocapkit.motion.layouts import LANDMARK_NAMES, MSR20, find_landmarks
+from mocapkit.motion.container import Motion, all_coordinates
+from mocapkit.kinect.learned import ARCHITECTURES
+
+MODEL_FPS = 30.0
+
+
+class KinectFixError(ValueError):
+    """Input ``mocapkit kinect-fix`` cannot use; the message names the file (and the joints)."""
+
+
+def kinect_clip(motion: Motion) -> tuple[np.ndarray, np.ndarray, int]:
+    """A motion's 20 Kinect landmarks, gaps filled, with tracking states.
+
+    Returns:
+        ``(positions, state, filled)``: float64 ``[T, 20, 3]`` metres, y up, in
+        :data:`~mocapkit.motion.layouts.LANDMARK_NAMES` order; int8 ``[T, 20]`` tracking states
+        (TRACKED 2 where observed, NOT_TRACKED 0 where filled); the number of filled (frame, joint) entries.
+
+    Raises:
+        KinectFixError: no frame, a skeleton without the body landmarks, or a landmark never observed.
+    """
+    from mocapkit.kinect.reconstruction import NOT_TRACKED, TRACKED
+    from mocapkit.motion.geometry import landmark_positions, to_y_up
+
+    label = motion.source or motion.name or "<motion>"
+    if motion.num_frames == 0:
+        raise KinectFixError(f"{label}: no frames")
+    try:
+        positions, observed = landmark_positions(motion)
+    except ValueError as exc:
+        raise KinectFixError(str(exc) if str(label) in str(exc) else f"{label}: {exc}") from exc
+    observed &= all_coordinates(np.isfinite(positions))
+    if not observed.any():
+        raise KinectFixError(f"{label}: no landmark is observed in any of its {motion.num_frames} frames (all-zero "
+                             f"or missing frames only)")
+    never = [LANDMARK_NAMES[k] for k in np.flatnonzero(~observed.any(axis=0))]
+    if never:
+        raise KinectFixError(f"{label}: the Kinect landmarks {never} are missing in every frame (a Kinect-20 "
+                             f"skeleton is needed: MSR Action3D, NTU RGB+D or a rig with those joints)")
+    positions = to_y_up(positions, motion.up_axis).astype(np.float64)
+    frames = np.arange(motion.num_frames)
+    for k in np.flatnonzero(~observed.all(axis=0)):
+        seen = observed[:, k]
+        for axis in range(3):
+            positions[~seen, k, axis] = np.interp(frames[~seen], frames[seen], positions[seen, k, axis])
+    state = np.where(observed, TRACKED, NOT_TRACKED).astype(np.int8)
+    return positions, state, int((~observed).sum())
+
+
+def _as_msr_motion(positions: np.ndarray, fps: float, name: str, source: str) -> Motion:
+    """Kinect-20 landmarks ``[T, 20, 3]`` (y up, m) as an MSR-20 Motion (its joint names and parents)."""
+    found = find_landmarks(MSR20.joint_names, MSR20.name)
+    out = np.zeros((len(positions), len(MSR20.joint_names), 3), dtype=np.float32)
+    for k, landmark in enumerate(LANDMARK_NAMES):
+        out[:, found[landmark]] = positions[:, k]
+    return Motion(positions=out, joint_names=MSR20.joint_names, parents=MSR20.parents, fps=fps, up_axis="y",
+                  name=name, source=source, layout_name=MSR20.name)
+
+
+METHODS = ("gp", *ARCHITECTURES)
+"""What ``kinect-fix train --method`` fits: Zhou's GP reconstructor, or a learned refiner network retrained as a
+corrector (:class:`~mocapkit.kinect.learned.LearnedKinectCorrector`, ``architecture`` = the name)."""
+
+
+def train_kinect_model(mocap, out: str | os.PathLike, seed: int = 0, skip_bad: bool = False,
+                       noise: str = "mean_error", method: str = "gp", **params) -> dict:
+    """Fit a Kinect corrector on simulated pairs of the motion files in ``mocap`` (files or folders, searched
+    recursively) and save it to ``out``: with ``method="gp"``
+    :class:`~mocapkit.kinect.reconstruction.KinectPostureReconstructor` (``.npz``), with ``"bigru"`` or
+    ``"transformer"`` :class:`~mocapkit.kinect.learned.LearnedKinectCorrector` (a ``torch.save`` file,
+    ``.pt`` by convention).
+
+    Args:
+        seed: the simulation seed and the model's ``random_state``.
+        method: one of :data:`METHODS`.
+        noise: the simulator's calibration (:meth:`~mocapkit.datasets.synthetic.kinect_noise.KinectNoiseConfig.preset`:
+            ``mean_error`` or ``msr_steadiness``).
+        skip_bad: skip (and report) unreadable or unusable files instead of failing.
+        params: other parameters of the model (the GP's ``max_train_frames``, ``gp_iterations``, weights, ...; the
+            learned corrector's ``steps``, ``window``, ...).
+
+    Returns:
+        ``{"model", "method", "noise", "files", "frames", "skipped": [[path, reason], ...], "fit_seconds"}`` (also
+        printed by the CLI).
+    """
+    from mocapkit.kinect.reconstruction import KinectPostureReconstructor
+    from mocapkit.datasets.formats.motion_io import expand_motion_paths
+    from mocapkit.datasets.synthetic.kinect_noise import (
+        KinectNoiseConfig,
+        simulate_pairs,
+    )
+    from mocapkit.kinect.learned import LearnedKinectCorrector
+
+    if method not in METHODS:
+        raise KinectFixError(f"--method {method}: one of {list(METHODS)}")
+    try:
+        config = KinectNoiseConfig.preset(noise)
+    except ValueError as exc:
+        raise KinectFixError(f"--noise {noise}: {exc}") from None
+    try:
+        model = (KinectPostureReconstructor(random_state=seed, **params) if method == "gp"
+                 else LearnedKinectCorrector(architecture=method, random_state=seed, **params))
+    except TypeError as exc:
+        raise KinectFixError(f"--set: {exc}") from None
+    files = expand_motion_paths(mocap, "--mocap", empty_error=KinectFixError)
+    pairs, skipped = simulate_pairs(files, config, seed=seed, fps=MODEL_FPS,
+                                    skip_bad=skip_bad, progress=True)
+    if not pairs:
+        raise KinectFixError(f"--mocap {', '.join(map(str, mocap))}: no usable motion file "
+                             f"({len(skipped)} skipped)")
+    what = "the 20 joint GPs" if method == "gp" else f"the {method} corrector"
+    print(f"[kinect-fix] fitting {what} on {len(pairs)} simulated clips "
+          f"({sum(len(p.clean) for p in pairs)} frames)...", file=sys.stderr, flush=True)
+    start = time.perf_counter()
+    model.fit([p.noisy for p in pairs], [p.clean for p in pairs], [p.state for p in pairs])
+    seconds = time.perf_counter() - start
+    path = model.save(out)
+    return {"model": str(path), "method": method, "noise": noise, "files": len(pairs),
+            "frames": int(sum(len(p.clean) for p in pairs)), "skipped": [[str(p), r] for p, r in skipped],
+            "fit_seconds": round(seconds, 1)}
+
+
+def load_model(path: str | os.PathLike):
+    """A saved Kinect model: a ``.npz`` is Zhou's GP reconstructor
+    (:meth:`~mocapkit.kinect.reconstruction.KinectPostureReconstructor.load`), an ``.onnx`` an exported
+    learned corrector (:class:`~mocapkit.kinect.learned.OnnxKinectCorrector`, the network in
+    onnxruntime), any other file a learned corrector (:meth:`~mocapkit.kinect.learned.LearnedKinectCorrector.load`);
+    a :class:`KinectFixError` names the file when it is none of them."""
+    from mocapkit.kinect.reconstruction import KinectPostureReconstructor
+    from mocapkit.kinect.learned import (
+        LearnedKinectCorrector,
+        OnnxKinectCorrector,
+    )
+
+    if not Path(path).is_file():
+        raise KinectFixError(f"--model {path}: no such file")
+    suffix = Path(path).suffix.lower()
+    try:
+        if suffix == ".onnx":
+            return OnnxKinectCorrector(str(path)).fit()
+        return (KinectPostureReconstructor if suffix == ".npz" else LearnedKinectCorrector).load(path)
+    except ValueError as exc:
+        raise KinectFixError(str(exc)) from None
+
+
+def export_kinect_model(model: str | os.PathLike, out: str | os.PathLike) -> dict:
+    """Export a learned corrector written by :func:`train_kinect_model` (``--method bigru|transformer``) as ONNX
+    (:meth:`~mocapkit.kinect.learned.LearnedKinectCorrector.export_onnx`); ``kinect-fix apply --model
+    OUT`` then runs it with onnxruntime. Zhou's GP model (``.npz``) has no network to export: a
+    :class:`KinectFixError` says so. Returns the export's figures (parity with PyTorch included)."""
+    from mocapkit.kinect.learned import LearnedKinectCorrector
+
+    if Path(model).suffix.lower() == ".npz":
+        raise KinectFixError(f"--model {model}: a GP reconstructor (.npz) has no network to export to ONNX; only the "
+                             f"learned correctors do (kinect-fix train --method {'|'.join(METHODS[1:])})")
+    corrector = load_model(model)
+    if not isinstance(corrector, LearnedKinectCorrector):
+        raise KinectFixError(f"--model {model}: already an ONNX export")
+    return corrector.export_onnx(out)
+
+
+@dataclass
+class KinectFixReport:
+    """What :func:`fix_kinect_files` did: one entry per written file, one per skipped file."""
+
+    model: str
+    fixed: list[dict] = field(default_factory=list)
+    skipped: list[list[str]] = field(default_factory=list)
+    frames_per_s: float = float("nan")
+
+    def to_text(self) -> str:
+        lines = [(f"[kinect-fix] corrected {len(self.fixed)} file(s) with {self.model} "
+                  f"({self.frames_per_s:,.0f} frames/s)")]
+        if self.fixed:
+            mean = {k: float(np.mean([f[k] for f in self.fixed])) for k in
+                    ("bone_sd_raw_cm", "bone_sd_fixed_cm", "jitter_raw_cm", "jitter_fixed_cm")}
+            lines.append(f"  bone-length sd {mean['bone_sd_raw_cm']:.2f} → {mean['bone_sd_fixed_cm']:.2f} cm, "
+                         f"jitter {mean['jitter_raw_cm']:.2f} → {mean['jitter_fixed_cm']:.2f} cm (means over files)")
+            filled = [f for f in self.fixed if f["filled_entries"]]
+            if filled:
+                lines.append(f"  {len(filled)} file(s) had missing joints, filled and marked not tracked: "
+                             + ", ".join(f"{Path(f['input']).name} ({f['filled_entries']})" for f in filled[:10])
+                             + (" ..." if len(filled) > 10 else ""))
+        for path, reason in self.skipped:
+            lines.append(f"  skipped {path}: {reason}")
+        return "\n".join(lines)
+
+
+def fix_kinect_files(model, inputs, out_dir: str | os.PathLike, skip_bad: bool = False, plot: int = 0,
+                     **energy) -> KinectFixReport:
+    """Correct Kinect skeleton files with a saved model (see the module docstring).
+
+    Args:
+        model: a file from :func:`train_kinect_model` (a GP ``.npz``, else a learned corrector; :func:`load_model`)
+            or a fitted model.
+        inputs: files or folders (searched recursively for files ``read_motion`` reads).
+        out_dir: where ``<name>.c3d``, ``report.json`` and the ``<name>_before_after.png`` plots go.
+        skip_bad: skip (and report) files that cannot be read or used instead of failing.
+        plot: draw the first ``plot`` files before/after.
+        energy: prediction parameters set on the model (the GP's ``w_spatial``, ``w_temporal``, ``w_reliability``,
+            ``energy_unit``, ...; the learned corrector's ``inference_window``, ``overlap``).
+    """
+    from mocapkit.datasets.formats.motion_io import (
+        expand_motion_paths,
+        read_motion,
+        write_motion,
+    )
+    from mocapkit.kinect.metrics import bone_length_sd_cm, jitter_cm
+    from mocapkit.io_atomic import atomic_write_text
+
+    name = str(model)
+    if isinstance(model, (str, os.PathLike)):
+        model = load_model(model)
+    if energy:
+        try:
+            model.set_params(**energy)
+        except ValueError as exc:
+            raise KinectFixError(f"--set: {exc}") from None
+    files = expand_motion_paths(inputs, "input", empty_error=KinectFixError)
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    report = KinectFixReport(model=name)
+    total_frames, total_seconds = 0, 0.0
+    for path in files:
+        try:
+            motion = read_motion(path)
+            source_fps = motion.fps
+            raw, state, filled = kinect_clip(motion.resample(MODEL_FPS))
+        except (OSError, ValueError) as exc:
+            reason = str(exc) if str(path) in str(exc) else f"{path}: {exc}"
+            if not skip_bad:
+                raise KinectFixError(reason) from exc
+            report.skipped.append([str(path), reason])
+            continue
+        start = time.perf_counter()
+        fixed = model.predict(raw, state=state)
+        total_seconds += time.perf_counter() - start
+        total_frames += len(raw)
+        target = out_dir / f"{path.stem}.c3d"
+        write_motion(target, _as_msr_motion(fixed, MODEL_FPS, path.stem, str(path)))
+        entry = {"input": str(path), "output": str(target), "frames": len(raw), "fps": MODEL_FPS,
+                 "source_fps": source_fps, "filled_entries": filled,
+                 "bone_sd_raw_cm": bone_length_sd_cm(raw), "bone_sd_fixed_cm": bone_length_sd_cm(fixed),
+                 "jitter_raw_cm": jitter_cm(raw), "jitter_fixed_cm": jitter_cm(fixed)}
+        if len(report.fixed) < plot:
+            entry["plot"] = str(_plot_before_after(raw, fixed, path, out_dir))
+        report.fixed.append(entry)
+    if not report.fixed and not report.skipped:
+        raise KinectFixError(f"input {', '.join(map(str, inputs))}: no motion files")
+    report.frames_per_s = total_frames / total_seconds if total_seconds > 0 else float("nan")
+    atomic_write_text(out_dir / "report.json", json.dumps({"model": report.model, "frames_per_s": report.frames_per_s,
+                                                           "fixed": report.fixed, "skipped": report.skipped},
+                                                          indent=1))
+    return report
+
+
+def _plot_before_after(raw: np.ndarray, fixed: np.ndarray, path: Path, out_dir: Path) -> Path:
+    from mocapkit.visualization.render import render_strip
+
+    before = _as_msr_motion(raw, MODEL_FPS, f"{path.stem} raw", str(path))
+    after = _as_msr_motion(fixed, MODEL_FPS, f"{path.stem} corrected", str(path))
+    return render_strip([before, after], out_dir / f"{path.stem}_before_after.png", n=8, view="front",
+                        title=f"{path.name}: raw Kinect (blue) and corrected (red)")

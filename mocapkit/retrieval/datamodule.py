@@ -1,0 +1,286 @@
+"""Training data of the learned motion embeddings: whole labelled clips as normalised landmarks, two views each.
+
+:class:`RetrievalDataModule` reads HDM05 or Bandai clips (:mod:`mocapkit.datasets.mocap.folders`) or MSR Action3D
+(:class:`~mocapkit.datasets.msr_action3d.dataset.MSRAction3D`), turns every clip into
+:func:`~mocapkit.motion.geometry.normalised_landmarks` ``[T, 20, 3]`` once (``fps``, ``heading``), holds out
+**groups** (performers) for testing and keeps a seeded, class-stratified fraction of the training groups' clips
+for validation (checkpoint selection never sees a test performer):
+
+==========  ===================================  =====================================================
+dataset     label (``label``)                    group (held out by ``test_groups``)
+==========  ===================================  =====================================================
+``hdm05``   ``class`` (the motion class)         the actor (bd, bk, dg, mm)
+``bandai``  ``content`` (= ``class``) or         no actor is known: the **style** when the label is the
+            ``style``                            content, the **content** when the label is the style
+``msr``     ``action`` (= ``class``)             the subject (``"1"`` ... ``"10"``)
+==========  ===================================  =====================================================
+
+Every clip becomes ``frames`` frames by :func:`~mocapkit.retrieval.embedding.resample_frames` (what
+:class:`~mocapkit.retrieval.embedding.EmbeddingRetrieval` does to a query). Training items are two views of a
+clip, each augmented afresh at every access: a random temporal crop of ``crop`` (70–100 %) of the clip resampled
+to ``frames``, a rotation about the vertical (±``rotation_deg``), a scale (``scale``) and Gaussian jitter of every
+landmark (``jitter`` metres). There is no left/right mirroring: HDM05's classes have sides. Each training clip
+appears ``repeats`` times per epoch.
+
+Validation and test items are the clips as they are (no augmentation), each flagged as a *query* or a *database*
+clip, so that one loader gives a retrieval task:
+
+- ``val``: queries = the validation clips; database = the training clips (of the training groups);
+- ``test``: queries = the held-out groups' clips; database = every training-group clip (training and validation).
+
+Batches are dicts::
+
+    landmarks  float32 [B, frames, 20, 3]   the clip (training: the first augmented view)
+    view2      float32 [B, frames, 20, 3]   training only: the second augmented view
+    label      int64   [B]                  index into class_names
+    group      int64   [B]                  index into groups["all"]
+    query      bool    [B]                  validation / test: a query (True) or a database clip (False)
+    index      int64   [B]                  the clip's index in its part
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import lightning as L
+import numpy as np
+import torch
+from torch.utils.data import DataLoader, Dataset
+
+from mocapkit.motion.layouts import LANDMARK_NAMES
+from mocapkit.datasets.mocap.folders import MocapFolderError, held_out_groups
+from mocapkit.retrieval.embedding import resample_frames
+from mocapkit.motion.geometry import normalised_landmarks
+
+DATASETS = ("hdm05", "bandai", "msr")
+#: Labels each data set offers (``class`` is the first one's alias).
+LABELS = {"hdm05": ("class",), "bandai": ("content", "style"), "msr": ("action",)}
+AUGMENT_KEYS = ("crop", "rotation_deg", "scale", "jitter")
+
+
+@dataclass
+class Clip:
+    """One clip: normalised landmarks ``[T, 20, 3]``, its label and group (strings) and its name."""
+    landmarks: np.ndarray
+    label: str
+    group: str
+    name: str
+
+
+def read_labelled_clips(dataset: str, root: str, label: str = "class", fps: float = 30.0,
+                        heading: str = "frame") -> list[Clip]:
+    """Every clip of ``dataset`` under ``root`` as a :class:`Clip` (see the module docstring for labels and groups)."""
+    if dataset not in DATASETS:
+        raise MocapFolderError(f"data.dataset={dataset!r}: one of {list(DATASETS)}")
+    label = LABELS[dataset][0] if label == "class" else label
+    if label not in LABELS[dataset]:
+        raise ValueError(f"data.label={label!r}: {dataset} offers {['class', *LABELS[dataset]]}")
+    if dataset == "msr":
+        from mocapkit.datasets.msr_action3d.dataset import ACTION_NAMES, MSRAction3D
+
+        data = MSRAction3D(root)
+        return [Clip(normalised_landmarks(m, fps=fps, heading=heading), ACTION_NAMES[int(a) - 1], str(int(s)), name)
+                for m, a, s, name in zip(data.motions, data.actions, data.subjects, data.names)]
+    from mocapkit.datasets.mocap.folders import list_clips, read_clips
+
+    clips = list_clips(dataset, root)
+    print(f"[mocapkit] reading {len(clips)} {dataset} clips under {root}", flush=True)
+    motions = read_clips(clips, progress=True)
+    out = []
+    for clip, motion in zip(clips, motions):
+        landmarks = normalised_landmarks(motion, fps=fps, heading=heading)
+        if dataset == "bandai" and label == "style":       # Bandai: group = the other factor (no actor is known)
+            out.append(Clip(landmarks, clip["group"], clip["class"], clip["name"]))
+        else:
+            out.append(Clip(landmarks, clip["class"], clip["group"], clip["name"]))
+    return out
+
+
+def augment(sequence: np.ndarray, frames: int, rng: np.random.Generator, crop=(0.7, 1.0), rotation_deg: float = 30.0,
+            scale=(0.9, 1.1), jitter: float = 0.01) -> np.ndarray:
+    """One augmented view ``[frames, 20, 3]`` float32 of ``sequence`` ``[T, 20, 3]`` (module docstring)."""
+    total = len(sequence)
+    length = min(total, max(2, round(rng.uniform(*crop) * total)))
+    start = int(rng.integers(total - length + 1))
+    x = resample_frames(sequence[start:start + length], frames).astype(np.float64)
+    angle = np.deg2rad(rng.uniform(-rotation_deg, rotation_deg))
+    c, s = np.cos(angle), np.sin(angle)
+    rotation = np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+    x = rng.uniform(*scale) * (x @ rotation.T)
+    if jitter > 0:
+        x = x + rng.normal(0.0, jitter, x.shape)
+    return x.astype(np.float32)
+
+
+class TwoViews(Dataset):
+    """Training clips, ``repeats`` times each, as two freshly augmented views."""
+
+    def __init__(self, clips: list[Clip], labels: np.ndarray, groups: np.ndarray, frames: int, repeats: int = 1,
+                 seed: int = 0, augmentation: dict | None = None):
+        self.clips, self.labels, self.groups = clips, labels, groups
+        self.frames, self.repeats, self.seed, self.calls = frames, max(1, int(repeats)), seed, 0
+        self.augmentation = dict(augmentation or {})
+
+    def __len__(self) -> int:
+        return len(self.clips) * self.repeats
+
+    def __getitem__(self, index: int) -> dict:
+        self.calls += 1
+        rng = np.random.default_rng([self.seed, self.calls, index])
+        i = index % len(self.clips)
+        sequence = self.clips[i].landmarks
+        return {"landmarks": torch.from_numpy(augment(sequence, self.frames, rng, **self.augmentation)),
+                "view2": torch.from_numpy(augment(sequence, self.frames, rng, **self.augmentation)),
+                "label": torch.tensor(self.labels[i]), "group": torch.tensor(self.groups[i]),
+                "index": torch.tensor(i)}
+
+
+class RetrievalClips(Dataset):
+    """Clips as they are (resampled to ``frames``), each a query or a database clip."""
+
+    def __init__(self, clips: list[Clip], labels: np.ndarray, groups: np.ndarray, query: np.ndarray, frames: int):
+        self.clips, self.labels, self.groups, self.query, self.frames = clips, labels, groups, query, frames
+        self._cache: dict[int, torch.Tensor] = {}
+
+    def __len__(self) -> int:
+        return len(self.clips)
+
+    def __getitem__(self, index: int) -> dict:
+        if index not in self._cache:
+            self._cache[index] = torch.from_numpy(resample_frames(self.clips[index].landmarks, self.frames))
+        return {"landmarks": self._cache[index], "label": torch.tensor(self.labels[index]),
+                "group": torch.tensor(self.groups[index]), "query": torch.tensor(bool(self.query[index])),
+                "index": torch.tensor(index)}
+
+
+def stratified_split(labels: list[str], fraction: float, seed: int) -> np.ndarray:
+    """bool ``[n]``: a seeded ``fraction`` of each label's clips (rounded; at least one of a label with ≥ 2 clips)."""
+    rng = np.random.default_rng(seed)
+    labels = np.asarray(labels)
+    chosen = np.zeros(len(labels), dtype=bool)
+    for name in sorted(set(labels.tolist())):
+        members = np.flatnonzero(labels == name)
+        if len(members) < 2:
+            continue
+        n = min(len(members) - 1, max(1, round(fraction * len(members))))
+        chosen[rng.permutation(members)[:n]] = True
+    return chosen
+
+
+class RetrievalDataModule(L.LightningDataModule):
+    """Labelled clips for the motion embeddings; see the module docstring.
+
+    Args:
+        dataset: ``"hdm05"``, ``"bandai"`` or ``"msr"``. root: its folder.
+        label: ``"class"`` (each data set's own class), Bandai ``"content"`` or ``"style"``, MSR ``"action"``.
+        test_groups: groups (performers) held out for testing; None: the first group in sorted order; ``[]``: none.
+        train_groups: groups to train on; None: every group not held out.
+        val_fraction: fraction of each class's training-group clips kept for validation (seeded by ``split_seed``).
+        frames: frames per item (every clip is resampled to it). fps, heading: of
+            :func:`~mocapkit.motion.geometry.normalised_landmarks`.
+        repeats: times each training clip is drawn per epoch (a fresh augmentation each time).
+        augmentation: ``crop`` [min, max] fraction, ``rotation_deg``, ``scale`` [min, max], ``jitter`` (metres).
+        batch_size, eval_batch_size, num_workers: the loaders'.
+        split_seed: seed of the validation draw. seed: the run's seed (``mocapkit train`` passes it): augmentations.
+        clips: instead of ``dataset`` / ``root``: :class:`Clip` objects (tests, or motions read elsewhere).
+    """
+
+    def __init__(self, dataset: str = "hdm05", root: str | None = None, label: str = "class",
+                 test_groups: list | str | None = None, train_groups: list | None = None, val_fraction: float = 0.1,
+                 frames: int = 64, fps: float = 30.0, heading: str = "frame", repeats: int = 1,
+                 augmentation: dict | None = None, batch_size: int = 64, eval_batch_size: int = 128,
+                 num_workers: int = 0, split_seed: int = 0, seed: int = 0, clips: list[Clip] | None = None):
+        super().__init__()
+        if int(frames) < 8:
+            raise ValueError(f"data.frames={frames}: at least 8")
+        if not 0.0 < float(val_fraction) < 1.0:
+            raise ValueError(f"data.val_fraction={val_fraction}: a fraction in (0, 1)")
+        self.augmentation = dict(augmentation or {})
+        if set(self.augmentation) - set(AUGMENT_KEYS):
+            raise ValueError(f"data.augmentation: unknown key(s) {sorted(set(self.augmentation) - set(AUGMENT_KEYS))};"
+                             f" it takes {list(AUGMENT_KEYS)}")
+        self.dataset_name, self.root, self.label = dataset, None if root is None else str(root), label
+        self.frames, self.fps, self.heading = int(frames), float(fps), heading
+        self.repeats, self.seed, self.split_seed = int(repeats), int(seed), int(split_seed)
+        self.batch_size, self.eval_batch_size, self.num_workers = int(batch_size), int(eval_batch_size), int(num_workers)
+        if clips is None:
+            if root is None:
+                raise ValueError(f"data.root is not set: give the {dataset} folder (e.g. data.root=../shared/data/"
+                                 "hdm05_cuts11)")
+            clips = read_labelled_clips(dataset, root, label, self.fps, heading)
+        clips = list(clips)
+        if not clips:
+            raise ValueError("no clip")
+        groups = sorted({c.group for c in clips})
+        train, test = held_out_groups(groups, test_groups, train_groups, dataset, root)
+        self.groups = {"train": train, "test": test, "all": groups}
+        train_clips = [c for c in clips if c.group in train]
+        self.test_clips = [c for c in clips if c.group in test]
+        val = stratified_split([c.label for c in train_clips], float(val_fraction), self.split_seed)
+        self.val_clips = [c for c, v in zip(train_clips, val) if v]
+        self.train_clips = [c for c, v in zip(train_clips, val) if not v]
+        self.class_names_ = sorted({c.label for c in clips})
+        self._label_index = {name: i for i, name in enumerate(self.class_names_)}
+        self._group_index = {name: i for i, name in enumerate(groups)}
+
+    # ------------------------------------------------------------------ what the model needs
+    def label_spaces(self) -> dict:
+        """``{"class_names": [...], "source": {...}}``: the label space and how the training data was made (data set,
+        label, groups, frames, fps, heading, landmark names), stored in the checkpoint and the ONNX metadata."""
+        return {"class_names": list(self.class_names_),
+                "source": {"dataset": self.dataset_name, "root": self.root, "label": self.label,
+                           "train_groups": list(self.groups["train"]), "test_groups": list(self.groups["test"]),
+                           "groups": list(self.groups["all"]), "frames": self.frames, "fps": self.fps,
+                           "heading": self.heading, "landmark_names": list(LANDMARK_NAMES)}}
+
+    @property
+    def class_names(self) -> list[str]:
+        return list(self.class_names_)
+
+    def sample_counts(self) -> dict[str, int]:
+        return {"train": len(self.train_clips), "val": len(self.val_clips), "test": len(self.test_clips)}
+
+    def describe(self) -> dict:
+        return {"split": f"groups: train {self.groups['train']}, test {self.groups['test']}",
+                "dataset": self.dataset_name, "root": self.root, "label": self.label, "frames": self.frames,
+                "fps": self.fps, "heading": self.heading, "classes": len(self.class_names_),
+                "sample_counts": self.sample_counts()}
+
+    # ------------------------------------------------------------------ loaders
+    def _arrays(self, clips: list[Clip]) -> tuple[np.ndarray, np.ndarray]:
+        return (np.array([self._label_index[c.label] for c in clips], dtype=np.int64),
+                np.array([self._group_index[c.group] for c in clips], dtype=np.int64))
+
+    def _retrieval(self, queries: list[Clip], database: list[Clip]) -> RetrievalClips:
+        clips = [*queries, *database]
+        labels, groups = self._arrays(clips)
+        query = np.arange(len(clips)) < len(queries)
+        return RetrievalClips(clips, labels, groups, query, self.frames)
+
+    def dataset(self, part: str) -> Dataset:
+        if not hasattr(self, "_datasets"):
+            labels, groups = self._arrays(self.train_clips)
+            self._datasets = {
+                "train": TwoViews(self.train_clips, labels, groups, self.frames, self.repeats, self.seed,
+                                  self.augmentation),
+                "val": self._retrieval(self.val_clips, self.train_clips),
+                "test": self._retrieval(self.test_clips, [*self.train_clips, *self.val_clips])}
+        return self._datasets[part]
+
+    def _loader(self, part: str) -> DataLoader:
+        train = part == "train"
+        return DataLoader(self.dataset(part), batch_size=self.batch_size if train else self.eval_batch_size,
+                          shuffle=train, drop_last=train and len(self.dataset(part)) > self.batch_size,
+                          num_workers=self.num_workers, persistent_workers=self.num_workers > 0)
+
+    def train_dataloader(self) -> DataLoader:
+        return self._loader("train")
+
+    def val_dataloader(self) -> DataLoader:
+        return self._loader("val")
+
+    def test_dataloader(self) -> DataLoader:
+        return self._loader("test")
+
+
+__all__ = ["Clip", "RetrievalClips", "RetrievalDataModule", "TwoViews", "augment", "read_labelled_clips",
+           "stratified_split"]

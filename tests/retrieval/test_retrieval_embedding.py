@@ -1,0 +1,300 @@
+"""Learned motion embeddings for retrieval: encoder, losses, data module, `mocapkit train|eval|export`, and
+:class:`~mocapkit.retrieval.embedding.EmbeddingRetrieval` (checkpoint and ONNX, FAISS flat / HNSW, state).
+
+The end-to-end run trains one tiny epoch on a synthetic HDM05-format folder (the generator's output renamed to
+HDM05's own layout), so it runs without the real data.
+"""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from tests.shared_data import synthetic_hdm05_folder
+
+from mocapkit.models.motion_encoder import motion_encoder
+from mocapkit.retrieval.embedding import EmbeddingRetrieval, resample_frames
+from mocapkit.train.losses import contrastive_loss
+
+ROOT = Path(__file__).resolve().parents[2]
+TINY_MODEL = ["model.channels=[16,16]", "model.strides=[2,1]", "model.hidden=16", "model.embedding_dim=8"]
+TINY = [*TINY_MODEL, "data.frames=16", "data.batch_size=8", "trainer.max_epochs=1", "logger=none",
+        "callbacks.learning_rate=null", "trainer.enable_progress_bar=false", "data.val_fraction=0.3"]
+CLASSES = ("walk2StepsLstart", "hopBothLegs1hops")
+
+
+def smooth_batch(n: int, frames: int = 32, seed: int = 0) -> torch.Tensor:
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0, 2 * np.pi, frames)[None, :, None, None]
+    x = rng.normal(0, 0.3, (n, 1, 20, 3)) + 0.1 * np.sin(t * rng.uniform(1, 3, (n, 1, 20, 3)))
+    return torch.from_numpy(x.astype(np.float32))
+
+
+# ------------------------------------------------------------------------------------------ encoder and losses
+@pytest.mark.parametrize("trunk", ["tcn", "stgcn"])
+def test_encoder_gives_unit_norm_embeddings_for_any_length(trunk):
+    torch.manual_seed(0)
+    model = motion_encoder(embedding_dim=12, trunk=trunk, channels=[8, 16], strides=[2, 1], hidden=16).eval()
+    for frames in (16, 64, 97):
+        z = model(smooth_batch(3, frames))
+        assert z.shape == (3, 12)
+        assert torch.allclose(z.norm(dim=1), torch.ones(3), atol=1e-5)
+
+
+def test_contrastive_loss_matches_nt_xent_by_hand():
+    torch.manual_seed(0)
+    z = torch.nn.functional.normalize(torch.randn(6, 5), dim=1)
+    labels = torch.arange(3).repeat(2)                    # SimCLR: view i and i+3 are the pair
+    tau = 0.1
+    sim = z @ z.T / tau
+    expected = []
+    for i in range(6):
+        j = (i + 3) % 6
+        others = torch.cat([sim[i, :i], sim[i, i + 1:]])
+        expected.append(-(sim[i, j] - torch.logsumexp(others, 0)))
+    assert torch.allclose(contrastive_loss(z, labels, tau), torch.stack(expected).mean(), atol=1e-5)
+    assert contrastive_loss(z, torch.arange(6), tau).item() == 0.0      # no positive anywhere: zero, no NaN
+
+
+@pytest.mark.parametrize("loss", ["supcon", "simclr"])
+def test_both_losses_decrease_on_a_tiny_batch(loss):
+    from mocapkit.retrieval.datamodule import augment
+    from mocapkit.retrieval.module import MotionEmbeddingModule
+
+    torch.manual_seed(0)
+    module = MotionEmbeddingModule(model={"_target_": "mocapkit.models.motion_encoder.motion_encoder",
+                                          "channels": [16, 16], "strides": [2, 1], "hidden": 32, "embedding_dim": 16},
+                                   optimizer={"_target_": "torch.optim.Adam", "_partial_": True, "lr": 3e-3},
+                                   loss=loss, temperature=0.1)
+    base = smooth_batch(8, 40, seed=1).numpy()
+    rng = np.random.default_rng(0)
+    views = lambda: torch.from_numpy(np.stack([augment(s, 24, rng) for s in base]))
+    labels = torch.tensor([0, 0, 1, 1, 2, 2, 3, 3])
+    optimizer = module.configure_optimizers()
+    fixed = {"landmarks": views(), "view2": views(), "label": labels}
+    with torch.no_grad():
+        before = module.loss(fixed).item()
+    for _ in range(20):
+        batch = {"landmarks": views(), "view2": views(), "label": labels}
+        optimizer.zero_grad()
+        module.loss(batch).backward()
+        optimizer.step()
+    with torch.no_grad():
+        after = module.loss(fixed).item()
+    assert after < 0.8 * before, (before, after)
+
+
+# ------------------------------------------------------------------------------------------ data module
+def test_resample_and_augment_keep_the_shape_and_never_mirror():
+    from mocapkit.retrieval.datamodule import augment
+
+    x = np.random.default_rng(0).normal(size=(23, 20, 3)).astype(np.float32)
+    y = resample_frames(x, 64)
+    assert y.shape == (64, 20, 3) and y.dtype == np.float32
+    assert np.allclose(y[0], x[0]) and np.allclose(y[-1], x[-1], atol=1e-6)
+    assert np.allclose(resample_frames(x, 23), x, atol=1e-6)
+    assert resample_frames(x[:1], 5).shape == (5, 20, 3)
+    body = np.zeros((30, 20, 3), np.float32)
+    body[:, 12, 0], body[:, 16, 0] = 0.1, -0.1                           # l_hip +x, r_hip -x
+    for seed in range(20):
+        view = augment(body, 16, np.random.default_rng(seed), jitter=0.0)
+        assert view.shape == (16, 20, 3)
+        assert (view[:, 12, 0] > 0).all() and (view[:, 16, 0] < 0).all()    # ±30° never swaps the sides
+        assert 0.09 <= np.linalg.norm(view[0, 12]) <= 0.111                # scale 0.9-1.1
+
+
+def _clips(groups=("a", "b", "c"), labels=("x", "y"), per=3):
+    from mocapkit.retrieval.datamodule import Clip
+
+    rng = np.random.default_rng(0)
+    return [Clip(rng.normal(size=(int(rng.integers(10, 40)), 20, 3)).astype(np.float32), lab, g, f"{g}_{lab}_{i}")
+            for g in groups for lab in labels for i in range(per)]
+
+
+def test_datamodule_holds_out_groups_and_stratifies_validation():
+    from mocapkit.retrieval.datamodule import RetrievalDataModule
+
+    dm = RetrievalDataModule(clips=_clips(), test_groups=["b"], val_fraction=0.2, frames=16, batch_size=4)
+    assert dm.groups["test"] == ["b"] and dm.groups["train"] == ["a", "c"]
+    assert {c.group for c in dm.test_clips} == {"b"}
+    assert not {c.group for c in [*dm.train_clips, *dm.val_clips]} & {"b"}
+    assert sorted(c.label for c in dm.val_clips) == ["x", "y"]             # one of each class's 6 clips
+    spaces = dm.label_spaces()
+    assert spaces["class_names"] == ["x", "y"]
+    assert spaces["source"]["test_groups"] == ["b"] and spaces["source"]["frames"] == 16
+    batch = next(iter(dm.train_dataloader()))
+    assert batch["landmarks"].shape == batch["view2"].shape == (4, 16, 20, 3)
+    assert not torch.equal(batch["landmarks"], batch["view2"])
+    val = dm.dataset("val")
+    assert int(sum(val[i]["query"] for i in range(len(val)))) == len(dm.val_clips)
+    test = dm.dataset("test")
+    assert len(test) == len(dm.test_clips) + len(dm.train_clips) + len(dm.val_clips)
+    assert RetrievalDataModule(clips=_clips()).groups["test"] == ["a"]     # null: the first group
+
+
+def test_retrieval_scores_by_hand():
+    from mocapkit.retrieval.module import retrieval_loss, retrieval_scores
+
+    db = np.eye(3, dtype=np.float32)
+    q = np.array([[0.9, 0.1, 0.0], [0.0, 0.2, 0.8]], np.float32)
+    scores = retrieval_scores(q, np.array([0, 0]), db, np.array([0, 1, 1]))
+    assert scores == {"map": pytest.approx((1 + 1 / 3) / 2), "p1": 0.5, "n_queries": 2}   # 2nd query: rank 3
+    # cross-group: each query only against the other groups' clips; query 0 then has no relevant clip (left out)
+    scores = retrieval_scores(q, np.array([0, 0]), db, np.array([0, 1, 1]), np.array([0, 1]), np.array([0, 1, 1]))
+    assert scores == {"map": 1.0, "p1": 1.0, "n_queries": 1}
+    t = torch.from_numpy
+    loss = retrieval_loss(t(q), t(np.array([0, 0])), t(db), t(np.array([0, 1, 1])), 0.5)
+    by_hand = -np.mean([np.log(np.exp(s[0] / 0.5) / np.exp(s / 0.5).sum()) for s in q @ db.T])
+    assert float(loss) == pytest.approx(by_hand, rel=1e-5)
+
+
+# ------------------------------------------------------------------------------------------ train / eval / export
+@pytest.fixture(scope="module")
+def hdm05_folder(tmp_path_factory) -> Path:
+    return synthetic_hdm05_folder(tmp_path_factory, CLASSES, clips_per_actor=3, max_frames=90)
+
+
+@pytest.fixture(scope="module")
+def run(hdm05_folder, tmp_path_factory) -> Path:
+    from mocapkit.train.config import compose_config
+    from mocapkit.train.training import train
+
+    out = tmp_path_factory.mktemp("runs")
+    cfg = compose_config(["experiment=retrieval_supcon", f"data.root={hdm05_folder}", "data.test_groups=[mm]",
+                          f"output_root={out}", "run_name=tiny", *TINY])
+    return Path(train(cfg))
+
+
+@pytest.fixture(scope="module")
+def onnx_file(run) -> Path:
+    from mocapkit.deploy.export import export_checkpoint
+
+    report = export_checkpoint(run / "best.ckpt")
+    assert report["max_abs_diff"] < 1e-4 and report["checked_shape"] == [3, 97, 20, 3]
+    return run / "model.onnx"
+
+
+@pytest.fixture(scope="module")
+def motions(hdm05_folder):
+    from mocapkit.datasets.mocap.folders import list_clips, read_clips
+
+    return read_clips(list_clips("hdm05", hdm05_folder))
+
+
+def test_train_records_the_split_and_eval_ranks_the_held_out_performer(run):
+    from mocapkit.evaluation.evaluate import evaluate
+    from mocapkit.train.checkpoints import load_checkpoint
+
+    hp = load_checkpoint(run / "best.ckpt")["hyper_parameters"]
+    assert hp["loss"] == "supcon" and hp["class_names"] == sorted(CLASSES)
+    assert hp["source"]["test_groups"] == ["mm"] and hp["source"]["train_groups"] == ["bd"]
+    report = evaluate(run / "best.ckpt")
+    assert report["n_queries"] == 6 and 0.0 <= report["map"] <= 1.0
+    assert json.loads((run / "eval" / "metrics.json").read_text())["sample_counts"]["test"] == 6
+
+
+def test_export_metadata_and_dynamic_shapes(onnx_file):
+    import onnxruntime as ort
+
+    session = ort.InferenceSession(str(onnx_file), providers=["CPUExecutionProvider"])
+    meta = json.loads(session.get_modelmeta().custom_metadata_map["mocapkit_embedding"])
+    assert meta["frames"] == 16 and meta["fps"] == 30.0 and meta["embedding_dim"] == 8 and meta["loss"] == "supcon"
+    assert len(meta["landmark_names"]) == 20 and meta["training_data"]["test_groups"] == ["mm"]
+    inputs = session.get_inputs()[0]
+    assert inputs.name == "landmarks" and isinstance(inputs.shape[0], str) and isinstance(inputs.shape[1], str)
+    out = session.run(["embedding"], {"landmarks": smooth_batch(5, 33).numpy()})[0]
+    assert out.shape == (5, 8) and np.allclose(np.linalg.norm(out, axis=1), 1.0, atol=1e-5)
+
+
+# ------------------------------------------------------------------------------------------ EmbeddingRetrieval
+def test_onnx_retrieval_imports_no_torch_and_matches_the_checkpoint(run, onnx_file, hdm05_folder, motions):
+    script = textwrap.dedent(f"""
+        import sys, json
+        from mocapkit.datasets.mocap.folders import list_clips, read_clips
+        from mocapkit.retrieval.embedding import EmbeddingRetrieval
+        motions = read_clips(list_clips("hdm05", {str(hdm05_folder)!r}))
+        method = EmbeddingRetrieval(onnx={str(onnx_file)!r}).fit(motions[:6])
+        idx, dist = method.search(motions[6:], k=3)
+        print(json.dumps({{"torch": sorted(m for m in sys.modules if m == "torch" or m.startswith("torch.")),
+                          "idx": idx.tolist(), "sha1": method.model_sha1_}}))
+    """)
+    done = subprocess.run([sys.executable, "-c", script], check=False, capture_output=True, text=True, cwd=ROOT,
+                          timeout=120, env={"OMP_NUM_THREADS": "1", "PATH": "/usr/bin:/bin"})
+    assert done.returncode == 0, done.stderr[-2000:]
+    result = json.loads(done.stdout.strip().splitlines()[-1])
+    assert result["torch"] == []
+    torch_method = EmbeddingRetrieval(checkpoint=str(run / "best.ckpt")).fit(motions[:6])
+    idx, _ = torch_method.search(motions[6:], k=3)
+    assert idx.tolist() == result["idx"]
+    assert len(result["sha1"]) == 40 and result["sha1"] != torch_method.model_sha1_
+
+
+@pytest.mark.parametrize("index", ["flat", "hnsw"])
+def test_faiss_search_agrees_with_brute_force_and_the_state_round_trips(onnx_file, motions, tmp_path, index):
+    from mocapkit.retrieval.base import top_k
+
+    method = EmbeddingRetrieval(onnx=str(onnx_file), index=index).fit(motions[:8])
+    queries = motions[8:]
+    d = method.distances(queries)
+    assert d.shape == (len(queries), 8) and d.dtype == np.float64
+    for k in (1, 3, 0):
+        idx, dist = method.search(queries, k=k)
+        ref_idx, ref_dist = top_k(d, k)
+        assert np.array_equal(idx, ref_idx) and np.allclose(dist, ref_dist, atol=1e-6)
+    state = method._state()
+    assert all(isinstance(v, np.ndarray) and v.dtype != object for v in state.values())
+    assert ("hnsw_index" in state) == (index == "hnsw")
+    np.savez(tmp_path / "state.npz", **state)
+    with np.load(tmp_path / "state.npz", allow_pickle=False) as saved:
+        loaded = {k: saved[k] for k in saved.files}
+    again = EmbeddingRetrieval(onnx=str(onnx_file), index=index)
+    again._set_state(loaded)
+    assert again.model_sha1_ == method.model_sha1_ and again.n_database_ == 8
+    assert np.array_equal(again.search(queries, k=4)[0], method.search(queries, k=4)[0])
+    assert np.allclose(again.distances(queries), d)
+
+
+def test_auto_index_is_flat_for_small_libraries_and_hnsw_for_large_ones(onnx_file, motions, monkeypatch):
+    from mocapkit.retrieval import embedding
+
+    small = EmbeddingRetrieval(onnx=str(onnx_file)).fit(motions[:8])
+    assert small.index == "auto" and small.index_kind_ == "flat" and "hnsw_index" not in small._state()
+    monkeypatch.setattr(embedding, "AUTO_HNSW_MIN_CLIPS", 8)
+    large = EmbeddingRetrieval(onnx=str(onnx_file)).fit(motions[:8])
+    assert large.index_kind_ == "hnsw" and "hnsw_index" in large._state()
+    assert np.array_equal(large.search(motions[8:], k=3)[0], small.search(motions[8:], k=3)[0])
+    again = EmbeddingRetrieval(onnx=str(onnx_file))
+    again._set_state(large._state())
+    assert again.index_kind_ == "hnsw"
+    monkeypatch.setattr(embedding, "AUTO_HNSW_MIN_CLIPS", 9)
+    again._set_state(large._state())
+    assert again.index_kind_ == "hnsw"                     # a saved HNSW graph is used as it was built
+
+
+def test_an_index_refuses_another_model(onnx_file, motions, tmp_path):
+    method = EmbeddingRetrieval(onnx=str(onnx_file)).fit(motions[:4])
+    state = method._state()
+    other = tmp_path / "other.onnx"
+    other.write_bytes(onnx_file.read_bytes() + b"\0")     # another file: another digest
+    with pytest.raises(ValueError, match="SHA-1"):
+        EmbeddingRetrieval(onnx=str(other))._set_state(state)
+
+
+def test_a_list_of_runs_picks_the_one_that_held_out_the_absent_groups(run, motions, tmp_path):
+    ckpt = torch.load(run / "best.ckpt", map_location="cpu", weights_only=True)
+    ckpt["hyper_parameters"]["source"] = {**ckpt["hyper_parameters"]["source"], "test_groups": ["bd"],
+                                          "train_groups": ["mm"]}
+    other = tmp_path / "fold_bd.ckpt"
+    torch.save(ckpt, other)
+    runs = [str(other), str(run / "best.ckpt")]
+    bd = [m for m in motions if m.metadata["group"] == "bd"]
+    mm = [m for m in motions if m.metadata["group"] == "mm"]
+    assert EmbeddingRetrieval(checkpoint=runs).fit(bd).checkpoint_used_ == str(run / "best.ckpt")   # mm absent
+    assert EmbeddingRetrieval(checkpoint=runs).fit(mm).checkpoint_used_ == str(other)
+    with pytest.raises(ValueError, match="held out exactly"):
+        EmbeddingRetrieval(checkpoint=runs).fit(motions)
