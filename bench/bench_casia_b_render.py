@@ -17,14 +17,13 @@ Timings are the best of ``--repeat`` rounds, the renderers interleaved in every 
 
 Usage: ``python bench/bench_casia_b_render.py [--heights 64 128] [--subjects 2] [--frames 40] [--repeat 3]``
 """
+
 from __future__ import annotations
 
 import argparse
 import os
 
 import numpy as np
-
-
 from timing import best_of  # bench/timing.py, beside this script
 
 from mocapkit.datasets.formats.casia_b import CONDITIONS, VIEWS
@@ -62,8 +61,15 @@ def plain_render_walk(subject, views, condition: str, frames: int, height: int, 
                 norm = np.hypot(dx, dy)
                 if norm > 1e-9:
                     nx, ny = -dy / norm, dx / norm
-                    draw.polygon([(ax + nx * r0, ay + ny * r0), (bx + nx * r1, by + ny * r1),
-                                  (bx - nx * r1, by - ny * r1), (ax - nx * r0, ay - ny * r0)], fill=255)
+                    draw.polygon(
+                        [
+                            (ax + nx * r0, ay + ny * r0),
+                            (bx + nx * r1, by + ny * r1),
+                            (bx - nx * r1, by - ny * r1),
+                            (ax - nx * r0, ay - ny * r0),
+                        ],
+                        fill=255,
+                    )
                 draw.ellipse([ax - r0, ay - r0, ax + r0, ay + r0], fill=255)
                 draw.ellipse([bx - r1, by - r1, bx + r1, by + r1], fill=255)
             masks[t] = np.asarray(image)
@@ -84,13 +90,14 @@ def main(argv: list[str] | None = None) -> int:
     rngs = [np.random.default_rng(k) for k in range(len(VIEWS))]
     rows = []
     for height in args.heights:
+
         def ours(noise=None, height=height):
             return [render_views(p, VIEWS, c, args.frames, height, rngs, walk, noise) for p, c in walks]
 
         def plain(height=height):
             return [plain_render_walk(p, VIEWS, c, args.frames, height, walk) for p, c in walks]
 
-        mine, theirs = ours(), plain()      # agreement first (also warms up)
+        mine, theirs = ours(), plain()  # agreement first (also warms up)
         ious = []
         for views_m, views_p in zip(mine, theirs):
             for m, p in zip(views_m, views_p):
@@ -105,18 +112,26 @@ def main(argv: list[str] | None = None) -> int:
         rows.append((height, frames, iou, best))
 
     load = os.getloadavg()[0]
-    print(f"\nbest of {args.repeat} rounds; {os.cpu_count()} CPUs, load average {load:.2f}; "
-          f"{args.subjects} subjects x {len(CONDITIONS)} conditions x {len(VIEWS)} views x {args.frames} frames\n")
+    print(
+        f"\nbest of {args.repeat} rounds; {os.cpu_count()} CPUs, load average {load:.2f}; "
+        f"{args.subjects} subjects x {len(CONDITIONS)} conditions x {len(VIEWS)} views x {args.frames} frames\n"
+    )
     print("| height x width | frames | renderer | s | frames/s | IoU vs plain | ours vs plain |")
     print("|---|---:|---|---:|---:|---:|---:|")
     for height, frames, iou, best in rows:
         size = f"{height}x{height * 4 // 3}"
-        print(f"| {size} | {frames} | plain (PIL ImageDraw per capsule) | {best['plain']:.3f} "
-              f"| {frames / best['plain']:.0f} | | |")
-        print(f"| {size} | {frames} | mocapkit (numpy, vectorised) | {best['ours']:.3f} | {frames / best['ours']:.0f} "
-              f"| {iou:.3f} | **{best['plain'] / best['ours']:.1f}x** |")
-        print(f"| {size} | {frames} | mocapkit + segmentation noise | {best['ours+noise']:.3f} "
-              f"| {frames / best['ours+noise']:.0f} | | {best['plain'] / best['ours+noise']:.1f}x |")
+        print(
+            f"| {size} | {frames} | plain (PIL ImageDraw per capsule) | {best['plain']:.3f} "
+            f"| {frames / best['plain']:.0f} | | |"
+        )
+        print(
+            f"| {size} | {frames} | mocapkit (numpy, vectorised) | {best['ours']:.3f} | {frames / best['ours']:.0f} "
+            f"| {iou:.3f} | **{best['plain'] / best['ours']:.1f}x** |"
+        )
+        print(
+            f"| {size} | {frames} | mocapkit + segmentation noise | {best['ours+noise']:.3f} "
+            f"| {frames / best['ours+noise']:.0f} | | {best['plain'] / best['ours+noise']:.1f}x |"
+        )
     return 0
 
 

@@ -16,6 +16,7 @@ reading the bytes alone costs, in the same run).
 Usage: ``python bench/bench_fuzz.py [--cases 3000] [--seed 0] [--timeout 10] [--mem-gib 2]
 [--formats ntu c3d] [--src DIR] [--json out.json] [--keep DIR]``
 """
+
 from __future__ import annotations
 
 import argparse
@@ -30,6 +31,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from mocapkit.testing import fuzzing
+
 DEFAULT_SRC = Path(__file__).resolve().parents[1].parent / "shared" / "samples"
 ALL = ("ntu", "amc", "bvh", "c3d", "msr", "png")
 
@@ -57,8 +59,11 @@ def main(argv: list[str] | None = None) -> int:
         if fmt == "png":
             seeds = fuzzing.make_silhouette_seeds(root / "png-seeds")
         else:
-            seeds = [p for p in fuzzing.sample_files(args.src, fmt)
-                     if not args.max_seed_bytes or p.stat().st_size <= args.max_seed_bytes]
+            seeds = [
+                p
+                for p in fuzzing.sample_files(args.src, fmt)
+                if not args.max_seed_bytes or p.stat().st_size <= args.max_seed_bytes
+            ]
         if not seeds:
             skipped.append(f"{fmt}: no sample files under {args.src}")
             continue
@@ -66,9 +71,12 @@ def main(argv: list[str] | None = None) -> int:
         companion = fuzzing._asf_for(seeds[0]) if fmt == "amc" else None
         cases += fuzzing.make_special_cases(fmt, root, companion)
     t_gen = time.perf_counter() - t_gen
-    print(f"{len(cases)} cases ({per} mutated per format + {len(fuzzing.SPECIALS)} special files each), "
-          f"generated in {t_gen:.1f} s under {root}; seed {args.seed}, timeout {args.timeout:g} s, "
-          f"RLIMIT_AS {args.mem_gib:g} GiB", flush=True)
+    print(
+        f"{len(cases)} cases ({per} mutated per format + {len(fuzzing.SPECIALS)} special files each), "
+        f"generated in {t_gen:.1f} s under {root}; seed {args.seed}, timeout {args.timeout:g} s, "
+        f"RLIMIT_AS {args.mem_gib:g} GiB",
+        flush=True,
+    )
 
     start = time.perf_counter()
     step = max(1, len(cases) // 20)
@@ -80,8 +88,9 @@ def main(argv: list[str] | None = None) -> int:
             counts = ", ".join(f"{k} {running[k]}" for k in fuzzing.OUTCOMES if running[k])
             print(f"  {done}/{total} ({time.perf_counter() - start:.0f} s): {counts}", flush=True)
 
-    outcomes = fuzzing.run_cases(cases, timeout=args.timeout, mem_limit=int(args.mem_gib * (1 << 30)),
-                                 progress=progress)
+    outcomes = fuzzing.run_cases(
+        cases, timeout=args.timeout, mem_limit=int(args.mem_gib * (1 << 30)), progress=progress
+    )
     wall = time.perf_counter() - start
 
     # reference: the bytes alone, same files (regular files only: the specials would block or never end)
@@ -92,8 +101,9 @@ def main(argv: list[str] | None = None) -> int:
             f.read()
     plain = time.perf_counter() - t
 
-    print(f"\n{len(outcomes)} cases in {wall:.1f} s wall; {os.cpu_count()} CPUs, load average "
-          f"{os.getloadavg()[0]:.2f}\n")
+    print(
+        f"\n{len(outcomes)} cases in {wall:.1f} s wall; {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f}\n"
+    )
     print(fuzzing.table(outcomes))
     bad = fuzzing.failures(outcomes)
     print(f"\n{len(bad)} cases neither ok nor a clean error naming the file")
@@ -110,9 +120,11 @@ def main(argv: list[str] | None = None) -> int:
             shown += 1
     rate = len(outcomes) / wall
     plain_rate = len(regular) / plain if plain > 0 else float("inf")
-    print(f"\nfuzz: {rate:.1f} cases/s (isolated worker, classification, restarts, timeouts included); "
-          f"plain open().read() of the same {len(regular)} files: {plain_rate:.0f} files/s; "
-          f"fuzz vs plain read: **{rate / plain_rate:.4f}x**")
+    print(
+        f"\nfuzz: {rate:.1f} cases/s (isolated worker, classification, restarts, timeouts included); "
+        f"plain open().read() of the same {len(regular)} files: {plain_rate:.0f} files/s; "
+        f"fuzz vs plain read: **{rate / plain_rate:.4f}x**"
+    )
     for s in skipped:
         print(f"skipped: {s}")
     if args.json:

@@ -5,6 +5,7 @@ GEIs ``[32, 1, H, W]`` (no data loading, so this is the network's own cost) at t
 124×124 and OpenGait's 64×44, for the three-task network and the single-task (subject) one,
 and reports the ratios in the same run. Usage: ``python bench/bench_gait_training.py [--steps 5] [--batch 32]``.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -15,8 +16,8 @@ import time
 import torch
 import torch.nn.functional as F
 
-from mocapkit.models.gait_cnn import multitask_gait_cnn
 from mocapkit.gait.export import example_geis
+from mocapkit.models.gait_cnn import multitask_gait_cnn
 
 
 def measure(tasks: tuple[str, ...], size: tuple[int, int], batch: int, steps: int, num_subjects: int = 124) -> dict:
@@ -24,8 +25,11 @@ def measure(tasks: tuple[str, ...], size: tuple[int, int], batch: int, steps: in
     model = multitask_gait_cnn(num_subjects, tasks=tasks, input_size=size).train()
     optimizer = torch.optim.SGD(model.parameters(), lr=0.01, momentum=0.9, weight_decay=5e-4)  # thesis recipe
     x = example_geis(batch, *size)
-    labels = {"subject": torch.randint(0, num_subjects, (batch,)), "view": torch.randint(0, 11, (batch,)),
-              "condition": torch.randint(0, 3, (batch,))}
+    labels = {
+        "subject": torch.randint(0, num_subjects, (batch,)),
+        "view": torch.randint(0, 11, (batch,)),
+        "condition": torch.randint(0, 3, (batch,)),
+    }
 
     def step():
         out = model(x)
@@ -40,8 +44,14 @@ def measure(tasks: tuple[str, ...], size: tuple[int, int], batch: int, steps: in
         step()
     step_s = (time.perf_counter() - start) / steps
     params = sum(p.numel() for p in model.parameters())
-    return {"tasks": "+".join(tasks), "size": f"{size[0]}x{size[1]}", "batch": batch, "params_M": params / 1e6,
-            "step_s": step_s, "geis_per_s": batch / step_s}
+    return {
+        "tasks": "+".join(tasks),
+        "size": f"{size[0]}x{size[1]}",
+        "batch": batch,
+        "params_M": params / 1e6,
+        "step_s": step_s,
+        "geis_per_s": batch / step_s,
+    }
 
 
 def main() -> None:
@@ -49,19 +59,29 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=5)
     parser.add_argument("--batch", type=int, default=32)
     args = parser.parse_args()
-    print(f"# gait CNN training throughput, CPU ({platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
-          f"torch {torch.__version__}, {torch.get_num_threads()} threads), batch {args.batch}, 124 subjects\n")
+    print(
+        f"# gait CNN training throughput, CPU ({platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
+        f"torch {torch.__version__}, {torch.get_num_threads()} threads), batch {args.batch}, 124 subjects\n"
+    )
     multi, single = ("subject", "view", "condition"), ("subject",)
-    rows = [measure(multi, (124, 124), args.batch, args.steps), measure(single, (124, 124), args.batch, args.steps),
-            measure(multi, (64, 44), args.batch, args.steps), measure(single, (64, 44), args.batch, args.steps)]
+    rows = [
+        measure(multi, (124, 124), args.batch, args.steps),
+        measure(single, (124, 124), args.batch, args.steps),
+        measure(multi, (64, 44), args.batch, args.steps),
+        measure(single, (64, 44), args.batch, args.steps),
+    ]
     print("| network | GEI size | batch | params (M) | s / step | GEIs/s |")
     print("|---|---|---:|---:|---:|---:|")
     for r in rows:
-        print(f"| {r['tasks']} | {r['size']} | {r['batch']} | {r['params_M']:.2f} | {r['step_s']:.3f} "
-              f"| {r['geis_per_s']:.1f} |")
-    print(f"\nratio 64x44 / 124x124 (multi-task): {rows[2]['geis_per_s'] / rows[0]['geis_per_s']:.1f}x; "
-          f"single-task / multi-task at 124x124: {rows[1]['geis_per_s'] / rows[0]['geis_per_s']:.2f}x, "
-          f"at 64x44: {rows[3]['geis_per_s'] / rows[2]['geis_per_s']:.2f}x")
+        print(
+            f"| {r['tasks']} | {r['size']} | {r['batch']} | {r['params_M']:.2f} | {r['step_s']:.3f} "
+            f"| {r['geis_per_s']:.1f} |"
+        )
+    print(
+        f"\nratio 64x44 / 124x124 (multi-task): {rows[2]['geis_per_s'] / rows[0]['geis_per_s']:.1f}x; "
+        f"single-task / multi-task at 124x124: {rows[1]['geis_per_s'] / rows[0]['geis_per_s']:.2f}x, "
+        f"at 64x44: {rows[3]['geis_per_s'] / rows[2]['geis_per_s']:.2f}x"
+    )
 
 
 if __name__ == "__main__":

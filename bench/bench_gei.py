@@ -14,6 +14,7 @@ of this file, so the comparison is reproducible.
 Timings are the best of ``--repeat`` rounds, the builders interleaved in every round.
 Usage: ``python bench/bench_gei.py [--sequences 12] [--frames 80] [--size 64x44] [--repeat 3]``
 """
+
 from __future__ import annotations
 
 import argparse
@@ -21,13 +22,11 @@ import os
 
 import numpy as np
 from PIL import Image
-
-
 from timing import best_of  # bench/timing.py, beside this script
 
-from mocapkit.datasets.formats.casia_b import VIEWS
-from mocapkit.datasets.casia_b.prepare import parse_gei_size
 from mocapkit.datasets.casia_b.gei import gait_energy_images
+from mocapkit.datasets.casia_b.prepare import parse_gei_size
+from mocapkit.datasets.formats.casia_b import VIEWS
 from mocapkit.datasets.synthetic.casia_b import draw_subject, draw_walk, render_walk
 
 
@@ -40,15 +39,16 @@ def plain_gei(frames: np.ndarray, height: int = 64, width: int = 44, min_foregro
         y_sum = img.sum(axis=1)
         y_top = (y_sum != 0).argmax(axis=0)
         y_btm = (y_sum != 0).cumsum(axis=0).argmax(axis=0)
-        img = img[y_top:y_btm + 1]
+        img = img[y_top : y_btm + 1]
         ratio = img.shape[1] / img.shape[0]
-        img = np.asarray(Image.fromarray(img).resize((max(1, int(height * ratio)), height), Image.BOX),
-                         dtype=np.float64)
+        img = np.asarray(
+            Image.fromarray(img).resize((max(1, int(height * ratio)), height), Image.BOX), dtype=np.float64
+        )
         x_csum = img.sum(axis=0).cumsum()
         x_center = int(np.argmax(x_csum > img.sum() / 2))
         half = width // 2
         padded = np.concatenate([np.zeros((height, half)), img, np.zeros((height, width))], axis=1)
-        aligned.append(padded[:, x_center:x_center + width] / 255.0)  # columns x_center - half ..
+        aligned.append(padded[:, x_center : x_center + width] / 255.0)  # columns x_center - half ..
     return np.mean(aligned, axis=0).astype(np.float32)
 
 
@@ -83,32 +83,45 @@ def main(argv: list[str] | None = None) -> int:
         for axis in (0, 1):
             profile_ours, profile_theirs = ours.sum(axis=axis), theirs.sum(axis=axis)
             where = np.arange(len(profile_ours))
-            shift = ((profile_ours * where).sum() / profile_ours.sum()
-                     - (profile_theirs * where).sum() / profile_theirs.sum())
+            shift = (profile_ours * where).sum() / profile_ours.sum() - (
+                profile_theirs * where
+            ).sum() / profile_theirs.sum()
             assert abs(shift) < 1.0, f"GEI centroids differ by {shift:.2f} px along axis {axis}"
         worst = max(worst, float(np.abs(ours - theirs).mean()))
         assert worst < 0.05, f"GEIs disagree: mean |diff| {worst:.4f}"
     total = sum(len(f) for f in sequences)
 
-    best = best_of({
-        "plain": lambda: [plain_gei(f, height, width) for f in sequences],
-        "ours": lambda: [gait_energy_images(f, size=args.size, per="sequence") for f in sequences],
-        "ours_cycle": lambda: [gait_energy_images(f, size=args.size, per="cycle", fallback_period=25)
-                               for f in sequences],
-    }, args.repeat)
+    best = best_of(
+        {
+            "plain": lambda: [plain_gei(f, height, width) for f in sequences],
+            "ours": lambda: [gait_energy_images(f, size=args.size, per="sequence") for f in sequences],
+            "ours_cycle": lambda: [
+                gait_energy_images(f, size=args.size, per="cycle", fallback_period=25) for f in sequences
+            ],
+        },
+        args.repeat,
+    )
 
     load = os.getloadavg()[0]
-    print(f"\nbest of {args.repeat} rounds; {os.cpu_count()} CPUs, load average {load:.2f}; "
-          f"OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS', 'unset')}")
-    print(f"{args.sequences} synthetic walks x {args.frames} frames of 320x240 -> {height}x{width} GEIs; "
-          f"worst mean |ours - plain| per GEI {worst:.4f}\n")
+    print(
+        f"\nbest of {args.repeat} rounds; {os.cpu_count()} CPUs, load average {load:.2f}; "
+        f"OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS', 'unset')}"
+    )
+    print(
+        f"{args.sequences} synthetic walks x {args.frames} frames of 320x240 -> {height}x{width} GEIs; "
+        f"worst mean |ours - plain| per GEI {worst:.4f}\n"
+    )
     print("| builder | per | frames | s | frames/s | ours vs plain |")
     print("|---|---|---:|---:|---:|---:|")
     print(f"| plain (PIL per frame) | sequence | {total} | {best['plain']:.3f} | {total / best['plain']:.0f} | |")
-    print(f"| mocapkit | sequence | {total} | {best['ours']:.3f} | {total / best['ours']:.0f} "
-          f"| **{best['plain'] / best['ours']:.1f}x** |")
-    print(f"| mocapkit | cycle | {total} | {best['ours_cycle']:.3f} | {total / best['ours_cycle']:.0f} "
-          f"| {best['plain'] / best['ours_cycle']:.1f}x |")
+    print(
+        f"| mocapkit | sequence | {total} | {best['ours']:.3f} | {total / best['ours']:.0f} "
+        f"| **{best['plain'] / best['ours']:.1f}x** |"
+    )
+    print(
+        f"| mocapkit | cycle | {total} | {best['ours_cycle']:.3f} | {total / best['ours_cycle']:.0f} "
+        f"| {best['plain'] / best['ours_cycle']:.1f}x |"
+    )
     return 0
 
 

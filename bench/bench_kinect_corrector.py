@@ -24,6 +24,7 @@ the sum of those medians; "× eager" is the ORT throughput over the same model's
 Usage: ``OMP_NUM_THREADS=1 python bench/bench_kinect_corrector.py [--model M.pt ...] [--files 60] [--repeat 5]
 [--threads 1] [--data DIR]``
 """
+
 from __future__ import annotations
 
 import argparse
@@ -41,12 +42,12 @@ import torch
 
 HERE = Path(__file__).resolve().parent
 
-from mocapkit.kinect.reconstruction import DoubleExponentialSmoother
 from mocapkit.kinect.kinect_fix import MODEL_FPS, kinect_clip
 from mocapkit.kinect.learned import (
     LearnedKinectCorrector,
     OnnxKinectCorrector,
 )
+from mocapkit.kinect.reconstruction import DoubleExponentialSmoother
 
 
 def msr_clips(root: Path, count: int) -> list[tuple[str, np.ndarray, np.ndarray]]:
@@ -80,7 +81,8 @@ def train_tiny(hdm05: Path) -> LearnedKinectCorrector:
         raise SystemExit(f"no --model given and no HDM05 clips under {hdm05} to train a tiny corrector on")
     pairs, _ = simulate_pairs(files, KinectNoiseConfig.preset("msr_steadiness"), seed=0, fps=MODEL_FPS)
     return LearnedKinectCorrector(network={"hidden": 16}, window=32, steps=20, batch_size=8).fit(
-        [p.noisy for p in pairs], [p.clean for p in pairs], [p.state for p in pairs])
+        [p.noisy for p in pairs], [p.clean for p in pairs], [p.state for p in pairs]
+    )
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -89,34 +91,46 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--files", type=int, default=60, help="MSR Action3D files")
     parser.add_argument("--repeat", type=int, default=5, help="timed rounds (median per clip)")
     parser.add_argument("--threads", type=int, default=1, help="torch and onnxruntime intra-op threads")
-    parser.add_argument("--data", type=Path, default=HERE.parent.parent / "shared" / "data",
-                        help="folder holding msr_action3d/ (and hdm05_cuts11/ for the tiny fallback model)")
+    parser.add_argument(
+        "--data",
+        type=Path,
+        default=HERE.parent.parent / "shared" / "data",
+        help="folder holding msr_action3d/ (and hdm05_cuts11/ for the tiny fallback model)",
+    )
     args = parser.parse_args(argv)
     torch.set_num_threads(args.threads)
     import onnxruntime
 
     print(f"command: {' '.join(shlex.quote(a) for a in sys.argv)}")
-    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs; torch {torch.__version__}, "
-          f"onnxruntime {onnxruntime.__version__}, numpy {np.__version__}; OMP_NUM_THREADS="
-          f"{os.environ.get('OMP_NUM_THREADS', 'unset')}, threads {args.threads}")
+    print(
+        f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs; torch {torch.__version__}, "
+        f"onnxruntime {onnxruntime.__version__}, numpy {np.__version__}; OMP_NUM_THREADS="
+        f"{os.environ.get('OMP_NUM_THREADS', 'unset')}, threads {args.threads}"
+    )
     clips = msr_clips(args.data / "msr_action3d", args.files)
     frames = sum(len(c[1]) for c in clips)
-    print(f"{len(clips)} MSR Action3D clips at {MODEL_FPS:g} fps, {frames} frames "
-          f"({min(len(c[1]) for c in clips)}-{max(len(c[1]) for c in clips)} per clip)")
-    models = {p.stem: LearnedKinectCorrector.load(p) for p in args.model} or \
-        {"tiny_bigru": train_tiny(args.data / "hdm05_cuts11")}
+    print(
+        f"{len(clips)} MSR Action3D clips at {MODEL_FPS:g} fps, {frames} frames "
+        f"({min(len(c[1]) for c in clips)}-{max(len(c[1]) for c in clips)} per clip)"
+    )
+    models = {p.stem: LearnedKinectCorrector.load(p) for p in args.model} or {
+        "tiny_bigru": train_tiny(args.data / "hdm05_cuts11")
+    }
     methods, gaps = {}, {}
     with tempfile.TemporaryDirectory() as folder:
         for name, model in models.items():
             info = model.export_onnx(Path(folder) / f"{name}.onnx")
             exported = OnnxKinectCorrector(info["onnx"], threads=args.threads).fit()
             methods[f"{name} eager"], methods[f"{name} ORT"] = model, exported
-            gaps[name] = max(float(np.abs(exported.predict(x, state=s) - model.predict(x, state=s)).max())
-                             for _, x, s in clips)
-            print(f"{name}: {model.architecture}, {info['exporter']} exporter, max |ORT - eager| over the clips "
-                  f"{1000 * gaps[name]:.3g} mm")
+            gaps[name] = max(
+                float(np.abs(exported.predict(x, state=s) - model.predict(x, state=s)).max()) for _, x, s in clips
+            )
+            print(
+                f"{name}: {model.architecture}, {info['exporter']} exporter, max |ORT - eager| over the clips "
+                f"{1000 * gaps[name]:.3g} mm"
+            )
         methods["SDK filter"] = DoubleExponentialSmoother().fit([clips[0][1]])
-        for method in methods.values():                                       # warm-up
+        for method in methods.values():  # warm-up
             method.predict(clips[0][1], state=clips[0][2])
         seconds = {name: [] for name in methods}
         for _, x, s in clips:
@@ -133,8 +147,10 @@ def main(argv: list[str] | None = None) -> None:
     for name in methods:
         model = name.rsplit(" ", 1)[0]
         ratio = throughput[name] / throughput[f"{model} eager"] if f"{model} eager" in throughput else float("nan")
-        print(f"| {name} | {throughput[name]:,.0f} | {1000 * statistics.median(seconds[name]):.2f} | "
-              f"{'–' if np.isnan(ratio) else f'{ratio:.2f}'} |")
+        print(
+            f"| {name} | {throughput[name]:,.0f} | {1000 * statistics.median(seconds[name]):.2f} | "
+            f"{'–' if np.isnan(ratio) else f'{ratio:.2f}'} |"
+        )
 
 
 if __name__ == "__main__":

@@ -13,6 +13,7 @@ Data: uniform random non-negative matrices (seed 0). Timings are the best of ``-
 
 Usage: ``python bench/bench_nmf.py [--iters 100] [--repeat 1] [--threads 1] [--device cpu|cuda] [--sizes small]``
 """
+
 from __future__ import annotations
 
 import argparse
@@ -23,11 +24,8 @@ import time
 import numpy as np
 import torch
 
-
-from mocapkit.clustering.nmf import GNMF, NMC, NMF
-
-
 from mocapkit.clustering.graphs import knn_graph
+from mocapkit.clustering.nmf import GNMF, NMC, NMF
 
 SIZES = {"small": [(500, 100, 20)], "default": [(500, 100, 20), (2000, 300, 50), (5000, 500, 100)]}
 
@@ -68,9 +66,11 @@ def main(argv: list[str] | None = None) -> None:
     device = torch.device(args.device)
     torch.set_num_threads(args.threads)
     gpu = torch.cuda.get_device_name(device) if device.type == "cuda" else "-"
-    print(f"machine: {platform.machine()} {platform.processor() or ''}, os.cpu_count()={os.cpu_count()}, "
-          f"torch {torch.__version__} threads={torch.get_num_threads()}, BLAS threads={args.threads}, "
-          f"device={device} ({gpu}), float64, {args.iters} iterations, best of {args.repeat}\n")
+    print(
+        f"machine: {platform.machine()} {platform.processor() or ''}, os.cpu_count()={os.cpu_count()}, "
+        f"torch {torch.__version__} threads={torch.get_num_threads()}, BLAS threads={args.threads}, "
+        f"device={device} ({gpu}), float64, {args.iters} iterations, best of {args.repeat}\n"
+    )
 
     rows_nmf, rows_graph = [], []
     with threadpool_limits(limits=args.threads):

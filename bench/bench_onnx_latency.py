@@ -5,6 +5,7 @@ and the thesis VGG16 configuration, then times both runtimes on the same
 inputs of ``--frames`` frames. Reports milliseconds per batch and eager / ORT
 as a ratio. Usage: ``python bench/bench_onnx_latency.py [--frames 100]``.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -18,8 +19,8 @@ import onnxruntime as ort
 import torch
 from hydra.utils import instantiate
 
-from mocapkit.train.config import compose_config
 from mocapkit.recognition.export import example_skeletons, export_onnx
+from mocapkit.train.config import compose_config
 
 
 def best_of(fn, repeats: int) -> float:
@@ -37,8 +38,10 @@ def main() -> None:
     parser.add_argument("--frames", type=int, default=100)
     parser.add_argument("--repeats", type=int, default=10)
     args = parser.parse_args()
-    print(f"# inference latency, CPU ({platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
-          f"torch {torch.__version__}, onnxruntime {ort.__version__}), {args.frames} frames, best of {args.repeats}\n")
+    print(
+        f"# inference latency, CPU ({platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
+        f"torch {torch.__version__}, onnxruntime {ort.__version__}), {args.frames} frames, best of {args.repeats}\n"
+    )
     print("| model | batch | torch eager (ms) | onnxruntime (ms) | eager / ORT |")
     print("|---|---:|---:|---:|---:|")
     with tempfile.TemporaryDirectory() as tmp:
@@ -53,8 +56,8 @@ def main() -> None:
                 x = example_skeletons(batch, args.frames, seed=2)
                 repeats = args.repeats if model_name == "energy_vgg_cpu" else max(2, args.repeats // 4)
                 with torch.no_grad():
-                    eager = best_of(lambda: model(x), repeats)
-                onnx = best_of(lambda: session.run(None, {"skeletons": x.numpy()}), repeats)
+                    eager = best_of(lambda: model(x), repeats)  # noqa: B023 (called here, in this iteration)
+                onnx = best_of(lambda: session.run(None, {"skeletons": x.numpy()}), repeats)  # noqa: B023
                 print(f"| {model_name} | {batch} | {eager * 1e3:.1f} | {onnx * 1e3:.1f} | {eager / onnx:.2f} |")
 
 

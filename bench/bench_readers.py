@@ -18,6 +18,7 @@ reader module is not there yet are listed as skipped.
 
 Usage: ``python bench/bench_readers.py [--repeat 3] [--copies 3] [--formats bvh] [--src DIR]``
 """
+
 from __future__ import annotations
 
 import argparse
@@ -28,8 +29,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-
-
 from timing import best_of  # bench/timing.py, beside this script
 
 DEFAULT_SRC = Path(__file__).resolve().parents[1].parent / "shared" / "samples"
@@ -48,7 +47,7 @@ def plain_read_bvh(path: str | Path, scale: float = 1.0) -> np.ndarray:
     names, parents, offsets, channels = [], [], [], []
     stack: list[int] = []
     in_end = False
-    with open(path, "r") as f:
+    with open(path) as f:
         for line in f:
             tok = line.split()
             if not tok:
@@ -66,7 +65,7 @@ def plain_read_bvh(path: str | Path, scale: float = 1.0) -> np.ndarray:
                 if not in_end:
                     offsets[stack[-1]] = [float(v) for v in tok[1:4]]
             elif key == "CHANNELS":
-                channels[stack[-1]] = tok[2:2 + int(tok[1])]
+                channels[stack[-1]] = tok[2 : 2 + int(tok[1])]
             elif key == "}":
                 if in_end:
                     in_end = False
@@ -141,7 +140,7 @@ def plain_read_amc(path: str | Path) -> np.ndarray:
         return m
 
     frames: list[dict] = []
-    with open(path, "r", encoding="latin-1") as f:
+    with open(path, encoding="latin-1") as f:
         for line in f:
             tok = line.split()
             if not tok or tok[0].startswith(("#", ":")):
@@ -231,20 +230,44 @@ def _bvh_plain_positions(path, ours, plain):
 
 
 CASES: list[Case] = [
-    Case("bvh", "bvh/*.bvh", "mocapkit.datasets.formats.bvh:read_bvh", plain_read_bvh,
-         ours_positions=lambda m: m.positions, plain_positions=_bvh_plain_positions,
-         frames=lambda m: m.num_frames),
-    Case("asf/amc", "asf_amc/**/*.amc", "mocapkit.datasets.formats.asf_amc:read_amc", plain_read_amc,
-         ours_positions=lambda m: m.positions, plain_positions=lambda path, ours, plain: plain,
-         frames=lambda m: m.num_frames),
-    Case("msr3d", "msr3d/*_skeleton3D.txt", "mocapkit.datasets.formats.msr_action3d:read_msr_skeleton", plain_read_msr,
-         # ours marks all-zero joints missing; the raw file has zeros
-         ours_positions=lambda m: m.filled(0.0), plain_positions=lambda path, ours, plain: plain,
-         frames=lambda m: m.num_frames),
-    Case("c3d", "c3d/*.c3d", "mocapkit.datasets.formats.c3d:read_c3d", plain_read_c3d,
-         ours_positions=lambda m: np.nan_to_num(m.positions, nan=0.0),
-         plain_positions=lambda path, ours, plain: np.nan_to_num(_c3d_like_ours(ours, plain), nan=0.0),
-         frames=lambda m: m.num_frames, atol=1e-4),
+    Case(
+        "bvh",
+        "bvh/*.bvh",
+        "mocapkit.datasets.formats.bvh:read_bvh",
+        plain_read_bvh,
+        ours_positions=lambda m: m.positions,
+        plain_positions=_bvh_plain_positions,
+        frames=lambda m: m.num_frames,
+    ),
+    Case(
+        "asf/amc",
+        "asf_amc/**/*.amc",
+        "mocapkit.datasets.formats.asf_amc:read_amc",
+        plain_read_amc,
+        ours_positions=lambda m: m.positions,
+        plain_positions=lambda path, ours, plain: plain,
+        frames=lambda m: m.num_frames,
+    ),
+    Case(
+        "msr3d",
+        "msr3d/*_skeleton3D.txt",
+        "mocapkit.datasets.formats.msr_action3d:read_msr_skeleton",
+        plain_read_msr,
+        # ours marks all-zero joints missing; the raw file has zeros
+        ours_positions=lambda m: m.filled(0.0),
+        plain_positions=lambda path, ours, plain: plain,
+        frames=lambda m: m.num_frames,
+    ),
+    Case(
+        "c3d",
+        "c3d/*.c3d",
+        "mocapkit.datasets.formats.c3d:read_c3d",
+        plain_read_c3d,
+        ours_positions=lambda m: np.nan_to_num(m.positions, nan=0.0),
+        plain_positions=lambda path, ours, plain: np.nan_to_num(_c3d_like_ours(ours, plain), nan=0.0),
+        frames=lambda m: m.num_frames,
+        atol=1e-4,
+    ),
 ]
 
 
@@ -294,8 +317,13 @@ def main(argv: list[str] | None = None) -> int:
             np.testing.assert_allclose(case.ours_positions(mine), theirs, rtol=0, atol=case.atol, err_msg=str(f))
             frames += case.frames(mine)
         work = files * args.copies
-        best = best_of({"plain": lambda plain=case.plain, work=work: [plain(f) for f in work],
-                        "ours": lambda ours=ours, work=work: [ours(f) for f in work]}, args.repeat)
+        best = best_of(
+            {
+                "plain": lambda plain=case.plain, work=work: [plain(f) for f in work],
+                "ours": lambda ours=ours, work=work: [ours(f) for f in work],
+            },
+            args.repeat,
+        )
         n, nf = len(work), frames * args.copies
         rows.append((case.fmt, len(files), n, nf, best["plain"], best["ours"]))
 
@@ -305,8 +333,10 @@ def main(argv: list[str] | None = None) -> int:
     print("|---|---:|---:|---|---:|---:|---:|---:|")
     for fmt, nfiles, n, nf, plain, mine in rows:
         print(f"| {fmt} | {nfiles} ({n}) | {nf} | plain | {plain:.3f} | {n / plain:.1f} | {nf / plain:.0f} | |")
-        print(f"| {fmt} | {nfiles} ({n}) | {nf} | mocapkit | {mine:.3f} | {n / mine:.1f} | {nf / mine:.0f} "
-              f"| **{plain / mine:.1f}x** |")
+        print(
+            f"| {fmt} | {nfiles} ({n}) | {nf} | mocapkit | {mine:.3f} | {n / mine:.1f} | {nf / mine:.0f} "
+            f"| **{plain / mine:.1f}x** |"
+        )
     for s in skipped:
         print(f"skipped: {s}")
     if not rows:

@@ -11,7 +11,7 @@ Methods, each refining every sequence through the refiner contract (``refine(mot
 checks, windows, blending and report included):
 
 * ``TrNN`` (:class:`mocapkit.refinement.trnn.TrNN`) and ``PCA`` (:class:`mocapkit.refinement.gap_filling.
-  PCAGapFilling`), built from ``configs/refiner/trnn.yaml`` / ``pca.yaml`` (the comparison runner's settings);
+  PCAGapFilling`), built from ``configs/refinement/method/trnn.yaml`` / ``pca.yaml`` (the comparison runner's settings);
 * every ``--ckpt``: ``<label> eager`` (:class:`~mocapkit.refinement.learned.LearnedRefiner` on the checkpoint,
   PyTorch on the CPU) and, with ``--onnx``, ``<label> ORT`` (:class:`~mocapkit.refinement.learned.OnnxRefiner`
   on its export with :func:`~mocapkit.deploy.refiner_export.export_refiner`, written to a temporary folder).
@@ -30,6 +30,7 @@ onnxruntime ``threads=--threads``; set ``OMP_NUM_THREADS`` to the same for the B
 Usage: ``OMP_NUM_THREADS=1 python bench/bench_refine_learned.py [--ckpt RUN/best.ckpt ...] [--onnx]
 [--clips 8] [--frames 600] [--repeat 5] [--threads 1] [--data DIR]``
 """
+
 from __future__ import annotations
 
 import argparse
@@ -48,12 +49,19 @@ import torch
 
 HERE = Path(__file__).resolve().parent
 
-from mocapkit.refinement.metrics import matrix_rmse
 from mocapkit.refinement.corruptions import corrupt
 from mocapkit.refinement.learned import LearnedRefiner, OnnxRefiner, train_on_motions
+from mocapkit.refinement.metrics import matrix_rmse
 
-TINY = ["model.hidden=8", "model.layers=1", "data.window=32", "data.windows_per_epoch=64", "data.batch_size=16",
-        "trainer.max_epochs=1", "data.eval_windows_per_clip=1"]
+TINY = [
+    "model.hidden=8",
+    "model.layers=1",
+    "data.window=32",
+    "data.windows_per_epoch=64",
+    "data.batch_size=16",
+    "trainer.max_epochs=1",
+    "data.eval_windows_per_clip=1",
+]
 
 
 # ------------------------------------------------------------------------------------------------ data
@@ -90,11 +98,10 @@ def hdm05_sequences(root: Path, clips: int, frames: int):
 
 # ------------------------------------------------------------------------------------------------ models
 def classical(name: str):
-    """The refiner of ``configs/refiner/<name>.yaml`` (the comparison runner's settings)."""
-    from hydra.utils import instantiate
-    from omegaconf import OmegaConf
+    """The refiner of ``configs/refinement/method/<name>.yaml`` (the comparison runner's settings)."""
+    from mocapkit.train.registry import build_method
 
-    return instantiate(OmegaConf.load(HERE.parent / "configs" / "refiner" / f"{name}.yaml"))
+    return build_method("refinement", name)
 
 
 def train_tiny(clips: list[dict], folder: Path, count: int = 12) -> Path:
@@ -108,8 +115,14 @@ def train_tiny(clips: list[dict], folder: Path, count: int = 12) -> Path:
     module = train_on_motions("refine_bigru", read_clips(picks), TINY)
     path = folder / "tiny_bigru" / "best.ckpt"
     path.parent.mkdir(parents=True)
-    torch.save({"state_dict": module.state_dict(), "hyper_parameters": dict(module.hparams),
-                "pytorch-lightning_version": L.__version__}, path)
+    torch.save(
+        {
+            "state_dict": module.state_dict(),
+            "hyper_parameters": dict(module.hparams),
+            "pytorch-lightning_version": L.__version__,
+        },
+        path,
+    )
     return path
 
 
@@ -139,8 +152,12 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--frames", type=int, default=600, help="frames per sequence (clips cropped to it)")
     parser.add_argument("--repeat", type=int, default=5, help="timed rounds (median per sequence)")
     parser.add_argument("--threads", type=int, default=1, help="torch threads and onnxruntime intra-op threads")
-    parser.add_argument("--trace-frames", type=int, default=24,
-                        help="frames of the export's trace (the graph is dynamic in frames; parity is checked at 150)")
+    parser.add_argument(
+        "--trace-frames",
+        type=int,
+        default=24,
+        help="frames of the export's trace (the graph is dynamic in frames; parity is checked at 150)",
+    )
     default_data = Path(os.environ.get("MOCAPKIT_SHARED", HERE.parents[1] / "shared")) / "data"
     parser.add_argument("--data", type=Path, default=default_data, help="folder holding hdm05_cuts11/")
     args = parser.parse_args(argv)
@@ -150,34 +167,49 @@ def main(argv: list[str] | None = None) -> None:
 
     command = shlex.join([os.path.relpath(sys.executable), *(sys.argv if argv is None else [sys.argv[0], *argv])])
     print(f"# command: OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS', '(unset)')} {command}", flush=True)
-    print(f"# machine: {platform.machine()} {platform.processor() or ''}, {os.cpu_count()} CPUs, "
-          f"load average {os.getloadavg()[0]:.1f}; Python {platform.python_version()}, torch {torch.__version__}, "
-          f"onnxruntime {onnxruntime.__version__}, numpy {np.__version__}", flush=True)
-    print(f"# threads: torch.set_num_threads({args.threads}) (torch reports {torch.get_num_threads()}), onnxruntime "
-          f"threads={args.threads}, OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS', '(unset)')}", flush=True)
+    print(
+        f"# machine: {platform.machine()} {platform.processor() or ''}, {os.cpu_count()} CPUs, "
+        f"load average {os.getloadavg()[0]:.1f}; Python {platform.python_version()}, torch {torch.__version__}, "
+        f"onnxruntime {onnxruntime.__version__}, numpy {np.__version__}",
+        flush=True,
+    )
+    print(
+        f"# threads: torch.set_num_threads({args.threads}) (torch reports {torch.get_num_threads()}), onnxruntime "
+        f"threads={args.threads}, OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS', '(unset)')}",
+        flush=True,
+    )
     root = args.data / "hdm05_cuts11"
     sequences, rest = hdm05_sequences(root, args.clips, args.frames)
     total_frames = sum(c.num_frames for c, _, _ in sequences)
-    print(f"# sequences: {len(sequences)} HDM05 clips cropped to {args.frames} frames ({total_frames} frames, "
-          f"{sequences[0][0].fps:g} fps, {sequences[0][0].num_joints} joints), continuous_missing ml = 40 "
-          f"(seed = sequence index): {', '.join(n for _, _, n in sequences)}", flush=True)
+    print(
+        f"# sequences: {len(sequences)} HDM05 clips cropped to {args.frames} frames ({total_frames} frames, "
+        f"{sequences[0][0].fps:g} fps, {sequences[0][0].num_joints} joints), continuous_missing ml = 40 "
+        f"(seed = sequence index): {', '.join(n for _, _, n in sequences)}",
+        flush=True,
+    )
 
     work = tempfile.TemporaryDirectory(prefix="bench_refine_learned_")
     ckpts = list(args.ckpt)
     if not ckpts:
         start = time.perf_counter()
         ckpts = [train_tiny(rest, Path(work.name))]
-        print(f"# no --ckpt given: trained a tiny BiGRU here ({' '.join(TINY)}) on 12 other HDM05 clips in "
-              f"{time.perf_counter() - start:.0f} s; its figures time the code path, not a real model", flush=True)
+        print(
+            f"# no --ckpt given: trained a tiny BiGRU here ({' '.join(TINY)}) on 12 other HDM05 clips in "
+            f"{time.perf_counter() - start:.0f} s; its figures time the code path, not a real model",
+            flush=True,
+        )
     methods = {"TrNN": classical("trnn"), "PCA": classical("pca")}
     for label, ckpt in zip(_labels(ckpts), ckpts):
         eager = LearnedRefiner(checkpoint=str(ckpt)).fit()
         model = eager.module_.model
         params = sum(p.numel() for p in model.parameters())
         hp = eager.module_.hparams.model
-        print(f"# {label}: {ckpt} — {type(model).__name__} "
-              f"({', '.join(f'{k}={v}' for k, v in hp.items() if not k.startswith('_'))}), {params:,} parameters, "
-              f"window {eager.window_} frames, overlap {eager.overlap_}", flush=True)
+        print(
+            f"# {label}: {ckpt} — {type(model).__name__} "
+            f"({', '.join(f'{k}={v}' for k, v in hp.items() if not k.startswith('_'))}), {params:,} parameters, "
+            f"window {eager.window_} frames, overlap {eager.overlap_}",
+            flush=True,
+        )
         methods[f"{label} eager"] = eager
         if args.onnx:
             out = Path(work.name) / f"{label.replace('/', '_')}.onnx"
@@ -186,7 +218,7 @@ def main(argv: list[str] | None = None) -> None:
             print(f"#   exported to {out.name} in {time.perf_counter() - start:.0f} s ({parity})", flush=True)
             methods[f"{label} ORT"] = OnnxRefiner(str(out), threads=args.threads).fit()
 
-    for refiner in methods.values():                          # warm-up (first calls, lazy imports), not timed
+    for refiner in methods.values():  # warm-up (first calls, lazy imports), not timed
         refiner.refine(sequences[0][1].motion)
     seconds = {name: [[] for _ in sequences] for name in methods}
     outputs = {}
@@ -201,14 +233,20 @@ def main(argv: list[str] | None = None) -> None:
     rate = {name: total_frames / sum(m) for name, m in medians.items()}
 
     print(f"# {args.repeat} rounds, median per sequence; load average {os.getloadavg()[0]:.1f} after", flush=True)
-    print(f"{'method':28s} | {'frames/s':>9s} | {'ms/seq median':>13s} {'min':>7s} {'max':>7s} | {'× TrNN':>7s} | "
-          f"{'RMSE cm':>7s} | {'unfilled':>8s}", flush=True)
+    print(
+        f"{'method':28s} | {'frames/s':>9s} | {'ms/seq median':>13s} {'min':>7s} {'max':>7s} | {'× TrNN':>7s} | "
+        f"{'RMSE cm':>7s} | {'unfilled':>8s}",
+        flush=True,
+    )
     for name in methods:
         rmse = np.mean([matrix_rmse(clean, outputs[name, i], c.removed) for i, (clean, c, _) in enumerate(sequences)])
         unfilled = sum(int((outputs[name, i].missing & c.removed).sum()) for i, (_, c, _) in enumerate(sequences))
         ms = [1000 * s for s in medians[name]]
-        print(f"{name:28s} | {rate[name]:9.0f} | {statistics.median(ms):13.1f} {min(ms):7.1f} {max(ms):7.1f} | "
-              f"{rate[name] / rate['TrNN']:7.2f} | {rmse:7.2f} | {unfilled:8d}", flush=True)
+        print(
+            f"{name:28s} | {rate[name]:9.0f} | {statistics.median(ms):13.1f} {min(ms):7.1f} {max(ms):7.1f} | "
+            f"{rate[name] / rate['TrNN']:7.2f} | {rmse:7.2f} | {unfilled:8d}",
+            flush=True,
+        )
     print("# per sequence, median ms:", flush=True)
     print(f"{'sequence':40s} " + " ".join(f"{n[:14]:>14s}" for n in methods), flush=True)
     for i, (_, _, seq_name) in enumerate(sequences):

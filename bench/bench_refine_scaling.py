@@ -18,6 +18,7 @@ ours, indicative only.
 Usage: ``OMP_NUM_THREADS=1 python bench/bench_refine_scaling.py [--max-frames N] [--svt-iters 500]
 [--methods trnn,trnn_r0,svt] [--threads 1] [--data DIR]``.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -30,9 +31,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from mocapkit.refinement.corruptions import corrupt
 from mocapkit.refinement.svt import SVTCompletion
 from mocapkit.refinement.trnn import TrNN
-from mocapkit.refinement.corruptions import corrupt
 
 HERE = Path(__file__).resolve().parent
 
@@ -65,8 +66,11 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_args(argv)
     torch.set_num_threads(args.threads)
     bt = _bench_trnn()
-    makers = {"trnn": ("TrNN", lambda: TrNN()), "trnn_r0": ("TrNN r=0", lambda: TrNN(truncation=0)),
-              "svt": ("SVT", lambda: SVTCompletion(max_iter=args.svt_iters))}
+    makers = {
+        "trnn": ("TrNN", lambda: TrNN()),
+        "trnn_r0": ("TrNN r=0", lambda: TrNN(truncation=0)),
+        "svt": ("SVT", lambda: SVTCompletion(max_iter=args.svt_iters)),
+    }
     chosen = [m.strip() for m in args.methods.split(",") if m.strip()]
     unknown = [m for m in chosen if m not in makers]
     if unknown:
@@ -76,12 +80,16 @@ def main(argv: list[str] | None = None) -> None:
     if not pool.paths:
         raise SystemExit(f"no HDM05 clips under {args.data / 'hdm05_cuts11'}")
     rows = [r for r in bt.TABLE_4_1 if args.max_frames is None or r[1] <= args.max_frames]
-    print(f"# Table 4.1-style timing on HDM05 ({len(pool.paths)} clips); {platform.processor() or platform.machine()}, "
-          f"{os.cpu_count()} CPUs, torch {torch.__version__}, {args.threads} thread(s), "
-          f"OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS')}; random_missing mr = 0.3, seed 0; "
-          f"SVT cap {args.svt_iters} iterations", flush=True)
-    header = f"{'action':11s} {'frames':>6s} | " + " | ".join(f"{makers[m][0]:>10s} s {'it':>4s} {'RMSE':>5s}"
-                                                              for m in chosen)
+    print(
+        f"# Table 4.1-style timing on HDM05 ({len(pool.paths)} clips); {platform.processor() or platform.machine()}, "
+        f"{os.cpu_count()} CPUs, torch {torch.__version__}, {args.threads} thread(s), "
+        f"OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS')}; random_missing mr = 0.3, seed 0; "
+        f"SVT cap {args.svt_iters} iterations",
+        flush=True,
+    )
+    header = f"{'action':11s} {'frames':>6s} | " + " | ".join(
+        f"{makers[m][0]:>10s} s {'it':>4s} {'RMSE':>5s}" for m in chosen
+    )
     print(header + " | thesis TSMC s  TrNN s | source", flush=True)
     times = {m: [] for m in chosen}
     start = time.perf_counter()
@@ -95,9 +103,12 @@ def main(argv: list[str] | None = None) -> None:
             times[m].append(seconds)
             capped = ">" if (m == "svt" and not converged) else " "
             parts.append(f"{capped}{seconds:10.2f}   {iters:4d} {rmse:5.2f}")
-        print(f"{action:11s} {frames:6d} | " + " | ".join(parts) +
-              f" | {thesis_tsmc:13.2f} {thesis_trnn:7.2f} | {source}  (elapsed {time.perf_counter() - start:.0f} s)",
-              flush=True)
+        print(
+            f"{action:11s} {frames:6d} | "
+            + " | ".join(parts)
+            + f" | {thesis_tsmc:13.2f} {thesis_trnn:7.2f} | {source}  (elapsed {time.perf_counter() - start:.0f} s)",
+            flush=True,
+        )
     frames = [r[1] for r in rows]
     long_rows = [i for i, f in enumerate(frames) if f >= 1000]
     print("# scaling exponent b of seconds ≈ a·frames^b (least squares on log–log):", flush=True)
@@ -106,10 +117,17 @@ def main(argv: list[str] | None = None) -> None:
         tail = scaling_exponent([frames[i] for i in long_rows], [times[m][i] for i in long_rows])
         print(f"#   {makers[m][0]:10s} b = {every:.2f} (all rows), {tail:.2f} (rows ≥ 1,000 frames)", flush=True)
     thesis = {"TSMC": [r[2] for r in rows], "TrNN": [r[3] for r in rows]}
-    print("#   thesis     " + ", ".join(f"{k} b = {scaling_exponent(frames, v):.2f}" for k, v in thesis.items()) +
-          " (Table 4.1, same rows)", flush=True)
-    print(f"# RMSE = Wang 2017 §4.2.3 matrix RMSE over the removed entries, cm; total "
-          f"{time.perf_counter() - start:.0f} s", flush=True)
+    print(
+        "#   thesis     "
+        + ", ".join(f"{k} b = {scaling_exponent(frames, v):.2f}" for k, v in thesis.items())
+        + " (Table 4.1, same rows)",
+        flush=True,
+    )
+    print(
+        f"# RMSE = Wang 2017 §4.2.3 matrix RMSE over the removed entries, cm; total "
+        f"{time.perf_counter() - start:.0f} s",
+        flush=True,
+    )
 
 
 if __name__ == "__main__":

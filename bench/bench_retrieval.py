@@ -5,7 +5,7 @@ The library is real HDM05 clips (``../shared/data/hdm05_cuts11``, 232 clips) rep
 
 - **DTW** (:class:`~mocapkit.retrieval.dtw.DTWRetrieval`, the baseline a user would otherwise reach for, and the
   ``mocapkit index`` default, DTW on positions and relational features with mutual proximity): the augmented clips
-  themselves, one row per name of ``--dtw-methods`` (:data:`~mocapkit.retrieval.index.METHODS`); build = ``fit``
+  themselves, one row per name of ``--dtw-methods`` (registry names: ``mocapkit methods retrieval``); build = ``fit``
   (normalise + per-frame features; with mutual proximity also DTW from every clip to at most 512 reference clips),
   query = one query clip ranked against the whole library (median over queries), measured up to ``--dtw-max``
   clips;
@@ -21,6 +21,7 @@ the results (``--plot``).
 
     OMP_NUM_THREADS=1 .venv/bin/python bench/bench_retrieval.py --onnx checkpoints/retrieval_supcon/fold_bd/model.onnx
 """
+
 from __future__ import annotations
 
 import argparse
@@ -49,8 +50,12 @@ def augmented(motions, count: int, seed: int = 0):
         start = rng.uniform(0, 0.1)
         T = m.num_frames
         a, b = int(start * T), int(T - rng.uniform(0, 0.1) * T)
-        positions = m.positions[a:max(b, a + 8)] + rng.normal(scale=0.01, size=(max(b, a + 8) - a,) + m.positions.shape[1:])
-        out.append(replace(m, positions=positions.astype(np.float32), missing=None, fps=fps, name=f"{m.name}~{len(out)}"))
+        positions = m.positions[a : max(b, a + 8)] + rng.normal(
+            scale=0.01, size=(max(b, a + 8) - a,) + m.positions.shape[1:]
+        )
+        out.append(
+            replace(m, positions=positions.astype(np.float32), missing=None, fps=fps, name=f"{m.name}~{len(out)}")
+        )
     return out
 
 
@@ -69,8 +74,11 @@ def main() -> None:
     parser.add_argument("--onnx", required=True, help="an exported retrieval encoder (mocapkit export)")
     parser.add_argument("--sizes", default="1000,10000,100000,1000000")
     parser.add_argument("--dtw-max", type=int, default=10000, help="largest library DTW is measured on")
-    parser.add_argument("--dtw-methods", default="dtw_relational,dtw_mutual_proximity",
-                        help="DTW rows: names of mocapkit.retrieval.index.METHODS")
+    parser.add_argument(
+        "--dtw-methods",
+        default="dtw_relational,dtw_mutual_proximity",
+        help="DTW rows: retrieval method names of the registry (mocapkit methods retrieval)",
+    )
     parser.add_argument("--encode", type=int, default=5000, help="augmented clips actually encoded")
     parser.add_argument("--hnsw-max", type=int, default=1000000)
     parser.add_argument("--plot", default=str(ROOT / "docs" / "img" / "retrieval_latency.png"))
@@ -84,10 +92,12 @@ def main() -> None:
 
     faiss.omp_set_num_threads(1)
     sizes = [int(s) for s in args.sizes.split(",")]
-    print(f"# retrieval at scale — {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
-          f"OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS')}, faiss {faiss.__version__} (1 thread)")
+    print(
+        f"# retrieval at scale — {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
+        f"OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS')}, faiss {faiss.__version__} (1 thread)"
+    )
     real = read_clips(list_clips("hdm05", args.data))
-    queries = augmented(real, len(real) + 50, seed=99)[len(real):]          # 50 augmented clips, not indexed
+    queries = augmented(real, len(real) + 50, seed=99)[len(real) :]  # 50 augmented clips, not indexed
 
     rows = []
     # ---------------------------------------------------------------- embedding
@@ -97,23 +107,27 @@ def main() -> None:
     start = time.perf_counter()
     method.fit(library)
     encode_s = time.perf_counter() - start
-    print(f"encoded {encode_n} clips in {encode_s:.1f} s ({encode_n / encode_s:.0f} clips/s, "
-          f"{1000 * encode_s / encode_n:.2f} ms/clip incl. normalisation)")
+    print(
+        f"encoded {encode_n} clips in {encode_s:.1f} s ({encode_n / encode_s:.0f} clips/s, "
+        f"{1000 * encode_s / encode_n:.2f} ms/clip incl. normalisation)"
+    )
     base = np.asarray(method.database_, dtype=np.float32)
     rng = np.random.default_rng(0)
     query_encode_ms = median_ms(lambda i: method.encode([queries[i % len(queries)]]), 50)
     q_vectors = method.encode(queries)
     for size in sizes:
         reps = int(np.ceil(size / len(base)))
-        vectors = np.concatenate([base] + [base + rng.normal(scale=0.05, size=base.shape).astype(np.float32)
-                                           for _ in range(reps - 1)])[:size]
+        vectors = np.concatenate(
+            [base] + [base + rng.normal(scale=0.05, size=base.shape).astype(np.float32) for _ in range(reps - 1)]
+        )[:size]
         vectors /= np.linalg.norm(vectors, axis=1, keepdims=True)
         for kind in ("flat", "hnsw"):
             if kind == "hnsw" and size > args.hnsw_max:
                 continue
             m = EmbeddingRetrieval(onnx=args.onnx, index=kind)
-            m.__dict__.update({k: v for k, v in method.__dict__.items() if k in ("_predict", "model_sha1_", "frames_",
-                                                                                 "model_info_")})
+            m.__dict__.update(
+                {k: v for k, v in method.__dict__.items() if k in ("_predict", "model_sha1_", "frames_", "model_info_")}
+            )
             m.database_, m.n_database_ = vectors, size
             start = time.perf_counter()
             m._build_index()
@@ -126,11 +140,20 @@ def main() -> None:
                 exact = np.argsort(-(q_vectors @ vectors.T), axis=1)[:, :10]
                 found = m.index_.search(q_vectors, 10)[1]
                 recall = float(np.mean([len(set(a) & set(b)) / 10 for a, b in zip(exact, found)]))
-            rows.append({"size": size, "method": f"embedding/{kind}", "build_s": build_s + encode_s * size / encode_n
-                         if size <= encode_n else build_s, "query_ms": search_ms, "recall@10": recall})
-            print(f"size {size:>8}: embedding {kind:5s} build {build_s:8.2f} s (FAISS add), search {search_ms:7.3f} ms"
-                  f" + encode query {query_encode_ms:.2f} ms" + (f", recall@10 vs exact {recall:.3f}" if recall else ""),
-                  flush=True)
+            rows.append(
+                {
+                    "size": size,
+                    "method": f"embedding/{kind}",
+                    "build_s": build_s + encode_s * size / encode_n if size <= encode_n else build_s,
+                    "query_ms": search_ms,
+                    "recall@10": recall,
+                }
+            )
+            print(
+                f"size {size:>8}: embedding {kind:5s} build {build_s:8.2f} s (FAISS add), search {search_ms:7.3f} ms"
+                f" + encode query {query_encode_ms:.2f} ms" + (f", recall@10 vs exact {recall:.3f}" if recall else ""),
+                flush=True,
+            )
     # ---------------------------------------------------------------- DTW
     for name in args.dtw_methods.split(","):
         for size in [s for s in sizes if s <= args.dtw_max]:
@@ -144,8 +167,11 @@ def main() -> None:
             rows.append({"size": size, "method": name, "build_s": build_s, "query_ms": query_ms})
             flat = next(r for r in rows if r["size"] == size and r["method"] == "embedding/flat")
             ratio = query_ms / (flat["query_ms"] + query_encode_ms)
-            print(f"size {size:>8}: {name} build {build_s:8.2f} s, query {query_ms:9.1f} ms "
-                  f"= {ratio:,.0f}x the embedding flat index (search + query encoding)", flush=True)
+            print(
+                f"size {size:>8}: {name} build {build_s:8.2f} s, query {query_ms:9.1f} ms "
+                f"= {ratio:,.0f}x the embedding flat index (search + query encoding)",
+                flush=True,
+            )
 
     print("\n| library size | method | build (s) | query (ms) | recall@10 |")
     print("|---:|---|---:|---:|---:|")
@@ -159,8 +185,11 @@ def main() -> None:
         plt = pyplot()
         fig, ax = plt.subplots(figsize=(6, 4))
         for name in dict.fromkeys(r["method"] for r in rows):
-            pts = [(r["size"], r["query_ms"] + (query_encode_ms if name.startswith("embedding") else 0))
-                   for r in rows if r["method"] == name]
+            pts = [
+                (r["size"], r["query_ms"] + (query_encode_ms if name.startswith("embedding") else 0))
+                for r in rows
+                if r["method"] == name
+            ]
             ax.plot(*zip(*pts), marker="o", label=name + (" (+ query encoding)" if name.startswith("emb") else ""))
         ax.axhline(10, color="grey", ls="--", lw=0.8)
         ax.set_xscale("log")

@@ -17,6 +17,7 @@ volume. Skips with a message if that folder is absent.
 
 Usage: ``python bench/bench_skeleton_parse.py [--files 400] [--repeat 3] [--src DIR]``
 """
+
 from __future__ import annotations
 
 import argparse
@@ -29,21 +30,42 @@ from pathlib import Path
 
 import numpy as np
 
-
-from mocapkit.datasets.ntu.prepare import prepare_ntu
 from mocapkit.datasets.formats.ntu_skeleton import read_skeleton
+from mocapkit.datasets.ntu.prepare import prepare_ntu
 
 DEFAULT_SRC = Path(__file__).resolve().parents[1].parent / "shared" / "samples" / "ntu_skeleton"
 
-BODY_KEYS = ("bodyID", "clipedEdges", "handLeftConfidence", "handLeftState", "handRightConfidence",
-             "handRightState", "isResticted", "leanX", "leanY", "trackingState")
-JOINT_KEYS = ("x", "y", "z", "depthX", "depthY", "colorX", "colorY",
-              "orientationW", "orientationX", "orientationY", "orientationZ", "trackingState")
+BODY_KEYS = (
+    "bodyID",
+    "clipedEdges",
+    "handLeftConfidence",
+    "handLeftState",
+    "handRightConfidence",
+    "handRightState",
+    "isResticted",
+    "leanX",
+    "leanY",
+    "trackingState",
+)
+JOINT_KEYS = (
+    "x",
+    "y",
+    "z",
+    "depthX",
+    "depthY",
+    "colorX",
+    "colorY",
+    "orientationW",
+    "orientationX",
+    "orientationY",
+    "orientationZ",
+    "trackingState",
+)
 
 
 def baseline_read_skeleton_filter(path: str | Path) -> dict:
     """The common public reader: nested dicts, one ``float()`` per value (body IDs lose precision)."""
-    with open(path, "r") as f:
+    with open(path) as f:
         sequence = {"numFrame": int(f.readline()), "frameInfo": []}
         for _ in range(sequence["numFrame"]):
             frame = {"numBody": int(f.readline()), "bodyInfo": []}
@@ -140,10 +162,13 @@ def main(argv: list[str] | None = None) -> int:
             def run():
                 report = prepare_ntu(tree, Path(tmp) / f"cache_w{workers}", workers=workers, progress=False)
                 assert report.samples_written == len(files)
+
             return run
 
-        best = best_of({"base": lambda: [baseline_read_xyz(f) for f in files],
-                        "ours": lambda: [read_skeleton(f) for f in files]}, args.repeat)
+        best = best_of(
+            {"base": lambda: [baseline_read_xyz(f) for f in files], "ours": lambda: [read_skeleton(f) for f in files]},
+            args.repeat,
+        )
         best.update(best_of({"prep1": prepare(1), "prep2": prepare(2)}, args.repeat))
 
     n = len(files)
@@ -153,8 +178,10 @@ def main(argv: list[str] | None = None) -> int:
         ("`prepare_ntu` (parse + select bodies + write cache)", 1, "prep1"),
         ("`prepare_ntu`", 2, "prep2"),
     ]
-    print(f"\n{n} files, {megabytes:.1f} MB (replicated from {args.src}), best of {args.repeat} runs each; "
-          f"{os.cpu_count()} CPUs, load average before the run {load[0]:.2f}\n")
+    print(
+        f"\n{n} files, {megabytes:.1f} MB (replicated from {args.src}), best of {args.repeat} runs each; "
+        f"{os.cpu_count()} CPUs, load average before the run {load[0]:.2f}\n"
+    )
     print("| reader | workers | wall s | CPU s | files/s (wall) | MB/s (wall) |")
     print("|---|---:|---:|---:|---:|---:|")
     for label, workers, key in rows:

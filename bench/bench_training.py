@@ -5,6 +5,7 @@ Measures optimiser steps on plausible random skeletons ``[batch, 2, frames, 25, 
 share of the step spent computing the energy image, and default / faithful as a
 ratio. Usage: ``python bench/bench_training.py [--frames 100] [--steps 5]``.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -15,8 +16,8 @@ import time
 import torch
 from hydra.utils import instantiate
 
-from mocapkit.train.config import compose_config
 from mocapkit.recognition.export import example_skeletons
+from mocapkit.train.config import compose_config
 
 
 def measure(model_name: str, batch: int, frames: int, steps: int, num_classes: int = 60) -> dict:
@@ -46,8 +47,15 @@ def measure(model_name: str, batch: int, frames: int, steps: int, num_classes: i
                 model.energy(x)
             energy_s = (time.perf_counter() - start) / steps
     params = sum(p.numel() for p in model.parameters())
-    return {"model": model_name, "batch": batch, "frames": frames, "params_M": params / 1e6,
-            "step_s": step_s, "samples_per_s": batch / step_s, "energy_share": energy_s / step_s}
+    return {
+        "model": model_name,
+        "batch": batch,
+        "frames": frames,
+        "params_M": params / 1e6,
+        "step_s": step_s,
+        "samples_per_s": batch / step_s,
+        "energy_share": energy_s / step_s,
+    }
 
 
 def main() -> None:
@@ -55,21 +63,29 @@ def main() -> None:
     parser.add_argument("--frames", type=int, default=100)
     parser.add_argument("--steps", type=int, default=5)
     args = parser.parse_args()
-    print(f"# training throughput, CPU ({platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
-          f"torch {torch.__version__}, {torch.get_num_threads()} threads), {args.frames} frames per sample\n")
-    rows = [measure("stgcn", 32, args.frames, args.steps),
-            measure("energy_vgg_cpu", 32, args.frames, args.steps),
-            measure("energy_vgg16", 2, args.frames, max(2, args.steps // 2)),
-            measure("energy_vgg16", 8, args.frames, max(2, args.steps // 2))]
+    print(
+        f"# training throughput, CPU ({platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
+        f"torch {torch.__version__}, {torch.get_num_threads()} threads), {args.frames} frames per sample\n"
+    )
+    rows = [
+        measure("stgcn", 32, args.frames, args.steps),
+        measure("energy_vgg_cpu", 32, args.frames, args.steps),
+        measure("energy_vgg16", 2, args.frames, max(2, args.steps // 2)),
+        measure("energy_vgg16", 8, args.frames, max(2, args.steps // 2)),
+    ]
     print("| model | batch | params (M) | s / step | samples/s | energy image share |")
     print("|---|---:|---:|---:|---:|---:|")
     for r in rows:
         share = f"{r['energy_share']:.1%}" if r["energy_share"] else "n/a"
-        print(f"| {r['model']} | {r['batch']} | {r['params_M']:.2f} | {r['step_s']:.3f} | {r['samples_per_s']:.1f} "
-              f"| {share} |")
-    print(f"\nratio default / faithful (batch 2, the thesis's mini-batch): "
-          f"{rows[1]['samples_per_s'] / rows[2]['samples_per_s']:.1f}x; GCN / energy-image default: "
-          f"{rows[0]['samples_per_s'] / rows[1]['samples_per_s']:.2f}x")
+        print(
+            f"| {r['model']} | {r['batch']} | {r['params_M']:.2f} | {r['step_s']:.3f} | {r['samples_per_s']:.1f} "
+            f"| {share} |"
+        )
+    print(
+        f"\nratio default / faithful (batch 2, the thesis's mini-batch): "
+        f"{rows[1]['samples_per_s'] / rows[2]['samples_per_s']:.1f}x; GCN / energy-image default: "
+        f"{rows[0]['samples_per_s'] / rows[1]['samples_per_s']:.2f}x"
+    )
 
 
 if __name__ == "__main__":

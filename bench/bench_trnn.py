@@ -29,6 +29,7 @@ on a 2.4 GHz Intel i5, 4 GB) are printed beside ours: indicative only.
 Usage: ``python bench/bench_trnn.py [--threads 1] [--device cpu|cuda] [--svt-iters 500] [--max-frames N]
 [--data DIR]``
 """
+
 from __future__ import annotations
 
 import argparse
@@ -44,19 +45,27 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from mocapkit.refinement.trnn import TrNN
 from mocapkit.datasets import read_motion
 from mocapkit.motion.container import Motion
-from mocapkit.refinement.metrics import matrix_rmse
 from mocapkit.refinement.base import MotionRefiner
 from mocapkit.refinement.corruptions import corrupt
+from mocapkit.refinement.metrics import matrix_rmse
+from mocapkit.refinement.trnn import TrNN
 
 #: Wang 2017 Table 4.1: (action, frames, TSMC seconds, TrNN seconds); Matlab 7.10, Intel i5 2.4 GHz.
 TABLE_4_1 = [
-    ("Running", 152, 1.61, 2.69), ("Walk", 343, 2.99, 4.35), ("Jump", 439, 4.07, 6.13),
-    ("Gymnastics", 575, 7.63, 8.17), ("Score", 801, 8.95, 10.19), ("Dance", 1095, 21.23, 14.84),
-    ("Varied", 2085, 111.69, 36.30), ("Punch", 2251, 93.33, 33.36), ("Acrobatics", 2422, 121.93, 34.09),
-    ("Boxing", 4840, 267.29, 73.75), ("Basketball", 4905, 286.25, 102.42), ("Taichi", 17799, 2094.8, 564.85),
+    ("Running", 152, 1.61, 2.69),
+    ("Walk", 343, 2.99, 4.35),
+    ("Jump", 439, 4.07, 6.13),
+    ("Gymnastics", 575, 7.63, 8.17),
+    ("Score", 801, 8.95, 10.19),
+    ("Dance", 1095, 21.23, 14.84),
+    ("Varied", 2085, 111.69, 36.30),
+    ("Punch", 2251, 93.33, 33.36),
+    ("Acrobatics", 2422, 121.93, 34.09),
+    ("Boxing", 4840, 267.29, 73.75),
+    ("Basketball", 4905, 286.25, 102.42),
+    ("Taichi", 17799, 2094.8, 564.85),
 ]
 
 try:
@@ -133,9 +142,9 @@ class ClipPool:
         parts, used, end = [], [], None
         for clip in self.clips:
             pos = clip.positions.astype(np.float64).copy()
-            if end is not None:                     # continue on the floor from where the last clip ended
+            if end is not None:  # continue on the floor from where the last clip ended
                 shift = end - pos[0, 0]
-                shift[1] = 0.0                      # y is up: keep heights
+                shift[1] = 0.0  # y is up: keep heights
                 pos += shift
             parts.append(pos)
             used.append(Path(clip.source).stem if clip.source else clip.name)
@@ -174,10 +183,13 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_args(argv)
     torch.set_num_threads(args.threads)
     svt_cls = SVTCompletion or _MinimalSVT
-    print(f"# TrNN vs full-SVD SVT; {platform.processor() or platform.machine()}, torch {torch.__version__}, "
-          f"{args.threads} thread(s), device {args.device}; SVT = "
-          f"{'mocapkit.refinement.svt.SVTCompletion' if SVTCompletion else 'minimal reference in this script'}, "
-          f"cap {args.svt_iters} iterations", flush=True)
+    print(
+        f"# TrNN vs full-SVD SVT; {platform.processor() or platform.machine()}, torch {torch.__version__}, "
+        f"{args.threads} thread(s), device {args.device}; SVT = "
+        f"{'mocapkit.refinement.svt.SVTCompletion' if SVTCompletion else 'minimal reference in this script'}, "
+        f"cap {args.svt_iters} iterations",
+        flush=True,
+    )
     print("# corruption: random_missing mr = 0.3 (seed 0); times are one refine() call, setup included", flush=True)
     print("# thesis columns: Wang 2017 Table 4.1, Matlab 7.10 on a 2.4 GHz i5 — indicative only", flush=True)
     pool = ClipPool(args.data)
@@ -185,10 +197,12 @@ def main(argv: list[str] | None = None) -> None:
         raise SystemExit(f"no CMU/HDM05 ASF/AMC clips under {args.data}")
     rows = [r for r in TABLE_4_1 if args.max_frames is None or r[1] <= args.max_frames]
     pool._load_until(max(r[1] for r in TABLE_4_1))  # the clips the longest row needs, whatever --max-frames says
-    header = (f"{'action':11s} {'frames':>6s} | {'TrNN s':>7s} {'it':>3s} {'s/it':>7s} {'d':>3s} | "
-              f"{'r=0 s':>7s} {'it':>3s} | {'d=16 s':>7s} {'s/it':>7s} | {'SVT s':>8s} {'it':>4s} {'s/it':>7s} | "
-              f"{'SVT/TrNN it':>11s} {'seq':>6s} | {'RMSE cm TrNN/r0/d16/SVT':>27s} | {'thesis TSMC s':>13s} "
-              f"{'TrNN s':>7s} | source")
+    header = (
+        f"{'action':11s} {'frames':>6s} | {'TrNN s':>7s} {'it':>3s} {'s/it':>7s} {'d':>3s} | "
+        f"{'r=0 s':>7s} {'it':>3s} | {'d=16 s':>7s} {'s/it':>7s} | {'SVT s':>8s} {'it':>4s} {'s/it':>7s} | "
+        f"{'SVT/TrNN it':>11s} {'seq':>6s} | {'RMSE cm TrNN/r0/d16/SVT':>27s} | {'thesis TSMC s':>13s} "
+        f"{'TrNN s':>7s} | source"
+    )
     print(header, flush=True)
     totals = time.perf_counter()
     for action, frames, thesis_tsmc, thesis_trnn in rows:
@@ -201,13 +215,19 @@ def main(argv: list[str] | None = None) -> None:
         w, wi, we, _ = _run(TrNN(rank=16, device=args.device), motion, clean, removed, args.device)
         s, si, se, sc = _run(svt_cls(max_iter=args.svt_iters, device=args.device), motion, clean, removed, args.device)
         capped = " " if sc else ">"
-        print(f"{action:11s} {frames:6d} | {t:7.2f} {ti:3d}{' ' if tc else '*'}{t / ti:7.4f} {default.width_:3d} | "
-              f"{z:7.2f} {zi:3d}{' ' if zc else '*'}| {w:7.2f} {w / wi:7.4f} | "
-              f"{capped}{s:7.2f} {si:4d} {s / si:7.4f} | "
-              f"{(s / si) / (t / ti):11.2f} {capped}{s / t:5.2f} | {te:6.2f} {ze:6.2f} {we:6.2f} {se:6.2f} | "
-              f"{thesis_tsmc:13.2f} {thesis_trnn:7.2f} | {source}", flush=True)
-    print(f"# total {time.perf_counter() - totals:.0f} s; '*' = TrNN stopped at max_iter, '>' = SVT hit the "
-          f"iteration cap (lower bound)", flush=True)
+        print(
+            f"{action:11s} {frames:6d} | {t:7.2f} {ti:3d}{' ' if tc else '*'}{t / ti:7.4f} {default.width_:3d} | "
+            f"{z:7.2f} {zi:3d}{' ' if zc else '*'}| {w:7.2f} {w / wi:7.4f} | "
+            f"{capped}{s:7.2f} {si:4d} {s / si:7.4f} | "
+            f"{(s / si) / (t / ti):11.2f} {capped}{s / t:5.2f} | {te:6.2f} {ze:6.2f} {we:6.2f} {se:6.2f} | "
+            f"{thesis_tsmc:13.2f} {thesis_trnn:7.2f} | {source}",
+            flush=True,
+        )
+    print(
+        f"# total {time.perf_counter() - totals:.0f} s; '*' = TrNN stopped at max_iter, '>' = SVT hit the "
+        f"iteration cap (lower bound)",
+        flush=True,
+    )
 
 
 if __name__ == "__main__":

@@ -23,6 +23,7 @@ Usage (from the repository root)::
     OMP_NUM_THREADS=1 python bench/profile_refiner_onnx.py checkpoints/refine_transformer/fold_mm/best.ckpt
     OMP_NUM_THREADS=1 python bench/profile_refiner_onnx.py model.onnx --frames 300 --runs 30 --top 25
 """
+
 from __future__ import annotations
 
 import argparse
@@ -79,8 +80,10 @@ def main(argv: list[str] | None = None) -> None:
         path = Path(work.name) / "refiner.onnx"
         print(f"# exported {args.model}: {export_one(args.model, path, 24)}")
     sequences, _ = hdm05_sequences(args.data / "hdm05_cuts11", args.clips, args.frames)
-    feeds = [{"positions": c.motion.positions[None].astype(np.float32), "missing": c.motion.missing[None]}
-             for _, c, _ in sequences]
+    feeds = [
+        {"positions": c.motion.positions[None].astype(np.float32), "missing": c.motion.missing[None]}
+        for _, c, _ in sequences
+    ]
     options = ort.SessionOptions()
     options.intra_op_num_threads = 1
     plain = ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
@@ -113,11 +116,13 @@ def main(argv: list[str] | None = None) -> None:
         count_part[where] += 1
         op_of[name] = op
         shapes[name] = [next(iter(s.values())) for s in event["args"].get("input_type_shape", [])]
-    per_run = 1000.0 * args.runs                                    # µs summed over the runs → ms per run
+    per_run = 1000.0 * args.runs  # µs summed over the runs → ms per run
     total = sum(by_op.values()) / per_run
     print(f"# {path.name}: {args.clips} HDM05 takes of {args.frames} frames, batch 1, 1 thread, {args.runs} runs")
-    print(f"session.run without the profiler: {1000 * statistics.median(seconds):.2f} ms (median); "
-          f"kernel time with it: {total:.2f} ms per run, {sum(count_op.values()) // args.runs} nodes")
+    print(
+        f"session.run without the profiler: {1000 * statistics.median(seconds):.2f} ms (median); "
+        f"kernel time with it: {total:.2f} ms per run, {sum(count_op.values()) // args.runs} nodes"
+    )
     print("\nper operator type (ms per run, nodes):")
     for op, us in by_op.most_common():
         print(f"  {us / per_run:7.3f}  {count_op[op] // args.runs:4d}  {op}")

@@ -1,4 +1,5 @@
 """Timing helper shared by the benchmarks (run as scripts: ``python bench/<name>.py``, so this folder is on the path)."""
+
 from __future__ import annotations
 
 import time

@@ -1,4 +1,5 @@
 """``python -m mocapkit`` is the ``mocapkit`` command."""
+
 import sys
 
 from mocapkit.cli import main

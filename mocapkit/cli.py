@@ -9,6 +9,7 @@
     mocapkit pyskl export --cache DIR --out FILE.pkl [--splits ntu60|ntu120]     (pyskl / MMAction2 annotations)
     mocapkit pyskl import --pkl FILE.pkl --out DIR [--skip-bad] [--max-bodies N] [--classes FILE]
     mocapkit train [experiment=NAME] data.root=CACHE [Hydra overrides ...]      (-m: a sweep; resume=RUN/last.ckpt)
+    mocapkit train --cfg job [overrides ...]      (print the composed config; --help: Hydra's help, the config groups)
     mocapkit eval ckpt_path=RUN/best.ckpt [overrides ...]
     mocapkit export ckpt_path=RUN/best.ckpt [out=FILE] [overrides ...]
     mocapkit predict --onnx FILE MOTION_FILE [MOTION_FILE ...]
@@ -18,23 +19,29 @@
                     [--screen-outliers [METRES]]
     mocapkit refine IN OUT --method RUN/best.ckpt | --onnx FILE [--set KEY=VALUE ...] [--repair-outliers]
                     [--screen-outliers [METRES]]
-    mocapkit index --src DIR --out INDEX [--method NAME] [--ckpt PATH] [--skip-bad]
+    mocapkit index --src DIR --out INDEX [--method NAME] [--set KEY=VALUE ...] [--ckpt PATH] [--skip-bad]
     mocapkit search --index INDEX QUERY [QUERY ...] [-k K] [--json]
     mocapkit synthesize INPUT [INPUT ...] --out DIR [--type SUBSTRING] [--variants N] [--frames F] [--seed S]
-                        [--window SECONDS] [--method slfm|perlin|lau|cvae] [--no-footskate] [--set KEY=VALUE ...]
+                        [--window SECONDS] [--method NAME] [--no-footskate] [--set KEY=VALUE ...]
                         [--format amc|bvh]                                      (Zhou 2014 ch. 4)
-    mocapkit kinect-fix train --mocap PATH [PATH ...] --out MODEL [--method gp|bigru|transformer] [--noise PRESET]
+    mocapkit kinect-fix train --mocap PATH [PATH ...] --out MODEL [--method NAME] [--noise PRESET]
                               [--set KEY=VALUE ...]
                         [--skip-bad]
     mocapkit kinect-fix export --model MODEL.pt --out MODEL.onnx                 (a learned corrector as ONNX)
     mocapkit kinect-fix apply INPUT [INPUT ...] --model MODEL --out DIR [--set KEY=VALUE ...] [--plot N]
                         [--skip-bad]                                            (Zhou 2014 ch. 5)
 
+    mocapkit methods [TASK]                     (the method registry: task, name, learned, description)
+
+--method NAME is a name of the method registry (configs/<task>/method/NAME.yaml, ``mocapkit methods``); --set
+KEY=VALUE is a Hydra override of that method's parameters (null, true, 0.1, "[a,b]", "{k: v}").
+
 Errors are one line (``mocapkit: error: ...``, exit code 2); ``mocapkit --debug COMMAND ...`` (or
 ``MOCAPKIT_DEBUG=1``) shows the traceback instead.
 Heavy libraries are imported inside each command, so ``predict`` runs with
 onnxruntime and numpy alone.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -44,23 +51,22 @@ import sys
 
 
 def cmd_synth_ntu(args: argparse.Namespace) -> None:
-    import json
-
     from mocapkit.datasets.synthetic.ntu import NTUSynthConfig, synthesize_ntu
+    from mocapkit.train.registry import override_values
 
-    fields = {f.name: f for f in dataclasses.fields(NTUSynthConfig)}
-    values = {}
-    for item in args.set or []:
-        if "=" not in item:
-            raise SystemExit(f"--set {item!r}: expected KEY=VALUE")
-        key, raw = item.split("=", 1)
-        if key not in fields:
-            raise SystemExit(f"--set {key}: unknown synthesis option; known: {', '.join(sorted(fields))}")
-        values[key] = json.loads(raw) if raw[:1] in "[{0123456789-.tfn" else raw
-        if isinstance(values[key], list):
-            values[key] = tuple(values[key])
-    for option, name in (("classes", "num_classes"), ("subjects", "num_subjects"), ("seed", "seed"),
-                         ("setups", "setups"), ("cameras", "cameras"), ("replications", "replications")):
+    fields = sorted(f.name for f in dataclasses.fields(NTUSynthConfig))
+    values = {
+        key: tuple(value) if isinstance(value, list) else value  # Hydra's grammar: --set "setups=[1,2]"
+        for key, value in override_values(args.set or [], fields, "NTUSynthConfig").items()
+    }
+    for option, name in (
+        ("classes", "num_classes"),
+        ("subjects", "num_subjects"),
+        ("seed", "seed"),
+        ("setups", "setups"),
+        ("cameras", "cameras"),
+        ("replications", "replications"),
+    ):
         value = getattr(args, option)
         if value is not None:
             values[name] = tuple(value) if isinstance(value, list) else value
@@ -90,9 +96,11 @@ def cmd_synth_casia_b(args: argparse.Namespace) -> None:
         synthesize_casia_b,
     )
 
-    values = {name: getattr(args, option) for option, name in
-              (("subjects", "num_subjects"), ("frames", "frames"), ("size", "height"), ("seed", "seed"))
-              if getattr(args, option) is not None}
+    values = {
+        name: getattr(args, option)
+        for option, name in (("subjects", "num_subjects"), ("frames", "frames"), ("size", "height"), ("seed", "seed"))
+        if getattr(args, option) is not None
+    }
     folders = synthesize_casia_b(args.out, CasiaBSynthConfig(**values), progress=not args.quiet, workers=args.workers)
     print(f"[mocapkit] wrote {len(folders)} silhouette sequences (CASIA-B layout) to {args.out}")
 
@@ -112,10 +120,18 @@ def cmd_render(args: argparse.Namespace) -> None:
 def cmd_prepare_ntu(args: argparse.Namespace) -> None:
     from mocapkit.datasets.ntu.prepare import prepare_ntu
 
-    report = prepare_ntu(args.src, args.out, workers=args.workers, skip_bad=args.skip_bad,
-                         missing_list=args.missing_list, max_bodies=args.max_bodies,
-                         denoise_spread=args.denoise_spread, min_body_frames=args.min_body_frames,
-                         denoise_flicker=args.denoise_flicker, progress=not args.quiet)
+    report = prepare_ntu(
+        args.src,
+        args.out,
+        workers=args.workers,
+        skip_bad=args.skip_bad,
+        missing_list=args.missing_list,
+        max_bodies=args.max_bodies,
+        denoise_spread=args.denoise_spread,
+        min_body_frames=args.min_body_frames,
+        denoise_flicker=args.denoise_flicker,
+        progress=not args.quiet,
+    )
     print(f"[mocapkit] prepared cache in {args.out}")
     print(report.summary())
 
@@ -123,10 +139,18 @@ def cmd_prepare_ntu(args: argparse.Namespace) -> None:
 def cmd_prepare_casia_b(args: argparse.Namespace) -> None:
     from mocapkit.datasets.casia_b.prepare import parse_gei_size, prepare_casia_b
 
-    report = prepare_casia_b(args.src, args.out, size=parse_gei_size(args.size), per=args.per,
-                             skip_bad=args.skip_bad, workers=args.workers, subjects=args.subjects,
-                             fallback_period=args.fallback_period, no_period=args.no_period,
-                             progress=not args.quiet)
+    report = prepare_casia_b(
+        args.src,
+        args.out,
+        size=parse_gei_size(args.size),
+        per=args.per,
+        skip_bad=args.skip_bad,
+        workers=args.workers,
+        subjects=args.subjects,
+        fallback_period=args.fallback_period,
+        no_period=args.no_period,
+        progress=not args.quiet,
+    )
     print(f"[mocapkit] prepared GEI cache in {args.out}")
     if args.quiet:  # otherwise prepare_casia_b has printed the summary (every item is in report.txt)
         print(report.summary())
@@ -137,15 +161,18 @@ def cmd_pyskl_export(args: argparse.Namespace) -> None:
 
     summary = export_pyskl(args.cache, args.out, splits=args.splits)
     lists = ", ".join(f"{k} {n}" for k, n in summary["split"].items())
-    print(f"[mocapkit] wrote {summary['num_samples']} samples ({summary['total_frames']} frames) to {args.out}; "
-          f"split: {lists}")
+    print(
+        f"[mocapkit] wrote {summary['num_samples']} samples ({summary['total_frames']} frames) to {args.out}; "
+        f"split: {lists}"
+    )
 
 
 def cmd_pyskl_import(args: argparse.Namespace) -> None:
     from mocapkit.datasets.interop.pyskl import import_pyskl
 
-    report = import_pyskl(args.pkl, args.out, skip_bad=args.skip_bad, max_bodies=args.max_bodies,
-                          class_names=args.classes)
+    report = import_pyskl(
+        args.pkl, args.out, skip_bad=args.skip_bad, max_bodies=args.max_bodies, class_names=args.classes
+    )
     print(f"[mocapkit] imported {args.pkl} into the cache {args.out}")
     print(report.to_text())
 
@@ -153,19 +180,21 @@ def cmd_pyskl_import(args: argparse.Namespace) -> None:
 def cmd_gait_report(args: argparse.Namespace) -> None:
     from mocapkit.gait.benchmark import gait_report  # `compare gait` with these options
 
-    gait_report(args.data, args.out, protocols=tuple(args.protocols), experiments=tuple(args.experiments),
-                overrides=tuple(args.overrides), seed=args.seed, include_pca_lda=not args.no_pca_lda)
+    gait_report(
+        args.data,
+        args.out,
+        protocols=tuple(args.protocols),
+        experiments=tuple(args.experiments),
+        overrides=tuple(args.overrides),
+        seed=args.seed,
+        include_pca_lda=not args.no_pca_lda,
+    )
 
 
-def cmd_train(overrides: list[str]) -> None:
-    from mocapkit.train.config import pop_override
-    from mocapkit.train.training import main, resume_config, train
+def cmd_train(argv: list[str]) -> None:
+    from mocapkit.train.training import main  # Hydra's command line; resume=RUN/last.ckpt continues a run
 
-    resume, rest = pop_override(overrides, "resume")
-    if resume:  # continue a run in its own folder, from its saved config
-        train(resume_config(resume, rest))
-    else:
-        main(overrides)
+    main(argv)
 
 
 def cmd_eval(overrides: list[str]) -> None:
@@ -192,18 +221,35 @@ def cmd_export(overrides: list[str]) -> None:
 def cmd_refine(args: argparse.Namespace) -> None:
     from mocapkit.refinement.apply import refine_file
 
-    report = refine_file(args.input, args.output, args.method, overrides=tuple(args.set),
-                         train=tuple(args.train), skip_bad=args.skip_bad, repair_outliers=args.repair_outliers,
-                         onnx=args.onnx, screen_outliers=args.screen_outliers)
+    report = refine_file(
+        args.input,
+        _one_of(args, "output", "out", "OUT"),
+        args.method,
+        overrides=tuple(args.set),
+        train=tuple(args.train),
+        skip_bad=args.skip_bad,
+        repair_outliers=args.repair_outliers,
+        onnx=args.onnx,
+        screen_outliers=args.screen_outliers,
+    )
     print(report.to_text())
 
 
 def cmd_index(args: argparse.Namespace) -> None:
     from mocapkit.retrieval.index import build_index
 
-    index = build_index(args.src, args.out, method=args.method, ckpt=args.ckpt, skip_bad=args.skip_bad)
-    print(f"[mocapkit] indexed {len(index.files)} files with {index.method_name} into {args.out}"
-          + (f"; skipped {len(index.skipped)} (listed in {args.out}/manifest.json)" if index.skipped else ""))
+    index = build_index(
+        _one_of(args, "src_path", "src", "SRC"),
+        args.out,
+        method=args.method,
+        overrides=tuple(args.set),
+        ckpt=args.ckpt,
+        skip_bad=args.skip_bad,
+    )
+    print(
+        f"[mocapkit] indexed {len(index.files)} files with {index.method_name} into {args.out}"
+        + (f"; skipped {len(index.skipped)} (listed in {args.out}/manifest.json)" if index.skipped else "")
+    )
 
 
 def cmd_search(args: argparse.Namespace) -> None:
@@ -224,59 +270,85 @@ def cmd_search(args: argparse.Namespace) -> None:
 def cmd_synthesize(args: argparse.Namespace) -> None:
     from mocapkit.synthesis.synthesize import synthesize
 
-    report = synthesize(args.inputs, args.out, n_variants=args.variants, n_frames=args.frames, seed=args.seed,
-                        method=args.method, motion_type=args.type, max_clips=args.max_clips,
-                        footskate_cleanup=not args.no_footskate, options=_key_values(args.set),
-                        progress=not args.quiet, output_format=args.format, window_seconds=args.window)
-    print(f"[mocapkit] wrote {len(report['variants'])} variants of {len(report['training_clips'])} training clips to "
-          f"{args.out} (fit {report['fit_seconds']:.1f} s, {report['sample_seconds_per_motion_second']:.4f} s of "
-          f"compute per second of motion)")
+    report = synthesize(
+        args.inputs,
+        args.out,
+        n_variants=args.variants,
+        n_frames=args.frames,
+        seed=args.seed,
+        method=args.method,
+        motion_type=args.type,
+        max_clips=args.max_clips,
+        footskate_cleanup=not args.no_footskate,
+        overrides=tuple(args.set),
+        progress=not args.quiet,
+        output_format=args.format,
+        window_seconds=args.window,
+    )
+    print(
+        f"[mocapkit] wrote {len(report['variants'])} variants of {len(report['training_clips'])} training clips to "
+        f"{args.out} (fit {report['fit_seconds']:.1f} s, {report['sample_seconds_per_motion_second']:.4f} s of "
+        f"compute per second of motion)"
+    )
 
 
 def cmd_kinect_fix_train(args: argparse.Namespace) -> None:
     from mocapkit.kinect.kinect_fix import train_kinect_model
 
-    report = train_kinect_model(args.mocap, args.out, seed=args.seed, skip_bad=args.skip_bad, noise=args.noise,
-                                method=args.method, **_key_values(args.set))
-    print(f"[mocapkit] Kinect reconstruction model ({report['method']}) of {report['files']} simulated clips "
-          f"({report['frames']} frames, "
-          f"noise {report['noise']}, "
-          f"fit {report['fit_seconds']:.0f} s) written to {report['model']}"
-          + "".join(f"\n  skipped {path}: {reason}" for path, reason in report["skipped"]))
+    report = train_kinect_model(
+        _one_of(args, "inputs", "mocap", "MOCAP"),
+        args.out,
+        seed=args.seed,
+        skip_bad=args.skip_bad,
+        noise=args.noise,
+        method=args.method,
+        overrides=tuple(args.set),
+    )
+    print(
+        f"[mocapkit] Kinect reconstruction model ({report['method']}) of {report['files']} simulated clips "
+        f"({report['frames']} frames, "
+        f"noise {report['noise']}, "
+        f"fit {report['fit_seconds']:.0f} s) written to {report['model']}"
+        + "".join(f"\n  skipped {path}: {reason}" for path, reason in report["skipped"])
+    )
 
 
 def cmd_kinect_fix_export(args: argparse.Namespace) -> None:
     from mocapkit.kinect.kinect_fix import export_kinect_model
 
     report = export_kinect_model(args.model, args.out)
-    print(f"[mocapkit] ONNX Kinect corrector written to {report['onnx']} (opset {report['opset']}, "
-          f"{report['exporter']} exporter; onnxruntime against PyTorch on {report['checked_shape']}: max |diff| "
-          f"{report['max_abs_diff']:.2e} m)")
+    print(
+        f"[mocapkit] ONNX Kinect corrector written to {report['onnx']} (opset {report['opset']}, "
+        f"{report['exporter']} exporter; onnxruntime against PyTorch on {report['checked_shape']}: max |diff| "
+        f"{report['max_abs_diff']:.2e} m)"
+    )
 
 
 def cmd_kinect_fix_apply(args: argparse.Namespace) -> None:
     from mocapkit.kinect.kinect_fix import fix_kinect_files
 
-    report = fix_kinect_files(args.model, args.inputs, args.out, skip_bad=args.skip_bad, plot=args.plot,
-                              **_key_values(args.set))
+    report = fix_kinect_files(
+        args.model, args.inputs, args.out, skip_bad=args.skip_bad, plot=args.plot, overrides=tuple(args.set)
+    )
     print(report.to_text())
 
 
-def _key_values(items) -> dict:
-    """``["n_fit=50", "sample_noise=False", "gp_input=posture"]`` → a parameter dict (values read as Python
-    literals, else kept as strings)."""
-    import ast
+def _one_of(args: argparse.Namespace, positional: str, option: str, name: str):
+    """The value given positionally or as ``--option`` (the commands take inputs positionally; the older option
+    spellings still work): exactly one of them."""
+    given = [v for v in (getattr(args, positional), getattr(args, option)) if v not in (None, [])]
+    if len(given) != 1:
+        raise ValueError(
+            f"mocapkit {args.command}: give {name} "
+            + (f"once (positionally or as --{option})" if given else f"(positionally or as --{option})")
+        )
+    return given[0]
 
-    options = {}
-    for item in items:
-        key, sep, text = item.partition("=")
-        if not sep or not key.strip():
-            raise ValueError(f"--set {item!r}: expected KEY=VALUE")
-        try:
-            options[key.strip()] = ast.literal_eval(text.strip())
-        except (ValueError, SyntaxError):
-            options[key.strip()] = text.strip()
-    return options
+
+def cmd_methods(args: argparse.Namespace) -> None:
+    from mocapkit.train.registry import methods_table
+
+    print(methods_table(args.task))
 
 
 def cmd_predict(args: argparse.Namespace) -> None:
@@ -286,10 +358,12 @@ def cmd_predict(args: argparse.Namespace) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="mocapkit", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--debug", action="store_true",
-                        help="show the traceback of an error (as MOCAPKIT_DEBUG=1 does)")
+    parser = argparse.ArgumentParser(
+        prog="mocapkit", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument(
+        "--debug", action="store_true", help="show the traceback of an error (as MOCAPKIT_DEBUG=1 does)"
+    )
     sub = parser.add_subparsers(dest="command", required=True)
 
     synth = sub.add_parser("synth", help="write a synthetic stand-in dataset in a real format")
@@ -302,8 +376,9 @@ def build_parser() -> argparse.ArgumentParser:
     ntu.add_argument("--setups", type=int, nargs="+", help="setup IDs (camera height/distance)")
     ntu.add_argument("--cameras", type=int, nargs="+", help="camera IDs (views)")
     ntu.add_argument("--replications", type=int, nargs="+", help="replication IDs")
-    ntu.add_argument("--set", action="append", metavar="KEY=VALUE",
-                     help="any other synthesis option (difficulty knobs), repeatable")
+    ntu.add_argument(
+        "--set", action="append", metavar="KEY=VALUE", help="any other synthesis option (difficulty knobs), repeatable"
+    )
     ntu.add_argument("--workers", type=int, default=1)
     ntu.add_argument("--quiet", action="store_true", help="no progress bar")
     ntu.set_defaults(func=cmd_synth_ntu)
@@ -345,33 +420,60 @@ def build_parser() -> argparse.ArgumentParser:
     pntu.add_argument("--skip-bad", action="store_true", help="skip malformed files (each is listed in the report)")
     pntu.add_argument("--missing-list", help="official list of samples with missing skeletons to leave out")
     pntu.add_argument("--max-bodies", type=int, default=2, help="bodies kept per sample (most motion first)")
-    pntu.add_argument("--denoise-spread", action=argparse.BooleanOptionalAction, default=True,
-                      help="drop non-human 'bodies' wider than tall (the NTU authors' spread rule); on by default, "
-                           "--denoise-spread is accepted and changes nothing")
-    pntu.add_argument("--min-body-frames", type=int, default=12,
-                      help="drop bodies seen in fewer frames, never the longest of a file (default 12, the NTU "
-                           "authors' and pyskl's; 1 disables)")
-    pntu.add_argument("--denoise-flicker", action=argparse.BooleanOptionalAction, default=True,
-                      help="drop bodies that come and go (< 80%% of the frames of their span) or jump (> 0.3 m a "
-                           "frame); on by default. The former default was --min-body-frames 1 "
-                           "--no-denoise-spread --no-denoise-flicker")
+    pntu.add_argument(
+        "--denoise-spread",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="drop non-human 'bodies' wider than tall (the NTU authors' spread rule); on by default, "
+        "--denoise-spread is accepted and changes nothing",
+    )
+    pntu.add_argument(
+        "--min-body-frames",
+        type=int,
+        default=12,
+        help="drop bodies seen in fewer frames, never the longest of a file (default 12, the NTU "
+        "authors' and pyskl's; 1 disables)",
+    )
+    pntu.add_argument(
+        "--denoise-flicker",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="drop bodies that come and go (< 80%% of the frames of their span) or jump (> 0.3 m a "
+        "frame); on by default. The former default was --min-body-frames 1 "
+        "--no-denoise-spread --no-denoise-flicker",
+    )
     pntu.add_argument("--quiet", action="store_true", help="no progress bar")
     pntu.set_defaults(func=cmd_prepare_ntu)
 
     pcb = prepare_sub.add_parser("casia-b", help="CASIA-B silhouette folders -> Gait Energy Images")
     pcb.add_argument("--src", required=True, help="root of <subject>/<condition>-<nn>/<view>/<frame>.png")
     pcb.add_argument("--out", required=True, help="GEI cache folder to write")
-    pcb.add_argument("--size", default="64x44",
-                     help="GEI HxW: 64x44 (OpenGait's convention, default) or 124x124 (the thesis network)")
-    pcb.add_argument("--per", choices=["cycle", "sequence"], default="cycle",
-                     help="one GEI per detected gait cycle (default) or per sequence")
-    pcb.add_argument("--no-period", dest="no_period", choices=["sequence", "fallback", "error"], default=None,
-                     help="a sequence without a detectable gait period gives one GEI over the whole sequence "
-                          "(sequence, the default), GEIs of --fallback-period frames (fallback), or is bad "
-                          "(error: stops, or is skipped with --skip-bad; the former behaviour); each is reported")
-    pcb.add_argument("--fallback-period", dest="fallback_period", type=int,
-                     help="frames per cycle to use where no period is detected (implies --no-period fallback; "
-                          "each use is reported)")
+    pcb.add_argument(
+        "--size",
+        default="64x44",
+        help="GEI HxW: 64x44 (OpenGait's convention, default) or 124x124 (the thesis network)",
+    )
+    pcb.add_argument(
+        "--per",
+        choices=["cycle", "sequence"],
+        default="cycle",
+        help="one GEI per detected gait cycle (default) or per sequence",
+    )
+    pcb.add_argument(
+        "--no-period",
+        dest="no_period",
+        choices=["sequence", "fallback", "error"],
+        default=None,
+        help="a sequence without a detectable gait period gives one GEI over the whole sequence "
+        "(sequence, the default), GEIs of --fallback-period frames (fallback), or is bad "
+        "(error: stops, or is skipped with --skip-bad; the former behaviour); each is reported",
+    )
+    pcb.add_argument(
+        "--fallback-period",
+        dest="fallback_period",
+        type=int,
+        help="frames per cycle to use where no period is detected (implies --no-period fallback; each use is reported)",
+    )
     pcb.add_argument("--subjects", type=int, nargs="+", help="only these subject IDs")
     pcb.add_argument("--workers", type=int, default=1, help="parallel processes")
     pcb.add_argument("--skip-bad", action="store_true", help="skip bad sequences (each is listed in the report)")
@@ -383,35 +485,46 @@ def build_parser() -> argparse.ArgumentParser:
     pexp = pyskl_sub.add_parser("export", help="write an NTU cache as a pyskl 3D annotation pickle")
     pexp.add_argument("--cache", required=True, help="NTU cache folder (mocapkit prepare ntu --out ...)")
     pexp.add_argument("--out", required=True, help="the .pkl file to write")
-    pexp.add_argument("--splits", choices=["ntu60", "ntu120"],
-                      help="split lists: xsub/xview (ntu60) or xsub/xset (ntu120); default: ntu120 when the cache "
-                           "has NTU-120 setups or actions, else ntu60")
+    pexp.add_argument(
+        "--splits",
+        choices=["ntu60", "ntu120"],
+        help="split lists: xsub/xview (ntu60) or xsub/xset (ntu120); default: ntu120 when the cache "
+        "has NTU-120 setups or actions, else ntu60",
+    )
     pexp.set_defaults(func=cmd_pyskl_export)
     pimp = pyskl_sub.add_parser("import", help="write a pyskl 3D annotation pickle as an NTU cache")
     pimp.add_argument("--pkl", required=True, help="pyskl annotation pickle (read without running code)")
     pimp.add_argument("--out", required=True, help="cache folder to write")
-    pimp.add_argument("--skip-bad", action="store_true",
-                      help="skip bad annotations (each is listed in the report)")
+    pimp.add_argument("--skip-bad", action="store_true", help="skip bad annotations (each is listed in the report)")
     pimp.add_argument("--max-bodies", type=int, default=2, help="bodies per sample; an annotation with more is bad")
     pimp.add_argument("--classes", help="classes.txt with the action names (line k = action k+1)")
     pimp.set_defaults(func=cmd_pyskl_import)
 
-    for name, help_text in (("train", "train a model (Hydra overrides)"),
-                            ("eval", "evaluate a checkpoint: ckpt_path=PATH [overrides]"),
-                            ("export", "export a checkpoint to ONNX: ckpt_path=PATH [out=FILE]"),
-                            ("compare", ("run configs/compare/NAME.yaml: methods x protocols x seeds "
-                                         "(NAME [overrides])"))):
+    for name, help_text in (
+        ("train", "train a model (Hydra overrides)"),
+        ("eval", "evaluate a checkpoint: ckpt_path=PATH [overrides]"),
+        ("export", "export a checkpoint to ONNX: ckpt_path=PATH [out=FILE]"),
+        ("compare", ("run configs/compare/NAME.yaml: methods x protocols x seeds (NAME [overrides])")),
+    ):
         p = sub.add_parser(name, help=help_text)
         p.add_argument("overrides", nargs="*", help="key=value overrides")
 
-    report = sub.add_parser("gait-report", help="multi-task CNN, single-task CNN and GEI+PCA+LDA side by side "
-                                                "under the closed-set and cross-subject CASIA-B protocols")
+    report = sub.add_parser(
+        "gait-report",
+        help="multi-task CNN, single-task CNN and GEI+PCA+LDA side by side "
+        "under the closed-set and cross-subject CASIA-B protocols",
+    )
     report.add_argument("--data", required=True, help="GEI cache (mocapkit prepare casia-b --out ...)")
     report.add_argument("--out", required=True, help="report folder (runs go to OUT/runs)")
-    report.add_argument("--protocols", nargs="+", default=["closed_set", "cross_subject"],
-                        choices=["closed_set", "cross_subject"])
-    report.add_argument("--experiments", nargs="+", default=["casiab_multitask", "casiab_single_subject"],
-                        help="Hydra experiments to train (task: gait)")
+    report.add_argument(
+        "--protocols", nargs="+", default=["closed_set", "cross_subject"], choices=["closed_set", "cross_subject"]
+    )
+    report.add_argument(
+        "--experiments",
+        nargs="+",
+        default=["casiab_multitask", "casiab_single_subject"],
+        help="Hydra experiments to train (task: gait)",
+    )
     report.add_argument("--seed", type=int, default=0, help="run seed")
     report.add_argument("--no-pca-lda", dest="no_pca_lda", action="store_true", help="skip the classical baseline")
     report.add_argument("overrides", nargs="*", help="Hydra overrides for every run, e.g. trainer.max_epochs=30")
@@ -419,123 +532,260 @@ def build_parser() -> argparse.ArgumentParser:
 
     refine = sub.add_parser("refine", help="fill the gaps of a motion file (C3D in, C3D out: only the gaps change)")
     refine.add_argument("input", help="any motion file read_motion reads (.c3d, .amc, .bvh, .skeleton, MSR .txt)")
-    refine.add_argument("output", help="OUT.c3d (markers; from a C3D only the filled samples change) or OUT.npz")
+    refine.add_argument(
+        "output", nargs="?", help="OUT.c3d (markers; from a C3D only the filled samples change) or OUT.npz (or --out)"
+    )
+    refine.add_argument("--out", default=None, help="the output, as the positional OUT")
     which = refine.add_mutually_exclusive_group(required=True)
-    which.add_argument("--method", help="configs/refiner/NAME.yaml: linear, pchip, pca, svt, lrmf, trnn, psc, "
-                                        "filter-bases, dynammo, pose-prior; or RUN/best.ckpt, a trained refiner "
-                                        "(mocapkit train experiment=refine_bigru)")
-    which.add_argument("--onnx", metavar="FILE", help="an exported refiner (mocapkit export of a refiner run), "
-                                                      "run with onnxruntime and numpy only")
-    refine.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                        help="a parameter of the method (Hydra syntax), repeatable; trained refiners: window, "
-                             "overlap, repair_threshold, max_empty_frames")
-    refine.add_argument("--train", action="append", default=[], metavar="PATH",
-                        help="clean training motions (file or folder) for data-driven methods, repeatable")
-    refine.add_argument("--repair-outliers", dest="repair_outliers", action="store_true",
-                        help="also replace the observed samples a robust method flags as outliers "
-                             "(default: only the gaps are filled)")
-    refine.add_argument("--screen-outliers", dest="screen_outliers", nargs="?", type=float, default=None,
-                        const=True, metavar="METRES",
-                        help="hide the observed samples farther than METRES from their joint's running median "
-                             "(noise, spikes; without METRES: mocapkit.refinement.screening.SCREEN_THRESHOLD) and "
-                             "refill them with the method; implies --repair-outliers")
-    refine.add_argument("--skip-bad", dest="skip_bad", action="store_true",
-                        help="skip unreadable training files (each is reported)")
+    which.add_argument(
+        "--method",
+        help="a refinement method (mocapkit methods refinement: linear, pchip, pca, trnn, "
+        "...); or RUN/best.ckpt, a trained refiner "
+        "(mocapkit train experiment=refine_bigru)",
+    )
+    which.add_argument(
+        "--onnx",
+        metavar="FILE",
+        help="an exported refiner (mocapkit export of a refiner run), run with onnxruntime and numpy only",
+    )
+    refine.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="a parameter of the method, Hydra's grammar (extrapolate=hold, outlier_threshold=null), "
+        "repeatable; trained refiners: window, overlap, repair_threshold, max_empty_frames",
+    )
+    refine.add_argument(
+        "--train",
+        action="append",
+        default=[],
+        metavar="PATH",
+        help="clean training motions (file or folder) for data-driven methods, repeatable",
+    )
+    refine.add_argument(
+        "--repair-outliers",
+        dest="repair_outliers",
+        action="store_true",
+        help="also replace the observed samples a robust method flags as outliers (default: only the gaps are filled)",
+    )
+    refine.add_argument(
+        "--screen-outliers",
+        dest="screen_outliers",
+        nargs="?",
+        type=float,
+        default=None,
+        const=True,
+        metavar="METRES",
+        help="hide the observed samples farther than METRES from their joint's running median "
+        "(noise, spikes; without METRES: mocapkit.refinement.screening.SCREEN_THRESHOLD) and "
+        "refill them with the method; implies --repair-outliers",
+    )
+    refine.add_argument(
+        "--skip-bad", dest="skip_bad", action="store_true", help="skip unreadable training files (each is reported)"
+    )
     refine.set_defaults(func=cmd_refine)
 
     index = sub.add_parser("index", help="index a folder of motion files for query by example (mocapkit search)")
-    index.add_argument("--src", required=True, help="folder searched recursively for files read_motion reads")
+    index.add_argument(
+        "src_path", nargs="?", metavar="SRC", help="folder searched recursively for files read_motion reads (or --src)"
+    )
+    index.add_argument("--src", default=None, help="the folder, as the positional SRC")
     index.add_argument("--out", required=True, help="the index folder to write (manifest.json + state.npz)")
-    index.add_argument("--method", default=None,
-                       help="dtw_mutual_proximity, dtw_positions, dtw_relational, hod, gpf, amfs, laplacian_score, "
-                            "tsr_stpm, embedding (default: the recommended label-free method, "
-                            "mocapkit.retrieval.RECOMMENDED)")
+    index.add_argument(
+        "--method",
+        default=None,
+        help="a retrieval method (mocapkit methods retrieval; default: the registry's, "
+        "dtw_mutual_proximity, the recommended label-free method)",
+    )
+    index.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help='a parameter of the method, Hydra\'s grammar (window=0.1, "features=[positions]"), repeatable',
+    )
     index.add_argument("--ckpt", default=None, help="--method embedding: RUN/best.ckpt or an exported model.onnx")
-    index.add_argument("--skip-bad", dest="skip_bad", action="store_true",
-                       help="skip files that cannot be read or used (each is reported)")
+    index.add_argument(
+        "--skip-bad",
+        dest="skip_bad",
+        action="store_true",
+        help="skip files that cannot be read or used (each is reported)",
+    )
     index.set_defaults(func=cmd_index)
 
     search = sub.add_parser("search", help="rank the files of an index for each query motion file")
     search.add_argument("--index", required=True, help="a folder written by mocapkit index")
     search.add_argument("queries", nargs="+", help="query motion files")
     search.add_argument("-k", type=int, default=10, help="results per query (0: every indexed file)")
-    search.add_argument("--json", action="store_true",
-                        help='print [{"query": path, "results": [{"path", "distance"}, ...]}, ...]')
+    search.add_argument(
+        "--json", action="store_true", help='print [{"query": path, "results": [{"path", "distance"}, ...]}, ...]'
+    )
     search.add_argument("--method", default=None, help="refuse unless the index was built with this method")
     search.add_argument("--ckpt", default=None, help="refuse unless the index was built with this model file")
     search.set_defaults(func=cmd_search)
 
-    synthesize = sub.add_parser("synthesize", help="new variants of a motion type from about ten example AMC or BVH clips "
-                                                   "(Zhou 2014 ch. 4 SLFM Gaussian processes)")
-    synthesize.add_argument("inputs", nargs="+", help="AMC or BVH files and/or folders (searched recursively); the "
-                                                      "ASF is looked up beside each AMC; BVH clips are converted to "
-                                                      "ASF/AMC on one T-pose rest")
-    synthesize.add_argument("--type", default=None, metavar="SUBSTRING",
-                            help="keep only files whose name contains this, e.g. hopBothLegs1hops")
-    synthesize.add_argument("--out", required=True, help="output folder: variant_000.amc ... and the reference .asf "
-                                                         "(or variant_000.bvh ...), report.json")
-    synthesize.add_argument("--format", default=None, choices=["amc", "bvh"],
-                            help="variants as ASF/AMC (with the reference skeleton) or self-contained BVH (default: "
-                                 "the inputs' format)")
+    synthesize = sub.add_parser(
+        "synthesize",
+        help="new variants of a motion type from about ten example AMC or BVH clips "
+        "(Zhou 2014 ch. 4 SLFM Gaussian processes)",
+    )
+    synthesize.add_argument(
+        "inputs",
+        nargs="+",
+        help="AMC or BVH files and/or folders (searched recursively); the "
+        "ASF is looked up beside each AMC; BVH clips are converted to "
+        "ASF/AMC on one T-pose rest",
+    )
+    synthesize.add_argument(
+        "--type",
+        default=None,
+        metavar="SUBSTRING",
+        help="keep only files whose name contains this, e.g. hopBothLegs1hops",
+    )
+    synthesize.add_argument(
+        "--out",
+        required=True,
+        help="output folder: variant_000.amc ... and the reference .asf (or variant_000.bvh ...), report.json",
+    )
+    synthesize.add_argument(
+        "--format",
+        default=None,
+        choices=["amc", "bvh"],
+        help="variants as ASF/AMC (with the reference skeleton) or self-contained BVH (default: the inputs' format)",
+    )
     synthesize.add_argument("--variants", type=int, default=10, help="variants to write (default 10)")
-    synthesize.add_argument("--frames", type=int, default=None, help="frames per variant (default: mean training "
-                                                                     "length)")
+    synthesize.add_argument(
+        "--frames", type=int, default=None, help="frames per variant (default: mean training length)"
+    )
     synthesize.add_argument("--seed", type=int, default=0, help="seed of the fit and the sampling (default 0)")
-    synthesize.add_argument("--max-clips", dest="max_clips", type=int, default=10,
-                            help="use the first N matching clips, sorted by path (default 10, as the thesis)")
-    synthesize.add_argument("--window", type=float, default=None, metavar="SECONDS",
-                            help="cut each file into consecutive windows of this length and train on the first "
-                                 "--max-clips of them (long takes of one motion, e.g. CMU walks)")
-    synthesize.add_argument("--method", default="slfm", choices=["slfm", "perlin", "lau", "cvae"],
-                            help="synthesiser (default slfm; perlin, lau and cvae are the baselines)")
-    synthesize.add_argument("--no-footskate", dest="no_footskate", action="store_true",
-                            help="skip the footskate cleanup that every method applies (stances, root shift, "
-                                 "two-bone leg IK)")
-    synthesize.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                            help="a parameter of the synthesiser, repeatable, e.g. n_inducing=64, max_iter=50, "
-                                 "frame_stride=4, sample_noise=False, dynamic_feature=scf_difference")
+    synthesize.add_argument(
+        "--max-clips",
+        dest="max_clips",
+        type=int,
+        default=10,
+        help="use the first N matching clips, sorted by path (default 10, as the thesis)",
+    )
+    synthesize.add_argument(
+        "--window",
+        type=float,
+        default=None,
+        metavar="SECONDS",
+        help="cut each file into consecutive windows of this length and train on the first "
+        "--max-clips of them (long takes of one motion, e.g. CMU walks)",
+    )
+    synthesize.add_argument(
+        "--method",
+        default=None,
+        help="a synthesis method (mocapkit methods synthesis; default slfm; perlin, lau and cvae are the baselines)",
+    )
+    synthesize.add_argument(
+        "--no-footskate",
+        dest="no_footskate",
+        action="store_true",
+        help="skip the footskate cleanup that every method applies (stances, root shift, two-bone leg IK)",
+    )
+    synthesize.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="a parameter of the synthesiser, Hydra's grammar, repeatable, e.g. n_inducing=64, "
+        "max_iter=50, frame_stride=4, sample_noise=false, dynamic_feature=scf_difference",
+    )
     synthesize.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     synthesize.set_defaults(func=cmd_synthesize)
 
-    kinect = sub.add_parser("kinect-fix", help="correct noisy Kinect skeletons (Zhou 2014 ch. 5: GP offset prior, "
-                                               "temporal and reliability terms)")
+    kinect = sub.add_parser(
+        "kinect-fix",
+        help="correct noisy Kinect skeletons (Zhou 2014 ch. 5: GP offset prior, temporal and reliability terms)",
+    )
     kinect_sub = kinect.add_subparsers(dest="action", required=True)
     ktrain = kinect_sub.add_parser("train", help="fit a model on simulated Kinect pairs of real mocap files")
-    ktrain.add_argument("--mocap", nargs="+", required=True, help="mocap files and/or folders (ASF/AMC, BVH, C3D "
-                                                                   "with body landmarks), searched recursively")
+    ktrain.add_argument(
+        "inputs",
+        nargs="*",
+        metavar="MOCAP",
+        help="mocap files and/or folders (ASF/AMC, BVH, C3D with body landmarks), searched recursively (or --mocap)",
+    )
+    ktrain.add_argument("--mocap", nargs="+", default=None, help="the mocap files and/or folders, as MOCAP")
     ktrain.add_argument("--out", required=True, help="the model file (.npz for gp, e.g. .pt for the learned ones)")
-    ktrain.add_argument("--method", default="gp",
-                        help="gp: Zhou ch. 5's GP reconstructor (default); bigru / transformer: the learned refiner "
-                             "networks retrained as correctors (mocapkit.kinect.learned)")
+    ktrain.add_argument(
+        "--method",
+        default=None,
+        help="a kinect method (mocapkit methods kinect) that saves a model: gp, Zhou ch. 5's GP "
+        "reconstructor (default); bigru / transformer: the learned refiner networks retrained "
+        "as correctors",
+    )
     ktrain.add_argument("--seed", type=int, default=0, help="simulation and model seed (default 0)")
-    ktrain.add_argument("--noise", default="mean_error",
-                        help="the Kinect simulator's calibration: mean_error (raw error only, the default) or "
-                             "msr_steadiness (as steady as MSR Action3D's real skeletons)")
-    ktrain.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                        help="a parameter of the model, repeatable, e.g. gp_input=posture, energy_unit=0.1, "
-                             "w_temporal=0.1, max_train_frames=5000 (gp); steps=2000, window=64 (bigru, transformer)")
+    ktrain.add_argument(
+        "--noise",
+        default="mean_error",
+        help="the Kinect simulator's calibration: mean_error (raw error only, the default) or "
+        "msr_steadiness (as steady as MSR Action3D's real skeletons)",
+    )
+    ktrain.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="a parameter of the model, Hydra's grammar, repeatable, e.g. gp_input=posture, "
+        'energy_unit=0.1, max_train_frames=5000 (gp); steps=2000, "network={hidden: 16}" '
+        "(bigru, transformer)",
+    )
     ktrain.add_argument("--skip-bad", dest="skip_bad", action="store_true", help="skip (and list) unusable files")
     ktrain.set_defaults(func=cmd_kinect_fix_train)
-    kexport = kinect_sub.add_parser("export", help="write a learned corrector (--method bigru|transformer) as ONNX, "
-                                                   "run by `kinect-fix apply --model FILE.onnx` with onnxruntime")
+    kexport = kinect_sub.add_parser(
+        "export",
+        help="write a learned corrector (--method bigru|transformer) as ONNX, "
+        "run by `kinect-fix apply --model FILE.onnx` with onnxruntime",
+    )
     kexport.add_argument("--model", required=True, help="a learned corrector from `mocapkit kinect-fix train`")
     kexport.add_argument("--out", required=True, help="the .onnx file to write")
     kexport.set_defaults(func=cmd_kinect_fix_export)
-    kapply = kinect_sub.add_parser("apply", help="correct Kinect skeleton files (MSR Action3D .txt, NTU .skeleton, "
-                                                 "C3D) with a trained model; writes OUT/<name>.c3d + report.json")
+    kapply = kinect_sub.add_parser(
+        "apply",
+        help="correct Kinect skeleton files (MSR Action3D .txt, NTU .skeleton, "
+        "C3D) with a trained model; writes OUT/<name>.c3d + report.json",
+    )
     kapply.add_argument("inputs", nargs="+", help="Kinect skeleton files and/or folders (searched recursively)")
-    kapply.add_argument("--model", required=True,
-                        help="a model from `mocapkit kinect-fix train`, or an .onnx from `kinect-fix export`")
+    kapply.add_argument(
+        "--model", required=True, help="a model from `mocapkit kinect-fix train`, or an .onnx from `kinect-fix export`"
+    )
     kapply.add_argument("--out", required=True, help="output folder")
-    kapply.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                        help="a prediction parameter, repeatable: w_spatial, w_temporal, w_reliability, energy_unit, "
-                             "reliability, kappa, jump_threshold, still_threshold (gp); inference_window, overlap "
-                             "(bigru, transformer)")
-    kapply.add_argument("--plot", type=int, default=0, metavar="N",
-                        help="draw the first N files before/after as PNG strips (default 0)")
-    kapply.add_argument("--skip-bad", dest="skip_bad", action="store_true",
-                        help="skip (and list) unreadable files, empty files and skeletons without the 20 joints")
+    kapply.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="a prediction parameter, Hydra's grammar, repeatable: w_spatial, w_temporal, "
+        "w_reliability, energy_unit, "
+        "reliability, kappa, jump_threshold, still_threshold (gp); inference_window, overlap "
+        "(bigru, transformer)",
+    )
+    kapply.add_argument(
+        "--plot", type=int, default=0, metavar="N", help="draw the first N files before/after as PNG strips (default 0)"
+    )
+    kapply.add_argument(
+        "--skip-bad",
+        dest="skip_bad",
+        action="store_true",
+        help="skip (and list) unreadable files, empty files and skeletons without the 20 joints",
+    )
     kapply.set_defaults(func=cmd_kinect_fix_apply)
+
+    methods = sub.add_parser(
+        "methods",
+        help="list the registered methods of every task (or of TASK): name, learned "
+        "(needs a trained model), description",
+    )
+    methods.add_argument(
+        "task",
+        nargs="?",
+        default=None,
+        help="recognition, gait, clustering, refinement, retrieval, synthesis or kinect",
+    )
+    methods.set_defaults(func=cmd_methods)
 
     predict = sub.add_parser("predict", help="classify motion files with an exported ONNX model")
     predict.add_argument("--onnx", required=True, help="model written by `mocapkit export`")
@@ -553,8 +803,9 @@ def main(argv: list[str] | None = None) -> int:
         _DEBUG = True
         argv.pop(0)
     parser = build_parser()
-    # train / eval / export take free-form Hydra overrides, which argparse must not interpret.
-    if argv and argv[0] in ("train", "eval", "export") and not ({"-h", "--help"} & set(argv[1:])):
+    # train / eval / export take free-form Hydra overrides, which argparse must not interpret; `train` takes
+    # Hydra's flags too (--help lists the config groups, --cfg job prints the config).
+    if argv and (argv[0] == "train" or argv[0] in ("eval", "export") and not ({"-h", "--help"} & set(argv[1:]))):
         handler = {"train": cmd_train, "eval": cmd_eval, "export": cmd_export}[argv[0]]
         return _run(handler, argv[1:])
     if argv and argv[0] == "compare":  # `mocapkit compare NAME [overrides]`: Hydra overrides, like train
@@ -589,11 +840,13 @@ def _user_errors() -> tuple[type[BaseException], ...]:
     errors: list[type[BaseException]] = [MotionFormatError, OSError, ValueError]
     try:
         from mocapkit.train.config import ConfigError
+
         errors.append(ConfigError)
     except ImportError:  # pragma: no cover - only without hydra installed
         pass
     try:
         from omegaconf.errors import OmegaConfBaseException
+
         errors.append(OmegaConfBaseException)
     except ImportError:  # pragma: no cover
         pass

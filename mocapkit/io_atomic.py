@@ -16,6 +16,7 @@ no part.
 
 On an exception inside the ``with`` block the temporary file is removed and ``dest`` is left as it was.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -98,8 +99,9 @@ def atomic_path(dest: str | os.PathLike, suffix: str = "") -> Iterator[Path]:
 
 
 @contextlib.contextmanager
-def atomic_open(dest: str | os.PathLike, mode: str = "wb", encoding: str | None = None,
-                newline: str | None = None) -> Iterator[IO]:
+def atomic_open(
+    dest: str | os.PathLike, mode: str = "wb", encoding: str | None = None, newline: str | None = None
+) -> Iterator[IO]:
     """``open(tmp, mode)`` on the temporary sibling of ``dest``; on success flushed, fsynced and renamed onto ``dest``."""
     if mode not in ("w", "wb", "wt"):
         raise ValueError(f"atomic_open: mode must be 'w', 'wt' or 'wb', got {mode!r}")

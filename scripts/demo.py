@@ -4,6 +4,7 @@ Every step is the real `mocapkit` command (printed before it runs). Data goes
 to `.demo/`, the run to `checkpoints/ntu_energy_vgg/demo-<time>/`. Options:
 `--epochs N` and `--fresh` (re-synthesize the data).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -39,8 +40,9 @@ def main() -> None:
     timings = {}
     start = time.time()
     if not (SYNTH / "synth_config.json").exists():
-        timings["synth"] = run("synth", "ntu", "--out", str(SYNTH), "--classes", "12", "--subjects", "20",
-                               "--seed", "0", "--workers", "2")
+        timings["synth"] = run(
+            "synth", "ntu", "--out", str(SYNTH), "--classes", "12", "--subjects", "20", "--seed", "0", "--workers", "2"
+        )
     if not (CACHE / "meta.json").exists():
         timings["prepare"] = run("prepare", "ntu", "--src", str(SYNTH), "--out", str(CACHE), "--workers", "2")
     run_name = "demo-" + datetime.now().strftime("%Y%m%d-%H%M%S")
@@ -61,7 +63,9 @@ def main() -> None:
 
     print("\n## mocapkit demo: NTU-style synthetic set, held-out subjects")
     print("| | |\n|---|---|")
-    print(f"| split | {metrics['split']}: train subjects {metrics['train_subjects']}, test {metrics['test_subjects']} |")
+    print(
+        f"| split | {metrics['split']}: train subjects {metrics['train_subjects']}, test {metrics['test_subjects']} |"
+    )
     counts = metrics["sample_counts"]
     print(f"| samples train / val / test | {counts['train']} / {counts['val']} / {counts['test']} |")
     print(f"| top-1 (held-out subjects) | {metrics['top1']:.1%} (chance {metrics['chance']:.1%}) |")
@@ -70,9 +74,16 @@ def main() -> None:
     print(f"| ONNX parity, max abs diff | {parity['max_abs_diff']:.2e} on {parity['checked_shape']} |")
     print(f"| wall time | {total:.0f} s (" + ", ".join(f"{k} {v:.0f} s" for k, v in timings.items()) + ") |")
     print("\nWrote:")
-    for path in (CACHE, run_dir / "config.yaml", run_dir / "best.ckpt", run_dir / "last.ckpt",
-                 run_dir / "tensorboard", run_dir / "eval" / "metrics.json", run_dir / "eval" / "confusion_matrix.png",
-                 onnx_path):
+    for path in (
+        CACHE,
+        run_dir / "config.yaml",
+        run_dir / "best.ckpt",
+        run_dir / "last.ckpt",
+        run_dir / "tensorboard",
+        run_dir / "eval" / "metrics.json",
+        run_dir / "eval" / "confusion_matrix.png",
+        onnx_path,
+    ):
         print(f"  {path.relative_to(ROOT)}")
 
 

@@ -3,6 +3,7 @@
 The files are never committed: they sit in ``../shared`` beside the checkout
 (``$MOCAPKIT_SHARED`` overrides it), and tests that need them are skipped without it.
 """
+
 import os
 from pathlib import Path
 
@@ -19,8 +20,9 @@ def needs(path: Path):
 NTU_SAMPLES = SHARED / "samples" / "ntu_skeleton"
 
 
-def synthetic_hdm05_folder(tmp_path_factory, classes, actors=("bd", "mm"), clips_per_actor: int = 2,
-                           max_frames: int = 160) -> Path:
+def synthetic_hdm05_folder(
+    tmp_path_factory, classes, actors=("bd", "mm"), clips_per_actor: int = 2, max_frames: int = 160
+) -> Path:
     """A synthetic HDM05 folder laid out as the real cuts: ``<actor>/HDM_<actor>.asf`` and
     ``<actor>/HDM_<actor>_<class>_<nnn>_120.amc`` (the generator writes them flat)."""
     import shutil
@@ -28,8 +30,13 @@ def synthetic_hdm05_folder(tmp_path_factory, classes, actors=("bd", "mm"), clips
     from mocapkit.datasets.synthetic.hdm05 import HDM05SynthConfig, synthesize_hdm05
 
     raw = tmp_path_factory.mktemp("synth")
-    synthesize_hdm05(raw, HDM05SynthConfig(classes=tuple(classes), actors=tuple(actors),
-                                           clips_per_actor=clips_per_actor, max_frames=max_frames), progress=False)
+    synthesize_hdm05(
+        raw,
+        HDM05SynthConfig(
+            classes=tuple(classes), actors=tuple(actors), clips_per_actor=clips_per_actor, max_frames=max_frames
+        ),
+        progress=False,
+    )
     root = tmp_path_factory.mktemp("hdm05")
     for amc in sorted(raw.glob("*.amc")):
         cls, actor, number = amc.stem.rsplit("_", 2)
@@ -37,3 +44,30 @@ def synthetic_hdm05_folder(tmp_path_factory, classes, actors=("bd", "mm"), clips
         shutil.copy(raw / f"HDM_{actor}.asf", root / actor / f"HDM_{actor}.asf")
         shutil.copy(amc, root / actor / f"HDM_{actor}_{cls}_{number}_120.amc")
     return root
+
+
+#: ``mocapkit synth ntu`` options of a tiny NTU-format set: 3 classes, 4 subjects, one setup, camera and take.
+TINY_NTU_SYNTH = "--classes 3 --subjects 4 --setups 1 --replications 1 --cameras 1 --seed 5 --quiet".split()
+
+
+def tiny_energy_vgg_run(root: Path) -> Path:
+    """Synthesise and prepare the tiny NTU-format set under ``root``, train the energy-image CNN for one epoch on it
+    (32-pixel images) and return the run folder ``root/runs/ntu_energy_vgg/r``."""
+    from mocapkit.cli import main
+
+    assert main(["synth", "ntu", "--out", str(root / "synth"), *TINY_NTU_SYNTH]) == 0
+    assert main(["prepare", "ntu", "--src", str(root / "synth"), "--out", str(root / "cache"), "--quiet"]) == 0
+    train = [
+        "train",
+        "experiment=ntu_energy_vgg",
+        f"data.root={root / 'cache'}",
+        f"output_root={root / 'runs'}",
+        "run_name=r",
+        "trainer.max_epochs=1",
+        "trainer.enable_progress_bar=false",
+        "data.batch_size=8",
+        "model.energy.size=32",
+        "data.val_by_subject=false",
+    ]
+    assert main(train) == 0
+    return root / "runs" / "ntu_energy_vgg" / "r"

@@ -1,10 +1,11 @@
-"""Atomic, durable writes (issue 14, item 4): a kill at any moment leaves the previous good file.
+"""Atomic, durable writes: a kill at any moment leaves the previous good file.
 
 The helper (:mod:`mocapkit.io_atomic`) writes a temporary sibling in the destination folder, fsyncs it and
 renames it; checkpoints go through it (:class:`mocapkit.train.checkpoint_io.AtomicCheckpointIO`). The kill
 tests run with ``TMPDIR`` on another filesystem (``/dev/shm`` where it exists), where Lightning's own save
 degrades into a copy in place.
 """
+
 import os
 import signal
 import subprocess
@@ -21,6 +22,7 @@ from mocapkit.io_atomic import (
     atomic_write_text,
     temp_path_for,
 )
+from tests.shared_data import TINY_NTU_SYNTH
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -48,6 +50,7 @@ def wait_for(path: Path, proc: subprocess.Popen, timeout: float) -> None:
 
 # --------------------------------------------------------------------------- the helper
 
+
 def test_write_replaces_and_leaves_no_temporary(tmp_path):
     dest = tmp_path / "report.json"
     atomic_write_text(dest, "old")
@@ -68,7 +71,7 @@ def test_the_temporary_file_is_in_the_destination_folder_and_fsynced(tmp_path, m
     atomic_write_bytes(dest, b"data")
     assert replaced == [(temp_path_for(dest), dest)]
     assert temp_path_for(dest).parent == dest.parent and temp_path_for(dest).name == f"last.ckpt.tmp-{os.getpid()}"
-    assert len(synced) >= 2                   # the file and its folder
+    assert len(synced) >= 2  # the file and its folder
 
 
 def test_an_error_inside_the_block_keeps_the_previous_file(tmp_path):
@@ -123,8 +126,13 @@ with atomic_open(dest, "wb") as f:
 def test_a_killed_write_leaves_the_previous_file(tmp_path):
     dest, marker = tmp_path / "cache.bin", tmp_path / "writing"
     dest.write_bytes(b"previous good file")
-    proc = subprocess.Popen([sys.executable, "-c", KILLED_WRITER, str(dest), str(marker)], cwd=REPO,
-                            env=other_filesystem_tmpdir(tmp_path), stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", KILLED_WRITER, str(dest), str(marker)],
+        cwd=REPO,
+        env=other_filesystem_tmpdir(tmp_path),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
     wait_for(marker, proc, 60)
     os.kill(proc.pid, signal.SIGKILL)
     proc.wait()
@@ -170,25 +178,37 @@ def test_a_training_killed_while_writing_last_ckpt_keeps_the_previous_one(tmp_pa
     from mocapkit.cli import main
     from mocapkit.train.checkpoints import load_checkpoint
 
-    tiny = ["--classes", "3", "--subjects", "4", "--setups", "1", "--replications", "1", "--cameras", "1",
-            "--seed", "5", "--quiet"]
-    assert main(["synth", "ntu", "--out", str(tmp_path / "synth"), *tiny]) == 0
+    assert main(["synth", "ntu", "--out", str(tmp_path / "synth"), *TINY_NTU_SYNTH]) == 0
     assert main(["prepare", "ntu", "--src", str(tmp_path / "synth"), "--out", str(tmp_path / "cache"), "--quiet"]) == 0
     run = tmp_path / "runs" / "ntu_energy_vgg" / "k"
     marker = tmp_path / "writing"
-    argv = ["train", "experiment=ntu_energy_vgg", f"data.root={tmp_path / 'cache'}", f"output_root={tmp_path / 'runs'}",
-            "run_name=k", "trainer.max_epochs=3", "trainer.enable_progress_bar=false",
-            "data.batch_size=8", "model.energy.size=32", "data.val_by_subject=false"]
+    argv = [
+        "train",
+        "experiment=ntu_energy_vgg",
+        f"data.root={tmp_path / 'cache'}",
+        f"output_root={tmp_path / 'runs'}",
+        "run_name=k",
+        "trainer.max_epochs=3",
+        "trainer.enable_progress_bar=false",
+        "data.batch_size=8",
+        "model.energy.size=32",
+        "data.val_by_subject=false",
+    ]
     env = other_filesystem_tmpdir(tmp_path)
-    proc = subprocess.Popen([sys.executable, "-c", KILLED_TRAINING, str(marker), *argv], cwd=REPO, env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", KILLED_TRAINING, str(marker), *argv],
+        cwd=REPO,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
     wait_for(marker, proc, 300)
-    assert Path(marker.read_text()).parent == run             # the partial file is in the run folder ...
+    assert Path(marker.read_text()).parent == run  # the partial file is in the run folder ...
     assert Path(marker.read_text()).name.startswith("last.ckpt.tmp-")  # ... beside last.ckpt, not in TMPDIR
     os.kill(proc.pid, signal.SIGKILL)
     proc.wait()
-    state = load_checkpoint(run / "last.ckpt")                 # weights_only=True, vetted
-    assert state["epoch"] == 0                                  # the previous, complete checkpoint
+    state = load_checkpoint(run / "last.ckpt")  # weights_only=True, vetted
+    assert state["epoch"] == 0  # the previous, complete checkpoint
     assert torch.load(run / "best.ckpt", weights_only=True)["state_dict"]
     # and the run can be continued from it
     assert main(["train", f"resume={run / 'last.ckpt'}", "trainer.max_epochs=2"]) == 0

@@ -1,8 +1,9 @@
-"""Every CLI error is one line (issue 14, item 7) and outputs stay under output_root (item 5).
+"""Every CLI error is one line, and outputs stay under output_root.
 
 An error is ``mocapkit: error: MESSAGE`` naming the file, key or value and what was expected, then the
 hint line about ``--debug``; exit code 2; no traceback unless ``mocapkit --debug`` or ``MOCAPKIT_DEBUG=1``.
 """
+
 import json
 import shutil
 import zipfile
@@ -13,9 +14,7 @@ import torch
 
 from mocapkit.cli import main
 from mocapkit.train.config import ConfigError
-
-TINY = ["--classes", "3", "--subjects", "4", "--setups", "1", "--replications", "1", "--cameras", "1", "--seed", "5",
-        "--quiet"]
+from tests.shared_data import TINY_NTU_SYNTH
 
 
 def one_line_error(capsys, rc: int, *expected: str) -> str:
@@ -23,7 +22,7 @@ def one_line_error(capsys, rc: int, *expected: str) -> str:
     lines = err.strip().splitlines()
     assert rc == 2, err
     assert lines and lines[0].startswith("mocapkit: error: "), err
-    assert len(lines) == 2 and "--debug" in lines[1], err      # one line, and the hint
+    assert len(lines) == 2 and "--debug" in lines[1], err  # one line, and the hint
     assert "Traceback" not in err
     for text in expected:
         assert text in lines[0], (text, err)
@@ -33,31 +32,57 @@ def one_line_error(capsys, rc: int, *expected: str) -> str:
 @pytest.fixture(scope="module")
 def workspace(tmp_path_factory):
     root = tmp_path_factory.mktemp("clierr")
-    assert main(["synth", "ntu", "--out", str(root / "synth"), *TINY]) == 0
+    assert main(["synth", "ntu", "--out", str(root / "synth"), *TINY_NTU_SYNTH]) == 0
     assert main(["prepare", "ntu", "--src", str(root / "synth"), "--out", str(root / "cache"), "--quiet"]) == 0
     return root
 
 
 @pytest.fixture(scope="module")
 def run_dir(workspace):
-    assert main(["train", "experiment=ntu_energy_vgg", f"data.root={workspace / 'cache'}",
-                 f"output_root={workspace / 'runs'}", "run_name=r", "trainer.max_epochs=1",
-                 "trainer.enable_progress_bar=false", "data.batch_size=8", "model.energy.size=32",
-                 "data.val_by_subject=false"]) == 0
+    assert (
+        main(
+            [
+                "train",
+                "experiment=ntu_energy_vgg",
+                f"data.root={workspace / 'cache'}",
+                f"output_root={workspace / 'runs'}",
+                "run_name=r",
+                "trainer.max_epochs=1",
+                "trainer.enable_progress_bar=false",
+                "data.batch_size=8",
+                "model.energy.size=32",
+                "data.val_by_subject=false",
+            ]
+        )
+        == 0
+    )
     return workspace / "runs" / "ntu_energy_vgg" / "r"
 
 
 # --------------------------------------------------------------------------- config values
 
-@pytest.mark.parametrize("override, key", [("trainer.max_epochs=abc", "trainer.max_epochs"),
-                                           ("data.batch_size=many", "data.batch_size"),
-                                           ("trainer.enable_progress_bar=maybe", "trainer.enable_progress_bar"),
-                                           ("optimizer.lr=fast", "optimizer.lr")])
+
+@pytest.mark.parametrize(
+    "override, key",
+    [
+        ("trainer.max_epochs=abc", "trainer.max_epochs"),
+        ("data.batch_size=many", "data.batch_size"),
+        ("trainer.enable_progress_bar=maybe", "trainer.enable_progress_bar"),
+        ("optimizer.lr=fast", "optimizer.lr"),
+    ],
+)
 def test_a_value_of_the_wrong_type_is_named(tmp_path, capsys, override, key):
     rc = main(["train", f"data.root={tmp_path}", f"output_root={tmp_path / 'runs'}", override])
     one_line_error(capsys, rc, key, override.split("=")[1])
-    rc = main(["train", "-m", f"data.root={tmp_path}", f"output_root={tmp_path / 'runs'}",
-               f"{key}=1,{override.split('=')[1]}" if "enable" not in key else f"{key}=true,maybe"])
+    rc = main(
+        [
+            "train",
+            "-m",
+            f"data.root={tmp_path}",
+            f"output_root={tmp_path / 'runs'}",
+            f"{key}=1,{override.split('=')[1]}" if "enable" not in key else f"{key}=true,maybe",
+        ]
+    )
     one_line_error(capsys, rc, key)
     assert not (tmp_path / "runs").exists()
 
@@ -68,8 +93,18 @@ def test_an_unknown_key_is_one_line(tmp_path, capsys):
 
 # --------------------------------------------------------------------------- outputs stay under output_root
 
-@pytest.mark.parametrize("override", ["run_name=../../x", "run_name=/tmp/mocapkit-absolute-run", "run_name=a/b",
-                                      "experiment_name=../../../x", "run_name=..", "run_name=''"])
+
+@pytest.mark.parametrize(
+    "override",
+    [
+        "run_name=../../x",
+        "run_name=/tmp/mocapkit-absolute-run",
+        "run_name=a/b",
+        "experiment_name=../../../x",
+        "run_name=..",
+        "run_name=''",
+    ],
+)
 def test_run_and_experiment_names_are_one_folder_name(tmp_path, capsys, override):
     root = tmp_path / "root" / "out"
     rc = main(["train", f"data.root={tmp_path}", f"output_root={root}", override])
@@ -101,6 +136,7 @@ def test_an_unwritable_output_folder_is_one_line(tmp_path, capsys):
 
 # --------------------------------------------------------------------------- damaged checkpoints
 
+
 def damaged(kind: str, path: Path) -> None:
     if kind == "empty":
         path.write_bytes(b"")
@@ -127,9 +163,11 @@ def test_a_damaged_checkpoint_is_one_line(run_dir, tmp_path, capsys, kind, cmd):
     shutil.copytree(run_dir, run)
     name = "last.ckpt" if cmd == "resume" else "best.ckpt"
     damaged(kind, run / name)
-    argv = {"eval": ["eval", f"ckpt_path={run / name}"],
-            "export": ["export", f"ckpt_path={run / name}", f"out={tmp_path / 'm.onnx'}"],
-            "resume": ["train", f"resume={run / name}", "trainer.max_epochs=2"]}[cmd]
+    argv = {
+        "eval": ["eval", f"ckpt_path={run / name}"],
+        "export": ["export", f"ckpt_path={run / name}", f"out={tmp_path / 'm.onnx'}"],
+        "resume": ["train", f"resume={run / name}", "trainer.max_epochs=2"],
+    }[cmd]
     one_line_error(capsys, main(argv), str(run / name))
     assert not (tmp_path / "m.onnx").exists()
 
@@ -151,12 +189,19 @@ def test_eval_out_dir_under_a_file_is_one_line(run_dir, tmp_path, capsys):
     run = tmp_path / "run"
     shutil.copytree(run_dir, run)
     (tmp_path / "file").write_text("x")
-    rc = main(["eval", f"ckpt_path={run / 'best.ckpt'}", f"eval.out_dir={tmp_path / 'file' / 'eval'}",
-               "trainer.enable_progress_bar=false"])
+    rc = main(
+        [
+            "eval",
+            f"ckpt_path={run / 'best.ckpt'}",
+            f"eval.out_dir={tmp_path / 'file' / 'eval'}",
+            "trainer.enable_progress_bar=false",
+        ]
+    )
     one_line_error(capsys, rc, str(tmp_path / "file"))
 
 
 # --------------------------------------------------------------------------- predict
+
 
 def tiny_onnx(path: Path) -> Path:
     """A 3-class "skeleton classifier" (mean of x, y, z) written with onnx.helper: no export needed."""
@@ -164,9 +209,12 @@ def tiny_onnx(path: Path) -> Path:
     from onnx import TensorProto, helper
 
     node = helper.make_node("ReduceMean", ["skeletons"], ["logits"], axes=[1, 2, 3], keepdims=0)
-    graph = helper.make_graph([node], "tiny", [helper.make_tensor_value_info("skeletons", TensorProto.FLOAT,
-                                                                              ["b", "m", "t", 25, 3])],
-                              [helper.make_tensor_value_info("logits", TensorProto.FLOAT, ["b", 3])])
+    graph = helper.make_graph(
+        [node],
+        "tiny",
+        [helper.make_tensor_value_info("skeletons", TensorProto.FLOAT, ["b", "m", "t", 25, 3])],
+        [helper.make_tensor_value_info("logits", TensorProto.FLOAT, ["b", 3])],
+    )
     model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 13)])
     model.ir_version = 8
     for key, value in {"class_names": json.dumps(["a", "b", "c"]), "layout": "ntu25"}.items():
@@ -209,6 +257,7 @@ def test_predict_on_a_nan_skeleton_is_one_line(workspace, tmp_path, capsys):
 
 
 # --------------------------------------------------------------------------- --debug
+
 
 def test_debug_flag_and_variable_show_the_traceback(tmp_path, capsys, monkeypatch):
     missing = tmp_path / "nowhere.ckpt"

@@ -2,6 +2,7 @@
 
 One tiny synthetic set and one short run are shared by the tests of this module.
 """
+
 import json
 
 import pytest
@@ -23,8 +24,16 @@ def workspace(tmp_path_factory):
 
 
 def train_overrides(root, *extra):
-    return ["train", "experiment=ntu_energy_vgg", f"data.root={root / 'cache'}", f"output_root={root / 'runs'}",
-            "trainer.enable_progress_bar=false", "data.batch_size=8", "model.energy.size=32", *extra]
+    return [
+        "train",
+        "experiment=ntu_energy_vgg",
+        f"data.root={root / 'cache'}",
+        f"output_root={root / 'runs'}",
+        "trainer.enable_progress_bar=false",
+        "data.batch_size=8",
+        "model.energy.size=32",
+        *extra,
+    ]
 
 
 @pytest.fixture(scope="module")
@@ -38,8 +47,8 @@ def test_train_writes_the_run_folder(run_dir):
         assert (run_dir / name).is_file(), name
     assert any((run_dir / "tensorboard").glob("events.out.tfevents.*"))
     last = torch.load(run_dir / "last.ckpt", weights_only=False)
-    assert last["epoch"] == 1                      # 0-based index of the second (last) epoch
-    assert last["global_step"] == 2 * 3            # 2 epochs of 3 batches (2 training subjects x 12 samples, batch 8)
+    assert last["epoch"] == 1  # 0-based index of the second (last) epoch
+    assert last["global_step"] == 2 * 3  # 2 epochs of 3 batches (2 training subjects x 12 samples, batch 8)
 
 
 def test_resume_continues_where_it_stopped(run_dir, tmp_path):
@@ -59,7 +68,7 @@ def test_eval_writes_metrics_and_confusion_matrix(run_dir):
     assert main(["eval", f"ckpt_path={run_dir / 'best.ckpt'}", "trainer.enable_progress_bar=false"]) == 0
     metrics = json.loads((run_dir / "eval" / "metrics.json").read_text())
     assert metrics["split"] == "ntu60_xsub"
-    assert metrics["test_subjects"] == [3]                      # subjects 1, 2, 4 train in NTU-60 X-Sub
+    assert metrics["test_subjects"] == [3]  # subjects 1, 2, 4 train in NTU-60 X-Sub
     assert 3 not in metrics["train_subjects"]
     assert metrics["sample_counts"]["test"] == metrics["num_samples"] == 3 * 4  # 3 cameras x 4 actions
     assert 0.0 <= metrics["top1"] <= metrics["top5"] <= 1.0
@@ -72,18 +81,28 @@ def test_eval_writes_metrics_and_confusion_matrix(run_dir):
 def test_eval_with_test_time_views(run_dir, tmp_path):
     def evaluate(name, *views):
         out = tmp_path / name
-        assert main(["eval", f"ckpt_path={run_dir / 'best.ckpt'}", "trainer.enable_progress_bar=false",
-                     f"eval.out_dir={out}", *views]) == 0
+        assert (
+            main(
+                [
+                    "eval",
+                    f"ckpt_path={run_dir / 'best.ckpt'}",
+                    "trainer.enable_progress_bar=false",
+                    f"eval.out_dir={out}",
+                    *views,
+                ]
+            )
+            == 0
+        )
         return json.loads((out / "metrics.json").read_text())
 
     plain = evaluate("plain")
     assert plain["views"] is None
-    identity = evaluate("identity", "eval.views={crops:[1.0],rotate_deg:[0]}")     # one view = the clip itself
+    identity = evaluate("identity", "eval.views={crops:[1.0],rotate_deg:[0]}")  # one view = the clip itself
     assert identity["views"]["n_views"] == 1
     assert identity["confusion_matrix"] == plain["confusion_matrix"] and identity["top1"] == plain["top1"]
     twelve = evaluate("twelve", "eval.views={crops:[1.0,0.9],rotate_deg:[0,-10,10]}")
     assert twelve["views"] == {"crops": [1.0, 0.9], "rotate_deg": [0.0, -10.0, 10.0], "n_views": 12}
-    assert twelve["num_samples"] == plain["num_samples"]                        # one prediction per clip
+    assert twelve["num_samples"] == plain["num_samples"]  # one prediction per clip
     assert "test-time views | 12" in (tmp_path / "twelve" / "summary.md").read_text()
 
 
@@ -127,8 +146,10 @@ def test_malformed_file_stops_prepare_with_file_and_line(tmp_path, capsys):
 def test_same_seed_deterministic_runs_give_identical_weights(workspace):
     states = []
     for name in ("det_a", "det_b"):
-        assert main(train_overrides(workspace, f"run_name={name}", "trainer.max_epochs=1", "deterministic=true",
-                                    "seed=7")) == 0
+        assert (
+            main(train_overrides(workspace, f"run_name={name}", "trainer.max_epochs=1", "deterministic=true", "seed=7"))
+            == 0
+        )
         states.append(torch.load(workspace / "runs" / "ntu_energy_vgg" / name / "last.ckpt", weights_only=False))
     a, b = (s["state_dict"] for s in states)
     assert a.keys() == b.keys()

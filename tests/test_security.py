@@ -1,4 +1,4 @@
-"""Loading a checkpoint or opening a run folder never runs code (issue 14, item 1).
+"""Loading a checkpoint or opening a run folder never runs code.
 
 A real tiny run is trained once; each test copies its folder and plants a payload — a Hydra ``_target_``
 that would create, empty or overwrite a "victim" file — in the checkpoint's ``hyper_parameters`` or in the
@@ -6,6 +6,7 @@ run's ``.hydra/config.yaml``. ``eval``, ``export`` and ``train resume=`` must re
 one line naming the file and the key, and the victim must be untouched. ``predict`` loads ONNX only (and
 never imports torch); ``refine`` builds only MotionRefiner classes.
 """
+
 import json
 import shutil
 import subprocess
@@ -17,22 +18,17 @@ import torch
 from omegaconf import OmegaConf
 
 from mocapkit.cli import main
+from tests.shared_data import tiny_energy_vgg_run
 
 pytestmark = pytest.mark.slow
 
-TINY = ["--classes", "3", "--subjects", "4", "--setups", "1", "--replications", "1", "--cameras", "1", "--seed", "5",
-        "--quiet"]
 ORIGINAL = "precious contents\n"
 
 
 @pytest.fixture(scope="module")
 def workspace(tmp_path_factory):
     root = tmp_path_factory.mktemp("security")
-    assert main(["synth", "ntu", "--out", str(root / "synth"), *TINY]) == 0
-    assert main(["prepare", "ntu", "--src", str(root / "synth"), "--out", str(root / "cache"), "--quiet"]) == 0
-    assert main(["train", "experiment=ntu_energy_vgg", f"data.root={root / 'cache'}", f"output_root={root / 'runs'}",
-                 "run_name=r", "trainer.max_epochs=1", "trainer.enable_progress_bar=false",
-                 "data.batch_size=8", "model.energy.size=32", "data.val_by_subject=false"]) == 0
+    tiny_energy_vgg_run(root)
     return root
 
 
@@ -63,53 +59,91 @@ def plant_in_config(run: Path, key: str, node: dict) -> None:
 
 # --------------------------------------------------------------------------- the payloads
 
-def touch_model(victim):          # (a) pathlib.Path.touch as "the model": would create the file
-    return "ckpt", "hyper_parameters.model", lambda hp: hp.update(model={"_target_": "pathlib.Path.touch",
-                                                                          "self": str(victim)})
+
+def touch_model(victim):  # (a) pathlib.Path.touch as "the model": would create the file
+    return (
+        "ckpt",
+        "hyper_parameters.model",
+        lambda hp: hp.update(model={"_target_": "pathlib.Path.touch", "self": str(victim)}),
+    )
 
 
-def open_model(victim):           # (b) builtins.open(victim, "w") as "the model": would empty the file
-    return "ckpt", "hyper_parameters.model", lambda hp: hp.update(model={"_target_": "builtins.open",
-                                                                          "_args_": [str(victim), "w"]})
+def open_model(victim):  # (b) builtins.open(victim, "w") as "the model": would empty the file
+    return (
+        "ckpt",
+        "hyper_parameters.model",
+        lambda hp: hp.update(model={"_target_": "builtins.open", "_args_": [str(victim), "w"]}),
+    )
 
 
 def mocapkit_writer_model(victim):  # (d) a mocapkit function that writes files, as "the model"
-    return "ckpt", "hyper_parameters.model", lambda hp: hp.update(
-        model={"_target_": "mocapkit.datasets.formats.motion_io.write_motion", "path": str(victim)})
+    return (
+        "ckpt",
+        "hyper_parameters.model",
+        lambda hp: hp.update(
+            model={"_target_": "mocapkit.datasets.formats.motion_io.write_motion", "path": str(victim)}
+        ),
+    )
 
 
 def nested_in_optimizer(victim):  # an allowed optimizer whose argument is a payload (recursive instantiate)
-    return "ckpt", "hyper_parameters.optimizer.lr", lambda hp: hp.update(
-        optimizer={"_target_": "torch.optim.SGD", "_partial_": True,
-                   "lr": {"_target_": "builtins.open", "_args_": [str(victim), "w"]}})
+    return (
+        "ckpt",
+        "hyper_parameters.optimizer.lr",
+        lambda hp: hp.update(
+            optimizer={
+                "_target_": "torch.optim.SGD",
+                "_partial_": True,
+                "lr": {"_target_": "builtins.open", "_args_": [str(victim), "w"]},
+            }
+        ),
+    )
 
 
-def partial_numpy(victim):        # _partial_ on a non-allowed target
-    return "ckpt", "hyper_parameters.scheduler", lambda hp: hp.update(
-        scheduler={"_target_": "numpy.save", "_partial_": True, "file": str(victim), "arr": [1]})
+def partial_numpy(victim):  # _partial_ on a non-allowed target
+    return (
+        "ckpt",
+        "hyper_parameters.scheduler",
+        lambda hp: hp.update(scheduler={"_target_": "numpy.save", "_partial_": True, "file": str(victim), "arr": [1]}),
+    )
 
 
 def lightning_instantiator(victim):  # Lightning's own instantiator keys
-    return "ckpt", "hyper_parameters._instantiator", lambda hp: hp.update(
-        _instantiator="lightning.pytorch.cli.instantiate_module", _class_path="shutil.copyfile")
+    return (
+        "ckpt",
+        "hyper_parameters._instantiator",
+        lambda hp: hp.update(_instantiator="lightning.pytorch.cli.instantiate_module", _class_path="shutil.copyfile"),
+    )
 
 
-def copy_as_data(victim, source):   # (c) the run config's data module is shutil.copyfile(source, victim)
+def copy_as_data(victim, source):  # (c) the run config's data module is shutil.copyfile(source, victim)
     return "config", "data._target_", ("data", {"_target_": "shutil.copyfile", "src": str(source), "dst": str(victim)})
 
 
 def copy_as_evaluator(victim, source):  # (c) the evaluator is shutil.copyfile
-    return "config", "eval.evaluator._target_", ("eval.evaluator", {"_target_": "shutil.copyfile", "_partial_": True,
-                                                                    "src": str(source), "dst": str(victim)})
+    return (
+        "config",
+        "eval.evaluator._target_",
+        ("eval.evaluator", {"_target_": "shutil.copyfile", "_partial_": True, "src": str(source), "dst": str(victim)}),
+    )
 
 
 def mocapkit_writer_as_model_config(victim, source):  # (d) in the config's model node
-    return "config", "model._target_", ("model", {"_target_": "mocapkit.datasets.formats.motion_io.write_motion",
-                                                  "path": str(victim)})
+    return (
+        "config",
+        "model._target_",
+        ("model", {"_target_": "mocapkit.datasets.formats.motion_io.write_motion", "path": str(victim)}),
+    )
 
 
-CKPT_PAYLOADS = [touch_model, open_model, mocapkit_writer_model, nested_in_optimizer, partial_numpy,
-                 lightning_instantiator]
+CKPT_PAYLOADS = [
+    touch_model,
+    open_model,
+    mocapkit_writer_model,
+    nested_in_optimizer,
+    partial_numpy,
+    lightning_instantiator,
+]
 CONFIG_PAYLOADS = [copy_as_data, copy_as_evaluator, mocapkit_writer_as_model_config]
 COMMANDS = ["eval", "export", "resume"]
 
@@ -126,7 +160,7 @@ def assert_refused(capsys, rc: int, files: list[str], key: str) -> str:
     err = capsys.readouterr().err
     lines = err.strip().splitlines()
     assert rc == 2, err
-    assert lines[0].startswith("mocapkit: error: ") and len(lines) == 2, err    # one line (+ the --debug hint)
+    assert lines[0].startswith("mocapkit: error: ") and len(lines) == 2, err  # one line (+ the --debug hint)
     assert any(f in lines[0] for f in files), (files, err)
     assert key in lines[0], (key, err)
     assert "Traceback" not in err
@@ -150,7 +184,7 @@ def test_checkpoint_payloads_are_refused(run_dir, tmp_path, capsys, cmd, payload
     assert victim.read_text() == ORIGINAL
     assert not new_victim.exists()
     assert not (tmp_path / "model.onnx").exists()
-    assert (run / "last.ckpt").read_bytes() == before    # resume did not start
+    assert (run / "last.ckpt").read_bytes() == before  # resume did not start
     assert not (run / "eval").exists()
 
 
@@ -181,8 +215,14 @@ def test_a_module_target_outside_mocapkit_train_is_refused(run_dir, tmp_path, ca
 def test_an_override_cannot_bring_a_payload(run_dir, tmp_path, capsys):
     run = copy_run(run_dir, tmp_path)
     victim = tmp_path / "created.txt"
-    rc = main(["eval", f"ckpt_path={run / 'best.ckpt'}", "eval.evaluator._target_=pathlib.Path.touch",
-               f"+eval.evaluator.self={victim}"])
+    rc = main(
+        [
+            "eval",
+            f"ckpt_path={run / 'best.ckpt'}",
+            "eval.evaluator._target_=pathlib.Path.touch",
+            f"+eval.evaluator.self={victim}",
+        ]
+    )
     assert_refused(capsys, rc, [str(run)], "eval.evaluator")
     assert not victim.exists()
 
@@ -204,13 +244,18 @@ print("TORCH_IMPORTED" if "torch" in sys.modules else "NO_TORCH", rc)
 
 
 def _predict(*argv) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-c", PREDICT_PROBE, "predict", *map(str, argv)], capture_output=True,
-                          text=True, cwd=Path(__file__).resolve().parents[1], timeout=120)
+    return subprocess.run(
+        [sys.executable, "-c", PREDICT_PROBE, "predict", *map(str, argv)],
+        capture_output=True,
+        text=True,
+        cwd=Path(__file__).resolve().parents[1],
+        timeout=120,
+    )
 
 
 def test_predict_refuses_a_checkpoint_and_never_imports_torch(run_dir, workspace, tmp_path):
     fake = tmp_path / "model.onnx"
-    shutil.copy(run_dir / "best.ckpt", fake)       # a pickle-based checkpoint named like an ONNX file
+    shutil.copy(run_dir / "best.ckpt", fake)  # a pickle-based checkpoint named like an ONNX file
     skeleton = sorted((workspace / "synth").glob("*.skeleton"))[0]
     result = _predict("--onnx", fake, skeleton)
     assert "NO_TORCH 2" in result.stdout, result.stdout + result.stderr
@@ -218,12 +263,21 @@ def test_predict_refuses_a_checkpoint_and_never_imports_torch(run_dir, workspace
     assert err[0].startswith("mocapkit: error: ") and str(fake) in err[0] and len(err) == 2, result.stderr
 
 
-# --------------------------------------------------------------------------- refine: configs/refiner/*.yaml only
+# --------------------------------------------------------------------------- refine: registry entries configs/refinement/method/*.yaml only
 
-@pytest.mark.parametrize("setting", ["refiner._target_=builtins.open", "_target_=builtins.open",
-                                     "+refiner._target_=builtins.open", "++_target_=builtins.open",
-                                     "++refiner._target_=pathlib.Path.touch", "+x._target_=builtins.open",
-                                     "+x={_target_: shutil.copyfile, src: a, dst: b}"])
+
+@pytest.mark.parametrize(
+    "setting",
+    [
+        "refiner._target_=builtins.open",
+        "_target_=builtins.open",
+        "+refiner._target_=builtins.open",
+        "++_target_=builtins.open",
+        "++refiner._target_=pathlib.Path.touch",
+        "+x._target_=builtins.open",
+        "+x={_target_: shutil.copyfile, src: a, dst: b}",
+    ],
+)
 def test_refine_refuses_a_target_override(tmp_path, capsys, setting):
     from mocapkit.refinement.apply import build_refiner
     from mocapkit.train.config import ConfigError

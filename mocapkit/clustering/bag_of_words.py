@@ -9,7 +9,7 @@ its ``C`` chosen by stratified cross-validation on the training sequences reads 
 
 Clusterers are duck-typed scikit-learn estimators: centroid models (``n_clusters``; ``fit`` then ``labels_``
 and ``predict``, e.g. ``KMeans``) or factorisations (``fit_transform`` / ``transform`` and ``components_``, e.g.
-the :mod:`mocapkit.classical` NMF family or ``sklearn.decomposition.NMF``), whose word is the arg-max of a
+the :mod:`mocapkit.clustering.nmf` family or ``sklearn.decomposition.NMF``), whose word is the arg-max of a
 clip's code row (the thesis's ``argmax_c G_c,clip``; we tried ``argmax_c W_ic ‖H_c‖`` instead and it was worse
 on MSR: one dominant "mean pose" component then takes most clips).
 For graph-regularised models (GNMF, NMC) the graph couples the training clips only; test clips
@@ -35,6 +35,7 @@ turns skeleton sequences ``[T_i, J, 3]`` into per-sequence clip features ``[n_cl
 pipeline is ``Pipeline([("clips", SequenceClips(...)), ("bow", BagOfWordsClassifier(...))])`` and
 ``GridSearchCV`` can tune e.g. ``bow__clusterer__n_components`` with folds over sequences.
 """
+
 from __future__ import annotations
 
 import copy
@@ -73,8 +74,10 @@ class ClipConditioner(TransformerMixin, BaseEstimator):
     def _signed(X) -> np.ndarray:
         X = check_array(X, dtype=np.float64, input_name="ClipConditioner features")
         if X.shape[1] % 2:
-            raise ValueError(f"ClipConditioner needs sign-split features [n_clips, 2h] (an even number of "
-                             f"columns), got shape {X.shape}")
+            raise ValueError(
+                f"ClipConditioner needs sign-split features [n_clips, 2h] (an even number of "
+                f"columns), got shape {X.shape}"
+            )
         check_non_negative(X, "ClipConditioner (sign-split features must be non-negative)")
         half = X.shape[1] // 2
         return X[:, :half] - X[:, half:]
@@ -91,8 +94,9 @@ class ClipConditioner(TransformerMixin, BaseEstimator):
         check_is_fitted(self, "mean_")
         signed = self._signed(X)
         if signed.shape[1] != len(self.mean_):
-            raise ValueError(f"X has {2 * signed.shape[1]} features but the conditioner was fitted with "
-                             f"{2 * len(self.mean_)}")
+            raise ValueError(
+                f"X has {2 * signed.shape[1]} features but the conditioner was fitted with {2 * len(self.mean_)}"
+            )
         signed = signed - self.mean_
         out = np.concatenate([np.maximum(signed, 0.0), np.maximum(-signed, 0.0)], axis=1)
         if self.unit_norm:
@@ -113,8 +117,7 @@ class SequenceClips(TransformerMixin, BaseEstimator):
         frames_per_clip: frames sampled per clip. layout: the skeleton layout name (e.g. ``"msr20"``).
     """
 
-    def __init__(self, window: int = 30, stride: int | None = None, frames_per_clip: int = 10,
-                 layout: str = "msr20"):
+    def __init__(self, window: int = 30, stride: int | None = None, frames_per_clip: int = 10, layout: str = "msr20"):
         self.window = window
         self.stride = stride
         self.frames_per_clip = frames_per_clip
@@ -122,10 +125,10 @@ class SequenceClips(TransformerMixin, BaseEstimator):
 
     def fit(self, X=None, y=None) -> SequenceClips:
         """Check the parameters (``window`` ≥ 2 without a stride, ``frames_per_clip`` ≥ 1, a known layout)."""
-        from mocapkit.motion.layouts import get_layout
         from mocapkit.features.clips import clip_count
+        from mocapkit.motion.layouts import get_layout
 
-        clip_count(1, self.window, self.stride)                     # raises naming a bad window / stride
+        clip_count(1, self.window, self.stride)  # raises naming a bad window / stride
         if int(self.frames_per_clip) < 1:
             raise ValueError(f"frames_per_clip must be at least 1, got {self.frames_per_clip}")
         self.layout_ = get_layout(self.layout)
@@ -141,8 +144,10 @@ class SequenceClips(TransformerMixin, BaseEstimator):
         for i, positions in enumerate(X):
             positions = np.asarray(positions)
             if positions.ndim != 3 or positions.shape[1:] != (self.layout_.num_joints, 3):
-                raise ValueError(f"sequence {i}: expected [frames, {self.layout_.num_joints}, 3] positions of the "
-                                 f"{self.layout} layout, got shape {positions.shape}")
+                raise ValueError(
+                    f"sequence {i}: expected [frames, {self.layout_.num_joints}, 3] positions of the "
+                    f"{self.layout} layout, got shape {positions.shape}"
+                )
             try:
                 out.append(clip_features(positions, self.window, self.stride, self.frames_per_clip, self.layout_))
             except ValueError as exc:
@@ -162,8 +167,10 @@ def stack_clips(X, name: str = "X") -> tuple[np.ndarray, np.ndarray]:
         raise ValueError(f"{name} holds no sequences")
     for i, clips in enumerate(sequences):
         if clips.ndim != 2 or len(clips) == 0 or clips.shape[1] != sequences[0].shape[1]:
-            raise ValueError(f"{name}[{i}] must be a [n_clips, d] array with at least one clip and "
-                             f"d = {sequences[0].shape[-1]} like {name}[0], got shape {clips.shape}")
+            raise ValueError(
+                f"{name}[{i}] must be a [n_clips, d] array with at least one clip and "
+                f"d = {sequences[0].shape[-1]} like {name}[0], got shape {clips.shape}"
+            )
     clips = check_array(np.concatenate(sequences), dtype="numeric", input_name=f"{name} (clip features)")
     check_non_negative(clips, f"BagOfWordsClassifier ({name} clip features)")
     owner = np.repeat(np.arange(len(sequences)), [len(c) for c in sequences])
@@ -196,8 +203,7 @@ def code_histograms(codes, sequence_of_clip, n_sequences: int) -> np.ndarray:
     codes = _numpy(codes).astype(np.float64)
     owner = np.asarray(sequence_of_clip, dtype=np.int64)
     if codes.ndim != 2 or owner.shape != (len(codes),):
-        raise ValueError(f"codes must be [n_clips, k] and sequence_of_clip [n_clips], got {codes.shape}, "
-                         f"{owner.shape}")
+        raise ValueError(f"codes must be [n_clips, k] and sequence_of_clip [n_clips], got {codes.shape}, {owner.shape}")
     if len(codes) and (codes.min() < 0 or not np.isfinite(codes).all()):
         raise ValueError("codes must be finite and non-negative")
     if len(owner) and (owner.min() < 0 or owner.max() >= n_sequences):
@@ -219,7 +225,7 @@ def assign_codes(clusterer, X: np.ndarray) -> np.ndarray:
 def fit_words(clusterer, X: np.ndarray) -> np.ndarray:
     """Fit ``clusterer`` on clips ``X [n, d]``; the training clips' words.
 
-    ``labels_`` after ``fit`` (k-means; the :mod:`mocapkit.classical` NMF family: arg-max of each row of the
+    ``labels_`` after ``fit`` (k-means; the :mod:`mocapkit.clustering.nmf` family: arg-max of each row of the
     fitted codes W, the thesis's ``argmax_c G_c,clip``), else the arg-max of ``fit_transform`` (e.g.
     ``sklearn.decomposition.NMF``).
     """
@@ -295,8 +301,17 @@ class BagOfWordsClassifier(ClassifierMixin, BaseEstimator):
     ``cluster_time_``, ``classifier_time_`` (seconds).
     """
 
-    def __init__(self, clusterer, classifier: str = "logistic", Cs=(0.1, 1.0, 10.0, 100.0), cv: int = 3,
-                 random_state: int = 0, assignment: str = "hard", conditioner=None, prefit: bool = False):
+    def __init__(
+        self,
+        clusterer,
+        classifier: str = "logistic",
+        Cs=(0.1, 1.0, 10.0, 100.0),
+        cv: int = 3,
+        random_state: int = 0,
+        assignment: str = "hard",
+        conditioner=None,
+        prefit: bool = False,
+    ):
         self.clusterer = clusterer
         self.classifier = classifier
         self.Cs = Cs
@@ -340,8 +355,9 @@ class BagOfWordsClassifier(ClassifierMixin, BaseEstimator):
         base = make_classifier(self.classifier, self.random_state)
         folds = min(int(self.cv), int(np.bincount(np.unique(y, return_inverse=True)[1]).min()))
         if folds >= 2:
-            search = GridSearchCV(base, {"C": Cs}, cv=StratifiedKFold(folds, shuffle=True,
-                                                                       random_state=self.random_state))
+            search = GridSearchCV(
+                base, {"C": Cs}, cv=StratifiedKFold(folds, shuffle=True, random_state=self.random_state)
+            )
             search.fit(histograms, y)
             self.classifier_, self.best_C_ = search.best_estimator_, float(search.best_params_["C"])
         else:
@@ -368,7 +384,7 @@ class BagOfWordsClassifier(ClassifierMixin, BaseEstimator):
 
     def predict(self, X) -> np.ndarray:
         """Predicted labels ``[n]`` of the sequences ``X``."""
-        histograms = self.histograms(X)                  # checks the fit first (NotFittedError)
+        histograms = self.histograms(X)  # checks the fit first (NotFittedError)
         return self.classifier_.predict(histograms)
 
     def decision_function(self, X) -> np.ndarray:

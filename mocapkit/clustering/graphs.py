@@ -2,7 +2,7 @@
 
 Every builder returns a symmetric ``scipy.sparse.csr_matrix`` of shape ``[n_samples, n_samples]`` with
 non-negative weights and a zero diagonal (no self loops). Samples are the rows of ``X [n_samples, n_features]``,
-as everywhere in :mod:`mocapkit.classical`.
+as everywhere in :mod:`mocapkit.clustering`.
 
 * :func:`knn_graph` — the GNMF graph of Cai et al. 2011: ``p``-nearest neighbours, 0/1 or heat-kernel weights.
 * :func:`sparse_graph` — a locally weighted sparse (ℓ1) graph, **our reading** of Feng et al. 2015
@@ -11,6 +11,7 @@ as everywhere in :mod:`mocapkit.classical`.
 * :func:`combine_graphs` — ``a + weight · b``.
 * :func:`laplacian` / :func:`split_laplacian` — ``L = D − S`` and ``L = L⁺ − L⁻`` for multiplicative updates.
 """
+
 from __future__ import annotations
 
 import warnings
@@ -32,8 +33,9 @@ def _as_numpy_2d(X, name: str = "X") -> np.ndarray:
     bad = ~np.isfinite(X)
     if bad.any():
         i, j = np.argwhere(bad)[0]
-        raise ValueError(f"{name} has non-finite entries ({int(bad.sum())} in total): first {X[i, j]} "
-                         f"at row {i}, column {j}")
+        raise ValueError(
+            f"{name} has non-finite entries ({int(bad.sum())} in total): first {X[i, j]} at row {i}, column {j}"
+        )
     return X
 
 
@@ -51,15 +53,18 @@ def check_graph(S, n_samples: int | None = None, name: str = "graph") -> sp.csr_
     if S.ndim != 2 or S.shape[0] != S.shape[1]:
         raise ValueError(f"{name} must be a square [n_samples, n_samples] affinity matrix, got shape {S.shape}")
     if n_samples is not None and S.shape[0] != n_samples:
-        raise ValueError(f"{name} has shape {S.shape} but X has {n_samples} samples (rows); "
-                         f"expected [{n_samples}, {n_samples}]")
+        raise ValueError(
+            f"{name} has shape {S.shape} but X has {n_samples} samples (rows); expected [{n_samples}, {n_samples}]"
+        )
     if S.nnz and not np.isfinite(S.data).all():
         raise ValueError(f"{name} has non-finite weights")
     if S.nnz and S.data.min() < 0:
         k = int(np.argmin(S.data))
         i = int(np.searchsorted(S.indptr, k, side="right") - 1)
-        raise ValueError(f"{name} has negative weights: min {S.data[k]:.4g} at row {i}, column {S.indices[k]} "
-                         f"(affinities must be >= 0; pass a signed Laplacian through split_laplacian instead)")
+        raise ValueError(
+            f"{name} has negative weights: min {S.data[k]:.4g} at row {i}, column {S.indices[k]} "
+            f"(affinities must be >= 0; pass a signed Laplacian through split_laplacian instead)"
+        )
     off_diagonal = S - sp.diags(S.diagonal())
     off_diagonal.eliminate_zeros()
     if off_diagonal.nnz == 0:
@@ -101,9 +106,10 @@ def knn_graph(X, n_neighbors: int = 5, weight: str = "binary", sigma: float | No
         if sigma is None:
             sigma = float(A.data.mean())
         if not sigma > 0:
-            raise ValueError(f"heat kernel sigma must be > 0, got {sigma} (all neighbours at distance 0? "
-                             f"pass sigma explicitly)")
-        A.data = np.exp(-A.data ** 2 / (2.0 * float(sigma) ** 2))
+            raise ValueError(
+                f"heat kernel sigma must be > 0, got {sigma} (all neighbours at distance 0? pass sigma explicitly)"
+            )
+        A.data = np.exp(-(A.data**2) / (2.0 * float(sigma) ** 2))
     A = A.tocsr().astype(np.float64)
     S = A.maximum(A.T).tocsr()
     S.setdiag(0.0)
@@ -149,14 +155,14 @@ def sparse_graph(X, beta: float = 0.05, n_neighbors: int | None = None, max_iter
     distances, neighbours = NearestNeighbors(n_neighbors=m + 1).fit(X).kneighbors(X)
     rows, cols, vals = [], [], []
     for i in range(n):
-        keep = neighbours[i] != i                        # drop the sample itself (wherever ties put it)
+        keep = neighbours[i] != i  # drop the sample itself (wherever ties put it)
         cand, dist = neighbours[i][keep][:m], distances[i][keep][:m]
         sq_norm = float(X[i] @ X[i])
-        if sq_norm == 0.0:                               # an all-zero sample is coded by nothing
+        if sq_norm == 0.0:  # an all-zero sample is coded by nothing
             continue
         mean_dist = dist.mean()
         p = dist / mean_dist if mean_dist > 0 else np.ones_like(dist)
-        p = np.maximum(p, 1e-3)                          # duplicates (distance 0) must not get a free ride
+        p = np.maximum(p, 1e-3)  # duplicates (distance 0) must not get a free ride
         lasso = Lasso(alpha=beta * sq_norm / d, fit_intercept=False, max_iter=max_iter)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ConvergenceWarning)

@@ -33,6 +33,7 @@ Orthogonality: Ding's update keeps the components *near* orthonormal, not exactl
 features ``max|H Hᵀ − I| ≈ 1e-2`` after a default fit (tests assert < 0.02); on clusters with overlapping dense
 centres the off-diagonal of the row-normalised Gram plateaus at ~0.15–0.4 (plain NMF: ~0.7).
 """
+
 from __future__ import annotations
 
 import warnings
@@ -77,8 +78,10 @@ def _check_nonnegative_matrix(A, name: str) -> np.ndarray | torch.Tensor:
             raise ValueError(f"{name} has {what} entries ({int(bad.sum())} in total): first at row {i}, column {j}")
     if a.min() < 0:
         i, j = np.unravel_index(int(np.argmin(a)), a.shape)
-        raise ValueError(f"{name} has negative entries: min {a[i, j]:.4g} at row {i}, column {j} "
-                         f"(NMF needs non-negative data; shift or split it into positive/negative parts)")
+        raise ValueError(
+            f"{name} has negative entries: min {a[i, j]:.4g} at row {i}, column {j} "
+            f"(NMF needs non-negative data; shift or split it into positive/negative parts)"
+        )
     return A
 
 
@@ -87,8 +90,7 @@ def _resolve_device(device) -> torch.device:
         return torch.device("cpu")
     device = torch.device(device)
     if device.type == "cuda" and not torch.cuda.is_available():
-        warnings.warn("device='cuda' requested but CUDA is not available; running on CPU", RuntimeWarning,
-                      stacklevel=3)
+        warnings.warn("device='cuda' requested but CUDA is not available; running on CPU", RuntimeWarning, stacklevel=3)
         return torch.device("cpu")
     return device
 
@@ -126,9 +128,20 @@ class NMF(BaseEstimator):
     #: losses this class can minimise (subclasses: Frobenius only)
     _supported_losses = ("frobenius", "kullback-leibler")
 
-    def __init__(self, n_components: int, *, beta_loss: str = "frobenius", init: str = "random", max_iter: int = 200,
-                 tol: float = 1e-4, random_state: int | None = None, eps: float = 1e-10, device=None,
-                 dtype: torch.dtype = torch.float64, verbose: bool = False):
+    def __init__(
+        self,
+        n_components: int,
+        *,
+        beta_loss: str = "frobenius",
+        init: str = "random",
+        max_iter: int = 200,
+        tol: float = 1e-4,
+        random_state: int | None = None,
+        eps: float = 1e-10,
+        device=None,
+        dtype: torch.dtype = torch.float64,
+        verbose: bool = False,
+    ):
         self.n_components = n_components
         self.beta_loss = beta_loss
         self.init = init
@@ -164,8 +177,12 @@ class NMF(BaseEstimator):
         if X.shape[1] != self.components_.shape[1]:
             raise ValueError(f"X has {X.shape[1]} features but the model was fitted with {self.components_.shape[1]}")
         H = torch.as_tensor(self.components_, dtype=self.dtype, device=self._device)
-        W = torch.full((X.shape[0], H.shape[0]), float(np.sqrt(X.mean().item() / H.shape[0])),
-                       dtype=self.dtype, device=self._device)
+        W = torch.full(
+            (X.shape[0], H.shape[0]),
+            float(np.sqrt(X.mean().item() / H.shape[0])),
+            dtype=self.dtype,
+            device=self._device,
+        )
         W = self._solve_codes(X, W, H)
         return self._as_output(W, X_in)
 
@@ -186,18 +203,20 @@ class NMF(BaseEstimator):
         X = self._to_tensor(_check_nonnegative_matrix(X, "X"))
         n, d = X.shape
         k = int(self.n_components)
-        self._x_sq_norm = float(torch.sum(X * X))          # ‖X‖², for objectives from cached products
+        self._x_sq_norm = float(torch.sum(X * X))  # ‖X‖², for objectives from cached products
         if (W is None) != (H is None):
             raise ValueError("pass both W and H for a custom initialisation (or neither)")
         if W is not None:
             W = self._to_tensor(_check_nonnegative_matrix(W, "W")).clone()
             H = self._to_tensor(_check_nonnegative_matrix(H, "H")).clone()
             if tuple(W.shape) != (n, k):
-                raise ValueError(f"initial W must have shape [n_samples, n_components] = [{n}, {k}], "
-                                 f"got {list(W.shape)}")
+                raise ValueError(
+                    f"initial W must have shape [n_samples, n_components] = [{n}, {k}], got {list(W.shape)}"
+                )
             if tuple(H.shape) != (k, d):
-                raise ValueError(f"initial H must have shape [n_components, n_features] = [{k}, {d}], "
-                                 f"got {list(H.shape)}")
+                raise ValueError(
+                    f"initial H must have shape [n_components, n_features] = [{k}, {d}], got {list(H.shape)}"
+                )
         else:
             W, H = self._initialise(X)
         self._prepare(X, y)
@@ -230,18 +249,22 @@ class NMF(BaseEstimator):
         if not isinstance(self.n_components, (int, np.integer)) or self.n_components < 1:
             raise ValueError(f"n_components must be an integer >= 1, got {self.n_components!r}")
         if self.beta_loss not in self._supported_losses:
-            raise ValueError(f"{type(self).__name__} beta_loss must be one of {self._supported_losses}, "
-                             f"got {self.beta_loss!r}")
+            raise ValueError(
+                f"{type(self).__name__} beta_loss must be one of {self._supported_losses}, got {self.beta_loss!r}"
+            )
         if self.init not in ("random", "nndsvda", "kmeans"):
             raise ValueError(f"init must be 'random', 'nndsvda' or 'kmeans', got {self.init!r}")
         if self.max_iter < 1 or self.tol < 0 or not self.eps > 0:
-            raise ValueError(f"need max_iter >= 1, tol >= 0, eps > 0; got max_iter={self.max_iter}, "
-                             f"tol={self.tol}, eps={self.eps}")
+            raise ValueError(
+                f"need max_iter >= 1, tol >= 0, eps > 0; got max_iter={self.max_iter}, tol={self.tol}, eps={self.eps}"
+            )
 
     def _check_finite(self, value: float, iteration: int) -> None:
         if not np.isfinite(value):
-            raise FloatingPointError(f"{type(self).__name__} diverged at iteration {iteration}: objective is {value} "
-                                     f"(check the data scale, eps and the regularisation weights)")
+            raise FloatingPointError(
+                f"{type(self).__name__} diverged at iteration {iteration}: objective is {value} "
+                f"(check the data scale, eps and the regularisation weights)"
+            )
 
     def _check_fitted(self) -> None:
         if not hasattr(self, "components_"):
@@ -270,8 +293,10 @@ class NMF(BaseEstimator):
             W = np.abs(avg * rng.standard_normal(size=(n, k)))
         elif self.init == "nndsvda":
             if k > min(n, d):
-                raise ValueError(f"init='nndsvda' needs n_components <= min(n_samples, n_features) = {min(n, d)}, "
-                                 f"got n_components={k}; use init='random' for a larger rank")
+                raise ValueError(
+                    f"init='nndsvda' needs n_components <= min(n_samples, n_features) = {min(n, d)}, "
+                    f"got n_components={k}; use init='random' for a larger rank"
+                )
             W, H = _nndsvda(Xn, k)
         else:
             if k > n:
@@ -353,6 +378,7 @@ class NMF(BaseEstimator):
             return float(torch.linalg.norm(X - W @ H))
         return float(np.sqrt(2.0 * max(_generalised_kl(X, W @ H), 0.0)))
 
+
 def _generalised_kl(X: torch.Tensor, WH: torch.Tensor) -> float:
     """``Σ X log(X / WH) − X + WH`` computed as scikit-learn does (terms with ``X ≤ float32 eps`` contribute
     only ``WH``; ``WH`` floored at float32 eps)."""
@@ -413,11 +439,31 @@ class OrthogonalNMF(NMF):
 
     _supported_losses = ("frobenius",)
 
-    def __init__(self, n_components: int, *, init: str = "random", max_iter: int = 200, tol: float = 1e-4,
-                 random_state: int | None = None, eps: float = 1e-10, device=None, dtype: torch.dtype = torch.float64,
-                 verbose: bool = False):
-        super().__init__(n_components, beta_loss="frobenius", init=init, max_iter=max_iter, tol=tol,
-                         random_state=random_state, eps=eps, device=device, dtype=dtype, verbose=verbose)
+    def __init__(
+        self,
+        n_components: int,
+        *,
+        init: str = "random",
+        max_iter: int = 200,
+        tol: float = 1e-4,
+        random_state: int | None = None,
+        eps: float = 1e-10,
+        device=None,
+        dtype: torch.dtype = torch.float64,
+        verbose: bool = False,
+    ):
+        super().__init__(
+            n_components,
+            beta_loss="frobenius",
+            init=init,
+            max_iter=max_iter,
+            tol=tol,
+            random_state=random_state,
+            eps=eps,
+            device=device,
+            dtype=dtype,
+            verbose=verbose,
+        )
 
     def _iterate(self, X, W, H):
         eps = self.eps
@@ -470,8 +516,9 @@ class _GraphRegularised(NMF):
             elif graph == "label":
                 if y is None:
                     raise ValueError("graph='label' needs the labels y in fit (y[i] = -1 for unlabelled samples)")
-                S = combine_graphs(knn_graph(Xn, self.n_neighbors, weight="binary"), label_graph(y, n),
-                                   self.label_weight)
+                S = combine_graphs(
+                    knn_graph(Xn, self.n_neighbors, weight="binary"), label_graph(y, n), self.label_weight
+                )
             else:
                 raise ValueError(f"graph must be 'knn', 'heat', 'sparse', 'label' or an [n, n] affinity, got {graph!r}")
         else:
@@ -483,15 +530,15 @@ class _GraphRegularised(NMF):
         self.affinity_ = S.tocsr()
         indices = torch.as_tensor(np.vstack([S.row, S.col]), dtype=torch.int64)
         values = torch.as_tensor(S.data, dtype=self.dtype)
-        self._S = torch.sparse_coo_tensor(indices, values, S.shape, device=self._device,
-                                          check_invariants=True).coalesce()
+        self._S = torch.sparse_coo_tensor(
+            indices, values, S.shape, device=self._device, check_invariants=True
+        ).coalesce()
         self._degree = torch.as_tensor(np.asarray(S.sum(axis=1)).ravel(), dtype=self.dtype, device=self._device)
 
     def _graph_term(self, W: torch.Tensor, SW: torch.Tensor | None = None) -> float:
         """``tr(Wᵀ L W) = Σ_i D_ii ‖w_i‖² − ⟨W, S W⟩``."""
         SW = torch.sparse.mm(self._S, W) if SW is None else SW
         return float(torch.sum(self._degree[:, None] * W * W) - torch.sum(W * SW))
-
 
 
 class GNMF(_GraphRegularised):
@@ -517,12 +564,35 @@ class GNMF(_GraphRegularised):
 
     _supported_losses = ("frobenius",)
 
-    def __init__(self, n_components: int, *, lam: float = 1.0, graph="knn", n_neighbors: int = 5,
-                 label_weight: float = 1.0, init: str = "random", max_iter: int = 200, tol: float = 1e-4,
-                 random_state: int | None = None, eps: float = 1e-10, device=None, dtype: torch.dtype = torch.float64,
-                 verbose: bool = False):
-        super().__init__(n_components, beta_loss="frobenius", init=init, max_iter=max_iter, tol=tol,
-                         random_state=random_state, eps=eps, device=device, dtype=dtype, verbose=verbose)
+    def __init__(
+        self,
+        n_components: int,
+        *,
+        lam: float = 1.0,
+        graph="knn",
+        n_neighbors: int = 5,
+        label_weight: float = 1.0,
+        init: str = "random",
+        max_iter: int = 200,
+        tol: float = 1e-4,
+        random_state: int | None = None,
+        eps: float = 1e-10,
+        device=None,
+        dtype: torch.dtype = torch.float64,
+        verbose: bool = False,
+    ):
+        super().__init__(
+            n_components,
+            beta_loss="frobenius",
+            init=init,
+            max_iter=max_iter,
+            tol=tol,
+            random_state=random_state,
+            eps=eps,
+            device=device,
+            dtype=dtype,
+            verbose=verbose,
+        )
         self.lam = lam
         self.graph = graph
         self.n_neighbors = n_neighbors
@@ -581,12 +651,37 @@ class NMC(_GraphRegularised):
 
     _supported_losses = ("frobenius",)
 
-    def __init__(self, n_components: int, *, lambda1: float = 1e-3, lambda2: float = 1.0, graph="knn",
-                 n_neighbors: int = 5, label_weight: float = 1.0, eta: float = 0.5, init: str = "kmeans",
-                 max_iter: int = 200, tol: float = 1e-4, random_state: int | None = None, eps: float = 1e-10,
-                 device=None, dtype: torch.dtype = torch.float64, verbose: bool = False):
-        super().__init__(n_components, beta_loss="frobenius", init=init, max_iter=max_iter, tol=tol,
-                         random_state=random_state, eps=eps, device=device, dtype=dtype, verbose=verbose)
+    def __init__(
+        self,
+        n_components: int,
+        *,
+        lambda1: float = 1e-3,
+        lambda2: float = 1.0,
+        graph="knn",
+        n_neighbors: int = 5,
+        label_weight: float = 1.0,
+        eta: float = 0.5,
+        init: str = "kmeans",
+        max_iter: int = 200,
+        tol: float = 1e-4,
+        random_state: int | None = None,
+        eps: float = 1e-10,
+        device=None,
+        dtype: torch.dtype = torch.float64,
+        verbose: bool = False,
+    ):
+        super().__init__(
+            n_components,
+            beta_loss="frobenius",
+            init=init,
+            max_iter=max_iter,
+            tol=tol,
+            random_state=random_state,
+            eps=eps,
+            device=device,
+            dtype=dtype,
+            verbose=verbose,
+        )
         self.lambda1 = lambda1
         self.lambda2 = lambda2
         self.graph = graph
@@ -606,7 +701,7 @@ class NMC(_GraphRegularised):
         return W * norms[None, :], H / norms[:, None]
 
     def _start(self, X, W, H):
-        self.objective_h_step_ = []                     # objective after each H-step (before the W-step)
+        self.objective_h_step_ = []  # objective after each H-step (before the W-step)
         return self._normalise_rows(W, H)
 
     def _iterate(self, X, W, H):
@@ -618,14 +713,17 @@ class NMC(_GraphRegularised):
         SW = torch.sparse.mm(self._S, W)
         self.objective_h_step_.append(self._objective_from_products(W, XHt, HHt, SW))
         ratio = (XHt + l2 * SW) / torch.clamp(W @ HHt + l1 * W + l2 * self._degree[:, None] * W, min=eps)
-        W = W * (ratio if eta == 1.0 else ratio ** eta)
+        W = W * (ratio if eta == 1.0 else ratio**eta)
         return W, H, self._objective_from_products(W, XHt, HHt)
 
     def _objective_from_products(self, W, XHt, HHt, SW=None) -> float:
         """The NMC objective from ``X Hᵀ`` and ``H Hᵀ`` (``‖X − WH‖² = ‖X‖² − 2⟨W, XHᵀ⟩ + ⟨WᵀW, HHᵀ⟩``)."""
         fit = self._x_sq_norm - 2.0 * float(torch.sum(W * XHt)) + float(torch.sum((W.T @ W) * HHt))
-        return (max(fit, 0.0) + float(self.lambda1) * float(torch.sum(W * W))
-                + float(self.lambda2) * self._graph_term(W, SW))
+        return (
+            max(fit, 0.0)
+            + float(self.lambda1) * float(torch.sum(W * W))
+            + float(self.lambda2) * self._graph_term(W, SW)
+        )
 
     def _objective(self, X, W, H, with_graph: bool = True) -> float:
         value = float(torch.sum((X - W @ H) ** 2)) + float(self.lambda1) * float(torch.sum(W * W))

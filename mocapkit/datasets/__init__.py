@@ -19,6 +19,15 @@ package / module    what it holds
 This module re-exports the public API: the readers and writers, the caches and the preparation
 functions.
 """
+
+from mocapkit.datasets.casia_b.cache import GEICache
+from mocapkit.datasets.casia_b.gei import (
+    GaitSequenceError,
+    gait_energy_images,
+    gait_period,
+    normalize_silhouettes,
+)
+from mocapkit.datasets.casia_b.prepare import prepare_casia_b
 from mocapkit.datasets.formats.asf_amc import (
     AmcFormatError,
     AsfFormatError,
@@ -39,20 +48,8 @@ from mocapkit.datasets.formats.casia_b import (
     read_sequence,
     read_silhouette,
 )
-from mocapkit.datasets.casia_b.prepare import prepare_casia_b
 from mocapkit.datasets.formats.errors import MotionFormatError
-from mocapkit.datasets.casia_b.gei import (
-    GaitSequenceError,
-    gait_energy_images,
-    gait_period,
-    normalize_silhouettes,
-)
-from mocapkit.datasets.casia_b.cache import GEICache
-from mocapkit.motion.layouts import CMU31, LAYOUTS, MSR20, NTU25, SkeletonLayout
-from mocapkit.motion.container import Motion
 from mocapkit.datasets.formats.motion_io import read_motion, write_motion
-from mocapkit.datasets.ntu.cache import NTUCache
-from mocapkit.datasets.ntu.prepare import PrepareReport, prepare_ntu
 from mocapkit.datasets.formats.ntu_skeleton import (
     BodySelection,
     NTUSampleName,
@@ -65,8 +62,12 @@ from mocapkit.datasets.formats.ntu_skeleton import (
     sequence_from_positions,
     write_skeleton,
 )
+from mocapkit.datasets.ntu.cache import NTUCache
+from mocapkit.datasets.ntu.prepare import PrepareReport, prepare_ntu
 from mocapkit.datasets.ntu.splits import SPLITS, split_indices, split_summary
 from mocapkit.datasets.splits import validation_split
+from mocapkit.motion.container import Motion
+from mocapkit.motion.layouts import CMU31, LAYOUTS, MSR20, NTU25, SkeletonLayout
 
 __all__ = [
     "CMU31",

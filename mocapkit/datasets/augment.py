@@ -5,6 +5,7 @@ Absent bodies and frames are stored as zeros, so every transform here keeps
 zeros as zeros. Random numbers come from torch's global generator, which
 Lightning seeds per data-loader worker (``seed_everything(workers=True)``).
 """
+
 from __future__ import annotations
 
 import math
@@ -14,7 +15,7 @@ import torch
 
 def temporal_crop(skeleton: torch.Tensor, keep: int, start: int) -> torch.Tensor:
     """Frames ``start … start + keep - 1`` of ``skeleton`` ``[M, T, J, 3]`` → ``[M, keep, J, 3]``."""
-    return skeleton[:, start:start + keep]
+    return skeleton[:, start : start + keep]
 
 
 def crop_length(frames: int, fraction: float, min_frames: int) -> int:
@@ -26,7 +27,7 @@ def crop_length(frames: int, fraction: float, min_frames: int) -> int:
 def transform_about_centroid(skeleton: torch.Tensor, matrix: torch.Tensor) -> torch.Tensor:
     """``skeleton`` ``[M, T, J, 3]`` mapped by the 3 × 3 ``matrix`` about the centroid of its present (non-zero)
     joints; absent joints stay zeros."""
-    present = skeleton.abs().sum(-1, keepdim=True) > 0                      # [M, T, J, 1]
+    present = skeleton.abs().sum(-1, keepdim=True) > 0  # [M, T, J, 1]
     if not present.any():
         return skeleton
     center = (skeleton * present).sum((0, 1, 2)) / present.sum()
@@ -73,8 +74,14 @@ class SkeletonAugment:
         scale: maximum relative change of each axis's scale (0.1: factors in [0.9, 1.1]); 0 disables it.
     """
 
-    def __init__(self, rotate_deg: float = 0.0, crop: tuple[float, float] = (1.0, 1.0), min_frames: int = 8,
-                 tilt_deg: float = 0.0, scale: float = 0.0):
+    def __init__(
+        self,
+        rotate_deg: float = 0.0,
+        crop: tuple[float, float] = (1.0, 1.0),
+        min_frames: int = 8,
+        tilt_deg: float = 0.0,
+        scale: float = 0.0,
+    ):
         lo, hi = crop
         if not 0 < lo <= hi <= 1:
             raise ValueError(f"augment.crop must satisfy 0 < min <= max <= 1, got {crop}")

@@ -23,6 +23,7 @@ Caches written before the integrity record existed are still opened; they get ev
 needs no record. NaN rows are reported: by :meth:`PreparedCache.verify` (a full scan in chunks)
 and by the per-sample accessors of the subclasses, which refuse a sample holding NaN.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -89,10 +90,18 @@ def integrity_record(folder: str | os.PathLike, array_file: str, num_samples: in
     shape, dtype, _ = npy_header(folder / array_file)
     return {
         "num_samples": int(num_samples),
-        "index": {"file": INDEX_FILE, "bytes": (folder / INDEX_FILE).stat().st_size,
-                  "sha256": sha256_of(folder / INDEX_FILE)},
-        "array": {"file": array_file, "bytes": (folder / array_file).stat().st_size,
-                  "shape": list(shape), "dtype": dtype.str, "nan_rows": int(nan_rows)},
+        "index": {
+            "file": INDEX_FILE,
+            "bytes": (folder / INDEX_FILE).stat().st_size,
+            "sha256": sha256_of(folder / INDEX_FILE),
+        },
+        "array": {
+            "file": array_file,
+            "bytes": (folder / array_file).stat().st_size,
+            "shape": list(shape),
+            "dtype": dtype.str,
+            "nan_rows": int(nan_rows),
+        },
     }
 
 
@@ -120,8 +129,11 @@ def npy_header(path: str | os.PathLike) -> tuple[tuple[int, ...], np.dtype, int]
     expected = offset + int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
     size = path.stat().st_size
     if size != expected:
-        raise CacheIntegrityError(path, f"the file is {size} bytes but its header announces {list(shape)} {dtype} "
-                                        f"({expected} bytes): it is truncated or damaged")
+        raise CacheIntegrityError(
+            path,
+            f"the file is {size} bytes but its header announces {list(shape)} {dtype} "
+            f"({expected} bytes): it is truncated or damaged",
+        )
     return tuple(int(n) for n in shape), dtype, offset
 
 
@@ -161,8 +173,10 @@ class PreparedCache:
             raise FileNotFoundError(f"{self._KIND} cache folder {self.root} does not exist")
         for required in (META_FILE, INDEX_FILE, self._ARRAY_FILE):
             if not (self.root / required).is_file():
-                raise FileNotFoundError(f"{self.root} is not a prepared {self._KIND} cache: {required} is missing "
-                                        f"(run `mocapkit prepare {self._COMMAND} --src ... --out {self.root}`)")
+                raise FileNotFoundError(
+                    f"{self.root} is not a prepared {self._KIND} cache: {required} is missing "
+                    f"(run `mocapkit prepare {self._COMMAND} --src ... --out {self.root}`)"
+                )
         meta_path = self.root / META_FILE
         try:
             self.meta = json.loads(meta_path.read_text(encoding="utf-8"))
@@ -171,9 +185,11 @@ class PreparedCache:
         if not isinstance(self.meta, dict):
             raise CacheIntegrityError(meta_path, f"expected a JSON object, found {type(self.meta).__name__}")
         if self.meta.get("format") != self._FORMAT or self.meta.get("version") != self._VERSION:
-            raise ValueError(f"{self.root / META_FILE}: cache format {self.meta.get('format')!r} version "
-                             f"{self.meta.get('version')!r}, expected {self._FORMAT!r} version {self._VERSION}; "
-                             "prepare the cache again")
+            raise ValueError(
+                f"{self.root / META_FILE}: cache format {self.meta.get('format')!r} version "
+                f"{self.meta.get('version')!r}, expected {self._FORMAT!r} version {self._VERSION}; "
+                "prepare the cache again"
+            )
         record = self.meta.get(INTEGRITY_KEY)
         if record is not None and not isinstance(record, dict):
             raise CacheIntegrityError(meta_path, f"{INTEGRITY_KEY!r} must be an object")
@@ -190,8 +206,9 @@ class PreparedCache:
         expected = record.get("index") or {}
         try:
             if "bytes" in expected and index_path.stat().st_size != expected["bytes"]:
-                raise CacheIntegrityError(index_path, f"the file is {index_path.stat().st_size} bytes, meta.json "
-                                                      f"recorded {expected['bytes']}")
+                raise CacheIntegrityError(
+                    index_path, f"the file is {index_path.stat().st_size} bytes, meta.json recorded {expected['bytes']}"
+                )
             if "sha256" in expected and sha256_of(index_path) != expected["sha256"]:
                 raise CacheIntegrityError(index_path, "its SHA-256 checksum differs from the one meta.json recorded")
             with np.load(index_path, allow_pickle=False) as index:
@@ -216,8 +233,9 @@ class PreparedCache:
         shape, dtype, _ = npy_header(array_path)
         expected = record.get("array") or {}
         if "shape" in expected and list(shape) != list(expected["shape"]):
-            raise CacheIntegrityError(array_path, f"shape {list(shape)}, meta.json recorded {expected['shape']} "
-                                                  "(rows were lost or added)")
+            raise CacheIntegrityError(
+                array_path, f"shape {list(shape)}, meta.json recorded {expected['shape']} (rows were lost or added)"
+            )
         if "dtype" in expected and dtype.str != expected["dtype"]:
             raise CacheIntegrityError(array_path, f"dtype {dtype.str}, meta.json recorded {expected['dtype']}")
         if not shape:
@@ -251,7 +269,7 @@ class PreparedCache:
         step = max(1, chunk_bytes // row_bytes)
         found = []
         for start in range(0, len(array), step):
-            block = np.asarray(array[start:start + step]).reshape(min(step, len(array) - start), -1)
+            block = np.asarray(array[start : start + step]).reshape(min(step, len(array) - start), -1)
             found.append(start + np.flatnonzero(np.isnan(block).any(axis=1)))
         return np.concatenate(found) if found else np.zeros(0, dtype=np.int64)
 
@@ -260,8 +278,10 @@ class PreparedCache:
         rows = self.nan_rows()
         if len(rows):
             shown = ", ".join(str(int(r)) for r in rows[:10])
-            raise CacheIntegrityError(self.root / self._ARRAY_FILE,
-                                      f"{len(rows)} rows hold NaN (first: {shown}{', ...' if len(rows) > 10 else ''})")
+            raise CacheIntegrityError(
+                self.root / self._ARRAY_FILE,
+                f"{len(rows)} rows hold NaN (first: {shown}{', ...' if len(rows) > 10 else ''})",
+            )
 
     # Pickle without the memmap: each DataLoader worker reopens it on first access.
     def __getstate__(self) -> dict:

@@ -17,6 +17,7 @@
 Padding frames are all zero, which every model here treats as "no body". The GEI data module
 (:mod:`mocapkit.datasets.casia_b.datamodule`) builds on :class:`SplitDataModule` directly.
 """
+
 from __future__ import annotations
 
 import lightning as L
@@ -47,15 +48,23 @@ class SplitDataModule(L.LightningDataModule):
 
     def split_description(self, subjects: np.ndarray) -> dict:
         """Subjects on each side of the split (``subjects``: per-sample IDs) and the sample counts."""
-        return {"train_subjects": sorted(set(subjects[self.train_idx].tolist())),
-                "val_subjects": sorted(set(subjects[self.val_idx].tolist())),
-                "test_subjects": sorted(set(subjects[self.test_idx].tolist())),
-                "sample_counts": self.sample_counts()}
+        return {
+            "train_subjects": sorted(set(subjects[self.train_idx].tolist())),
+            "val_subjects": sorted(set(subjects[self.val_idx].tolist())),
+            "test_subjects": sorted(set(subjects[self.test_idx].tolist())),
+            "sample_counts": self.sample_counts(),
+        }
 
     def _loader(self, part: str, shuffle: bool) -> DataLoader:
-        return DataLoader(self.dataset(part), batch_size=self.batch_size if part == "train" else self.eval_batch_size,
-                          shuffle=shuffle, num_workers=self.num_workers, collate_fn=self.collate_fn,
-                          persistent_workers=self.num_workers > 0, drop_last=False)
+        return DataLoader(
+            self.dataset(part),
+            batch_size=self.batch_size if part == "train" else self.eval_batch_size,
+            shuffle=shuffle,
+            num_workers=self.num_workers,
+            collate_fn=self.collate_fn,
+            persistent_workers=self.num_workers > 0,
+            drop_last=False,
+        )
 
     def train_dataloader(self) -> DataLoader:
         return self._loader("train", shuffle=True)
@@ -65,9 +74,6 @@ class SplitDataModule(L.LightningDataModule):
 
     def test_dataloader(self) -> DataLoader:
         return self._loader("test", shuffle=False)
-
-
-
 
 
 def pad_collate(items: list[dict]) -> dict:
@@ -97,8 +103,15 @@ class SequenceDataset(Dataset):
         augment: applied to every sample read (training only), or None.
     """
 
-    def __init__(self, sequences, indices: np.ndarray, labels: np.ndarray, subjects: np.ndarray,
-                 max_frames: int, augment: SkeletonAugment | None = None):
+    def __init__(
+        self,
+        sequences,
+        indices: np.ndarray,
+        labels: np.ndarray,
+        subjects: np.ndarray,
+        max_frames: int,
+        augment: SkeletonAugment | None = None,
+    ):
         self.sequences, self.indices = sequences, np.asarray(indices, dtype=np.int64)
         self.labels, self.subjects = labels, subjects
         self.max_frames, self.augment = int(max_frames), augment
@@ -159,18 +172,31 @@ class SkeletonDataModule(SplitDataModule):
         train), built once."""
         if part not in self._parts:
             indices = {"train": self.train_idx, "val": self.val_idx, "test": self.test_idx}[part]
-            self._parts[part] = SequenceDataset(self.sequences, indices, self.labels, self.subjects,
-                                                self.max_frames, self.augment if part == "train" else None)
+            self._parts[part] = SequenceDataset(
+                self.sequences,
+                indices,
+                self.labels,
+                self.subjects,
+                self.max_frames,
+                self.augment if part == "train" else None,
+            )
         return self._parts[part]
 
     def views_dataloader(self, part: str, views: TestTimeViews) -> DataLoader:
         """An unshuffled loader over the ``"val"`` or ``"test"`` part in which every sample appears as
         ``len(views)`` consecutive items (:class:`ViewDataset`), for test-time augmentation."""
-        return DataLoader(ViewDataset(self.dataset(part), views), batch_size=self.eval_batch_size, shuffle=False,
-                          num_workers=self.num_workers, collate_fn=self.collate_fn, drop_last=False)
+        return DataLoader(
+            ViewDataset(self.dataset(part), views),
+            batch_size=self.eval_batch_size,
+            shuffle=False,
+            num_workers=self.num_workers,
+            collate_fn=self.collate_fn,
+            drop_last=False,
+        )
 
-    def _set_loading(self, batch_size: int, eval_batch_size: int | None, num_workers: int, max_frames: int,
-                     augment: dict | None) -> None:
+    def _set_loading(
+        self, batch_size: int, eval_batch_size: int | None, num_workers: int, max_frames: int, augment: dict | None
+    ) -> None:
         """Set the loader options every skeleton data module takes.
 
         ``eval_batch_size`` None means ``batch_size``; longer samples are subsampled to ``max_frames``

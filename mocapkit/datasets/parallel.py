@@ -5,6 +5,7 @@ Shared by the ``prepare`` commands (:mod:`mocapkit.datasets.ntu.prepare`,
 synthetic data sets (:mod:`mocapkit.datasets.synthetic`), whose workers write files and
 report them in any order.
 """
+
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
@@ -22,8 +23,16 @@ class parallel_map:
     With ``desc``, a tqdm bar (``unit``; hidden unless ``progress``) ticks as each result is taken.
     """
 
-    def __init__(self, fn: Callable, jobs: list, workers: int, max_chunksize: int = 16, desc: str | None = None,
-                 unit: str = "it", progress: bool = True):
+    def __init__(
+        self,
+        fn: Callable,
+        jobs: list,
+        workers: int,
+        max_chunksize: int = 16,
+        desc: str | None = None,
+        unit: str = "it",
+        progress: bool = True,
+    ):
         self.fn, self.jobs, self.workers, self.max_chunksize = fn, jobs, workers, max_chunksize
         self.desc, self.unit, self.progress = desc, unit, progress
         self.pool = None
@@ -39,6 +48,7 @@ class parallel_map:
         if self.desc is None:
             return results
         from tqdm import tqdm
+
         self.bar = tqdm(total=len(self.jobs), desc=self.desc, unit=self.unit, disable=not self.progress)
         return self._ticking(results)
 
@@ -56,14 +66,23 @@ class parallel_map:
         return False
 
 
-def write_all(fn: Callable[..., list], jobs: list, workers: int, total: int, desc: str, unit: str,
-              progress: bool = True, chunksize: int = 1) -> None:
+def write_all(
+    fn: Callable[..., list],
+    jobs: list,
+    workers: int,
+    total: int,
+    desc: str,
+    unit: str,
+    progress: bool = True,
+    chunksize: int = 1,
+) -> None:
     """Run ``fn(job)`` for every job, in this process (``workers == 1``) or in a pool in any order.
 
     ``fn`` writes files and returns the list of what it wrote; the tqdm bar (``total`` items of
     ``unit``, hidden unless ``progress``) advances by the length of each list.
     """
     from tqdm import tqdm
+
     bar = tqdm(total=total, desc=desc, unit=unit, disable=not progress)
     try:
         if workers == 1:

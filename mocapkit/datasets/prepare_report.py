@@ -5,6 +5,7 @@
 :class:`PrepareReportBase`. Each is written beside its cache as ``report.json``
 (:meth:`~PrepareReportBase.to_dict`) and ``report.txt`` (:meth:`~PrepareReportBase.to_text`).
 """
+
 from __future__ import annotations
 
 import json

@@ -4,20 +4,23 @@ The protocol of each benchmark lives in its package (``ntu.splits``, ``msr_actio
 ``hdm05.splits``, ``casia_b.splits``); they build on these two functions. The test side of a
 split is never touched here: validation always comes from training samples.
 """
+
 from __future__ import annotations
 
 import numpy as np
 
 
-def subject_masks(subjects: np.ndarray, train_subjects, test_subjects,
-                  label: str = "split='custom'") -> tuple[np.ndarray, np.ndarray]:
+def subject_masks(
+    subjects: np.ndarray, train_subjects, test_subjects, label: str = "split='custom'"
+) -> tuple[np.ndarray, np.ndarray]:
     """Boolean masks of the samples of ``train_subjects`` and of ``test_subjects``.
 
     Both lists are required, non-empty, disjoint, and every listed subject must have samples;
     errors name the list (``label`` names the split in the messages).
     """
-    absent = [name for name, value in (("train_subjects", train_subjects), ("test_subjects", test_subjects))
-              if value is None]
+    absent = [
+        name for name, value in (("train_subjects", train_subjects), ("test_subjects", test_subjects)) if value is None
+    ]
     if absent:
         raise ValueError(f"{label} needs both subject lists; missing: {', '.join(absent)}")
     train_set = {int(s) for s in train_subjects}
@@ -36,8 +39,9 @@ def subject_masks(subjects: np.ndarray, train_subjects, test_subjects,
     return np.isin(subjects, sorted(train_set)), np.isin(subjects, sorted(test_set))
 
 
-def validation_split(train_idx: np.ndarray, subjects: np.ndarray, val_fraction: float = 0.2, seed: int = 0,
-                     by_subject: bool = True) -> tuple[np.ndarray, np.ndarray]:
+def validation_split(
+    train_idx: np.ndarray, subjects: np.ndarray, val_fraction: float = 0.2, seed: int = 0, by_subject: bool = True
+) -> tuple[np.ndarray, np.ndarray]:
     """Hold out part of the training samples for validation; the test set is never touched.
 
     Args:

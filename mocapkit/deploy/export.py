@@ -10,6 +10,7 @@ beside the model as ``<stem>.parity.json``. Both files are written atomically (a
 folder, fsynced, then renamed: :mod:`mocapkit.io_atomic`), and the run's config and the checkpoint are
 vetted before anything is built (:mod:`mocapkit.train.safety`).
 """
+
 from __future__ import annotations
 
 import json
@@ -20,7 +21,8 @@ import onnx
 from mocapkit.io_atomic import atomic_path, atomic_write_text
 
 #: ONNX opset of every dynamo export (the configs' ``export.opset``): from opset 20 GELU is ONNX's own operator,
-#: which onnxruntime runs fused (the refiner transformer's export 3–4 % faster than at opset 18, bench/RESULTS.md §13).
+#: which onnxruntime runs fused (the refiner transformer's export 3–4 % faster than at opset 18:
+#: bench/RESULTS.md#onnx-runtime-costs).
 DEFAULT_OPSET = 20
 
 
@@ -59,7 +61,9 @@ def export_checkpoint(ckpt_path: str | Path, out: str | None = None, overrides: 
     diff = report["max_abs_diff"]  # one number, or one per output for multi-output models
     diff = max(diff.values()) if isinstance(diff, dict) else diff
     top1 = f", same top-1: {report['same_top1']}" if "same_top1" in report else ""
-    print(f"[mocapkit] parity on {report['checked_shape']} (traced with {report['traced_shape']}): "
-          f"max |onnxruntime - torch| = {diff:.2e}{top1}")
+    print(
+        f"[mocapkit] parity on {report['checked_shape']} (traced with {report['traced_shape']}): "
+        f"max |onnxruntime - torch| = {diff:.2e}{top1}"
+    )
     print(f"[mocapkit] wrote {target.parent / (target.stem + '.parity.json')}")
     return report

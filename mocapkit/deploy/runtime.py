@@ -1,5 +1,6 @@
 """Opening an exported model with onnxruntime on the CPU: one place for every session mocapkit creates (exports'
 parity checks, ``predict``, the ONNX refiners, Kinect correctors and embedding indexes). Needs onnxruntime alone."""
+
 from __future__ import annotations
 
 import os

@@ -5,6 +5,7 @@ Runtime or a classical method) are reported the same way. The accuracies come fr
 scikit-learn (``accuracy_score``, ``top_k_accuracy_score``, ``balanced_accuracy_score``,
 ``confusion_matrix``); the per-class and per-group tables are read off them.
 """
+
 from __future__ import annotations
 
 import warnings
@@ -36,12 +37,15 @@ def topk_accuracy(scores: np.ndarray, labels: np.ndarray, k: int) -> float:
         return float(accuracy_score(labels, scores.argmax(1)))
     # scikit-learn ranks tied scores by descending class index; on reversed columns (and labels) that
     # is ascending original index, the argmax order
-    return float(top_k_accuracy_score(num_classes - 1 - labels, scores[:, ::-1], k=k,
-                                      labels=np.arange(num_classes)))
+    return float(top_k_accuracy_score(num_classes - 1 - labels, scores[:, ::-1], k=k, labels=np.arange(num_classes)))
 
 
-def classification_report(scores: np.ndarray, labels: np.ndarray, groups: dict[str, np.ndarray] | None = None,
-                          class_names: list[str] | None = None) -> dict:
+def classification_report(
+    scores: np.ndarray,
+    labels: np.ndarray,
+    groups: dict[str, np.ndarray] | None = None,
+    class_names: list[str] | None = None,
+) -> dict:
     """Top-1, top-5, mean-class accuracy, per-class accuracy, per-group accuracy and the confusion matrix.
 
     Mean-class accuracy is the mean of the per-class accuracies (recalls) over the classes present in
@@ -77,23 +81,33 @@ def classification_report(scores: np.ndarray, labels: np.ndarray, groups: dict[s
         "top5": topk_accuracy(scores, labels, 5),
         "mean_class_accuracy": float(mean_class),
         "chance": float(1.0 / max(1, present.sum())),
-        "per_class": {names[k]: {"accuracy": float(recall[k]), "support": int(support[k])}
-                      for k in range(num_classes) if present[k]},
+        "per_class": {
+            names[k]: {"accuracy": float(recall[k]), "support": int(support[k])}
+            for k in range(num_classes)
+            if present[k]
+        },
         "confusion_matrix": confusion.tolist(),
         "class_names": names,
     }
     for group_name, ids in (groups or {}).items():
         ids = np.asarray(ids)
         report[f"per_{group_name}"] = {
-            str(g): {"accuracy": float(accuracy_score(labels[ids == g], predictions[ids == g])),
-                     "support": int((ids == g).sum())}
+            str(g): {
+                "accuracy": float(accuracy_score(labels[ids == g], predictions[ids == g])),
+                "support": int((ids == g).sum()),
+            }
             for g in np.unique(ids)
         }
     return report
 
 
-def plot_confusion_matrix(confusion: np.ndarray, class_names: list[str], path: str | Path,
-                          title: str = "Confusion matrix", normalize: bool = True) -> Path:
+def plot_confusion_matrix(
+    confusion: np.ndarray,
+    class_names: list[str],
+    path: str | Path,
+    title: str = "Confusion matrix",
+    normalize: bool = True,
+) -> Path:
     """Save a confusion-matrix heat map (rows = true class, normalised per row by default) as PNG."""
     plt = pyplot()
 
@@ -112,7 +126,14 @@ def plot_confusion_matrix(confusion: np.ndarray, class_names: list[str], path: s
         for i in range(n):
             for j in range(n):
                 if confusion[i, j]:
-                    ax.text(j, i, f"{shown[i, j]:.2f}" if normalize else int(confusion[i, j]), ha="center",
-                            va="center", fontsize=6, color="white" if shown[i, j] > 0.5 else "black")
+                    ax.text(
+                        j,
+                        i,
+                        f"{shown[i, j]:.2f}" if normalize else int(confusion[i, j]),
+                        ha="center",
+                        va="center",
+                        fontsize=6,
+                        color="white" if shown[i, j] > 0.5 else "black",
+                    )
     fig.colorbar(im, ax=ax, fraction=0.046)
     return save_figure(fig, path, dpi=120)

@@ -10,6 +10,7 @@
   reports carry ``"nmi_normalisation"`` so numbers are never compared across the two by mistake.
 * **ARI** = ``sklearn.metrics.adjusted_rand_score``: about 0 for random labels, 1 for identical partitions.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -37,7 +38,7 @@ def clustering_accuracy(labels_true, labels_pred) -> float:
     Any label values are allowed (not necessarily 0..k-1); the numbers of classes and clusters may differ.
     """
     labels_true, labels_pred = _labels(labels_true, labels_pred)
-    table = contingency_matrix(labels_true, labels_pred)                 # [classes, clusters]
+    table = contingency_matrix(labels_true, labels_pred)  # [classes, clusters]
     rows, cols = linear_sum_assignment(-table)
     return float(table[rows, cols].sum() / len(labels_true))
 
@@ -45,9 +46,12 @@ def clustering_accuracy(labels_true, labels_pred) -> float:
 def clustering_report(labels_true, labels_pred) -> dict:
     """``{"acc", "nmi", "ari", "nmi_normalisation": "arithmetic", "n_samples", "n_classes", "n_clusters"}``."""
     labels_true, labels_pred = _labels(labels_true, labels_pred)
-    return {"acc": clustering_accuracy(labels_true, labels_pred),
-            "nmi": float(normalized_mutual_info_score(labels_true, labels_pred, average_method=NMI_NORMALISATION)),
-            "ari": float(adjusted_rand_score(labels_true, labels_pred)),
-            "nmi_normalisation": NMI_NORMALISATION,
-            "n_samples": int(len(labels_true)), "n_classes": int(len(np.unique(labels_true))),
-            "n_clusters": int(len(np.unique(labels_pred)))}
+    return {
+        "acc": clustering_accuracy(labels_true, labels_pred),
+        "nmi": float(normalized_mutual_info_score(labels_true, labels_pred, average_method=NMI_NORMALISATION)),
+        "ari": float(adjusted_rand_score(labels_true, labels_pred)),
+        "nmi_normalisation": NMI_NORMALISATION,
+        "n_samples": int(len(labels_true)),
+        "n_classes": int(len(np.unique(labels_true))),
+        "n_clusters": int(len(np.unique(labels_pred))),
+    }

@@ -7,6 +7,7 @@ and calls the evaluator named by ``eval.evaluator._target_`` (:func:`~mocapkit.r
 or :func:`~mocapkit.gait.evaluate.evaluate_gait`). Everything goes to ``<run>/eval/``
 (or ``eval.out_dir``), with the config it ran with (``eval_config.yaml``).
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -24,14 +25,17 @@ from mocapkit.train.training import build, build_datamodule
 
 def predict_outputs(module: L.LightningModule, loader, cfg: DictConfig) -> dict[str, np.ndarray]:
     """Run ``module.predict_step`` over ``loader`` on one device; every output key concatenated as numpy ``[N, ...]``."""
-    trainer = L.Trainer(accelerator=cfg.trainer.accelerator, devices=1, logger=False,
-                        enable_progress_bar=bool(cfg.trainer.get("enable_progress_bar", False)),
-                        enable_checkpointing=False)
+    trainer = L.Trainer(
+        accelerator=cfg.trainer.accelerator,
+        devices=1,
+        logger=False,
+        enable_progress_bar=bool(cfg.trainer.get("enable_progress_bar", False)),
+        enable_checkpointing=False,
+    )
     batches = trainer.predict(module, dataloaders=loader)
     if not batches:
         raise ValueError("the evaluation loader is empty: nothing to evaluate")
     return {key: torch.cat([b[key] for b in batches]).cpu().numpy() for key in batches[0]}
-
 
 
 def evaluate(ckpt_path: str | Path, overrides: list[str] | None = None) -> dict:
@@ -48,7 +52,7 @@ def evaluate(ckpt_path: str | Path, overrides: list[str] | None = None) -> dict:
     except (FileExistsError, NotADirectoryError) as exc:
         raise ConfigError(f"eval.out_dir={out_dir}: not a folder ({exc.strerror})") from exc
     with open_dict(cfg):
-        cfg.ckpt_path = str(ckpt_path)   # evaluators that hand the checkpoint on (refiners) read it here
+        cfg.ckpt_path = str(ckpt_path)  # evaluators that hand the checkpoint on (refiners) read it here
     evaluator = build(cfg.eval.evaluator)
     report = {"checkpoint": str(ckpt_path), **evaluator(module, datamodule, cfg, out_dir)}
     atomic_write_text(out_dir / "eval_config.yaml", OmegaConf.to_yaml(cfg, resolve=True))

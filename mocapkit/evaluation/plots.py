@@ -1,4 +1,5 @@
 """The two steps every result plot shares: a headless matplotlib figure, and saving it as a PNG."""
+
 from __future__ import annotations
 
 from pathlib import Path

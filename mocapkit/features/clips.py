@@ -28,11 +28,13 @@ frame plus one. All-zero frames *inside* a sequence (untracked frames) stay and 
    ``[sign, frame, joint, xyz]`` (positive part first). Both halves are ≥ 0 and ``y = y⁺ − y⁻``
    is recoverable, unlike a constant shift whose offset NMF would have to model.
 """
+
 from __future__ import annotations
 
 import numpy as np
 import torch
 
+from mocapkit.motion.geometry import body_origin, body_size
 from mocapkit.motion.layouts import LANDMARKS, SkeletonLayout, get_layout
 
 
@@ -42,8 +44,10 @@ def _check_window(window: int, stride: int | None) -> tuple[int, int]:
         raise ValueError(f"window must be at least 1 frame, got {window}")
     stride = window // 2 if stride is None else int(stride)
     if stride < 1:
-        raise ValueError(f"stride must be at least 1 frame, got {stride} (window {window}; "
-                         "the default stride window // 2 needs window >= 2)")
+        raise ValueError(
+            f"stride must be at least 1 frame, got {stride} (window {window}; "
+            "the default stride window // 2 needs window >= 2)"
+        )
     return window, stride
 
 
@@ -101,28 +105,41 @@ def normalise_sequence(positions: np.ndarray, layout: SkeletonLayout | str = "ms
     positions = np.asarray(positions, dtype=np.float32)
     layout = get_layout(layout)
     if positions.ndim != 3 or positions.shape[1:] != (layout.num_joints, 3):
-        raise ValueError(f"positions must be [frames, {layout.num_joints}, 3] for layout {layout.name!r}, "
-                         f"got {list(positions.shape)}")
+        raise ValueError(
+            f"positions must be [frames, {layout.num_joints}, 3] for layout {layout.name!r}, "
+            f"got {list(positions.shape)}"
+        )
     if not np.isfinite(positions).all():
         frame = int(np.flatnonzero(~np.isfinite(positions).all(axis=(1, 2)))[0])
         raise ValueError(f"positions contain NaN or inf (first at frame {frame}); missing joints must be zeros")
     root, pelvis, neck = body_joints(layout)
-    joint_present = np.abs(positions).sum(-1) > 0                                   # [T, J]
+    joint_present = np.abs(positions).sum(-1) > 0  # [T, J]
     frame_present = joint_present.any(1)
     if not frame_present.any():
         raise ValueError("positions are all zero: no tracked joint, no clip features")
     length = int(np.flatnonzero(frame_present)[-1]) + 1
-    origin = positions[int(np.argmax(frame_present)), root]
-    both = (joint_present[:, pelvis] & joint_present[:, neck]).astype(np.float32)
-    segment = np.linalg.norm(positions[:, neck] - positions[:, pelvis], axis=-1)
-    scale = float((segment * both).sum() / both.sum()) if both.sum() > 0 else 1.0
-    scale = max(scale, 1e-3)
+    origin = body_origin(positions, frame_present, root, statistic="first")
+    # the mean segment (the networks take the median), 1 where pelvis and neck are never seen together
+    scale = body_size(
+        positions,
+        joint_present[:, pelvis] & joint_present[:, neck],
+        pelvis,
+        neck,
+        statistic="mean",
+        floor=1e-3,
+        default=1.0,
+    )
     normalised = (positions - origin) / np.float32(scale) * joint_present[..., None]
     return normalised.astype(np.float32), length
 
 
-def clip_features(positions: np.ndarray, window: int = 30, stride: int | None = None, frames_per_clip: int = 10,
-                  layout: SkeletonLayout | str = "msr20") -> np.ndarray:
+def clip_features(
+    positions: np.ndarray,
+    window: int = 30,
+    stride: int | None = None,
+    frames_per_clip: int = 10,
+    layout: SkeletonLayout | str = "msr20",
+) -> np.ndarray:
     """Non-negative features ``[num_clips, d]`` (float32) of one sequence ``positions [T, J, 3]`` in metres.
 
     ``d = 2 · frames_per_clip · J · 3``; zeros mark untracked joints. See the module docstring for
@@ -132,14 +149,20 @@ def clip_features(positions: np.ndarray, window: int = 30, stride: int | None = 
     offsets = clip_frame_offsets(window, frames_per_clip)
     clips = []
     for start, _ in clip_windows(length, window, stride):
-        frames = np.minimum(start + offsets, length - 1)                             # edge padding
-        clip = normalised[frames]                                                    # [f, J, 3]
+        frames = np.minimum(start + offsets, length - 1)  # edge padding
+        clip = normalised[frames]  # [f, J, 3]
         clips.append(np.concatenate([np.maximum(clip, 0).ravel(), np.maximum(-clip, 0).ravel()]))
     return np.stack(clips).astype(np.float32)
 
 
-def sequence_clip_features(sequences, window: int = 30, stride: int | None = None, frames_per_clip: int = 10,
-                           layout: SkeletonLayout | str = "msr20", names=None) -> tuple[np.ndarray, np.ndarray]:
+def sequence_clip_features(
+    sequences,
+    window: int = 30,
+    stride: int | None = None,
+    frames_per_clip: int = 10,
+    layout: SkeletonLayout | str = "msr20",
+    names=None,
+) -> tuple[np.ndarray, np.ndarray]:
     """Clip features of many sequences stacked: ``(features [sum num_clips, d], sequence_of_clip [sum num_clips])``.
 
     ``names`` (optional, one per sequence) only serve error messages, which then name the sequence.
@@ -167,24 +190,30 @@ class ClipFeatures(torch.nn.Module):
     invalid columns and leaves every valid clip unchanged. Same definition as :func:`clip_features`.
     """
 
-    def __init__(self, layout: SkeletonLayout | str = "msr20", window: int = 30, stride: int | None = None,
-                 frames_per_clip: int = 10):
+    def __init__(
+        self,
+        layout: SkeletonLayout | str = "msr20",
+        window: int = 30,
+        stride: int | None = None,
+        frames_per_clip: int = 10,
+    ):
         super().__init__()
         self.layout = get_layout(layout)
         self.window, self.stride = _check_window(window, stride)
         self.frames_per_clip = int(frames_per_clip)
         self.root, self.pelvis, self.neck = body_joints(self.layout)
-        self.register_buffer("offsets", torch.from_numpy(clip_frame_offsets(self.window, self.frames_per_clip)),
-                             persistent=False)
+        self.register_buffer(
+            "offsets", torch.from_numpy(clip_frame_offsets(self.window, self.frames_per_clip)), persistent=False
+        )
         self.out_features = feature_dim(self.layout.num_joints, self.frames_per_clip)
 
     def forward(self, skeletons: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         b, t, j, c = skeletons.shape
-        joint_present = skeletons.abs().sum(-1) > 0                                   # [B, T, J]
-        frame_present = joint_present.any(-1)                                         # [B, T]
+        joint_present = skeletons.abs().sum(-1) > 0  # [B, T, J]
+        frame_present = joint_present.any(-1)  # [B, T]
         frame_number = torch.arange(1, t + 1, device=skeletons.device).expand(b, t)
-        length = (frame_number * frame_present).amax(1).clamp(min=1)                  # [B]; all-zero → 1
-        first = torch.argmax(frame_present.to(torch.int64), dim=1)                    # first present frame
+        length = (frame_number * frame_present).amax(1).clamp(min=1)  # [B]; all-zero → 1
+        first = torch.argmax(frame_present.to(torch.int64), dim=1)  # first present frame
         origin = skeletons[torch.arange(b, device=skeletons.device), first, self.root]  # [B, 3]
         both = (joint_present[:, :, self.pelvis] & joint_present[:, :, self.neck]).to(skeletons.dtype)
         segment = (skeletons[:, :, self.neck] - skeletons[:, :, self.pelvis]).norm(dim=-1)
@@ -193,12 +222,13 @@ class ClipFeatures(torch.nn.Module):
         scale = scale.clamp(min=1e-3)
         y = (skeletons - origin[:, None, None]) / scale[:, None, None, None] * joint_present[..., None]
 
-        starts = torch.arange(0, t, self.stride, device=skeletons.device)             # [N]
-        frames = starts[:, None] + self.offsets[None]                                 # [N, f]
-        frames = torch.minimum(frames[None], (length - 1)[:, None, None])            # [B, N, f] edge padding
+        starts = torch.arange(0, t, self.stride, device=skeletons.device)  # [N]
+        frames = starts[:, None] + self.offsets[None]  # [N, f]
+        frames = torch.minimum(frames[None], (length - 1)[:, None, None])  # [B, N, f] edge padding
         n = starts.shape[0]
-        gathered = torch.gather(y.reshape(b, t, j * c), 1,
-                                frames.reshape(b, -1, 1).expand(-1, -1, j * c))      # [B, N*f, J*3]
+        gathered = torch.gather(
+            y.reshape(b, t, j * c), 1, frames.reshape(b, -1, 1).expand(-1, -1, j * c)
+        )  # [B, N*f, J*3]
         clips = gathered.reshape(b, n, self.frames_per_clip * j * c)
         features = torch.cat([clips.clamp(min=0), (-clips).clamp(min=0)], dim=-1)
         valid = (starts[None] + self.window <= length[:, None]) | (starts[None] == 0)
@@ -206,8 +236,13 @@ class ClipFeatures(torch.nn.Module):
         return features * valid[..., None].to(features.dtype), valid
 
 
-def clip_features_torch(skeletons: torch.Tensor, layout: SkeletonLayout | str = "msr20", window: int = 30,
-                        stride: int | None = None, frames_per_clip: int = 10) -> tuple[torch.Tensor, torch.Tensor]:
+def clip_features_torch(
+    skeletons: torch.Tensor,
+    layout: SkeletonLayout | str = "msr20",
+    window: int = 30,
+    stride: int | None = None,
+    frames_per_clip: int = 10,
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Functional form of :class:`ClipFeatures`: ``[B, T, J, 3]`` → ``(features [B, N, d], valid [B, N] bool)``."""
     module = ClipFeatures(layout, window, stride, frames_per_clip).to(skeletons.device)
     return module(skeletons)

@@ -5,6 +5,7 @@ centred on body 0's root joint frame by frame, then their mean, standard deviati
 over the frames where that body is present. With ``StandardScaler`` and ``LogisticRegression`` it is the
 baseline the learned models are compared with (``configs/compare/*_recognition.yaml``).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -49,10 +50,10 @@ class PooledJointStatistics(TransformerMixin, BaseEstimator):
     def transform(self, X) -> np.ndarray:
         rows = []
         for seq in X:
-            pos = self._as_bodies(seq)                                   # [M, T, J, 3]
-            present = np.abs(pos).sum(axis=(2, 3)) > 0                   # [M, T]
+            pos = self._as_bodies(seq)  # [M, T, J, 3]
+            present = np.abs(pos).sum(axis=(2, 3)) > 0  # [M, T]
             frames = present[0] if present[0].any() else np.ones(pos.shape[1], bool)
-            centred = pos - pos[0, :, self.root: self.root + 1]          # body 0's root, per frame
+            centred = pos - pos[0, :, self.root : self.root + 1]  # body 0's root, per frame
             parts = []
             for k in range(self.bodies):
                 keep = frames & present[k]

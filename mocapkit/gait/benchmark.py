@@ -17,6 +17,7 @@ Scoring, for learned runs (``evaluate_gait`` of ``mocapkit eval``) and estimator
 
 An estimator gets ``fit(geis [n, H, W] float32 in [0, 1], subject IDs [n])`` on the whole training side.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -64,12 +65,18 @@ class GaitBenchmark(Benchmark):
     title = "CASIA-B gait recognition (GEIs)"
     protocols = PROTOCOLS
 
-    def __init__(self, root: str, holdout_seed: int = 0, num_train_subjects: int | None = None,
-                 metric: str = "euc", aggregate: str = "sequence"):
+    def __init__(
+        self,
+        root: str,
+        holdout_seed: int = 0,
+        num_train_subjects: int | None = None,
+        metric: str = "euc",
+        aggregate: str = "sequence",
+    ):
         if root is None:
             raise ComparisonError("benchmark.root is not set: give the GEI cache of `mocapkit prepare casia-b`")
         self.root = Path(root)
-        self.cache = GEICache(self.root)                  # fails early, naming the folder, before any training
+        self.cache = GEICache(self.root)  # fails early, naming the folder, before any training
         if len(self.cache) == 0:
             raise ComparisonError(f"{self.root}: the GEI cache is empty")
         self.holdout_seed = int(holdout_seed)
@@ -78,19 +85,32 @@ class GaitBenchmark(Benchmark):
 
     # -------------------------------------------------------------- data and splits
     def describe(self) -> dict:
-        return {"root": str(self.root), "num_geis": len(self.cache), "per": self.cache.meta.get("per"),
-                "gei_size": [self.cache.height, self.cache.width], "holdout_seed": self.holdout_seed,
-                "num_train_subjects": self.num_train_subjects, "metric": self.metric, "aggregate": self.aggregate}
+        return {
+            "root": str(self.root),
+            "num_geis": len(self.cache),
+            "per": self.cache.meta.get("per"),
+            "gei_size": [self.cache.height, self.cache.width],
+            "holdout_seed": self.holdout_seed,
+            "num_train_subjects": self.num_train_subjects,
+            "metric": self.metric,
+            "aggregate": self.aggregate,
+        }
 
     def split(self, protocol: str, seed: int) -> Split:
-        parts = protocol_split(self.cache, protocol, self.holdout_seed,
-                               self.num_train_subjects if protocol == "cross_subject" else None)
+        parts = protocol_split(
+            self.cache, protocol, self.holdout_seed, self.num_train_subjects if protocol == "cross_subject" else None
+        )
         if protocol == "closed_set":
             unseen = np.setdiff1d(self.cache.subjects[parts.test_idx], self.cache.subjects[parts.train_idx])
             if len(unseen):
                 raise ComparisonError(f"{self.root}: closed-set test subjects {unseen.tolist()} have no training GEIs")
-        return Split(protocol, seed, parts.train_idx, parts.test_idx,
-                     {"train_subjects": parts.train_subjects.tolist(), "test_subjects": parts.test_subjects.tolist()})
+        return Split(
+            protocol,
+            seed,
+            parts.train_idx,
+            parts.test_idx,
+            {"train_subjects": parts.train_subjects.tolist(), "test_subjects": parts.test_subjects.tolist()},
+        )
 
     def data(self, indices: np.ndarray):
         """GEIs float32 ``[n, H, W]`` in [0, 1] and subject IDs ``[n]`` of GEIs ``indices``."""
@@ -103,14 +123,26 @@ class GaitBenchmark(Benchmark):
         cache = self.cache
         if protocol == "closed_set":
             subjects = cache.subjects[indices].astype(np.int64)
-            detail = closed_set_report({
-                "subject_logits": scores, "subjects": np.searchsorted(classes, subjects), "subject_ids": subjects,
-                "views": np.searchsorted(np.asarray(VIEWS), cache.views[indices]),
-                "conditions": cache.conditions[indices], "sequences": cache.sequences[indices]})
+            detail = closed_set_report(
+                {
+                    "subject_logits": scores,
+                    "subjects": np.searchsorted(classes, subjects),
+                    "subject_ids": subjects,
+                    "views": np.searchsorted(np.asarray(VIEWS), cache.views[indices]),
+                    "conditions": cache.conditions[indices],
+                    "sequences": cache.sequences[indices],
+                }
+            )
             return {"metrics": closed_set_metrics(detail), "detail": {"closed_set": detail}}
-        detail = cross_view_rank1(embeddings, cache.subjects[indices], cache.conditions[indices],
-                                  cache.sequences[indices], cache.views[indices], metric=self.metric,
-                                  aggregate=self.aggregate)
+        detail = cross_view_rank1(
+            embeddings,
+            cache.subjects[indices],
+            cache.conditions[indices],
+            cache.sequences[indices],
+            cache.views[indices],
+            metric=self.metric,
+            aggregate=self.aggregate,
+        )
         return {"metrics": cross_view_metrics(detail), "detail": {"cross_view": detail}}
 
     def evaluate_estimator(self, estimator, split: Split) -> dict:
@@ -119,8 +151,12 @@ class GaitBenchmark(Benchmark):
         estimator.fit(X, y)
         X_test, _ = self.data(split.test)
         if split.protocol == "closed_set":
-            result = self._score("closed_set", split.test, scores=estimator.decision_function(X_test),
-                                 classes=np.asarray(estimator.classes_))
+            result = self._score(
+                "closed_set",
+                split.test,
+                scores=estimator.decision_function(X_test),
+                classes=np.asarray(estimator.classes_),
+            )
         else:
             result = self._score("cross_subject", split.test, embeddings=estimator.transform(X_test))
         fitted = {k: int(getattr(estimator, k)) for k in ("n_pca_", "n_lda_") if hasattr(estimator, k)}
@@ -128,16 +164,22 @@ class GaitBenchmark(Benchmark):
         return result
 
     def learned_overrides(self, protocol: str, seed: int) -> list[str]:
-        overrides = [f"data.root={self.root}", f"data.protocol={protocol}", f"data.holdout_seed={self.holdout_seed}",
-                     f"eval.metric={self.metric}", f"eval.aggregate={self.aggregate}"]
+        overrides = [
+            f"data.root={self.root}",
+            f"data.protocol={protocol}",
+            f"data.holdout_seed={self.holdout_seed}",
+            f"eval.metric={self.metric}",
+            f"eval.aggregate={self.aggregate}",
+        ]
         if protocol == "cross_subject" and self.num_train_subjects is not None:
             overrides.append(f"data.num_train_subjects={self.num_train_subjects}")
         return overrides
 
     def check_learned_config(self, cfg, method: str) -> None:
         if cfg.get("task") != "gait":
-            raise ComparisonError(f"methods.{method}: experiment has task={cfg.get('task')!r}; the gait benchmark "
-                                  "needs task: gait")
+            raise ComparisonError(
+                f"methods.{method}: experiment has task={cfg.get('task')!r}; the gait benchmark needs task: gait"
+            )
 
     def evaluate_learned(self, report: dict, run_dir: Path, split: Split) -> dict:
         if "closed_set" in report:
@@ -149,35 +191,61 @@ class GaitBenchmark(Benchmark):
     # -------------------------------------------------------------- presentation
     def headline(self, protocol: str) -> list[str]:
         if protocol == "closed_set":
-            return ["subject_accuracy", "subject_accuracy_nm", "subject_accuracy_bg", "subject_accuracy_cl",
-                    "subject_accuracy_per_sequence", "view_accuracy", "condition_accuracy"]
+            return [
+                "subject_accuracy",
+                "subject_accuracy_nm",
+                "subject_accuracy_bg",
+                "subject_accuracy_cl",
+                "subject_accuracy_per_sequence",
+                "view_accuracy",
+                "condition_accuracy",
+            ]
         return ["rank1_nm", "rank1_bg", "rank1_cl"]
 
     def markdown(self, results: dict) -> str:
         """Closed set laid out as thesis Table 6.2 and cross-subject rank-1 tables, for the first seed."""
         seed = results["seeds"][0]
-        lines = [f"## Detail tables (seed {seed})", "",
-                 ("Thesis and literature columns are results on the **real CASIA-B** (124 subjects), a different "
-                  "data set from this cache unless it was prepared from CASIA-B itself: there for scale, not as a "
-                  "like-for-like comparison. Averages are over test samples."), ""]
+        lines = [
+            f"## Detail tables (seed {seed})",
+            "",
+            (
+                "Thesis and literature columns are results on the **real CASIA-B** (124 subjects), a different "
+                "data set from this cache unless it was prepared from CASIA-B itself: there for scale, not as a "
+                "like-for-like comparison. Averages are over test samples."
+            ),
+            "",
+        ]
         for protocol in results["protocols"]:
-            cells = {c["label"]: c["detail"] for c in results["cells"] if c["protocol"] == protocol
-                     and c["seed"] == seed}
+            cells = {
+                c["label"]: c["detail"] for c in results["cells"] if c["protocol"] == protocol and c["seed"] == seed
+            }
             if not cells:
                 continue
             if protocol == "closed_set":
                 reports = {label: d["closed_set"] for label, d in cells.items()}
-                lines += ["### Closed set (thesis Table 6.2 protocol): accuracy (%) per test GEI", "",
-                          closed_set_table(reports, "gei")]
+                lines += [
+                    "### Closed set (thesis Table 6.2 protocol): accuracy (%) per test GEI",
+                    "",
+                    closed_set_table(reports, "gei"),
+                ]
                 if any(r.get("per") == "cycle" for r in reports.values()):
-                    lines += ["### Closed set, per test sequence (vote: summed scores of its cycles)", "",
-                              closed_set_table(reports, "sequence")]
+                    lines += [
+                        "### Closed set, per test sequence (vote: summed scores of its cycles)",
+                        "",
+                        closed_set_table(reports, "sequence"),
+                    ]
             else:
                 reports = {label: d["cross_view"] for label, d in cells.items()}
-                lines += ["### Cross subject (OpenGait protocol): mean rank-1 (%)", "",
-                          ("Gallery nm-01..04, probes nm-05/06, bg-01/02, cl-01/02 of unseen subjects; per (probe "
-                           "view, gallery view), identical view excluded, mean over probe views."), "",
-                          cross_subject_tables(reports)]
+                lines += [
+                    "### Cross subject (OpenGait protocol): mean rank-1 (%)",
+                    "",
+                    (
+                        "Gallery nm-01..04, probes nm-05/06, bg-01/02, cl-01/02 of unseen subjects; per (probe "
+                        "view, gallery view), identical view excluded, mean over probe views."
+                    ),
+                    "",
+                    cross_subject_tables(reports),
+                ]
         return "\n".join(lines)
 
     def plots(self, results: dict, out_dir: Path) -> list[Path]:
@@ -185,8 +253,11 @@ class GaitBenchmark(Benchmark):
         panels = per_view_panels(results)
         if not panels:
             return []
-        return [plot_per_view_panels(panels, Path(out_dir) / "per_view.png",
-                                     f"{self.root.name}: per-view accuracy (mean over seeds)")]
+        return [
+            plot_per_view_panels(
+                panels, Path(out_dir) / "per_view.png", f"{self.root.name}: per-view accuracy (mean over seeds)"
+            )
+        ]
 
 
 # ------------------------------------------------------------------------------------------ metrics
@@ -220,8 +291,9 @@ def closed_set_table(reports: dict[str, dict], level: str = "gei") -> str:
             if level == "sequence":
                 entry = entry.get("per_sequence", entry)
             columns.append((f"{label}: {TASK_TITLES[task].lower()}", entry))
-    header = ["Probe"] + [title for title, _ in columns] + \
-        [f"thesis: {TASK_TITLES[t].lower()}" for t in THESIS_TABLE_6_2]
+    header = (
+        ["Probe"] + [title for title, _ in columns] + [f"thesis: {TASK_TITLES[t].lower()}" for t in THESIS_TABLE_6_2]
+    )
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for label, row in TABLE_6_2_ROWS:
         cells = [_percent(table_6_2_cell(entry, row)) for _, entry in columns]
@@ -236,8 +308,13 @@ def cross_subject_tables(reports: dict[str, dict]) -> str:
     ``reports``: method label → :func:`cross_view_rank1` report.
     """
     names = list(reports)
-    header = ["Probe"] + names + [f"{n} (incl. identical view)" for n in names] + list(LITERATURE_RANK1) + \
-        ["thesis Table 6.3 GEI+PCA+LDA (90° protocol)"]
+    header = (
+        ["Probe"]
+        + names
+        + [f"{n} (incl. identical view)" for n in names]
+        + list(LITERATURE_RANK1)
+        + ["thesis Table 6.3 GEI+PCA+LDA (90° protocol)"]
+    )
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for c, condition in enumerate(CONDITIONS):
         cells = [_percent(r["conditions"][condition]["mean"]) for r in reports.values()]
@@ -258,6 +335,7 @@ def cross_subject_tables(reports: dict[str, dict]) -> str:
 def per_view_panels(results: dict) -> dict:
     """Plot data: per method, closed-set subject accuracy per view and cross-subject NM rank-1 per probe view,
     each the mean over the seeds (``{panel title: {method label: {view: accuracy}}}``)."""
+
     def mean_series(protocol: str, get) -> dict:
         series: dict[str, dict[str, list]] = {}
         for cell in results["cells"]:
@@ -274,16 +352,24 @@ def per_view_panels(results: dict) -> dict:
     panels = {}
     if "closed_set" in results["protocols"]:
         panels["closed set: subject accuracy per view"] = mean_series(
-            "closed_set", lambda d: d["closed_set"]["tasks"].get("subject", {}).get("per_view"))
+            "closed_set", lambda d: d["closed_set"]["tasks"].get("subject", {}).get("per_view")
+        )
     if "cross_subject" in results["protocols"]:
         panels["cross subject: NM rank-1 per probe view (identical view excluded)"] = mean_series(
-            "cross_subject", lambda d: d["cross_view"]["conditions"]["nm"]["per_probe_view"])
+            "cross_subject", lambda d: d["cross_view"]["conditions"]["nm"]["per_probe_view"]
+        )
     return {title: series for title, series in panels.items() if series}
 
 
-def gait_report(data_root, out_dir, protocols=("closed_set", "cross_subject"),
-                experiments=("casiab_multitask", "casiab_single_subject"), overrides=(), seed: int = 0,
-                include_pca_lda: bool = True) -> dict:
+def gait_report(
+    data_root,
+    out_dir,
+    protocols=("closed_set", "cross_subject"),
+    experiments=("casiab_multitask", "casiab_single_subject"),
+    overrides=(),
+    seed: int = 0,
+    include_pca_lda: bool = True,
+) -> dict:
     """``mocapkit gait-report``: ``compare gait`` with the old options (a thin alias).
 
     ``overrides`` go to every learned run (``learned_overrides``); ``data.holdout_seed=`` /
@@ -302,7 +388,7 @@ def gait_report(data_root, out_dir, protocols=("closed_set", "cross_subject"),
             key, _, value = item.lstrip("+").partition("=")
             if key in ("data.holdout_seed", "data.num_train_subjects"):
                 OmegaConf.update(cfg, f"benchmark.{key.split('.', 1)[1]}", None if value == "null" else int(value))
-        by_experiment = {}   # experiment → its first method (gait.yaml lists the plain recipe before variants)
+        by_experiment = {}  # experiment → its first method (gait.yaml lists the plain recipe before variants)
         for k, m in cfg.methods.items():
             if m.get("learned"):
                 by_experiment.setdefault(m.learned.experiment, k)

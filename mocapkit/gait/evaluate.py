@@ -14,6 +14,7 @@ module's protocol, writes to ``out_dir``:
 ``per_view.png``
     accuracy (or rank-1) per probe view.
 """
+
 from __future__ import annotations
 
 import json
@@ -35,8 +36,9 @@ from mocapkit.gait.metrics import (
 from mocapkit.io_atomic import atomic_write_text
 
 
-def evaluate_gait(module: L.LightningModule, datamodule, cfg: DictConfig, out_dir: Path,
-                  ckpt_path: str | Path | None = None) -> dict:
+def evaluate_gait(
+    module: L.LightningModule, datamodule, cfg: DictConfig, out_dir: Path, ckpt_path: str | Path | None = None
+) -> dict:
     """Evaluate a gait module on ``datamodule.test_dataloader()`` under ``datamodule.protocol``.
 
     With ``eval.part=val`` the validation side (training subjects' held-out sequences) is scored
@@ -65,8 +67,13 @@ def evaluate_gait(module: L.LightningModule, datamodule, cfg: DictConfig, out_di
     # the validation side holds training subjects' sequences under both protocols: closed-set classification
     protocol = "closed_set" if part == "val" else datamodule.protocol
     name = str(cfg.get("experiment_name", "gait"))
-    report: dict = {"experiment": name, "protocol": datamodule.protocol, "part": part,
-                    "tasks": [k[: -len("_logits")] for k in out if k.endswith("_logits")], **datamodule.describe()}
+    report: dict = {
+        "experiment": name,
+        "protocol": datamodule.protocol,
+        "part": part,
+        "tasks": [k[: -len("_logits")] for k in out if k.endswith("_logits")],
+        **datamodule.describe(),
+    }
     if ckpt_path is not None:  # (mocapkit.evaluation.evaluate.evaluate adds it itself)
         report["checkpoint"] = str(ckpt_path)
     if protocol == "closed_set":
@@ -78,17 +85,26 @@ def evaluate_gait(module: L.LightningModule, datamodule, cfg: DictConfig, out_di
     elif protocol == "cross_subject":
         metric = str(cfg.get("eval", {}).get("metric", "euc") or "euc")
         aggregate = str(cfg.get("eval", {}).get("aggregate", "sequence") or "sequence")
-        cross = cross_view_rank1(out["embedding"], out["subject_ids"], out["conditions"], out["sequences"],
-                                 np.asarray(VIEWS)[out["views"].astype(np.int64)], metric=metric, aggregate=aggregate)
+        cross = cross_view_rank1(
+            out["embedding"],
+            out["subject_ids"],
+            out["conditions"],
+            out["sequences"],
+            np.asarray(VIEWS)[out["views"].astype(np.int64)],
+            metric=metric,
+            aggregate=aggregate,
+        )
         report["cross_view"] = cross
         summary = cross_view_markdown(cross, f"{name}: cross-subject rank-1 (%), identical view excluded")
         heads = {k: v for k, v in out.items() if k in ("view_logits", "condition_logits")}
         if heads:  # view and condition do not depend on who walks: their heads apply to unseen subjects
-            unseen = closed_set_report({**heads, **{k: out[k] for k in ("views", "conditions", "subject_ids",
-                                                                         "sequences")}})
+            unseen = closed_set_report(
+                {**heads, **{k: out[k] for k in ("views", "conditions", "subject_ids", "sequences")}}
+            )
             report["view_condition_on_test_subjects"] = unseen
-            summary += "\n" + closed_set_markdown(unseen, f"{name}: view / condition accuracy (%) on the unseen "
-                                                          "test subjects", reference=False)
+            summary += "\n" + closed_set_markdown(
+                unseen, f"{name}: view / condition accuracy (%) on the unseen test subjects", reference=False
+            )
         series = {c.upper(): entry["per_probe_view"] for c, entry in cross["conditions"].items()}
         plot_title = f"{name}: cross-subject rank-1 per probe view"
     else:

@@ -8,6 +8,7 @@ The metadata holds the subject names, the view labels (degrees), the conditions 
 The file is checked with ``onnx.checker`` and onnxruntime is compared with PyTorch on a batch
 size other than the traced one; a mismatch raises :class:`~mocapkit.deploy.export.ParityError`.
 """
+
 from __future__ import annotations
 
 import json
@@ -46,8 +47,16 @@ def example_geis(batch: int, height: int, width: int, seed: int = 0) -> torch.Te
     return (body + 0.1 * torch.rand(batch, 1, height, width, generator=g)).clamp(0, 1)
 
 
-def export_gait_onnx(model: nn.Module, out: str | Path, subject_names: list[str] | None = None, opset: int = DEFAULT_OPSET,
-                     trace_batch: int = 2, check_batch: int = 3, atol: float = 1e-4, rtol: float = 1e-3) -> dict:
+def export_gait_onnx(
+    model: nn.Module,
+    out: str | Path,
+    subject_names: list[str] | None = None,
+    opset: int = DEFAULT_OPSET,
+    trace_batch: int = 2,
+    check_batch: int = 3,
+    atol: float = 1e-4,
+    rtol: float = 1e-3,
+) -> dict:
     """Export a :class:`~mocapkit.models.gait_cnn.MultiTaskGaitCNN` to ``out`` and check it; return the parity figures.
 
     Returns:
@@ -57,7 +66,9 @@ def export_gait_onnx(model: nn.Module, out: str | Path, subject_names: list[str]
         ParityError: an output of onnxruntime differs from PyTorch beyond ``atol + rtol * |reference|``.
     """
     if trace_batch == check_batch:
-        raise ValueError(f"export: check_batch={check_batch} must differ from trace_batch so the dynamic batch is checked")
+        raise ValueError(
+            f"export: check_batch={check_batch} must differ from trace_batch so the dynamic batch is checked"
+        )
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     model = model.eval().cpu()
@@ -69,14 +80,28 @@ def export_gait_onnx(model: nn.Module, out: str | Path, subject_names: list[str]
     with warnings.catch_warnings(), torch.no_grad():
         warnings.simplefilter("ignore")
         # optimize=False: as in export_onnx, onnxscript's optimiser is skipped; the unoptimised graph is correct.
-        program = torch.onnx.export(wrapped, (trace_input,), None, input_names=["geis"], output_names=names,
-                                    dynamic_shapes={"geis": {0: batch}}, dynamo=True, opset_version=opset,
-                                    optimize=False, verbose=False)
+        program = torch.onnx.export(
+            wrapped,
+            (trace_input,),
+            None,
+            input_names=["geis"],
+            output_names=names,
+            dynamic_shapes={"geis": {0: batch}},
+            dynamo=True,
+            opset_version=opset,
+            optimize=False,
+            verbose=False,
+        )
     proto = program.model_proto
-    meta = {"subject_names": json.dumps(list(subject_names or [])), "views": json.dumps(list(VIEWS)),
-            "conditions": json.dumps(list(CONDITIONS)), "tasks": json.dumps(list(model.tasks)),
-            "input": f"geis float32 [batch, 1, {height}, {width}], Gait Energy Image pixel values in [0, 1]",
-            "outputs": json.dumps(names), "producer": "mocapkit"}
+    meta = {
+        "subject_names": json.dumps(list(subject_names or [])),
+        "views": json.dumps(list(VIEWS)),
+        "conditions": json.dumps(list(CONDITIONS)),
+        "tasks": json.dumps(list(model.tasks)),
+        "input": f"geis float32 [batch, 1, {height}, {width}], Gait Energy Image pixel values in [0, 1]",
+        "outputs": json.dumps(names),
+        "producer": "mocapkit",
+    }
     save_checked_onnx(proto, meta, out)
 
     session = cpu_session(str(out))
@@ -88,17 +113,30 @@ def export_gait_onnx(model: nn.Module, out: str | Path, subject_names: list[str]
     for name, ref, res in zip(names, reference, results):
         if res.shape != ref.shape:
             raise ParityError(f"onnxruntime output {name} has shape {list(res.shape)}, PyTorch {list(ref.shape)}")
-        checks[name] = {"shape": list(ref.shape), "max_abs_diff": float(np.abs(res - ref).max()),
-                        "max_abs_value": float(np.abs(ref).max())}
+        checks[name] = {
+            "shape": list(ref.shape),
+            "max_abs_diff": float(np.abs(res - ref).max()),
+            "max_abs_value": float(np.abs(ref).max()),
+        }
         if name != "embedding":
             checks[name]["same_top1"] = bool((res.argmax(1) == ref.argmax(1)).all())
         if not np.allclose(res, ref, atol=atol, rtol=rtol):
-            raise ParityError(f"onnxruntime differs from PyTorch on {name} for input {list(check_input.shape)}: "
-                              f"max |diff| = {checks[name]['max_abs_diff']:.3g} > atol {atol} + rtol {rtol}·|ref|")
-    return {"onnx": str(out), "opset": opset, "outputs": names, "traced_shape": list(trace_input.shape),
-            "checked_shape": list(check_input.shape), "checks": checks,
-            "max_abs_diff": {name: c["max_abs_diff"] for name, c in checks.items()},
-            "same_top1": all(c.get("same_top1", True) for c in checks.values()), "atol": atol, "rtol": rtol}
+            raise ParityError(
+                f"onnxruntime differs from PyTorch on {name} for input {list(check_input.shape)}: "
+                f"max |diff| = {checks[name]['max_abs_diff']:.3g} > atol {atol} + rtol {rtol}·|ref|"
+            )
+    return {
+        "onnx": str(out),
+        "opset": opset,
+        "outputs": names,
+        "traced_shape": list(trace_input.shape),
+        "checked_shape": list(check_input.shape),
+        "checks": checks,
+        "max_abs_diff": {name: c["max_abs_diff"] for name, c in checks.items()},
+        "same_top1": all(c.get("same_top1", True) for c in checks.values()),
+        "atol": atol,
+        "rtol": rtol,
+    }
 
 
 def export_gait_module(module, target: str | Path, export_cfg) -> dict:
@@ -108,5 +146,9 @@ def export_gait_module(module, target: str | Path, export_cfg) -> dict:
     the skeleton-only ``trace_frames`` / ``check_frames`` are ignored). ``mocapkit export`` writes the returned
     report beside the model as ``<target stem>.parity.json``.
     """
-    return export_gait_onnx(module.model, Path(target), subject_names=module.hparams.subject_names,
-                            **{key: export_cfg[key] for key in ("opset", "trace_batch", "check_batch", "atol", "rtol")})
+    return export_gait_onnx(
+        module.model,
+        Path(target),
+        subject_names=module.hparams.subject_names,
+        **{key: export_cfg[key] for key in ("opset", "trace_batch", "check_batch", "atol", "rtol")},
+    )

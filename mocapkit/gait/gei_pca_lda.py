@@ -13,6 +13,7 @@ runner (:mod:`mocapkit.evaluation.compare`, ``configs/compare/gei_pca_lda.yaml``
 cache under the thesis's closed-set protocol and OpenGait's cross-subject protocol on the same splits
 as the CNNs and scores it with the same metric code (:mod:`mocapkit.gait.metrics`).
 """
+
 from __future__ import annotations
 
 import warnings
@@ -59,8 +60,7 @@ class GEIPCALDA(ClassifierMixin, TransformerMixin, BaseEstimator):
     ``sklearn.exceptions.NotFittedError``.
     """
 
-    def __init__(self, n_pca: int | None = None, n_lda: int | None = None, metric: str = "euc",
-                 random_state: int = 0):
+    def __init__(self, n_pca: int | None = None, n_lda: int | None = None, metric: str = "euc", random_state: int = 0):
         self.n_pca = n_pca
         self.n_lda = n_lda
         self.metric = metric
@@ -80,17 +80,24 @@ class GEIPCALDA(ClassifierMixin, TransformerMixin, BaseEstimator):
             raise ValueError(f"LDA needs at least 2 subjects in training, got {len(classes)}")
         n, dims, n_classes = len(X), X.shape[1], len(classes)
         if n <= n_classes:
-            raise ValueError(f"LDA needs more training GEIs than subjects (some subject with two), got {n} GEIs "
-                             f"of {n_classes} subjects")
+            raise ValueError(
+                f"LDA needs more training GEIs than subjects (some subject with two), got {n} GEIs "
+                f"of {n_classes} subjects"
+            )
         pca_limit = min(n - n_classes, dims)
         self.n_pca_ = self._clamped("n_pca", self.n_pca, min(pca_limit, DEFAULT_PCA_CAP), pca_limit)
         lda_limit = max(1, min(n_classes - 1, self.n_pca_))
         self.n_lda_ = self._clamped("n_lda", self.n_lda, lda_limit, lda_limit)
-        self.pipeline_ = Pipeline([
-            ("pca", PCA(n_components=self.n_pca_, random_state=self.random_state)),
-            ("lda", LinearDiscriminantAnalysis(n_components=self.n_lda_, solver="svd")),
-            ("nearest", KNeighborsClassifier(n_neighbors=1, metric=_SKLEARN_METRIC[self.metric], algorithm="brute")),
-        ])
+        self.pipeline_ = Pipeline(
+            [
+                ("pca", PCA(n_components=self.n_pca_, random_state=self.random_state)),
+                ("lda", LinearDiscriminantAnalysis(n_components=self.n_lda_, solver="svd")),
+                (
+                    "nearest",
+                    KNeighborsClassifier(n_neighbors=1, metric=_SKLEARN_METRIC[self.metric], algorithm="brute"),
+                ),
+            ]
+        )
         with warnings.catch_warnings():  # few GEIs per subject make LDA's covariance near-singular; expected
             warnings.filterwarnings("ignore", message="Variables are collinear")
             self.pipeline_.fit(X, y)
@@ -107,8 +114,9 @@ class GEIPCALDA(ClassifierMixin, TransformerMixin, BaseEstimator):
         if requested < 1:
             raise ValueError(f"{name}={requested}: must be at least 1")
         if requested > limit:
-            warnings.warn(f"{name}={requested} exceeds what the training data supports ({limit}); using {limit}",
-                          stacklevel=3)
+            warnings.warn(
+                f"{name}={requested} exceeds what the training data supports ({limit}); using {limit}", stacklevel=3
+            )
             return limit
         return int(requested)
 

@@ -18,6 +18,7 @@ Cross subject (OpenGait's CASIA-B protocol, ``single_view_gallery_evaluation``)
 Per-view keys are the view in degrees as a string (``"0"``, ``"18"``, ... ``"180"``), so a report
 survives a JSON round trip unchanged; accuracies are fractions in [0, 1].
 """
+
 from __future__ import annotations
 
 import math
@@ -31,26 +32,74 @@ from mocapkit.datasets.formats.casia_b import CONDITIONS, VIEWS
 from mocapkit.evaluation.plots import pyplot, save_figure
 
 #: The classification tasks of the multi-task network: name → (logits key, label key).
-TASKS: dict[str, tuple[str, str]] = {"subject": ("subject_logits", "subjects"), "view": ("view_logits", "views"),
-                                     "condition": ("condition_logits", "conditions")}
+TASKS: dict[str, tuple[str, str]] = {
+    "subject": ("subject_logits", "subjects"),
+    "view": ("view_logits", "views"),
+    "condition": ("condition_logits", "conditions"),
+}
 #: Column titles of thesis Table 6.2.
 TASK_TITLES = {"subject": "Identify subject", "view": "Predict view", "condition": "Predict condition"}
 #: Thesis Table 6.2 (real CASIA-B, 124 subjects, the thesis's own hold-out), accuracy in %.
 #: Keys: views in degrees, the conditions, and ``"average"`` (as printed; the thesis's averages are inconsistent, see closed_set_report).
 THESIS_TABLE_6_2: dict[str, dict[str, float]] = {
-    "subject": {"0": 96.09, "18": 98.68, "36": 97.82, "54": 94.94, "72": 95.80, "90": 95.80, "108": 95.23,
-                "126": 95.80, "144": 94.08, "162": 94.37, "180": 96.09, "nm": 99.35, "bg": 91.47, "cl": 93.82,
-                "average": 95.88},
-    "view": {"0": 97.55, "18": 98.99, "36": 98.70, "54": 99.01, "72": 98.41, "90": 99.63, "108": 94.68,
-             "126": 99.23, "144": 98.70, "162": 99.85, "180": 99.11, "nm": 99.29, "bg": 98.37, "cl": 97.79,
-             "average": 98.67},
-    "condition": {"0": 91.08, "18": 95.10, "36": 95.68, "54": 97.69, "72": 97.98, "90": 97.11, "108": 95.97,
-                  "126": 98.55, "144": 97.98, "162": 96.25, "180": 95.39, "nm": 99.51, "bg": 94.19, "cl": 95.05,
-                  "average": 96.31},
+    "subject": {
+        "0": 96.09,
+        "18": 98.68,
+        "36": 97.82,
+        "54": 94.94,
+        "72": 95.80,
+        "90": 95.80,
+        "108": 95.23,
+        "126": 95.80,
+        "144": 94.08,
+        "162": 94.37,
+        "180": 96.09,
+        "nm": 99.35,
+        "bg": 91.47,
+        "cl": 93.82,
+        "average": 95.88,
+    },
+    "view": {
+        "0": 97.55,
+        "18": 98.99,
+        "36": 98.70,
+        "54": 99.01,
+        "72": 98.41,
+        "90": 99.63,
+        "108": 94.68,
+        "126": 99.23,
+        "144": 98.70,
+        "162": 99.85,
+        "180": 99.11,
+        "nm": 99.29,
+        "bg": 98.37,
+        "cl": 97.79,
+        "average": 98.67,
+    },
+    "condition": {
+        "0": 91.08,
+        "18": 95.10,
+        "36": 95.68,
+        "54": 97.69,
+        "72": 97.98,
+        "90": 97.11,
+        "108": 95.97,
+        "126": 98.55,
+        "144": 97.98,
+        "162": 96.25,
+        "180": 95.39,
+        "nm": 99.51,
+        "bg": 94.19,
+        "cl": 95.05,
+        "average": 96.31,
+    },
 }
 #: Table 6.2's rows as (label, key): the views 0°..180°, the conditions, the average.
-TABLE_6_2_ROWS: tuple[tuple[str, str], ...] = (*((f"{v}°", str(v)) for v in VIEWS),
-                                               *((f"condition {c}", c) for c in CONDITIONS), ("**average**", "average"))
+TABLE_6_2_ROWS: tuple[tuple[str, str], ...] = (
+    *((f"{v}°", str(v)) for v in VIEWS),
+    *((f"condition {c}", c) for c in CONDITIONS),
+    ("**average**", "average"),
+)
 METRICS = ("euc", "cos")
 AGGREGATES = ("sequence", "gei")
 
@@ -68,10 +117,15 @@ def _column(predictions: dict[str, np.ndarray], key: str, n: int | None) -> np.n
 def _accuracy_table(correct: np.ndarray, views: np.ndarray, conditions: np.ndarray) -> dict:
     """Overall, per-view (degrees) and per-condition accuracy of a boolean ``correct`` vector."""
     per_view = {str(VIEWS[v]): float(correct[views == v].mean()) for v in range(len(VIEWS)) if (views == v).any()}
-    per_condition = {name: float(correct[conditions == c].mean())
-                     for c, name in enumerate(CONDITIONS) if (conditions == c).any()}
-    return {"accuracy": float(correct.mean()), "num_samples": len(correct),
-            "per_view": per_view, "per_condition": per_condition}
+    per_condition = {
+        name: float(correct[conditions == c].mean()) for c, name in enumerate(CONDITIONS) if (conditions == c).any()
+    }
+    return {
+        "accuracy": float(correct.mean()),
+        "num_samples": len(correct),
+        "per_view": per_view,
+        "per_condition": per_condition,
+    }
 
 
 def closed_set_report(predictions: dict[str, np.ndarray]) -> dict:
@@ -97,19 +151,23 @@ def closed_set_report(predictions: dict[str, np.ndarray]) -> dict:
     """
     tasks = [task for task, (logits_key, _) in TASKS.items() if logits_key in predictions]
     if not tasks:
-        raise KeyError(f"predictions hold no logits (expected one of {[k for k, _ in TASKS.values()]}; "
-                       f"keys: {sorted(predictions)})")
+        raise KeyError(
+            f"predictions hold no logits (expected one of {[k for k, _ in TASKS.values()]}; "
+            f"keys: {sorted(predictions)})"
+        )
     views = _column(predictions, "views", None).astype(np.int64)
     n = len(views)
     if n == 0:
         raise ValueError("predictions are empty: no test GEIs to evaluate")
     conditions = _column(predictions, "conditions", n).astype(np.int64)
     if views.min() < 0 or views.max() >= len(VIEWS):
-        raise ValueError(f"predictions['views'] must be view labels 0..{len(VIEWS) - 1}, "
-                         f"got {views.min()}..{views.max()}")
+        raise ValueError(
+            f"predictions['views'] must be view labels 0..{len(VIEWS) - 1}, got {views.min()}..{views.max()}"
+        )
     if conditions.min() < 0 or conditions.max() >= len(CONDITIONS):
-        raise ValueError(f"predictions['conditions'] must be 0..{len(CONDITIONS) - 1}, "
-                         f"got {conditions.min()}..{conditions.max()}")
+        raise ValueError(
+            f"predictions['conditions'] must be 0..{len(CONDITIONS) - 1}, got {conditions.min()}..{conditions.max()}"
+        )
     # A test video is one (subject, condition, repetition, view); several rows of one video = per-cycle GEIs.
     identity = _column(predictions, "subject_ids" if "subject_ids" in predictions else "subjects", n)
     sequences = _column(predictions, "sequences", n) if "sequences" in predictions else np.arange(n)
@@ -117,8 +175,12 @@ def closed_set_report(predictions: dict[str, np.ndarray]) -> dict:
     _, video, video_counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
     video = video.reshape(-1)
     per_cycle = bool((video_counts > 1).any())
-    report: dict = {"num_geis": n, "num_sequences": len(video_counts), "per": "cycle" if per_cycle else "sequence",
-                    "tasks": {}}
+    report: dict = {
+        "num_geis": n,
+        "num_sequences": len(video_counts),
+        "per": "cycle" if per_cycle else "sequence",
+        "tasks": {},
+    }
     for task in tasks:
         logits_key, label_key = TASKS[task]
         logits = np.asarray(_column(predictions, logits_key, n), dtype=np.float64)
@@ -128,17 +190,20 @@ def closed_set_report(predictions: dict[str, np.ndarray]) -> dict:
         if not np.isfinite(logits).all():
             raise ValueError(f"predictions[{logits_key!r}] contains NaN or infinite values")
         if labels.min() < 0 or labels.max() >= logits.shape[1]:
-            raise ValueError(f"predictions[{label_key!r}] must be labels 0..{logits.shape[1] - 1} for the closed set "
-                             f"(got {labels.min()}..{labels.max()}; -1 marks a subject outside the training label "
-                             "space, which only the cross-subject protocol has)")
+            raise ValueError(
+                f"predictions[{label_key!r}] must be labels 0..{logits.shape[1] - 1} for the closed set "
+                f"(got {labels.min()}..{labels.max()}; -1 marks a subject outside the training label "
+                "space, which only the cross-subject protocol has)"
+            )
         entry = _accuracy_table(logits.argmax(1) == labels, views, conditions)
         entry["chance"] = 1.0 / logits.shape[1]
         if per_cycle:
             video_logits = np.zeros((len(video_counts), logits.shape[1]))
             np.add.at(video_logits, video, logits)
             first = np.unique(video, return_index=True)[1]  # one row per video, in video order
-            entry["per_sequence"] = _accuracy_table(video_logits.argmax(1) == labels[first], views[first],
-                                                    conditions[first])
+            entry["per_sequence"] = _accuracy_table(
+                video_logits.argmax(1) == labels[first], views[first], conditions[first]
+            )
         report["tasks"][task] = entry
     return report
 
@@ -178,9 +243,11 @@ def closed_set_markdown(report: dict, title: str = "Closed-set accuracy (%)", re
             cells += [f"{THESIS_TABLE_6_2[t][row]:.2f}" for t in tasks]
         lines.append(f"| {label} | " + " | ".join(cells) + " |")
     lines.append("")
-    lines.append(f"{report['num_geis']} test GEIs in {report['num_sequences']} test sequences "
-                 f"(GEIs per {report['per']}); averages are over test samples "
-                 "(the thesis's printed averages are inconsistent with its rows).")
+    lines.append(
+        f"{report['num_geis']} test GEIs in {report['num_sequences']} test sequences "
+        f"(GEIs per {report['per']}); averages are over test samples "
+        "(the thesis's printed averages are inconsistent with its rows)."
+    )
     return "\n".join(lines) + "\n"
 
 
@@ -196,8 +263,15 @@ def _mean_or_nan(values: np.ndarray) -> float:
     return float(values.mean()) if len(values) else float("nan")
 
 
-def cross_view_rank1(embeddings: np.ndarray, subject_ids: np.ndarray, conditions: np.ndarray, sequences: np.ndarray,
-                     views: np.ndarray, metric: str = "euc", aggregate: str = "sequence") -> dict:
+def cross_view_rank1(
+    embeddings: np.ndarray,
+    subject_ids: np.ndarray,
+    conditions: np.ndarray,
+    sequences: np.ndarray,
+    views: np.ndarray,
+    metric: str = "euc",
+    aggregate: str = "sequence",
+) -> dict:
     """OpenGait's CASIA-B rank-1 per (probe view, gallery view), identical views excluded.
 
     Args:
@@ -231,8 +305,12 @@ def cross_view_rank1(embeddings: np.ndarray, subject_ids: np.ndarray, conditions
         raise ValueError("embeddings contain NaN or infinite values")
     n = len(embeddings)
     columns = {}
-    for name, values in (("subject_ids", subject_ids), ("conditions", conditions), ("sequences", sequences),
-                         ("views", views)):
+    for name, values in (
+        ("subject_ids", subject_ids),
+        ("conditions", conditions),
+        ("sequences", sequences),
+        ("views", views),
+    ):
         values = np.asarray(values, dtype=np.int64)
         if values.shape != (n,):
             raise ValueError(f"{name} must have shape ({n},) like embeddings, got {values.shape}")
@@ -251,8 +329,13 @@ def cross_view_rank1(embeddings: np.ndarray, subject_ids: np.ndarray, conditions
     ids, view_deg = columns["subject_ids"], columns["views"]
     gallery, probes = gallery_probe_masks(columns["conditions"], columns["sequences"])
     distance_metric = "euclidean" if metric == "euc" else "cosine"
-    report: dict = {"metric": metric, "aggregate": aggregate, "views": list(VIEWS),
-                    "num_gallery": int(gallery.sum()), "conditions": {}}
+    report: dict = {
+        "metric": metric,
+        "aggregate": aggregate,
+        "views": list(VIEWS),
+        "num_gallery": int(gallery.sum()),
+        "conditions": {},
+    }
     for condition, probe in probes.items():
         matrix = np.full((len(VIEWS), len(VIEWS)), np.nan)
         for p, probe_view in enumerate(VIEWS):
@@ -290,20 +373,26 @@ def cross_view_markdown(report: dict, title: str = "Cross-view rank-1 (%), ident
     lines = [f"**{title}**", "", "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for condition, entry in report["conditions"].items():
         cells = [_percent(entry["per_probe_view"].get(str(v))) for v in VIEWS]
-        cells += [_percent(entry["mean"]), _percent(entry["mean_including_identical"]),
-                  f"{len(entry['missing_cells'])}/{len(VIEWS) ** 2}"]
+        cells += [
+            _percent(entry["mean"]),
+            _percent(entry["mean_including_identical"]),
+            f"{len(entry['missing_cells'])}/{len(VIEWS) ** 2}",
+        ]
         lines.append(f"| {condition.upper()} | " + " | ".join(cells) + " |")
     lines.append("")
-    lines.append(f"metric {report['metric']}, one item per {report['aggregate']}, "
-                 f"{report['num_gallery']} gallery items (nm-01..04); probes nm-05/06, bg-01/02, cl-01/02. "
-                 "Per probe view: mean over the other gallery views "
-                 "(OpenGait de_diag, /10 when all views are present).")
+    lines.append(
+        f"metric {report['metric']}, one item per {report['aggregate']}, "
+        f"{report['num_gallery']} gallery items (nm-01..04); probes nm-05/06, bg-01/02, cl-01/02. "
+        "Per probe view: mean over the other gallery views "
+        "(OpenGait de_diag, /10 when all views are present)."
+    )
     return "\n".join(lines) + "\n"
 
 
 # --------------------------------------------------------------------------------------------- plots
-def plot_per_view_panels(panels: dict[str, dict[str, dict]], path: str | Path, title: str | None = None,
-                         ylabel: str = "accuracy (%)") -> Path:
+def plot_per_view_panels(
+    panels: dict[str, dict[str, dict]], path: str | Path, title: str | None = None, ylabel: str = "accuracy (%)"
+) -> Path:
     """Save side-by-side per-view line plots as PNG.
 
     Args:

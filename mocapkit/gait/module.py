@@ -22,6 +22,7 @@ logged as objects: Lightning accumulates them over the epoch, synchronises them 
 (DDP) and resets them, so ``val/acc`` is the accuracy over the whole validation set. Losses are
 logged with ``sync_dist=True``.
 """
+
 from __future__ import annotations
 
 import lightning as L
@@ -46,7 +47,6 @@ PREDICT_KEYS = ("subjects", "subject_ids", "views", "conditions", "sequences", "
 STAGES = ("train", "val", "test")
 
 
-
 class GaitRecognitionModule(ConfiguredOptimization, StagedSteps, L.LightningModule):
     """Joint cross-entropy training of a multi-task gait network (GEIs ``[B, 1, H, W]`` → ``{task: logits}``).
 
@@ -66,11 +66,21 @@ class GaitRecognitionModule(ConfiguredOptimization, StagedSteps, L.LightningModu
         temperature: its temperature.
     """
 
-    def __init__(self, model: dict, optimizer: dict, num_subjects: int, num_views: int, num_conditions: int,
-                 scheduler: dict | None = None, task_weights: dict | None = None,
-                 subject_names: list[str] | None = None, label_smoothing: float = 0.0,
-                 input_size: tuple[int, int] | list[int] = (124, 124), metric_weight: float = 0.0,
-                 temperature: float = 0.1):
+    def __init__(
+        self,
+        model: dict,
+        optimizer: dict,
+        num_subjects: int,
+        num_views: int,
+        num_conditions: int,
+        scheduler: dict | None = None,
+        task_weights: dict | None = None,
+        subject_names: list[str] | None = None,
+        label_smoothing: float = 0.0,
+        input_size: tuple[int, int] | list[int] = (124, 124),
+        metric_weight: float = 0.0,
+        temperature: float = 0.1,
+    ):
         super().__init__()
         model, optimizer = as_plain_dict(model), as_plain_dict(optimizer)
         scheduler = as_plain_dict(scheduler) if scheduler else None
@@ -78,17 +88,33 @@ class GaitRecognitionModule(ConfiguredOptimization, StagedSteps, L.LightningModu
         unknown = sorted(set(task_weights or {}) - set(TASK_LABELS))
         if unknown:
             raise ValueError(f"task_weights: unknown tasks {unknown}; tasks are {list(TASK_LABELS)}")
-        self.save_hyperparameters({"model": model, "optimizer": optimizer, "scheduler": scheduler,
-                                   "num_subjects": num_subjects, "num_views": num_views,
-                                   "num_conditions": num_conditions, "task_weights": task_weights,
-                                   "subject_names": list(subject_names) if subject_names is not None else None,
-                                   "label_smoothing": label_smoothing, "input_size": list(input_size),
-                                   "metric_weight": float(metric_weight), "temperature": float(temperature)})
+        self.save_hyperparameters(
+            {
+                "model": model,
+                "optimizer": optimizer,
+                "scheduler": scheduler,
+                "num_subjects": num_subjects,
+                "num_views": num_views,
+                "num_conditions": num_conditions,
+                "task_weights": task_weights,
+                "subject_names": list(subject_names) if subject_names is not None else None,
+                "label_smoothing": label_smoothing,
+                "input_size": list(input_size),
+                "metric_weight": float(metric_weight),
+                "temperature": float(temperature),
+            }
+        )
         if metric_weight < 0 or temperature <= 0:
-            raise ValueError(f"module.metric_weight must be >= 0 and module.temperature > 0, got {metric_weight} "
-                             f"and {temperature}")
-        self.model = instantiate(model, num_subjects=num_subjects, num_views=num_views,
-                                 num_conditions=num_conditions, input_size=list(input_size))
+            raise ValueError(
+                f"module.metric_weight must be >= 0 and module.temperature > 0, got {metric_weight} and {temperature}"
+            )
+        self.model = instantiate(
+            model,
+            num_subjects=num_subjects,
+            num_views=num_views,
+            num_conditions=num_conditions,
+            input_size=list(input_size),
+        )
         self.tasks: tuple[str, ...] = tuple(self.model.tasks)
         self.task_weights = {t: float((task_weights or {}).get(t, 1.0)) for t in self.tasks}
         #: the task whose accuracy is logged as ``acc`` (the checkpoint monitor): subject when the model has it
@@ -98,9 +124,13 @@ class GaitRecognitionModule(ConfiguredOptimization, StagedSteps, L.LightningModu
         classes = {"subject": num_subjects, "view": num_views, "condition": num_conditions}
         #: ``<stage>_<name>`` → top-1 accuracy over the epoch (micro; samples labelled -1 are left out).
         #: (Not keyed by stage alone: ``train`` is taken by ``nn.Module.train``.)
-        self.accuracy = nn.ModuleDict({
-            f"{stage}_{name}": MulticlassAccuracy(int(classes[task]), average="micro", ignore_index=-1)
-            for stage in STAGES for name, task in self.metric_tasks.items()})
+        self.accuracy = nn.ModuleDict(
+            {
+                f"{stage}_{name}": MulticlassAccuracy(int(classes[task]), average="micro", ignore_index=-1)
+                for stage in STAGES
+                for name, task in self.metric_tasks.items()
+            }
+        )
 
     def _accuracy_names(self) -> list[tuple[str, str]]:
         """``(task, logged name)`` pairs: ``acc`` for the primary task, ``<task>_acc`` for view and condition."""
@@ -127,8 +157,9 @@ class GaitRecognitionModule(ConfiguredOptimization, StagedSteps, L.LightningModu
             known = labels >= 0
             if not bool(known.any()):
                 continue
-            losses[task] = F.cross_entropy(outputs[task][known], labels[known],
-                                           label_smoothing=self.hparams.label_smoothing)
+            losses[task] = F.cross_entropy(
+                outputs[task][known], labels[known], label_smoothing=self.hparams.label_smoothing
+            )
         return losses
 
     def joint_loss(self, losses: dict[str, torch.Tensor]) -> torch.Tensor:
@@ -143,11 +174,9 @@ class GaitRecognitionModule(ConfiguredOptimization, StagedSteps, L.LightningModu
             return None
         loss = self.joint_loss(losses)
         on_step, size = stage == "train", len(batch["geis"])
-        self.log(f"{stage}/loss", loss, on_step=on_step, on_epoch=True, prog_bar=True, batch_size=size,
-                 sync_dist=True)
+        self.log(f"{stage}/loss", loss, on_step=on_step, on_epoch=True, prog_bar=True, batch_size=size, sync_dist=True)
         for task, task_loss in losses.items():
-            self.log(f"{stage}/{task}_loss", task_loss, on_step=False, on_epoch=True, batch_size=size,
-                     sync_dist=True)
+            self.log(f"{stage}/{task}_loss", task_loss, on_step=False, on_epoch=True, batch_size=size, sync_dist=True)
         for name, task in self.metric_tasks.items():
             if task not in losses:  # no labelled sample of this task in the batch
                 continue

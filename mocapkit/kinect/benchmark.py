@@ -24,6 +24,7 @@ out; ``cv`` caps how many) and scores ``−error_cm``. Fits are cached per (esti
 parameters, training clips, seed): parameters an estimator lists in ``predict_params`` (the energy weights of
 Zhou's method) change without a refit, so a whole ablation shares one GP fit per fold.
 """
+
 from __future__ import annotations
 
 import copy
@@ -57,12 +58,22 @@ class KinectReconstructionBenchmark(Benchmark):
 
     title = "Kinect posture reconstruction (simulated Kinect v1 from real mocap, held-out performers)"
     percent_metrics = ("reduction",)
-    selection_cv = ("validation on training performers held out in turn (the first `cv` in name order; error in cm, "
-                    "negated)")
+    selection_cv = (
+        "validation on training performers held out in turn (the first `cv` in name order; error in cm, negated)"
+    )
 
-    def __init__(self, root: str, protocols: list[str] | None = None, fps: float = 30.0,
-                 clips_per_group: int | None = None, clip_seed: int = 0, cache_fits: bool = True,
-                 noise: str = "mean_error", transfer_root: str | None = None, transfer_name: str = "transfer"):
+    def __init__(
+        self,
+        root: str,
+        protocols: list[str] | None = None,
+        fps: float = 30.0,
+        clips_per_group: int | None = None,
+        clip_seed: int = 0,
+        cache_fits: bool = True,
+        noise: str = "mean_error",
+        transfer_root: str | None = None,
+        transfer_name: str = "transfer",
+    ):
         from mocapkit.datasets.formats.motion_io import find_motion_files
         from mocapkit.datasets.synthetic.kinect_noise import KinectNoiseConfig
 
@@ -98,13 +109,13 @@ class KinectReconstructionBenchmark(Benchmark):
             kept = []
             for g in groups + ([self.transfer_name] if self.transfer_name else []):
                 mine = [f for f in files if group_of[f] == g]
-                kept += [mine[i] for i in sorted(rng.choice(len(mine), min(clips_per_group, len(mine)),
-                                                            replace=False))]
+                kept += [mine[i] for i in sorted(rng.choice(len(mine), min(clips_per_group, len(mine)), replace=False))]
             files = kept
         self.files = sorted(files)
         self.groups = np.array([group_of[f] for f in self.files])
-        self.protocols = tuple(protocols) if protocols else tuple(groups) + ((self.transfer_name,)
-                                                                             if self.transfer_name else ())
+        self.protocols = (
+            tuple(protocols) if protocols else tuple(groups) + ((self.transfer_name,) if self.transfer_name else ())
+        )
         unknown = [p for p in self.protocols if p not in groups and p != self.transfer_name]
         if unknown:
             raise ComparisonError(f"benchmark.protocols: {unknown} are not performer folders of {root} ({groups})")
@@ -138,16 +149,26 @@ class KinectReconstructionBenchmark(Benchmark):
             raise ComparisonError(f"unknown protocol {protocol!r}: this benchmark has {list(self.protocols)}")
         test = np.flatnonzero(self.groups == protocol)
         train = np.flatnonzero((self.groups != protocol) & (self.groups != self.transfer_name))
-        return Split(protocol, seed, train, test, {"held_out": protocol,
-                                                   "train_groups": sorted(set(self.groups[train].tolist())),
-                                                   "simulation_seed": seed})
+        return Split(
+            protocol,
+            seed,
+            train,
+            test,
+            {"held_out": protocol, "train_groups": sorted(set(self.groups[train].tolist())), "simulation_seed": seed},
+        )
 
     def describe(self) -> dict:
-        return {"root": str(self.root), "n_clips": len(self.files), "fps": self.fps,
-                "groups": {g: int((self.groups == g).sum()) for g in sorted(set(self.groups.tolist()))},
-                "clips_per_group": self.clips_per_group, "clip_seed": self.clip_seed, "noise": self.noise,
-                "transfer_root": None if self.transfer_root is None else str(self.transfer_root),
-                "transfer_name": self.transfer_name}
+        return {
+            "root": str(self.root),
+            "n_clips": len(self.files),
+            "fps": self.fps,
+            "groups": {g: int((self.groups == g).sum()) for g in sorted(set(self.groups.tolist()))},
+            "clips_per_group": self.clips_per_group,
+            "clip_seed": self.clip_seed,
+            "noise": self.noise,
+            "transfer_root": None if self.transfer_root is None else str(self.transfer_root),
+            "transfer_name": self.transfer_name,
+        }
 
     # ------------------------------------------------------------------ scoring
     def _fitted(self, estimator, train: np.ndarray, seed: int) -> tuple[object, float, bool]:
@@ -156,8 +177,13 @@ class KinectReconstructionBenchmark(Benchmark):
 
         late = set(getattr(estimator, "predict_params", ()))
         params = estimator.get_params(deep=False)
-        key = (type(estimator).__module__, type(estimator).__qualname__,
-               repr(sorted((k, repr(v)) for k, v in params.items() if k not in late)), tuple(train.tolist()), seed)
+        key = (
+            type(estimator).__module__,
+            type(estimator).__qualname__,
+            repr(sorted((k, repr(v)) for k, v in params.items() if k not in late)),
+            tuple(train.tolist()),
+            seed,
+        )
         if self.cache_fits and key in self._fits:
             fitted, seconds = self._fits[key]
             fitted = copy.deepcopy(fitted)
@@ -182,18 +208,31 @@ class KinectReconstructionBenchmark(Benchmark):
         # frame-weighted per-joint means; the overall error is their mean (every frame has all 20 joints)
         per_joint = sum(joint_error_cm(p, m, per_joint=True) * len(m) for p, m in zip(predicted, mocap)) / total
         per_joint_raw = sum(joint_error_cm(k, m, per_joint=True) * len(m) for k, m in zip(kinect, mocap)) / total
-        return {"error_cm": float(per_joint.mean()), "raw_cm": float(per_joint_raw.mean()),
-                "frames_per_s": float(total / max(seconds, 1e-9)), "n_frames": int(total),
-                "per_joint_cm": per_joint.round(3).tolist(), "per_joint_raw_cm": per_joint_raw.round(3).tolist()}
+        return {
+            "error_cm": float(per_joint.mean()),
+            "raw_cm": float(per_joint_raw.mean()),
+            "frames_per_s": float(total / max(seconds, 1e-9)),
+            "n_frames": int(total),
+            "per_joint_cm": per_joint.round(3).tolist(),
+            "per_joint_raw_cm": per_joint_raw.round(3).tolist(),
+        }
 
     def evaluate_estimator(self, estimator, split: Split) -> dict:
         fitted, fit_seconds, cached = self._fitted(estimator, split.train, split.seed)
         scores = self._score(fitted, split.test, split.seed)
-        metrics = {"error_cm": scores["error_cm"], "raw_cm": scores["raw_cm"],
-                   "reduction": 1.0 - scores["error_cm"] / scores["raw_cm"],
-                   "frames_per_s": scores["frames_per_s"], "fit_seconds": fit_seconds}
-        detail = {"n_test_frames": scores["n_frames"], "fit_cached": cached,
-                  "per_joint_cm": scores["per_joint_cm"], "per_joint_raw_cm": scores["per_joint_raw_cm"]}
+        metrics = {
+            "error_cm": scores["error_cm"],
+            "raw_cm": scores["raw_cm"],
+            "reduction": 1.0 - scores["error_cm"] / scores["raw_cm"],
+            "frames_per_s": scores["frames_per_s"],
+            "fit_seconds": fit_seconds,
+        }
+        detail = {
+            "n_test_frames": scores["n_frames"],
+            "fit_cached": cached,
+            "per_joint_cm": scores["per_joint_cm"],
+            "per_joint_raw_cm": scores["per_joint_raw_cm"],
+        }
         return {"metrics": metrics, "detail": detail}
 
     def cross_validate(self, estimator, train: np.ndarray, folds: int, seed: int) -> float:
@@ -203,7 +242,7 @@ class KinectReconstructionBenchmark(Benchmark):
         if len(groups) < 2:
             raise ComparisonError(f"selection needs at least 2 training performers, got {groups}")
         weighted, frames = 0.0, 0
-        for group in groups[:max(1, int(folds))]:
+        for group in groups[: max(1, int(folds))]:
             inner_train = train[self.groups[train] != group]
             inner_test = train[self.groups[train] == group]
             fitted, _, _ = self._fitted(estimator, inner_train, seed)
@@ -223,9 +262,13 @@ class KinectReconstructionBenchmark(Benchmark):
         keys = list(dict.fromkeys(c["method"] for c in cells))
         lines = []
         transfer = self.transfer_name
-        for title, chosen in (("Over all held-out performers", lambda c: c["protocol"] != transfer),
-                              (f"Another data set: `{transfer}`, by models trained on every performer",
-                               lambda c: c["protocol"] == transfer)):
+        for title, chosen in (
+            ("Over all held-out performers", lambda c: c["protocol"] != transfer),
+            (
+                f"Another data set: `{transfer}`, by models trained on every performer",
+                lambda c: c["protocol"] == transfer,
+            ),
+        ):
             table = self._pooled_table(title, [c for c in cells if chosen(c)], keys)
             lines += table
         return "\n".join(lines) + "\n" if lines else ""
@@ -234,10 +277,17 @@ class KinectReconstructionBenchmark(Benchmark):
         """Markdown lines of one pooled table (frame-weighted over the cells' protocols, mean ± sd over seeds)."""
         if not cells:
             return []
-        lines = [f"## {title}", "",
-                 ("Frame-weighted mean joint error (cm) over every test frame of every protocol, per seed; mean ± sd "
-                  "over seeds. `raw` is the simulated Kinect input on the same frames."), "",
-                 "| method | error (cm) | raw (cm) | reduction | frames/s |", "|---|---|---|---|---|"]
+        lines = [
+            f"## {title}",
+            "",
+            (
+                "Frame-weighted mean joint error (cm) over every test frame of every protocol, per seed; mean ± sd "
+                "over seeds. `raw` is the simulated Kinect input on the same frames."
+            ),
+            "",
+            "| method | error (cm) | raw (cm) | reduction | frames/s |",
+            "|---|---|---|---|---|",
+        ]
         for key in keys:
             mine = [c for c in cells if c["method"] == key and "metrics" in c]
             by_seed: dict[int, list] = {}
@@ -253,8 +303,10 @@ class KinectReconstructionBenchmark(Benchmark):
                 continue
             reduction = [1.0 - e / r for e, r in zip(errors, raws)]
             label = mine[0]["label"]
-            lines.append(f"| {label} | {_mean_sd(errors, 2)} | {_mean_sd(raws, 2)} | "
-                         f"{_mean_sd([100 * r for r in reduction], 1)} % | {np.median(speeds):,.0f} |")
+            lines.append(
+                f"| {label} | {_mean_sd(errors, 2)} | {_mean_sd(raws, 2)} | "
+                f"{_mean_sd([100 * r for r in reduction], 1)} % | {np.median(speeds):,.0f} |"
+            )
         return lines + [""]
 
     def plots(self, results: dict, out_dir: Path) -> list[Path]:
@@ -268,20 +320,29 @@ class KinectReconstructionBenchmark(Benchmark):
         out = []
         performers = [c for c in cells if c["protocol"] != self.transfer_name]
         if performers:
-            out.append(_per_joint_plot(performers, f"Per-joint error over all held-out performers (seed {seed})",
-                                       Path(out_dir) / "per_joint_error.png"))
+            out.append(
+                _per_joint_plot(
+                    performers,
+                    f"Per-joint error over all held-out performers (seed {seed})",
+                    Path(out_dir) / "per_joint_error.png",
+                )
+            )
         transfer = [c for c in cells if c["protocol"] == self.transfer_name]
         if transfer:
-            out.append(_per_joint_plot(transfer, f"Per-joint error on {self.transfer_name}, trained on every "
-                                                 f"performer (seed {seed})",
-                                       Path(out_dir) / f"per_joint_error_{self.transfer_name}.png"))
+            out.append(
+                _per_joint_plot(
+                    transfer,
+                    f"Per-joint error on {self.transfer_name}, trained on every performer (seed {seed})",
+                    Path(out_dir) / f"per_joint_error_{self.transfer_name}.png",
+                )
+            )
         return out
 
 
 def _per_joint_plot(cells: list, title: str, path: Path) -> Path:
     """One figure: each method's frame-weighted per-joint error over ``cells`` beside the raw input's."""
-    from mocapkit.motion.layouts import LANDMARK_NAMES
     from mocapkit.evaluation.plots import pyplot, save_figure
+    from mocapkit.motion.layouts import LANDMARK_NAMES
 
     plt = pyplot()
     keys = list(dict.fromkeys(c["method"] for c in cells))

@@ -7,7 +7,8 @@ then correct real Kinect skeletons with it.
     (:func:`~mocapkit.datasets.synthetic.kinect_noise.simulate_pairs`, 30 fps); a
     :class:`~mocapkit.kinect.reconstruction.KinectPostureReconstructor` is fitted on them and saved as one
     ``.npz`` (:meth:`~mocapkit.kinect.reconstruction.KinectPostureReconstructor.save`), or with
-    ``method="bigru"`` / ``"transformer"`` a learned refiner network retrained as a corrector
+    ``method="bigru"`` / ``"transformer"`` (the registry's kinect methods, ``configs/kinect/method/NAME.yaml``; ``--set``
+    Hydra overrides of their parameters) a learned refiner network retrained as a corrector
     (:class:`~mocapkit.kinect.learned.LearnedKinectCorrector`, one ``torch.save`` file read back with
     ``weights_only=True``).
 ``export_kinect_model(model, out)``
@@ -28,20 +29,21 @@ there and the GP prior and temporal term decide; the count is reported per file.
 frame, a skeleton without the 20 landmarks or an unreadable file is an error naming the file, or with
 ``skip_bad`` a skipped file listed in the report. Nothing is dropped silently.
 """
+
 from __future__ import annotations
 
 import json
 import os
 import sys
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from mocapkit.motion.layouts import LANDMARK_NAMES, MSR20, find_landmarks
 from mocapkit.motion.container import Motion, all_coordinates
-from mocapkit.kinect.learned import ARCHITECTURES
+from mocapkit.motion.layouts import LANDMARK_NAMES, MSR20, find_landmarks
 
 MODEL_FPS = 30.0
 
@@ -73,12 +75,16 @@ def kinect_clip(motion: Motion) -> tuple[np.ndarray, np.ndarray, int]:
         raise KinectFixError(str(exc) if str(label) in str(exc) else f"{label}: {exc}") from exc
     observed &= all_coordinates(np.isfinite(positions))
     if not observed.any():
-        raise KinectFixError(f"{label}: no landmark is observed in any of its {motion.num_frames} frames (all-zero "
-                             f"or missing frames only)")
+        raise KinectFixError(
+            f"{label}: no landmark is observed in any of its {motion.num_frames} frames (all-zero "
+            f"or missing frames only)"
+        )
     never = [LANDMARK_NAMES[k] for k in np.flatnonzero(~observed.any(axis=0))]
     if never:
-        raise KinectFixError(f"{label}: the Kinect landmarks {never} are missing in every frame (a Kinect-20 "
-                             f"skeleton is needed: MSR Action3D, NTU RGB+D or a rig with those joints)")
+        raise KinectFixError(
+            f"{label}: the Kinect landmarks {never} are missing in every frame (a Kinect-20 "
+            f"skeleton is needed: MSR Action3D, NTU RGB+D or a rig with those joints)"
+        )
     positions = to_y_up(positions, motion.up_axis).astype(np.float64)
     frames = np.arange(motion.num_frames)
     for k in np.flatnonzero(~observed.all(axis=0)):
@@ -95,17 +101,27 @@ def _as_msr_motion(positions: np.ndarray, fps: float, name: str, source: str) ->
     out = np.zeros((len(positions), len(MSR20.joint_names), 3), dtype=np.float32)
     for k, landmark in enumerate(LANDMARK_NAMES):
         out[:, found[landmark]] = positions[:, k]
-    return Motion(positions=out, joint_names=MSR20.joint_names, parents=MSR20.parents, fps=fps, up_axis="y",
-                  name=name, source=source, layout_name=MSR20.name)
+    return Motion(
+        positions=out,
+        joint_names=MSR20.joint_names,
+        parents=MSR20.parents,
+        fps=fps,
+        up_axis="y",
+        name=name,
+        source=source,
+        layout_name=MSR20.name,
+    )
 
 
-METHODS = ("gp", *ARCHITECTURES)
-"""What ``kinect-fix train --method`` fits: Zhou's GP reconstructor, or a learned refiner network retrained as a
-corrector (:class:`~mocapkit.kinect.learned.LearnedKinectCorrector`, ``architecture`` = the name)."""
-
-
-def train_kinect_model(mocap, out: str | os.PathLike, seed: int = 0, skip_bad: bool = False,
-                       noise: str = "mean_error", method: str = "gp", **params) -> dict:
+def train_kinect_model(
+    mocap,
+    out: str | os.PathLike,
+    seed: int = 0,
+    skip_bad: bool = False,
+    noise: str = "mean_error",
+    method: str | None = None,
+    overrides: Sequence[str] = (),
+) -> dict:
     """Fit a Kinect corrector on simulated pairs of the motion files in ``mocap`` (files or folders, searched
     recursively) and save it to ``out``: with ``method="gp"``
     :class:`~mocapkit.kinect.reconstruction.KinectPostureReconstructor` (``.npz``), with ``"bigru"`` or
@@ -114,65 +130,75 @@ def train_kinect_model(mocap, out: str | os.PathLike, seed: int = 0, skip_bad: b
 
     Args:
         seed: the simulation seed and the model's ``random_state``.
-        method: one of :data:`METHODS`.
+        method: a kinect method of the registry that can be saved (``gp``, ``bigru``, ``transformer``;
+            ``mocapkit methods kinect``); None: the registry's default, ``gp``.
         noise: the simulator's calibration (:meth:`~mocapkit.datasets.synthetic.kinect_noise.KinectNoiseConfig.preset`:
             ``mean_error`` or ``msr_steadiness``).
         skip_bad: skip (and report) unreadable or unusable files instead of failing.
-        params: other parameters of the model (the GP's ``max_train_frames``, ``gp_iterations``, weights, ...; the
-            learned corrector's ``steps``, ``window``, ...).
+        overrides: ``--set`` Hydra overrides of the model's parameters (the GP's ``max_train_frames=5000``,
+            ``gp_iterations``, weights, ...; the learned corrector's ``steps``, ``window``, ``network={hidden: 16}``).
 
     Returns:
         ``{"model", "method", "noise", "files", "frames", "skipped": [[path, reason], ...], "fit_seconds"}`` (also
         printed by the CLI).
     """
-    from mocapkit.kinect.reconstruction import KinectPostureReconstructor
     from mocapkit.datasets.formats.motion_io import expand_motion_paths
     from mocapkit.datasets.synthetic.kinect_noise import (
         KinectNoiseConfig,
         simulate_pairs,
     )
-    from mocapkit.kinect.learned import LearnedKinectCorrector
+    from mocapkit.train.registry import build_method, default_method, method_config
 
-    if method not in METHODS:
-        raise KinectFixError(f"--method {method}: one of {list(METHODS)}")
+    method = method or default_method("kinect")
     try:
         config = KinectNoiseConfig.preset(noise)
     except ValueError as exc:
         raise KinectFixError(f"--noise {noise}: {exc}") from None
-    try:
-        model = (KinectPostureReconstructor(random_state=seed, **params) if method == "gp"
-                 else LearnedKinectCorrector(architecture=method, random_state=seed, **params))
-    except TypeError as exc:
-        raise KinectFixError(f"--set: {exc}") from None
+    seeded = [f"random_state={int(seed)}"] if "random_state" in method_config("kinect", method) else []
+    model = build_method("kinect", method, [*seeded, *overrides])
+    if not hasattr(model, "save"):
+        raise KinectFixError(
+            f"--method {method}: {type(model).__name__} has no model file to save; kinect-fix "
+            f"trains the methods that save one (gp, bigru, transformer)"
+        )
     files = expand_motion_paths(mocap, "--mocap", empty_error=KinectFixError)
-    pairs, skipped = simulate_pairs(files, config, seed=seed, fps=MODEL_FPS,
-                                    skip_bad=skip_bad, progress=True)
+    pairs, skipped = simulate_pairs(files, config, seed=seed, fps=MODEL_FPS, skip_bad=skip_bad, progress=True)
     if not pairs:
-        raise KinectFixError(f"--mocap {', '.join(map(str, mocap))}: no usable motion file "
-                             f"({len(skipped)} skipped)")
-    what = "the 20 joint GPs" if method == "gp" else f"the {method} corrector"
-    print(f"[kinect-fix] fitting {what} on {len(pairs)} simulated clips "
-          f"({sum(len(p.clean) for p in pairs)} frames)...", file=sys.stderr, flush=True)
+        raise KinectFixError(f"--mocap {', '.join(map(str, mocap))}: no usable motion file ({len(skipped)} skipped)")
+    what = f"{type(model).__name__} ({method})"
+    print(
+        f"[kinect-fix] fitting {what} on {len(pairs)} simulated clips ({sum(len(p.clean) for p in pairs)} frames)...",
+        file=sys.stderr,
+        flush=True,
+    )
     start = time.perf_counter()
     model.fit([p.noisy for p in pairs], [p.clean for p in pairs], [p.state for p in pairs])
     seconds = time.perf_counter() - start
     path = model.save(out)
-    return {"model": str(path), "method": method, "noise": noise, "files": len(pairs),
-            "frames": int(sum(len(p.clean) for p in pairs)), "skipped": [[str(p), r] for p, r in skipped],
-            "fit_seconds": round(seconds, 1)}
+    return {
+        "model": str(path),
+        "method": method,
+        "noise": noise,
+        "files": len(pairs),
+        "frames": int(sum(len(p.clean) for p in pairs)),
+        "skipped": [[str(p), r] for p, r in skipped],
+        "fit_seconds": round(seconds, 1),
+    }
 
 
 def load_model(path: str | os.PathLike):
     """A saved Kinect model: a ``.npz`` is Zhou's GP reconstructor
     (:meth:`~mocapkit.kinect.reconstruction.KinectPostureReconstructor.load`), an ``.onnx`` an exported
     learned corrector (:class:`~mocapkit.kinect.learned.OnnxKinectCorrector`, the network in
-    onnxruntime), any other file a learned corrector (:meth:`~mocapkit.kinect.learned.LearnedKinectCorrector.load`);
+    onnxruntime), a ``.ckpt`` a run of ``mocapkit train experiment=kinect_corrector_*``
+    (:meth:`~mocapkit.kinect.learned.LearnedKinectCorrector.from_checkpoint`), any other file a learned corrector
+    (:meth:`~mocapkit.kinect.learned.LearnedKinectCorrector.load`);
     a :class:`KinectFixError` names the file when it is none of them."""
-    from mocapkit.kinect.reconstruction import KinectPostureReconstructor
     from mocapkit.kinect.learned import (
         LearnedKinectCorrector,
         OnnxKinectCorrector,
     )
+    from mocapkit.kinect.reconstruction import KinectPostureReconstructor
 
     if not Path(path).is_file():
         raise KinectFixError(f"--model {path}: no such file")
@@ -180,6 +206,8 @@ def load_model(path: str | os.PathLike):
     try:
         if suffix == ".onnx":
             return OnnxKinectCorrector(str(path)).fit()
+        if suffix == ".ckpt":  # a run of `mocapkit train experiment=kinect_corrector_*`
+            return LearnedKinectCorrector.from_checkpoint(path)
         return (KinectPostureReconstructor if suffix == ".npz" else LearnedKinectCorrector).load(path)
     except ValueError as exc:
         raise KinectFixError(str(exc)) from None
@@ -193,8 +221,10 @@ def export_kinect_model(model: str | os.PathLike, out: str | os.PathLike) -> dic
     from mocapkit.kinect.learned import LearnedKinectCorrector
 
     if Path(model).suffix.lower() == ".npz":
-        raise KinectFixError(f"--model {model}: a GP reconstructor (.npz) has no network to export to ONNX; only the "
-                             f"learned correctors do (kinect-fix train --method {'|'.join(METHODS[1:])})")
+        raise KinectFixError(
+            f"--model {model}: a GP reconstructor (.npz) has no network to export to ONNX; only the "
+            f"learned correctors do (kinect-fix train --method bigru|transformer)"
+        )
     corrector = load_model(model)
     if not isinstance(corrector, LearnedKinectCorrector):
         raise KinectFixError(f"--model {model}: already an ONNX export")
@@ -211,25 +241,33 @@ class KinectFixReport:
     frames_per_s: float = float("nan")
 
     def to_text(self) -> str:
-        lines = [(f"[kinect-fix] corrected {len(self.fixed)} file(s) with {self.model} "
-                  f"({self.frames_per_s:,.0f} frames/s)")]
+        lines = [
+            (f"[kinect-fix] corrected {len(self.fixed)} file(s) with {self.model} ({self.frames_per_s:,.0f} frames/s)")
+        ]
         if self.fixed:
-            mean = {k: float(np.mean([f[k] for f in self.fixed])) for k in
-                    ("bone_sd_raw_cm", "bone_sd_fixed_cm", "jitter_raw_cm", "jitter_fixed_cm")}
-            lines.append(f"  bone-length sd {mean['bone_sd_raw_cm']:.2f} → {mean['bone_sd_fixed_cm']:.2f} cm, "
-                         f"jitter {mean['jitter_raw_cm']:.2f} → {mean['jitter_fixed_cm']:.2f} cm (means over files)")
+            mean = {
+                k: float(np.mean([f[k] for f in self.fixed]))
+                for k in ("bone_sd_raw_cm", "bone_sd_fixed_cm", "jitter_raw_cm", "jitter_fixed_cm")
+            }
+            lines.append(
+                f"  bone-length sd {mean['bone_sd_raw_cm']:.2f} → {mean['bone_sd_fixed_cm']:.2f} cm, "
+                f"jitter {mean['jitter_raw_cm']:.2f} → {mean['jitter_fixed_cm']:.2f} cm (means over files)"
+            )
             filled = [f for f in self.fixed if f["filled_entries"]]
             if filled:
-                lines.append(f"  {len(filled)} file(s) had missing joints, filled and marked not tracked: "
-                             + ", ".join(f"{Path(f['input']).name} ({f['filled_entries']})" for f in filled[:10])
-                             + (" ..." if len(filled) > 10 else ""))
+                lines.append(
+                    f"  {len(filled)} file(s) had missing joints, filled and marked not tracked: "
+                    + ", ".join(f"{Path(f['input']).name} ({f['filled_entries']})" for f in filled[:10])
+                    + (" ..." if len(filled) > 10 else "")
+                )
         for path, reason in self.skipped:
             lines.append(f"  skipped {path}: {reason}")
         return "\n".join(lines)
 
 
-def fix_kinect_files(model, inputs, out_dir: str | os.PathLike, skip_bad: bool = False, plot: int = 0,
-                     **energy) -> KinectFixReport:
+def fix_kinect_files(
+    model, inputs, out_dir: str | os.PathLike, skip_bad: bool = False, plot: int = 0, overrides: Sequence[str] = ()
+) -> KinectFixReport:
     """Correct Kinect skeleton files with a saved model (see the module docstring).
 
     Args:
@@ -239,25 +277,28 @@ def fix_kinect_files(model, inputs, out_dir: str | os.PathLike, skip_bad: bool =
         out_dir: where ``<name>.c3d``, ``report.json`` and the ``<name>_before_after.png`` plots go.
         skip_bad: skip (and report) files that cannot be read or used instead of failing.
         plot: draw the first ``plot`` files before/after.
-        energy: prediction parameters set on the model (the GP's ``w_spatial``, ``w_temporal``, ``w_reliability``,
-            ``energy_unit``, ...; the learned corrector's ``inference_window``, ``overlap``).
+        overrides: ``--set`` prediction parameters set on the model, Hydra's grammar (the GP's ``w_spatial``,
+            ``w_temporal``, ``w_reliability``, ``energy_unit=0.1``, ...; the learned corrector's ``inference_window``,
+            ``overlap``); a key the model does not have fails naming it and listing the model's parameters.
     """
     from mocapkit.datasets.formats.motion_io import (
         expand_motion_paths,
         read_motion,
         write_motion,
     )
-    from mocapkit.kinect.metrics import bone_length_sd_cm, jitter_cm
     from mocapkit.io_atomic import atomic_write_text
+    from mocapkit.kinect.metrics import bone_length_sd_cm, jitter_cm
 
     name = str(model)
     if isinstance(model, (str, os.PathLike)):
         model = load_model(model)
-    if energy:
-        try:
-            model.set_params(**energy)
-        except ValueError as exc:
-            raise KinectFixError(f"--set: {exc}") from None
+    if overrides:
+        from mocapkit.train.registry import override_values
+
+        # a saved model is not a registry entry: its parameters are the ones it was trained with
+        model.set_params(
+            **override_values(overrides, list(model.get_params(deep=False)), f"{type(model).__name__} ({name})")
+        )
     files = expand_motion_paths(inputs, "input", empty_error=KinectFixError)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -280,19 +321,36 @@ def fix_kinect_files(model, inputs, out_dir: str | os.PathLike, skip_bad: bool =
         total_frames += len(raw)
         target = out_dir / f"{path.stem}.c3d"
         write_motion(target, _as_msr_motion(fixed, MODEL_FPS, path.stem, str(path)))
-        entry = {"input": str(path), "output": str(target), "frames": len(raw), "fps": MODEL_FPS,
-                 "source_fps": source_fps, "filled_entries": filled,
-                 "bone_sd_raw_cm": bone_length_sd_cm(raw), "bone_sd_fixed_cm": bone_length_sd_cm(fixed),
-                 "jitter_raw_cm": jitter_cm(raw), "jitter_fixed_cm": jitter_cm(fixed)}
+        entry = {
+            "input": str(path),
+            "output": str(target),
+            "frames": len(raw),
+            "fps": MODEL_FPS,
+            "source_fps": source_fps,
+            "filled_entries": filled,
+            "bone_sd_raw_cm": bone_length_sd_cm(raw),
+            "bone_sd_fixed_cm": bone_length_sd_cm(fixed),
+            "jitter_raw_cm": jitter_cm(raw),
+            "jitter_fixed_cm": jitter_cm(fixed),
+        }
         if len(report.fixed) < plot:
             entry["plot"] = str(_plot_before_after(raw, fixed, path, out_dir))
         report.fixed.append(entry)
     if not report.fixed and not report.skipped:
         raise KinectFixError(f"input {', '.join(map(str, inputs))}: no motion files")
     report.frames_per_s = total_frames / total_seconds if total_seconds > 0 else float("nan")
-    atomic_write_text(out_dir / "report.json", json.dumps({"model": report.model, "frames_per_s": report.frames_per_s,
-                                                           "fixed": report.fixed, "skipped": report.skipped},
-                                                          indent=1))
+    atomic_write_text(
+        out_dir / "report.json",
+        json.dumps(
+            {
+                "model": report.model,
+                "frames_per_s": report.frames_per_s,
+                "fixed": report.fixed,
+                "skipped": report.skipped,
+            },
+            indent=1,
+        ),
+    )
     return report
 
 
@@ -301,5 +359,10 @@ def _plot_before_after(raw: np.ndarray, fixed: np.ndarray, path: Path, out_dir: 
 
     before = _as_msr_motion(raw, MODEL_FPS, f"{path.stem} raw", str(path))
     after = _as_msr_motion(fixed, MODEL_FPS, f"{path.stem} corrected", str(path))
-    return render_strip([before, after], out_dir / f"{path.stem}_before_after.png", n=8, view="front",
-                        title=f"{path.name}: raw Kinect (blue) and corrected (red)")
+    return render_strip(
+        [before, after],
+        out_dir / f"{path.stem}_before_after.png",
+        n=8,
+        view="front",
+        title=f"{path.name}: raw Kinect (blue) and corrected (red)",
+    )

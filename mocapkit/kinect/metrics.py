@@ -6,12 +6,13 @@ Every function takes Kinect-20 clips ``[T, 20, 3]`` in metres (joints in
 :data:`~mocapkit.motion.layouts.LANDMARK_NAMES` order, parents
 :data:`~mocapkit.motion.layouts.LANDMARK_PARENTS`) and answers in centimetres.
 """
+
 from __future__ import annotations
 
 import numpy as np
 
-from mocapkit.motion.layouts import LANDMARK_PARENTS
 from mocapkit.motion.container import point_distance
+from mocapkit.motion.layouts import LANDMARK_PARENTS
 
 
 def joint_error_cm(a: np.ndarray, b: np.ndarray, per_joint: bool = False):
@@ -20,8 +21,9 @@ def joint_error_cm(a: np.ndarray, b: np.ndarray, per_joint: bool = False):
     mean over frames of each joint."""
     a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
     if a.shape != b.shape or a.ndim < 2 or a.shape[-1] != 3:
-        raise ValueError(f"joint_error_cm: two [T, J, 3] arrays of one shape expected, got {list(a.shape)} and "
-                         f"{list(b.shape)}")
+        raise ValueError(
+            f"joint_error_cm: two [T, J, 3] arrays of one shape expected, got {list(a.shape)} and {list(b.shape)}"
+        )
     err = point_distance(a, b).reshape(-1, a.shape[-2]) * 100.0
     return err.mean(0) if per_joint else float(err.mean())
 

@@ -54,6 +54,7 @@ reconstructed length along its reconstructed direction (from HipCenter outwards)
 
 Errors are :func:`mocapkit.kinect.metrics.joint_error_cm` (eqs. 5.7–5.9 with the per-frame mean, §7 item 29).
 """
+
 from __future__ import annotations
 
 import json
@@ -69,9 +70,9 @@ from sklearn.utils import check_random_state
 from sklearn.utils.validation import check_is_fitted
 
 from mocapkit.datasets.cache_files import save_npz_atomic
-from mocapkit.motion.layouts import LANDMARK_NAMES, LANDMARK_PARENTS
 from mocapkit.motion.container import all_coordinates
-from mocapkit.motion.geometry import TEMPLATE_BONES, retarget
+from mocapkit.motion.geometry import TEMPLATE_BONES, hip_line_heading, retarget, turn_about_up
+from mocapkit.motion.layouts import LANDMARK_NAMES, LANDMARK_PARENTS
 
 N_JOINTS = 20
 MODEL_FORMAT = "mocapkit-kinect-reconstruction-1"
@@ -85,7 +86,8 @@ TEMPLATE_LENGTHS = np.array([0.0] + [TEMPLATE_BONES[name] for name in LANDMARK_N
 #: Joints sharing a bone with each joint (sorted), e.g. the right hand → (right wrist,).
 NEIGHBOURS: tuple[tuple[int, ...], ...] = tuple(
     tuple(sorted({LANDMARK_PARENTS[i]} - {-1} | {k for k, p in enumerate(LANDMARK_PARENTS) if p == i}))
-    for i in range(N_JOINTS))
+    for i in range(N_JOINTS)
+)
 #: The joints of each joint's GP input: itself, then its neighbours.
 GP_INPUT_JOINTS: tuple[tuple[int, ...], ...] = tuple((i, *NEIGHBOURS[i]) for i in range(N_JOINTS))
 _MAX_INPUT_DIM = 3 * max(len(j) for j in GP_INPUT_JOINTS)
@@ -96,6 +98,7 @@ COMBINATIONS = ("product", "min")
 
 # ----------------------------------------------------------------------------------------------------- validation
 
+
 def _check_clip(clip, name: str) -> np.ndarray:
     """float64 ``[T, 20, 3]`` with T ≥ 1 and finite values, or a ValueError naming ``name``."""
     try:
@@ -103,13 +106,16 @@ def _check_clip(clip, name: str) -> np.ndarray:
     except (TypeError, ValueError) as err:
         raise ValueError(f"{name}: not a numeric [T, 20, 3] array ({err})") from None
     if arr.ndim != 3 or arr.shape[1:] != (N_JOINTS, 3) or arr.shape[0] < 1:
-        raise ValueError(f"{name}: expected a [T, 20, 3] array (T ≥ 1 frames of the 20 Kinect v1 joints), "
-                         f"got shape {arr.shape}")
+        raise ValueError(
+            f"{name}: expected a [T, 20, 3] array (T ≥ 1 frames of the 20 Kinect v1 joints), got shape {arr.shape}"
+        )
     bad = ~all_coordinates(np.isfinite(arr))
     if bad.any():
         t, j = np.argwhere(bad)[0]
-        raise ValueError(f"{name}: {int(bad.sum())} non-finite joint position(s), the first at frame {t}, joint "
-                         f"{j} ({LANDMARK_NAMES[j]})")
+        raise ValueError(
+            f"{name}: {int(bad.sum())} non-finite joint position(s), the first at frame {t}, joint "
+            f"{j} ({LANDMARK_NAMES[j]})"
+        )
     return arr
 
 
@@ -130,8 +136,10 @@ def _check_state(state, frames: int, name: str) -> np.ndarray | None:
     if arr.shape != (frames, N_JOINTS):
         raise ValueError(f"{name}: expected a [T, 20] tracking-state array with T = {frames}, got shape {arr.shape}")
     if not np.isin(arr, (NOT_TRACKED, INFERRED, TRACKED)).all():
-        raise ValueError(f"{name}: tracking states must be 0 (not tracked), 1 (inferred) or 2 (tracked), got "
-                         f"values {np.unique(arr[~np.isin(arr, (0, 1, 2))])[:5].tolist()}")
+        raise ValueError(
+            f"{name}: tracking states must be 0 (not tracked), 1 (inferred) or 2 (tracked), got "
+            f"values {np.unique(arr[~np.isin(arr, (0, 1, 2))])[:5].tolist()}"
+        )
     return arr.astype(np.int64)
 
 
@@ -165,16 +173,6 @@ def _check_nonneg(name: str, value, integer: bool = False, minimum: float = 0.0)
 
 # --------------------------------------------------------------------------------------------------- normalisation
 
-def _rotate_y(p: np.ndarray, angle: np.ndarray) -> np.ndarray:
-    """Turn ``[T, ..., 3]`` about y by ``angle`` ``[T]`` with :func:`~mocapkit.motion.geometry.face_forward`'s
-    convention (``x' = c·x − s·z``, ``z' = s·x + c·z``)."""
-    shape = (len(angle),) + (1,) * (p.ndim - 2)
-    c, s = np.cos(angle).reshape(shape), np.sin(angle).reshape(shape)
-    out = p.copy()
-    out[..., 0] = c * p[..., 0] - s * p[..., 2]
-    out[..., 2] = s * p[..., 0] + c * p[..., 2]
-    return out
-
 
 def bone_lengths(positions: np.ndarray) -> np.ndarray:
     """``[T, 20]``: the length of each joint's bone to its parent (0 for HipCenter)."""
@@ -190,7 +188,8 @@ class PostureTransform:
 
     Attributes:
         translation: ``[T, 3]`` HipCenter position of each input frame (m).
-        yaw: ``[T]`` angle (rad) each frame was turned about y (``face_forward``'s convention).
+        yaw: ``[T]`` heading (rad) each frame was turned by: its hip line's yaw from −x
+            (:func:`~mocapkit.motion.geometry.hip_line_heading` with ``along="-x"``: the body then faces +z).
         lengths: ``[T, 20]`` the input's bone lengths (each joint to its parent; 0 for HipCenter).
         scale: the clip's size factor: sum of its median bone lengths / sum of the template's.
     """
@@ -204,19 +203,19 @@ class PostureTransform:
         """Exact inverse of F: positions ``[T, 20, 3]`` in the normalised frame → world (each bone keeps its
         normalised direction and takes back the input's length; then inverse yaw, then the translation)."""
         out = retarget(np.asarray(normalised, dtype=np.float64), lengths=self.lengths)
-        return _rotate_y(out, -self.yaw) + self.translation[:, None]
+        return turn_about_up(out, -self.yaw, along="-x") + self.translation[:, None]
 
     def offsets_to_world(self, offsets: np.ndarray) -> np.ndarray:
         """Offsets ``[T, 20, 3]`` in the normalised frame → world: inverse yaw, times ``scale``."""
-        return _rotate_y(np.asarray(offsets, dtype=np.float64), -self.yaw) * self.scale
+        return turn_about_up(np.asarray(offsets, dtype=np.float64), -self.yaw, along="-x") * self.scale
 
     def offsets_to_normalised(self, offsets: np.ndarray) -> np.ndarray:
         """World offsets ``[T, 20, 3]`` (e.g. mocap − kinect) → the normalised frame: yaw, divided by ``scale``."""
-        return _rotate_y(np.asarray(offsets, dtype=np.float64), self.yaw) / self.scale
+        return turn_about_up(np.asarray(offsets, dtype=np.float64), self.yaw, along="-x") / self.scale
 
     def variance_to_world(self, variance: np.ndarray) -> np.ndarray:
         """Isotropic offset variances (any shape) in the normalised frame → world (times ``scale²``)."""
-        return np.asarray(variance, dtype=np.float64) * self.scale ** 2
+        return np.asarray(variance, dtype=np.float64) * self.scale**2
 
 
 def normalise_posture(kinect: np.ndarray) -> tuple[np.ndarray, PostureTransform]:
@@ -235,16 +234,16 @@ def normalise_posture(kinect: np.ndarray) -> tuple[np.ndarray, PostureTransform]
     lengths = bone_lengths(x)
     translation = x[:, PELVIS].copy()
     p = retarget(x - translation[:, None])
-    hips = p[:, R_HIP] - p[:, L_HIP]
-    yaw = np.arctan2(hips[:, 2], -hips[:, 0])
+    yaw = hip_line_heading(p, L_HIP, R_HIP, along="-x")  # the body's yaw: it then faces +z
     reference = TEMPLATE_LENGTHS.sum()
     scale = float(np.median(lengths, axis=0).sum() / reference)
     if not scale > 1e-6:
         scale = 1.0
-    return _rotate_y(p, yaw), PostureTransform(translation, yaw, lengths, scale)
+    return turn_about_up(p, yaw, along="-x"), PostureTransform(translation, yaw, lengths, scale)
 
 
 # ----------------------------------------------------------------------------------------------------- reliability
+
 
 def _attachment_matrix() -> np.ndarray:
     """``[20 joints, 20 bones]`` (bone = its child joint): row j averages the bones attached to joint j."""
@@ -258,8 +257,9 @@ def _attachment_matrix() -> np.ndarray:
 _ATTACHED = _attachment_matrix()
 
 
-def behaviour_reliability(kinect: np.ndarray, jump_threshold: float = 0.15,
-                          still_threshold: float = 0.01) -> np.ndarray:
+def behaviour_reliability(
+    kinect: np.ndarray, jump_threshold: float = 0.15, still_threshold: float = 0.01
+) -> np.ndarray:
     """``[T, 20]`` in [0, 1] from each joint's own trajectory (causal: frame t uses t−2, t−1, t).
 
     - direction: ``clip(1 + cos θ, 0, 1)`` with θ the angle between the displacements into t−1 and into t, so
@@ -275,7 +275,7 @@ def behaviour_reliability(kinect: np.ndarray, jump_threshold: float = 0.15,
     rel = np.ones(x.shape[:2])
     if len(x) < 2:
         return rel
-    d = np.diff(x, axis=0)                                             # d[t-1] = x_t − x_{t−1}
+    d = np.diff(x, axis=0)  # d[t-1] = x_t − x_{t−1}
     speed = np.linalg.norm(d, axis=-1)
     tau = float(jump_threshold)
     rel[1:] *= np.exp(-np.maximum(speed - tau, 0.0) / tau) if tau > 0 else 1.0
@@ -311,9 +311,14 @@ def state_reliability(state: np.ndarray | None, frames: int) -> np.ndarray:
     return np.ones((frames, N_JOINTS)) if state is None else STATE_RELIABILITY[state]
 
 
-def joint_reliability(kinect: np.ndarray, state: np.ndarray | None = None, kappa: float = 5.0,
-                      combine: str = "product", jump_threshold: float = 0.15,
-                      still_threshold: float = 0.01) -> np.ndarray:
+def joint_reliability(
+    kinect: np.ndarray,
+    state: np.ndarray | None = None,
+    kappa: float = 5.0,
+    combine: str = "product",
+    jump_threshold: float = 0.15,
+    still_threshold: float = 0.01,
+) -> np.ndarray:
     """Per-joint reliability ``r ∈ [0, 1]``, ``[T, 20]``, of a Kinect clip (world coordinates, metres).
 
     An **approximation of Shum et al. 2013** (the thesis's [85]; its formulas are not reproduced in the thesis,
@@ -325,12 +330,18 @@ def joint_reliability(kinect: np.ndarray, state: np.ndarray | None = None, kappa
     if combine not in COMBINATIONS:
         raise ValueError(f"combine={combine!r}: expected one of {COMBINATIONS}")
     x = _check_clip(kinect, "kinect")
-    cues = np.stack([behaviour_reliability(x, jump_threshold, still_threshold), kinematic_reliability(x, kappa),
-                     state_reliability(state, len(x))])
+    cues = np.stack(
+        [
+            behaviour_reliability(x, jump_threshold, still_threshold),
+            kinematic_reliability(x, kappa),
+            state_reliability(state, len(x)),
+        ]
+    )
     return np.clip(cues.prod(0) if combine == "product" else cues.min(0), 0.0, 1.0)
 
 
 # ----------------------------------------------------------------------------------------------------- shared data
+
 
 def _training_pairs(kinect: list[np.ndarray], mocap: list[np.ndarray], max_frames, random_state):
     """Stacked normalised Kinect postures and normalised offsets ``([N, 20, 3], [N, 20, 3])``, subsampled."""
@@ -361,7 +372,7 @@ def _gp_inputs(normalised: np.ndarray, gp_input: str = "neighbours") -> np.ndarr
     joints_of = _input_joints(gp_input)
     out = np.zeros((N_JOINTS, len(normalised), 3 * max(len(j) for j in joints_of)))
     for j, joints in enumerate(joints_of):
-        out[j, :, :3 * len(joints)] = normalised[:, joints].reshape(len(normalised), -1)
+        out[j, :, : 3 * len(joints)] = normalised[:, joints].reshape(len(normalised), -1)
     return out
 
 
@@ -370,15 +381,16 @@ def _input_mask(gp_input: str = "neighbours") -> np.ndarray:
     joints_of = _input_joints(gp_input)
     mask = np.zeros((N_JOINTS, 3 * max(len(j) for j in joints_of)))
     for j, joints in enumerate(joints_of):
-        mask[j, :3 * len(joints)] = 1.0
+        mask[j, : 3 * len(joints)] = 1.0
     return mask
 
 
 # --------------------------------------------------------------------------------------------------------- the GPs
 
+
 def _rbf_bias(a: np.ndarray, b: np.ndarray, lengthscale, outputscale, constant) -> np.ndarray:
     """Batched eq. 4.3 kernel without noise: ``os·exp(−|a−b|²/(2ℓ²)) + c``, ``a [J, n, D]``, ``b [J, m, D]``."""
-    sq = (a ** 2).sum(-1)[:, :, None] + (b ** 2).sum(-1)[:, None, :] - 2.0 * a @ b.transpose(0, 2, 1)
+    sq = (a**2).sum(-1)[:, :, None] + (b**2).sum(-1)[:, None, :] - 2.0 * a @ b.transpose(0, 2, 1)
     sq = np.maximum(sq, 0.0)
     return outputscale[:, None, None] * np.exp(-0.5 * sq / lengthscale[:, None, None] ** 2) + constant[:, None, None]
 
@@ -391,27 +403,27 @@ class JointSGPRs:
     ``= y_scale_j² · (os_j + c_j − k V_j kᵀ + noise_j)`` (the observation's variance, noise included).
     """
 
-    inducing: np.ndarray      # [J, M, D] (padded dimensions zero)
-    lengthscale: np.ndarray   # [J]
-    outputscale: np.ndarray   # [J]
-    constant: np.ndarray      # [J]
-    noise: np.ndarray         # [J], standardised units
-    weights: np.ndarray       # [J, M, 3]
-    var_matrix: np.ndarray    # [J, M, M]
-    y_mean: np.ndarray        # [J, 3]
-    y_scale: np.ndarray       # [J]
+    inducing: np.ndarray  # [J, M, D] (padded dimensions zero)
+    lengthscale: np.ndarray  # [J]
+    outputscale: np.ndarray  # [J]
+    constant: np.ndarray  # [J]
+    noise: np.ndarray  # [J], standardised units
+    weights: np.ndarray  # [J, M, 3]
+    var_matrix: np.ndarray  # [J, M, M]
+    y_mean: np.ndarray  # [J, 3]
+    y_scale: np.ndarray  # [J]
 
     def predict(self, inputs: np.ndarray, chunk: int = 2048) -> tuple[np.ndarray, np.ndarray]:
         """Per-joint inputs ``[J, N, D]`` → (offset mean ``[N, J, 3]``, variance ``[N, J]``), normalised frame."""
         n = inputs.shape[1]
         mean, var = np.empty((n, N_JOINTS, 3)), np.empty((n, N_JOINTS))
         for s in range(0, n, chunk):
-            K = _rbf_bias(inputs[:, s:s + chunk], self.inducing, self.lengthscale, self.outputscale, self.constant)
-            mu = K @ self.weights                                                       # [J, n, 3]
-            quad = ((K @ self.var_matrix) * K).sum(-1)                                   # [J, n]: k V kᵀ
+            K = _rbf_bias(inputs[:, s : s + chunk], self.inducing, self.lengthscale, self.outputscale, self.constant)
+            mu = K @ self.weights  # [J, n, 3]
+            quad = ((K @ self.var_matrix) * K).sum(-1)  # [J, n]: k V kᵀ
             v = np.maximum(self.outputscale + self.constant - quad.T, 0.0) + self.noise  # [n, J]
-            mean[s:s + chunk] = (mu * self.y_scale[:, None, None] + self.y_mean[:, None]).transpose(1, 0, 2)
-            var[s:s + chunk] = v * self.y_scale ** 2
+            mean[s : s + chunk] = (mu * self.y_scale[:, None, None] + self.y_mean[:, None]).transpose(1, 0, 2)
+            var[s : s + chunk] = v * self.y_scale**2
         return mean, var
 
 
@@ -425,15 +437,16 @@ def _kmeans_inducing(inputs: np.ndarray, mask: np.ndarray, m: int, seed: int) ->
         if m >= len(data):
             Z[j][:, dims] = data[:m]
             continue
-        with warnings.catch_warnings():       # duplicate postures → fewer distinct clusters than m: harmless
+        with warnings.catch_warnings():  # duplicate postures → fewer distinct clusters than m: harmless
             warnings.simplefilter("ignore")
             km = KMeans(n_clusters=m, n_init=1, max_iter=50, random_state=seed + j).fit(data)
         Z[j][:, dims] = km.cluster_centers_
     return Z
 
 
-def _train_sgpr(inputs: np.ndarray, targets: np.ndarray, mask: np.ndarray, Z0: np.ndarray, iterations: int,
-                lr: float, device: str) -> tuple[dict, list[float]]:
+def _train_sgpr(
+    inputs: np.ndarray, targets: np.ndarray, mask: np.ndarray, Z0: np.ndarray, iterations: int, lr: float, device: str
+) -> tuple[dict, list[float]]:
     """Adam on the summed exact SGPR bound of ``J`` independent shared-kernel 3-output GPs.
 
     ``inputs [J, N, D]``, ``targets [J, N, 3]`` (standardised), ``Z0 [J, M, D]``. Returns the hyper-parameters
@@ -452,9 +465,10 @@ def _train_sgpr(inputs: np.ndarray, targets: np.ndarray, mask: np.ndarray, Z0: n
     # starting values: length-scale = median pairwise input distance of each joint (on ≤ 500 points)
     sub = x[:, :: max(1, N // 500)]
     i, k = torch.triu_indices(sub.shape[1], sub.shape[1], offset=1, device=dev)
-    pairs = torch.cdist(sub, sub, compute_mode="donot_use_mm_for_euclid_dist")[:, i, k]      # [J, n(n−1)/2]
-    ls0 = torch.stack([torch.quantile(d[d > 0], 0.5) if (d > 0).any() else torch.ones((), dtype=dtype, device=dev)
-                       for d in pairs])
+    pairs = torch.cdist(sub, sub, compute_mode="donot_use_mm_for_euclid_dist")[:, i, k]  # [J, n(n−1)/2]
+    ls0 = torch.stack(
+        [torch.quantile(d[d > 0], 0.5) if (d > 0).any() else torch.ones((), dtype=dtype, device=dev) for d in pairs]
+    )
 
     likelihood = gpytorch.likelihoods.GaussianLikelihood(batch_shape=batch).to(device=dev, dtype=dtype)
     likelihood.noise = torch.full((J, 1), 0.1, dtype=dtype, device=dev)
@@ -467,13 +481,17 @@ def _train_sgpr(inputs: np.ndarray, targets: np.ndarray, mask: np.ndarray, Z0: n
     scaled.outputscale = torch.ones(J, dtype=dtype, device=dev)
     bias.constant = torch.full((J, 1), 0.1, dtype=dtype, device=dev)
     zmask = torch.as_tensor(mask[:, None, :], dtype=dtype, device=dev)
-    kernel.inducing_points.register_hook(lambda g: g * zmask)   # padded input dimensions stay 0
+    kernel.inducing_points.register_hook(lambda g: g * zmask)  # padded input dimensions stay 0
 
     # (the likelihood is a sub-module of the kernel too: take each parameter once)
-    hyper = list({id(p): p for n, p in [*kernel.named_parameters(), *likelihood.named_parameters()]
-                  if p is not kernel.inducing_points}.values())
-    optimiser = torch.optim.Adam([{"params": hyper, "lr": lr},
-                                  {"params": [kernel.inducing_points], "lr": lr * 0.2}])
+    hyper = list(
+        {
+            id(p): p
+            for n, p in [*kernel.named_parameters(), *likelihood.named_parameters()]
+            if p is not kernel.inducing_points
+        }.values()
+    )
+    optimiser = torch.optim.Adam([{"params": hyper, "lr": lr}, {"params": [kernel.inducing_points], "lr": lr * 0.2}])
     log2pi = math.log(2.0 * math.pi)
     history = []
     kernel.train()
@@ -482,10 +500,10 @@ def _train_sgpr(inputs: np.ndarray, targets: np.ndarray, mask: np.ndarray, Z0: n
         for _ in range(int(iterations)):
             optimiser.zero_grad()
             prior = gpytorch.distributions.MultivariateNormal(torch.zeros(J, N, dtype=dtype, device=dev), kernel(x))
-            covar = likelihood(prior).lazy_covariance_matrix                  # Q + σ²I (low rank + diagonal)
-            inv_quad, logdet = covar.inv_quad_logdet(inv_quad_rhs=y, logdet=True)   # Σ over the 3 outputs
+            covar = likelihood(prior).lazy_covariance_matrix  # Q + σ²I (low rank + diagonal)
+            inv_quad, logdet = covar.inv_quad_logdet(inv_quad_rhs=y, logdet=True)  # Σ over the 3 outputs
             bound = -0.5 * (inv_quad + 3.0 * logdet + 3.0 * N * log2pi)
-            for term in kernel.added_loss_terms():                            # −tr(K − Q)/(2σ²), per output
+            for term in kernel.added_loss_terms():  # −tr(K − Q)/(2σ²), per output
                 bound = bound + 3.0 * term.loss()
             loss = -(bound / (3.0 * N)).sum()
             loss.backward()
@@ -508,22 +526,23 @@ def _sgpr_predictive(inputs: np.ndarray, targets: np.ndarray, params: dict) -> t
     J, M, _ = Z.shape
     eye = np.eye(M)
     Kzz = _rbf_bias(Z, Z, ls, os_, c) + 1e-6 * (os_ + c)[:, None, None] * eye
-    Kzx = _rbf_bias(Z, inputs, ls, os_, c)                                         # [J, M, N]
+    Kzx = _rbf_bias(Z, inputs, ls, os_, c)  # [J, M, N]
     sigma = np.sqrt(noise)[:, None, None]
     W, V = np.empty((J, M, 3)), np.empty((J, M, M))
     for j in range(J):
         L = np.linalg.cholesky(Kzz[j])
-        A = np.linalg.solve(L, Kzx[j]) / sigma[j]                                  # L⁻¹K_zx/σ
+        A = np.linalg.solve(L, Kzx[j]) / sigma[j]  # L⁻¹K_zx/σ
         LB = np.linalg.cholesky(eye + A @ A.T)
-        cvec = np.linalg.solve(LB, A @ targets[j]) / sigma[j]                      # L_B⁻¹ A y / σ
+        cvec = np.linalg.solve(LB, A @ targets[j]) / sigma[j]  # L_B⁻¹ A y / σ
         Linv = np.linalg.solve(L, eye)
         LBinv = np.linalg.solve(LB, eye)
-        W[j] = Linv.T @ (LBinv.T @ cvec)                                           # mean = k·W
-        V[j] = Linv.T @ (eye - LBinv.T @ LBinv) @ Linv                             # var_f = k** − k V kᵀ
+        W[j] = Linv.T @ (LBinv.T @ cvec)  # mean = k·W
+        V[j] = Linv.T @ (eye - LBinv.T @ LBinv) @ Linv  # var_f = k** − k V kᵀ
     return W, V
 
 
 # -------------------------------------------------------------------------------------------------- the estimators
+
 
 class KinectPostureReconstructor(BaseEstimator):
     """Zhou 2014 ch. 5: per-joint sparse-GP offset prior + temporal + reliability energy, solved per frame.
@@ -557,14 +576,37 @@ class KinectPostureReconstructor(BaseEstimator):
 
     #: Parameters used only by :meth:`predict`: changing them after ``fit`` needs no refit (the comparison
     #: benchmark reuses one fit across them).
-    predict_params = ("w_spatial", "w_temporal", "w_reliability", "reliability", "kappa", "jump_threshold",
-                      "still_threshold", "energy_unit", "rigid_bones")
+    predict_params = (
+        "w_spatial",
+        "w_temporal",
+        "w_reliability",
+        "reliability",
+        "kappa",
+        "jump_threshold",
+        "still_threshold",
+        "energy_unit",
+        "rigid_bones",
+    )
 
-    def __init__(self, w_spatial: float = 0.6, w_temporal: float = 0.2, w_reliability: float = 0.2,
-                 gp_input: str = "neighbours", n_inducing: int = 200, max_train_frames: int | None = 3000,
-                 gp_iterations: int = 100, learning_rate: float = 0.05, reliability: str = "product", kappa: float = 5.0,
-                 jump_threshold: float = 0.15, still_threshold: float = 0.01, energy_unit: float = 0.01,
-                 rigid_bones: bool = False, device: str = "cpu", random_state: int | None = 0):
+    def __init__(
+        self,
+        w_spatial: float = 0.6,
+        w_temporal: float = 0.2,
+        w_reliability: float = 0.2,
+        gp_input: str = "neighbours",
+        n_inducing: int = 200,
+        max_train_frames: int | None = 3000,
+        gp_iterations: int = 100,
+        learning_rate: float = 0.05,
+        reliability: str = "product",
+        kappa: float = 5.0,
+        jump_threshold: float = 0.15,
+        still_threshold: float = 0.01,
+        energy_unit: float = 0.01,
+        rigid_bones: bool = False,
+        device: str = "cpu",
+        random_state: int | None = 0,
+    ):
         self.w_spatial = w_spatial
         self.w_temporal = w_temporal
         self.w_reliability = w_reliability
@@ -618,18 +660,19 @@ class KinectPostureReconstructor(BaseEstimator):
         self._check_fit_params()
         kinect, mocap = _check_pairs(kinect_clips, mocap_clips)
         _check_states(states, [len(c) for c in kinect], "states")
-        seed = int(check_random_state(self.random_state).randint(2 ** 31 - N_JOINTS))    # k-means seeds
+        seed = int(check_random_state(self.random_state).randint(2**31 - N_JOINTS))  # k-means seeds
         X, Y = _training_pairs(kinect, mocap, self.max_train_frames, self.random_state)
-        inputs = _gp_inputs(X, self.gp_input)                                           # [J, N, D]
-        offsets = Y.transpose(1, 0, 2)                                                  # [J, N, 3]
+        inputs = _gp_inputs(X, self.gp_input)  # [J, N, D]
+        offsets = Y.transpose(1, 0, 2)  # [J, N, 3]
         y_mean = offsets.mean(1)
         y_scale = np.maximum(np.sqrt(((offsets - y_mean[:, None]) ** 2).mean((1, 2))), 1e-4)
         targets = (offsets - y_mean[:, None]) / y_scale[:, None, None]
         mask = _input_mask(self.gp_input)
         m = min(int(self.n_inducing), len(X))
         Z0 = _kmeans_inducing(inputs, mask, m, seed)
-        params, history = _train_sgpr(inputs, targets, mask, Z0, self.gp_iterations, float(self.learning_rate),
-                                      self.device)
+        params, history = _train_sgpr(
+            inputs, targets, mask, Z0, self.gp_iterations, float(self.learning_rate), self.device
+        )
         W, V = _sgpr_predictive(inputs, targets, params)
         self.gp_ = JointSGPRs(weights=W, var_matrix=V, y_mean=y_mean, y_scale=y_scale, **params)
         self.n_train_frames_ = len(X)
@@ -644,8 +687,12 @@ class KinectPostureReconstructor(BaseEstimator):
         check_is_fitted(self, "gp_")
         Path(path).parent.mkdir(parents=True, exist_ok=True)
         arrays = {f"gp_{name}": getattr(self.gp_, name) for name in JointSGPRs.__dataclass_fields__}
-        meta = {"format": MODEL_FORMAT, "params": self.get_params(deep=False), "n_train_frames": self.n_train_frames_,
-                "n_inducing": self.n_inducing_}
+        meta = {
+            "format": MODEL_FORMAT,
+            "params": self.get_params(deep=False),
+            "n_train_frames": self.n_train_frames_,
+            "n_inducing": self.n_inducing_,
+        }
         return save_npz_atomic(path, meta=np.array(json.dumps(meta)), **arrays)
 
     @classmethod
@@ -657,8 +704,10 @@ class KinectPostureReconstructor(BaseEstimator):
                 meta = json.loads(str(data["meta"]))
                 arrays = {name: data[f"gp_{name}"] for name in JointSGPRs.__dataclass_fields__}
         except (OSError, KeyError, ValueError) as exc:
-            raise ValueError(f"{path}: not a Kinect reconstruction model written by "
-                             f"KinectPostureReconstructor.save / mocapkit kinect-fix train ({exc})") from exc
+            raise ValueError(
+                f"{path}: not a Kinect reconstruction model written by "
+                f"KinectPostureReconstructor.save / mocapkit kinect-fix train ({exc})"
+            ) from exc
         if meta.get("format") != MODEL_FORMAT:
             raise ValueError(f"{path}: format {meta.get('format')!r}, expected {MODEL_FORMAT!r}")
         model = cls(**meta["params"])
@@ -678,8 +727,7 @@ class KinectPostureReconstructor(BaseEstimator):
 
     def reliability_of(self, kinect: np.ndarray, state: np.ndarray | None = None) -> np.ndarray:
         """:func:`joint_reliability` with this estimator's settings, ``[T, 20]``."""
-        return joint_reliability(kinect, state, self.kappa, self.reliability, self.jump_threshold,
-                                 self.still_threshold)
+        return joint_reliability(kinect, state, self.kappa, self.reliability, self.jump_threshold, self.still_threshold)
 
     def predict(self, kinect, state=None, reliability: np.ndarray | None = None):
         """Reconstruct a Kinect clip ``[T, 20, 3]`` (world, m) → ``[T, 20, 3]`` (world, m).
@@ -711,16 +759,16 @@ class KinectPostureReconstructor(BaseEstimator):
                 raise ValueError(f"reliability for {name}: expected [T, 20] values in [0, 1] with T = {T}")
         if self.w_spatial > 0:
             mu, var = self.predict_offsets(x)
-            a = self.w_spatial * self.energy_unit ** 2 / np.maximum(var, 1e-300)       # w_S/σ² in energy units
+            a = self.w_spatial * self.energy_unit**2 / np.maximum(var, 1e-300)  # w_S/σ² in energy units
         else:
             mu, a = np.zeros_like(x), np.zeros((T, N_JOINTS))
-        base_num = a[..., None] * mu                                                    # [T, J, 3]
-        base_den = a + 2.0 * self.w_reliability * r ** 2                                # [T, J]
+        base_num = a[..., None] * mu  # [T, J, 3]
+        base_den = a + 2.0 * self.w_reliability * r**2  # [T, J]
         out = np.empty_like(x)
-        head = min(T, 2) if self.w_temporal > 0 else T                                  # no E_T before frame 2
+        head = min(T, 2) if self.w_temporal > 0 else T  # no E_T before frame 2
         out[:head] = x[:head] + _safe_ratio(base_num[:head], base_den[:head])
         two_wt = 2.0 * self.w_temporal
-        for t in range(head, T):                                                        # sequential over frames
+        for t in range(head, T):  # sequential over frames
             c = 2.0 * out[t - 1] - out[t - 2] - x[t]
             out[t] = x[t] + _safe_ratio(base_num[t] + two_wt * c, base_den[t] + two_wt)
         if self.rigid_bones:
@@ -747,8 +795,15 @@ class RandomForestPoseCorrector(BaseEstimator):
     Attributes (after ``fit``): ``forest_``, ``n_train_frames_``.
     """
 
-    def __init__(self, n_estimators: int = 100, max_depth: int | None = None, min_samples_leaf: int = 5,
-                 max_train_frames: int | None = None, n_jobs: int | None = None, random_state: int | None = 0):
+    def __init__(
+        self,
+        n_estimators: int = 100,
+        max_depth: int | None = None,
+        min_samples_leaf: int = 5,
+        max_train_frames: int | None = None,
+        n_jobs: int | None = None,
+        random_state: int | None = 0,
+    ):
         self.n_estimators = n_estimators
         self.max_depth = max_depth
         self.min_samples_leaf = min_samples_leaf
@@ -769,9 +824,13 @@ class RandomForestPoseCorrector(BaseEstimator):
         kinect, mocap = _check_pairs(kinect_clips, mocap_clips)
         _check_states(states, [len(c) for c in kinect], "states")
         X, Y = _training_pairs(kinect, mocap, self.max_train_frames, self.random_state)
-        self.forest_ = RandomForestRegressor(n_estimators=self.n_estimators, max_depth=self.max_depth,
-                                             min_samples_leaf=self.min_samples_leaf, n_jobs=self.n_jobs,
-                                             random_state=self.random_state)
+        self.forest_ = RandomForestRegressor(
+            n_estimators=self.n_estimators,
+            max_depth=self.max_depth,
+            min_samples_leaf=self.min_samples_leaf,
+            n_jobs=self.n_jobs,
+            random_state=self.random_state,
+        )
         self.forest_.fit(X.reshape(len(X), -1), Y.reshape(len(Y), -1))
         self.n_train_frames_ = len(X)
         return self
@@ -812,8 +871,14 @@ class DoubleExponentialSmoother(BaseEstimator):
         jitter_radius, max_deviation: metres (the SDK: 0.05 and 0.04); 0 turns the step off.
     """
 
-    def __init__(self, smoothing: float = 0.5, correction: float = 0.5, prediction: float = 0.5,
-                 jitter_radius: float = 0.05, max_deviation: float = 0.04):
+    def __init__(
+        self,
+        smoothing: float = 0.5,
+        correction: float = 0.5,
+        prediction: float = 0.5,
+        jitter_radius: float = 0.05,
+        max_deviation: float = 0.04,
+    ):
         self.smoothing = smoothing
         self.correction = correction
         self.prediction = prediction

@@ -22,6 +22,7 @@ clip definition as the classical pipeline (:mod:`mocapkit.features.clips`):
 Zero-padding a batch does not change any sample's output (the padded clips are invalid, the NMF
 layer zeroes their codes and, with ``graph_reg > 0``, keeps them out of the kNN graph).
 """
+
 from __future__ import annotations
 
 import torch
@@ -29,8 +30,8 @@ import torch.nn.functional as F
 from torch import nn
 
 from mocapkit.features.clips import ClipFeatures
-from mocapkit.motion.layouts import LAYOUTS, SkeletonLayout
 from mocapkit.models.nmf_layer import NMFLayer
+from mocapkit.motion.layouts import LAYOUTS, SkeletonLayout
 
 
 class ClipNMFBagOfWords(nn.Module):
@@ -39,9 +40,21 @@ class ClipNMFBagOfWords(nn.Module):
     Args: see :func:`clip_nmf_bow`.
     """
 
-    def __init__(self, num_classes: int, layout: SkeletonLayout | str = "msr20", window: int = 30, stride: int = 15,
-                 frames_per_clip: int = 10, n_components: int = 64, n_iter: int = 10, one_step_grad: bool = True,
-                 graph_reg: float = 0.0, encoder_hidden: int = 128, temperature: float = 1.0, dropout: float = 0.0):
+    def __init__(
+        self,
+        num_classes: int,
+        layout: SkeletonLayout | str = "msr20",
+        window: int = 30,
+        stride: int = 15,
+        frames_per_clip: int = 10,
+        n_components: int = 64,
+        n_iter: int = 10,
+        one_step_grad: bool = True,
+        graph_reg: float = 0.0,
+        encoder_hidden: int = 128,
+        temperature: float = 1.0,
+        dropout: float = 0.0,
+    ):
         super().__init__()
         if isinstance(layout, str) and layout not in LAYOUTS:
             raise ValueError(f"unknown skeleton layout {layout!r}; known: {sorted(LAYOUTS)}")
@@ -49,10 +62,15 @@ class ClipNMFBagOfWords(nn.Module):
             raise ValueError(f"temperature must be > 0, got {temperature}")
         self.clips = ClipFeatures(layout, window, stride, frames_per_clip)
         self.layout = self.clips.layout
-        self.encoder = nn.Sequential(nn.Linear(self.clips.out_features, encoder_hidden), nn.ReLU(),
-                                     nn.Linear(encoder_hidden, encoder_hidden), nn.Softplus())
-        self.nmf = NMFLayer(encoder_hidden, n_components, n_iter=n_iter, one_step_grad=one_step_grad,
-                            graph_reg=graph_reg)
+        self.encoder = nn.Sequential(
+            nn.Linear(self.clips.out_features, encoder_hidden),
+            nn.ReLU(),
+            nn.Linear(encoder_hidden, encoder_hidden),
+            nn.Softplus(),
+        )
+        self.nmf = NMFLayer(
+            encoder_hidden, n_components, n_iter=n_iter, one_step_grad=one_step_grad, graph_reg=graph_reg
+        )
         self.temperature = float(temperature)
         self.dropout = nn.Dropout(dropout)
         self.fc = nn.Linear(n_components, num_classes)
@@ -62,7 +80,7 @@ class ClipNMFBagOfWords(nn.Module):
         """Per-clip soft word assignments ``[B, N, k]`` (rows sum to 1 on valid clips) and the clip mask ``[B, N]``."""
         if skeletons.dim() != 5 or skeletons.shape[-2:] != (self.layout.num_joints, 3):
             raise ValueError(f"expected skeletons [B, M, T, {self.layout.num_joints}, 3], got {list(skeletons.shape)}")
-        features, valid = self.clips(skeletons[:, 0])                                 # body 0
+        features, valid = self.clips(skeletons[:, 0])  # body 0
         encoded = self.encoder(features) * valid[..., None].to(features.dtype)
         codes = self.nmf(encoded, valid)
         words = F.softmax(torch.log(codes + self.nmf.eps) / self.temperature, dim=-1)
@@ -79,10 +97,20 @@ class ClipNMFBagOfWords(nn.Module):
         return self.fc(self.dropout(histogram * self.n_components))
 
 
-def clip_nmf_bow(num_classes: int, layout: SkeletonLayout | str = "msr20", window: int = 30, stride: int = 15,
-                 frames_per_clip: int = 10, n_components: int = 64, n_iter: int = 10, one_step_grad: bool = True,
-                 graph_reg: float = 0.0, encoder_hidden: int = 128, temperature: float = 1.0,
-                 dropout: float = 0.0) -> ClipNMFBagOfWords:
+def clip_nmf_bow(
+    num_classes: int,
+    layout: SkeletonLayout | str = "msr20",
+    window: int = 30,
+    stride: int = 15,
+    frames_per_clip: int = 10,
+    n_components: int = 64,
+    n_iter: int = 10,
+    one_step_grad: bool = True,
+    graph_reg: float = 0.0,
+    encoder_hidden: int = 128,
+    temperature: float = 1.0,
+    dropout: float = 0.0,
+) -> ClipNMFBagOfWords:
     """Hydra builder of :class:`ClipNMFBagOfWords` (``configs/model/clip_nmf_bow.yaml``).
 
     Args:
@@ -97,5 +125,17 @@ def clip_nmf_bow(num_classes: int, layout: SkeletonLayout | str = "msr20", windo
         temperature: soft-assignment temperature (1 = normalised codes).
         dropout: before the classifier.
     """
-    return ClipNMFBagOfWords(num_classes, layout, window, stride, frames_per_clip, n_components, n_iter,
-                             one_step_grad, graph_reg, encoder_hidden, temperature, dropout)
+    return ClipNMFBagOfWords(
+        num_classes,
+        layout,
+        window,
+        stride,
+        frames_per_clip,
+        n_components,
+        n_iter,
+        one_step_grad,
+        graph_reg,
+        encoder_hidden,
+        temperature,
+        dropout,
+    )

@@ -12,6 +12,7 @@ module that is trained, evaluated and exported to ONNX.
 Builders follow torchvision's pattern: ``energy_vgg(arch="vgg16", ...)`` and
 ``energy_image_vgg(...)`` for the whole classifier.
 """
+
 from __future__ import annotations
 
 import torch
@@ -42,14 +43,25 @@ class EnergyVGG(nn.Module):
         dropout: dropout after each hidden FC layer (0.5 in the thesis).
     """
 
-    def __init__(self, features: nn.Sequential, out_channels: int, num_classes: int,
-                 pool_size: int = 7, hidden: int = 4096, dropout: float = 0.5):
+    def __init__(
+        self,
+        features: nn.Sequential,
+        out_channels: int,
+        num_classes: int,
+        pool_size: int = 7,
+        hidden: int = 4096,
+        dropout: float = 0.5,
+    ):
         super().__init__()
         self.features = features
         self.pool = nn.AdaptiveMaxPool2d(pool_size)
         self.classifier = nn.Sequential(
-            nn.Linear(out_channels * pool_size * pool_size, hidden), nn.ReLU(inplace=True), nn.Dropout(dropout),
-            nn.Linear(hidden, hidden), nn.ReLU(inplace=True), nn.Dropout(dropout),
+            nn.Linear(out_channels * pool_size * pool_size, hidden),
+            nn.ReLU(inplace=True),
+            nn.Dropout(dropout),
+            nn.Linear(hidden, hidden),
+            nn.ReLU(inplace=True),
+            nn.Dropout(dropout),
             nn.Linear(hidden, num_classes),
         )
         linears = [m for m in self.classifier if isinstance(m, nn.Linear)]
@@ -67,8 +79,16 @@ class EnergyVGG(nn.Module):
         return self.classifier(torch.flatten(x, 1))
 
 
-def energy_vgg(arch: str = "vgg16", num_classes: int = 60, batch_norm: bool = False, width: float = 1.0,
-               pool_size: int = 7, hidden: int = 4096, dropout: float = 0.5, weights: str | None = None) -> EnergyVGG:
+def energy_vgg(
+    arch: str = "vgg16",
+    num_classes: int = 60,
+    batch_norm: bool = False,
+    width: float = 1.0,
+    pool_size: int = 7,
+    hidden: int = 4096,
+    dropout: float = 0.5,
+    weights: str | None = None,
+) -> EnergyVGG:
     """Build an :class:`EnergyVGG` from torchvision's VGG configurations.
 
     Args:
@@ -128,9 +148,17 @@ class EnergyImageClassifier(nn.Module):
         return self.cnn((self.energy(skeletons) - self.mean) / self.std)
 
 
-def energy_image_vgg(num_classes: int, arch: str = "vgg16", batch_norm: bool = False, width: float = 1.0,
-                     pool_size: int = 7, hidden: int = 4096, dropout: float = 0.5, weights: str | None = None,
-                     energy: dict | None = None) -> EnergyImageClassifier:
+def energy_image_vgg(
+    num_classes: int,
+    arch: str = "vgg16",
+    batch_norm: bool = False,
+    width: float = 1.0,
+    pool_size: int = 7,
+    hidden: int = 4096,
+    dropout: float = 0.5,
+    weights: str | None = None,
+    energy: dict | None = None,
+) -> EnergyImageClassifier:
     """Build the whole skeleton classifier: :class:`EnergyImage` (options in ``energy``) + :func:`energy_vgg`."""
     return EnergyImageClassifier(
         EnergyImage(**(energy or {})),

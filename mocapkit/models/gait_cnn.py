@@ -17,6 +17,7 @@ every fully connected layer but the logits. The softmax lives in the loss. Any i
 whose feature maps stay non-empty works, e.g. OpenGait's 64×44 (flatten size 40·3·1 = 120).
 The single-task network (``tasks=("subject",)``) has the same trunk and one head.
 """
+
 from __future__ import annotations
 
 from collections import OrderedDict
@@ -52,9 +53,17 @@ class MultiTaskGaitCNN(nn.Module):
         num_classes: task → number of classes.
     """
 
-    def __init__(self, num_subjects: int, num_views: int = 11, num_conditions: int = 3,
-                 tasks: tuple[str, ...] = TASKS, input_size: tuple[int, int] = (124, 124), embedding_dim: int = 512,
-                 head_dim: int = 128, dropout: float = 0.5):
+    def __init__(
+        self,
+        num_subjects: int,
+        num_views: int = 11,
+        num_conditions: int = 3,
+        tasks: tuple[str, ...] = TASKS,
+        input_size: tuple[int, int] = (124, 124),
+        embedding_dim: int = 512,
+        head_dim: int = 128,
+        dropout: float = 0.5,
+    ):
         super().__init__()
         tasks = tuple(tasks)
         unknown = [t for t in tasks if t not in TASKS]
@@ -81,15 +90,24 @@ class MultiTaskGaitCNN(nn.Module):
         sizes = self.feature_map_sizes()
         channels, height, width = sizes["pool3"]
         if height < 1 or width < 1:
-            raise ValueError(f"input_size={list(self.input_size)} is too small for Table 6.1's trunk: "
-                             f"the feature maps shrink to {sizes}")
+            raise ValueError(
+                f"input_size={list(self.input_size)} is too small for Table 6.1's trunk: "
+                f"the feature maps shrink to {sizes}"
+            )
         self.flat_features = channels * height * width
         self.shared_fc = nn.Linear(self.flat_features, self.embedding_dim)
         self.dropout = nn.Dropout(dropout)
-        self.heads = nn.ModuleDict({
-            task: nn.Sequential(nn.Linear(self.embedding_dim, self.head_dim), nn.ReLU(inplace=True),
-                                nn.Dropout(dropout), nn.Linear(self.head_dim, n))
-            for task, n in self.num_classes.items()})
+        self.heads = nn.ModuleDict(
+            {
+                task: nn.Sequential(
+                    nn.Linear(self.embedding_dim, self.head_dim),
+                    nn.ReLU(inplace=True),
+                    nn.Dropout(dropout),
+                    nn.Linear(self.head_dim, n),
+                )
+                for task, n in self.num_classes.items()
+            }
+        )
         self.reset_parameters()
 
     def reset_parameters(self) -> None:
@@ -109,7 +127,7 @@ class MultiTaskGaitCNN(nn.Module):
                 else:
                     nn.init.kaiming_normal_(module.weight, nonlinearity="relu")
                     if isinstance(module, nn.Conv2d):
-                        module.weight.data.mul_(LRN_K ** LRN_BETA)
+                        module.weight.data.mul_(LRN_K**LRN_BETA)
                 nn.init.zeros_(module.bias)
 
     def feature_map_sizes(self) -> dict[str, tuple[int, int, int]]:
@@ -130,8 +148,9 @@ class MultiTaskGaitCNN(nn.Module):
         """``geis`` ``[B, 1, H, W]`` → ``{"subject": [B, S], "view": [B, 11], "condition": [B, 3], "embedding": [B, 512]}``
         (only the configured tasks). ``embedding`` is the shared FC's ReLU output, before dropout."""
         if geis.dim() != 4 or tuple(geis.shape[1:]) != (1, *self.input_size):
-            raise ValueError(f"expected GEIs [batch, 1, {self.input_size[0]}, {self.input_size[1]}], "
-                             f"got {list(geis.shape)}")
+            raise ValueError(
+                f"expected GEIs [batch, 1, {self.input_size[0]}, {self.input_size[1]}], got {list(geis.shape)}"
+            )
         features = self.trunk(geis).flatten(1)
         embedding = torch.relu(self.shared_fc(features))
         hidden = self.dropout(embedding)
@@ -140,10 +159,17 @@ class MultiTaskGaitCNN(nn.Module):
         return out
 
 
-def multitask_gait_cnn(num_subjects: int, num_views: int = 11, num_conditions: int = 3,
-                       tasks: tuple[str, ...] | list[str] = TASKS,
-                       input_size: tuple[int, int] | list[int] = (124, 124), embedding_dim: int = 512,
-                       head_dim: int = 128, dropout: float = 0.5) -> MultiTaskGaitCNN:
+def multitask_gait_cnn(
+    num_subjects: int,
+    num_views: int = 11,
+    num_conditions: int = 3,
+    tasks: tuple[str, ...] | list[str] = TASKS,
+    input_size: tuple[int, int] | list[int] = (124, 124),
+    embedding_dim: int = 512,
+    head_dim: int = 128,
+    dropout: float = 0.5,
+) -> MultiTaskGaitCNN:
     """Hydra builder of :class:`MultiTaskGaitCNN` (``configs/model/gait_cnn.yaml``); lists are accepted for tuples."""
-    return MultiTaskGaitCNN(num_subjects, num_views, num_conditions, tuple(tasks), tuple(input_size), embedding_dim,
-                            head_dim, dropout)
+    return MultiTaskGaitCNN(
+        num_subjects, num_views, num_conditions, tuple(tasks), tuple(input_size), embedding_dim, head_dim, dropout
+    )

@@ -23,18 +23,19 @@ five minutes a fold): the same retrieval accuracy as ``stgcn`` at a sixth of the
 ``configs/model/motion_encoder.yaml`` records the figures. Exports to ONNX with dynamic batch
 and frames (:mod:`mocapkit.retrieval.export`).
 """
+
 from __future__ import annotations
 
 import torch
 import torch.nn.functional as F
 from torch import nn
 
+from mocapkit.models.stgcn import STGCNBlock, spatial_adjacency
 from mocapkit.motion.layouts import (
     LANDMARK_NAMES,
     LANDMARK_PARENTS,
     SkeletonLayout,
 )
-from mocapkit.models.stgcn import STGCNBlock, spatial_adjacency
 
 STREAMS = ("joint", "velocity", "bone")
 TRUNKS = ("stgcn", "tcn")
@@ -56,10 +57,18 @@ class MotionEncoder(nn.Module):
         adaptive: (stgcn) learn an additive correction of the adjacency in each block.
     """
 
-    def __init__(self, embedding_dim: int = 128, trunk: str = "tcn", channels: tuple[int, ...] = (64, 128, 128),
-                 strides: tuple[int, ...] = (2, 2, 1), kernel_size: int = 5,
-                 streams: tuple[str, ...] = ("joint", "velocity", "bone"), hidden: int = 256, dropout: float = 0.1,
-                 adaptive: bool = True):
+    def __init__(
+        self,
+        embedding_dim: int = 128,
+        trunk: str = "tcn",
+        channels: tuple[int, ...] = (64, 128, 128),
+        strides: tuple[int, ...] = (2, 2, 1),
+        kernel_size: int = 5,
+        streams: tuple[str, ...] = ("joint", "velocity", "bone"),
+        hidden: int = 256,
+        dropout: float = 0.1,
+        adaptive: bool = True,
+    ):
         super().__init__()
         streams = tuple(streams)
         if trunk not in TRUNKS:
@@ -68,8 +77,9 @@ class MotionEncoder(nn.Module):
         if unknown or not streams:
             raise ValueError(f"model.streams: unknown input streams {unknown or list(streams)}; choose from {STREAMS}")
         if len(channels) != len(strides) or not channels:
-            raise ValueError(f"model.channels {list(channels)} and model.strides {list(strides)} must have the same, "
-                             "non-zero length")
+            raise ValueError(
+                f"model.channels {list(channels)} and model.strides {list(strides)} must have the same, non-zero length"
+            )
         self.trunk, self.streams, self.embedding_dim = trunk, streams, int(embedding_dim)
         self.num_joints = len(LANDMARK_NAMES)
         parents = [p if p >= 0 else j for j, p in enumerate(LANDMARK_PARENTS)]
@@ -81,8 +91,9 @@ class MotionEncoder(nn.Module):
             adjacency = spatial_adjacency(LANDMARK_LAYOUT)
             blocks, c_in = [], features
             for k, (c_out, stride) in enumerate(zip(channels, strides)):
-                blocks.append(STGCNBlock(c_in, c_out, adjacency, stride, kernel_size, dropout, residual=k > 0,
-                                         adaptive=adaptive))
+                blocks.append(
+                    STGCNBlock(c_in, c_out, adjacency, stride, kernel_size, dropout, residual=k > 0, adaptive=adaptive)
+                )
                 c_in = c_out
         else:
             blocks, c_in = [], features * self.num_joints
@@ -90,8 +101,12 @@ class MotionEncoder(nn.Module):
                 blocks.append(TemporalBlock(c_in, c_out, kernel_size, stride, pad, dropout))
                 c_in = c_out
         self.blocks = nn.ModuleList(blocks)
-        self.head = nn.Sequential(nn.Linear(c_in, hidden), nn.BatchNorm1d(hidden), nn.ReLU(inplace=True),
-                                  nn.Linear(hidden, self.embedding_dim))
+        self.head = nn.Sequential(
+            nn.Linear(c_in, hidden),
+            nn.BatchNorm1d(hidden),
+            nn.ReLU(inplace=True),
+            nn.Linear(hidden, self.embedding_dim),
+        )
 
     def features(self, x: torch.Tensor) -> torch.Tensor:
         """``[B, T, J, 3]`` → ``[B, T, J, 3 · len(streams)]``."""
@@ -107,11 +122,11 @@ class MotionEncoder(nn.Module):
 
     def pooled(self, landmarks: torch.Tensor) -> torch.Tensor:
         """The trunk's pooled features ``[B, C]`` (before the projection head)."""
-        x = self.features(landmarks)                                              # [B, T, J, C]
+        x = self.features(landmarks)  # [B, T, J, C]
         b, t, j, c = x.shape
-        x = self.data_bn(x.permute(0, 2, 3, 1).reshape(b, j * c, t))              # [B, J*C, T]
+        x = self.data_bn(x.permute(0, 2, 3, 1).reshape(b, j * c, t))  # [B, J*C, T]
         if self.trunk == "stgcn":
-            x = x.view(b, j, c, t).permute(0, 2, 3, 1)                            # [B, C, T, J]
+            x = x.view(b, j, c, t).permute(0, 2, 3, 1)  # [B, C, T, J]
             mask = torch.ones_like(x[:, :1, :, :1])
             for block in self.blocks:
                 x, mask = block(x, mask)
@@ -127,8 +142,9 @@ class MotionEncoder(nn.Module):
 class TemporalBlock(nn.Module):
     """Conv1d → BN → ReLU → Conv1d → BN, plus a (projected) residual, → ReLU: ``[B, C, T]`` → ``[B, C', T/stride]``."""
 
-    def __init__(self, in_channels: int, out_channels: int, kernel_size: int, stride: int, pad: int,
-                 dropout: float = 0.0):
+    def __init__(
+        self, in_channels: int, out_channels: int, kernel_size: int, stride: int, pad: int, dropout: float = 0.0
+    ):
         super().__init__()
         self.conv1 = nn.Conv1d(in_channels, out_channels, kernel_size, stride, pad)
         self.bn1 = nn.BatchNorm1d(out_channels)
@@ -146,13 +162,21 @@ class TemporalBlock(nn.Module):
         return F.relu(y + self.residual(x))
 
 
-def motion_encoder(embedding_dim: int = 128, trunk: str = "tcn", channels: tuple[int, ...] | list[int] = (64, 128, 128),
-                   strides: tuple[int, ...] | list[int] = (2, 2, 1), kernel_size: int = 5,
-                   streams: tuple[str, ...] | list[str] = ("joint", "velocity", "bone"), hidden: int = 256,
-                   dropout: float = 0.1, adaptive: bool = True) -> MotionEncoder:
+def motion_encoder(
+    embedding_dim: int = 128,
+    trunk: str = "tcn",
+    channels: tuple[int, ...] | list[int] = (64, 128, 128),
+    strides: tuple[int, ...] | list[int] = (2, 2, 1),
+    kernel_size: int = 5,
+    streams: tuple[str, ...] | list[str] = ("joint", "velocity", "bone"),
+    hidden: int = 256,
+    dropout: float = 0.1,
+    adaptive: bool = True,
+) -> MotionEncoder:
     """Hydra builder of :class:`MotionEncoder` (``configs/model/motion_encoder.yaml``); lists are accepted for tuples."""
-    return MotionEncoder(embedding_dim, trunk, tuple(channels), tuple(strides), kernel_size, tuple(streams), hidden,
-                         dropout, adaptive)
+    return MotionEncoder(
+        embedding_dim, trunk, tuple(channels), tuple(strides), kernel_size, tuple(streams), hidden, dropout, adaptive
+    )
 
 
 __all__ = ["LANDMARK_LAYOUT", "MotionEncoder", "TemporalBlock", "motion_encoder"]

@@ -13,6 +13,7 @@ features, each dimension z-scored over the training frames). The network has two
 Sampling runs the decoder autoregressively with ``z ~ N(0, I)`` at every step
 (:meth:`MotionVAE.rollout`).
 """
+
 from __future__ import annotations
 
 import itertools
@@ -50,15 +51,14 @@ class MotionVAE(nn.Module):
         """``(mean, log_variance)`` ``[B, latent]`` of ``q(z | x_t, x_{t−1})``; ``current`` ``[B, F]`` is ``x_t``,
         ``previous`` ``[B, 2, F]`` is ``(x_{t−1}, x_{t−2})``."""
         stats = self.encoder(torch.cat([current, previous[:, 0]], dim=-1))
-        return stats[:, :self.latent], stats[:, self.latent:]
+        return stats[:, : self.latent], stats[:, self.latent :]
 
     def decode(self, z: torch.Tensor, previous: torch.Tensor) -> torch.Tensor:
         """The predicted ``x_t`` ``[B, F]`` from ``z`` ``[B, latent]`` and ``previous`` ``[B, 2, F]``."""
         last, before = previous[:, 0], previous[:, 1]
         return last + self.decoder(torch.cat([z, last, last - before], dim=-1))
 
-    def forward(self, current: torch.Tensor, previous: torch.Tensor
-                ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    def forward(self, current: torch.Tensor, previous: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """``(reconstruction [B, F], mean [B, latent], log_variance [B, latent])`` with ``z`` drawn by the
         reparameterisation ``mean + exp(log_variance / 2) · ε``."""
         mean, log_variance = self.encode(current, previous)
@@ -66,8 +66,9 @@ class MotionVAE(nn.Module):
         return self.decode(z, previous), mean, log_variance
 
     @torch.no_grad()
-    def rollout(self, start: torch.Tensor, frames: int, generator: torch.Generator | None = None,
-                scale: float = 1.0) -> torch.Tensor:
+    def rollout(
+        self, start: torch.Tensor, frames: int, generator: torch.Generator | None = None, scale: float = 1.0
+    ) -> torch.Tensor:
         """``[B, frames, F]``: ``start`` ``[B, 2, F]`` (``x_0, x_1``) continued autoregressively with
         ``z = scale · ε``, ``ε ~ N(0, I)`` drawn from ``generator`` at every step (``frames ≥ 2``; the first two rows
         are ``start``; ``scale`` 1 is the prior, above 1 samples further from the training frames)."""

@@ -30,6 +30,7 @@ This layer does the same for items as rows (scikit-learn orientation):
 All-zero inputs give all-zero codes (never NaN): the numerator is 0 and ``eps`` keeps the
 denominator positive.
 """
+
 from __future__ import annotations
 
 import torch
@@ -55,9 +56,19 @@ class NMFLayer(nn.Module):
         update_dictionary: also refine a per-sample copy of the dictionary each step (Hamburger).
     """
 
-    def __init__(self, in_features: int, n_components: int, n_iter: int = 10, learn_dictionary: bool = True,
-                 one_step_grad: bool = True, graph_reg: float = 0.0, n_neighbors: int = 5, eps: float = 1e-6,
-                 init: str = "uniform", update_dictionary: bool = False):
+    def __init__(
+        self,
+        in_features: int,
+        n_components: int,
+        n_iter: int = 10,
+        learn_dictionary: bool = True,
+        one_step_grad: bool = True,
+        graph_reg: float = 0.0,
+        n_neighbors: int = 5,
+        eps: float = 1e-6,
+        init: str = "uniform",
+        update_dictionary: bool = False,
+    ):
         super().__init__()
         if in_features < 1 or n_components < 1:
             raise ValueError(f"in_features and n_components must be positive, got {in_features}, {n_components}")
@@ -124,11 +135,12 @@ class NMFLayer(nn.Module):
             codes = codes * mask[..., None].to(x.dtype)
         return codes
 
-    def step(self, x: torch.Tensor, codes: torch.Tensor, dictionary: torch.Tensor,
-             graph: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+    def step(
+        self, x: torch.Tensor, codes: torch.Tensor, dictionary: torch.Tensor, graph: torch.Tensor | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor]:
         """One MU step: new ``(codes [b, n, k], dictionary)``; the dictionary is ``[k, d]`` or ``[b, k, d]``."""
-        gram = dictionary @ dictionary.transpose(-1, -2)                              # [(b,) k, k]
-        numerator = x @ dictionary.transpose(-1, -2)                                  # [b, n, k]
+        gram = dictionary @ dictionary.transpose(-1, -2)  # [(b,) k, k]
+        numerator = x @ dictionary.transpose(-1, -2)  # [b, n, k]
         denominator = codes @ gram
         if graph is not None and self.graph_reg > 0:
             numerator = numerator + self.graph_reg * (graph @ codes)
@@ -137,7 +149,7 @@ class NMFLayer(nn.Module):
         if self.update_dictionary:
             if dictionary.dim() == 2:
                 dictionary = dictionary.expand(x.shape[0], -1, -1)
-            ct = codes.transpose(1, 2)                                                # [b, k, n]
+            ct = codes.transpose(1, 2)  # [b, k, n]
             dictionary = dictionary * (ct @ x) / ((ct @ codes) @ dictionary + self.eps)
         return codes.clamp(min=0), dictionary
 
@@ -188,7 +200,8 @@ class NMFLayer(nn.Module):
         return errors
 
     def extra_repr(self) -> str:
-        return (f"in_features={self.in_features}, n_components={self.n_components}, n_iter={self.n_iter}, "
-                f"one_step_grad={self.one_step_grad}, graph_reg={self.graph_reg}, "
-                f"update_dictionary={self.update_dictionary}")
-
+        return (
+            f"in_features={self.in_features}, n_components={self.n_components}, n_iter={self.n_iter}, "
+            f"one_step_grad={self.one_step_grad}, graph_reg={self.graph_reg}, "
+            f"update_dictionary={self.update_dictionary}"
+        )

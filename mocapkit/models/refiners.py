@@ -36,6 +36,7 @@ Input ``positions`` float ``[B, T, J, 3]`` in the training data's units (metres 
 ``read_motion`` returns), ``missing`` bool ``[B, T, J]`` (True = not observed; those positions are
 ignored, NaN allowed); output float ``[B, T, J, 3]`` in the same units.
 """
+
 from __future__ import annotations
 
 import math
@@ -44,28 +45,23 @@ from collections.abc import Sequence
 import torch
 from torch import nn
 
-AXES = {"x": 0, "y": 1, "z": 2}
+from mocapkit.models.body_frame import heading_cos_sin, turn_about_up
+from mocapkit.motion.geometry import horizontal_axes
 
 
-def _masked_mean(values: torch.Tensor, weights: torch.Tensor, dims: tuple[int, ...]) -> tuple[torch.Tensor, torch.Tensor]:
+def _masked_mean(
+    values: torch.Tensor, weights: torch.Tensor, dims: tuple[int, ...]
+) -> tuple[torch.Tensor, torch.Tensor]:
     """``(Σ w·v / Σ w, Σ w)`` over ``dims`` (0 where ``Σ w = 0``); ``weights`` broadcast against ``values``."""
     total = (weights * values).sum(dims, keepdim=True)
     count = weights.sum(dims, keepdim=True)
     return total / count.clamp_min(1e-6), count
 
 
-def heading(a: torch.Tensor, b: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """``(cos, sin)`` of the horizontal direction ``(a, b)`` (two horizontal coordinates of a hip line, any shape):
-    the turn about the up axis that lays it along the first horizontal axis; no turn (1, 0) where it vanishes."""
-    norm = torch.sqrt(a * a + b * b)
-    ok = norm > 1e-6
-    return torch.where(ok, a / norm.clamp_min(1e-6), 1.0), torch.where(ok, b / norm.clamp_min(1e-6), 0.0)
-
-
 def coordinate_mask(observed: torch.Tensor) -> torch.Tensor:
     """``observed [B, T, J]`` as a mask of the coordinates' shape ``[B, T, J, 3]``, built by concatenation: a
     ``torch.where`` whose condition broadcasts over the trailing axis of 3, or an expand to it, runs several times
-    slower in onnxruntime (bench/RESULTS.md §13)."""
+    slower in onnxruntime (bench/RESULTS.md#onnx-runtime-costs)."""
     seen = observed.unsqueeze(-1)
     return torch.cat([seen, seen, seen], dim=-1)
 
@@ -86,23 +82,31 @@ class PoseNormalizer(nn.Module):
     work **coordinate-first**, ``[B, 3, T, J]`` with masks ``[B, 1, T, J]``, which is how the refiners call them:
     in that layout a coordinate is a contiguous block and masks broadcast over a leading axis, where the
     ``[..., 3]`` layout makes onnxruntime gather, slice and broadcast over a trailing axis of 3, several times
-    slower (bench/RESULTS.md §13). The statistics are ``(centre [B,3,1,1], cos [B,1,1,1], sin [B,1,1,1],
+    slower (bench/RESULTS.md#onnx-runtime-costs). The statistics are ``(centre [B,3,1,1], cos [B,1,1,1], sin [B,1,1,1],
     scale [B,1,1,1])``, the same in both.
     """
 
-    def __init__(self, parents: Sequence[int], up_axis: str = "y", hips: Sequence[int] | None = None,
-                 bone_lengths: Sequence[float] | None = None, unit: float = 0.1):
+    def __init__(
+        self,
+        parents: Sequence[int],
+        up_axis: str = "y",
+        hips: Sequence[int] | None = None,
+        bone_lengths: Sequence[float] | None = None,
+        unit: float = 0.1,
+    ):
         super().__init__()
         self.unit = float(unit)
         parents = [int(p) for p in parents]
         self.root = parents.index(-1)
         self.child = [j for j, p in enumerate(parents) if p >= 0]
         self.parent = [parents[j] for j in self.child]
-        self.up = AXES[up_axis]
-        self.horizontal = [a for a in range(3) if a != self.up]
+        self.up_axis = up_axis
+        self.horizontal = list(horizontal_axes(up_axis))
         self.hips = None if hips is None else (int(hips[0]), int(hips[1]))
-        lengths = torch.ones(len(parents)) if bone_lengths is None else torch.as_tensor(bone_lengths, dtype=torch.float32)
-        self.register_buffer("bone_lengths", lengths[self.child].clone())       # [bones]
+        lengths = (
+            torch.ones(len(parents)) if bone_lengths is None else torch.as_tensor(bone_lengths, dtype=torch.float32)
+        )
+        self.register_buffer("bone_lengths", lengths[self.child].clone())  # [bones]
         # bones as products with [J, bones] matrices: +1 at the child, −1 at the parent (the bone vector, exact: one
         # subtraction), and 1 at both (observed ends: 2 where the bone is seen) — one small matrix product each
         # instead of gathers over the joint axis
@@ -127,43 +131,36 @@ class PoseNormalizer(nn.Module):
     def statistics_cf(self, coords: torch.Tensor, seen: torch.Tensor):
         """``(centre [B,3,1,1], cos [B,1,1,1], sin [B,1,1,1], scale [B,1,1,1])`` of each window of ``coords``
         ``[B, 3, T, J]``, from the entries where ``seen`` (bool ``[B, 1, T, J]``)."""
-        w = seen.to(coords.dtype)                                                   # [B,1,T,J]
+        w = seen.to(coords.dtype)  # [B,1,T,J]
         r = self.root
-        root_mean, root_count = _masked_mean(coords[..., r:r + 1], w[..., r:r + 1], (2, 3))
+        root_mean, root_count = _masked_mean(coords[..., r : r + 1], w[..., r : r + 1], (2, 3))
         all_mean, _ = _masked_mean(coords, w, (2, 3))
-        centre = torch.where(root_count > 0, root_mean, all_mean)                   # [B,3,1,1]
+        centre = torch.where(root_count > 0, root_mean, all_mean)  # [B,3,1,1]
         h1, h2 = self.horizontal
         if self.hips is None:
             cos = torch.ones_like(centre[:, :1])
             sin = torch.zeros_like(centre[:, :1])
         else:
             left, right = self.hips
-            both = w[..., left] * w[..., right]                                     # [B,1,T]
-            line, _ = _masked_mean(coords[..., right] - coords[..., left], both, (2,))   # [B,3,1]
-            cos, sin = heading(line[:, h1:h1 + 1], line[:, h2:h2 + 1])             # [B,1,1]
-            cos, sin = cos.unsqueeze(-1), sin.unsqueeze(-1)                         # [B,1,1,1]
-        vectors = torch.matmul(coords, self.bone_vector)                            # [B,3,T,bones]
-        length = torch.sqrt((vectors * vectors).sum(1))                              # [B,T,bones]
-        bone_w = (torch.matmul(w[:, 0], self.bone_ends) > 1.5).to(coords.dtype)     # both ends seen
+            both = w[..., left] * w[..., right]  # [B,1,T]
+            line, _ = _masked_mean(coords[..., right] - coords[..., left], both, (2,))  # [B,3,1]
+            cos, sin = heading_cos_sin(line[:, h1 : h1 + 1], line[:, h2 : h2 + 1])  # [B,1,1]
+            cos, sin = cos.unsqueeze(-1), sin.unsqueeze(-1)  # [B,1,1,1]
+        vectors = torch.matmul(coords, self.bone_vector)  # [B,3,T,bones]
+        length = torch.sqrt((vectors * vectors).sum(1))  # [B,T,bones]
+        bone_w = (torch.matmul(w[:, 0], self.bone_ends) > 1.5).to(coords.dtype)  # both ends seen
         length = torch.where(bone_w > 0, length, 0.0)
-        mean_len, count = _masked_mean(length, bone_w, (1,))                        # [B,1,bones]
+        mean_len, count = _masked_mean(length, bone_w, (1,))  # [B,1,bones]
         known = (count > 0).to(coords.dtype)
-        ratio = (mean_len * known).sum(-1) / (self.bone_lengths * known).sum(-1).clamp_min(1e-6)   # [B,1]
+        ratio = (mean_len * known).sum(-1) / (self.bone_lengths * known).sum(-1).clamp_min(1e-6)  # [B,1]
         ratio = torch.where(known.sum(-1) > 0, ratio, 1.0)
         scale = (ratio * self.unit).reshape(-1, 1, 1, 1)
         return centre, cos, sin, scale
 
-    def _turn(self, coords: list[torch.Tensor], cos: torch.Tensor, sin: torch.Tensor) -> list[torch.Tensor]:
-        """The three coordinates turned about the up axis by ``cos``, ``sin`` (broadcast: per window or per frame)."""
-        h1, h2 = self.horizontal
-        a, b = coords[h1], coords[h2]
-        turned = {h1: cos * a + sin * b, h2: -sin * a + cos * b, self.up: coords[self.up]}
-        return [turned[0], turned[1], turned[2]]
-
     def turn_cf(self, coords: torch.Tensor, cos: torch.Tensor, sin: torch.Tensor) -> torch.Tensor:
         """``coords [B, 3, T, J]`` turned about the up axis by ``cos``, ``sin`` (``[B, 1, 1 | T, 1]``); the inverse
         turn is ``(cos, −sin)``."""
-        return torch.cat(self._turn(list(coords.split(1, dim=1)), cos, sin), dim=1)
+        return torch.cat(turn_about_up(coords.split(1, dim=1), cos, sin, self.up_axis), dim=1)
 
     def forward_cf(self, coords: torch.Tensor, stats) -> torch.Tensor:
         """``coords [B, 3, T, J]`` normalised with ``stats`` (centred, turned, scaled)."""
@@ -185,11 +182,11 @@ def observed_neighbours(observed: torch.Tensor) -> tuple[torch.Tensor, torch.Ten
     """
     T = observed.shape[1]
     frames = torch.arange(T, device=observed.device).view(1, 1, T, 1)
-    seen_here = observed.unsqueeze(1)                                        # [B,1,T,J]
+    seen_here = observed.unsqueeze(1)  # [B,1,T,J]
     counted = seen_here.to(torch.int64)
     order = torch.argsort(torch.where(seen_here, frames, frames + T), dim=2)  # observed frames first, in time order
-    seen = torch.cumsum(counted, dim=2)                                      # observed frames ≤ t
-    before_t = seen - counted                                                # observed frames < t
+    seen = torch.cumsum(counted, dim=2)  # observed frames ≤ t
+    before_t = seen - counted  # observed frames < t
     ranked = torch.gather(order, 2, torch.cat([seen - 1, before_t], dim=2).clamp(0, T - 1))
     prev = torch.where(seen > 0, ranked[:, :, :T], -1)
     nxt = torch.where(before_t < seen[:, :, -1:], ranked[:, :, T:], T)
@@ -209,7 +206,7 @@ def cubic_fill(x: torch.Tensor, observed: torch.Tensor, tangents: str = "chord",
         tangents: the tangent at a gap end whose outer neighbour frame is not observed: ``"chord"``, the gap's
             own slope (p1 − p0) / span (with both ends so, the fill is linear), or ``"zero"`` (the first
             networks' rule: it bends the curve by a quarter of a frame's motion on one-frame gaps next to other
-            gaps, bench/RESULTS.md §13).
+            gaps, docs/decisions.md#refiner-first-guess).
         extrapolate: before the first / after the last observation, the nearest observed value moved on by the
             observed frame step there for at most this many frames, then held (0: held from the start; a joint
             lost at the end of a take otherwise freezes mid-motion).
@@ -224,47 +221,50 @@ def cubic_fill(x: torch.Tensor, observed: torch.Tensor, tangents: str = "chord",
     return cubic_fill_cf(x.permute(0, 3, 1, 2), observed, tangents, extrapolate).permute(0, 2, 3, 1)
 
 
-def cubic_fill_cf(x: torch.Tensor, observed: torch.Tensor, tangents: str = "chord", extrapolate: int = 6) -> torch.Tensor:
+def cubic_fill_cf(
+    x: torch.Tensor, observed: torch.Tensor, tangents: str = "chord", extrapolate: int = 6
+) -> torch.Tensor:
     """:func:`cubic_fill` of coordinate-first ``x`` ``[B, 3, T, J]`` (``observed`` bool ``[B, T, J]``) →
     ``[B, 3, T, J]``. Masks are ``[B, 1, T, J]`` and the four neighbour frames of every entry come from one
     gather per coordinate: an exported graph pays per operator, and onnxruntime broadcasts a mask over a leading
-    axis several times faster than over a trailing axis of 3 (bench/RESULTS.md §13).
+    axis several times faster than over a trailing axis of 3 (bench/RESULTS.md#onnx-runtime-costs).
     """
     T = x.shape[2]
     frames = torch.arange(T, device=x.device).view(1, 1, T, 1)
-    seen_here = observed.unsqueeze(1)                                        # [B,1,T,J]
+    seen_here = observed.unsqueeze(1)  # [B,1,T,J]
     prev, nxt = observed_neighbours(observed)
     has_prev, has_next = prev >= 0, nxt < T
     prev_c, next_c = prev.clamp(0, T - 1), nxt.clamp(0, T - 1)
     before_prev, after_next = (prev_c - 1).clamp(0, T - 1), (next_c + 1).clamp(0, T - 1)
-    index = torch.cat([prev_c, next_c, before_prev, after_next], dim=2)      # [B,1,4T,J]
+    index = torch.cat([prev_c, next_c, before_prev, after_next], dim=2)  # [B,1,4T,J]
     # one gather per coordinate: expanding the int64 index to the three coordinates costs more than the gathers
-    ends = torch.cat([torch.gather(c, 2, index) for c in x.split(1, dim=1)], dim=1)   # [B,3,4T,J]
-    p0, p1, q0, q1 = ends[:, :, :T], ends[:, :, T:2 * T], ends[:, :, 2 * T:3 * T], ends[:, :, 3 * T:]
-    beyond = torch.gather(seen_here, 2, index[:, :, 2 * T:])                 # [B,1,2T,J]
-    span = (nxt - prev).clamp_min(1).to(x.dtype)                             # [B,1,T,J]
+    ends = torch.cat([torch.gather(c, 2, index) for c in x.split(1, dim=1)], dim=1)  # [B,3,4T,J]
+    p0, p1, q0, q1 = ends[:, :, :T], ends[:, :, T : 2 * T], ends[:, :, 2 * T : 3 * T], ends[:, :, 3 * T :]
+    beyond = torch.gather(seen_here, 2, index[:, :, 2 * T :])  # [B,1,2T,J]
+    span = (nxt - prev).clamp_min(1).to(x.dtype)  # [B,1,T,J]
     # the choices below are products with 0/1 masks (m·a + (1 − m)·b, exact for the finite values here) rather than
-    # torch.where: onnxruntime's Where costs about four of its Mul (bench/RESULTS.md §13)
+    # torch.where: onnxruntime's Where costs about four of its Mul (bench/RESULTS.md#onnx-runtime-costs)
     known0 = (beyond[:, :, :T] & (prev_c > 0)).to(x.dtype)
     known1 = (beyond[:, :, T:] & (next_c < T - 1)).to(x.dtype)
-    step0, step1 = known0 * (p0 - q0), known1 * (q1 - p1)                   # observed frame steps (0: unknown)
-    if tangents == "chord":                                                  # a tangent whose neighbour is missing
+    step0, step1 = known0 * (p0 - q0), known1 * (q1 - p1)  # observed frame steps (0: unknown)
+    if tangents == "chord":  # a tangent whose neighbour is missing
         unknown = (p1 - p0) / span
         m0, m1 = step0 + (1 - known0) * unknown, step1 + (1 - known1) * unknown
     else:
         m0, m1 = step0, step1
     u = ((frames - prev).to(x.dtype) / span).clamp(0, 1)
     u2, u3 = u * u, u * u * u
-    hermite = ((2 * u3 - 3 * u2 + 1) * p0 + (u3 - 2 * u2 + u) * span * m0
-               + (-2 * u3 + 3 * u2) * p1 + (u3 - u2) * span * m1)
-    after = p0 + step0 * (frames - prev).clamp(max=extrapolate).to(x.dtype)   # past the last observation
-    before = p1 - step1 * (nxt - frames).clamp(max=extrapolate).to(x.dtype)   # before the first
+    hermite = (
+        (2 * u3 - 3 * u2 + 1) * p0 + (u3 - 2 * u2 + u) * span * m0 + (-2 * u3 + 3 * u2) * p1 + (u3 - u2) * span * m1
+    )
+    after = p0 + step0 * (frames - prev).clamp(max=extrapolate).to(x.dtype)  # past the last observation
+    before = p1 - step1 * (nxt - frames).clamp(max=extrapolate).to(x.dtype)  # before the first
     before_ok, after_ok = has_prev.to(x.dtype), has_next.to(x.dtype)
     inside = before_ok * after_ok
     held = before_ok * after + (1 - before_ok) * before
     fill = inside * hermite + (1 - inside) * held
     seen = seen_here.to(x.dtype)
-    return seen * x + (1 - seen) * (fill * (1 - (1 - before_ok) * (1 - after_ok)))   # 0 for a joint never seen
+    return seen * x + (1 - seen) * (fill * (1 - (1 - before_ok) * (1 - after_ok)))  # 0 for a joint never seen
 
 
 #: Scale of the guess and of its temporal detail in the networks' input features (:meth:`_Refiner.features`).
@@ -283,9 +283,18 @@ def temporal_detail(x: torch.Tensor, dim: int = 1) -> torch.Tensor:
 class _Refiner(nn.Module):
     """Shared input and output handling: normalise, first guess, correct, denormalise (module docstring)."""
 
-    def __init__(self, joint_names: Sequence[str], parents: Sequence[int], up_axis: str = "y",
-                 hips: Sequence[int] | None = None, bone_lengths: Sequence[float] | None = None,
-                 fps: float | None = None, tangents: str = "chord", extrapolate: int = 6, pose_frame: bool = False):
+    def __init__(
+        self,
+        joint_names: Sequence[str],
+        parents: Sequence[int],
+        up_axis: str = "y",
+        hips: Sequence[int] | None = None,
+        bone_lengths: Sequence[float] | None = None,
+        fps: float | None = None,
+        tangents: str = "chord",
+        extrapolate: int = 6,
+        pose_frame: bool = False,
+    ):
         super().__init__()
         self.set_first_guess(tangents, extrapolate)
         self.pose_frame = bool(pose_frame)
@@ -297,7 +306,7 @@ class _Refiner(nn.Module):
         self.num_joints = len(self.joint_names)
         self.normalizer = PoseNormalizer(self.parents, up_axis, hips, bone_lengths)
         depth = [0] * self.num_joints
-        for j in range(self.num_joints):                      # depth of every joint (parents may come later)
+        for j in range(self.num_joints):  # depth of every joint (parents may come later)
             p, seen = self.parents[j], 0
             while p >= 0 and seen <= self.num_joints:
                 depth[j], p, seen = depth[j] + 1, self.parents[p], seen + 1
@@ -324,17 +333,17 @@ class _Refiner(nn.Module):
         pointer moves to its parent where the joint is never observed, and ``ancestor_rounds`` compositions of the
         pointers reach the nearest observed ancestor — a few gathers instead of a loop over the joints (a graph of
         ``J`` small operators once exported)."""
-        guess = cubic_fill_cf(x, observed, self.tangents, self.extrapolate)          # [B,3,T,J]
+        guess = cubic_fill_cf(x, observed, self.tangents, self.extrapolate)  # [B,3,T,J]
         J = guess.shape[3]
-        never = ~observed.any(dim=1, keepdim=True)                                   # [B,1,J]
+        never = ~observed.any(dim=1, keepdim=True)  # [B,1,J]
         own = torch.arange(J, device=guess.device).view(1, 1, J)
-        source = torch.where(never, self.parent_or_self.view(1, 1, J), own)           # [B,1,J]
+        source = torch.where(never, self.parent_or_self.view(1, 1, J), own)  # [B,1,J]
         for _ in range(self.ancestor_rounds):
             source = torch.gather(source, 2, source)
         # joint j takes the guess of joint source[j]: a product with the 0/1 matrix [i == source[j]] (exact: one
         # term of each sum is 1·guess, the others 0) runs as one small matrix product where a gather over the
-        # coordinates' layout cost ~0.1 ms in onnxruntime (bench/RESULTS.md §13)
-        pick = (source.view(-1, J, 1) == own.view(1, 1, J)).to(guess.dtype)          # [B,J(to),J(from)]
+        # coordinates' layout cost ~0.1 ms in onnxruntime (bench/RESULTS.md#onnx-runtime-costs)
+        pick = (source.view(-1, J, 1) == own.view(1, 1, J)).to(guess.dtype)  # [B,J(to),J(from)]
         return torch.matmul(guess, pick.transpose(1, 2).unsqueeze(1))
 
     def correction(self, guess: torch.Tensor, observed: torch.Tensor, body: torch.Tensor | None = None) -> torch.Tensor:
@@ -354,8 +363,11 @@ class _Refiner(nn.Module):
         inputs of order 1 keep the GRU's gates and the attention out of saturation. With ``body`` (the guess in
         every frame's own body frame, :meth:`body_frame`) its three coordinates ×0.1 follow: ``[B, 10, T, J]``.
         The networks read them per frame, joint-major (:func:`per_joint`)."""
-        parts = [FEATURE_SCALE[0] * guess, FEATURE_SCALE[1] * temporal_detail(guess, dim=2),
-                 observed.unsqueeze(1).to(guess.dtype)]
+        parts = [
+            FEATURE_SCALE[0] * guess,
+            FEATURE_SCALE[1] * temporal_detail(guess, dim=2),
+            observed.unsqueeze(1).to(guess.dtype),
+        ]
         if body is not None:
             parts.append(FEATURE_SCALE[0] * body)
         return torch.cat(parts, dim=1)
@@ -367,13 +379,13 @@ class _Refiner(nn.Module):
         networks read each frame in this frame and correct it there (:meth:`corrected`): where a missing joint is,
         given the others of its frame, is then one function of them whichever way the body faces."""
         n = self.normalizer
-        root = guess[..., n.root:n.root + 1]
+        root = guess[..., n.root : n.root + 1]
         if n.hips is None:
             return root, torch.ones_like(root[:, :1]), torch.zeros_like(root[:, :1])
         left, right = n.hips
-        line = guess[..., right:right + 1] - guess[..., left:left + 1]                # [B,3,T,1]
+        line = guess[..., right : right + 1] - guess[..., left : left + 1]  # [B,3,T,1]
         h1, h2 = n.horizontal
-        return (root, *heading(line[:, h1:h1 + 1], line[:, h2:h2 + 1]))
+        return (root, *heading_cos_sin(line[:, h1 : h1 + 1], line[:, h2 : h2 + 1]))
 
     def corrected(self, guess: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
         """The first guess ``[B, 3, T, J]`` (normalised) plus the network's correction; with ``pose_frame`` the
@@ -397,14 +409,14 @@ class _Refiner(nn.Module):
         """``(refined [B, 3, T, J] normalised, stats)``: everything from the one transpose of the input on runs
         coordinate-first (:class:`PoseNormalizer`)."""
         observed = ~missing.bool()
-        seen = observed.unsqueeze(1)                                                  # [B,1,T,J]
+        seen = observed.unsqueeze(1)  # [B,1,T,J]
         # missing entries (NaN allowed) are zeroed before the transpose, with a mask of the input's own shape
         # built by concatenation: masked after it, onnxruntime moves the transpose below the Where and broadcasts
         # the mask over the trailing axis of 3 (0.4 ms on 300 frames); an Expand to that shape costs 0.2 ms
-        # (bench/RESULTS.md §13)
-        clean = torch.where(coordinate_mask(observed), positions, 0.0).permute(0, 3, 1, 2)         # [B,3,T,J]
+        # (bench/RESULTS.md#onnx-runtime-costs)
+        clean = torch.where(coordinate_mask(observed), positions, 0.0).permute(0, 3, 1, 2)  # [B,3,T,J]
         stats = self.normalizer.statistics_cf(clean, seen)
-        x = seen.to(clean.dtype) * self.normalizer.forward_cf(clean, stats)          # 0 where missing (finite)
+        x = seen.to(clean.dtype) * self.normalizer.forward_cf(clean, stats)  # 0 where missing (finite)
         return self.corrected(self.first_guess_cf(x, observed), observed), stats
 
 
@@ -433,20 +445,37 @@ class BiGRURefiner(_Refiner):
             extrapolate=0`` is the first guess of the runs trained before these options (their configs lack the
             keys: restore them with ``LearnedRefiner(first_guess={"tangents": "zero", "extrapolate": 0})``).
         pose_frame: also read every frame in its own body frame and correct it there
-            (:meth:`~_Refiner.corrected`; measured in bench/RESULTS.md §13: no gain, off by default).
+            (:meth:`~_Refiner.corrected`; no gain, off by default: docs/decisions.md#refiner-training-options-left-off).
     """
 
-    def __init__(self, joint_names: Sequence[str], parents: Sequence[int], up_axis: str = "y",
-                 hips: Sequence[int] | None = None, bone_lengths: Sequence[float] | None = None,
-                 fps: float | None = None, hidden: int = 128, layers: int = 2, dropout: float = 0.1,
-                 tangents: str = "chord", extrapolate: int = 6, pose_frame: bool = False):
+    def __init__(
+        self,
+        joint_names: Sequence[str],
+        parents: Sequence[int],
+        up_axis: str = "y",
+        hips: Sequence[int] | None = None,
+        bone_lengths: Sequence[float] | None = None,
+        fps: float | None = None,
+        hidden: int = 128,
+        layers: int = 2,
+        dropout: float = 0.1,
+        tangents: str = "chord",
+        extrapolate: int = 6,
+        pose_frame: bool = False,
+    ):
         super().__init__(joint_names, parents, up_axis, hips, bone_lengths, fps, tangents, extrapolate, pose_frame)
         J = self.num_joints
         # LayerNorm before the GRU: without it the GRU's output collapsed to ~0 within an epoch in some runs
-        # (mean |h| 2e-5 on validation windows, the correction constant from then on: bench/RESULTS.md §13)
+        # (mean |h| 2e-5 on validation windows, the correction constant from then on: docs/decisions.md#bigru-layernorm)
         self.inp = nn.Sequential(nn.Linear(self.feature_channels * J, hidden), nn.LayerNorm(hidden), nn.GELU())
-        self.gru = nn.GRU(hidden, hidden, num_layers=layers, batch_first=True, bidirectional=True,
-                          dropout=dropout if layers > 1 else 0.0)
+        self.gru = nn.GRU(
+            hidden,
+            hidden,
+            num_layers=layers,
+            batch_first=True,
+            bidirectional=True,
+            dropout=dropout if layers > 1 else 0.0,
+        )
         self.out = nn.Linear(2 * hidden, 3 * J)
         nn.init.zeros_(self.out.weight)
         nn.init.zeros_(self.out.bias)
@@ -463,7 +492,7 @@ def encoder_layer_for_export(layer: nn.TransformerEncoderLayer, h: torch.Tensor)
     ``nn.MultiheadAttention`` works sequence-first and reshapes through shape arithmetic (six transposes and about
     twenty shape operators per layer); here queries, keys and values come from one projection and one permute, the
     scale goes onto the queries (``[N, heads, L, dim/heads]``) rather than onto the ``L × L`` scores, and the
-    output takes one transpose (bench/RESULTS.md §13).
+    output takes one transpose (bench/RESULTS.md#onnx-runtime-costs).
     """
     if not layer.norm_first:
         raise ValueError("encoder_layer_for_export writes out the pre-norm layer (norm_first=True) only")
@@ -473,8 +502,8 @@ def encoder_layer_for_export(layer: nn.TransformerEncoderLayer, h: torch.Tensor)
     x = layer.norm1(h)
     # the projections on [N·L, dim] matrices: onnxruntime then adds the bias inside the matrix product (Gemm)
     qkv = nn.functional.linear(x.reshape(N * L, dim), attention.in_proj_weight, attention.in_proj_bias)
-    q, k, v = qkv.reshape(N, L, 3, heads, dim // heads).permute(2, 0, 3, 1, 4)      # 3 × [N, heads, L, dim/heads]
-    scores = torch.matmul(q * (dim // heads) ** -0.5, k.transpose(-2, -1))            # [N, heads, L, L]
+    q, k, v = qkv.reshape(N, L, 3, heads, dim // heads).permute(2, 0, 3, 1, 4)  # 3 × [N, heads, L, dim/heads]
+    scores = torch.matmul(q * (dim // heads) ** -0.5, k.transpose(-2, -1))  # [N, heads, L, L]
     mixed = torch.matmul(torch.softmax(scores, dim=-1), v).transpose(1, 2).reshape(N * L, dim)
     h = h + attention.out_proj(mixed).reshape(N, L, dim)
     return h + layer.linear2(layer.activation(layer.linear1(layer.norm2(h))))
@@ -483,7 +512,7 @@ def encoder_layer_for_export(layer: nn.TransformerEncoderLayer, h: torch.Tensor)
 def _sinusoid(T: int, dim: int, device, dtype) -> torch.Tensor:
     position = torch.arange(T, device=device, dtype=dtype).unsqueeze(1)
     freq = torch.exp(torch.arange(0, dim, 2, device=device, dtype=dtype) * (-math.log(10000.0) / dim))
-    angles = position * freq                                                    # [T, dim/2]
+    angles = position * freq  # [T, dim/2]
     return torch.stack([torch.sin(angles), torch.cos(angles)], dim=-1).reshape(T, dim)
 
 
@@ -499,19 +528,33 @@ class MaskedTransformerRefiner(_Refiner):
             heads. ff: feed-forward width. dropout: in the encoder layers.
     """
 
-    def __init__(self, joint_names: Sequence[str], parents: Sequence[int], up_axis: str = "y",
-                 hips: Sequence[int] | None = None, bone_lengths: Sequence[float] | None = None,
-                 fps: float | None = None, tokens: str = "frames", dim: int = 128, layers: int = 3, heads: int = 4,
-                 ff: int = 256, dropout: float = 0.1, tangents: str = "chord", extrapolate: int = 6,
-                 pose_frame: bool = False):
+    def __init__(
+        self,
+        joint_names: Sequence[str],
+        parents: Sequence[int],
+        up_axis: str = "y",
+        hips: Sequence[int] | None = None,
+        bone_lengths: Sequence[float] | None = None,
+        fps: float | None = None,
+        tokens: str = "frames",
+        dim: int = 128,
+        layers: int = 3,
+        heads: int = 4,
+        ff: int = 256,
+        dropout: float = 0.1,
+        tangents: str = "chord",
+        extrapolate: int = 6,
+        pose_frame: bool = False,
+    ):
         super().__init__(joint_names, parents, up_axis, hips, bone_lengths, fps, tangents, extrapolate, pose_frame)
         if tokens not in ("frames", "joints"):
             raise ValueError(f"tokens must be 'frames' or 'joints', got {tokens!r}")
         J = self.num_joints
         self.tokens, self.dim = tokens, dim
-        self.mask_token = nn.Parameter(torch.zeros(J, 3))                      # replaces missing coordinates
-        layer = lambda: nn.TransformerEncoderLayer(dim, heads, ff, dropout, activation="gelu", batch_first=True,
-                                                   norm_first=True)
+        self.mask_token = nn.Parameter(torch.zeros(J, 3))  # replaces missing coordinates
+        layer = lambda: nn.TransformerEncoderLayer(
+            dim, heads, ff, dropout, activation="gelu", batch_first=True, norm_first=True
+        )
         if tokens == "frames":
             self.embed = nn.Linear((3 + self.feature_channels) * J, dim)
             self.blocks = nn.ModuleList(layer() for _ in range(layers))
@@ -520,7 +563,7 @@ class MaskedTransformerRefiner(_Refiner):
             self.embed = nn.Linear(3 + self.feature_channels, dim)
             self.joint_embedding = nn.Parameter(torch.zeros(J, dim))
             nn.init.normal_(self.joint_embedding, std=0.02)
-            self.blocks = nn.ModuleList(layer() for _ in range(2 * layers))    # joint, frame, joint, frame, ...
+            self.blocks = nn.ModuleList(layer() for _ in range(2 * layers))  # joint, frame, joint, frame, ...
             self.out = nn.Linear(dim, 3)
         self.norm = nn.LayerNorm(dim)
         nn.init.zeros_(self.out.weight)
@@ -529,10 +572,10 @@ class MaskedTransformerRefiner(_Refiner):
     def correction(self, guess: torch.Tensor, observed: torch.Tensor, body: torch.Tensor | None = None) -> torch.Tensor:
         B, _, T, J = guess.shape
         mask_token = self.mask_token.to(guess.dtype).t().reshape(1, 3, 1, J)
-        seen = observed.unsqueeze(1).to(guess.dtype)                                 # a 0/1 blend: cheaper than Where
-        tokenised = seen * (FEATURE_SCALE[0] * guess) + (1 - seen) * mask_token                        # [B,3,T,J]
-        inputs = torch.cat([tokenised, self.features(guess, observed, body)], dim=1)             # [B,10|13,T,J]
-        pos = _sinusoid(T, self.dim, guess.device, guess.dtype)                      # [T, dim]
+        seen = observed.unsqueeze(1).to(guess.dtype)  # a 0/1 blend: cheaper than Where
+        tokenised = seen * (FEATURE_SCALE[0] * guess) + (1 - seen) * mask_token  # [B,3,T,J]
+        inputs = torch.cat([tokenised, self.features(guess, observed, body)], dim=1)  # [B,10|13,T,J]
+        pos = _sinusoid(T, self.dim, guess.device, guess.dtype)  # [T, dim]
         exporting = torch.onnx.is_in_onnx_export() and not self.training
         run = encoder_layer_for_export if exporting else (lambda block, h: block(h))
         if self.tokens == "frames":
@@ -540,11 +583,11 @@ class MaskedTransformerRefiner(_Refiner):
             for block in self.blocks:
                 h = run(block, h)
             return coordinate_first(self.out(self.norm(h)), J)
-        h = self.embed(inputs.permute(0, 2, 3, 1)) + self.joint_embedding + pos.unsqueeze(1)   # [B,T,J,dim]
+        h = self.embed(inputs.permute(0, 2, 3, 1)) + self.joint_embedding + pos.unsqueeze(1)  # [B,T,J,dim]
         for i, block in enumerate(self.blocks):
-            if i % 2 == 0:                                                           # over the joints of a frame
+            if i % 2 == 0:  # over the joints of a frame
                 h = run(block, h.reshape(B * T, J, self.dim)).reshape(B, T, J, self.dim)
-            else:                                                                    # over the frames of a joint
+            else:  # over the frames of a joint
                 h = run(block, h.permute(0, 2, 1, 3).reshape(B * J, T, self.dim))
                 h = h.reshape(B, J, T, self.dim).permute(0, 2, 1, 3)
         return self.out(self.norm(h)).permute(0, 3, 1, 2)
@@ -560,5 +603,11 @@ def refine_transformer(**kwargs) -> MaskedTransformerRefiner:
     return MaskedTransformerRefiner(**kwargs)
 
 
-__all__ = ["BiGRURefiner", "MaskedTransformerRefiner", "PoseNormalizer", "cubic_fill", "refine_bigru",
-           "refine_transformer"]
+__all__ = [
+    "BiGRURefiner",
+    "MaskedTransformerRefiner",
+    "PoseNormalizer",
+    "cubic_fill",
+    "refine_bigru",
+    "refine_transformer",
+]

@@ -27,14 +27,15 @@ so the same code runs on NTU-25, MSR-20 and CMU-31 skeletons.
 * **Persons.** Each body goes through the network; the pooled features are averaged over the
   bodies that are present.
 """
+
 from __future__ import annotations
 
 import torch
 import torch.nn.functional as F
 from torch import nn
 
-from mocapkit.motion.layouts import LANDMARKS, SkeletonLayout, get_layout
 from mocapkit.models.body_frame import body0_origin, body0_size
+from mocapkit.motion.layouts import LANDMARKS, SkeletonLayout, get_layout
 
 STREAMS = ("joint", "velocity", "bone", "bone_velocity")
 
@@ -75,8 +76,14 @@ class GraphConv(nn.Module):
     training starts from the shared graph) and added to the partition's adjacency.
     """
 
-    def __init__(self, in_channels: int, out_channels: int, adjacency: torch.Tensor, adaptive: bool = True,
-                 topology: str = "shared"):
+    def __init__(
+        self,
+        in_channels: int,
+        out_channels: int,
+        adjacency: torch.Tensor,
+        adaptive: bool = True,
+        topology: str = "shared",
+    ):
         super().__init__()
         if topology not in TOPOLOGIES:
             raise ValueError(f"unknown graph topology {topology!r}; choose from {TOPOLOGIES}")
@@ -88,7 +95,7 @@ class GraphConv(nn.Module):
         self.channelwise = topology == "channelwise"
         if self.channelwise:
             r = max(8, in_channels // 8)
-            self.relation_in = nn.Conv2d(in_channels, 2 * self.k * r, kernel_size=1)     # u and v of each partition
+            self.relation_in = nn.Conv2d(in_channels, 2 * self.k * r, kernel_size=1)  # u and v of each partition
             self.relation_out = nn.Conv2d(self.k * r, self.k * out_channels, kernel_size=1, groups=self.k)
             self.alpha = nn.Parameter(torch.zeros(1))
             self.relation_channels = r
@@ -101,9 +108,9 @@ class GraphConv(nn.Module):
         if not self.channelwise:
             return torch.einsum("nkctj,kij->ncti", y, a)
         frames = torch.full_like(x[:, :1, :, :1], 1.0) if mask is None else mask
-        mean = (self.relation_in(x) * frames).sum(2) / frames.sum(2).clamp(min=1.0)      # [N, 2KR, J]
+        mean = (self.relation_in(x) * frames).sum(2) / frames.sum(2).clamp(min=1.0)  # [N, 2KR, J]
         u, v = mean.view(n, 2, self.k * self.relation_channels, j).unbind(1)
-        relation = torch.tanh(u[..., :, None] - v[..., None, :])                        # [N, KR, J, J]
+        relation = torch.tanh(u[..., :, None] - v[..., None, :])  # [N, KR, J, J]
         q = self.relation_out(relation).view(n, self.k, self.out_channels, j, j)
         return torch.einsum("nkctj,nkcij->ncti", y, a[None, :, None] + self.alpha * q)
 
@@ -129,8 +136,9 @@ class MultiScaleTemporalConv(nn.Module):
         if mid < 1:
             raise ValueError(f"the multi-scale temporal unit needs at least {branches} channels, got {out_channels}")
         widths = [out_channels - mid * (branches - 1)] + [mid] * (branches - 1)
-        self.squeeze = nn.ModuleList(nn.Sequential(nn.Conv2d(in_channels, w, 1), nn.BatchNorm2d(w), nn.ReLU())
-                                     for w in widths)
+        self.squeeze = nn.ModuleList(
+            nn.Sequential(nn.Conv2d(in_channels, w, 1), nn.BatchNorm2d(w), nn.ReLU()) for w in widths
+        )
         temporal = [nn.Conv2d(w, w, (3, 1), (stride, 1), (d, 0), (d, 1)) for w, d in zip(widths, self.DILATIONS)]
         temporal.append(nn.MaxPool2d((3, 1), (stride, 1), (1, 0)))
         temporal.append(nn.Conv2d(widths[-1], widths[-1], 1, (stride, 1)))
@@ -146,9 +154,19 @@ class MultiScaleTemporalConv(nn.Module):
 class STGCNBlock(nn.Module):
     """Graph convolution → BN → ReLU → temporal unit (stride) → BN, plus a residual, → ReLU."""
 
-    def __init__(self, in_channels: int, out_channels: int, adjacency: torch.Tensor, stride: int = 1,
-                 kernel_size: int = 9, dropout: float = 0.0, residual: bool = True, adaptive: bool = True,
-                 temporal: str = "conv", topology: str = "shared"):
+    def __init__(
+        self,
+        in_channels: int,
+        out_channels: int,
+        adjacency: torch.Tensor,
+        stride: int = 1,
+        kernel_size: int = 9,
+        dropout: float = 0.0,
+        residual: bool = True,
+        adaptive: bool = True,
+        temporal: str = "conv",
+        topology: str = "shared",
+    ):
         super().__init__()
         if temporal not in TEMPORAL_UNITS:
             raise ValueError(f"unknown temporal unit {temporal!r}; choose from {TEMPORAL_UNITS}")
@@ -167,8 +185,9 @@ class STGCNBlock(nn.Module):
         elif in_channels == out_channels and stride == 1:
             self.residual = nn.Identity()
         else:
-            self.residual = nn.Sequential(nn.Conv2d(in_channels, out_channels, 1, (stride, 1)),
-                                          nn.BatchNorm2d(out_channels))
+            self.residual = nn.Sequential(
+                nn.Conv2d(in_channels, out_channels, 1, (stride, 1)), nn.BatchNorm2d(out_channels)
+            )
 
     def forward(self, x: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """``x`` ``[N, C, T, J]`` (zero at absent frames), ``mask`` ``[N, 1, T, 1]`` → both downsampled."""
@@ -202,11 +221,23 @@ class STGCN(nn.Module):
             :class:`GraphConv`).
     """
 
-    def __init__(self, layout: SkeletonLayout | str, num_classes: int, in_channels: int = 3,
-                 channels: tuple[int, ...] = (64, 64, 128, 128), strides: tuple[int, ...] = (1, 1, 2, 1),
-                 kernel_size: int = 9, streams: tuple[str, ...] = ("joint",), center: bool = True,
-                 scale: bool = False, adaptive: bool = True, dropout: float = 0.0, head_dropout: float = 0.0,
-                 temporal: str = "conv", topology: str = "shared"):
+    def __init__(
+        self,
+        layout: SkeletonLayout | str,
+        num_classes: int,
+        in_channels: int = 3,
+        channels: tuple[int, ...] = (64, 64, 128, 128),
+        strides: tuple[int, ...] = (1, 1, 2, 1),
+        kernel_size: int = 9,
+        streams: tuple[str, ...] = ("joint",),
+        center: bool = True,
+        scale: bool = False,
+        adaptive: bool = True,
+        dropout: float = 0.0,
+        head_dropout: float = 0.0,
+        temporal: str = "conv",
+        topology: str = "shared",
+    ):
         super().__init__()
         self.layout = get_layout(layout)
         streams = tuple(streams)
@@ -214,7 +245,9 @@ class STGCN(nn.Module):
         if unknown or not streams:
             raise ValueError(f"unknown input streams {unknown or streams}; choose from {STREAMS}")
         if len(channels) != len(strides) or not channels:
-            raise ValueError(f"channels {list(channels)} and strides {list(strides)} must have the same, non-zero length")
+            raise ValueError(
+                f"channels {list(channels)} and strides {list(strides)} must have the same, non-zero length"
+            )
         self.num_joints = self.layout.num_joints
         self.in_channels = in_channels
         self.streams = streams
@@ -223,7 +256,9 @@ class STGCN(nn.Module):
         landmarks = LANDMARKS.get(self.layout.name)
         if self.scale and not landmarks:
             raise ValueError(f"scale=True needs the body landmarks of layout {self.layout.name!r}")
-        self.spine = (self.layout.index(landmarks["pelvis"]), self.layout.index(landmarks["neck"])) if landmarks else None
+        self.spine = (
+            (self.layout.index(landmarks["pelvis"]), self.layout.index(landmarks["neck"])) if landmarks else None
+        )
         parents = [p if p >= 0 else j for j, p in enumerate(self.layout.parents)]
         self.register_buffer("parents", torch.tensor(parents, dtype=torch.long), persistent=False)
         features = in_channels * len(streams)
@@ -231,9 +266,20 @@ class STGCN(nn.Module):
         adjacency = spatial_adjacency(self.layout)
         blocks, c_in = [], features
         for k, (c_out, stride) in enumerate(zip(channels, strides)):
-            blocks.append(STGCNBlock(c_in, c_out, adjacency, stride, kernel_size, dropout,
-                                     residual=k > 0, adaptive=adaptive, temporal=temporal,
-                                     topology=topology))
+            blocks.append(
+                STGCNBlock(
+                    c_in,
+                    c_out,
+                    adjacency,
+                    stride,
+                    kernel_size,
+                    dropout,
+                    residual=k > 0,
+                    adaptive=adaptive,
+                    temporal=temporal,
+                    topology=topology,
+                )
+            )
             c_in = c_out
         self.blocks = nn.ModuleList(blocks)
         self.head_dropout = nn.Dropout(head_dropout)
@@ -252,7 +298,7 @@ class STGCN(nn.Module):
         if self.center:
             x = x - body0_origin(x, present, self.root).view(-1, 1, 1, 1, x.shape[-1])
         if self.scale:
-            lower, upper = self.spine                                                  # centring cancels
+            lower, upper = self.spine  # centring cancels
             x = x / body0_size(x, present, lower, upper).view(-1, 1, 1, 1, 1)
         return x * present[..., None, None].to(x.dtype)
 
@@ -277,32 +323,56 @@ class STGCN(nn.Module):
 
     def forward(self, skeletons: torch.Tensor) -> torch.Tensor:
         n, m, t, j, c = skeletons.shape
-        present = skeletons.abs().sum(dim=(-1, -2)) > 0                               # [N, M, T]
+        present = skeletons.abs().sum(dim=(-1, -2)) > 0  # [N, M, T]
         x = self.features(self.normalize(skeletons, present), present)
         c = x.shape[-1]
         # data BN over (joint, channel), as in ST-GCN; padded frames are re-zeroed below
         x = x.permute(0, 1, 3, 4, 2).reshape(n * m, j * c, t)
-        x = self.data_bn(x).view(n * m, j, c, t).permute(0, 2, 3, 1)                  # [NM, C, T, J]
+        x = self.data_bn(x).view(n * m, j, c, t).permute(0, 2, 3, 1)  # [NM, C, T, J]
         mask = present.reshape(n * m, 1, t, 1).to(x.dtype)
         x = x * mask
         for block in self.blocks:
             x, mask = block(x, mask)
-        pooled = (x.sum(dim=(2, 3)) / (mask.sum(dim=(2, 3)) * j).clamp(min=1.0))      # [NM, C]
+        pooled = x.sum(dim=(2, 3)) / (mask.sum(dim=(2, 3)) * j).clamp(min=1.0)  # [NM, C]
         pooled = pooled.view(n, m, -1)
-        body = present.any(dim=2).to(x.dtype).unsqueeze(-1)                           # [N, M, 1]
+        body = present.any(dim=2).to(x.dtype).unsqueeze(-1)  # [N, M, 1]
         pooled = (pooled * body).sum(1) / body.sum(1).clamp(min=1.0)
         return self.fc(self.head_dropout(pooled))
 
 
-def stgcn(num_classes: int, layout: SkeletonLayout | str = "ntu25", in_channels: int = 3,
-          channels: tuple[int, ...] | list[int] = (64, 64, 128, 128),
-          strides: tuple[int, ...] | list[int] = (1, 1, 2, 1), kernel_size: int = 9,
-          streams: tuple[str, ...] | list[str] = ("joint",), center: bool = True, scale: bool = False,
-          adaptive: bool = True, dropout: float = 0.0, head_dropout: float = 0.0, temporal: str = "conv",
-          topology: str = "shared") -> STGCN:
+def stgcn(
+    num_classes: int,
+    layout: SkeletonLayout | str = "ntu25",
+    in_channels: int = 3,
+    channels: tuple[int, ...] | list[int] = (64, 64, 128, 128),
+    strides: tuple[int, ...] | list[int] = (1, 1, 2, 1),
+    kernel_size: int = 9,
+    streams: tuple[str, ...] | list[str] = ("joint",),
+    center: bool = True,
+    scale: bool = False,
+    adaptive: bool = True,
+    dropout: float = 0.0,
+    head_dropout: float = 0.0,
+    temporal: str = "conv",
+    topology: str = "shared",
+) -> STGCN:
     """Hydra builder of :class:`STGCN` (``configs/model/stgcn.yaml``); lists are accepted for tuples."""
-    return STGCN(layout, num_classes, in_channels, tuple(channels), tuple(strides), kernel_size, tuple(streams),
-                 center, scale, adaptive, dropout, head_dropout, temporal, topology)
+    return STGCN(
+        layout,
+        num_classes,
+        in_channels,
+        tuple(channels),
+        tuple(strides),
+        kernel_size,
+        tuple(streams),
+        center,
+        scale,
+        adaptive,
+        dropout,
+        head_dropout,
+        temporal,
+        topology,
+    )
 
 
 class MultiStreamSTGCN(nn.Module):
@@ -325,7 +395,7 @@ class MultiStreamSTGCN(nn.Module):
             raise ValueError("MultiStreamSTGCN needs at least one member's streams, e.g. [[joint], [bone]]")
         self.streams = streams
         self.members = nn.ModuleList(STGCN(layout, num_classes, streams=member, **kwargs) for member in streams)
-        self.layout = self.members[0].layout      # read by the ONNX export (joint count, metadata)
+        self.layout = self.members[0].layout  # read by the ONNX export (joint count, metadata)
         self.num_classes = num_classes
 
     def forward(self, skeletons: torch.Tensor) -> torch.Tensor:
@@ -333,14 +403,36 @@ class MultiStreamSTGCN(nn.Module):
         return logits if self.training else logits.mean(0)
 
 
-def stgcn_ensemble(num_classes: int, layout: SkeletonLayout | str = "ntu25",
-                   streams=(("joint",), ("bone",), ("velocity",), ("bone_velocity",)), in_channels: int = 3,
-                   channels: tuple[int, ...] | list[int] = (64, 64, 128, 128),
-                   strides: tuple[int, ...] | list[int] = (1, 1, 2, 1), kernel_size: int = 9, center: bool = True,
-                   scale: bool = False, adaptive: bool = True, dropout: float = 0.0,
-                   head_dropout: float = 0.0, temporal: str = "conv", topology: str = "shared") -> MultiStreamSTGCN:
+def stgcn_ensemble(
+    num_classes: int,
+    layout: SkeletonLayout | str = "ntu25",
+    streams=(("joint",), ("bone",), ("velocity",), ("bone_velocity",)),
+    in_channels: int = 3,
+    channels: tuple[int, ...] | list[int] = (64, 64, 128, 128),
+    strides: tuple[int, ...] | list[int] = (1, 1, 2, 1),
+    kernel_size: int = 9,
+    center: bool = True,
+    scale: bool = False,
+    adaptive: bool = True,
+    dropout: float = 0.0,
+    head_dropout: float = 0.0,
+    temporal: str = "conv",
+    topology: str = "shared",
+) -> MultiStreamSTGCN:
     """Hydra builder of :class:`MultiStreamSTGCN` (``configs/model/stgcn_ensemble.yaml``)."""
-    return MultiStreamSTGCN(layout, num_classes, streams, in_channels=in_channels, channels=tuple(channels),
-                            strides=tuple(strides), kernel_size=kernel_size, center=center, scale=scale,
-                            adaptive=adaptive, dropout=dropout, head_dropout=head_dropout, temporal=temporal,
-                            topology=topology)
+    return MultiStreamSTGCN(
+        layout,
+        num_classes,
+        streams,
+        in_channels=in_channels,
+        channels=tuple(channels),
+        strides=tuple(strides),
+        kernel_size=kernel_size,
+        center=center,
+        scale=scale,
+        adaptive=adaptive,
+        dropout=dropout,
+        head_dropout=head_dropout,
+        temporal=temporal,
+        topology=topology,
+    )

@@ -19,20 +19,21 @@ Views: :meth:`Motion.resample`, :meth:`Motion.root_centered`,
 and CMU/HDM05-31 through shared body landmarks) and :meth:`Motion.select`.
 Every view returns a new Motion; the original is never modified.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from mocapkit.motion.geometry import AXES, hip_line_heading, horizontal_axes, turn_about_up
 from mocapkit.motion.layouts import LANDMARKS, SkeletonLayout, mirror_joints
-
-AXES = {"x": 0, "y": 1, "z": 2}
 
 
 # Per-joint tests of ``[..., 3]`` coordinate arrays. numpy reduces over a trailing axis of 3 about ten times slower
 # than it combines the three coordinate slices (170-210 µs against 13-34 µs on a [300, 31, 3] array; a refiner pays
-# several of them per take: bench/RESULTS.md §13), so these read the coordinates one at a time.
+# several of them per take: bench/RESULTS.md#onnx-runtime-costs), so these read the
+# coordinates one at a time.
 def any_coordinate(mask: np.ndarray) -> np.ndarray:
     """``mask [..., 3]`` bool → ``[...]``: True where any of the three coordinates is (``mask.any(-1)``)."""
     return mask[..., 0] | mask[..., 1] | mask[..., 2]
@@ -47,27 +48,6 @@ def point_distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Euclidean distance of ``[..., 3]`` points ``a`` and ``b`` → ``[...]`` (``np.linalg.norm(a - b, axis=-1)``)."""
     d = a - b
     return np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1] + d[..., 2] * d[..., 2])
-
-
-def hip_heading(positions: np.ndarray, left: int, right: int, up_axis: str) -> tuple[np.ndarray, np.ndarray]:
-    """``(cos, sin)`` ``[N]`` of the angle about the up axis of the hip line (joint ``left`` → ``right``) of every
-    frame of ``positions`` ``[N, J, 3]``, measured from the first horizontal axis (0 for a vertical or empty line)."""
-    h1, h2 = [a for a in range(3) if a != AXES[up_axis]]
-    line = positions[:, right] - positions[:, left]
-    angle = np.arctan2(line[:, h2], line[:, h1])
-    return np.cos(angle), np.sin(angle)
-
-
-def turn_about_up(positions: np.ndarray, cos: np.ndarray, sin: np.ndarray, up_axis: str,
-                  inverse: bool = False) -> np.ndarray:
-    """``positions`` ``[N, J, 3]`` turned about the up axis, frame ``n`` by the angle whose ``cos[n]``, ``sin[n]``
-    are given, so that that direction comes onto the first horizontal axis (with ``inverse``: back from it)."""
-    h1, h2 = [a for a in range(3) if a != AXES[up_axis]]
-    c, s = cos[:, None], (-sin if inverse else sin)[:, None]
-    out = positions.copy()
-    out[..., h1] = c * positions[..., h1] + s * positions[..., h2]
-    out[..., h2] = -s * positions[..., h1] + c * positions[..., h2]
-    return out
 
 
 @dataclass
@@ -91,7 +71,9 @@ class Motion:
         self.positions = np.asarray(self.positions, dtype=np.float32)
         self.joint_names = tuple(self.joint_names)
         if self.positions.ndim != 3 or self.positions.shape[2] != 3:
-            raise ValueError(f"{self._label()}: positions must be [frames, joints, 3], got {list(self.positions.shape)}")
+            raise ValueError(
+                f"{self._label()}: positions must be [frames, joints, 3], got {list(self.positions.shape)}"
+            )
         frames, joints = self.positions.shape[:2]
         if len(self.joint_names) != joints:
             raise ValueError(f"{self._label()}: {len(self.joint_names)} joint names for {joints} joints")
@@ -165,10 +147,16 @@ class Motion:
             parents = tuple(where.get(self.parents[i], -1) for i in idx)
             if sum(p < 0 for p in parents) != 1:
                 parents = None  # the selection is not a tree any more
-        return replace(self, positions=self.positions[:, idx], joint_names=tuple(self.joint_names[i] for i in idx),
-                       parents=parents, missing=self.missing[:, idx],
-                       rotations=None if self.rotations is None else self.rotations[:, idx], layout_name=None,
-                       metadata=dict(self.metadata))
+        return replace(
+            self,
+            positions=self.positions[:, idx],
+            joint_names=tuple(self.joint_names[i] for i in idx),
+            parents=parents,
+            missing=self.missing[:, idx],
+            rotations=None if self.rotations is None else self.rotations[:, idx],
+            layout_name=None,
+            metadata=dict(self.metadata),
+        )
 
     def resample(self, fps: float) -> Motion:
         """Linear interpolation in time to ``fps`` frames per second (over the same duration).
@@ -180,9 +168,14 @@ class Motion:
             raise ValueError(f"fps must be positive, got {fps}")
         if self.num_frames < 2 or fps == self.fps:
             same = fps == self.fps
-            return replace(self, positions=self.positions.copy(), missing=self.missing.copy(),
-                           rotations=self.rotations if same else None, fps=self.fps if same else float(fps),
-                           metadata=dict(self.metadata))
+            return replace(
+                self,
+                positions=self.positions.copy(),
+                missing=self.missing.copy(),
+                rotations=self.rotations if same else None,
+                fps=self.fps if same else float(fps),
+                metadata=dict(self.metadata),
+            )
         count = int(np.floor(self.duration * fps + 1e-6)) + 1
         return self.sample_at(np.arange(count) * (self.fps / fps), fps)
 
@@ -196,20 +189,21 @@ class Motion:
         w = (t - lo).astype(np.float32)[:, None, None]
         positions = self.filled()[lo] * (1 - w) + self.filled()[hi] * w
         missing = self.missing[lo] | (self.missing[hi] & (w[:, :, 0] > 0))
-        return replace(self, positions=positions, missing=missing, fps=float(fps), rotations=None,
-                       metadata=dict(self.metadata))
+        return replace(
+            self, positions=positions, missing=missing, fps=float(fps), rotations=None, metadata=dict(self.metadata)
+        )
 
     def root_centered(self, root: str | int | None = None) -> Motion:
         """Positions relative to the root joint (default: the hierarchy's root, else joint 0) in every frame."""
         r = self._joint(root, default=self.parents.index(-1) if self.parents else 0)
-        return replace(self, positions=self.positions - self.positions[:, r:r + 1], metadata=dict(self.metadata))
+        return replace(self, positions=self.positions - self.positions[:, r : r + 1], metadata=dict(self.metadata))
 
     def torso_aligned(self, left_hip: str | int, right_hip: str | int, root: str | int | None = None) -> Motion:
         """Root-centred and turned about the up axis so that, in every frame, the hip line
         (left → right) lies along the first horizontal axis (x, or x for z-up data)."""
         centred = self.root_centered(root)
-        cos, sin = hip_heading(centred.positions, self._joint(left_hip), self._joint(right_hip), self.up_axis)
-        return replace(centred, positions=turn_about_up(centred.positions, cos, sin, self.up_axis), rotations=None)
+        angle = hip_line_heading(centred.positions, self._joint(left_hip), self._joint(right_hip), self.up_axis)
+        return replace(centred, positions=turn_about_up(centred.positions, angle, self.up_axis), rotations=None)
 
     def mirrored(self) -> Motion:
         """The motion's mirror image: the first horizontal axis negated (x, for y-up and z-up data alike) and every
@@ -219,15 +213,21 @@ class Motion:
         whose hierarchy is not left-right symmetric."""
         swap = mirror_joints(self.joint_names)
         if self.parents is not None and any(
-                (self.parents[j] < 0) != (self.parents[swap[j]] < 0)
-                or (self.parents[j] >= 0 and swap[self.parents[j]] != self.parents[swap[j]])
-                for j in range(self.num_joints)):
+            (self.parents[j] < 0) != (self.parents[swap[j]] < 0)
+            or (self.parents[j] >= 0 and swap[self.parents[j]] != self.parents[swap[j]])
+            for j in range(self.num_joints)
+        ):
             raise ValueError(f"{self._label()}: the joint hierarchy is not left-right symmetric; cannot mirror it")
-        axis = next(a for a in range(3) if a != AXES[self.up_axis])
+        axis = horizontal_axes(self.up_axis)[0]
         positions = self.positions[:, swap].copy()
         positions[..., axis] *= -1
-        return replace(self, positions=positions, missing=self.missing[:, swap].copy(), rotations=None,
-                       metadata=dict(self.metadata))
+        return replace(
+            self,
+            positions=positions,
+            missing=self.missing[:, swap].copy(),
+            rotations=None,
+            metadata=dict(self.metadata),
+        )
 
     def map_layout(self, target: SkeletonLayout) -> Motion:
         """The same motion on another layout, joint by joint through shared body landmarks.
@@ -236,17 +236,27 @@ class Motion:
         """
         source_name = self.layout_name
         if source_name not in LANDMARKS or target.name not in LANDMARKS:
-            raise ValueError(f"no landmark table for layout {source_name!r} -> {target.name!r}; "
-                             f"known: {sorted(LANDMARKS)}")
+            raise ValueError(
+                f"no landmark table for layout {source_name!r} -> {target.name!r}; known: {sorted(LANDMARKS)}"
+            )
         by_landmark = {lm: self.index(joint) for lm, joint in LANDMARKS[source_name].items()}
         source_of = {target.index(joint): by_landmark.get(lm) for lm, joint in LANDMARKS[target.name].items()}
         positions = np.full((self.num_frames, target.num_joints, 3), np.nan, dtype=np.float32)
         for j, src in source_of.items():
             if src is not None:
                 positions[:, j] = self.positions[:, src]
-        return Motion(positions=positions, joint_names=target.joint_names, parents=target.parents, fps=self.fps,
-                      source_units=self.source_units, up_axis=self.up_axis, name=self.name, source=self.source,
-                      layout_name=target.name, metadata=dict(self.metadata, mapped_from=source_name))
+        return Motion(
+            positions=positions,
+            joint_names=target.joint_names,
+            parents=target.parents,
+            fps=self.fps,
+            source_units=self.source_units,
+            up_axis=self.up_axis,
+            name=self.name,
+            source=self.source,
+            layout_name=target.name,
+            metadata=dict(self.metadata, mapped_from=source_name),
+        )
 
     def _joint(self, joint: str | int | None, default: int | None = None) -> int:
         if joint is None:

@@ -6,6 +6,7 @@ A model trained on sequences subsampled to ``max_frames`` frames must see the sa
 deployed: the data modules apply :func:`uniform_frame_indices` to every sample, and ``mocapkit predict``
 applies it to every file with the ``max_frames`` that ``mocapkit export`` stored in the ONNX metadata.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -44,7 +45,7 @@ def blend_weights(length: int, overlap: int, first: bool, last: bool) -> np.ndar
         if not first:
             weights[:ramp] = up
         if not last:
-            weights[length - ramp:] = up[::-1]
+            weights[length - ramp :] = up[::-1]
     return weights
 
 
@@ -54,13 +55,13 @@ def refine_windows(predict, positions: np.ndarray, missing: np.ndarray, window: 
     frames = positions.shape[0]
     starts = window_starts(frames, window, overlap)
     length = min(frames, window)
-    batch_p = np.stack([positions[s:s + length] for s in starts]).astype(np.float32)
-    batch_m = np.stack([missing[s:s + length] for s in starts])
+    batch_p = np.stack([positions[s : s + length] for s in starts]).astype(np.float32)
+    batch_m = np.stack([missing[s : s + length] for s in starts])
     out = np.asarray(predict(batch_p, batch_m), dtype=np.float64)
     total = np.zeros(positions.shape, dtype=np.float64)
     weight = np.zeros(frames, dtype=np.float64)
     for i, s in enumerate(starts):
         w = blend_weights(length, overlap, first=i == 0, last=i == len(starts) - 1)
-        total[s:s + length] += w[:, None, None] * out[i]
-        weight[s:s + length] += w
+        total[s : s + length] += w[:, None, None] * out[i]
+        weight[s : s + length] += w
     return total / weight[:, None, None]

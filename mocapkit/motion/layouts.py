@@ -5,6 +5,7 @@ model builds its adjacency from ``parents``, the energy image rasterises the
 bones ``(joint, parent)``, and readers attach a layout to every sequence.
 Joint indices are 0-based everywhere in mocapkit.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -53,20 +54,58 @@ class SkeletonLayout:
 NTU25 = SkeletonLayout(
     name="ntu25",
     joint_names=(
-        "SpineBase", "SpineMid", "Neck", "Head",
-        "ShoulderLeft", "ElbowLeft", "WristLeft", "HandLeft",
-        "ShoulderRight", "ElbowRight", "WristRight", "HandRight",
-        "HipLeft", "KneeLeft", "AnkleLeft", "FootLeft",
-        "HipRight", "KneeRight", "AnkleRight", "FootRight",
-        "SpineShoulder", "HandTipLeft", "ThumbLeft", "HandTipRight", "ThumbRight",
+        "SpineBase",
+        "SpineMid",
+        "Neck",
+        "Head",
+        "ShoulderLeft",
+        "ElbowLeft",
+        "WristLeft",
+        "HandLeft",
+        "ShoulderRight",
+        "ElbowRight",
+        "WristRight",
+        "HandRight",
+        "HipLeft",
+        "KneeLeft",
+        "AnkleLeft",
+        "FootLeft",
+        "HipRight",
+        "KneeRight",
+        "AnkleRight",
+        "FootRight",
+        "SpineShoulder",
+        "HandTipLeft",
+        "ThumbLeft",
+        "HandTipRight",
+        "ThumbRight",
     ),
     parents=(
-        -1, 0, 20, 2,
-        20, 4, 5, 6,
-        20, 8, 9, 10,
-        0, 12, 13, 14,
-        0, 16, 17, 18,
-        1, 7, 7, 11, 11,
+        -1,
+        0,
+        20,
+        2,
+        20,
+        4,
+        5,
+        6,
+        20,
+        8,
+        9,
+        10,
+        0,
+        12,
+        13,
+        14,
+        0,
+        16,
+        17,
+        18,
+        1,
+        7,
+        7,
+        11,
+        11,
     ),
 )
 
@@ -77,9 +116,26 @@ NTU25 = SkeletonLayout(
 MSR20 = SkeletonLayout(
     name="msr20",
     joint_names=(
-        "ShoulderLeft", "ShoulderRight", "ShoulderCenter", "Spine", "HipLeft", "HipRight", "HipCenter",
-        "ElbowLeft", "ElbowRight", "WristLeft", "WristRight", "HandLeft", "HandRight",
-        "KneeLeft", "KneeRight", "AnkleLeft", "AnkleRight", "FootLeft", "FootRight", "Head",
+        "ShoulderLeft",
+        "ShoulderRight",
+        "ShoulderCenter",
+        "Spine",
+        "HipLeft",
+        "HipRight",
+        "HipCenter",
+        "ElbowLeft",
+        "ElbowRight",
+        "WristLeft",
+        "WristRight",
+        "HandLeft",
+        "HandRight",
+        "KneeLeft",
+        "KneeRight",
+        "AnkleLeft",
+        "AnkleRight",
+        "FootLeft",
+        "FootRight",
+        "Head",
     ),
     parents=(2, 2, 3, 6, 6, 6, -1, 0, 1, 7, 8, 9, 10, 4, 5, 13, 14, 15, 16, 2),
 )
@@ -88,27 +144,91 @@ MSR20 = SkeletonLayout(
 CMU31 = SkeletonLayout(
     name="cmu31",
     joint_names=(
-        "root", "lhipjoint", "lfemur", "ltibia", "lfoot", "ltoes",
-        "rhipjoint", "rfemur", "rtibia", "rfoot", "rtoes",
-        "lowerback", "upperback", "thorax", "lowerneck", "upperneck", "head",
-        "lclavicle", "lhumerus", "lradius", "lwrist", "lhand", "lfingers", "lthumb",
-        "rclavicle", "rhumerus", "rradius", "rwrist", "rhand", "rfingers", "rthumb",
+        "root",
+        "lhipjoint",
+        "lfemur",
+        "ltibia",
+        "lfoot",
+        "ltoes",
+        "rhipjoint",
+        "rfemur",
+        "rtibia",
+        "rfoot",
+        "rtoes",
+        "lowerback",
+        "upperback",
+        "thorax",
+        "lowerneck",
+        "upperneck",
+        "head",
+        "lclavicle",
+        "lhumerus",
+        "lradius",
+        "lwrist",
+        "lhand",
+        "lfingers",
+        "lthumb",
+        "rclavicle",
+        "rhumerus",
+        "rradius",
+        "rwrist",
+        "rhand",
+        "rfingers",
+        "rthumb",
     ),
     parents=(
-        -1, 0, 1, 2, 3, 4,
-        0, 6, 7, 8, 9,
-        0, 11, 12, 13, 14, 15,
-        13, 17, 18, 19, 20, 21, 20,
-        13, 24, 25, 26, 27, 28, 27,
+        -1,
+        0,
+        1,
+        2,
+        3,
+        4,
+        0,
+        6,
+        7,
+        8,
+        9,
+        0,
+        11,
+        12,
+        13,
+        14,
+        15,
+        13,
+        17,
+        18,
+        19,
+        20,
+        21,
+        20,
+        13,
+        24,
+        25,
+        26,
+        27,
+        28,
+        27,
     ),
 )
 
 #: Limb landmarks of both Kinect layouts (v2 ``ntu25`` and v1 ``msr20`` name the limb joints alike).
 _KINECT_LIMBS = {
-    "l_shoulder": "ShoulderLeft", "l_elbow": "ElbowLeft", "l_wrist": "WristLeft", "l_hand": "HandLeft",
-    "r_shoulder": "ShoulderRight", "r_elbow": "ElbowRight", "r_wrist": "WristRight", "r_hand": "HandRight",
-    "l_hip": "HipLeft", "l_knee": "KneeLeft", "l_ankle": "AnkleLeft", "l_foot": "FootLeft",
-    "r_hip": "HipRight", "r_knee": "KneeRight", "r_ankle": "AnkleRight", "r_foot": "FootRight",
+    "l_shoulder": "ShoulderLeft",
+    "l_elbow": "ElbowLeft",
+    "l_wrist": "WristLeft",
+    "l_hand": "HandLeft",
+    "r_shoulder": "ShoulderRight",
+    "r_elbow": "ElbowRight",
+    "r_wrist": "WristRight",
+    "r_hand": "HandRight",
+    "l_hip": "HipLeft",
+    "l_knee": "KneeLeft",
+    "l_ankle": "AnkleLeft",
+    "l_foot": "FootLeft",
+    "r_hip": "HipRight",
+    "r_knee": "KneeRight",
+    "r_ankle": "AnkleRight",
+    "r_foot": "FootRight",
 }
 
 #: Body landmarks shared across layouts: landmark -> joint name in each layout. A joint's
@@ -118,11 +238,26 @@ LANDMARKS: dict[str, dict[str, str]] = {
     "ntu25": {"pelvis": "SpineBase", "spine": "SpineMid", "neck": "SpineShoulder", "head": "Head", **_KINECT_LIMBS},
     "msr20": {"pelvis": "HipCenter", "spine": "Spine", "neck": "ShoulderCenter", "head": "Head", **_KINECT_LIMBS},
     "cmu31": {
-        "pelvis": "root", "spine": "upperback", "neck": "lowerneck", "head": "head",
-        "l_shoulder": "lclavicle", "l_elbow": "lhumerus", "l_wrist": "lradius", "l_hand": "lhand",
-        "r_shoulder": "rclavicle", "r_elbow": "rhumerus", "r_wrist": "rradius", "r_hand": "rhand",
-        "l_hip": "lhipjoint", "l_knee": "lfemur", "l_ankle": "ltibia", "l_foot": "lfoot",
-        "r_hip": "rhipjoint", "r_knee": "rfemur", "r_ankle": "rtibia", "r_foot": "rfoot",
+        "pelvis": "root",
+        "spine": "upperback",
+        "neck": "lowerneck",
+        "head": "head",
+        "l_shoulder": "lclavicle",
+        "l_elbow": "lhumerus",
+        "l_wrist": "lradius",
+        "l_hand": "lhand",
+        "r_shoulder": "rclavicle",
+        "r_elbow": "rhumerus",
+        "r_wrist": "rradius",
+        "r_hand": "rhand",
+        "l_hip": "lhipjoint",
+        "l_knee": "lfemur",
+        "l_ankle": "ltibia",
+        "l_foot": "lfoot",
+        "r_hip": "rhipjoint",
+        "r_knee": "rfemur",
+        "r_ankle": "rtibia",
+        "r_foot": "rfoot",
     },
 }
 
@@ -154,9 +289,21 @@ def hip_joints(joint_names, layout_name: str | None = None) -> tuple[int, int] |
         low = name.lower()
         if not any(k in low for k in ("upleg", "upperleg", "thigh", "hip")) or low in ("hips", "hip"):
             continue
-        if "left" in low or low.endswith(("_l", ".l")) or low.startswith(("l_", "left")) or low[:1] == "l" and "hip" in low[1:4]:
+        if (
+            "left" in low
+            or low.endswith(("_l", ".l"))
+            or low.startswith(("l_", "left"))
+            or low[:1] == "l"
+            and "hip" in low[1:4]
+        ):
             found.setdefault("l", i)
-        elif "right" in low or low.endswith(("_r", ".r")) or low.startswith(("r_", "right")) or low[:1] == "r" and "hip" in low[1:4]:
+        elif (
+            "right" in low
+            or low.endswith(("_r", ".r"))
+            or low.startswith(("r_", "right"))
+            or low[:1] == "r"
+            and "hip" in low[1:4]
+        ):
             found.setdefault("r", i)
     return (found["l"], found["r"]) if "l" in found and "r" in found else None
 
@@ -164,9 +311,26 @@ def hip_joints(joint_names, layout_name: str | None = None) -> tuple[int, int] |
 #: The 20 body landmarks of :data:`LANDMARKS`, in one order, with their tree (parent landmark index, -1 for the
 #: pelvis): the skeleton on which layout-independent features (retrieval) are computed.
 LANDMARK_NAMES: tuple[str, ...] = (
-    "pelvis", "spine", "neck", "head",
-    "l_shoulder", "l_elbow", "l_wrist", "l_hand", "r_shoulder", "r_elbow", "r_wrist", "r_hand",
-    "l_hip", "l_knee", "l_ankle", "l_foot", "r_hip", "r_knee", "r_ankle", "r_foot",
+    "pelvis",
+    "spine",
+    "neck",
+    "head",
+    "l_shoulder",
+    "l_elbow",
+    "l_wrist",
+    "l_hand",
+    "r_shoulder",
+    "r_elbow",
+    "r_wrist",
+    "r_hand",
+    "l_hip",
+    "l_knee",
+    "l_ankle",
+    "l_foot",
+    "r_hip",
+    "r_knee",
+    "r_ankle",
+    "r_foot",
 )
 LANDMARK_PARENTS: tuple[int, ...] = (-1, 0, 1, 2, 2, 4, 5, 6, 2, 8, 9, 10, 0, 12, 13, 14, 0, 16, 17, 18)
 
@@ -204,7 +368,7 @@ def _rig_side(name: str) -> tuple[str | None, str]:
                 return side, low[: -len(suffix)]
         for prefix in (f"{side}_", f"{side}."):
             if low.startswith(prefix):
-                return side, low[len(prefix):]
+                return side, low[len(prefix) :]
     return None, low.replace("_", "")
 
 
@@ -226,8 +390,10 @@ def mirror_joints(joint_names) -> list[int]:
             other = "r" if side == "l" else "l"
             match = [i for i, (s, st) in enumerate(parsed) if s == other and st == stem]
             if not match:
-                raise ValueError(f"joint {names[j]!r} is marked {'left' if side == 'l' else 'right'} but no joint "
-                                 f"is its counterpart (stem {stem!r}); cannot mirror this skeleton")
+                raise ValueError(
+                    f"joint {names[j]!r} is marked {'left' if side == 'l' else 'right'} but no joint "
+                    f"is its counterpart (stem {stem!r}); cannot mirror this skeleton"
+                )
             result[j] = match[0]
         elif names[j][:1].lower() in ("l", "r"):
             swapped = ("r" if names[j][:1].lower() == "l" else "l") + names[j][1:].lower()

@@ -7,6 +7,7 @@ sequences (metres, y up, resampled to ``fps``) and ``y`` = 0-based classes; lear
 ``data.root=<folder> data.test_actors=[<actor>]`` (validation from the training performers only) and report
 ``mocapkit eval``'s top-1 on the same clips.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -35,23 +36,36 @@ class HDM05ActionBenchmark(Benchmark):
         self.data_module = HDM05ActionDataModule(str(self.root), labels=labels, fps=fps, val_fraction=0)
         self.performers = list(self.data_module.performers)
         if len(self.performers) < 2:
-            raise ComparisonError(f"benchmark.root={self.root}: leaving a performer out needs at least 2 "
-                                  f"performers, the folder has {self.performers}")
+            raise ComparisonError(
+                f"benchmark.root={self.root}: leaving a performer out needs at least 2 "
+                f"performers, the folder has {self.performers}"
+            )
         self.protocols = tuple(f"test_{actor}" for actor in self.performers)
         self.sequences = [s.numpy() for s in self.data_module.sequences]
         self.labels = np.asarray(self.data_module.labels)
 
     def describe(self) -> dict:
-        return {"root": str(self.root), "n_clips": len(self.sequences), "performers": self.performers,
-                "labels": self.labels_from, "fps": self.fps, "class_names": self.data_module.class_names}
+        return {
+            "root": str(self.root),
+            "n_clips": len(self.sequences),
+            "performers": self.performers,
+            "labels": self.labels_from,
+            "fps": self.fps,
+            "class_names": self.data_module.class_names,
+        }
 
     def split(self, protocol: str, seed: int) -> Split:
         actor = protocol.removeprefix("test_")
         subjects = np.asarray(self.data_module.subjects)
         test_mask = subjects == self.performers.index(actor)
         train, test = np.flatnonzero(~test_mask), np.flatnonzero(test_mask)
-        return Split(protocol, seed, train, test, {"train_actors": [a for a in self.performers if a != actor],
-                                                   "test_actors": [actor]})
+        return Split(
+            protocol,
+            seed,
+            train,
+            test,
+            {"train_actors": [a for a in self.performers if a != actor], "test_actors": [actor]},
+        )
 
     def data(self, indices: np.ndarray):
         """Sequences (a list of ``[T_i, 31, 3]`` float32 arrays) and labels ``[n]`` of ``indices``."""
@@ -59,13 +73,20 @@ class HDM05ActionBenchmark(Benchmark):
         return [self.sequences[i] for i in indices], self.labels[indices]
 
     def learned_overrides(self, protocol: str, seed: int) -> list[str]:
-        return [f"data.root={self.root}", f"data.test_actors=[{protocol.removeprefix('test_')}]",
-                "data.train_actors=null", f"data.labels={self.labels_from}", f"data.fps={self.fps}"]
+        return [
+            f"data.root={self.root}",
+            f"data.test_actors=[{protocol.removeprefix('test_')}]",
+            "data.train_actors=null",
+            f"data.labels={self.labels_from}",
+            f"data.fps={self.fps}",
+        ]
 
     def check_learned_config(self, cfg, method: str) -> None:
         if cfg.get("task") != "action" or "hdm05" not in str(cfg.data.get("_target_", "")):
-            raise ComparisonError(f"method {method}: the HDM05 benchmark scores action runs on HDM05 data "
-                                  f"(task={cfg.get('task')!r}, data={cfg.data.get('_target_')!r})")
+            raise ComparisonError(
+                f"method {method}: the HDM05 benchmark scores action runs on HDM05 data "
+                f"(task={cfg.get('task')!r}, data={cfg.data.get('_target_')!r})"
+            )
 
     def evaluate_learned(self, report: dict, run_dir: Path, split: Split) -> dict:
         metrics = {"accuracy": float(report["top1"]), "mean_class_accuracy": float(report["mean_class_accuracy"])}

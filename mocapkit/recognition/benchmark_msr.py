@@ -18,6 +18,7 @@ Learned runs (``experiment=msr3d_nmf_layer``) get ``data.root``, ``data.split`` 
 they train on 90 % of the training sequences (10 % select the checkpoint) and see sequences longer than
 ``data.max_frames`` subsampled, as every run of the data module does.
 """
+
 from __future__ import annotations
 
 import shutil
@@ -48,13 +49,17 @@ def subset_copy(root: Path, target: Path, actions=None, subjects=None, takes=Non
     copied = 0
     for source in sorted(Path(root).rglob("*_skeleton3D.txt")):
         name = parse_msr_name(source)
-        if ((actions is None or name.action in actions) and (subjects is None or name.subject in subjects)
-                and (takes is None or name.take in takes)):
+        if (
+            (actions is None or name.action in actions)
+            and (subjects is None or name.subject in subjects)
+            and (takes is None or name.take in takes)
+        ):
             shutil.copyfile(source, target / source.name)
             copied += 1
     if copied == 0:
-        raise ComparisonError(f"benchmark: no MSR Action3D file of {root} matches actions={actions}, "
-                              f"subjects={subjects}, takes={takes}")
+        raise ComparisonError(
+            f"benchmark: no MSR Action3D file of {root} matches actions={actions}, subjects={subjects}, takes={takes}"
+        )
     return target
 
 
@@ -76,8 +81,9 @@ class MSRActionBenchmark(Benchmark):
         if root is None:
             raise ComparisonError("benchmark.root is not set: give the MSR Action3D skeleton folder")
         self.source = Path(root)
-        self.subset = {k: list(v) for k, v in (("actions", actions), ("subjects", subjects), ("takes", takes))
-                       if v is not None}
+        self.subset = {
+            k: list(v) for k, v in (("actions", actions), ("subjects", subjects), ("takes", takes)) if v is not None
+        }
         if self.subset:
             if not subset_dir:
                 raise ComparisonError("benchmark.subset_dir: needed with benchmark.actions / subjects / takes")
@@ -89,9 +95,15 @@ class MSRActionBenchmark(Benchmark):
         self.sequences = [self.dataset.positions(i) for i in range(len(self.dataset))]
 
     def describe(self) -> dict:
-        return {"root": str(self.root), "source": str(self.source), "subset": self.subset,
-                "n_sequences": len(self.dataset), "excluded": dict(self.dataset.excluded),
-                "nmi_normalisation": NMI_NORMALISATION, "thesis_accuracy_random_half": THESIS_ACCURACY}
+        return {
+            "root": str(self.root),
+            "source": str(self.source),
+            "subset": self.subset,
+            "n_sequences": len(self.dataset),
+            "excluded": dict(self.dataset.excluded),
+            "nmi_normalisation": NMI_NORMALISATION,
+            "thesis_accuracy_random_half": THESIS_ACCURACY,
+        }
 
     @staticmethod
     def _protocol(protocol: str) -> tuple[str, str | None]:
@@ -102,8 +114,16 @@ class MSRActionBenchmark(Benchmark):
         split, subset = self._protocol(protocol)
         train, test = msr_split_indices(self.dataset, split, subset=subset, seed=seed)
         subjects = np.asarray(self.dataset.subjects)
-        return Split(protocol, seed, train, test, {"train_subjects": np.unique(subjects[train]).tolist(),
-                                                   "test_subjects": np.unique(subjects[test]).tolist()})
+        return Split(
+            protocol,
+            seed,
+            train,
+            test,
+            {
+                "train_subjects": np.unique(subjects[train]).tolist(),
+                "test_subjects": np.unique(subjects[test]).tolist(),
+            },
+        )
 
     def data(self, indices: np.ndarray):
         """Skeleton sequences (a list of ``[T_i, 20, 3]`` float32 arrays) and action labels ``[n]`` of ``indices``."""
@@ -122,15 +142,22 @@ class MSRActionBenchmark(Benchmark):
         words = getattr(final, "train_words_", None)
         if words is not None:
             metrics.update(clip_metrics(y[final.train_clip_sequence_], words))
-            detail = {"n_train_clips": len(words), "best_C": getattr(final, "best_C_", None),
-                      "cluster_time_s": getattr(final, "cluster_time_", None),
-                      "classifier_time_s": getattr(final, "classifier_time_", None)}
+            detail = {
+                "n_train_clips": len(words),
+                "best_C": getattr(final, "best_C_", None),
+                "cluster_time_s": getattr(final, "cluster_time_", None),
+                "classifier_time_s": getattr(final, "classifier_time_", None),
+            }
         return {"metrics": metrics, "detail": detail}
 
     def learned_overrides(self, protocol: str, seed: int) -> list[str]:
         split, subset = self._protocol(protocol)
-        return [f"data.root={self.root}", f"data.split={split}", f"data.split_seed={seed}",
-                f"data.subset={subset or 'null'}"]
+        return [
+            f"data.root={self.root}",
+            f"data.split={split}",
+            f"data.split_seed={seed}",
+            f"data.subset={subset or 'null'}",
+        ]
 
     def evaluate_learned(self, report: dict, run_dir: Path, split: Split) -> dict:
         """Top-1 of ``mocapkit eval``; clip metrics of the model's arg-max soft words on the training sequences."""
@@ -139,8 +166,12 @@ class MSRActionBenchmark(Benchmark):
         if words is not None:
             owners, assigned = words
             metrics.update(clip_metrics(self.labels[split.train][owners], assigned))
-        return {"metrics": metrics, "detail": {k: report[k] for k in ("top1", "top5", "mean_class_accuracy",
-                                                                       "split", "sample_counts") if k in report}}
+        return {
+            "metrics": metrics,
+            "detail": {
+                k: report[k] for k in ("top1", "top5", "mean_class_accuracy", "split", "sample_counts") if k in report
+            },
+        }
 
     # -------------------------------------------------------------- presentation
     def headline(self, protocol: str) -> list[str]:
@@ -152,22 +183,31 @@ class MSRActionBenchmark(Benchmark):
         return super().format_metric(name, mean, sd)
 
     def markdown(self, results: dict) -> str:
-        return "\n".join([
-            "## Reading the table", "",
-            (f"Accuracy = sequence recognition on the test side. clip ACC / NMI / ARI = the training clips' words "
-             f"against their sequence's action (NMI normalisation: {NMI_NORMALISATION}); n_words_used = distinct "
-             "words among the training clips. The thesis (§6.3.4) reports "
-             f"{100 * THESIS_ACCURACY:.2f} % with NMC on a random half (features, k, λ, graph and classifier not "
-             "stated); only random_half rows compare with it. Hard bag of words (arg-max word per clip) is the "
-             "thesis's protocol; `soft` rows read the same clusterer as the mean ℓ1-normalised code per sequence."),
-        ])
+        return "\n".join(
+            [
+                "## Reading the table",
+                "",
+                (
+                    f"Accuracy = sequence recognition on the test side. clip ACC / NMI / ARI = the training clips' words "
+                    f"against their sequence's action (NMI normalisation: {NMI_NORMALISATION}); n_words_used = distinct "
+                    "words among the training clips. The thesis (§6.3.4) reports "
+                    f"{100 * THESIS_ACCURACY:.2f} % with NMC on a random half (features, k, λ, graph and classifier not "
+                    "stated); only random_half rows compare with it. Hard bag of words (arg-max word per clip) is the "
+                    "thesis's protocol; `soft` rows read the same clusterer as the mean ℓ1-normalised code per sequence."
+                ),
+            ]
+        )
 
 
 def clip_metrics(clip_labels: np.ndarray, words: np.ndarray) -> dict:
     """``clip_acc``, ``clip_nmi``, ``clip_ari``, ``n_words_used`` of clip ``words`` against their ``clip_labels``."""
     report = clustering_report(np.asarray(clip_labels), np.asarray(words))
-    return {"clip_acc": report["acc"], "clip_nmi": report["nmi"], "clip_ari": report["ari"],
-            "n_words_used": report["n_clusters"]}
+    return {
+        "clip_acc": report["acc"],
+        "clip_nmi": report["nmi"],
+        "clip_ari": report["ari"],
+        "n_words_used": report["n_clusters"],
+    }
 
 
 def learned_clip_words(checkpoint: Path, sequences: list[np.ndarray]):
@@ -178,7 +218,7 @@ def learned_clip_words(checkpoint: Path, sequences: list[np.ndarray]):
     from mocapkit.train.checkpoints import checkpoint_config, load_module
 
     checkpoint = Path(checkpoint)
-    module = load_module(checkpoint_config(checkpoint), checkpoint).eval()   # vetted, weights_only
+    module = load_module(checkpoint_config(checkpoint), checkpoint).eval()  # vetted, weights_only
     network = getattr(module, "model", None)
     if not hasattr(network, "soft_words"):
         return None

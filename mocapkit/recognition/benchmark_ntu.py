@@ -7,6 +7,7 @@ the seed, which moves the training runs' initialisation, their validation hold-o
 body is absent) and the 0-based labels; learned runs train on ``data.root=<cache> data.split=<protocol>``
 and report ``mocapkit eval``'s top-1 on the same test samples.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -41,8 +42,16 @@ class NTUBenchmark(Benchmark):
     def split(self, protocol: str, seed: int) -> Split:
         train, test = split_indices(self.cache, protocol)
         subjects = np.asarray(self.cache.subjects)
-        return Split(protocol, seed, train, test, {"train_subjects": np.unique(subjects[train]).tolist(),
-                                                   "test_subjects": np.unique(subjects[test]).tolist()})
+        return Split(
+            protocol,
+            seed,
+            train,
+            test,
+            {
+                "train_subjects": np.unique(subjects[train]).tolist(),
+                "test_subjects": np.unique(subjects[test]).tolist(),
+            },
+        )
 
     def data(self, indices: np.ndarray):
         """Sequences (a list of ``[bodies, T_i, 25, 3]`` float32 arrays) and labels ``[n]`` of ``indices``."""
@@ -54,12 +63,17 @@ class NTUBenchmark(Benchmark):
 
     def check_learned_config(self, cfg, method: str) -> None:
         if cfg.get("task") != "action" or "ntu" not in str(cfg.data.get("_target_", "")):
-            raise ComparisonError(f"method {method}: the NTU benchmark scores action runs on NTU data "
-                                  f"(task={cfg.get('task')!r}, data={cfg.data.get('_target_')!r})")
+            raise ComparisonError(
+                f"method {method}: the NTU benchmark scores action runs on NTU data "
+                f"(task={cfg.get('task')!r}, data={cfg.data.get('_target_')!r})"
+            )
 
     def evaluate_learned(self, report: dict, run_dir: Path, split: Split) -> dict:
-        metrics = {"accuracy": float(report["top1"]), "top5": float(report["top5"]),
-                   "mean_class_accuracy": float(report["mean_class_accuracy"])}
+        metrics = {
+            "accuracy": float(report["top1"]),
+            "top5": float(report["top5"]),
+            "mean_class_accuracy": float(report["mean_class_accuracy"]),
+        }
         return {"metrics": metrics, "detail": {k: report[k] for k in ("split", "sample_counts") if k in report}}
 
     def headline(self, protocol: str) -> list[str]:

@@ -9,6 +9,7 @@ With ``eval.views`` (keyword arguments of :class:`~mocapkit.datasets.augment.Tes
 class probabilities are averaged (test-time augmentation); the report's logits are the log of the mean
 probabilities. ``eval.views=null`` (the default) predicts each sample once.
 """
+
 from __future__ import annotations
 
 import json
@@ -35,8 +36,10 @@ def views_from_config(cfg: DictConfig) -> TestTimeViews | None:
         return None
     spec = OmegaConf.to_container(spec, resolve=True) if OmegaConf.is_config(spec) else spec
     if not isinstance(spec, dict):
-        raise ConfigError(f"eval.views: expected a mapping such as {{crops: [1.0, 0.9], rotate_deg: [0, -10, 10]}} "
-                          f"or null, got {spec!r}")
+        raise ConfigError(
+            f"eval.views: expected a mapping such as {{crops: [1.0, 0.9], rotate_deg: [0, -10, 10]}} "
+            f"or null, got {spec!r}"
+        )
     unknown = sorted(set(spec) - {"crops", "rotate_deg", "min_frames"})
     if unknown:
         raise ConfigError(f"eval.views: unknown key(s) {unknown}; it takes crops, rotate_deg, min_frames")
@@ -53,9 +56,13 @@ def mean_over_views(out: dict[str, np.ndarray], n_views: int) -> dict[str, np.nd
     each group's first row (they are the sample's own: label, index, subject).
     """
     n = len(out["logits"]) // n_views
-    if len(out["logits"]) != n * n_views or (out["indices"].reshape(n, n_views) != out["indices"][::n_views, None]).any():
-        raise RuntimeError(f"test-time views: the {len(out['logits'])} predictions do not come in groups of "
-                           f"{n_views} rows per sample")
+    if (
+        len(out["logits"]) != n * n_views
+        or (out["indices"].reshape(n, n_views) != out["indices"][::n_views, None]).any()
+    ):
+        raise RuntimeError(
+            f"test-time views: the {len(out['logits'])} predictions do not come in groups of {n_views} rows per sample"
+        )
     probabilities = torch.softmax(torch.from_numpy(out["logits"]).double(), dim=-1).reshape(n, n_views, -1)
     mean = {key: value[::n_views] for key, value in out.items()}
     mean["logits"] = probabilities.mean(1).log().float().numpy()
@@ -67,19 +74,31 @@ def evaluate_action(module, datamodule, cfg: DictConfig, out_dir: Path) -> dict:
     part = cfg.eval.part
     views = views_from_config(cfg)
     if views is None:
-        out = predict_outputs(module, datamodule.test_dataloader() if part == "test" else datamodule.val_dataloader(),
-                              cfg)
+        out = predict_outputs(
+            module, datamodule.test_dataloader() if part == "test" else datamodule.val_dataloader(), cfg
+        )
     else:
         out = mean_over_views(predict_outputs(module, datamodule.views_dataloader(part, views), cfg), len(views))
-    report = classification_report(out["logits"], out["labels"], groups={"subject": out["subjects"]},
-                                   class_names=module.hparams.class_names or None)
-    report.update({"part": part, "views": None if views is None else
-                   {"crops": list(views.crops), "rotate_deg": list(views.rotate_deg), "n_views": len(views)},
-                   **datamodule.describe()})
+    report = classification_report(
+        out["logits"],
+        out["labels"],
+        groups={"subject": out["subjects"]},
+        class_names=module.hparams.class_names or None,
+    )
+    report.update(
+        {
+            "part": part,
+            "views": None
+            if views is None
+            else {"crops": list(views.crops), "rotate_deg": list(views.rotate_deg), "n_views": len(views)},
+            **datamodule.describe(),
+        }
+    )
     atomic_write_text(out_dir / "metrics.json", json.dumps(report, indent=2))
     title = f"{cfg.experiment_name}: {report['split']} {part}, top-1 {report['top1']:.1%}"
-    plot_confusion_matrix(np.array(report["confusion_matrix"]), report["class_names"],
-                          out_dir / "confusion_matrix.png", title=title)
+    plot_confusion_matrix(
+        np.array(report["confusion_matrix"]), report["class_names"], out_dir / "confusion_matrix.png", title=title
+    )
     atomic_write_text(out_dir / "summary.md", summary_table(report))
     print(summary_table(report))
     for name in ("metrics.json", "confusion_matrix.png", "summary.md"):

@@ -10,6 +10,7 @@ The file is checked with ``onnx.checker`` and onnxruntime is compared with
 PyTorch on a batch size, body count and length other than those traced; a
 mismatch is an error.
 """
+
 from __future__ import annotations
 
 import json
@@ -36,13 +37,21 @@ def example_skeletons(batch: int, frames: int, bodies: int = 2, joints: int = 25
     offset = torch.tensor([0.0, 0.0, 3.0]) + torch.randn(batch, bodies, 1, 1, 3, generator=g) * 0.4
     x = pose + drift + offset
     x[0, 1:] = 0.0
-    x[:, :, frames - max(1, frames // 8):] = 0.0
+    x[:, :, frames - max(1, frames // 8) :] = 0.0
     return x
 
 
-def export_onnx(model: torch.nn.Module, out: str | Path, class_names: list[str] | None = None, opset: int = DEFAULT_OPSET,
-                trace_shape: tuple[int, int] = (2, 64), check_shape: tuple[int, int] = (3, 97),
-                atol: float = 1e-4, rtol: float = 1e-3, max_frames: int | None = None) -> dict:
+def export_onnx(
+    model: torch.nn.Module,
+    out: str | Path,
+    class_names: list[str] | None = None,
+    opset: int = DEFAULT_OPSET,
+    trace_shape: tuple[int, int] = (2, 64),
+    check_shape: tuple[int, int] = (3, 97),
+    atol: float = 1e-4,
+    rtol: float = 1e-3,
+    max_frames: int | None = None,
+) -> dict:
     """Export ``model`` (skeletons → logits) to ``out`` and check it; return the parity figures.
 
     ``max_frames`` (the training data's ``data.max_frames``) goes into the metadata: ``mocapkit predict``
@@ -69,16 +78,28 @@ def export_onnx(model: torch.nn.Module, out: str | Path, class_names: list[str] 
         warnings.simplefilter("ignore")
         # optimize=False: onnxscript's graph optimiser left this graph out of topological
         # order (rejected by onnx.checker) when we tried it; the unoptimised graph is correct.
-        program = torch.onnx.export(model, (trace_input,), None, input_names=["skeletons"], output_names=["logits"],
-                                    dynamic_shapes={"skeletons": {0: batch, 1: bodies, 2: frames}}, dynamo=True,
-                                    opset_version=opset, optimize=False, verbose=False)
+        program = torch.onnx.export(
+            model,
+            (trace_input,),
+            None,
+            input_names=["skeletons"],
+            output_names=["logits"],
+            dynamic_shapes={"skeletons": {0: batch, 1: bodies, 2: frames}},
+            dynamo=True,
+            opset_version=opset,
+            optimize=False,
+            verbose=False,
+        )
     proto = program.model_proto  # weights inline: one self-contained file (VGG16 is ~0.5 GB, under protobuf's 2 GB)
-    meta = {"class_names": json.dumps(class_names or []),
-            "layout": layout.name if layout is not None else "ntu25",
-            "joint_names": json.dumps(list(layout.joint_names) if layout is not None else []),
-            "input": f"skeletons float32 [batch, bodies, frames, {joints}, 3], metres, zeros where a body is absent",
-            "output": "logits float32 [batch, classes]", "producer": "mocapkit",
-            "max_frames": json.dumps(None if max_frames is None else int(max_frames))}
+    meta = {
+        "class_names": json.dumps(class_names or []),
+        "layout": layout.name if layout is not None else "ntu25",
+        "joint_names": json.dumps(list(layout.joint_names) if layout is not None else []),
+        "input": f"skeletons float32 [batch, bodies, frames, {joints}, 3], metres, zeros where a body is absent",
+        "output": "logits float32 [batch, classes]",
+        "producer": "mocapkit",
+        "max_frames": json.dumps(None if max_frames is None else int(max_frames)),
+    }
     save_checked_onnx(proto, meta, out)
 
     session = cpu_session(str(out))
@@ -88,22 +109,44 @@ def export_onnx(model: torch.nn.Module, out: str | Path, class_names: list[str] 
         with torch.no_grad():
             reference = model(check_input).numpy()
         result = session.run(["logits"], {"skeletons": check_input.numpy()})[0]
-        checks.append({"shape": list(check_input.shape), "max_abs_diff": float(np.abs(result - reference).max()),
-                       "max_abs_logit": float(np.abs(reference).max()),
-                       "same_top1": bool((result.argmax(1) == reference.argmax(1)).all())})
+        checks.append(
+            {
+                "shape": list(check_input.shape),
+                "max_abs_diff": float(np.abs(result - reference).max()),
+                "max_abs_logit": float(np.abs(reference).max()),
+                "same_top1": bool((result.argmax(1) == reference.argmax(1)).all()),
+            }
+        )
         if not np.allclose(result, reference, atol=atol, rtol=rtol):
-            raise ParityError(f"onnxruntime differs from PyTorch on input {list(check_input.shape)}: "
-                              f"max |diff| = {checks[-1]['max_abs_diff']:.3g} > atol {atol} + rtol {rtol}·|ref|")
-    report = {"onnx": str(out), "opset": opset, "layout": meta["layout"], "traced_shape": list(trace_input.shape),
-              "checked_shape": checks[0]["shape"], "checks": checks,
-              "max_abs_diff": max(c["max_abs_diff"] for c in checks), "atol": atol, "rtol": rtol,
-              "same_top1": all(c["same_top1"] for c in checks)}
+            raise ParityError(
+                f"onnxruntime differs from PyTorch on input {list(check_input.shape)}: "
+                f"max |diff| = {checks[-1]['max_abs_diff']:.3g} > atol {atol} + rtol {rtol}·|ref|"
+            )
+    report = {
+        "onnx": str(out),
+        "opset": opset,
+        "layout": meta["layout"],
+        "traced_shape": list(trace_input.shape),
+        "checked_shape": checks[0]["shape"],
+        "checks": checks,
+        "max_abs_diff": max(c["max_abs_diff"] for c in checks),
+        "atol": atol,
+        "rtol": rtol,
+        "same_top1": all(c["same_top1"] for c in checks),
+    }
     return report
 
 
 def export_action_module(module, target: Path, export_cfg) -> dict:
     """Export a skeleton classifier with the ``export`` config node (opset, trace/check shapes, tolerances)."""
-    return export_onnx(module.model, target, class_names=module.hparams.class_names, opset=export_cfg.opset,
-                       trace_shape=(export_cfg.trace_batch, export_cfg.trace_frames),
-                       check_shape=(export_cfg.check_batch, export_cfg.check_frames),
-                       atol=export_cfg.atol, rtol=export_cfg.rtol, max_frames=export_cfg.get("max_frames"))
+    return export_onnx(
+        module.model,
+        target,
+        class_names=module.hparams.class_names,
+        opset=export_cfg.opset,
+        trace_shape=(export_cfg.trace_batch, export_cfg.trace_frames),
+        check_shape=(export_cfg.check_batch, export_cfg.check_frames),
+        atol=export_cfg.atol,
+        rtol=export_cfg.rtol,
+        max_frames=export_cfg.get("max_frames"),
+    )

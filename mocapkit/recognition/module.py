@@ -9,6 +9,7 @@ accumulates them over the epoch, synchronises them across processes (DDP) and re
 ``val/acc`` — the checkpoint monitor — is the accuracy over the whole validation set, not over
 one process's shard. Losses are logged with ``sync_dist=True`` for the same reason.
 """
+
 from __future__ import annotations
 
 import lightning as L
@@ -28,7 +29,6 @@ from mocapkit.train.optimization import (
 STAGES = ("train", "val", "test")
 
 
-
 class ActionRecognitionModule(ConfiguredOptimization, StagedSteps, L.LightningModule):
     """Cross-entropy training of ``model`` (skeletons ``[B, M, T, J, 3]`` → logits ``[B, C]``).
 
@@ -45,20 +45,34 @@ class ActionRecognitionModule(ConfiguredOptimization, StagedSteps, L.LightningMo
         label_smoothing: cross-entropy label smoothing.
     """
 
-    def __init__(self, model: dict, optimizer: dict, num_classes: int, scheduler: dict | None = None,
-                 class_names: list[str] | None = None, label_smoothing: float = 0.0):
+    def __init__(
+        self,
+        model: dict,
+        optimizer: dict,
+        num_classes: int,
+        scheduler: dict | None = None,
+        class_names: list[str] | None = None,
+        label_smoothing: float = 0.0,
+    ):
         super().__init__()
         model, optimizer = as_plain_dict(model), as_plain_dict(optimizer)
         scheduler = as_plain_dict(scheduler) if scheduler is not None else None
-        self.save_hyperparameters({"model": model, "optimizer": optimizer, "scheduler": scheduler,
-                                   "num_classes": num_classes, "class_names": class_names,
-                                   "label_smoothing": label_smoothing})
+        self.save_hyperparameters(
+            {
+                "model": model,
+                "optimizer": optimizer,
+                "scheduler": scheduler,
+                "num_classes": num_classes,
+                "class_names": class_names,
+                "label_smoothing": label_smoothing,
+            }
+        )
         self.model = instantiate(model, num_classes=num_classes)
         #: ``<stage>_acc`` → top-1 accuracy over the epoch (micro: correct / samples). Not keyed by stage
         #: alone: ``train`` is taken by ``nn.Module.train``.
-        self.accuracy = nn.ModuleDict({f"{stage}_acc": MulticlassAccuracy(num_classes, average="micro")
-                                       for stage in STAGES})
-
+        self.accuracy = nn.ModuleDict(
+            {f"{stage}_acc": MulticlassAccuracy(num_classes, average="micro") for stage in STAGES}
+        )
 
     def forward(self, skeletons: torch.Tensor) -> torch.Tensor:
         return self.model(skeletons)
@@ -66,19 +80,28 @@ class ActionRecognitionModule(ConfiguredOptimization, StagedSteps, L.LightningMo
     def _step(self, batch: dict, stage: str) -> torch.Tensor:
         logits = self(batch["skeletons"])
         if logits.dim() == 3:  # an ensemble in training mode: [members, B, C], each member on its own loss
-            loss = torch.stack([F.cross_entropy(member, batch["labels"], label_smoothing=self.hparams.label_smoothing)
-                                for member in logits]).sum()
+            loss = torch.stack(
+                [
+                    F.cross_entropy(member, batch["labels"], label_smoothing=self.hparams.label_smoothing)
+                    for member in logits
+                ]
+            ).sum()
             logits = logits.mean(0)
         else:
             loss = F.cross_entropy(logits, batch["labels"], label_smoothing=self.hparams.label_smoothing)
         accuracy = self.accuracy[f"{stage}_acc"]
         accuracy.update(logits.detach(), batch["labels"])
         on_step = stage == "train"
-        self.log(f"{stage}/loss", loss, on_step=on_step, on_epoch=True, prog_bar=True, batch_size=len(logits),
-                 sync_dist=True)
+        self.log(
+            f"{stage}/loss", loss, on_step=on_step, on_epoch=True, prog_bar=True, batch_size=len(logits), sync_dist=True
+        )
         self.log(f"{stage}/acc", accuracy, on_step=False, on_epoch=True, prog_bar=True)
         return loss
 
     def predict_step(self, batch: dict, batch_idx: int) -> dict:
-        return {"logits": self(batch["skeletons"]), "labels": batch["labels"], "indices": batch["indices"],
-                "subjects": batch["subjects"]}
+        return {
+            "logits": self(batch["skeletons"]),
+            "labels": batch["labels"],
+            "indices": batch["indices"],
+            "subjects": batch["subjects"],
+        }

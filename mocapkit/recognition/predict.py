@@ -10,6 +10,7 @@ Only an ONNX file is ever loaded (never a checkpoint or a pickle); a file that i
 a model without a ``skeletons`` input, or a motion with non-finite coordinates is refused with a
 ``ValueError`` naming the file.
 """
+
 from __future__ import annotations
 
 import json
@@ -19,8 +20,8 @@ import numpy as np
 import onnxruntime as ort
 
 from mocapkit.datasets.formats.ntu_skeleton import read_skeleton, select_main_bodies
-from mocapkit.motion.frames import uniform_frame_indices
 from mocapkit.deploy.runtime import cpu_session
+from mocapkit.motion.frames import uniform_frame_indices
 
 
 def softmax(logits: np.ndarray) -> np.ndarray:
@@ -33,12 +34,12 @@ def model_input(path: str | Path, layout: str) -> np.ndarray:
     """One file as the model's input ``[1, bodies, frames, joints, 3]`` (float32, metres, zeros = absent)."""
     if Path(path).suffix == ".skeleton":
         return select_main_bodies(read_skeleton(path), max_bodies=2).positions[None]
-    from mocapkit.motion.layouts import LAYOUTS
     from mocapkit.datasets.formats.motion_io import read_motion
+    from mocapkit.motion.layouts import LAYOUTS
 
     motion = read_motion(path)
     if motion.layout_name == layout and layout in LAYOUTS and motion.joint_names != LAYOUTS[layout].joint_names:
-        motion = motion.select(list(LAYOUTS[layout].joint_names))   # a C3D labelled with the joints, in its order
+        motion = motion.select(list(LAYOUTS[layout].joint_names))  # a C3D labelled with the joints, in its order
     elif motion.layout_name != layout:
         if layout not in LAYOUTS:
             raise ValueError(f"the model's metadata names the skeleton layout {layout!r}; known: {', '.join(LAYOUTS)}")
@@ -68,8 +69,10 @@ def predict_files(onnx_path: str | Path, files: list[str | Path], top: int = 5) 
     meta = session.get_modelmeta().custom_metadata_map
     inputs = [i.name for i in session.get_inputs()]
     if inputs != ["skeletons"]:
-        raise ValueError(f"--onnx {onnx_path}: expected a skeleton classifier with the one input 'skeletons' "
-                         f"(mocapkit export of an action run), got inputs {inputs}")
+        raise ValueError(
+            f"--onnx {onnx_path}: expected a skeleton classifier with the one input 'skeletons' "
+            f"(mocapkit export of an action run), got inputs {inputs}"
+        )
     try:
         class_names = [str(n) for n in json.loads(meta.get("class_names", "[]"))]
     except (ValueError, TypeError) as exc:
@@ -82,15 +85,18 @@ def predict_files(onnx_path: str | Path, files: list[str | Path], top: int = 5) 
     results = []
     for path in files:
         x = np.asarray(model_input(path, layout), dtype=np.float32)
-        x = x[:, :, uniform_frame_indices(x.shape[2], max_frames)]   # the frames training sampled
+        x = x[:, :, uniform_frame_indices(x.shape[2], max_frames)]  # the frames training sampled
         if not np.isfinite(x).all():
-            raise ValueError(f"{path}: the motion holds {int((~np.isfinite(x)).sum())} NaN or infinite coordinates; "
-                             "expected finite positions (absent joints as zeros)")
+            raise ValueError(
+                f"{path}: the motion holds {int((~np.isfinite(x)).sum())} NaN or infinite coordinates; "
+                "expected finite positions (absent joints as zeros)"
+            )
         try:
             logits = session.run(None, {"skeletons": x})[0][0]
         except Exception as exc:  # a shape the model does not take (another layout's joint count, ...)
-            raise ValueError(f"{path}: the model {Path(onnx_path).name} cannot run on it "
-                             f"(input {list(x.shape)}): {_first_line(exc)}") from exc
+            raise ValueError(
+                f"{path}: the model {Path(onnx_path).name} cannot run on it (input {list(x.shape)}): {_first_line(exc)}"
+            ) from exc
         probs = softmax(logits)
         order = np.argsort(-probs)[:top]
         names = [class_names[k] if k < len(class_names) else f"A{k + 1:03d}" for k in order]

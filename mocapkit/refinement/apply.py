@@ -1,11 +1,11 @@
 """Refine a motion file: what ``mocapkit refine IN OUT --method NAME [--set key=value ...] [--train PATH ...]`` runs
 (and ``--method RUN/best.ckpt`` / ``--onnx FILE``: a trained refiner network).
 
-The refiners are declared once, as Hydra configs: ``configs/refiner/<NAME>.yaml`` = ``{_target_: the
-MotionRefiner class, its parameters with their defaults}`` (``linear``, ``pchip``, ``pca``, ``svt``, ``lrmf``,
-``trnn``, ``psc``, ``filter-bases``, ``dynammo``, ``pose-prior``); :func:`build_refiner` composes ``configs/refiner.yaml`` with
-``refiner=NAME`` and the ``--set`` overrides (Hydra's grammar) and instantiates the node. The benchmark builds its
-refiners from the same files.
+The refiners are the registry's refinement methods (:mod:`mocapkit.train.registry`):
+``configs/refinement/method/<NAME>.yaml`` = ``{_target_: the MotionRefiner class, its parameters with their
+defaults}`` (``mocapkit methods refinement`` lists them); :func:`build_refiner` builds one with the ``--set``
+overrides (Hydra's grammar on that node: ``--set extrapolate=hold``, ``--set outlier_threshold=null``). The
+benchmark builds its refiners from the same files.
 
 :func:`refine_file` reads anything :func:`~mocapkit.datasets.formats.motion_io.read_motion` reads, fits the
 refiner on the ``--train`` motions (required when ``refiner.requires_fit``; used when given otherwise, e.g. the
@@ -14,9 +14,9 @@ optional clean frames of PCA), refines and writes:
 **Trained refiner networks** need no ``--train``: ``--method PATH.ckpt`` (a run of ``mocapkit train
 experiment=refine_bigru``) is :class:`~mocapkit.refinement.learned.LearnedRefiner` loaded from that checkpoint,
 ``--onnx FILE`` (its ``mocapkit export``) is :class:`~mocapkit.refinement.learned.OnnxRefiner`, run with
-onnxruntime and numpy only (torch is never imported on that path). ``--set`` takes their parameters
-(:data:`LEARNED_PARAMETERS`: ``window``, ``overlap``, ``repair_threshold``, ``max_empty_frames``,
-``short_gap_frames``, ``short_gap_points``; ``device`` of
+onnxruntime and numpy only (torch is never imported on that path). They are the registry's ``learned`` and
+``onnx`` entries with the file as ``checkpoint`` / ``path``; ``--set`` takes their other parameters (``window``,
+``overlap``, ``repair_threshold``, ``max_empty_frames``, ``short_gap_frames``, ``short_gap_points``; ``device`` of
 the checkpoint, ``threads`` of the ONNX session). The input must hold the joints the network was trained on
 (names; any order, extra markers are left as they are) and its up axis; a take at another frame rate is refined
 at the network's and brought back (:mod:`mocapkit.refinement.base`; the report says so); the report names the
@@ -59,6 +59,7 @@ seconds), the samples repaired, and the samples left missing with their frames a
 sample missing, NaN/Inf in observed entries, a take shorter than the method needs, a data-driven refiner applied
 to another skeleton layout, unreadable files) raises a ``ValueError`` subclass whose message names the file.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -71,9 +72,9 @@ from pathlib import Path
 
 import numpy as np
 
+from mocapkit.io_atomic import atomic_open, atomic_path
 from mocapkit.motion.container import Motion, any_coordinate
 from mocapkit.motion.frames import true_runs
-from mocapkit.io_atomic import atomic_open, atomic_path
 from mocapkit.refinement.base import MotionRefiner
 
 #: ``mocapkit refine --screen-outliers`` warns when the screen hides more than this share of the observed samples
@@ -88,177 +89,67 @@ class RefineError(ValueError):
     """A refine run that cannot go on (bad output name, unusable training data, a write that failed its check)."""
 
 
-# --------------------------------------------------------------------------- the registry (Hydra configs)
-
-
-def _config_dir() -> Path:
-    from mocapkit.train.config import CONFIG_DIR
-
-    return Path(CONFIG_DIR)
+# --------------------------------------------------------------------------- the methods (the registry)
 
 
 def refiner_names() -> list[str]:
-    """The method names: the files ``configs/refiner/<NAME>.yaml``."""
-    return sorted(p.stem for p in (_config_dir() / "refiner").glob("*.yaml"))
+    """The method names: the files ``configs/refinement/method/<NAME>.yaml`` (:mod:`mocapkit.train.registry`)."""
+    from mocapkit.train.registry import method_names
 
-
-def _override(method: str, item: str, keys: Sequence[str], target: str) -> str:
-    """``key=value`` (``--set``) as the override ``refiner.key=value``; unknown keys fail naming the key."""
-    if "=" not in item:
-        raise _config_error(f"--set {item!r}: expected KEY=VALUE")
-    key, value = item.split("=", 1)
-    prefix = key[:len(key) - len(key.lstrip("+~"))]
-    key = key[len(prefix):]
-    key = key.removeprefix("refiner.")
-    top = key.split(".", 1)[0]
-    if not prefix and top not in keys:
-        raise _config_error(f"--set {item}: refiner {method!r} ({target}) has no parameter {top!r}; its parameters: "
-                            f"{', '.join(keys) or '(none)'}")
-    return f"{prefix}refiner.{key}={value}"
-
-
-def _config_error(message: str) -> Exception:
-    from mocapkit.train.config import ConfigError
-
-    return ConfigError(message)
-
-
-def refiner_config(method: str, overrides: Sequence[str] = ()):
-    """The composed ``refiner`` node (an OmegaConf DictConfig) of ``method`` with ``--set`` style ``overrides``.
-
-    Raises:
-        ConfigError: an unknown method (the message lists the known names), an unknown key (named, with the
-            method's parameters), or an override Hydra cannot parse.
-    """
-    from mocapkit.train.config import compose_config
-
-    names = refiner_names()
-    if method not in names:
-        raise _config_error(f"unknown refiner method {method!r}; known: {', '.join(names)} "
-                            f"(configs/refiner/NAME.yaml in {_config_dir()})")
-    base = compose_config([f"refiner={method}"], config_name="refiner").refiner
-    keys = [str(k) for k in base if not str(k).startswith("_")]
-    target = str(base.get("_target_", "?"))
-    extra = [_override(method, item, keys, target) for item in overrides]
-    if not extra:
-        return base
-    from mocapkit.train.config import ConfigError
-
-    try:
-        return compose_config([f"refiner={method}", *extra], config_name="refiner").refiner
-    except ConfigError as exc:  # Hydra's messages are multi-line and name the override as rewritten
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc.__cause__).__name__
-        raise _config_error(f"--set {' '.join(overrides)}: {first}") from exc
+    return method_names("refinement")
 
 
 def build_refiner(method: str, overrides: Sequence[str] = ()) -> MotionRefiner:
-    """Instantiate ``configs/refiner/<method>.yaml`` with the ``--set`` style ``overrides``.
+    """The refiner ``configs/refinement/method/<method>.yaml`` with the ``--set`` Hydra ``overrides`` (unfitted).
 
     Raises:
-        ConfigError: see :func:`refiner_config`; also a class that cannot be imported or built from the
-            parameters (the message names the method and the class), or one that is not a MotionRefiner.
+        ConfigError: an unknown method (the message lists the names), an unknown key (named, with the method's
+            parameters), a bad value, a required parameter left unset, or a ``_target_`` that is not a mocapkit
+            MotionRefiner class (:func:`mocapkit.train.registry.build_method`).
     """
-    from hydra.utils import instantiate
+    from mocapkit.train.registry import build_method
 
-    from mocapkit.train.safety import REFINER_POLICY, check_targets
-
-    cfg = refiner_config(method, overrides)
-    target = str(cfg.get("_target_", "?"))
-    # every _target_ (nested ones too) must name a MotionRefiner class of mocapkit, before anything is built
-    source = f"refiner {method!r}" + (f" with --set {' '.join(overrides)}" if overrides else "")
-    check_targets(cfg, REFINER_POLICY, source, prefix="refiner")
-    try:
-        refiner = instantiate(cfg, _convert_="all")
-    except Exception as exc:  # Hydra wraps import and constructor errors in InstantiationException
-        cause = exc.__cause__ or exc
-        raise _config_error(f"refiner {method!r}: cannot build {target}: {cause}") from exc
-    if not isinstance(refiner, MotionRefiner):
-        raise _config_error(f"refiner {method!r}: {target} is a {type(refiner).__name__}, not a MotionRefiner")
-    return refiner
-
-
-# --------------------------------------------------------------------------- trained refiners (.ckpt / .onnx)
-
-#: ``--set`` parameters of the trained refiners: name -> (type, None allowed, smallest value).
-#: ``device`` is :class:`~mocapkit.refinement.learned.LearnedRefiner`'s, ``threads``
-#: :class:`~mocapkit.refinement.learned.OnnxRefiner`'s.
-LEARNED_PARAMETERS: dict[str, tuple[type, bool, float | None]] = {
-    "window": (int, True, 2), "overlap": (int, True, 0), "repair_threshold": (float, False, 0.0),
-    "max_empty_frames": (int, False, 0), "device": (str, False, None), "threads": (int, False, 0),
-    "short_gap_frames": (int, False, 0), "short_gap_points": (str, False, None),
-}
+    return build_method("refinement", method, overrides)
 
 
 def trained_model_kind(method: str | os.PathLike | None) -> str | None:
     """``"checkpoint"`` for a ``--method`` ending in ``.ckpt``, ``"onnx"`` for one ending in ``.onnx``, else None
-    (a method name of ``configs/refiner``)."""
+    (a method name of the registry)."""
     if method is None:
         return None
     return {".ckpt": "checkpoint", ".onnx": "onnx"}.get(Path(str(method)).suffix.lower())
 
 
-def _learned_value(item: str, key: str, raw: str):
-    import yaml
-
-    kind, nullable, low = LEARNED_PARAMETERS[key]
-    try:
-        value = yaml.safe_load(raw) if raw.strip() else None
-    except yaml.YAMLError:
-        value = raw
-    if value is None and nullable:
-        return None
-    try:
-        if kind is str:
-            if not isinstance(value, str) or not value:
-                raise ValueError
-            return value
-        if isinstance(value, bool) or value is None:
-            raise ValueError
-        if kind is int:
-            if isinstance(value, float) and not value.is_integer():
-                raise ValueError
-            value = int(value)
-        else:
-            value = float(value)
-        if low is not None and not value >= low:
-            raise ValueError
-    except (TypeError, ValueError):
-        what = {int: "an integer", float: "a number", str: "a name"}[kind]
-        bound = f" >= {low:g}" if low is not None else ""
-        raise _config_error(f"--set {item}: {key} must be {what}{bound}{' or null' if nullable else ''}, got "
-                            f"{raw!r}") from None
-    return value
-
-
-def build_learned_refiner(path: str | os.PathLike, overrides: Sequence[str] = (), onnx: bool = False,
-                          fit: bool = True) -> MotionRefiner:
-    """``LearnedRefiner(checkpoint=path)`` (``onnx``: ``OnnxRefiner(path)``) with the ``--set`` style
-    ``overrides`` (``key=value``, :data:`LEARNED_PARAMETERS`), loaded (``fit()``) unless ``fit=False``.
-
-    The ONNX refiner never imports torch.
+def build_learned_refiner(
+    path: str | os.PathLike, overrides: Sequence[str] = (), onnx: bool = False, fit: bool = True
+) -> MotionRefiner:
+    """The registry's ``learned`` entry with ``checkpoint=path`` (``onnx``: its ``onnx`` entry with ``path=path``)
+    and the ``--set`` Hydra ``overrides``, loaded (``fit()``) unless ``fit=False``. The ONNX refiner never
+    imports torch.
 
     Raises:
-        ConfigError: an unknown key (the message lists the parameters), a bad value, a checkpoint that is missing
-            or not a refiner's.
+        ConfigError: an unknown key (the message names the file and lists the parameters), a bad value, a checkpoint
+            that is missing or not a refiner's.
         FileNotFoundError / RefinementError: an ONNX file that is missing or not a refiner export.
     """
-    from mocapkit.refinement.learned import LearnedRefiner, OnnxRefiner
+    from mocapkit.train.errors import ConfigError
+    from mocapkit.train.registry import build_method
 
-    refiner = OnnxRefiner(str(path)) if onnx else LearnedRefiner(checkpoint=str(path))
-    name = type(refiner).__name__
-    keys = [k for k in refiner.get_params() if k in LEARNED_PARAMETERS]
-    params = {}
-    for item in overrides:
-        if "=" not in item:
-            raise _config_error(f"--set {item!r}: expected KEY=VALUE")
-        key, raw = item.split("=", 1)
-        key = key.strip().removeprefix("refiner.")
-        if key not in keys:
-            raise _config_error(f"--set {item}: {name} ({path}) has no parameter {key!r}; its parameters: "
-                                f"{', '.join(keys)}")
-        params[key] = _learned_value(item, key, raw)
-    refiner.set_params(**params)
+    name, key = ("onnx", "path") if onnx else ("learned", "checkpoint")
+    for item in overrides:  # the model file is the command's (--method / --onnx), not a --set
+        if item.split("=", 1)[0].lstrip("+~") == key:
+            raise ConfigError(f"--set {item}: {path} is the model; the trained refiner has no parameter {key!r} to set")
+    try:
+        refiner = build_method("refinement", name, [*overrides, f"{key}={_quoted(path)}"])
+    except ConfigError as exc:
+        raise ConfigError(f"{path}: {exc}") from exc
     return refiner.fit() if fit else refiner
+
+
+def _quoted(path: str | os.PathLike) -> str:
+    """A path as a Hydra override value (quoted: a path may hold characters Hydra's grammar reads)."""
+    text = str(path).replace("\\", "\\\\").replace("'", "\\'")
+    return f"'{text}'"
 
 
 # --------------------------------------------------------------------------- the report
@@ -270,10 +161,10 @@ class MarkerReport:
 
     name: str
     index: int
-    missing: int                                  # samples missing in the input
-    filled: int                                   # of those, filled
-    longest_gap: int                              # longest run of consecutive filled frames
-    repaired: int = 0                             # observed samples replaced as outliers (robust methods)
+    missing: int  # samples missing in the input
+    filled: int  # of those, filled
+    longest_gap: int  # longest run of consecutive filled frames
+    repaired: int = 0  # observed samples replaced as outliers (robust methods)
     #: (first, last, reason), inclusive; reason: "leading" / "trailing" (before the first / after the last
     #: observation), "missing in every frame" or "interior, not filled by the method"
     unfilled: list[tuple[int, int, str]] = field(default_factory=list)
@@ -290,16 +181,16 @@ class RefineReport:
     source: str
     output: str
     method: str
-    refiner: str                                  # class name
+    refiner: str  # class name
     fps: float
     frames: int
-    markers: list[MarkerReport]                   # markers with gaps or repairs, in file order
-    training: list[str] = field(default_factory=list)           # training files used
+    markers: list[MarkerReport]  # markers with gaps or repairs, in file order
+    training: list[str] = field(default_factory=list)  # training files used
     skipped: list[tuple[str, str]] = field(default_factory=list)  # (training file, why) with --skip-bad
-    write_mode: str = ""                          # how the output was written
+    write_mode: str = ""  # how the output was written
     hint: str = ""
-    refined_at_fps: float | None = None           # the rate a fixed-rate refiner worked at, when not the take's
-    screened: tuple[int, int] | None = None       # --screen-outliers: (samples the screen hid, observed samples)
+    refined_at_fps: float | None = None  # the rate a fixed-rate refiner worked at, when not the take's
+    screened: tuple[int, int] | None = None  # --screen-outliers: (samples the screen hid, observed samples)
     warning: str = ""
 
     @property
@@ -318,12 +209,16 @@ class RefineReport:
     def to_text(self) -> str:
         lines = [f"{self.source}: {self.frames} frames at {self.fps:g} fps; method {self.method} ({self.refiner})"]
         if self.refined_at_fps is not None:
-            lines.append(f"refined at the model's {self.refined_at_fps:g} fps: the take resampled linearly, the gaps "
-                         f"filled there and interpolated back to its {self.fps:g} fps frames (observed samples kept)")
+            lines.append(
+                f"refined at the model's {self.refined_at_fps:g} fps: the take resampled linearly, the gaps "
+                f"filled there and interpolated back to its {self.fps:g} fps frames (observed samples kept)"
+            )
         if self.screened is not None:
             hidden, observed = self.screened
-            lines.append(f"median screen: hid {hidden} of {observed} observed samples "
-                         f"({100 * hidden / max(observed, 1):.2f} %) and refilled them with the method")
+            lines.append(
+                f"median screen: hid {hidden} of {observed} observed samples "
+                f"({100 * hidden / max(observed, 1):.2f} %) and refilled them with the method"
+            )
         if self.warning:
             lines.append(f"warning: {self.warning}")
         if self.training:
@@ -332,8 +227,10 @@ class RefineReport:
         width = max([len(m.name) for m in self.markers] + [1])
         gapped = [m for m in self.markers if m.missing]
         for m in gapped:
-            line = (f"{m.name:<{width}}  filled {m.filled} samples, longest gap {m.longest_gap} frames "
-                    f"({m.longest_gap / self.fps:.3f} s)")
+            line = (
+                f"{m.name:<{width}}  filled {m.filled} samples, longest gap {m.longest_gap} frames "
+                f"({m.longest_gap / self.fps:.3f} s)"
+            )
             if m.repaired:
                 line += f"; repaired {m.repaired} outlier samples"
             if m.unfilled:
@@ -345,8 +242,10 @@ class RefineReport:
         lines.append(f"filled {self.filled} of {self.missing} missing samples in {len(gapped)} markers")
         left = [m for m in self.markers if m.unfilled]
         if left:
-            lines.append(f"left missing ({sum(m.left_missing for m in left)} samples; frames are 0-based, inclusive; "
-                         f"leading/trailing: before the first / after the last observation of the marker):")
+            lines.append(
+                f"left missing ({sum(m.left_missing for m in left)} samples; frames are 0-based, inclusive; "
+                f"leading/trailing: before the first / after the last observation of the marker):"
+            )
             for m in left:
                 runs = [f"{a}-{b} ({why})" if a != b else f"{a} ({why})" for a, b, why in m.unfilled]
                 if len(runs) > 8:
@@ -369,7 +268,7 @@ def _report_markers(before: Motion, after: Motion, changed: np.ndarray) -> list[
         seen = np.flatnonzero(~before.missing[:, j])
         unfilled = []
         for a, stop in true_runs(after.missing[:, j]):
-            b = stop - 1                                              # the report's runs are inclusive
+            b = stop - 1  # the report's runs are inclusive
             if seen.size == 0:
                 why = "missing in every frame"
             elif a == 0:
@@ -380,17 +279,26 @@ def _report_markers(before: Motion, after: Motion, changed: np.ndarray) -> list[
                 why = "interior, not filled by the method"
             unfilled.append((a, b, why))
         longest = max([stop - start for start, stop in true_runs(filled[:, j])] + [0])
-        out.append(MarkerReport(name=before.joint_names[j], index=int(j), missing=int(before.missing[:, j].sum()),
-                                filled=int(filled[:, j].sum()), longest_gap=longest,
-                                repaired=int(repaired[:, j].sum()), unfilled=unfilled))
+        out.append(
+            MarkerReport(
+                name=before.joint_names[j],
+                index=int(j),
+                missing=int(before.missing[:, j].sum()),
+                filled=int(filled[:, j].sum()),
+                longest_gap=longest,
+                repaired=int(repaired[:, j].sum()),
+                unfilled=unfilled,
+            )
+        )
     return out
 
 
 # --------------------------------------------------------------------------- training data
 
 
-def load_training(paths: Sequence[str | os.PathLike], skip_bad: bool = False
-                  ) -> tuple[list[Motion], list[str], list[tuple[str, str]]]:
+def load_training(
+    paths: Sequence[str | os.PathLike], skip_bad: bool = False
+) -> tuple[list[Motion], list[str], list[tuple[str, str]]]:
     """Read the ``--train`` paths: files, or folders searched (recursively) for files ``read_motion`` reads.
 
     Returns:
@@ -413,8 +321,7 @@ def load_training(paths: Sequence[str | os.PathLike], skip_bad: bool = False
             why = f"{type(exc).__name__}: {exc}"
             if not skip_bad:
                 message = str(exc) if str(path) in str(exc) else f"{path}: {why}"
-                raise RefineError(f"cannot read training file: {message} (--skip-bad skips unreadable files)") \
-                    from exc
+                raise RefineError(f"cannot read training file: {message} (--skip-bad skips unreadable files)") from exc
             skipped.append((str(path), why))
     if not motions:
         raise RefineError(f"--train: none of the {len(files)} training file(s) could be read")
@@ -434,13 +341,20 @@ def refine_motion(refiner: MotionRefiner, motion: Motion) -> tuple[Motion, np.nd
     return out, filled | repaired
 
 
-def refine_file(src: str | os.PathLike, out: str | os.PathLike, method: str | None = None,
-                overrides: Sequence[str] = (), train: Sequence[str | os.PathLike] = (), skip_bad: bool = False,
-                repair_outliers: bool = False, onnx: str | os.PathLike | None = None,
-                screen_outliers: float | bool | None = None) -> RefineReport:
+def refine_file(
+    src: str | os.PathLike,
+    out: str | os.PathLike,
+    method: str | None = None,
+    overrides: Sequence[str] = (),
+    train: Sequence[str | os.PathLike] = (),
+    skip_bad: bool = False,
+    repair_outliers: bool = False,
+    onnx: str | os.PathLike | None = None,
+    screen_outliers: float | bool | None = None,
+) -> RefineReport:
     """Refine the motion file ``src`` with the refiner ``method`` and write ``out`` (``.c3d`` or ``.npz``).
 
-    See the module docstring for what is written. ``method`` is a name of ``configs/refiner`` or a trained
+    See the module docstring for what is written. ``method`` is a name of ``configs/refinement/method`` or a trained
     checkpoint ``PATH.ckpt`` (a ``PATH.onnx`` is taken as ``onnx``); ``onnx`` (``--onnx``, instead of ``method``)
     an exported refiner. ``overrides`` are ``key=value`` parameters of the method (``--set``); ``train`` are
     files or folders of clean motions of the same layout (``--train``; not with a trained model); ``skip_bad``
@@ -466,23 +380,30 @@ def refine_file(src: str | os.PathLike, out: str | os.PathLike, method: str | No
     src, out = Path(src), Path(out)
     suffix = out.suffix.lower()
     if suffix not in OUTPUT_SUFFIXES:
-        raise RefineError(f"{out}: cannot write {suffix or 'a file without suffix'}; supported outputs: "
-                          f"{', '.join(OUTPUT_SUFFIXES)} (C3D markers, or NumPy positions)")
+        raise RefineError(
+            f"{out}: cannot write {suffix or 'a file without suffix'}; supported outputs: "
+            f"{', '.join(OUTPUT_SUFFIXES)} (C3D markers, or NumPy positions)"
+        )
     if (method is None) == (onnx is None):
-        raise RefineError("give the method: --method NAME (configs/refiner), --method RUN/best.ckpt (a trained "
-                          "refiner) or --onnx FILE (an exported one)" if method is None else
-                          f"give either --method {method} or --onnx {onnx}, not both")
+        raise RefineError(
+            "give the method: --method NAME (mocapkit methods refinement), --method RUN/best.ckpt (a trained "
+            "refiner) or --onnx FILE (an exported one)"
+            if method is None
+            else f"give either --method {method} or --onnx {onnx}, not both"
+        )
     kind = "onnx" if onnx is not None else trained_model_kind(method)
-    if kind is not None:                  # a trained network: loaded, never trained here
+    if kind is not None:  # a trained network: loaded, never trained here
         model = Path(onnx if onnx is not None else method)
         if train:
-            raise RefineError(f"--train: {model} is a trained refiner and is not trained again; train one with "
-                              f"`mocapkit train experiment=refine_bigru`")
+            raise RefineError(
+                f"--train: {model} is a trained refiner and is not trained again; train one with "
+                f"`mocapkit train experiment=refine_bigru`"
+            )
         refiner = build_learned_refiner(model, overrides, onnx=kind == "onnx", fit=False)
         method = str(model)
     else:
         refiner = build_refiner(method, overrides)
-    filling = refiner                     # the method itself (the screen, when asked, stands in front of it)
+    filling = refiner  # the method itself (the screen, when asked, stands in front of it)
     if screen_outliers is not None:
         from mocapkit.refinement.screening import (
             SCREEN_HALF_WINDOW,
@@ -496,14 +417,16 @@ def refine_file(src: str | os.PathLike, out: str | os.PathLike, method: str | No
         refiner = MedianScreen(refiner, half_window=SCREEN_HALF_WINDOW, threshold=threshold)
         repair_outliers = True
     if refiner.requires_fit and not train and kind is None:
-        raise RefineError(f"refiner {method!r} ({type(refiner).__name__}) is data-driven and needs training motions: "
-                          f"pass --train PATH (files or folders of clean motions of the layout of {src.name})")
+        raise RefineError(
+            f"refiner {method!r} ({type(refiner).__name__}) is data-driven and needs training motions: "
+            f"pass --train PATH (files or folders of clean motions of the layout of {src.name})"
+        )
     if not src.is_file():
         raise FileNotFoundError(f"{src}: no such file")
     motion = read_motion(src)
     used, skipped = [], []
     if kind is not None:
-        refiner.fit()                     # loads the checkpoint / opens the ONNX session
+        refiner.fit()  # loads the checkpoint / opens the ONNX session
     elif train:
         motions, used, skipped = load_training(train, skip_bad=skip_bad)
         refiner.fit(motions)
@@ -525,32 +448,54 @@ def refine_file(src: str | os.PathLike, out: str | os.PathLike, method: str | No
         _write_npz(out, refined, motion.missing & ~refined.missing)
         mode = "positions in metres, NaN where missing"
     hint = ""
-    if "extrapolate" in inspect.signature(type(filling).__init__).parameters and \
-            getattr(filling, "extrapolate", None) is None:
+    if (
+        "extrapolate" in inspect.signature(type(filling).__init__).parameters
+        and getattr(filling, "extrapolate", None) is None
+    ):
         hint = f"{method} does not extrapolate: --set extrapolate=hold holds the nearest observed value there"
-    refiner_name = type(filling).__name__ if filling is refiner else f"{type(refiner).__name__}({type(filling).__name__})"
+    refiner_name = (
+        type(filling).__name__ if filling is refiner else f"{type(refiner).__name__}({type(filling).__name__})"
+    )
     screened, warning = None, ""
     if filling is not refiner:
         screened = (int(refined.metadata["refinement"]["screened"]), int((~motion.missing).sum()))
         if screened[0] > SCREEN_WARN_SHARE * screened[1]:
-            warning = (f"the screen hid {100 * screened[0] / screened[1]:.1f} % of the observed samples: its "
-                       f"{1000 * refiner.threshold:g} mm threshold was chosen at 120 fps, and at {motion.fps:g} fps or "
-                       f"in fast motion clean samples can lie that far from their neighbours' median; check the "
-                       f"output, or raise the threshold (--screen-outliers METRES)")
-    return RefineReport(source=str(src), output=str(out), method=method, refiner=refiner_name,
-                        fps=float(motion.fps), frames=motion.num_frames,
-                        markers=_report_markers(motion, refined, changed), training=used, skipped=skipped,
-                        write_mode=mode, hint=hint, screened=screened, warning=warning,
-                        refined_at_fps=refined.metadata.get("refinement", {}).get("resampled", {}).get(
-                            "refined_at_fps"))
+            warning = (
+                f"the screen hid {100 * screened[0] / screened[1]:.1f} % of the observed samples: its "
+                f"{1000 * refiner.threshold:g} mm threshold was chosen at 120 fps, and at {motion.fps:g} fps or "
+                f"in fast motion clean samples can lie that far from their neighbours' median; check the "
+                f"output, or raise the threshold (--screen-outliers METRES)"
+            )
+    return RefineReport(
+        source=str(src),
+        output=str(out),
+        method=method,
+        refiner=refiner_name,
+        fps=float(motion.fps),
+        frames=motion.num_frames,
+        markers=_report_markers(motion, refined, changed),
+        training=used,
+        skipped=skipped,
+        write_mode=mode,
+        hint=hint,
+        screened=screened,
+        warning=warning,
+        refined_at_fps=refined.metadata.get("refinement", {}).get("resampled", {}).get("refined_at_fps"),
+    )
 
 
 def _write_npz(path: Path, motion: Motion, filled: np.ndarray) -> None:
     positions = motion.positions.astype(np.float32)
     positions[motion.missing] = np.nan
     with atomic_open(path, "wb") as fh:
-        np.savez(fh, positions=positions, missing=motion.missing, filled=filled,
-                 joint_names=np.asarray(motion.joint_names, dtype=str), fps=np.float64(motion.fps))
+        np.savez(
+            fh,
+            positions=positions,
+            missing=motion.missing,
+            filled=filled,
+            joint_names=np.asarray(motion.joint_names, dtype=str),
+            fps=np.float64(motion.fps),
+        )
 
 
 # --------------------------------------------------------------------------- C3D in, C3D out
@@ -569,15 +514,17 @@ def patch_c3d(src: Path, out: Path, motion: Motion, refined: Motion, changed: np
     source = ezc3d.c3d(str(src))
     points = source["data"]["points"]
     if points.shape[1] != motion.num_joints or points.shape[2] != motion.num_frames:
-        raise RefineError(f"{src}: ezc3d sees {points.shape[1]} markers x {points.shape[2]} frames, the motion "
-                          f"{motion.num_joints} x {motion.num_frames}; cannot map the samples back")
+        raise RefineError(
+            f"{src}: ezc3d sees {points.shape[1]} markers x {points.shape[2]} frames, the motion "
+            f"{motion.num_joints} x {motion.num_frames}; cannot map the samples back"
+        )
     units = str(motion.source_units).strip().lower()
-    frames, joints = np.nonzero(changed)                      # [n] each
-    values = refined.positions[frames, joints].astype(np.float64) / UNIT_SCALE[units]     # [n, 3] file units
+    frames, joints = np.nonzero(changed)  # [n] each
+    values = refined.positions[frames, joints].astype(np.float64) / UNIT_SCALE[units]  # [n, 3] file units
     if not np.isfinite(values).all():
         raise RefineError(f"{src}: the refiner returned non-finite values for samples it reports as filled")
     scale = float(np.asarray(source["parameters"]["POINT"]["SCALE"]["value"]).ravel()[0])
-    with atomic_path(out, suffix=".c3d") as tmp:          # ezc3d appends ".c3d" to other names
+    with atomic_path(out, suffix=".c3d") as tmp:  # ezc3d appends ".c3d" to other names
         if scale > 0:
             mode = _patch_integer(src, tmp, source, motion, frames, joints, values, scale)
         else:
@@ -595,8 +542,16 @@ def patch_c3d(src: Path, out: Path, motion: Motion, refined: Motion, changed: np
     return mode
 
 
-def _patch_integer(src: Path, dst: Path, source, motion: Motion, frames: np.ndarray, joints: np.ndarray,
-                   values: np.ndarray, scale: float) -> str:
+def _patch_integer(
+    src: Path,
+    dst: Path,
+    source,
+    motion: Motion,
+    frames: np.ndarray,
+    joints: np.ndarray,
+    values: np.ndarray,
+    scale: float,
+) -> str:
     """Integer storage: a byte copy of ``src`` with the 4 int16 words of each changed sample rewritten."""
     raw = bytearray(src.read_bytes())
     processor = motion.metadata.get("processor", "intel")
@@ -606,9 +561,11 @@ def _patch_integer(src: Path, dst: Path, source, motion: Motion, frames: np.ndar
     per_frame = analogs.shape[1] * (analogs.shape[2] // n_frames) if n_frames else 0
     header_points, header_analog = struct.unpack(endian + "2H", bytes(raw[2:6]))
     if header_points != n_points or header_analog != per_frame:
-        raise RefineError(f"{src}: integer storage and the header's {header_points} markers / {header_analog} "
-                          f"analog samples per frame disagree with the data ({n_points} / {per_frame}); "
-                          f"cannot patch it safely")
+        raise RefineError(
+            f"{src}: integer storage and the header's {header_points} markers / {header_analog} "
+            f"analog samples per frame disagree with the data ({n_points} / {per_frame}); "
+            f"cannot patch it safely"
+        )
     start = int(np.asarray(source["parameters"]["POINT"]["DATA_START"]["value"]).ravel()[0])
     frame_bytes = 2 * (4 * n_points + per_frame)
     if (start - 1) * 512 + n_frames * frame_bytes > len(raw):
@@ -617,18 +574,21 @@ def _patch_integer(src: Path, dst: Path, source, motion: Motion, frames: np.ndar
     bad = np.abs(words) > 32767
     if bad.any():
         k = int(np.argmax(bad.any(axis=1)))
-        raise RefineError(f"{src}: filled value of marker {motion.joint_names[joints[k]]!r} at frame {frames[k]} "
-                          f"is outside the int16 range of this integer-storage file (POINT:SCALE {scale:g})")
+        raise RefineError(
+            f"{src}: filled value of marker {motion.joint_names[joints[k]]!r} at frame {frames[k]} "
+            f"is outside the int16 range of this integer-storage file (POINT:SCALE {scale:g})"
+        )
     for f, j, (x, y, z) in zip(frames.tolist(), joints.tolist(), words.astype(int).tolist()):
         offset = (start - 1) * 512 + f * frame_bytes + j * 8
-        raw[offset:offset + 8] = struct.pack(endian + "4h", x, y, z, 0)
+        raw[offset : offset + 8] = struct.pack(endian + "4h", x, y, z, 0)
     dst.write_bytes(bytes(raw))
-    return (f"integer storage (POINT:SCALE {scale:g}) patched in place, filled values quantised to it; "
-            f"ezc3d would rewrite it as float storage")
+    return (
+        f"integer storage (POINT:SCALE {scale:g}) patched in place, filled values quantised to it; "
+        f"ezc3d would rewrite it as float storage"
+    )
 
 
-def _verify(src: Path, written: Path, frames: np.ndarray, joints: np.ndarray, values: np.ndarray,
-            scale: float) -> None:
+def _verify(src: Path, written: Path, frames: np.ndarray, joints: np.ndarray, values: np.ndarray, scale: float) -> None:
     """Read both files with ezc3d: unchanged samples identical, changed ones valid and at ``values``."""
     import ezc3d
 
@@ -641,10 +601,15 @@ def _verify(src: Path, written: Path, frames: np.ndarray, joints: np.ndarray, va
     keep[joints, frames] = False
     same = np.array_equal(pa[:, keep], pb[:, keep], equal_nan=True) and np.array_equal(ra[keep], rb[keep])
     got = pb[:, joints, frames].T
-    ok = np.isfinite(got).all() and (rb[joints, frames] >= 0).all() and \
-        np.allclose(got, values, rtol=1e-6, atol=max(scale, 1e-6))
+    ok = (
+        np.isfinite(got).all()
+        and (rb[joints, frames] >= 0).all()
+        and np.allclose(got, values, rtol=1e-6, atol=max(scale, 1e-6))
+    )
     if not (same and ok):
-        raise RefineError(f"{src}: the C3D written for it did not read back as intended "
-                          f"({'unchanged samples differ' if not same else 'filled samples differ'}); nothing written")
+        raise RefineError(
+            f"{src}: the C3D written for it did not read back as intended "
+            f"({'unchanged samples differ' if not same else 'filled samples differ'}); nothing written"
+        )
     if not np.array_equal(a["data"]["analogs"], b["data"]["analogs"], equal_nan=True):
         raise RefineError(f"{src}: the analog data of the written C3D differ from the source; nothing written")

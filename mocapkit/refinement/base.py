@@ -24,6 +24,7 @@ Subclasses implement :meth:`MotionRefiner._refine_matrix` on the frames × (3·j
 float64 metres, and set ``requires_fit = True`` when ``fit`` must come first. The shared checks
 (finite observed values, at least one observed entry, fitted layout) live here.
 """
+
 from __future__ import annotations
 
 from collections.abc import Sequence
@@ -70,8 +71,10 @@ def check_motion(motion: Motion, min_frames: int = 1, what: str = "refine") -> N
     bad = ~all_coordinates(np.isfinite(motion.positions)) & ~motion.missing
     if bad.any():
         frame, joint = np.argwhere(bad)[0]
-        raise RefinementError(f"{label}: non-finite value at frame {frame} of marker {motion.joint_names[joint]!r} "
-                              f"({int(bad.sum())} such entries); mark them missing (NaN) or remove them")
+        raise RefinementError(
+            f"{label}: non-finite value at frame {frame} of marker {motion.joint_names[joint]!r} "
+            f"({int(bad.sum())} such entries); mark them missing (NaN) or remove them"
+        )
 
 
 class MotionRefiner(BaseEstimator):
@@ -94,14 +97,18 @@ class MotionRefiner(BaseEstimator):
             names = motions[0].joint_names
             for m in motions[1:]:
                 if m.joint_names != names:
-                    raise RefinementError(f"{m.source or m.name}: joints {list(m.joint_names)[:4]}... differ from the "
-                                          f"first training motion's; fit one refiner per skeleton layout")
+                    raise RefinementError(
+                        f"{m.source or m.name}: joints {list(m.joint_names)[:4]}... differ from the "
+                        f"first training motion's; fit one refiner per skeleton layout"
+                    )
             self.joint_names_ = names
             if self.fixed_sampling:
                 fps, up = {float(m.fps) for m in motions}, {m.up_axis for m in motions}
                 if len(fps) > 1 or len(up) > 1:
-                    raise RefinementError(f"{type(self).__name__}.fit: training motions mix frame rates {sorted(fps)} "
-                                          f"or up axes {sorted(up)}; resample them to one rate first")
+                    raise RefinementError(
+                        f"{type(self).__name__}.fit: training motions mix frame rates {sorted(fps)} "
+                        f"or up axes {sorted(up)}; resample them to one rate first"
+                    )
                 self.fps_, self.up_axis_ = fps.pop(), up.pop()
         self._fit_matrices([motion_matrix(m) for m in motions]) if motions else None
         return self
@@ -117,12 +124,16 @@ class MotionRefiner(BaseEstimator):
                 raise NotFittedError(f"{type(self).__name__} is not fitted: call fit(training_motions) first")
             if tuple(motion.joint_names) != tuple(self.joint_names_):
                 absent = [n for n in self.joint_names_ if n not in motion.joint_names]
-                raise RefinementError(f"{motion.source or motion.name}: {type(self).__name__} was fitted on another "
-                                      f"skeleton layout (missing joints: {absent[:8]}{'...' if len(absent) > 8 else ''})")
+                raise RefinementError(
+                    f"{motion.source or motion.name}: {type(self).__name__} was fitted on another "
+                    f"skeleton layout (missing joints: {absent[:8]}{'...' if len(absent) > 8 else ''})"
+                )
         if self.fixed_sampling and hasattr(self, "fps_"):
             if motion.up_axis != self.up_axis_:
-                raise RefinementError(f"{motion.source or motion.name}: {motion.fps:g} fps, {motion.up_axis}-up; "
-                                      f"{type(self).__name__} was fitted at {self.fps_:g} fps, {self.up_axis_}-up")
+                raise RefinementError(
+                    f"{motion.source or motion.name}: {motion.fps:g} fps, {motion.up_axis}-up; "
+                    f"{type(self).__name__} was fitted at {self.fps_:g} fps, {self.up_axis_}-up"
+                )
             if float(motion.fps) != self.fps_:
                 return self._refine_resampled(motion)
         X, observed = motion_matrix(motion)
@@ -136,10 +147,15 @@ class MotionRefiner(BaseEstimator):
         positions[replace_mask] = filled[replace_mask].astype(np.float32)
         positions[still_missing] = np.nan
         unfilled = {motion.joint_names[j]: int(still_missing[:, j].sum()) for j in np.flatnonzero(still_missing.any(0))}
-        report = {"method": type(self).__name__, "filled": int((motion.missing & ~still_missing).sum()),
-                  "repaired": int((repaired & ~motion.missing).sum()), "unfilled": unfilled}
-        return replace(motion, positions=positions, missing=still_missing,
-                       metadata={**motion.metadata, "refinement": report})
+        report = {
+            "method": type(self).__name__,
+            "filled": int((motion.missing & ~still_missing).sum()),
+            "repaired": int((repaired & ~motion.missing).sum()),
+            "unfilled": unfilled,
+        }
+        return replace(
+            motion, positions=positions, missing=still_missing, metadata={**motion.metadata, "refinement": report}
+        )
 
     def _refine_resampled(self, motion: Motion) -> Motion:
         """Refine ``motion`` at the fitted rate ``fps_`` and bring the filled entries back to its own frames (the
@@ -147,9 +163,11 @@ class MotionRefiner(BaseEstimator):
         label = motion.source or motion.name or "motion"
         at_rate = motion.resample(self.fps_)
         if at_rate.num_frames < self.min_frames:
-            raise RefinementError(f"{label}: {motion.num_frames} frames at {motion.fps:g} fps are "
-                                  f"{at_rate.num_frames} at the {self.fps_:g} fps {type(self).__name__} was fitted "
-                                  f"at; it needs at least {self.min_frames}")
+            raise RefinementError(
+                f"{label}: {motion.num_frames} frames at {motion.fps:g} fps are "
+                f"{at_rate.num_frames} at the {self.fps_:g} fps {type(self).__name__} was fitted "
+                f"at; it needs at least {self.min_frames}"
+            )
         done = self.refine(at_rate)
         # back at the take's own frames (their times in the refined take's frame units)
         back = done.sample_at(np.arange(motion.num_frames) * (self.fps_ / float(motion.fps)), motion.fps)
@@ -159,11 +177,20 @@ class MotionRefiner(BaseEstimator):
         still_missing = motion.missing & ~fill
         positions[still_missing] = np.nan
         unfilled = {motion.joint_names[j]: int(still_missing[:, j].sum()) for j in np.flatnonzero(still_missing.any(0))}
-        report = {**done.metadata["refinement"], "filled": int(fill.sum()), "repaired": 0, "unfilled": unfilled,
-                  "resampled": {"fps": float(motion.fps), "refined_at_fps": float(self.fps_),
-                                "note": "refined at the fitted rate, interpolated back; observed samples kept"}}
-        return replace(motion, positions=positions, missing=still_missing, metadata={**motion.metadata,
-                                                                                      "refinement": report})
+        report = {
+            **done.metadata["refinement"],
+            "filled": int(fill.sum()),
+            "repaired": 0,
+            "unfilled": unfilled,
+            "resampled": {
+                "fps": float(motion.fps),
+                "refined_at_fps": float(self.fps_),
+                "note": "refined at the fitted rate, interpolated back; observed samples kept",
+            },
+        }
+        return replace(
+            motion, positions=positions, missing=still_missing, metadata={**motion.metadata, "refinement": report}
+        )
 
     def _refine_matrix(self, X: np.ndarray, observed: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         """Fill ``X`` (float64 ``[frames, 3·joints]``, 0 where not ``observed``).

@@ -57,6 +57,7 @@ winner in bold, refine and fit time; the same for the joint error; where each me
 ``continuous_missing``, per-frame RMSE curves in the style of the thesis's Figs. 3.8–3.11, refine time against
 frames when the test clips' lengths differ at least twofold).
 """
+
 from __future__ import annotations
 
 import math
@@ -106,16 +107,20 @@ def parse_protocol(text: str, fps: float = 120.0) -> tuple[str, object]:
 
     name, sep, level = str(text).partition("@")
     if not sep or name not in PROTOCOLS or not level:
-        raise ComparisonError(f"benchmark.protocols: {text!r} is not NAME@LEVEL of a known corruption protocol; "
-                              f"known (with the theses' levels): {known_protocols()}")
+        raise ComparisonError(
+            f"benchmark.protocols: {text!r} is not NAME@LEVEL of a known corruption protocol; "
+            f"known (with the theses' levels): {known_protocols()}"
+        )
     value = _level(level)
-    dummy = Motion(np.random.default_rng(0).normal(size=(4000, 31, 3)), [f"j{i}" for i in range(31)], fps,
-                   name="level-check")
+    dummy = Motion(
+        np.random.default_rng(0).normal(size=(4000, 31, 3)), [f"j{i}" for i in range(31)], fps, name="level-check"
+    )
     try:
         corrupt(dummy, name, value, seed=0)
     except CorruptionError as exc:
-        raise ComparisonError(f"benchmark.protocols: {text!r}: {str(exc).split(': ', 1)[-1]}; known: "
-                              f"{known_protocols()}") from exc
+        raise ComparisonError(
+            f"benchmark.protocols: {text!r}: {str(exc).split(': ', 1)[-1]}; known: {known_protocols()}"
+        ) from exc
     return name, value
 
 
@@ -141,8 +146,13 @@ def central_crop(motion, max_frames: int | None):
         return motion
     start = (motion.num_frames - int(max_frames)) // 2
     stop = start + int(max_frames)
-    return replace(motion, positions=motion.positions[start:stop], missing=motion.missing[start:stop],
-                   rotations=None, metadata={**motion.metadata, "crop": [start, stop]})
+    return replace(
+        motion,
+        positions=motion.positions[start:stop],
+        missing=motion.missing[start:stop],
+        rotations=None,
+        metadata={**motion.metadata, "crop": [start, stop]},
+    )
 
 
 def _nan_mean(values) -> float:
@@ -183,21 +193,37 @@ class RefinementBenchmark(Benchmark):
     title = "Motion refinement on held-out performers"
     percent_metrics = ("coverage",)
 
-    def __init__(self, dataset: str, root: str, protocols: list[str], fps: float | None = None,
-                 max_frames: int | None = None, clips_per_fold: int | None = None, held_out: list | None = None,
-                 clips_per_performer: int | None = None, train_clips_per_performer: int | None = None,
-                 same_clips: bool = True, clip_seed: int = 0, curve_clip: str | None = None,
-                 numerator: str = "frame", cache_fits: bool = True, baselines: list | None = None,
-                 claims: list | None = None):
+    def __init__(
+        self,
+        dataset: str,
+        root: str,
+        protocols: list[str],
+        fps: float | None = None,
+        max_frames: int | None = None,
+        clips_per_fold: int | None = None,
+        held_out: list | None = None,
+        clips_per_performer: int | None = None,
+        train_clips_per_performer: int | None = None,
+        same_clips: bool = True,
+        clip_seed: int = 0,
+        curve_clip: str | None = None,
+        numerator: str = "frame",
+        cache_fits: bool = True,
+        baselines: list | None = None,
+        claims: list | None = None,
+    ):
         if root is None:
             raise ComparisonError("benchmark.root is not set: give the data set's folder")
         if not protocols:
             raise ComparisonError(f"benchmark.protocols: give at least one NAME@LEVEL; known: {known_protocols()}")
         if numerator not in ("frame", "corrupted"):
             raise ComparisonError(f"benchmark.numerator={numerator!r}: 'frame' or 'corrupted'")
-        for key, value in (("max_frames", max_frames), ("clips_per_fold", clips_per_fold),
-                           ("clips_per_performer", clips_per_performer),
-                           ("train_clips_per_performer", train_clips_per_performer)):
+        for key, value in (
+            ("max_frames", max_frames),
+            ("clips_per_fold", clips_per_fold),
+            ("clips_per_performer", clips_per_performer),
+            ("train_clips_per_performer", train_clips_per_performer),
+        ):
             if value is not None and int(value) < 1:
                 raise ComparisonError(f"benchmark.{key}={value!r}: a positive number or null")
         self.dataset, self.root = dataset, Path(root)
@@ -221,7 +247,7 @@ class RefinementBenchmark(Benchmark):
             keep = []
             for group in self.all_groups:
                 mine = [c for c in found if c["group"] == group]
-                order = rng.permutation(len(mine))[:self.clips_per_performer]
+                order = rng.permutation(len(mine))[: self.clips_per_performer]
                 keep += [mine[i] for i in sorted(order)]
             found = keep
         from mocapkit.datasets.mocap.folders import read_clips
@@ -230,8 +256,10 @@ class RefinementBenchmark(Benchmark):
             self.motions = read_clips(found, self.fps)
         except MocapFolderError as exc:
             raise ComparisonError(f"benchmark: {exc}") from exc
-        self.clips = [{**clip, "path": str(clip["path"]), "frames": motion.num_frames}
-                      for clip, motion in zip(found, self.motions)]
+        self.clips = [
+            {**clip, "path": str(clip["path"]), "frames": motion.num_frames}
+            for clip, motion in zip(found, self.motions)
+        ]
         self.groups = np.asarray([c["group"] for c in self.clips])
         self.names = [c["name"] for c in self.clips]
         present = sorted(set(self.groups.tolist()))
@@ -241,11 +269,13 @@ class RefinementBenchmark(Benchmark):
             self.held_out = [str(g) for g in ([held_out] if isinstance(held_out, (str, int)) else held_out)]
             unknown = [g for g in self.held_out if g not in present]
             if unknown:
-                raise ComparisonError(f"benchmark.held_out={unknown}: not groups of {dataset} under {self.root} "
-                                      f"(groups: {present})")
+                raise ComparisonError(
+                    f"benchmark.held_out={unknown}: not groups of {dataset} under {self.root} (groups: {present})"
+                )
         if len(present) < 2:
-            raise ComparisonError(f"benchmark: {dataset} under {self.root} has one group ({present}); holding one "
-                                  "out needs at least two")
+            raise ComparisonError(
+                f"benchmark: {dataset} under {self.root} has one group ({present}); holding one out needs at least two"
+            )
         data_fps = self.motions[0].fps
         self.parsed = {}
         for text in protocols:
@@ -258,15 +288,26 @@ class RefinementBenchmark(Benchmark):
     # -------------------------------------------------------------- data
     def describe(self) -> dict:
         frames = [c["frames"] for c in self.clips]
-        return {"dataset": self.dataset, "root": str(self.root), "n_clips": len(self.clips),
-                "frames": int(sum(frames)), "fps": float(self.motions[0].fps), "joints": self.motions[0].num_joints,
-                "groups": {g: int((self.groups == g).sum()) for g in sorted(set(self.groups.tolist()))},
-                "group_kind": "style (no performer label in the files)" if self.dataset == "bandai" else "performer",
-                "held_out": self.held_out, "max_frames": self.max_frames, "clips_per_fold": self.clips_per_fold,
-                "clips_per_performer": self.clips_per_performer,
-                "train_clips_per_performer": self.train_clips_per_performer, "same_clips": self.same_clips,
-                "clip_seed": self.clip_seed, "numerator": self.numerator, "cache_fits": self.cache_fits,
-                "resampled_to": self.fps}
+        return {
+            "dataset": self.dataset,
+            "root": str(self.root),
+            "n_clips": len(self.clips),
+            "frames": int(sum(frames)),
+            "fps": float(self.motions[0].fps),
+            "joints": self.motions[0].num_joints,
+            "groups": {g: int((self.groups == g).sum()) for g in sorted(set(self.groups.tolist()))},
+            "group_kind": "style (no performer label in the files)" if self.dataset == "bandai" else "performer",
+            "held_out": self.held_out,
+            "max_frames": self.max_frames,
+            "clips_per_fold": self.clips_per_fold,
+            "clips_per_performer": self.clips_per_performer,
+            "train_clips_per_performer": self.train_clips_per_performer,
+            "same_clips": self.same_clips,
+            "clip_seed": self.clip_seed,
+            "numerator": self.numerator,
+            "cache_fits": self.cache_fits,
+            "resampled_to": self.fps,
+        }
 
     def data(self, indices: np.ndarray):
         """Clean whole clips (a list of :class:`~mocapkit.motion.container.Motion`, positions ``[T_i, J, 3]``
@@ -301,7 +342,7 @@ class RefinementBenchmark(Benchmark):
         for group in sorted(set(self.groups.tolist())):
             mine = np.flatnonzero(self.groups == group)
             if self.train_clips_per_performer and len(mine) > self.train_clips_per_performer:
-                subset = np.sort(rng.permutation(mine)[:self.train_clips_per_performer])
+                subset = np.sort(rng.permutation(mine)[: self.train_clips_per_performer])
             else:
                 subset = mine
             if group != fold:
@@ -312,7 +353,7 @@ class RefinementBenchmark(Benchmark):
         """``clips_per_fold`` clips of group ``fold`` that suit the protocol(s), in a seeded order; and how many
         of the group's clips were passed over as too short."""
         mine = np.flatnonzero(self.groups == fold)
-        rng = np.random.default_rng([self.clip_seed, 2, zlib.crc32(fold.encode())])   # its own draw per group
+        rng = np.random.default_rng([self.clip_seed, 2, zlib.crc32(fold.encode())])  # its own draw per group
         order = mine[rng.permutation(len(mine))]
         needed = list(self.protocols) if self.same_clips else [protocol]
         chosen, skipped = [], 0
@@ -336,31 +377,54 @@ class RefinementBenchmark(Benchmark):
             if len(test) == 0:
                 longest = max(self.test_motion(int(i)).num_frames for i in np.flatnonzero(self.groups == fold))
                 wanted = list(self.protocols) if self.same_clips else protocol
-                raise ComparisonError(f"benchmark: no clip of {fold!r} suits {wanted} (longest test clip {longest} "
-                                      f"frames after max_frames={self.max_frames}); "
-                                      "raise max_frames, lower the gap lengths or set same_clips: false")
+                raise ComparisonError(
+                    f"benchmark: no clip of {fold!r} suits {wanted} (longest test clip {longest} "
+                    f"frames after max_frames={self.max_frames}); "
+                    "raise max_frames, lower the gap lengths or set same_clips: false"
+                )
             train = self._train_indices(fold)
-            folds[fold] = {"test": test.tolist(), "test_clips": [self.names[i] for i in test],
-                           "n_train": len(train), "train_groups": sorted(set(self.groups[train].tolist())),
-                           "skipped_short": skipped}
+            folds[fold] = {
+                "test": test.tolist(),
+                "test_clips": [self.names[i] for i in test],
+                "n_train": len(train),
+                "train_groups": sorted(set(self.groups[train].tolist())),
+                "skipped_short": skipped,
+            }
             tests.append(test)
             trains.append(train)
         test = np.unique(np.concatenate(tests))
         train = np.unique(np.concatenate(trains))
         if self.curve_clip is not None and self.curve_clip not in [self.names[i] for i in test]:
-            raise ComparisonError(f"benchmark.curve_clip={self.curve_clip!r} is not a test clip of {protocol}: "
-                                  f"{[self.names[i] for i in test]}")
+            raise ComparisonError(
+                f"benchmark.curve_clip={self.curve_clip!r} is not a test clip of {protocol}: "
+                f"{[self.names[i] for i in test]}"
+            )
         name, level = self.parsed[protocol]
-        return Split(protocol, seed, train, test, {"corruption": name, "level": level, "folds": folds,
-                                                   "corruption_seed": "SeedSequence([seed, sample index])"})
+        return Split(
+            protocol,
+            seed,
+            train,
+            test,
+            {
+                "corruption": name,
+                "level": level,
+                "folds": folds,
+                "corruption_seed": "SeedSequence([seed, sample index])",
+            },
+        )
 
     # -------------------------------------------------------------- scoring
     def _fitted(self, estimator, fold: str, train: np.ndarray) -> tuple[object, float, bool, list[str]]:
         """``(estimator fitted on train, fit seconds, from the cache?, groups it was fitted on)``."""
         from sklearn.base import clone
 
-        key = (fold, type(estimator).__module__, type(estimator).__qualname__,
-               repr(sorted((k, repr(v)) for k, v in estimator.get_params(deep=True).items())), tuple(train.tolist()))
+        key = (
+            fold,
+            type(estimator).__module__,
+            type(estimator).__qualname__,
+            repr(sorted((k, repr(v)) for k, v in estimator.get_params(deep=True).items())),
+            tuple(train.tolist()),
+        )
         if self.cache_fits and key in self._fits:
             fitted, seconds, groups = self._fits[key]
             return fitted, seconds, True, groups
@@ -377,8 +441,8 @@ class RefinementBenchmark(Benchmark):
     def evaluate_estimator(self, estimator, split: Split) -> dict:
         """Per fold: fit on the training groups' clean clips (only when ``estimator.requires_fit``), then corrupt
         (seeded), refine and score every test clip. Returns the metrics (means over the clips) and the detail."""
-        from mocapkit.refinement.metrics import score_refinement
         from mocapkit.refinement.corruptions import CorruptionError, corrupt
+        from mocapkit.refinement.metrics import score_refinement
 
         name, level = self.parsed[split.protocol]
         clips, folds, curve = [], {}, None
@@ -393,7 +457,7 @@ class RefinementBenchmark(Benchmark):
                     fit_error = f"fit failed: {type(exc).__name__}: {exc}"
                     refiner, fit_seconds, cached, fit_groups = None, float("nan"), False, []
                     print(f"[compare] {type(estimator).__name__} {fit_error} (fold {fold})", flush=True)
-                if fold in fit_groups:                      # never: the fold's clips are not in train
+                if fold in fit_groups:  # never: the fold's clips are not in train
                     raise ComparisonError(f"benchmark: the fit of fold {fold!r} saw its own clips")
             else:
                 refiner, fit_seconds, cached, fit_groups = estimator, 0.0, False, []
@@ -401,11 +465,17 @@ class RefinementBenchmark(Benchmark):
             for index in info["test"]:
                 clean = self.test_motion(index)
                 seed = clip_seed_for(split.seed, index)
-                record = {"clip": self.names[index], "index": int(index), "fold": fold,
-                          "class": self.clips[index]["class"], "frames": clean.num_frames, "corruption_seed": seed}
+                record = {
+                    "clip": self.names[index],
+                    "index": int(index),
+                    "fold": fold,
+                    "class": self.clips[index]["class"],
+                    "frames": clean.num_frames,
+                    "corruption_seed": seed,
+                }
                 try:
                     corruption = corrupt(clean, name, level, seed=seed)
-                except CorruptionError as exc:   # the same for every method (deterministic): not scored
+                except CorruptionError as exc:  # the same for every method (deterministic): not scored
                     record["error"] = f"not corruptible: {exc}"
                     clips.append(record)
                     continue
@@ -418,41 +488,70 @@ class RefinementBenchmark(Benchmark):
                 try:
                     refined = refiner.refine(corruption.motion)
                 except Exception as exc:  # noqa: BLE001 -- any refine error is recorded (n_failed, coverage 0)
-                    record.update(seconds=time.perf_counter() - start, cpu_seconds=time.process_time() - cpu,
-                                  error=f"{type(exc).__name__}: {exc}", coverage=0.0,
-                                  corrupted=int(corruption.corrupted.sum()))
-                    print(f"[compare] {type(estimator).__name__} failed on {record['clip']} ({split.protocol}): "
-                          f"{record['error']}", flush=True)
+                    record.update(
+                        seconds=time.perf_counter() - start,
+                        cpu_seconds=time.process_time() - cpu,
+                        error=f"{type(exc).__name__}: {exc}",
+                        coverage=0.0,
+                        corrupted=int(corruption.corrupted.sum()),
+                    )
+                    print(
+                        f"[compare] {type(estimator).__name__} failed on {record['clip']} ({split.protocol}): "
+                        f"{record['error']}",
+                        flush=True,
+                    )
                     clips.append(record)
                     mine.append(record)
                     continue
                 seconds, cpu_seconds = time.perf_counter() - start, time.process_time() - cpu
                 score = score_refinement(refined, clean, corruption, numerator=self.numerator)
-                record.update(rmse_cm=_json_float(score.rmse_cm), mje_mm=_json_float(score.mean_error_mm),
-                              mje_removed_mm=_json_float(score.mean_error_removed_mm),
-                              matrix_rmse_cm=_json_float(score.matrix_rmse_cm), coverage=float(score.coverage),
-                              corrupted=score.corrupted, unfilled=score.unfilled, changed_clean=score.changed_clean,
-                              seconds=seconds, cpu_seconds=cpu_seconds)
+                record.update(
+                    rmse_cm=_json_float(score.rmse_cm),
+                    mje_mm=_json_float(score.mean_error_mm),
+                    mje_removed_mm=_json_float(score.mean_error_removed_mm),
+                    matrix_rmse_cm=_json_float(score.matrix_rmse_cm),
+                    coverage=float(score.coverage),
+                    corrupted=score.corrupted,
+                    unfilled=score.unfilled,
+                    changed_clean=score.changed_clean,
+                    seconds=seconds,
+                    cpu_seconds=cpu_seconds,
+                )
                 if curve is None and (curve_name is None or curve_name == record["clip"]):
-                    curve = {"clip": record["clip"], "fold": fold, "frames": clean.num_frames,
-                             "fps": float(clean.fps), "description": corruption.description,
-                             "rmse_cm": [_json_float(v) for v in score.rmse_curve_cm]}
+                    curve = {
+                        "clip": record["clip"],
+                        "fold": fold,
+                        "frames": clean.num_frames,
+                        "fps": float(clean.fps),
+                        "description": corruption.description,
+                        "rmse_cm": [_json_float(v) for v in score.rmse_curve_cm],
+                    }
                 clips.append(record)
                 mine.append(record)
-            folds[fold] = {"fit_seconds": _json_float(fit_seconds), "fit_cached": cached, "fit_groups": fit_groups,
-                           "fit_error": fit_error,
-                           "n_fit_clips": len(train) if fit_groups else 0, "n_test": len(mine),
-                           **{k: _nan_mean(r.get(k) for r in mine)
-                              for k in ("rmse_cm", "mje_mm", "mje_removed_mm", "coverage", "seconds")}}
+            folds[fold] = {
+                "fit_seconds": _json_float(fit_seconds),
+                "fit_cached": cached,
+                "fit_groups": fit_groups,
+                "fit_error": fit_error,
+                "n_fit_clips": len(train) if fit_groups else 0,
+                "n_test": len(mine),
+                **{
+                    k: _nan_mean(r.get(k) for r in mine)
+                    for k in ("rmse_cm", "mje_mm", "mje_removed_mm", "coverage", "seconds")
+                },
+            }
         scored = [r for r in clips if "rmse_cm" in r or "coverage" in r]
         fitted = [f["fit_seconds"] for f in folds.values() if f["fit_seconds"] is not None]
-        metrics = {k: _nan_mean(r.get(k) for r in scored)
-                   for k in ("rmse_cm", "mje_mm", "mje_removed_mm", "matrix_rmse_cm", "coverage", "seconds",
-                             "cpu_seconds")}
+        metrics = {
+            k: _nan_mean(r.get(k) for r in scored)
+            for k in ("rmse_cm", "mje_mm", "mje_removed_mm", "matrix_rmse_cm", "coverage", "seconds", "cpu_seconds")
+        }
         metrics["fit_seconds"] = float(np.mean(fitted)) if fitted else 0.0
         metrics["n_failed"] = float(sum(1 for r in scored if "error" in r))
-        return {"metrics": metrics, "detail": {"protocol": name, "level": level, "folds": folds, "clips": clips,
-                                               "curve": curve}}
+        return {
+            "metrics": metrics,
+            "detail": {"protocol": name, "level": level, "folds": folds, "clips": clips, "curve": curve},
+        }
 
     # -------------------------------------------------------------- presentation
     def headline(self, protocol: str) -> list[str]:
@@ -475,18 +574,27 @@ class RefinementBenchmark(Benchmark):
         seeds = results["seeds"]
         held = bench.get("held_out") or []
         group_kind = bench.get("group_kind", "performer")
-        lines = ["## Refinement: methods × protocols", "",
-                 (f"{bench.get('dataset', '')} under `{bench.get('root', '')}`: {bench.get('n_clips')} clips, "
-                 f"{bench.get('joints')} joints, {bench.get('fps', 0):g} fps; held out in turn ({group_kind}): "
-                 f"{', '.join(held)}; test clips per fold {bench.get('clips_per_fold') or 'all'}, cropped to "
-                 f"{bench.get('max_frames') or 'whole'} frames; seeds (corruption) {seeds}. Data-driven methods are "
-                  "fitted on the other groups' clean clips only (`fit_groups` in results.json)."), "",
-                 ("RMSE = the theses' per-frame RMSE (Wang 2017 eq. 3.18 / 4.16) averaged over the frames with "
-                 "corrupted entries, cm; mean ± sd over seeds × folds (one value per fold and seed: the mean over "
-                 "the fold's test clips). **Bold**: the lowest mean among methods that filled ≥ "
-                 f"{100 * FULL_COVERAGE:.1f} % of the corrupted entries; † = coverage below that (scored on the "
-                 "filled entries only); ✗ = some refines raised. Time: `refine` wall seconds per clip (mean over "
-                  "every cell) and `fit` seconds per fold."), ""]
+        lines = [
+            "## Refinement: methods × protocols",
+            "",
+            (
+                f"{bench.get('dataset', '')} under `{bench.get('root', '')}`: {bench.get('n_clips')} clips, "
+                f"{bench.get('joints')} joints, {bench.get('fps', 0):g} fps; held out in turn ({group_kind}): "
+                f"{', '.join(held)}; test clips per fold {bench.get('clips_per_fold') or 'all'}, cropped to "
+                f"{bench.get('max_frames') or 'whole'} frames; seeds (corruption) {seeds}. Data-driven methods are "
+                "fitted on the other groups' clean clips only (`fit_groups` in results.json)."
+            ),
+            "",
+            (
+                "RMSE = the theses' per-frame RMSE (Wang 2017 eq. 3.18 / 4.16) averaged over the frames with "
+                "corrupted entries, cm; mean ± sd over seeds × folds (one value per fold and seed: the mean over "
+                "the fold's test clips). **Bold**: the lowest mean among methods that filled ≥ "
+                f"{100 * FULL_COVERAGE:.1f} % of the corrupted entries; † = coverage below that (scored on the "
+                "filled entries only); ✗ = some refines raised. Time: `refine` wall seconds per clip (mean over "
+                "every cell) and `fit` seconds per fold."
+            ),
+            "",
+        ]
         lines += _metric_table(table, protocols, "rmse_cm", 2)
         lines += ["", "Mean joint-position error over the corrupted entries (mm), mean ± sd over seeds × folds:", ""]
         lines += _metric_table(table, protocols, "mje_mm", 1)
@@ -500,8 +608,10 @@ class RefinementBenchmark(Benchmark):
         out_dir = Path(out_dir)
         table = fold_table(results)
         written = []
-        for protocol, symbol, stem in (("random_missing", "missing ratio mr", "rmse_vs_mr"),
-                                       ("continuous_missing", "gap length ml (frames)", "rmse_vs_ml")):
+        for protocol, symbol, stem in (
+            ("random_missing", "missing ratio mr", "rmse_vs_mr"),
+            ("continuous_missing", "gap length ml (frames)", "rmse_vs_ml"),
+        ):
             path = _plot_levels(table, results["protocols"], protocol, symbol, out_dir / f"{stem}.png")
             written += [path] if path else []
         path = _plot_curves(results, out_dir / "rmse_curves.png")
@@ -585,12 +695,18 @@ def _baseline_lines(table: dict, protocols: list[str], baselines: list[str]) -> 
     present = [b for b in baselines if b in table["methods"]]
     if not present:
         return []
-    lines = ["### Against the interpolation baselines", "",
-             (f"Protocols where a method's mean RMSE is **above** the baseline's by more than {100 * TIE:g} % "
-             "(ratio method / baseline; the protocol kind in brackets: missing, noise, mixed). A method not meant "
-              "for a kind (interpolation on noise) is listed all the same."), "",
-             "| method | " + " | ".join(f"worse than {table['methods'][b]}" for b in present) + " |",
-             "|---|" + "---|" * len(present)]
+    lines = [
+        "### Against the interpolation baselines",
+        "",
+        (
+            f"Protocols where a method's mean RMSE is **above** the baseline's by more than {100 * TIE:g} % "
+            "(ratio method / baseline; the protocol kind in brackets: missing, noise, mixed). A method not meant "
+            "for a kind (interpolation on noise) is listed all the same."
+        ),
+        "",
+        "| method | " + " | ".join(f"worse than {table['methods'][b]}" for b in present) + " |",
+        "|---|" + "---|" * len(present),
+    ]
     from mocapkit.refinement.corruptions import PROTOCOLS
 
     for key, label in table["methods"].items():
@@ -616,10 +732,16 @@ def _baseline_lines(table: dict, protocols: list[str], baselines: list[str]) -> 
 def _claim_lines(table: dict, protocols: list[str], claims: list[dict]) -> list[str]:
     if not claims:
         return []
-    lines = ["### The theses' claims on these data", "",
-             ("A claim holds on a protocol when the method's mean RMSE is below every beaten method's (those run) "
-              f"by more than {100 * TIE:g} %; ≈ marks a tie (within {100 * TIE:g} %), which neither holds nor "
-              "fails."), ""]
+    lines = [
+        "### The theses' claims on these data",
+        "",
+        (
+            "A claim holds on a protocol when the method's mean RMSE is below every beaten method's (those run) "
+            f"by more than {100 * TIE:g} %; ≈ marks a tie (within {100 * TIE:g} %), which neither holds nor "
+            "fails."
+        ),
+        "",
+    ]
     for claim in claims:
         method = claim["method"]
         text = claim.get("text") or f"{method} beats {claim.get('beats') or 'every other method'}"
@@ -653,8 +775,9 @@ def _claim_lines(table: dict, protocols: list[str], claims: list[dict]) -> list[
                 parts.append(f"{table['methods'][other]} {b:.2f} {mark}")
             verdict = "does not hold" if "✗" in marks else "tie" if "≈" in marks else "holds"
             holds += verdict == "holds"
-            lines.append(f"- {protocol}: {table['methods'][method]} {a:.2f} cm vs " + ", ".join(parts) +
-                         f" → {verdict}")
+            lines.append(
+                f"- {protocol}: {table['methods'][method]} {a:.2f} cm vs " + ", ".join(parts) + f" → {verdict}"
+            )
         lines += [f"- holds on {holds} of {len(chosen)} protocols", ""]
     return lines
 
@@ -684,11 +807,17 @@ def _class_rank_lines(results: dict) -> list[str]:
     if not ranks:
         return []
     names = sorted(ranks)
-    lines = ["### Mean rank per motion class", "",
-             ("Rank 1 = the lowest RMSE on a (protocol, seed, clip) instance that every method filled completely; "
-              "mean over the class's instances (count in brackets). Bold: the best mean rank of the class."), "",
-             "| method | " + " | ".join(f"{n} ({len(next(iter(ranks[n].values())))})" for n in names) + " |",
-             "|---|" + "---|" * len(names)]
+    lines = [
+        "### Mean rank per motion class",
+        "",
+        (
+            "Rank 1 = the lowest RMSE on a (protocol, seed, clip) instance that every method filled completely; "
+            "mean over the class's instances (count in brackets). Bold: the best mean rank of the class."
+        ),
+        "",
+        "| method | " + " | ".join(f"{n} ({len(next(iter(ranks[n].values())))})" for n in names) + " |",
+        "|---|" + "---|" * len(names),
+    ]
     best = {n: min(ranks[n], key=lambda m: np.mean(ranks[n][m])) for n in names}
     for method in methods:
         cells = []
@@ -710,13 +839,18 @@ def _clip_lines(results: dict) -> list[str]:
         split = next(iter(seeds.values()), {})
         if not split.get("folds"):
             continue
-        key = tuple((fold, tuple(info["test_clips"]), info.get("skipped_short", 0))
-                    for fold, info in split["folds"].items())
+        key = tuple(
+            (fold, tuple(info["test_clips"]), info.get("skipped_short", 0)) for fold, info in split["folds"].items()
+        )
         by_clips.setdefault(key, []).append(protocol)
     if not by_clips:
         return []
-    lines = ["### Test clips", "", "| protocols | fold | test clips (frames) | passed over as too short |",
-             "|---|---|---|---|"]
+    lines = [
+        "### Test clips",
+        "",
+        "| protocols | fold | test clips (frames) | passed over as too short |",
+        "|---|---|---|---|",
+    ]
     for key, protocols in by_clips.items():
         shown = "every protocol" if len(by_clips) == 1 else ", ".join(protocols)
         for fold, names, skipped in key:
@@ -731,8 +865,10 @@ def _styles(labels) -> dict[str, dict]:
     from mocapkit.evaluation.plots import pyplot
 
     colours = pyplot().get_cmap("tab10").colors
-    return {label: {"color": colours[i % 10], "linestyle": ("-", "--", ":")[(i // 10) % 3]}
-            for i, label in enumerate(dict.fromkeys(labels))}
+    return {
+        label: {"color": colours[i % 10], "linestyle": ("-", "--", ":")[(i // 10) % 3]}
+        for i, label in enumerate(dict.fromkeys(labels))
+    }
 
 
 def _plot_levels(table: dict, protocols: list[str], name: str, xlabel: str, path: Path) -> Path | None:
@@ -744,7 +880,7 @@ def _plot_levels(table: dict, protocols: list[str], name: str, xlabel: str, path
     plt = pyplot()
     levels.sort()
     longest = max((len(label) for label in table["methods"].values()), default=0)
-    fig, ax = plt.subplots(figsize=(max(7.5, 5.0 + 0.06 * longest), 4.4))      # room for the legend's labels
+    fig, ax = plt.subplots(figsize=(max(7.5, 5.0 + 0.06 * longest), 4.4))  # room for the legend's labels
     styles = _styles(table["methods"].values())
     for key, label in table["methods"].items():
         xs, ys, es = [], [], []
@@ -780,7 +916,7 @@ def _plot_curves(results: dict, path: Path) -> Path | None:
 
     plt = pyplot()
     names = [p for p in results["protocols"] if p in panels]
-    cols = min(3, len(names) + 1)                                 # one more panel: the legend
+    cols = min(3, len(names) + 1)  # one more panel: the legend
     rows = math.ceil((len(names) + 1) / cols)
     fig, axes = plt.subplots(rows, cols, figsize=(5.0 * cols, 3.2 * rows), squeeze=False)
     styles = _styles(label for p in names for label, _ in panels[p])
@@ -788,14 +924,21 @@ def _plot_curves(results: dict, path: Path) -> Path | None:
         for label, curve in panels[protocol]:
             values = np.asarray([np.nan if v is None else v for v in curve["rmse_cm"]], dtype=float)
             frames = np.arange(len(values))
-            ax.plot(frames, values, lw=0.9, marker="." if np.isfinite(values).sum() < 200 else None, ms=2,
-                    label=label, **styles[label])
+            ax.plot(
+                frames,
+                values,
+                lw=0.9,
+                marker="." if np.isfinite(values).sum() < 200 else None,
+                ms=2,
+                label=label,
+                **styles[label],
+            )
         clip = panels[protocol][0][1]
         ax.set_title(f"{protocol} — {clip['clip']}", fontsize=8)
         ax.set_xlabel(f"frame ({clip['fps']:g} fps)", fontsize=8)
         ax.set_ylabel("RMSE per frame (cm)", fontsize=8)
         ax.grid(alpha=0.3)
-    for ax in list(axes.flat)[len(names):]:
+    for ax in list(axes.flat)[len(names) :]:
         ax.axis("off")
     handles, labels = axes.flat[0].get_legend_handles_labels()
     axes.flat[len(names)].legend(handles, labels, fontsize=8, frameon=False, loc="center")
@@ -810,7 +953,7 @@ def _plot_time(results: dict, path: Path) -> Path | None:
             if clip.get("seconds") is not None:
                 points.setdefault(cell["label"], []).append((clip["frames"], clip["seconds"]))
     lengths = [f for pts in points.values() for f, _ in pts]
-    if not points or max(lengths) < 2 * min(lengths):          # all clips about one length: nothing to show
+    if not points or max(lengths) < 2 * min(lengths):  # all clips about one length: nothing to show
         return None
     from mocapkit.evaluation.plots import pyplot, save_figure
 
@@ -820,8 +963,15 @@ def _plot_time(results: dict, path: Path) -> Path | None:
     markers = "os^vD<>ph*X"
     for i, (label, pts) in enumerate(points.items()):
         x, y = np.asarray(pts, dtype=float).T
-        ax.scatter(x, np.maximum(y, 1e-5), s=10, alpha=0.6, label=label, color=styles[label]["color"],
-                   marker=markers[i % len(markers)])
+        ax.scatter(
+            x,
+            np.maximum(y, 1e-5),
+            s=10,
+            alpha=0.6,
+            label=label,
+            color=styles[label]["color"],
+            marker=markers[i % len(markers)],
+        )
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("frames")

@@ -47,6 +47,7 @@ protocol               levels                                 what exactly happe
 The theses: Wang 2017 (PhD thesis, *Motion Capture Data Processing, Retrieval and Recognition*) §4.1.3 and
 §4.2.3, §3.5; Lou 2012 (PhD thesis) ch. 2 for outliers (marker swaps) in optical mocap.
 """
+
 from __future__ import annotations
 
 import re
@@ -104,40 +105,104 @@ class ProtocolInfo:
     """One entry of :data:`PROTOCOLS`."""
 
     name: str
-    kind: str            # "missing", "noise", "mixed" or "outlier"
-    source: str          # where the protocol comes from
-    levels: tuple        # the levels of the source
+    kind: str  # "missing", "noise", "mixed" or "outlier"
+    source: str  # where the protocol comes from
+    levels: tuple  # the levels of the source
     default: object
     summary: str
 
 
-PROTOCOLS: dict[str, ProtocolInfo] = {p.name: p for p in [
-    ProtocolInfo("rdcrypt", "noise", "Wang 2017 §4.1.3", (0.3,), 0.3,
-                 "Gaussian noise σ = 2 cm (per coordinate) on a fraction `level` of the observed entries"),
-    ProtocolInfo("rdloss", "missing", "Wang 2017 §4.1.3", (0.3,), 0.3,
-                 "a fraction `level` of the observed entries missing, drawn uniformly"),
-    ProtocolInfo("mxcrypt", "mixed", "Wang 2017 §4.1.3", (0.3,), 0.3,
-                 "a fraction `level` of the observed entries missing, then σ = 2 cm noise on a fraction `level` "
-                 "of the remaining observed entries"),
-    ProtocolInfo("rgloss", "missing", "Wang 2017 §4.1.3", ("10x60",), "10x60",
-                 "10 distinct markers, each missing for 60 consecutive frames"),
-    ProtocolInfo("random_missing", "missing", "Wang 2017 §4.2.3", (0.2, 0.3, 0.4, 0.5, 0.6), 0.3,
-                 "in every frame, round(mr·joints) of the frame's observed markers missing, drawn per frame"),
-    ProtocolInfo("continuous_missing", "missing", "Wang 2017 §4.2.3", (20, 30, 40, 50, 60), 60,
-                 "10 distinct markers, each missing for ml consecutive frames"),
-    ProtocolInfo("missing_ratio", "missing", "Wang 2017 §3.5", (0.1, 0.2, 0.3), 0.2,
-                 "a fraction `level` of the observed entries missing, drawn uniformly"),
-    ProtocolInfo("long_gaps", "missing", "biomechanics practice", ("5x2s", "20x100"), "5x2s",
-                 "N gaps of L frames ('Ls' = L seconds); markers drawn with replacement, gaps of one marker "
-                 "never overlap or touch"),
-    ProtocolInfo("swaps", "outlier", "marker mislabelling (Lou 2012 ch. 2)", ("3x0.25s", "3x1s"), "3x0.25s",
-                 "N stretches of L frames in which a marker and a nearby marker exchange trajectories"),
-    ProtocolInfo("spikes", "outlier", "single-frame outliers", (0.005, 0.01, 0.02), 0.01,
-                 "a fraction `level` of the observed entries jump 10–30 cm for one frame (isolated)"),
-]}
+PROTOCOLS: dict[str, ProtocolInfo] = {
+    p.name: p
+    for p in [
+        ProtocolInfo(
+            "rdcrypt",
+            "noise",
+            "Wang 2017 §4.1.3",
+            (0.3,),
+            0.3,
+            "Gaussian noise σ = 2 cm (per coordinate) on a fraction `level` of the observed entries",
+        ),
+        ProtocolInfo(
+            "rdloss",
+            "missing",
+            "Wang 2017 §4.1.3",
+            (0.3,),
+            0.3,
+            "a fraction `level` of the observed entries missing, drawn uniformly",
+        ),
+        ProtocolInfo(
+            "mxcrypt",
+            "mixed",
+            "Wang 2017 §4.1.3",
+            (0.3,),
+            0.3,
+            "a fraction `level` of the observed entries missing, then σ = 2 cm noise on a fraction `level` "
+            "of the remaining observed entries",
+        ),
+        ProtocolInfo(
+            "rgloss",
+            "missing",
+            "Wang 2017 §4.1.3",
+            ("10x60",),
+            "10x60",
+            "10 distinct markers, each missing for 60 consecutive frames",
+        ),
+        ProtocolInfo(
+            "random_missing",
+            "missing",
+            "Wang 2017 §4.2.3",
+            (0.2, 0.3, 0.4, 0.5, 0.6),
+            0.3,
+            "in every frame, round(mr·joints) of the frame's observed markers missing, drawn per frame",
+        ),
+        ProtocolInfo(
+            "continuous_missing",
+            "missing",
+            "Wang 2017 §4.2.3",
+            (20, 30, 40, 50, 60),
+            60,
+            "10 distinct markers, each missing for ml consecutive frames",
+        ),
+        ProtocolInfo(
+            "missing_ratio",
+            "missing",
+            "Wang 2017 §3.5",
+            (0.1, 0.2, 0.3),
+            0.2,
+            "a fraction `level` of the observed entries missing, drawn uniformly",
+        ),
+        ProtocolInfo(
+            "long_gaps",
+            "missing",
+            "biomechanics practice",
+            ("5x2s", "20x100"),
+            "5x2s",
+            "N gaps of L frames ('Ls' = L seconds); markers drawn with replacement, gaps of one marker "
+            "never overlap or touch",
+        ),
+        ProtocolInfo(
+            "swaps",
+            "outlier",
+            "marker mislabelling (Lou 2012 ch. 2)",
+            ("3x0.25s", "3x1s"),
+            "3x0.25s",
+            "N stretches of L frames in which a marker and a nearby marker exchange trajectories",
+        ),
+        ProtocolInfo(
+            "spikes",
+            "outlier",
+            "single-frame outliers",
+            (0.005, 0.01, 0.02),
+            0.01,
+            "a fraction `level` of the observed entries jump 10–30 cm for one frame (isolated)",
+        ),
+    ]
+}
 
 
 # ---------------------------------------------------------------------------------------------------- helpers
+
 
 def _label(motion: Motion) -> str:
     return motion.source or motion.name or "motion"
@@ -151,15 +216,19 @@ def _parse_gaps(level, protocol: str, fps: float, label: str) -> tuple[int, int]
     """``"NxL"`` / ``"NxLs"`` → (count, length in frames)."""
     match = re.fullmatch(r"\s*(\d+)\s*[x×]\s*(\d+(?:\.\d*)?)\s*(s?)\s*", str(level))
     if not match:
-        raise CorruptionError(f"{label}: {protocol} level must look like '5x2s' (5 × 2 seconds) or '20x100' "
-                              f"(20 × 100 frames), got {level!r}")
+        raise CorruptionError(
+            f"{label}: {protocol} level must look like '5x2s' (5 × 2 seconds) or '20x100' "
+            f"(20 × 100 frames), got {level!r}"
+        )
     count, length = int(match.group(1)), float(match.group(2))
     frames = round(float(length * fps)) if match.group(3) else round(float(length))
     if match.group(3) == "" and length != int(length):
         raise CorruptionError(f"{label}: {protocol} gap length {length} frames is not whole; use 's' for seconds")
     if count < 1 or frames < 1:
-        raise CorruptionError(f"{label}: {protocol} level {level!r} asks for no gap (count and length must be ≥ 1 "
-                              f"frame; {length}{match.group(3)} at {fps:g} fps is {frames} frames)")
+        raise CorruptionError(
+            f"{label}: {protocol} level {level!r} asks for no gap (count and length must be ≥ 1 "
+            f"frame; {length}{match.group(3)} at {fps:g} fps is {frames} frames)"
+        )
     return count, frames
 
 
@@ -190,15 +259,17 @@ def _noise(rng: np.random.Generator, positions: np.ndarray, mask: np.ndarray) ->
 
 def _check_length(motion: Motion, protocol: str, length: int) -> None:
     if motion.num_frames < length + 2:
-        raise CorruptionError(f"{_label(motion)}: {motion.num_frames} frames ({motion.duration:.3g} s) are too few for "
-                              f"{protocol} gaps of {_seconds(length, motion.fps)}; gaps keep the first and last frame, "
-                              f"so it needs at least {length + 2} frames")
+        raise CorruptionError(
+            f"{_label(motion)}: {motion.num_frames} frames ({motion.duration:.3g} s) are too few for "
+            f"{protocol} gaps of {_seconds(length, motion.fps)}; gaps keep the first and last frame, "
+            f"so it needs at least {length + 2} frames"
+        )
 
 
 def _place_gaps(rng: np.random.Generator, frames: int, count: int, length: int) -> list[int]:
     """Starts of ``count`` gaps of ``length`` frames inside frames ``1 … frames−2``, pairwise separated by ≥ 1 frame,
     drawn uniformly over all such placements (blocks of ``length + 1`` in ``frames − 1`` slots)."""
-    slots = frames - 2 + 1                       # interior frames, plus one for the separator after the last gap
+    slots = frames - 2 + 1  # interior frames, plus one for the separator after the last gap
     leftover = slots - count * (length + 1)
     picks = np.sort(rng.choice(leftover + count, size=count, replace=False))
     return [1 + int(p - i) + i * (length + 1) for i, p in enumerate(picks)]
@@ -215,19 +286,21 @@ def _longest_runs(mask: np.ndarray) -> int:
 
 # ---------------------------------------------------------------------------------------------------- protocols
 
+
 def _random_entries(motion, rng, level, protocol):
     fraction = _fraction(level, protocol, _label(motion))
     removed = _choose_entries(rng, ~motion.missing, fraction)
-    text = (f"{int(removed.sum())} of {int((~motion.missing).sum())} observed entries "
-            f"({fraction:.0%}) removed at random")
+    text = f"{int(removed.sum())} of {int((~motion.missing).sum())} observed entries ({fraction:.0%}) removed at random"
     return removed, None, None, (), text
 
 
 def _rdcrypt(motion, rng, level, protocol):
     fraction = _fraction(level, protocol, _label(motion))
     perturbed = _choose_entries(rng, ~motion.missing, fraction)
-    text = (f"Gaussian noise σ = {NOISE_SIGMA_M * 100:g} cm per coordinate on {int(perturbed.sum())} of "
-            f"{int((~motion.missing).sum())} observed entries ({fraction:.0%}); nothing removed")
+    text = (
+        f"Gaussian noise σ = {NOISE_SIGMA_M * 100:g} cm per coordinate on {int(perturbed.sum())} of "
+        f"{int((~motion.missing).sum())} observed entries ({fraction:.0%}); nothing removed"
+    )
     return None, perturbed, _noise(rng, motion.positions, perturbed), (), text
 
 
@@ -235,9 +308,11 @@ def _mxcrypt(motion, rng, level, protocol):
     fraction = _fraction(level, protocol, _label(motion))
     removed = _choose_entries(rng, ~motion.missing, fraction)
     perturbed = _choose_entries(rng, ~motion.missing & ~removed, fraction)
-    text = (f"{int(removed.sum())} of {int((~motion.missing).sum())} observed entries ({fraction:.0%}) removed at "
-            f"random, then Gaussian noise σ = {NOISE_SIGMA_M * 100:g} cm on {int(perturbed.sum())} of the "
-            f"{int((~motion.missing & ~removed).sum())} remaining ({fraction:.0%})")
+    text = (
+        f"{int(removed.sum())} of {int((~motion.missing).sum())} observed entries ({fraction:.0%}) removed at "
+        f"random, then Gaussian noise σ = {NOISE_SIGMA_M * 100:g} cm on {int(perturbed.sum())} of the "
+        f"{int((~motion.missing & ~removed).sum())} remaining ({fraction:.0%})"
+    )
     return removed, perturbed, _noise(rng, motion.positions, perturbed), (), text
 
 
@@ -249,8 +324,10 @@ def _random_missing(motion, rng, level, protocol):
     for t in range(motion.num_frames):
         observed = np.flatnonzero(~motion.missing[t])
         removed[t, rng.choice(observed, size=min(per_frame, observed.size), replace=False)] = True
-    text = (f"{per_frame} of {joints} markers (mr = {mr:g}) removed in every frame, drawn per frame among the "
-            f"frame's observed markers ({int(removed.sum())} entries)")
+    text = (
+        f"{per_frame} of {joints} markers (mr = {mr:g}) removed in every frame, drawn per frame among the "
+        f"frame's observed markers ({int(removed.sum())} entries)"
+    )
     return removed, None, None, (), text
 
 
@@ -261,11 +338,13 @@ def _fixed_gaps(motion, rng, markers: int, length: int, protocol: str):
     gaps = tuple((int(j), _place_gaps(rng, motion.num_frames, 1, length)[0], length) for j in sorted(joints))
     removed = np.zeros_like(motion.missing)
     for j, start, n in gaps:
-        removed[start:start + n, j] = True
+        removed[start : start + n, j] = True
     removed &= ~motion.missing
     names = ", ".join(motion.joint_names[j] for j, _, _ in gaps)
-    text = (f"{len(gaps)} markers ({names}) each missing for {_seconds(length, motion.fps)} in one gap "
-            f"({int(removed.sum())} entries removed)")
+    text = (
+        f"{len(gaps)} markers ({names}) each missing for {_seconds(length, motion.fps)} in one gap "
+        f"({int(removed.sum())} entries removed)"
+    )
     return removed, None, None, gaps, text
 
 
@@ -278,8 +357,9 @@ def _continuous_missing(motion, rng, level, protocol):
     try:
         ml = int(level)
     except (TypeError, ValueError):
-        raise CorruptionError(f"{_label(motion)}: {protocol} level is a gap length ml in frames, got {level!r}") \
-            from None
+        raise CorruptionError(
+            f"{_label(motion)}: {protocol} level is a gap length ml in frames, got {level!r}"
+        ) from None
     if ml < 1 or ml != float(level):
         raise CorruptionError(f"{_label(motion)}: {protocol} level must be a whole number of frames ≥ 1, got {level!r}")
     return _fixed_gaps(motion, rng, 10, ml, protocol)
@@ -290,11 +370,13 @@ def _long_gaps(motion, rng, level, protocol):
     _check_length(motion, protocol, length)
     capacity = _gap_capacity(motion.num_frames, length)
     if count > capacity * motion.num_joints:
-        raise CorruptionError(f"{_label(motion)}: {count} {protocol} gaps of {_seconds(length, motion.fps)} do not fit "
-                              f"in {motion.num_joints} markers × {motion.num_frames} frames (at most {capacity} "
-                              f"separated gaps per marker)")
+        raise CorruptionError(
+            f"{_label(motion)}: {count} {protocol} gaps of {_seconds(length, motion.fps)} do not fit "
+            f"in {motion.num_joints} markers × {motion.num_frames} frames (at most {capacity} "
+            f"separated gaps per marker)"
+        )
     per_marker = np.zeros(motion.num_joints, int)
-    for _ in range(count):                       # markers with replacement, among those with room left
+    for _ in range(count):  # markers with replacement, among those with room left
         room = np.flatnonzero(per_marker < capacity)
         per_marker[rng.choice(room)] += 1
     gaps = []
@@ -302,10 +384,12 @@ def _long_gaps(motion, rng, level, protocol):
         gaps += [(int(j), s, length) for s in _place_gaps(rng, motion.num_frames, int(per_marker[j]), length)]
     removed = np.zeros_like(motion.missing)
     for j, start, n in gaps:
-        removed[start:start + n, j] = True
+        removed[start : start + n, j] = True
     removed &= ~motion.missing
-    text = (f"{count} gaps of {_seconds(length, motion.fps)} on {int((per_marker > 0).sum())} markers "
-            f"(at most {int(per_marker.max())} per marker, never overlapping; {int(removed.sum())} entries removed)")
+    text = (
+        f"{count} gaps of {_seconds(length, motion.fps)} on {int((per_marker > 0).sum())} markers "
+        f"(at most {int(per_marker.max())} per marker, never overlapping; {int(removed.sum())} entries removed)"
+    )
     return removed, None, None, tuple(gaps), text
 
 
@@ -315,8 +399,8 @@ def _swaps(motion, rng, level, protocol):
     if motion.num_joints < 2:
         raise CorruptionError(f"{_label(motion)}: {protocol} needs at least 2 markers")
     sample = np.unique(np.linspace(0, motion.num_frames - 1, min(motion.num_frames, 240)).astype(int))
-    filled = motion.positions[sample].astype(np.float64)                                  # ≤ 240 frames suffice
-    distance = np.sqrt(np.nansum((filled[:, :, None] - filled[:, None]) ** 2, axis=3))   # [t, J, J]
+    filled = motion.positions[sample].astype(np.float64)  # ≤ 240 frames suffice
+    distance = np.sqrt(np.nansum((filled[:, :, None] - filled[:, None]) ** 2, axis=3))  # [t, J, J]
     both = ~motion.missing[sample][:, :, None] & ~motion.missing[sample][:, None]
     with np.errstate(invalid="ignore"):
         mean_distance = np.where(both.any(0), (distance * both).sum(0) / np.maximum(both.sum(0), 1), np.inf)
@@ -328,9 +412,11 @@ def _swaps(motion, rng, level, protocol):
         a = int(rng.integers(motion.num_joints))
         partners = np.flatnonzero((mean_distance[a] >= SWAP_MIN_DISTANCE_M) & np.isfinite(mean_distance[a]))
         if partners.size == 0:
-            raise CorruptionError(f"{_label(motion)}: marker {motion.joint_names[a]!r} has no partner at least "
-                                  f"{SWAP_MIN_DISTANCE_M * 100:g} cm away for {protocol}")
-        b = int(rng.choice(partners[np.argsort(mean_distance[a, partners], kind="stable")][:3]))   # one of 3 nearest
+            raise CorruptionError(
+                f"{_label(motion)}: marker {motion.joint_names[a]!r} has no partner at least "
+                f"{SWAP_MIN_DISTANCE_M * 100:g} cm away for {protocol}"
+            )
+        b = int(rng.choice(partners[np.argsort(mean_distance[a, partners], kind="stable")][:3]))  # one of 3 nearest
         start = _place_gaps(rng, motion.num_frames, 1, length)[0]
         frames = np.arange(start, start + length)
         frames = frames[~motion.missing[frames, a] & ~motion.missing[frames, b]]
@@ -340,8 +426,10 @@ def _swaps(motion, rng, level, protocol):
         pairs.append(f"{motion.joint_names[a]}↔{motion.joint_names[b]} @ {start}")
     # a second swap over the same stretch can undo a first one: perturbed = actually changed
     perturbed &= ~all_coordinates(positions == motion.positions)
-    text = (f"{count} marker swaps of {_seconds(length, motion.fps)} each ({'; '.join(pairs)}); "
-            f"{int(perturbed.sum())} entries moved, nothing removed")
+    text = (
+        f"{count} marker swaps of {_seconds(length, motion.fps)} each ({'; '.join(pairs)}); "
+        f"{int(perturbed.sum())} entries moved, nothing removed"
+    )
     return None, perturbed, positions, tuple(events), text
 
 
@@ -358,7 +446,7 @@ def _spikes(motion, rng, level, protocol):
         if perturbed.sum() >= target:
             break
         t, j = divmod(int(flat), joints)
-        if not (perturbed[t - 1, j] or perturbed[t + 1, j]):     # isolated: a spike is one frame long
+        if not (perturbed[t - 1, j] or perturbed[t + 1, j]):  # isolated: a spike is one frame long
             perturbed[t, j] = True
     if perturbed.sum() < target:
         raise CorruptionError(f"{_label(motion)}: only {int(perturbed.sum())} isolated {protocol} fit, {target} asked")
@@ -367,16 +455,25 @@ def _spikes(motion, rng, level, protocol):
     magnitude = rng.uniform(*SPIKE_RANGE_M, size=(target, 1))
     positions = motion.positions.copy()
     positions[perturbed] += (direction * magnitude).astype(np.float32)
-    text = (f"{target} isolated single-frame spikes (1 frame = {1000 / motion.fps:.3g} ms at {motion.fps:g} fps) of "
-            f"{SPIKE_RANGE_M[0] * 100:g}–{SPIKE_RANGE_M[1] * 100:g} cm on {fraction:.1%} of the observed entries; "
-            f"nothing removed")
+    text = (
+        f"{target} isolated single-frame spikes (1 frame = {1000 / motion.fps:.3g} ms at {motion.fps:g} fps) of "
+        f"{SPIKE_RANGE_M[0] * 100:g}–{SPIKE_RANGE_M[1] * 100:g} cm on {fraction:.1%} of the observed entries; "
+        f"nothing removed"
+    )
     return None, perturbed, positions, (), text
 
 
 _IMPLEMENTATIONS = {
-    "rdcrypt": _rdcrypt, "rdloss": _random_entries, "mxcrypt": _mxcrypt, "rgloss": _rgloss,
-    "random_missing": _random_missing, "continuous_missing": _continuous_missing, "missing_ratio": _random_entries,
-    "long_gaps": _long_gaps, "swaps": _swaps, "spikes": _spikes,
+    "rdcrypt": _rdcrypt,
+    "rdloss": _random_entries,
+    "mxcrypt": _mxcrypt,
+    "rgloss": _rgloss,
+    "random_missing": _random_missing,
+    "continuous_missing": _continuous_missing,
+    "missing_ratio": _random_entries,
+    "long_gaps": _long_gaps,
+    "swaps": _swaps,
+    "spikes": _spikes,
 }
 
 
@@ -416,25 +513,51 @@ def corrupt(motion: Motion, protocol: str, level=None, seed: int = 0) -> Corrupt
     longest = _longest_runs(removed)
     if longest:
         text += f"; longest run of removed frames per marker: {_seconds(longest, motion.fps)}"
-    description = f"{protocol} (level {level!r}, seed {seed}) on {_label(motion)} " \
-                  f"[{shape[0]} frames, {shape[1]} markers, {motion.fps:g} fps]: {text}"
-    corrupted = replace(motion, positions=positions, missing=motion.missing | removed, rotations=None,
-                        metadata={**motion.metadata, "corruption": {"protocol": protocol, "level": level, "seed": seed,
-                                                                    "description": description}})
-    return Corruption(motion=corrupted, removed=removed, perturbed=perturbed, protocol=protocol, level=level,
-                      description=description, seed=seed, gaps=tuple(gaps))
+    description = (
+        f"{protocol} (level {level!r}, seed {seed}) on {_label(motion)} "
+        f"[{shape[0]} frames, {shape[1]} markers, {motion.fps:g} fps]: {text}"
+    )
+    corrupted = replace(
+        motion,
+        positions=positions,
+        missing=motion.missing | removed,
+        rotations=None,
+        metadata={
+            **motion.metadata,
+            "corruption": {"protocol": protocol, "level": level, "seed": seed, "description": description},
+        },
+    )
+    return Corruption(
+        motion=corrupted,
+        removed=removed,
+        perturbed=perturbed,
+        protocol=protocol,
+        level=level,
+        description=description,
+        seed=seed,
+        gaps=tuple(gaps),
+    )
 
 
 # ---------------------------------------------------------------------------------------------------- training
 
 #: The corruption mixture of learned refiners' training (:func:`training_corruption`): every protocol of
 #: :data:`PROTOCOLS`, with levels drawn around (and beyond) the theses' levels, gap lengths up to the window.
-TRAINING_MIXTURE = ("rdcrypt", "rdloss", "mxcrypt", "random_missing", "continuous_missing", "long_gaps", "spikes",
-                    "swaps")
+TRAINING_MIXTURE = (
+    "rdcrypt",
+    "rdloss",
+    "mxcrypt",
+    "random_missing",
+    "continuous_missing",
+    "long_gaps",
+    "spikes",
+    "swaps",
+)
 
 
-def training_corruption(motion: Motion, rng: np.random.Generator, whole_joint_rate: float = 0.15,
-                        weights: dict[str, float] | None = None) -> Corruption:
+def training_corruption(
+    motion: Motion, rng: np.random.Generator, whole_joint_rate: float = 0.15, weights: dict[str, float] | None = None
+) -> Corruption:
     """One corruption of ``motion`` (a training window) drawn from :data:`TRAINING_MIXTURE`.
 
     The protocol is drawn with ``weights`` (protocol → relative weight; None: uniform over the mixture;
@@ -450,8 +573,10 @@ def training_corruption(motion: Motion, rng: np.random.Generator, whole_joint_ra
     else:
         unknown = sorted(set(weights) - set(TRAINING_MIXTURE))
         if unknown or not sum(float(w) for w in weights.values()) > 0:
-            raise ValueError(f"corruption weights {dict(weights)}: protocols must be among {list(TRAINING_MIXTURE)} "
-                             "with a positive total weight")
+            raise ValueError(
+                f"corruption weights {dict(weights)}: protocols must be among {list(TRAINING_MIXTURE)} "
+                "with a positive total weight"
+            )
         names = list(weights)
         p = np.asarray([float(weights[n]) for n in names])
         protocol = names[rng.choice(len(names), p=p / p.sum())]
@@ -474,11 +599,15 @@ def training_corruption(motion: Motion, rng: np.random.Generator, whole_joint_ra
         joints = rng.choice(motion.num_joints, size=min(int(rng.integers(1, 4)), motion.num_joints), replace=False)
         extra = np.zeros_like(result.removed)
         extra[:, joints] = ~result.motion.missing[:, joints]
-        if (~(result.motion.missing | extra)).any():          # keep at least one observed entry
+        if (~(result.motion.missing | extra)).any():  # keep at least one observed entry
             positions = result.motion.positions.copy()
             positions[extra] = np.nan
             moved = replace(result.motion, positions=positions, missing=result.motion.missing | extra)
-            result = replace(result, motion=moved, removed=result.removed | extra,
-                             perturbed=result.perturbed & ~extra,
-                             description=result.description + f"; joints {sorted(joints.tolist())} missing throughout")
+            result = replace(
+                result,
+                motion=moved,
+                removed=result.removed | extra,
+                perturbed=result.perturbed & ~extra,
+                description=result.description + f"; joints {sorted(joints.tolist())} missing throughout",
+            )
     return result

@@ -18,6 +18,7 @@ Clips shorter than ``window`` frames give no window (counted in :meth:`describe`
     clean      float32 [B, W, J, 3]   the clean window, metres
     corrupted  bool    [B, W, J]      entries the corruption removed or perturbed
 """
+
 from __future__ import annotations
 
 from dataclasses import replace
@@ -27,26 +28,32 @@ import numpy as np
 import torch
 from torch.utils.data import DataLoader, Dataset
 
-from mocapkit.motion.layouts import hip_joints
 from mocapkit.datasets.mocap.folders import (
     MocapFolderError,
     held_out_groups,
     list_clips,
     read_clips,
 )
+from mocapkit.motion.layouts import hip_joints
 
 
 def _window(motion, start: int, length: int):
-    return replace(motion, positions=motion.positions[start:start + length],
-                   missing=motion.missing[start:start + length], rotations=None)
+    return replace(
+        motion,
+        positions=motion.positions[start : start + length],
+        missing=motion.missing[start : start + length],
+        rotations=None,
+    )
 
 
 def _item(clean, corruption) -> dict:
     corrupted = corruption.motion
-    return {"positions": torch.from_numpy(np.nan_to_num(corrupted.filled(0.0)).astype(np.float32)),
-            "missing": torch.from_numpy(corrupted.missing.copy()),
-            "clean": torch.from_numpy(clean.positions.astype(np.float32)),
-            "corrupted": torch.from_numpy(corruption.corrupted.copy())}
+    return {
+        "positions": torch.from_numpy(np.nan_to_num(corrupted.filled(0.0)).astype(np.float32)),
+        "missing": torch.from_numpy(corrupted.missing.copy()),
+        "clean": torch.from_numpy(clean.positions.astype(np.float32)),
+        "corrupted": torch.from_numpy(corruption.corrupted.copy()),
+    }
 
 
 class RandomWindows(Dataset):
@@ -54,8 +61,9 @@ class RandomWindows(Dataset):
     ``mirror`` a window is first replaced by its mirror image (:meth:`~mocapkit.motion.container.Motion.
     mirrored`: left and right swapped), which doubles the poses the network sees."""
 
-    def __init__(self, motions: list, length: int, count: int, seed: int = 0, corruption: dict | None = None,
-                 mirror: float = 0.0):
+    def __init__(
+        self, motions: list, length: int, count: int, seed: int = 0, corruption: dict | None = None, mirror: float = 0.0
+    ):
         self.motions = [m for m in motions if m.num_frames >= length]
         self.length, self.count, self.seed, self.calls, self.mirror = length, count, seed, 0, float(mirror)
         self.corruption = dict(corruption or {})
@@ -73,7 +81,7 @@ class RandomWindows(Dataset):
         motion = self.motions[rng.choice(len(self.motions), p=self.weights)]
         start = int(rng.integers(motion.num_frames - self.length + 1))
         clean = _window(motion, start, self.length)
-        if self.mirror > 0 and rng.random() < self.mirror:       # no draw at 0: the stream of earlier runs is kept
+        if self.mirror > 0 and rng.random() < self.mirror:  # no draw at 0: the stream of earlier runs is kept
             clean = clean.mirrored()
         return _item(clean, training_corruption(clean, rng, **self.corruption))
 
@@ -126,12 +134,27 @@ class MocapRefinementDataModule(L.LightningDataModule):
             Validation and test windows are never mirrored.
     """
 
-    def __init__(self, dataset: str | None = "hdm05", root: str | None = None, test_groups: list | None = None,
-                 train_groups: list | None = None, extra: list | None = None, motions: list | None = None,
-                 fps: float | None = None, window: int = 120, windows_per_epoch: int = 4096,
-                 val_fraction: float = 0.1, eval_windows_per_clip: int = 2, batch_size: int = 32,
-                 eval_batch_size: int = 64, num_workers: int = 0, split_seed: int = 0, seed: int = 0,
-                 corruption: dict | None = None, mirror: float = 0.0):
+    def __init__(
+        self,
+        dataset: str | None = "hdm05",
+        root: str | None = None,
+        test_groups: list | None = None,
+        train_groups: list | None = None,
+        extra: list | None = None,
+        motions: list | None = None,
+        fps: float | None = None,
+        window: int = 120,
+        windows_per_epoch: int = 4096,
+        val_fraction: float = 0.1,
+        eval_windows_per_clip: int = 2,
+        batch_size: int = 32,
+        eval_batch_size: int = 64,
+        num_workers: int = 0,
+        split_seed: int = 0,
+        seed: int = 0,
+        corruption: dict | None = None,
+        mirror: float = 0.0,
+    ):
         super().__init__()
         if not 0.0 <= float(mirror) <= 1.0:
             raise ValueError(f"data.mirror={mirror}: a probability in [0, 1]")
@@ -142,21 +165,29 @@ class MocapRefinementDataModule(L.LightningDataModule):
             raise ValueError(f"data.val_fraction={val_fraction}: a fraction in (0, 1)")
         self.window, self.windows_per_epoch = int(window), int(windows_per_epoch)
         self.eval_windows_per_clip, self.split_seed, self.seed = int(eval_windows_per_clip), int(split_seed), int(seed)
-        self.batch_size, self.eval_batch_size, self.num_workers = int(batch_size), int(eval_batch_size), int(num_workers)
+        self.batch_size, self.eval_batch_size, self.num_workers = (
+            int(batch_size),
+            int(eval_batch_size),
+            int(num_workers),
+        )
         self.dataset_name, self.root = dataset, None if root is None else str(root)
         self.corruption = dict(corruption or {})
         if set(self.corruption) - {"whole_joint_rate", "weights"}:
-            raise ValueError(f"data.corruption: unknown key(s) {sorted(set(self.corruption) - {'whole_joint_rate', 'weights'})}"
-                             "; it takes whole_joint_rate and weights")
+            raise ValueError(
+                f"data.corruption: unknown key(s) {sorted(set(self.corruption) - {'whole_joint_rate', 'weights'})}"
+                "; it takes whole_joint_rate and weights"
+            )
         if motions is not None:
-            all_motions = [m if m.metadata.get("group") else replace(m, metadata={**m.metadata, "group": "train"})
-                           for m in motions]
+            all_motions = [
+                m if m.metadata.get("group") else replace(m, metadata={**m.metadata, "group": "train"}) for m in motions
+            ]
             if fps is not None:
                 all_motions = [m.resample(float(fps)) for m in all_motions]
         else:
             if root is None:
-                raise ValueError(f"data.root is not set: give the {dataset} folder (e.g. data.root=../shared/data/"
-                                 "hdm05_cuts11)")
+                raise ValueError(
+                    f"data.root is not set: give the {dataset} folder (e.g. data.root=../shared/data/hdm05_cuts11)"
+                )
             print(f"[mocapkit] reading {dataset} clips under {root}", flush=True)
             all_motions = read_clips(list_clips(dataset, root), fps, progress=True)
         if not all_motions:
@@ -176,9 +207,11 @@ class MocapRefinementDataModule(L.LightningDataModule):
         for source in extra or []:
             more = read_clips(list_clips(source["dataset"], source["root"]), fps, progress=True)
             if more[0].joint_names != all_motions[0].joint_names:
-                raise MocapFolderError(f"data.extra {source['dataset']} under {source['root']}: joints "
-                                       f"{list(more[0].joint_names)[:4]}... differ from the training data's; extra "
-                                       "data must share the skeleton layout")
+                raise MocapFolderError(
+                    f"data.extra {source['dataset']} under {source['root']}: joints "
+                    f"{list(more[0].joint_names)[:4]}... differ from the training data's; extra "
+                    "data must share the skeleton layout"
+                )
             self.train_motions += more
             self.extra_sources.append({**source, "clips": len(more)})
         rates = {float(m.fps) for m in [*self.train_motions, *self.val_motions]}
@@ -208,10 +241,18 @@ class MocapRefinementDataModule(L.LightningDataModule):
             sums += np.where(seen, length, 0).sum(0)
             counts += seen.sum(0)
         lengths[child] = sums / np.maximum(counts, 1)
-        return {"skeleton": {"joint_names": list(ref.joint_names), "parents": list(ref.parents),
-                             "up_axis": ref.up_axis, "hips": hip_joints(ref.joint_names, ref.layout_name),
-                             "bone_lengths": [float(v) for v in lengths], "fps": self.fps,
-                             "window": self.window, "train_groups": self.groups["train"]}}
+        return {
+            "skeleton": {
+                "joint_names": list(ref.joint_names),
+                "parents": list(ref.parents),
+                "up_axis": ref.up_axis,
+                "hips": hip_joints(ref.joint_names, ref.layout_name),
+                "bone_lengths": [float(v) for v in lengths],
+                "fps": self.fps,
+                "window": self.window,
+                "train_groups": self.groups["train"],
+            }
+        }
 
     @property
     def class_names(self) -> list[str]:
@@ -221,30 +262,47 @@ class MocapRefinementDataModule(L.LightningDataModule):
         return {"train": len(self.dataset("train")), "val": len(self.dataset("val")), "test": len(self.dataset("test"))}
 
     def describe(self) -> dict:
-        short = {part: sum(m.num_frames < self.window for m in motions)
-                 for part, motions in (("train", self.train_motions), ("val", self.val_motions),
-                                       ("test", self.test_motions))}
-        return {"split": f"groups: train {self.groups['train']}, test {self.groups['test']}",
-                "dataset": self.dataset_name, "root": self.root, "fps": self.fps, "window": self.window,
-                "clips": {"train": len(self.train_motions), "val": len(self.val_motions), "test": len(self.test_motions)},
-                "clips_shorter_than_window": short, "extra": self.extra_sources, "mirror": self.mirror,
-                "sample_counts": self.sample_counts()}
+        short = {
+            part: sum(m.num_frames < self.window for m in motions)
+            for part, motions in (("train", self.train_motions), ("val", self.val_motions), ("test", self.test_motions))
+        }
+        return {
+            "split": f"groups: train {self.groups['train']}, test {self.groups['test']}",
+            "dataset": self.dataset_name,
+            "root": self.root,
+            "fps": self.fps,
+            "window": self.window,
+            "clips": {"train": len(self.train_motions), "val": len(self.val_motions), "test": len(self.test_motions)},
+            "clips_shorter_than_window": short,
+            "extra": self.extra_sources,
+            "mirror": self.mirror,
+            "sample_counts": self.sample_counts(),
+        }
 
     # ------------------------------------------------------------------ loaders
     def dataset(self, part: str) -> Dataset:
         if not hasattr(self, "_datasets"):
             self._datasets = {
-                "train": RandomWindows(self.train_motions, self.window, self.windows_per_epoch, self.seed,
-                                       self.corruption, self.mirror),
-                "val": FixedWindows(self.val_motions, self.window, self.eval_windows_per_clip, self.split_seed,
-                                    self.corruption),
-                "test": FixedWindows(self.test_motions, self.window, self.eval_windows_per_clip, self.split_seed + 1,
-                                     self.corruption)}
+                "train": RandomWindows(
+                    self.train_motions, self.window, self.windows_per_epoch, self.seed, self.corruption, self.mirror
+                ),
+                "val": FixedWindows(
+                    self.val_motions, self.window, self.eval_windows_per_clip, self.split_seed, self.corruption
+                ),
+                "test": FixedWindows(
+                    self.test_motions, self.window, self.eval_windows_per_clip, self.split_seed + 1, self.corruption
+                ),
+            }
         return self._datasets[part]
 
     def _loader(self, part: str) -> DataLoader:
-        return DataLoader(self.dataset(part), batch_size=self.batch_size if part == "train" else self.eval_batch_size,
-                          shuffle=False, num_workers=self.num_workers, persistent_workers=self.num_workers > 0)
+        return DataLoader(
+            self.dataset(part),
+            batch_size=self.batch_size if part == "train" else self.eval_batch_size,
+            shuffle=False,
+            num_workers=self.num_workers,
+            persistent_workers=self.num_workers > 0,
+        )
 
     def train_dataloader(self) -> DataLoader:
         return self._loader("train")

@@ -29,6 +29,7 @@ the M-step sums ``E[z z^T]`` over every channel's missing frames) and ``O(T·H²
 1,000-frame, 93-channel take with ``H = 16`` takes roughly 0.1 s per iteration on one CPU core.
 No training data are needed (``requires_fit = False``): every take is modelled on its own.
 """
+
 from __future__ import annotations
 
 from functools import lru_cache
@@ -37,18 +38,16 @@ import numpy as np
 from scipy.linalg.lapack import dpotrf as _potrf
 from scipy.linalg.lapack import dpotri as _potri
 
-from mocapkit.refinement.gap_filling import linear_fill
 from mocapkit.refinement.base import MotionRefiner
+from mocapkit.refinement.gap_filling import linear_fill
 
 _LOG_2PI = float(np.log(2.0 * np.pi))
-
-
 
 
 def _inv_spd(M: np.ndarray) -> tuple[np.ndarray, float]:
     """Inverse and log-determinant of a symmetric positive-definite matrix (LAPACK potrf/potri)."""
     L, info = _potrf(M, lower=1)
-    if info:                                   # rounding on a near-singular covariance: add a tiny jitter once
+    if info:  # rounding on a near-singular covariance: add a tiny jitter once
         L, info = _potrf(M + 1e-12 * max(float(np.trace(M)), 1e-300) * np.eye(M.shape[0]), lower=1)
     if info:
         raise np.linalg.LinAlgError("covariance lost positive definiteness")
@@ -101,7 +100,7 @@ class DynaMMo(MotionRefiner):
     # ------------------------------------------------------------------ contract
 
     def _refine_matrix(self, X: np.ndarray, observed: np.ndarray) -> tuple[np.ndarray, None]:
-        usable = observed.any(0)                       # a channel never observed cannot be filled
+        usable = observed.any(0)  # a channel never observed cannot be filled
         filled = np.full_like(X, np.nan)
         Xu, Ou = X[:, usable], observed[:, usable]
         Xhat, model, history = self.fit_lds(Xu, Ou)
@@ -146,13 +145,13 @@ class DynaMMo(MotionRefiner):
         T, D = Y.shape
         H = int(max(1, min(self.hidden_dim, D, T - 1)))
         Vt = np.linalg.svd(Y, full_matrices=False)[2]
-        C = Vt[:H].T                                    # [D, H], orthonormal columns
-        Z = Y @ C                                       # [T, H]
+        C = Vt[:H].T  # [D, H], orthonormal columns
+        Z = Y @ C  # [T, H]
         A = np.linalg.lstsq(Z[:-1], Z[1:], rcond=None)[0].T
         floor = float(self.min_variance)
         Q = max(float(np.mean((Z[1:] - Z[:-1] @ A.T) ** 2)), floor)
         R = max(float(np.mean((Y - Z @ C.T) ** 2)), floor)
-        Q0 = max(float(np.mean(Z ** 2)), Q)
+        Q0 = max(float(np.mean(Z**2)), Q)
         return {"A": A, "C": C, "Q": Q, "R": R, "Q0": Q0, "mu0": Z[0].copy()}
 
     def _e_step(self, Xc: np.ndarray, observed: np.ndarray, model: dict):
@@ -168,9 +167,9 @@ class DynaMMo(MotionRefiner):
         T, D = Xc.shape
         H = C.shape[1]
         eye = np.eye(H)
-        w = observed / R                                 # R^-1 on the observed channels
-        J = (w @ (C[:, :, None] * C[:, None, :]).reshape(D, H * H)).reshape(T, H, H)   # C_o^T R_o^-1 C_o
-        h = (w * Xc) @ C                                 # C_o^T R_o^-1 x_o  [T, H]
+        w = observed / R  # R^-1 on the observed channels
+        J = (w @ (C[:, :, None] * C[:, None, :]).reshape(D, H * H)).reshape(T, H, H)  # C_o^T R_o^-1 C_o
+        h = (w * Xc) @ C  # C_o^T R_o^-1 x_o  [T, H]
         n_obs = observed.sum(1)
         same_mask = np.zeros(T, bool)
         same_mask[1:] = (observed[1:] == observed[:-1]).all(1)
@@ -178,14 +177,14 @@ class DynaMMo(MotionRefiner):
         P_f = np.empty((T, H, H))
         P_p = np.empty((T, H, H))
         P_p_inv = np.empty((T, H, H))
-        logdet_S = np.zeros(T)                           # log|R_o + C_o P_p C_o^T|
-        steady = np.zeros(T, bool)                       # step t reused step t-1's covariances
+        logdet_S = np.zeros(T)  # log|R_o + C_o P_p C_o^T|
+        steady = np.zeros(T, bool)  # step t reused step t-1's covariances
         Pp = Q0 * eye
         for t in range(T):
             if t and same_mask[t] and _close(Pp, P_p[t - 1]):
                 steady[t] = True
                 P_p[t], P_p_inv[t], P_f[t], logdet_S[t] = P_p[t - 1], P_p_inv[t - 1], P_f[t - 1], logdet_S[t - 1]
-                continue                                  # next Pp = A P_f A^T + Q is unchanged
+                continue  # next Pp = A P_f A^T + Q is unchanged
             P_p[t] = Pp
             P_p_inv[t], logdet_Pp = _inv_spd(Pp)
             if n_obs[t]:
@@ -197,7 +196,7 @@ class DynaMMo(MotionRefiner):
             Pp = A @ P_f[t] @ A.T + Q * eye
             Pp = 0.5 * (Pp + Pp.T)
         # --- forward means: m_f = m_p + P_f (h - J m_p),  m_p(t+1) = A m_f
-        F = eye - P_f @ J                                 # [T, H, H]
+        F = eye - P_f @ J  # [T, H, H]
         Pfh = np.einsum("thk,tk->th", P_f, h)
         mp_all = np.empty((T, H))
         mp = mu0.copy()
@@ -205,18 +204,22 @@ class DynaMMo(MotionRefiner):
             mp_all[t] = mp
             mp = A @ (F[t] @ mp + Pfh[t])
         mu_f = np.einsum("thk,tk->th", F, mp_all) + Pfh
-        g = h - np.einsum("thk,tk->th", J, mp_all)        # C_o^T R_o^-1 (x_o - C_o m_p)
+        g = h - np.einsum("thk,tk->th", J, mp_all)  # C_o^T R_o^-1 (x_o - C_o m_p)
         # e^T S^-1 e = e^T R_o^-1 e - g^T P_f g   (Woodbury), e = x_o - C_o m_p
-        e_quad = ((w * Xc * Xc).sum(1) - 2.0 * (mp_all * h).sum(1) + np.einsum("th,thk,tk->t", mp_all, J, mp_all)
-                  - np.einsum("th,thk,tk->t", g, P_f, g))
+        e_quad = (
+            (w * Xc * Xc).sum(1)
+            - 2.0 * (mp_all * h).sum(1)
+            + np.einsum("th,thk,tk->t", mp_all, J, mp_all)
+            - np.einsum("th,thk,tk->t", g, P_f, g)
+        )
         has = n_obs > 0
         loglik = -0.5 * float((n_obs[has] * _LOG_2PI + logdet_S[has] + e_quad[has]).sum())
         # --- RTS smoother: G_t = P_f[t] A^T P_p[t+1]^-1
-        G = P_f[:-1] @ A.T @ P_p_inv[1:]                   # [T-1, H, H]
+        G = P_f[:-1] @ A.T @ P_p_inv[1:]  # [T-1, H, H]
         V = P_f.copy()
         for t in range(T - 2, -1, -1):
             if t + 2 < T and steady[t + 1] and steady[t + 2] and _close(V[t + 1], V[t + 2]):
-                V[t] = V[t + 1]                            # G_t = G_{t+1} and V converged
+                V[t] = V[t + 1]  # G_t = G_{t+1} and V converged
             else:
                 Vt = P_f[t] + G[t] @ (V[t + 1] - P_p[t + 1]) @ G[t].T
                 V[t] = 0.5 * (Vt + Vt.T)
@@ -224,7 +227,7 @@ class DynaMMo(MotionRefiner):
         mu = mu_f.copy()
         for t in range(T - 2, -1, -1):
             mu[t] = d[t] + G[t] @ mu[t + 1]
-        V_cross = V[1:] @ np.swapaxes(G, 1, 2)             # Cov(z_{t+1}, z_t) = V_{t+1} G_t^T
+        V_cross = V[1:] @ np.swapaxes(G, 1, 2)  # Cov(z_{t+1}, z_t) = V_{t+1} G_t^T
         return mu, V, V_cross, loglik
 
     def _m_step(self, Xc, observed, model, mu, V, V_cross) -> dict:
@@ -233,21 +236,21 @@ class DynaMMo(MotionRefiner):
         T, D = Xc.shape
         H = mu.shape[1]
         floor = float(self.min_variance)
-        Ezz = V + mu[:, :, None] * mu[:, None, :]        # E[z_t z_t^T]  [T, H, H]
+        Ezz = V + mu[:, :, None] * mu[:, None, :]  # E[z_t z_t^T]  [T, H, H]
         Szz = Ezz.sum(0)
-        Sz1z = (V_cross + mu[1:, :, None] * mu[:-1, None, :]).sum(0)   # Σ E[z_t z_{t-1}^T]
-        S_prev = Szz - Ezz[-1]                           # Σ_{t<T} E[z_t z_t^T]
-        S_next = Szz - Ezz[0]                            # Σ_{t>1} E[z_t z_t^T]
+        Sz1z = (V_cross + mu[1:, :, None] * mu[:-1, None, :]).sum(0)  # Σ E[z_t z_{t-1}^T]
+        S_prev = Szz - Ezz[-1]  # Σ_{t<T} E[z_t z_t^T]
+        S_next = Szz - Ezz[0]  # Σ_{t>1} E[z_t z_t^T]
         A = np.linalg.solve(S_prev.T, Sz1z.T).T
         Q = max(float(np.trace(S_next - A @ Sz1z.T)) / ((T - 1) * H), floor)
         mu0 = mu[0].copy()
         Q0 = max(float(np.trace(V[0])) / H, floor)
         # C: Σ_t E[x_rt z_t^T] = Σ_obs x_rt mu_t^T + C_old,r Σ_miss E[z_t z_t^T]
         missing = ~observed
-        M_r = (missing.T.astype(np.float64) @ Ezz.reshape(T, H * H)).reshape(D, H, H)   # Σ_miss E[zz^T]
-        Sxz = Xc.T @ mu + np.einsum("dh,dhk->dk", C_old, M_r)                 # (Xc = 0 where missing)
+        M_r = (missing.T.astype(np.float64) @ Ezz.reshape(T, H * H)).reshape(D, H, H)  # Σ_miss E[zz^T]
+        Sxz = Xc.T @ mu + np.einsum("dh,dhk->dk", C_old, M_r)  # (Xc = 0 where missing)
         C = np.linalg.solve(Szz, Sxz.T).T
         # R: Σ_t E[(x_rt - C_r z_t)^2] = Σ E[x^2] - C_r Sxz_r^T   (C optimal)
-        Ex2 = (Xc ** 2).sum(0) + np.einsum("dh,dhk,dk->d", C_old, M_r, C_old) + missing.sum(0) * R_old
+        Ex2 = (Xc**2).sum(0) + np.einsum("dh,dhk,dk->d", C_old, M_r, C_old) + missing.sum(0) * R_old
         R = max(float((Ex2 - np.einsum("dh,dh->d", C, Sxz)).sum()) / (T * D), floor)
         return {"A": A, "C": C, "Q": Q, "R": R, "Q0": Q0, "mu0": mu0}

@@ -7,6 +7,7 @@ as the folds: the same protocols, corruption seeds, test clips and metrics as ``
 on the other groups, which are the groups the run trained on (the learned refiner's ``fit`` checks that).
 Writes ``results.json``, ``results.md`` and the plots to ``<run>/eval`` (or ``eval.out_dir``).
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -27,11 +28,17 @@ def evaluate_refinement(module, datamodule, cfg: DictConfig, out_dir: Path) -> d
     if not groups:
         raise ConfigError("the run holds out no group (data.test_groups): nothing to evaluate on")
     label = f"learned ({cfg.get('experiment_name', 'refiner')})"
-    overrides = [name, f"benchmark.root={cfg.data.root}", f"benchmark.held_out=[{','.join(groups)}]",
-                 f"out={out_dir}",
-                 (f"+methods.learned={{label: '{label}', reseed: false, estimator: {{_target_: "
-                  f"mocapkit.refinement.learned.LearnedRefiner, checkpoint: '{Path(cfg.ckpt_path)}'}}}}"),
-                 *[str(o) for o in cfg.eval.get("overrides") or []]]
+    overrides = [
+        name,
+        f"benchmark.root={cfg.data.root}",
+        f"benchmark.held_out=[{','.join(groups)}]",
+        f"out={out_dir}",
+        (
+            f"+methods.learned={{label: '{label}', reseed: false, estimator: {{_target_: "
+            f"mocapkit.refinement.learned.LearnedRefiner, checkpoint: '{Path(cfg.ckpt_path)}'}}}}"
+        ),
+        *[str(o) for o in cfg.eval.get("overrides") or []],
+    ]
     results = run_comparison(compose(overrides))
     summary = results["summary"]
     return {"comparison": name, "held_out": groups, "out_dir": str(out_dir), "summary": summary}

@@ -45,15 +45,16 @@ same subject in one room), all documented on the parameters:
 * **Initialisation**: the thesis starts from ``z = y``, undefined where missing; gaps start from linear
   interpolation, a never-observed marker from the centroid of the observed ones.
 """
+
 from __future__ import annotations
 
 from collections.abc import Sequence
 
 import numpy as np
 
-from mocapkit.refinement.gap_filling import linear_fill
 from mocapkit.motion.container import AXES, Motion
 from mocapkit.refinement.base import MotionRefiner, RefinementError
+from mocapkit.refinement.gap_filling import linear_fill
 
 #: Frame rate at which the thesis processes all data (120 fps downsampled to 30 fps).
 THESIS_FPS = 30.0
@@ -94,10 +95,21 @@ class FilterBasesRefiner(MotionRefiner):
     requires_fit = True
     fixed_sampling = True
 
-    def __init__(self, window: int = 20, energy: float = 0.9999, n_bases: int | None = None, welsch_p: float = 0.03,
-                 prior_weight: float = 0.1, max_iter: int = 50, tol: float = 1e-5, outlier_weight: float = 0.01,
-                 dilation: int | None = None, invariance: str = "heading", max_windows: int = 30000,
-                 random_state: int | None = 0):
+    def __init__(
+        self,
+        window: int = 20,
+        energy: float = 0.9999,
+        n_bases: int | None = None,
+        welsch_p: float = 0.03,
+        prior_weight: float = 0.1,
+        max_iter: int = 50,
+        tol: float = 1e-5,
+        outlier_weight: float = 0.01,
+        dilation: int | None = None,
+        invariance: str = "heading",
+        max_windows: int = 30000,
+        random_state: int | None = 0,
+    ):
         self.window = window
         self.energy = energy
         self.n_bases = n_bases
@@ -127,18 +139,19 @@ class FilterBasesRefiner(MotionRefiner):
         for X, observed in data:
             if X.shape[0] < (M - 1) * delta + 1:
                 continue
-            ok = _unfold(observed.astype(np.float64), M, delta).min(axis=(1, 2)) > 0   # fully observed windows
+            ok = _unfold(observed.astype(np.float64), M, delta).min(axis=(1, 2)) > 0  # fully observed windows
             rows.append(_unfold(X, M, delta)[ok].reshape(-1, L * M))
         Dm = np.concatenate(rows) if rows else np.empty((0, L * M))
         if len(Dm) < 2:
-            raise RefinementError(f"{type(self).__name__}.fit: no fully observed training window of "
-                                  f"{(M - 1) * delta + 1} frames")
+            raise RefinementError(
+                f"{type(self).__name__}.fit: no fully observed training window of {(M - 1) * delta + 1} frames"
+            )
         if len(Dm) > self.max_windows:
             Dm = Dm[np.random.default_rng(self.random_state).choice(len(Dm), int(self.max_windows), replace=False)]
         shift = self._translation_basis(L, M)
         if self.invariance != "none":
-            Dm = Dm - (Dm @ shift) @ shift.T                  # centre every window (per axis)
-        C = Dm.T @ Dm / len(Dm)                               # eq. 2.3
+            Dm = Dm - (Dm @ shift) @ shift.T  # centre every window (per axis)
+        C = Dm.T @ Dm / len(Dm)  # eq. 2.3
         if self.invariance == "heading":
             C = _average_heading(C, L // 3, M, AXES[self.up_axis_])
         evals, evecs = np.linalg.eigh(C)
@@ -150,7 +163,7 @@ class FilterBasesRefiner(MotionRefiner):
         K = max(1, min(K, int((evals > 1e-12 * evals[0]).sum())))
         E = evecs[:, :K]
         if self.invariance != "none":
-            E = np.concatenate([shift, E], axis=1)            # centred bases ⟂ translations
+            E = np.concatenate([shift, E], axis=1)  # centred bases ⟂ translations
         self.bases_, self.n_bases_, self.eigenvalues_ = E, K, evals
 
     def _translation_basis(self, L: int, M: int) -> np.ndarray:
@@ -175,20 +188,20 @@ class FilterBasesRefiner(MotionRefiner):
         alpha = observed.astype(np.float64)
         y = np.where(observed, X, 0.0)
         z = _initial(X, observed)
-        n = _unfold_counts(T, M, delta)[:, None]               # windows covering each frame
+        n = _unfold_counts(T, M, delta)[:, None]  # windows covering each frame
         cost_history: list[float] = []
         for _ in range(max(1, int(self.max_iter))):
-            Z = _unfold(z, M, delta).reshape(-1, L * M)          # [S, L·M] windows (channel-major)
-            recon = (Z @ E) @ E.T                               # E c_s, c_s = Eᵀ z_s (eqs. 2.12–2.13)
-            w = np.exp(-((z - y) ** 2) / p2)                    # IRLS weight ψ(r)/r at the previous z
+            Z = _unfold(z, M, delta).reshape(-1, L * M)  # [S, L·M] windows (channel-major)
+            recon = (Z @ E) @ E.T  # E c_s, c_s = Eᵀ z_s (eqs. 2.12–2.13)
+            w = np.exp(-((z - y) ** 2) / p2)  # IRLS weight ψ(r)/r at the previous z
             cost_history.append(float((alpha * 0.5 * p2 * (1.0 - w)).sum()) + lam * float(((Z - recon) ** 2).sum()))
             R = _fold(recon.reshape(-1, L, M), T, delta)
             z = (lam * R + alpha * w * y) / (lam * n + alpha * w)  # eq. 2.15, closed form per entry
             if len(cost_history) > 1 and abs(cost_history[-2] - cost_history[-1]) <= self.tol * cost_history[-1]:
                 break
-        z, y, observed = z[pad:T - pad], y[pad:T - pad], observed[pad:T - pad]
+        z, y, observed = z[pad : T - pad], y[pad : T - pad], observed[pad : T - pad]
         r2 = np.where(observed, (z - y) ** 2, 0.0).reshape(T0, L // 3, 3).sum(2)
-        marker_weight = np.exp(-r2 / p2)                        # product of the marker's 3 coordinate weights
+        marker_weight = np.exp(-r2 / p2)  # product of the marker's 3 coordinate weights
         repaired = (marker_weight < float(self.outlier_weight)) & observed[:, ::3]
         self.weights_, self.cost_, self.n_iter_ = marker_weight, cost_history, len(cost_history)
         return z, repaired
@@ -204,7 +217,7 @@ def _initial(X: np.ndarray, observed: np.ndarray) -> np.ndarray:
         obs3 = observed.reshape(T, L // 3, 3)
         X3 = np.where(obs3, X.reshape(T, L // 3, 3), 0.0)
         cnt = obs3.sum(1)
-        centroid = np.where(cnt > 0, X3.sum(1) / np.maximum(cnt, 1), np.nan)      # [T, 3]
+        centroid = np.where(cnt > 0, X3.sum(1) / np.maximum(cnt, 1), np.nan)  # [T, 3]
         centroid = linear_fill(np.nan_to_num(centroid), cnt > 0)
         for c in np.flatnonzero(never):
             z[:, c] = centroid[:, c % 3]
@@ -215,7 +228,7 @@ def _unfold(z: np.ndarray, M: int, delta: int) -> np.ndarray:
     """Windows ``[S, L, M]`` of ``z`` ``[T, L]``: window s holds frames ``s, s+δ, …, s+(M−1)δ``."""
     T = z.shape[0]
     S = T - (M - 1) * delta
-    idx = np.arange(S)[:, None] + delta * np.arange(M)[None, :]          # [S, M]
+    idx = np.arange(S)[:, None] + delta * np.arange(M)[None, :]  # [S, M]
     return np.swapaxes(z[idx], 1, 2)
 
 
@@ -224,7 +237,7 @@ def _fold(windows: np.ndarray, T: int, delta: int) -> np.ndarray:
     S, L, M = windows.shape
     out = np.zeros((T, L))
     for m in range(M):
-        out[m * delta:m * delta + S] += windows[:, :, m]
+        out[m * delta : m * delta + S] += windows[:, :, m]
     return out
 
 

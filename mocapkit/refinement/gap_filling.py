@@ -21,6 +21,7 @@ Marker inter-correlations:
   clean frames to the PCA). See the class docstring for the exact steps and where this implementation departs
   from the published one.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -64,14 +65,14 @@ class _TemporalInterpolation(MotionRefiner):
         for column in np.flatnonzero(~observed.all(axis=0)):
             seen = np.flatnonzero(observed[:, column])
             if seen.size == 0:
-                continue                                   # missing in every frame: stays missing, reported
+                continue  # missing in every frame: stays missing, reported
             first, last = seen[0], seen[-1]
-            inside = np.flatnonzero(~observed[first:last + 1, column]) + first
+            inside = np.flatnonzero(~observed[first : last + 1, column]) + first
             if inside.size and seen.size >= self._min_points:
                 filled[inside, column] = self._interpolate(t[seen], X[seen, column], t[inside])
             if self.extrapolate == "hold":
                 filled[:first, column] = X[first, column]
-                filled[last + 1:, column] = X[last, column]
+                filled[last + 1 :, column] = X[last, column]
         return filled, None
 
 
@@ -196,10 +197,19 @@ class PCAGapFilling(MotionRefiner):
 
     min_frames = 2
 
-    def __init__(self, method: str = "iterative", min_cum_sv: float = 0.99, weight_scale: float = 0.2,
-                 missing_marker_weight: float = 0.02, min_complete_frames: int = 20, max_iter: int = 50,
-                 tol: float = 1e-5, regularization: str | None = "ppca", ridge: float = 1e-8,
-                 device: str = "cpu"):
+    def __init__(
+        self,
+        method: str = "iterative",
+        min_cum_sv: float = 0.99,
+        weight_scale: float = 0.2,
+        missing_marker_weight: float = 0.02,
+        min_complete_frames: int = 20,
+        max_iter: int = 50,
+        tol: float = 1e-5,
+        regularization: str | None = "ppca",
+        ridge: float = 1e-8,
+        device: str = "cpu",
+    ):
         self.method = method
         self.min_cum_sv = min_cum_sv
         self.weight_scale = weight_scale
@@ -224,16 +234,18 @@ class PCAGapFilling(MotionRefiner):
         rejected (their frames could not join the PCA)."""
         names = getattr(self, "joint_names_", None)
         if names is not None and tuple(motion.joint_names) != tuple(names):
-            raise RefinementError(f"{motion.source or motion.name}: PCAGapFilling was fitted on another skeleton "
-                                  f"layout; refit on motions of this layout or use an unfitted PCAGapFilling()")
+            raise RefinementError(
+                f"{motion.source or motion.name}: PCAGapFilling was fitted on another skeleton "
+                f"layout; refit on motions of this layout or use an unfitted PCAGapFilling()"
+            )
         return super().refine(motion)
 
     def _refine_matrix(self, X: np.ndarray, observed: np.ndarray):
         if self.method not in ("complete", "iterative"):
             raise ValueError(f"method must be 'iterative' or 'complete', got {self.method!r}")
         columns = X.shape[1]
-        seen = observed[:, ::3]                                          # [F, J] marker observed
-        active = seen.any(axis=0)                                        # markers seen at least once
+        seen = observed[:, ::3]  # [F, J] marker observed
+        active = seen.any(axis=0)  # markers seen at least once
         cols = np.repeat(active, 3)
         out = np.where(observed, X, np.nan)
         gapped = np.flatnonzero(active & ~seen.all(axis=0))
@@ -242,27 +254,31 @@ class PCAGapFilling(MotionRefiner):
             return out, None
         Xa, Oa, Sa = X[:, cols], observed[:, cols], seen[:, active]
         train = getattr(self, "training_frames_", np.zeros((0, columns)))[:, cols]
-        reference = seen[:, active].all(axis=0)                          # reference markers (complete)
+        reference = seen[:, active].all(axis=0)  # reference markers (complete)
         complete = Sa.all(axis=1)
         index = {j: i for i, j in enumerate(np.flatnonzero(active))}
         distances = self._distances(Xa, Sa)
         if self.method == "complete" and complete.sum() < max(2, self.min_complete_frames):
-            raise RefinementError(f"PCAGapFilling(method='complete'): only {int(complete.sum())} frames have every "
-                                  f"marker, {self.min_complete_frames} needed; use method='iterative'")
-        initial = linear_fill(Xa, Oa)                                   # the iterative start and the fallback
+            raise RefinementError(
+                f"PCAGapFilling(method='complete'): only {int(complete.sum())} frames have every "
+                f"marker, {self.min_complete_frames} needed; use method='iterative'"
+            )
+        initial = linear_fill(Xa, Oa)  # the iterative start and the fallback
         estimate = initial
         if complete.sum() >= max(2, self.min_complete_frames):
             self.basis_ = "complete"
-            estimate = self._pass(estimate, Oa, Sa, Xa[complete], train, reference, distances,
-                                  [index[j] for j in gapped])
+            estimate = self._pass(
+                estimate, Oa, Sa, Xa[complete], train, reference, distances, [index[j] for j in gapped]
+            )
         if self.method == "iterative":
             self.basis_ = "iterative"
             changes: list[float] = []
             for iteration in range(1, self.max_iter + 1):
                 self.n_iter_ = iteration
                 previous = estimate
-                estimate = self._pass(estimate, Oa, Sa, estimate, train, reference, distances,
-                                      [index[j] for j in gapped], own_rows=Sa)
+                estimate = self._pass(
+                    estimate, Oa, Sa, estimate, train, reference, distances, [index[j] for j in gapped], own_rows=Sa
+                )
                 change = float(np.abs(estimate - previous)[~Oa].max())
                 if change < self.tol:
                     break
@@ -274,19 +290,20 @@ class PCAGapFilling(MotionRefiner):
                 changes.append(change)
         estimate = self._plausible(estimate, Oa, Sa, initial, reference)
         result = np.where(Oa, Xa, estimate)
-        result[~Sa.any(axis=1)] = np.nan                                  # frames with nothing observed
+        result[~Sa.any(axis=1)] = np.nan  # frames with nothing observed
         out[:, cols] = np.where(Oa, Xa, result)
         return out, None
 
-    def _plausible(self, estimate: np.ndarray, observed: np.ndarray, seen: np.ndarray, fallback: np.ndarray,
-                   reference: np.ndarray) -> np.ndarray:
+    def _plausible(
+        self, estimate: np.ndarray, observed: np.ndarray, seen: np.ndarray, fallback: np.ndarray, reference: np.ndarray
+    ) -> np.ndarray:
         """Reconstructed markers farther from the body centre than any observed marker ever is (×1.5) are not
         plausible: they are replaced by the ``fallback`` (linear interpolation over time) and counted in
         ``n_implausible_``. With many markers missing at once the PCA solve can be ill-posed; this keeps a
         diverging reconstruction from inventing positions metres away from the body."""
         P = estimate.reshape(estimate.shape[0], -1, 3)
-        centre = self._centres(np.where(observed, estimate, fallback), reference)[:, None]   # [F, 1, 3]
-        radius = np.linalg.norm(P - centre, axis=2)                                           # [F, J]
+        centre = self._centres(np.where(observed, estimate, fallback), reference)[:, None]  # [F, 1, 3]
+        radius = np.linalg.norm(P - centre, axis=2)  # [F, J]
         reach = 1.5 * radius[seen].max() if seen.any() else np.inf
         bad = (radius > reach) & ~seen
         self.n_implausible_ = int(bad.sum())
@@ -303,7 +320,7 @@ class PCAGapFilling(MotionRefiner):
         J = P.shape[1]
         total, count = np.zeros((J, J)), np.zeros((J, J))
         for start in range(0, P.shape[0], 512):
-            p, s = P[start:start + 512], seen[start:start + 512]
+            p, s = P[start : start + 512], seen[start : start + 512]
             d = np.linalg.norm(p[:, :, None] - p[:, None], axis=3)
             both = s[:, :, None] & s[:, None]
             total += np.where(both, d, 0.0).sum(0)
@@ -324,31 +341,38 @@ class PCAGapFilling(MotionRefiner):
         dev = torch.device(self.device)
         columns = X.shape[1]
         J = columns // 3
-        centre = np.tile(self._centres(X, reference), J)                          # [F, C]
-        basis_all = np.concatenate([basis - np.tile(self._centres(basis, reference), J),
-                                    train - np.tile(self._centres(train, reference), J)]) \
-            if len(train) else basis - np.tile(self._centres(basis, reference), J)
+        centre = np.tile(self._centres(X, reference), J)  # [F, C]
+        basis_all = (
+            np.concatenate(
+                [
+                    basis - np.tile(self._centres(basis, reference), J),
+                    train - np.tile(self._centres(train, reference), J),
+                ]
+            )
+            if len(train)
+            else basis - np.tile(self._centres(basis, reference), J)
+        )
         B = torch.as_tensor(basis_all, dtype=torch.float64, device=dev)
         mean, std = B.mean(0), B.std(0)
         std = torch.where(std > 1e-9, std, torch.ones_like(std))
-        Z0 = (B - mean) / std                                                     # [n, C]
+        Z0 = (B - mean) / std  # [n, C]
         if own_rows is None:
             cov = (Z0.T @ Z0 / max(Z0.shape[0] - 1, 1))[None].expand(len(gapped), -1, -1)
         else:
-            keep = np.concatenate([own_rows[:, gapped], np.ones((len(train), len(gapped)), bool)])   # [n, G]
+            keep = np.concatenate([own_rows[:, gapped], np.ones((len(train), len(gapped)), bool)])  # [n, G]
             K = torch.as_tensor(keep, dtype=torch.float64, device=dev)
             cov = torch.einsum("ng,nc,nd->gcd", K, Z0, Z0) / (K.sum(0) - 1).clamp_min(1)[:, None, None]
         data = torch.as_tensor(X - centre, dtype=torch.float64, device=dev)
         obs = torch.as_tensor(observed, device=dev)
         out = X.copy()
         # distance weights of every gapped marker (rows) over all markers, then the weighted covariances
-        d = np.where(np.isfinite(distances[gapped]), distances[gapped], 1e3)             # [G, J]
-        w_markers = np.exp(-d ** 2 / (2.0 * self.weight_scale ** 2))
+        d = np.where(np.isfinite(distances[gapped]), distances[gapped], 1e3)  # [G, J]
+        w_markers = np.exp(-(d**2) / (2.0 * self.weight_scale**2))
         w_markers[np.arange(len(gapped)), gapped] = 0.0
         w_markers[np.arange(len(gapped)), gapped] = self.missing_marker_weight * w_markers.max(axis=1)
         W = torch.as_tensor(np.repeat(np.maximum(w_markers, 1e-12), 3, axis=1), dtype=torch.float64, device=dev)
-        evals, evecs = torch.linalg.eigh(cov * W[:, :, None] * W[:, None, :])           # [G, C], [G, C, C]
-        evals, evecs = evals.flip(-1).clamp_min(0.0), evecs.flip(-1)                     # descending
+        evals, evecs = torch.linalg.eigh(cov * W[:, :, None] * W[:, None, :])  # [G, C], [G, C, C]
+        evals, evecs = evals.flip(-1).clamp_min(0.0), evecs.flip(-1)  # descending
         sv = evals.sqrt()
         counts = torch.searchsorted(torch.cumsum(sv, -1), (self.min_cum_sv * sv.sum(-1))[:, None]).squeeze(-1) + 1
         for g, m in enumerate(gapped):
@@ -356,20 +380,20 @@ class PCAGapFilling(MotionRefiner):
             if rows.size == 0:
                 continue
             k = min(int(counts[g]), columns)
-            V, lam, w = evecs[g, :, :k], evals[g, :k], W[g]                              # [C, k], [k], [C]
+            V, lam, w = evecs[g, :, :k], evals[g, :k], W[g]  # [C, k], [k], [C]
             r = torch.as_tensor(rows, device=dev)
-            o = obs[r].to(torch.float64)                                                  # [f, C]
-            z = (data[r] - mean) / std * w * o                                            # observed coords only
-            gram = (V.T[None] * o[:, None, :]) @ V                                        # Vᵀ diag(o_f) V, [f, k, k]
-            if self.regularization == "ppca":      # Gaussian prior on the coefficients, variance = eigenvalues
+            o = obs[r].to(torch.float64)  # [f, C]
+            z = (data[r] - mean) / std * w * o  # observed coords only
+            gram = (V.T[None] * o[:, None, :]) @ V  # Vᵀ diag(o_f) V, [f, k, k]
+            if self.regularization == "ppca":  # Gaussian prior on the coefficients, variance = eigenvalues
                 noise = evals[g, k:].mean() if k < columns else evals[g, -1]
                 prior = noise / lam.clamp_min(1e-12 * float(evals[g, 0]))
             else:
                 prior = torch.zeros_like(lam)
             gram = gram + torch.diag_embed(prior + self.ridge)[None]
-            coef = torch.linalg.solve(gram, (z @ V).unsqueeze(-1)).squeeze(-1)            # [f, k]
+            coef = torch.linalg.solve(gram, (z @ V).unsqueeze(-1)).squeeze(-1)  # [f, k]
             block = slice(3 * m, 3 * m + 3)
-            zm = coef @ V[block].T                                                        # weighted, normalised
+            zm = coef @ V[block].T  # weighted, normalised
             xm = zm / w[block] * std[block] + mean[block]
             out[rows, block] = xm.cpu().numpy() + centre[rows, block]
         return out

@@ -22,6 +22,7 @@ with ``--repair-outliers``).
 A motion whose joints are those of the training layout in another order (a C3D whose point labels are the
 joint names, with or without extra markers) is refined on those joints; extra markers come back untouched.
 """
+
 from __future__ import annotations
 
 import io
@@ -38,20 +39,21 @@ from mocapkit.refinement.base import MotionRefiner, RefinementError
 #: Default inference window in training windows. Both networks run on any length, and with twice the training
 #: window they filled long gaps better on the runs' validation clips (training performers only; 2 s gaps: 32 → 25 cm
 #: RMS) at the cost of up to 0.3 mm under 20 % random loss for the transformer
-#: (``scripts/selection/refiner_inference_settings.py --setting window``; bench/RESULTS.md §13).
+#: (``scripts/selection/refiner_inference_settings.py --setting window``; docs/decisions.md#refiner-inference-window).
 INFERENCE_WINDOW_FACTOR = 2
 
 #: Default ``short_gap_frames``: interior gaps of up to 24 frames (0.2 s at 120 fps) are filled by the cubic spline,
 #: longer ones by the network. Chosen on the runs' validation clips (training performers only; values 0, 4, 8, 12,
 #: 24; mean RMS over random loss 0.2 / 0.5 and 10-, 20-, 40-frame gaps: 8.41 → 8.11 mm for the BiGRU, 8.40 → 8.11
-#: for the transformer; ``scripts/selection/refiner_inference_settings.py --setting short_gaps``; bench/RESULTS.md §13).
+#: for the transformer; ``scripts/selection/refiner_inference_settings.py --setting short_gaps``;
+#: docs/decisions.md#refiner-short-gaps).
 SHORT_GAP_FRAMES = 24
 
 #: Default ``short_gap_points``: the short-gap spline passes through the take's samples with the ones the network
 #: repairs at its values. Chosen on the same validation clips with ``mxcrypt`` (gaps in noisy data) added to the
 #: protocols, after the test table showed the spline through the raw samples losing there (mean RMS over the six
 #: protocols: BiGRU 10.18 mm without the spline, 10.82 through the observed samples, 10.09 through the repaired ones;
-#: transformer 10.27, 10.81, 10.10; ``--setting short_gap_points``; bench/RESULTS.md §13).
+#: transformer 10.27, 10.81, 10.10; ``--setting short_gap_points``; docs/decisions.md#refiner-short-gap-points).
 SHORT_GAP_POINTS = "repaired"
 
 
@@ -63,7 +65,7 @@ def short_gaps(missing: np.ndarray, longest: int) -> np.ndarray:
     if longest <= 0:
         return out
     for j in np.flatnonzero(missing.any(axis=0)):
-        for a, b in true_runs(missing[:, j]):                                     # [a, b)
+        for a, b in true_runs(missing[:, j]):  # [a, b)
             if a > 0 and b < len(missing) and b - a <= longest:
                 out[a:b, j] = True
     return out
@@ -93,8 +95,8 @@ def empty_frames_kept(missing: np.ndarray, max_empty_frames: int) -> np.ndarray:
     observed = np.flatnonzero(~empty)
     if observed.size == 0:
         return empty
-    keep[:observed[0]] = True
-    keep[observed[-1] + 1:] = True
+    keep[: observed[0]] = True
+    keep[observed[-1] + 1 :] = True
     start = None
     for t in range(observed[0], observed[-1] + 2):
         if t <= observed[-1] and empty[t]:
@@ -129,16 +131,31 @@ class _WindowedRefiner(MotionRefiner):
     def refine(self, motion: Motion) -> Motion:
         """See :class:`~mocapkit.refinement.base.MotionRefiner` and the module docstring."""
         trained = getattr(self, "joint_names_", None)
-        if trained is not None and tuple(motion.joint_names) != tuple(trained) \
-                and set(trained) <= set(motion.joint_names):
+        if (
+            trained is not None
+            and tuple(motion.joint_names) != tuple(trained)
+            and set(trained) <= set(motion.joint_names)
+        ):
             order = [motion.joint_names.index(name) for name in trained]
-            sub = replace(motion, positions=motion.positions[:, order], missing=motion.missing[:, order],
-                          joint_names=tuple(trained), parents=None, rotations=None, layout_name=None)
+            sub = replace(
+                motion,
+                positions=motion.positions[:, order],
+                missing=motion.missing[:, order],
+                joint_names=tuple(trained),
+                parents=None,
+                rotations=None,
+                layout_name=None,
+            )
             done = super().refine(sub)
             positions, missing = motion.positions.copy(), motion.missing.copy()
             positions[:, order], missing[:, order] = done.positions, done.missing
-            return replace(motion, positions=positions, missing=missing, rotations=None,
-                           metadata={**motion.metadata, "refinement": done.metadata["refinement"]})
+            return replace(
+                motion,
+                positions=positions,
+                missing=missing,
+                rotations=None,
+                metadata={**motion.metadata, "refinement": done.metadata["refinement"]},
+            )
         return super().refine(motion)
 
     def _refine_matrix(self, X: np.ndarray, observed: np.ndarray):
@@ -151,11 +168,14 @@ class _WindowedRefiner(MotionRefiner):
         repaired = ~missing & (moved > float(self.repair_threshold))
         if self.short_gap_frames:
             if self.short_gap_points not in ("observed", "repaired"):
-                raise ValueError(f"{type(self).__name__}: short_gap_points must be 'observed' or 'repaired', got "
-                                 f"{self.short_gap_points!r}")
+                raise ValueError(
+                    f"{type(self).__name__}: short_gap_points must be 'observed' or 'repaired', got "
+                    f"{self.short_gap_points!r}"
+                )
             short = short_gaps(missing, int(self.short_gap_frames))
-            through = positions if self.short_gap_points == "observed" else \
-                np.where(repaired[..., None], refined, positions)
+            through = (
+                positions if self.short_gap_points == "observed" else np.where(repaired[..., None], refined, positions)
+            )
             refined[short] = spline_fill(through, missing, short)[short]
         refined[empty_frames_kept(missing, int(self.max_empty_frames))] = np.nan
         return refined.reshape(frames, 3 * joints), repaired
@@ -185,11 +205,20 @@ class LearnedRefiner(_WindowedRefiner):
             (:class:`~mocapkit.models.refiners.BiGRURefiner`).
     """
 
-    def __init__(self, checkpoint: str | Sequence[str] | None = None, experiment: str | None = None,
-                 overrides: Sequence[str] = (), window: int | None = None, overlap: int | None = None,
-                 repair_threshold: float = 0.02, max_empty_frames: int = 12, device: str = "cpu",
-                 first_guess: dict | None = None, short_gap_frames: int = SHORT_GAP_FRAMES,
-                 short_gap_points: str = SHORT_GAP_POINTS):
+    def __init__(
+        self,
+        checkpoint: str | Sequence[str] | None = None,
+        experiment: str | None = None,
+        overrides: Sequence[str] = (),
+        window: int | None = None,
+        overlap: int | None = None,
+        repair_threshold: float = 0.02,
+        max_empty_frames: int = 12,
+        device: str = "cpu",
+        first_guess: dict | None = None,
+        short_gap_frames: int = SHORT_GAP_FRAMES,
+        short_gap_points: str = SHORT_GAP_POINTS,
+    ):
         self.checkpoint = checkpoint
         self.experiment = experiment
         self.overrides = overrides
@@ -215,8 +244,10 @@ class LearnedRefiner(_WindowedRefiner):
         raw = read_checkpoint_bytes(path)
         checkpoint = parse_checkpoint(raw, path)
         if "skeleton" not in checkpoint.get("hyper_parameters", {}):
-            raise RefinementError(f"{path}: not a refiner checkpoint (no skeleton in its hyper-parameters); train one "
-                                  "with `mocapkit train experiment=refine_bigru`")
+            raise RefinementError(
+                f"{path}: not a refiner checkpoint (no skeleton in its hyper-parameters); train one "
+                "with `mocapkit train experiment=refine_bigru`"
+            )
         try:
             return MotionRefinementModule.load_from_checkpoint(io.BytesIO(raw), map_location="cpu", weights_only=True)
         except Exception as exc:  # weights of another network version, hyper-parameters the class does not take
@@ -244,8 +275,10 @@ class LearnedRefiner(_WindowedRefiner):
                     self.checkpoint_used_ = str(path)
                     return self
             trained = {str(p): m.hparams.skeleton.get("train_groups") for p, m in modules}
-            raise RefinementError(f"LearnedRefiner.fit: no checkpoint was trained on exactly the groups {groups} of "
-                                  f"the fit motions (checkpoints and their training groups: {trained})")
+            raise RefinementError(
+                f"LearnedRefiner.fit: no checkpoint was trained on exactly the groups {groups} of "
+                f"the fit motions (checkpoints and their training groups: {trained})"
+            )
         if not self.experiment:
             raise ValueError("LearnedRefiner: give checkpoint= (a trained run) or experiment= (a recipe to train)")
         if not motions:
@@ -280,9 +313,16 @@ def train_on_motions(experiment: str, motions: Sequence[Motion], overrides: Sequ
     module = build(cfg.module, **datamodule.label_spaces())
     with tempfile.TemporaryDirectory() as folder:
         best = ModelCheckpoint(dirpath=folder, filename="best", monitor="val/mje_cm", mode="min")
-        trainer = L.Trainer(max_epochs=int(cfg.trainer.max_epochs), accelerator=cfg.trainer.accelerator, devices=1,
-                            logger=False, callbacks=[best], enable_progress_bar=False, enable_model_summary=False,
-                            gradient_clip_val=cfg.trainer.get("gradient_clip_val"))
+        trainer = L.Trainer(
+            max_epochs=int(cfg.trainer.max_epochs),
+            accelerator=cfg.trainer.accelerator,
+            devices=1,
+            logger=False,
+            callbacks=[best],
+            enable_progress_bar=False,
+            enable_model_summary=False,
+            gradient_clip_val=cfg.trainer.get("gradient_clip_val"),
+        )
         trainer.fit(module, datamodule=datamodule)
         return LearnedRefiner._load(best.best_model_path)
 
@@ -297,9 +337,17 @@ class OnnxRefiner(_WindowedRefiner):
         threads: onnxruntime intra-op threads (0: its default).
     """
 
-    def __init__(self, path: str, window: int | None = None, overlap: int | None = None,
-                 repair_threshold: float = 0.02, max_empty_frames: int = 12, threads: int = 0,
-                 short_gap_frames: int = SHORT_GAP_FRAMES, short_gap_points: str = SHORT_GAP_POINTS):
+    def __init__(
+        self,
+        path: str,
+        window: int | None = None,
+        overlap: int | None = None,
+        repair_threshold: float = 0.02,
+        max_empty_frames: int = 12,
+        threads: int = 0,
+        short_gap_frames: int = SHORT_GAP_FRAMES,
+        short_gap_points: str = SHORT_GAP_POINTS,
+    ):
         self.path = path
         self.window = window
         self.overlap = overlap
@@ -324,8 +372,10 @@ class OnnxRefiner(_WindowedRefiner):
             raise RefinementError(f"{path}: onnxruntime cannot load it: {exc}") from exc
         meta = self.session_.get_modelmeta().custom_metadata_map
         if "mocapkit_skeleton" not in meta:
-            raise RefinementError(f"{path}: not a mocapkit refiner export (no mocapkit_skeleton metadata); export "
-                                  "one with `mocapkit export ckpt_path=RUN/best.ckpt`")
+            raise RefinementError(
+                f"{path}: not a mocapkit refiner export (no mocapkit_skeleton metadata); export "
+                "one with `mocapkit export ckpt_path=RUN/best.ckpt`"
+            )
         self._set_skeleton(json.loads(meta["mocapkit_skeleton"]))
         return self
 
@@ -335,9 +385,19 @@ class OnnxRefiner(_WindowedRefiner):
         return super().refine(motion)
 
     def _predict(self, positions: np.ndarray, missing: np.ndarray) -> np.ndarray:
-        return self.session_.run(["refined"], {"positions": positions.astype(np.float32),
-                                               "missing": missing.astype(bool)})[0]
+        return self.session_.run(
+            ["refined"], {"positions": positions.astype(np.float32), "missing": missing.astype(bool)}
+        )[0]
 
 
-__all__ = ["INFERENCE_WINDOW_FACTOR", "SHORT_GAP_FRAMES", "SHORT_GAP_POINTS", "LearnedRefiner", "OnnxRefiner",
-           "empty_frames_kept", "short_gaps", "spline_fill", "train_on_motions"]
+__all__ = [
+    "INFERENCE_WINDOW_FACTOR",
+    "SHORT_GAP_FRAMES",
+    "SHORT_GAP_POINTS",
+    "LearnedRefiner",
+    "OnnxRefiner",
+    "empty_frames_kept",
+    "short_gaps",
+    "spline_fill",
+    "train_on_motions",
+]

@@ -55,6 +55,7 @@ This module also holds the pieces LRMF shares with :mod:`mocapkit.refinement.trn
 (:func:`dct`, :func:`idct`: scipy on the CPU, a torch FFT on other devices), the smoothness solve
 (:func:`smooth_solve`), gap interpolation and the rank estimate.
 """
+
 from __future__ import annotations
 
 import math
@@ -65,9 +66,9 @@ import numpy as np
 import scipy.fft
 import torch
 
-from mocapkit.refinement.gap_filling import linear_fill
 from mocapkit.motion.container import all_coordinates
 from mocapkit.refinement.base import MotionRefiner, RefinementError
+from mocapkit.refinement.gap_filling import linear_fill
 
 #: Length of the CMU ASF/AMC unit in metres: the unit the thesis's parameters were tuned in.
 CMU_UNIT = 0.056444
@@ -75,12 +76,12 @@ CMU_UNIT = 0.056444
 
 # ----------------------------------------------------------------------------- shared numerical pieces
 
+
 def resolve_device(device) -> torch.device:
     """``"cpu"`` / ``"cuda"`` / a torch device; ``"cuda"`` without CUDA falls back to CPU with a warning."""
     device = torch.device("cpu" if device is None else device)
     if device.type == "cuda" and not torch.cuda.is_available():
-        warnings.warn("device='cuda' requested but CUDA is not available; running on CPU", RuntimeWarning,
-                      stacklevel=3)
+        warnings.warn("device='cuda' requested but CUDA is not available; running on CPU", RuntimeWarning, stacklevel=3)
         return torch.device("cpu")
     return device
 
@@ -132,11 +133,11 @@ def _idct_fft(y: torch.Tensor) -> torch.Tensor:
     shape = (n,) + (1,) * (y.dim() - 1)
     scale = torch.full((n,), math.sqrt(1 / (2 * n)), device=y.device, dtype=y.dtype)
     scale[0] = math.sqrt(1 / (4 * n))
-    c = y / scale.reshape(shape)                           # unnormalised DCT-II coefficients c_k = 2 Re(w_k V_k)
-    c_rev = torch.cat([torch.zeros_like(c[:1]), c[1:].flip(0)], 0)   # c_{n−k}, with c_n = 0
+    c = y / scale.reshape(shape)  # unnormalised DCT-II coefficients c_k = 2 Re(w_k V_k)
+    c_rev = torch.cat([torch.zeros_like(c[:1]), c[1:].flip(0)], 0)  # c_{n−k}, with c_n = 0
     k = torch.arange(n, device=y.device, dtype=y.dtype)
     w_conj = torch.polar(torch.ones_like(k), math.pi * k / (2 * n)).reshape(shape)
-    V = w_conj * torch.complex(c, -c_rev) / 2              # w_k V_k = (c_k − i c_{n−k}) / 2
+    V = w_conj * torch.complex(c, -c_rev) / 2  # w_k V_k = (c_k − i c_{n−k}) / 2
     v = torch.fft.ifft(V, dim=0).real
     x = torch.empty_like(v)
     half = (n + 1) // 2
@@ -166,7 +167,7 @@ def smoothness_gains(n: int, eta: float, mu: float, device=None, dtype=torch.flo
     """``Γ_ii = 1 / (η + μ ξ_i²)``, ``ξ_i = −2 + 2cos((i−1)π/n)``, ``i = 1 … n`` (Wang 2017 eq. 4.25 with ``η``
     in place of the printed ``Y1``), as a float ``[n]`` vector."""
     xi = 2 * torch.cos(math.pi * torch.arange(n, device=device, dtype=dtype) / n) - 2
-    return 1.0 / (eta + mu * xi ** 2)
+    return 1.0 / (eta + mu * xi**2)
 
 
 def smooth_solve(T: torch.Tensor, eta: float, mu: float, dim: int = 0) -> torch.Tensor:
@@ -182,8 +183,6 @@ def smooth_solve(T: torch.Tensor, eta: float, mu: float, dim: int = 0) -> torch.
 def soft(x: torch.Tensor, tau: float) -> torch.Tensor:
     """Element-wise soft thresholding ``sign(x) max(|x| − τ, 0) = x − clamp(x, −τ, τ)``."""
     return x - x.clamp(-tau, tau)
-
-
 
 
 def lsj_rank(singular_values: np.ndarray, threshold: float = 0.1, rule: str = "absolute") -> int:
@@ -262,10 +261,23 @@ def ialm_multipliers(D: torch.Tensor, weight: float) -> tuple[torch.Tensor, torc
     Y1 = D / scale
     return Y1, Y1.clone()
 
-def lrmf(X: np.ndarray, observed: np.ndarray, width: int, alpha: float = 1.0, beta: float = 100.0,
-         lambda1: float = 1e-5, lambda2: float = 1e-5, gamma: float = 1.4, lambda_max: float = 1e10,
-         max_iter: int = 500, tol: float = 1e-4, random_state: int | None = 0, device="cpu",
-         dtype=torch.float64) -> LowRankResult:
+
+def lrmf(
+    X: np.ndarray,
+    observed: np.ndarray,
+    width: int,
+    alpha: float = 1.0,
+    beta: float = 100.0,
+    lambda1: float = 1e-5,
+    lambda2: float = 1e-5,
+    gamma: float = 1.4,
+    lambda_max: float = 1e10,
+    max_iter: int = 500,
+    tol: float = 1e-4,
+    random_state: int | None = 0,
+    device="cpu",
+    dtype=torch.float64,
+) -> LowRankResult:
     """Algorithm 2 of Wang 2017 (corrected, see the module docstring) on ``X`` (the thesis's ``Xᵀ``).
 
     Args:
@@ -296,11 +308,11 @@ def lrmf(X: np.ndarray, observed: np.ndarray, width: int, alpha: float = 1.0, be
     Y1, Y2 = ialm_multipliers(Xt, alpha)
     gen = torch.Generator().manual_seed(0 if random_state is None else int(random_state))
     V = torch.rand(d, width, generator=gen, dtype=torch.float64).to(device=device, dtype=dtype)
-    V = V / torch.linalg.matrix_norm(V)                    # V⁰ = rand(d, κ) / ‖·‖_F
+    V = V / torch.linalg.matrix_norm(V)  # V⁰ = rand(d, κ) / ‖·‖_F
     E = torch.zeros_like(Xt)
     M = torch.zeros_like(Xt)
     eye = torch.eye(width, device=device, dtype=dtype)
-    xi2 = (2 * torch.cos(math.pi * torch.arange(n, device=device, dtype=dtype) / n) - 2) ** 2   # eigenvalues² of O
+    xi2 = (2 * torch.cos(math.pi * torch.arange(n, device=device, dtype=dtype) / n) - 2) ** 2  # eigenvalues² of O
     l1, l2 = float(lambda1), float(lambda2)
     UV_prev = torch.zeros_like(Xt)
     history: list[dict] = []
@@ -308,43 +320,47 @@ def lrmf(X: np.ndarray, observed: np.ndarray, width: int, alpha: float = 1.0, be
     it = 0
     for it in range(1, max_iter + 1):
         Z = (Y1 + Y2).add_(M, alpha=l1).add_(Xt, alpha=l2).sub_(E, alpha=l2)  # Z_u = Z_v = Y1+Y2+λ1M+λ2(Xᵀ−E), n×d
-        U = _solve_right(Z @ V, eye + (l1 + l2) * (V.mT @ V))                  # (4.9)
-        V = _solve_right(Z.mT @ U, eye + (l1 + l2) * (U.mT @ U))               # (4.10) [fix: Zᵀ U, not Z_v U]
+        U = _solve_right(Z @ V, eye + (l1 + l2) * (V.mT @ V))  # (4.9)
+        V = _solve_right(Z.mT @ U, eye + (l1 + l2) * (U.mT @ U))  # (4.10) [fix: Zᵀ U, not Z_v U]
         del Z
         UV = U @ V.mT
-        Ze = (Xt - UV).add_(Y2, alpha=1 / l2)                                  # Z_e of (4.11)
-        E = torch.where(Om, soft(Ze, alpha / l2), Ze)                          # (4.11) [fix: element-wise S_τ]
+        Ze = (Xt - UV).add_(Y2, alpha=1 / l2)  # Z_e of (4.11)
+        E = torch.where(Om, soft(Ze, alpha / l2), Ze)  # (4.11) [fix: element-wise S_τ]
         del Ze
         # (4.13) M = (λ1 I + β O²)⁻¹ (λ1 UVᵀ − Y1), diagonal in the DCT-II basis along time (the trick of 4.25)
         C = dct((UV * l1).sub_(Y1), dim=0).mul_((1.0 / (l1 + beta * xi2)).unsqueeze(1))
         M = idct(C, dim=0)
         R1 = M - UV
         R2 = (Xt - UV).sub_(E)
-        Y1.add_(R1, alpha=l1)                                                  # (4.14) [fix: Y1 ↔ M − UVᵀ]
-        Y2.add_(R2, alpha=l2)                                                  # (4.14) [fix: Y2 ↔ Xᵀ − UVᵀ − E]
+        Y1.add_(R1, alpha=l1)  # (4.14) [fix: Y1 ↔ M − UVᵀ]
+        Y2.add_(R2, alpha=l2)  # (4.14) [fix: Y2 ↔ Xᵀ − UVᵀ − E]
         norm_UV = float(torch.linalg.matrix_norm(UV))
         r1 = float(torch.linalg.matrix_norm(R1)) / norm_X
         r2 = float(torch.linalg.matrix_norm(R2)) / norm_X
         change = float(torch.linalg.matrix_norm(UV_prev.sub_(UV))) / max(norm_UV, 1e-300)
         theta = max(r1, r2, change)
         # objective of (4.7); ‖OM‖²_F = Σ_i ξ_i² ‖DCT coefficient row i of M‖² (Parseval)
-        objective = (0.5 * float(U.square().sum() + V.square().sum())
-                     + alpha * float(torch.where(Om, E, 0.0).abs_().sum())
-                     + 0.5 * beta * float((C.square().sum(1) * xi2).sum()))
+        objective = (
+            0.5 * float(U.square().sum() + V.square().sum())
+            + alpha * float(torch.where(Om, E, 0.0).abs_().sum())
+            + 0.5 * beta * float((C.square().sum(1) * xi2).sum())
+        )
         history.append({"theta": theta, "residual": max(r1, r2), "objective": objective, "penalty": l1})
         if not math.isfinite(theta):
             raise FloatingPointError(f"LRMF diverged at iteration {it} (non-finite residual)")
         UV_prev = UV
-        l1, l2 = min(gamma * l1, lambda_max), min(gamma * l2, lambda_max)      # Algorithm 2 line 8
+        l1, l2 = min(gamma * l1, lambda_max), min(gamma * l2, lambda_max)  # Algorithm 2 line 8
         if theta < tol:
             converged = True
             break
     sparse = torch.where(Om, E, torch.zeros_like(E))
-    return LowRankResult(UV.cpu().numpy().astype(np.float64), sparse.cpu().numpy().astype(np.float64), it,
-                         converged, width, history)
+    return LowRankResult(
+        UV.cpu().numpy().astype(np.float64), sparse.cpu().numpy().astype(np.float64), it, converged, width, history
+    )
 
 
 # ----------------------------------------------------------------------------- shared refiner plumbing
+
 
 def flag_outliers(sparse: np.ndarray, observed: np.ndarray, threshold: float | None) -> np.ndarray | None:
     """Joints to repair: observed entries whose per-joint sparse component ``‖(s_x, s_y, s_z)‖₂`` exceeds
@@ -395,11 +411,26 @@ class LRMF(MotionRefiner):
 
     min_frames = 3
 
-    def __init__(self, alpha: float = 1.0, beta: float = 100.0, lambda1: float = 1e-5, lambda2: float = 1e-5,
-                 gamma: float = 1.4, lambda_max: float = 1e10, rank: int | str = "auto", rank_threshold: float = 0.1,
-                 rank_rule: str = "absolute", rank_inflation: float = 1.1,
-                 outlier_threshold: float | None = 0.03, unit: float = CMU_UNIT, max_iter: int = 500,
-                 tol: float = 1e-4, random_state: int | None = 0, device="cpu", dtype=torch.float64):
+    def __init__(
+        self,
+        alpha: float = 1.0,
+        beta: float = 100.0,
+        lambda1: float = 1e-5,
+        lambda2: float = 1e-5,
+        gamma: float = 1.4,
+        lambda_max: float = 1e10,
+        rank: int | str = "auto",
+        rank_threshold: float = 0.1,
+        rank_rule: str = "absolute",
+        rank_inflation: float = 1.1,
+        outlier_threshold: float | None = 0.03,
+        unit: float = CMU_UNIT,
+        max_iter: int = 500,
+        tol: float = 1e-4,
+        random_state: int | None = 0,
+        device="cpu",
+        dtype=torch.float64,
+    ):
         self.alpha = alpha
         self.beta = beta
         self.lambda1 = lambda1
@@ -423,7 +454,7 @@ class LRMF(MotionRefiner):
         if self.rank == "auto":
             r = estimate_rank(X, observed, self.rank_threshold, self.rank_rule)
             self.rank_ = r
-            return max(1, min(round(self.rank_inflation * r), d, n))     # (4.15)
+            return max(1, min(round(self.rank_inflation * r), d, n))  # (4.15)
         if not isinstance(self.rank, (int, np.integer)) or self.rank < 1:
             raise ValueError(f"rank must be 'auto' or a positive int, got {self.rank!r}")
         self.rank_ = int(self.rank)
@@ -433,17 +464,34 @@ class LRMF(MotionRefiner):
         """Fill ``X`` (float64 ``[frames, 3·joints]`` metres, 0 where not ``observed``); see the class docstring."""
         n = X.shape[0]
         if n < self.min_frames:
-            raise RefinementError(f"LRMF needs at least {self.min_frames} frames (second differences in time), "
-                                  f"got {n}")
+            raise RefinementError(f"LRMF needs at least {self.min_frames} frames (second differences in time), got {n}")
         if not self.unit > 0:
             raise ValueError(f"unit must be positive (metres per solver unit), got {self.unit!r}")
         keep = drop_empty_columns(X, observed)
         Xs, obs = X[:, keep] / self.unit, observed[:, keep]
         width = self._width(Xs, obs)
-        result = lrmf(Xs, obs, width, self.alpha, self.beta, self.lambda1, self.lambda2, self.gamma,
-                      self.lambda_max, self.max_iter, self.tol, self.random_state, self.device, self.dtype)
-        self.width_, self.n_iter_, self.converged_, self.history_ = width, result.n_iter, result.converged, \
-            result.history
+        result = lrmf(
+            Xs,
+            obs,
+            width,
+            self.alpha,
+            self.beta,
+            self.lambda1,
+            self.lambda2,
+            self.gamma,
+            self.lambda_max,
+            self.max_iter,
+            self.tol,
+            self.random_state,
+            self.device,
+            self.dtype,
+        )
+        self.width_, self.n_iter_, self.converged_, self.history_ = (
+            width,
+            result.n_iter,
+            result.converged,
+            result.history,
+        )
         filled = np.full(X.shape, np.nan)
         filled[:, keep] = result.low_rank * self.unit
         sparse = np.zeros(X.shape)

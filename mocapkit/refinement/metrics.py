@@ -21,6 +21,7 @@ they are counted in ``unfilled`` so that a method cannot look good by skipping t
 - :func:`mean_joint_error`: the mean 3-D Euclidean error over the corrupted entries, **mm** (MPJPE-style).
 - :func:`score_refinement`: all of the above for a refined motion given its :class:`Corruption`.
 """
+
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
@@ -34,8 +35,9 @@ def _arrays(clean: Motion | np.ndarray, refined: Motion | np.ndarray):
     a = clean.positions if isinstance(clean, Motion) else np.asarray(clean)
     b = refined.positions if isinstance(refined, Motion) else np.asarray(refined)
     if a.shape != b.shape or a.ndim != 3 or a.shape[2] != 3:
-        raise ValueError(f"clean and refined positions must both be [frames, joints, 3], got {list(a.shape)} "
-                         f"and {list(b.shape)}")
+        raise ValueError(
+            f"clean and refined positions must both be [frames, joints, 3], got {list(a.shape)} and {list(b.shape)}"
+        )
     if isinstance(clean, Motion) and isinstance(refined, Motion) and clean.joint_names != refined.joint_names:
         raise ValueError("clean and refined motions have different joints")
     return a.astype(np.float64), b.astype(np.float64)
@@ -54,8 +56,9 @@ def joint_errors(clean: Motion | np.ndarray, refined: Motion | np.ndarray) -> np
     return np.linalg.norm(a - b, axis=2)
 
 
-def per_frame_rmse(clean: Motion | np.ndarray, refined: Motion | np.ndarray, mask: np.ndarray,
-                   numerator: str = "frame") -> np.ndarray:
+def per_frame_rmse(
+    clean: Motion | np.ndarray, refined: Motion | np.ndarray, mask: np.ndarray, numerator: str = "frame"
+) -> np.ndarray:
     """Per-frame RMSE of Wang 2017 eq. 3.18 / 4.16 (see the module docstring), cm.
 
     Args:
@@ -69,7 +72,9 @@ def per_frame_rmse(clean: Motion | np.ndarray, refined: Motion | np.ndarray, mas
     """
     a, b = _arrays(clean, refined)
     scored = _scored(a, b, mask)
-    squared = np.where(all_coordinates(np.isfinite(a)) & all_coordinates(np.isfinite(b)), ((a - b) ** 2).sum(axis=2), 0.0)
+    squared = np.where(
+        all_coordinates(np.isfinite(a)) & all_coordinates(np.isfinite(b)), ((a - b) ** 2).sum(axis=2), 0.0
+    )
     if numerator == "frame":
         total = squared.sum(axis=1)
     elif numerator == "corrupted":
@@ -81,8 +86,9 @@ def per_frame_rmse(clean: Motion | np.ndarray, refined: Motion | np.ndarray, mas
         return np.where(count > 0, np.sqrt(total / np.maximum(count, 1)) * 100.0, np.nan)
 
 
-def sequence_rmse(clean: Motion | np.ndarray, refined: Motion | np.ndarray, mask: np.ndarray,
-                  numerator: str = "frame") -> float:
+def sequence_rmse(
+    clean: Motion | np.ndarray, refined: Motion | np.ndarray, mask: np.ndarray, numerator: str = "frame"
+) -> float:
     """Mean of :func:`per_frame_rmse` over the frames with corrupted entries, cm (NaN if there are none)."""
     curve = per_frame_rmse(clean, refined, mask, numerator)
     return float(np.nanmean(curve)) if np.isfinite(curve).any() else float("nan")
@@ -110,16 +116,16 @@ def mean_joint_error(clean: Motion | np.ndarray, refined: Motion | np.ndarray, m
 class RefinementScore:
     """The scores of one refined motion (see :func:`score_refinement`). Units in the field names."""
 
-    rmse_cm: float                   # Wang eq. 3.18/4.16, averaged over frames with corrupted entries
-    matrix_rmse_cm: float            # Wang §4.2.3
-    mean_error_mm: float             # mean 3-D error over the corrupted entries
-    mean_error_removed_mm: float     # ... over the removed entries only
-    mean_error_perturbed_mm: float   # ... over the perturbed entries only
-    rmse_curve_cm: np.ndarray        # float64 [frames], NaN where a frame has no corrupted entry
-    corrupted: int                   # corrupted entries with ground truth
-    unfilled: int                    # of those, left missing by the refiner (not scored)
-    coverage: float                  # 1 − unfilled / corrupted
-    changed_clean: int               # uncorrupted observed entries the refiner changed (0 for gap fillers)
+    rmse_cm: float  # Wang eq. 3.18/4.16, averaged over frames with corrupted entries
+    matrix_rmse_cm: float  # Wang §4.2.3
+    mean_error_mm: float  # mean 3-D error over the corrupted entries
+    mean_error_removed_mm: float  # ... over the removed entries only
+    mean_error_perturbed_mm: float  # ... over the perturbed entries only
+    rmse_curve_cm: np.ndarray  # float64 [frames], NaN where a frame has no corrupted entry
+    corrupted: int  # corrupted entries with ground truth
+    unfilled: int  # of those, left missing by the refiner (not scored)
+    coverage: float  # 1 − unfilled / corrupted
+    changed_clean: int  # uncorrupted observed entries the refiner changed (0 for gap fillers)
     protocol: str = ""
     level: object = None
 
@@ -143,8 +149,9 @@ def score_refinement(refined: Motion, clean: Motion, corruption, numerator: str 
     """
     a, b = _arrays(clean, refined)
     if corruption.removed.shape != a.shape[:2]:
-        raise ValueError(f"the corruption is for {list(corruption.removed.shape)} entries, the motions have "
-                         f"{list(a.shape[:2])}")
+        raise ValueError(
+            f"the corruption is for {list(corruption.removed.shape)} entries, the motions have {list(a.shape[:2])}"
+        )
     truth = all_coordinates(np.isfinite(a))
     corrupted = corruption.corrupted & truth
     filled = all_coordinates(np.isfinite(b))
@@ -159,5 +166,10 @@ def score_refinement(refined: Motion, clean: Motion, corruption, numerator: str 
         mean_error_removed_mm=mean_joint_error(a, b, corruption.removed & truth),
         mean_error_perturbed_mm=mean_joint_error(a, b, corruption.perturbed & truth),
         rmse_curve_cm=per_frame_rmse(a, b, corrupted, numerator),
-        corrupted=count, unfilled=unfilled, coverage=1.0 - unfilled / count if count else float("nan"),
-        changed_clean=changed, protocol=corruption.protocol, level=corruption.level)
+        corrupted=count,
+        unfilled=unfilled,
+        coverage=1.0 - unfilled / count if count else float("nan"),
+        changed_clean=changed,
+        protocol=corruption.protocol,
+        level=corruption.level,
+    )

@@ -5,7 +5,8 @@ ends misses everything the joint did in between), but in every frame its neighbo
 hand sits centimetres from its wrist. On fold bd's validation clips of HDM05 (training performers only) the
 learned refiners' correction of missing entries was ≈ 0 (their gap error equalled their cubic first guess's to
 0.1 mm), while a per-frame linear regression of a joint on the other joints, fitted on training frames, had a
-quarter of that error (bench/RESULTS.md §13). This method makes that regression the prior of a fusion:
+quarter of that error (docs/results/refinement.md#why-the-networks-do-not-fill-long-gaps). This method makes that
+regression the prior of a fusion:
 
 1. **Temporal guess** ``g``: the cubic Hermite fill of :func:`~mocapkit.models.refiners.cubic_fill` (a curve
    between the nearest observed samples before and after each gap; the last observed step continued for a few
@@ -33,14 +34,16 @@ Cost: ``fit`` is one ``[3J, 3J]`` eigen-decomposition; ``refine`` is a ``[K, K]`
 ``max_empty_frames`` in a row and left missing beyond it and before the first / after the last observed frame
 (reported as unfilled), as the learned refiners do.
 """
+
 from __future__ import annotations
 
 from collections.abc import Sequence
 
 import numpy as np
 
+from mocapkit.motion.container import Motion
+from mocapkit.motion.geometry import hip_line_heading, turn_about_up
 from mocapkit.motion.layouts import hip_joints
-from mocapkit.motion.container import Motion, hip_heading, turn_about_up
 from mocapkit.refinement.base import MotionRefiner, RefinementError
 
 
@@ -49,9 +52,9 @@ def nearest_sample_distance(observed: np.ndarray) -> np.ndarray:
     ``inf`` in a column without one. float64 ``[T, J]``."""
     frames = np.arange(observed.shape[0])[:, None].astype(np.float64)
     last = np.where(observed, frames, -np.inf)
-    last = np.maximum.accumulate(last, axis=0)                                     # latest sample at or before t
+    last = np.maximum.accumulate(last, axis=0)  # latest sample at or before t
     following = np.where(observed, frames, np.inf)[::-1]
-    following = np.minimum.accumulate(following, axis=0)[::-1]                     # next sample at or after t
+    following = np.minimum.accumulate(following, axis=0)[::-1]  # next sample at or after t
     return np.minimum(frames - last, following - frames)
 
 
@@ -61,7 +64,8 @@ class PosePriorRefiner(MotionRefiner):
     Parameters:
         n_components: PPCA components ``K`` (at most ``3·joints − 1``: 90 of HDM05's 93 coordinates is nearly
             the full covariance). Default 90, chosen with ``drift`` on the validation clips of HDM05's training
-            performers (K ∈ {30, 60, 90} × drift ∈ {0.04, 0.12, 0.2, 0.38} m/s; bench/RESULTS.md §13).
+            performers (K ∈ {30, 60, 90} × drift ∈ {0.04, 0.12, 0.2, 0.38} m/s;
+            docs/decisions.md#pose-prior-components-and-drift).
         drift: metres per second by which the temporal guess's standard deviation grows with the distance to
             the nearest observed sample of the joint. Default 0.2 (chosen with ``n_components``).
         observation_noise: standard deviation (metres) of an observed sample. Default 0.002.
@@ -70,11 +74,12 @@ class PosePriorRefiner(MotionRefiner):
             fitted on few clips is overconfident in its smallest directions (it then overrides the temporal
             guess even next to a sample); the floor keeps every direction uncertain by at least this much.
             Default 0.005 (chosen on the validation clips with the prior fitted on 10 clips per performer, as
-            the benchmark fits it: 0, 0.002, 0.005, 0.01 m; bench/RESULTS.md §13).
+            the benchmark fits it: 0, 0.002, 0.005, 0.01 m; docs/decisions.md#pose-prior-noise-floor).
         short_gap_seconds: interior gaps of a joint up to this long are filled by the cubic spline through its
             observed samples (:func:`~mocapkit.refinement.learned.spline_fill`, as the learned refiners hand short
             gaps over) instead of the fusion; 0: none. Default 0.2 (24 frames at 120 fps; chosen on the validation
-            clips of HDM05's training performers among 0, 12, 24, 48, 72, 96 frames, bench/RESULTS.md §13; in
+            clips of HDM05's training performers among 0, 12, 24, 48, 72, 96 frames,
+            docs/decisions.md#pose-prior-short-gaps; in
             seconds so that a 30 fps take hands over 6 frames, not 0.8 s).
         max_empty_frames: interior runs of frames with no observed joint longer than this stay missing, as do
             such frames before the first / after the last observed frame. Default 12.
@@ -88,9 +93,17 @@ class PosePriorRefiner(MotionRefiner):
     requires_fit = True
     fixed_sampling = True
 
-    def __init__(self, n_components: int = 90, drift: float = 0.2, observation_noise: float = 0.002,
-                 noise_floor: float = 0.005, short_gap_seconds: float = 0.2, max_empty_frames: int = 12,
-                 max_frames: int = 200_000, random_state: int | None = 0):
+    def __init__(
+        self,
+        n_components: int = 90,
+        drift: float = 0.2,
+        observation_noise: float = 0.002,
+        noise_floor: float = 0.005,
+        short_gap_seconds: float = 0.2,
+        max_empty_frames: int = 12,
+        max_frames: int = 200_000,
+        random_state: int | None = 0,
+    ):
         self.n_components = n_components
         self.drift = drift
         self.noise_floor = noise_floor
@@ -108,8 +121,10 @@ class PosePriorRefiner(MotionRefiner):
         if not (int(self.n_components) >= 1):
             raise ValueError(f"n_components must be ≥ 1, got {self.n_components!r}")
         if not (float(self.drift) > 0 and float(self.observation_noise) > 0 and float(self.noise_floor) >= 0):
-            raise ValueError(f"drift and observation_noise must be positive and noise_floor ≥ 0, got {self.drift!r}, "
-                             f"{self.observation_noise!r}, {self.noise_floor!r}")
+            raise ValueError(
+                f"drift and observation_noise must be positive and noise_floor ≥ 0, got {self.drift!r}, "
+                f"{self.observation_noise!r}, {self.noise_floor!r}"
+            )
         if not (float(self.short_gap_seconds) >= 0):
             raise ValueError(f"short_gap_seconds must be ≥ 0, got {self.short_gap_seconds!r}")
         motions = list(motions or [])
@@ -139,17 +154,18 @@ class PosePriorRefiner(MotionRefiner):
     # ------------------------------------------------------------------ pose frame
 
     def _to_pose_frame(self, P: np.ndarray):
-        """``[N, J, 3]`` → (root-centred, heading-turned ``[N, J, 3]``, root ``[N, 3]``, cos ``[N]``, sin ``[N]``)."""
+        """``[N, J, 3]`` → (root-centred, heading-turned ``[N, J, 3]``, root ``[N, 3]``, heading ``[N]`` rad): the
+        hip line turned onto the first horizontal axis (:func:`~mocapkit.motion.geometry.hip_line_heading`)."""
         root = P[:, self.root_].copy()
         Q = P - root[:, None]
         if self.hips_ is None:
-            cos, sin = np.ones(len(P)), np.zeros(len(P))
+            angle = np.zeros(len(P))
         else:
-            cos, sin = hip_heading(Q, self.hips_[0], self.hips_[1], self.up_axis_)
-        return turn_about_up(Q, cos, sin, self.up_axis_), root, cos, sin
+            angle = hip_line_heading(Q, self.hips_[0], self.hips_[1], self.up_axis_)
+        return turn_about_up(Q, angle, self.up_axis_), root, angle
 
-    def _from_pose_frame(self, L: np.ndarray, root: np.ndarray, cos: np.ndarray, sin: np.ndarray) -> np.ndarray:
-        return turn_about_up(L, cos, sin, self.up_axis_, inverse=True) + root[:, None]
+    def _from_pose_frame(self, L: np.ndarray, root: np.ndarray, angle: np.ndarray) -> np.ndarray:
+        return turn_about_up(L, angle, self.up_axis_, inverse=True) + root[:, None]
 
     # ------------------------------------------------------------------ refine
 
@@ -171,36 +187,36 @@ class PosePriorRefiner(MotionRefiner):
         )
 
         T, L = X.shape
-        seen = observed[:, ::3]                                                     # [T, J]
+        seen = observed[:, ::3]  # [T, J]
         guess = self.temporal_guess(X.reshape(T, -1, 3), seen)
         out = guess.copy()
         anchors = [self.root_] + list(self.hips_ or ())
-        framed = bool(seen[:, anchors].any(axis=0).all())    # the pose frame needs the root and the hips somewhere
+        framed = bool(seen[:, anchors].any(axis=0).all())  # the pose frame needs the root and the hips somewhere
         if framed:
             distance = nearest_sample_distance(seen)
             step = float(self.drift) / self.fps_
             temporal = np.repeat(float(self.observation_noise) ** 2 + (step * distance) ** 2, 3, axis=1)  # [T, 3J]
             noise = self.noise_variance_
             precision = np.where(np.isfinite(temporal), 1.0 / (temporal + noise), 0.0)
-            local, root, cos, sin = self._to_pose_frame(guess)
+            local, root, angle = self._to_pose_frame(guess)
             g = local.reshape(T, L)
             W = self.loadings_
-            WtV = W.T[None] * precision[:, None, :]                                  # [T, K, 3J]
-            A = np.eye(W.shape[1])[None] + WtV @ W                                   # [T, K, K]
-            b = WtV @ (g - self.mean_)[..., None]                                    # [T, K, 1]
-            subspace = self.mean_ + (np.linalg.solve(A, b)[..., 0] @ W.T)            # [T, 3J]
+            WtV = W.T[None] * precision[:, None, :]  # [T, K, 3J]
+            A = np.eye(W.shape[1])[None] + WtV @ W  # [T, K, K]
+            b = WtV @ (g - self.mean_)[..., None]  # [T, K, 1]
+            subspace = self.mean_ + (np.linalg.solve(A, b)[..., 0] @ W.T)  # [T, 3J]
             # the posterior mean of the PPCA noise term keeps the part of the guess the subspace cannot hold,
             # in proportion to how far the guess is trusted (all of it next to a sample, none of it far away)
             keep = np.where(np.isfinite(temporal), noise / (noise + temporal), 0.0)
             pose = subspace + keep * (np.where(np.isfinite(g), g, 0.0) - subspace)
-            out = self._from_pose_frame(pose.reshape(T, -1, 3), root, cos, sin)
+            out = self._from_pose_frame(pose.reshape(T, -1, 3), root, angle)
         longest = round(float(self.short_gap_seconds) * self.fps_)
         if longest > 0:
             short = short_gaps(~seen, longest)
             out[short] = spline_fill(X.reshape(T, -1, 3), ~seen, short)[short]
         out = out.reshape(T, L)
         never = ~seen.any(axis=0)
-        if not framed:                              # no prior: a joint never observed has no temporal guess either
+        if not framed:  # no prior: a joint never observed has no temporal guess either
             out[:, np.repeat(never, 3)] = np.nan
-        out[empty_frames_kept(~seen, int(self.max_empty_frames))] = np.nan           # frames left missing
+        out[empty_frames_kept(~seen, int(self.max_empty_frames))] = np.nan  # frames left missing
         return out, None

@@ -53,6 +53,7 @@ Cost: ``fit`` is ``O(max_iter · windows · (K + k²) · M·d_i)`` per poselet (
 with the defaults, three HDM05 performers); ``refine`` codes only the windows that contain an unobserved
 entry, ``O((K + k²) · M·d_i)`` each, plus the TDD spline fits, ``O(T)`` per marker track.
 """
+
 from __future__ import annotations
 
 from collections.abc import Sequence
@@ -62,16 +63,27 @@ import scipy.sparse as sp
 import torch
 from scipy.interpolate import make_smoothing_spline
 
-from mocapkit.refinement.gap_filling import linear_fill
 from mocapkit.motion.container import Motion, all_coordinates
 from mocapkit.refinement.base import MotionRefiner, RefinementError
+from mocapkit.refinement.gap_filling import linear_fill
 
 #: Wang 2017 Fig. 3.1 on the CMU / HDM05 31-joint ASF skeleton (the joint lists exist only in the figure):
 #: torso, arms, legs;
 #: the thorax is shared by torso and arms, the hip joints by torso and legs.
 CMU_POSELETS: dict[str, tuple[str, ...]] = {
-    "TO": ("root", "lhipjoint", "rhipjoint", "lowerback", "upperback", "thorax", "lowerneck", "upperneck", "head",
-           "lclavicle", "rclavicle"),
+    "TO": (
+        "root",
+        "lhipjoint",
+        "rhipjoint",
+        "lowerback",
+        "upperback",
+        "thorax",
+        "lowerneck",
+        "upperneck",
+        "head",
+        "lclavicle",
+        "rclavicle",
+    ),
     "LA": ("thorax", "lclavicle", "lhumerus", "lradius", "lwrist", "lhand", "lfingers", "lthumb"),
     "RA": ("thorax", "rclavicle", "rhumerus", "rradius", "rwrist", "rhand", "rfingers", "rthumb"),
     "LL": ("lhipjoint", "lfemur", "ltibia", "lfoot", "ltoes"),
@@ -128,12 +140,24 @@ class PSCRefiner(MotionRefiner):
     requires_fit = True
     fixed_sampling = True
 
-    def __init__(self, window: int = 10, dilation: int = 1, n_atoms: int = 512, n_neighbors: int = 20,
-                 llc_lambda: float = 1e-3, max_iter: int = 20, tol: float = 1e-4, dictionary_steps: int = 3,
-                 max_train_windows: int = 10000,
-                 poselets: dict[str, Sequence[str]] | None = None, reference_joints: Sequence[str] | None = None,
-                 tdd_threshold: float | None = 0.06, tdd_cutoff_hz: float = 6.0, tdd_passes: int = 2,
-                 random_state: int | None = 0):
+    def __init__(
+        self,
+        window: int = 10,
+        dilation: int = 1,
+        n_atoms: int = 512,
+        n_neighbors: int = 20,
+        llc_lambda: float = 1e-3,
+        max_iter: int = 20,
+        tol: float = 1e-4,
+        dictionary_steps: int = 3,
+        max_train_windows: int = 10000,
+        poselets: dict[str, Sequence[str]] | None = None,
+        reference_joints: Sequence[str] | None = None,
+        tdd_threshold: float | None = 0.06,
+        tdd_cutoff_hz: float = 6.0,
+        tdd_passes: int = 2,
+        random_state: int | None = 0,
+    ):
         self.window = window
         self.dilation = dilation
         self.n_atoms = n_atoms
@@ -165,8 +189,10 @@ class PSCRefiner(MotionRefiner):
         def indices(joints: Sequence[str], what: str) -> list[int]:
             absent = [j for j in joints if j not in names]
             if absent:
-                raise RefinementError(f"{type(self).__name__}: {what} joints {absent} are not in the training "
-                                      f"layout ({len(names)} joints: {list(names[:6])}...)")
+                raise RefinementError(
+                    f"{type(self).__name__}: {what} joints {absent} are not in the training "
+                    f"layout ({len(names)} joints: {list(names[:6])}...)"
+                )
             return [names.index(j) for j in joints]
 
         if self.poselets is not None:
@@ -216,8 +242,9 @@ class PSCRefiner(MotionRefiner):
         if not plane.any():
             return origin, identity
         across = linear_fill(np.where(both[:, None], P[:, rh] - P[:, lh], 0), np.repeat(both[:, None], 3, 1))
-        upv = linear_fill(np.where(plane[:, None], P[:, nk] - 0.5 * (P[:, lh] + P[:, rh]), 0),
-                          np.repeat(plane[:, None], 3, 1))
+        upv = linear_fill(
+            np.where(plane[:, None], P[:, nk] - 0.5 * (P[:, lh] + P[:, rh]), 0), np.repeat(plane[:, None], 3, 1)
+        )
         x = across / np.linalg.norm(across, axis=1, keepdims=True).clip(1e-9)
         zax = np.cross(x, upv)
         zax /= np.linalg.norm(zax, axis=1, keepdims=True).clip(1e-9)
@@ -257,8 +284,9 @@ class PSCRefiner(MotionRefiner):
         for name, joints in self.poselets_.items():
             Y = np.concatenate(per_poselet[name]) if per_poselet[name] else np.empty((0, 0))
             if len(Y) < 2:
-                raise RefinementError(f"{type(self).__name__}.fit: no fully observed {M}-frame training window "
-                                      f"for poselet {name!r}")
+                raise RefinementError(
+                    f"{type(self).__name__}.fit: no fully observed {M}-frame training window for poselet {name!r}"
+                )
             if len(Y) > self.max_train_windows:
                 Y = Y[rng.choice(len(Y), int(self.max_train_windows), replace=False)]
             scale = float(np.linalg.norm(Y, axis=1).max()) or 1.0
@@ -270,12 +298,12 @@ class PSCRefiner(MotionRefiner):
         poselet, each window missing them over a random span of frames (the whole window half the time)."""
         M = int(self.window)
         count = rng.integers(1, max(1, (J + 1) // 2) + 1, size=n)
-        pick = rng.random((n, J)).argsort(1) < count[:, None]                       # [n, J]
+        pick = rng.random((n, J)).argsort(1) < count[:, None]  # [n, J]
         length = np.where(rng.random(n) < 0.5, M, rng.integers(1, M + 1, size=n))
         start = rng.integers(0, M - length + 1)
         frames = np.arange(M)[None, :]
-        span = (frames >= start[:, None]) & (frames < (start + length)[:, None])     # [n, M]
-        miss = span[:, :, None] & pick[:, None, :]                                   # [n, M, J]
+        span = (frames >= start[:, None]) & (frames < (start + length)[:, None])  # [n, M]
+        miss = span[:, :, None] & pick[:, None, :]  # [n, M, J]
         return np.repeat(miss, 3, axis=2).reshape(n, -1)
 
     def _learn_dictionary(self, Y: np.ndarray, J: int, rng: np.random.Generator) -> tuple[np.ndarray, list]:
@@ -284,20 +312,20 @@ class PSCRefiner(MotionRefiner):
         K = int(min(self.n_atoms, N))
         missing = self._training_masks(N, J, rng)
         obs = ~missing
-        D = Y[rng.choice(N, K, replace=False)].T.copy()                              # [d, K] initial atoms
+        D = Y[rng.choice(N, K, replace=False)].T.copy()  # [d, K] initial atoms
         prev = None
-        Yo = np.where(missing, Y, 0.0)                                               # Ω ∘ Y
+        Yo = np.where(missing, Y, 0.0)  # Ω ∘ Y
         history = []
         for _ in range(int(self.max_iter)):
-            W = self._llc(Y, obs, D)                                                 # sparse [N, K]
+            W = self._llc(Y, obs, D)  # sparse [N, K]
             Wt = W.T.tocsr()
-            diag_h = np.asarray((Wt.multiply(Wt)) @ missing.astype(np.float64))      # [K, d] Σ_j Ω_rj w_mj²
-            step = 1.0 / (W.getnnz(axis=1).max() * diag_h + 1e-12)                  # k-sparse codes: H ≼ k·diag(H)
-            for _ in range(int(self.dictionary_steps)):                              # eq. 3.10, majorised steps
-                resid = np.where(missing, np.asarray(W @ D.T) - Y, 0.0)               # Ω ∘ (D W − Y)  [N, d]
-                grad = np.asarray(Wt @ resid)                                        # [K, d]
+            diag_h = np.asarray((Wt.multiply(Wt)) @ missing.astype(np.float64))  # [K, d] Σ_j Ω_rj w_mj²
+            step = 1.0 / (W.getnnz(axis=1).max() * diag_h + 1e-12)  # k-sparse codes: H ≼ k·diag(H)
+            for _ in range(int(self.dictionary_steps)):  # eq. 3.10, majorised steps
+                resid = np.where(missing, np.asarray(W @ D.T) - Y, 0.0)  # Ω ∘ (D W − Y)  [N, d]
+                grad = np.asarray(Wt @ resid)  # [K, d]
                 D = D - (step * grad).T
-                D /= np.maximum(np.linalg.norm(D, axis=0), 1.0)                       # ‖D_m‖₂ ≤ 1
+                D /= np.maximum(np.linalg.norm(D, axis=0), 1.0)  # ‖D_m‖₂ ≤ 1
             unused = np.asarray(abs(W).sum(0)).ravel() == 0
             if unused.any():
                 D[:, unused] = Y[rng.choice(N, int(unused.sum()), replace=False)].T
@@ -306,7 +334,7 @@ class PSCRefiner(MotionRefiner):
             change = np.inf if prev is None else np.linalg.norm(recon - prev) / max(np.linalg.norm(recon), 1e-12)
             prev = recon
             history.append((float(err), float(change)))
-            if err <= self.tol or change <= self.tol:                                # eq. 3.12
+            if err <= self.tol or change <= self.tol:  # eq. 3.12
                 break
         return D, history
 
@@ -317,24 +345,24 @@ class PSCRefiner(MotionRefiner):
         n, d = Y.shape
         K = D.shape[1]
         k = int(min(self.n_neighbors, K))
-        Dt = torch.from_numpy(np.ascontiguousarray(D.T))                             # [K, d] float64
+        Dt = torch.from_numpy(np.ascontiguousarray(D.T))  # [K, d] float64
         Dt32 = Dt.float()
-        D2 = (Dt32 * Dt32).T                                                          # [d, K]
+        D2 = (Dt32 * Dt32).T  # [d, K]
         eye = torch.eye(k, dtype=torch.float64)
         cols, vals = [], []
         chunk = max(1, int(3e7 // (max(K, k * d) * 8)))
         for a in range(0, n, chunk):
-            y = torch.from_numpy(Y[a:a + chunk])
-            o = torch.from_numpy(obs[a:a + chunk])
+            y = torch.from_numpy(Y[a : a + chunk])
+            o = torch.from_numpy(obs[a : a + chunk])
             yo = torch.where(o, y, 0.0)
             yo32 = yo.float()
-            dist2 = (yo32 * yo32).sum(1, keepdim=True) - 2 * yo32 @ Dt32.T + o.float() @ D2   # masked distances
-            d2nn, nn = torch.topk(dist2, k, dim=1, largest=False)                       # k nearest atoms
-            Z = torch.where(o[:, None, :], Dt[nn] - y[:, None, :], 0.0)                   # D̃ − ỹ1ᵀ, observed rows
-            C = Z @ Z.transpose(1, 2)                                                    # [c, k, k]
+            dist2 = (yo32 * yo32).sum(1, keepdim=True) - 2 * yo32 @ Dt32.T + o.float() @ D2  # masked distances
+            d2nn, nn = torch.topk(dist2, k, dim=1, largest=False)  # k nearest atoms
+            Z = torch.where(o[:, None, :], Dt[nn] - y[:, None, :], 0.0)  # D̃ − ỹ1ᵀ, observed rows
+            C = Z @ Z.transpose(1, 2)  # [c, k, k]
             dist = d2nn.double().clamp(min=0).sqrt()
             sigma = dist.mean(1, keepdim=True).clamp(min=1e-12)
-            g = torch.exp((dist - dist.amax(1, keepdim=True)) / sigma)                  # locality adaptor, (0, 1]
+            g = torch.exp((dist - dist.amax(1, keepdim=True)) / sigma)  # locality adaptor, (0, 1]
             tr = C.diagonal(dim1=1, dim2=2).sum(1).clamp(min=1e-12)[:, None, None]
             C = C + tr * (self.llc_lambda / k) * torch.diag_embed(g) + tr * 1e-8 * eye
             w = torch.linalg.solve(C, torch.ones(len(y), k, 1, dtype=torch.float64))[..., 0]
@@ -353,7 +381,7 @@ class PSCRefiner(MotionRefiner):
         if self.tdd_threshold is None or T < 5:
             return flagged
         t = np.arange(T) / self.fps_
-        lam = self.fps_ / (2 * np.pi * float(self.tdd_cutoff_hz)) ** 4      # |H(ω)| = ½ at the cutoff
+        lam = self.fps_ / (2 * np.pi * float(self.tdd_cutoff_hz)) ** 4  # |H(ω)| = ½ at the cutoff
         for _ in range(max(1, int(self.tdd_passes))):
             trusted = obs & ~flagged
             patterns: dict[bytes, list[int]] = {}
@@ -392,26 +420,26 @@ class PSCRefiner(MotionRefiner):
         count = np.zeros((Tp, J))
         for name, joints in self.poselets_.items():
             D, scale = self.dictionaries_[name], self.scales_[name]
-            Yw = self._windows(Lp, joints) / scale                                 # [S, d]
+            Yw = self._windows(Lp, joints) / scale  # [S, d]
             Ow = self._windows(np.repeat(op[:, :, None], 3, 2).astype(np.float64), joints) > 0
-            todo = ~Ow.all(1) & Ow.any(1)                                          # a gap and something to code from
+            todo = ~Ow.all(1) & Ow.any(1)  # a gap and something to code from
             if not todo.any():
                 continue
             W = self._llc(Yw[todo], Ow[todo], D)
-            recon = np.asarray(W @ D.T) * scale                                    # [n, d]
+            recon = np.asarray(W @ D.T) * scale  # [n, d]
             starts = np.flatnonzero(todo)
             Jp = len(joints)
             rec = recon.reshape(len(starts), M, Jp, 3)
             for m in range(M):
                 np.add.at(total, (starts[:, None] + m * delta, np.asarray(joints)[None, :]), rec[:, m])
                 np.add.at(count, (starts[:, None] + m * delta, np.asarray(joints)[None, :]), 1.0)
-        total, count = total[pad:pad + T], count[pad:pad + T]
+        total, count = total[pad : pad + T], count[pad : pad + T]
         est = np.where(count[..., None] > 0, total / np.maximum(count, 1)[..., None], np.nan)
-        world = np.einsum("tba,tjb->tja", R, est) + origin[:, None]                # R^T p + o
+        world = np.einsum("tba,tjb->tja", R, est) + origin[:, None]  # R^T p + o
         # the root of the local frame is the origin itself: where it is missing, use the interpolated origin
         r = self.reference_[0] if self.reference_ is not None else 0
         world[:, r] = np.where(np.isnan(world[:, r]), origin, world[:, r])
-        flagged &= all_coordinates(np.isfinite(world))    # a flagged marker nothing could recover stays as it was
+        flagged &= all_coordinates(np.isfinite(world))  # a flagged marker nothing could recover stays as it was
         obs = obs_in & ~flagged
         filled = np.where(np.repeat(obs, 3, 1), X, world.reshape(T, C3))
         return filled, flagged

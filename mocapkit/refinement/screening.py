@@ -13,6 +13,7 @@ side (the same number on both sides, so that a steady trend has no bias), fewer 
 span more than ``max_span`` frames (beside a gap) and near a joint's first and last observed sample; a sample with
 no such window (those two, one beside a gap longer than ``max_span − 2`` frames) is not judged.
 """
+
 from __future__ import annotations
 
 from collections.abc import Sequence
@@ -28,16 +29,21 @@ from mocapkit.refinement.base import MotionRefiner, check_motion
 #: two observed neighbours on each side, 5 mm. Chosen on HDM05 validation clips at 120 fps (training performers
 #: only; K ∈ {2, 3, 5} × {5, 7.5, 10, 15 mm}; mean RMS over noise, random loss and gaps): the choice of PCHIP, the
 #: BiGRU and the transformer (LRMF chose 10 mm); ``scripts/selection/refiner_inference_settings.py --setting screen``,
-#: bench/RESULTS.md §13. ``n_sigmas`` None: the fixed threshold alone (the Hampel rule, tried on the same clips,
-#: spares fast clean motion but missed most of the noise with two neighbours a side).
+#: docs/decisions.md#median-screen. ``n_sigmas`` None: the fixed threshold alone (the Hampel rule, tried on the same
+#: clips, spares fast clean motion but missed most of the noise with two neighbours a side).
 SCREEN_HALF_WINDOW = 2
 SCREEN_THRESHOLD = 0.005
 SCREEN_N_SIGMAS = None
 
 
-def median_outliers(positions: np.ndarray, missing: np.ndarray, half_window: int = SCREEN_HALF_WINDOW,
-                    threshold: float = SCREEN_THRESHOLD, max_span: int | None = None,
-                    n_sigmas: float | None = None) -> np.ndarray:
+def median_outliers(
+    positions: np.ndarray,
+    missing: np.ndarray,
+    half_window: int = SCREEN_HALF_WINDOW,
+    threshold: float = SCREEN_THRESHOLD,
+    max_span: int | None = None,
+    n_sigmas: float | None = None,
+) -> np.ndarray:
     """bool ``[T, J]``: the observed samples farther than ``threshold`` (the positions' units, metres for
     everything ``read_motion`` returns) from the per-coordinate median of the ``half_window`` observed samples
     on each side of them, same joint (see the module docstring).
@@ -55,30 +61,32 @@ def median_outliers(positions: np.ndarray, missing: np.ndarray, half_window: int
     positions = np.asarray(positions)
     missing = np.asarray(missing, dtype=bool)
     if positions.ndim != 3 or positions.shape[2] != 3 or missing.shape != positions.shape[:2]:
-        raise ValueError(f"median_outliers: positions [T, J, 3] and missing [T, J] expected, got "
-                         f"{positions.shape} and {missing.shape}")
+        raise ValueError(
+            f"median_outliers: positions [T, J, 3] and missing [T, J] expected, got "
+            f"{positions.shape} and {missing.shape}"
+        )
     k = int(half_window)
     if k < 1:
         raise ValueError(f"median_outliers: half_window must be ≥ 1, got {half_window}")
     span = 4 * k if max_span is None else int(max_span)
     # every joint's observed samples in one array, joint after joint (windows never cross a joint's ends)
-    joint, frame = np.nonzero(~missing.T)                                        # [N] each, by joint then frame
-    x = positions[frame, joint].astype(np.float64)                               # [N, 3]
+    joint, frame = np.nonzero(~missing.T)  # [N] each, by joint then frame
+    x = positions[frame, joint].astype(np.float64)  # [N, 3]
     index = np.arange(joint.size)
-    first = np.searchsorted(joint, joint, side="left")                           # the joint's first sample
-    last = np.searchsorted(joint, joint, side="right") - 1                       # and its last
-    half = np.zeros(joint.size, dtype=np.int64)        # per sample, the widest symmetric window within the span
+    first = np.searchsorted(joint, joint, side="left")  # the joint's first sample
+    last = np.searchsorted(joint, joint, side="right") - 1  # and its last
+    half = np.zeros(joint.size, dtype=np.int64)  # per sample, the widest symmetric window within the span
     for h in range(1, k + 1):
         inside = np.flatnonzero((index - first >= h) & (last - index >= h))
         half[inside[frame[inside + h] - frame[inside - h] <= span]] = h
     deviation = np.zeros(joint.size)
     for h in np.unique(half[half > 0]):
         at = index[half == h]
-        window = at[:, None] + np.arange(-h, h + 1)[None]                        # [m, 2h+1]
-        centre = np.median(x[window], axis=1)                                     # [m, 3]
+        window = at[:, None] + np.arange(-h, h + 1)[None]  # [m, 2h+1]
+        centre = np.median(x[window], axis=1)  # [m, 3]
         deviation[at] = point_distance(x[at], centre)
         if n_sigmas is not None:
-            spread = np.median(point_distance(x[window], centre[:, None]), axis=1)   # MAD, [m]
+            spread = np.median(point_distance(x[window], centre[:, None]), axis=1)  # MAD, [m]
             deviation[at] *= deviation[at] > float(n_sigmas) * 1.4826 * spread
     flags = np.zeros(missing.shape, dtype=bool)
     flags[frame[deviation > threshold], joint[deviation > threshold]] = True
@@ -96,8 +104,14 @@ class MedianScreen(MotionRefiner):
         half_window, threshold, max_span, n_sigmas: those of :func:`median_outliers` (threshold in metres).
     """
 
-    def __init__(self, refiner: MotionRefiner, half_window: int = SCREEN_HALF_WINDOW, threshold: float = SCREEN_THRESHOLD,
-                 max_span: int | None = None, n_sigmas: float | None = SCREEN_N_SIGMAS):
+    def __init__(
+        self,
+        refiner: MotionRefiner,
+        half_window: int = SCREEN_HALF_WINDOW,
+        threshold: float = SCREEN_THRESHOLD,
+        max_span: int | None = None,
+        n_sigmas: float | None = SCREEN_N_SIGMAS,
+    ):
         self.refiner = refiner
         self.half_window = half_window
         self.threshold = threshold
@@ -121,19 +135,25 @@ class MedianScreen(MotionRefiner):
         """``motion`` with its median outliers hidden and refilled by the refiner, and its gaps filled."""
         check_motion(motion, self.min_frames, what=type(self).__name__)
         refiner = getattr(self, "refiner_", self.refiner)
-        flags = median_outliers(motion.positions, motion.missing, self.half_window, self.threshold, self.max_span,
-                                self.n_sigmas)
-        hidden = replace(motion, positions=np.where(flags[..., None], np.float32(np.nan), motion.positions),
-                         missing=motion.missing | flags)
+        flags = median_outliers(
+            motion.positions, motion.missing, self.half_window, self.threshold, self.max_span, self.n_sigmas
+        )
+        hidden = replace(
+            motion,
+            positions=np.where(flags[..., None], np.float32(np.nan), motion.positions),
+            missing=motion.missing | flags,
+        )
         done = refiner.refine(hidden)
-        kept = flags & done.missing                      # flagged, but the refiner could not fill them: as observed
+        kept = flags & done.missing  # flagged, but the refiner could not fill them: as observed
         positions = done.positions.copy()
         positions[kept] = motion.positions[kept]
         missing = done.missing & ~kept
         inner = done.metadata.get("refinement", {})
-        report = {**inner, "method": f"{type(self).__name__}({inner.get('method', type(refiner).__name__)})",
-                  "screened": int(flags.sum()),
-                  "filled": int((motion.missing & ~missing).sum()),
-                  "repaired": int(inner.get("repaired", 0)) + int((flags & ~kept).sum())}
-        return replace(motion, positions=positions, missing=missing,
-                       metadata={**motion.metadata, "refinement": report})
+        report = {
+            **inner,
+            "method": f"{type(self).__name__}({inner.get('method', type(refiner).__name__)})",
+            "screened": int(flags.sum()),
+            "filled": int((motion.missing & ~missing).sum()),
+            "repaired": int(inner.get("repaired", 0)) + int((flags & ~kept).sum()),
+        }
+        return replace(motion, positions=positions, missing=missing, metadata={**motion.metadata, "refinement": report})

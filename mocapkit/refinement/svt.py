@@ -5,6 +5,7 @@ The SVT baseline of Wang 2017 (thesis §3.5, citing Lai et al. 2011 for SVT on m
 It completes the frames × (3·markers) matrix by approximately minimising the nuclear norm subject to agreeing
 with the observed entries; it needs no training data.
 """
+
 from __future__ import annotations
 
 import math
@@ -24,8 +25,15 @@ def shrink(Y: torch.Tensor, tau: float) -> tuple[torch.Tensor, int]:
     return (U[:, :rank] * s[:rank]) @ Vh[:rank], rank
 
 
-def svt_complete(M: np.ndarray, observed: np.ndarray, tau: float | None = None, delta: float | None = None,
-                 tol: float = 1e-4, max_iter: int = 500, device: str = "cpu") -> tuple[np.ndarray, dict]:
+def svt_complete(
+    M: np.ndarray,
+    observed: np.ndarray,
+    tau: float | None = None,
+    delta: float | None = None,
+    tol: float = 1e-4,
+    max_iter: int = 500,
+    device: str = "cpu",
+) -> tuple[np.ndarray, dict]:
     """Complete ``M`` (float64 ``[n1, n2]``; values where ``observed`` is False are ignored) by SVT.
 
     The iteration of Cai, Candès & Shen 2010 (§3, "shrinkage iterations"; parameters of §5.1):
@@ -51,27 +59,42 @@ def svt_complete(M: np.ndarray, observed: np.ndarray, tau: float | None = None, 
     m = int(mask.sum())
     if m == 0:
         raise ValueError("SVT needs at least one observed entry")
-    PM = torch.where(mask, torch.as_tensor(np.where(observed, M, 0.0), dtype=torch.float64, device=dev),
-                     torch.zeros((), dtype=torch.float64, device=dev))
+    PM = torch.where(
+        mask,
+        torch.as_tensor(np.where(observed, M, 0.0), dtype=torch.float64, device=dev),
+        torch.zeros((), dtype=torch.float64, device=dev),
+    )
     p = m / (n1 * n2)
     tau = 5.0 * math.sqrt(n1 * n2) if tau is None else float(tau)
     delta = 1.2 / p if delta is None else float(delta)
     norm_PM = torch.linalg.norm(PM)
     if norm_PM == 0:
-        return np.zeros((n1, n2)), {"iterations": 0, "residual": 0.0, "rank": 0, "converged": True,
-                                    "tau": tau, "delta": delta}
+        return np.zeros((n1, n2)), {
+            "iterations": 0,
+            "residual": 0.0,
+            "rank": 0,
+            "converged": True,
+            "tau": tau,
+            "delta": delta,
+        }
     k0 = math.ceil(tau / (delta * float(torch.linalg.matrix_norm(PM, ord=2))))
-    Y = k0 * delta * PM                                                   # kicking
+    Y = k0 * delta * PM  # kicking
     X, rank, residual, iterations = torch.zeros_like(PM), 0, float("inf"), 0
     for iterations in range(1, max_iter + 1):
-        X, rank = shrink(Y, tau)                                          # X^k = D_τ(Y^{k−1})
-        R = torch.where(mask, PM - X, torch.zeros((), dtype=torch.float64, device=dev))   # P_Ω(M − X^k)
+        X, rank = shrink(Y, tau)  # X^k = D_τ(Y^{k−1})
+        R = torch.where(mask, PM - X, torch.zeros((), dtype=torch.float64, device=dev))  # P_Ω(M − X^k)
         residual = float(torch.linalg.norm(R) / norm_PM)
-        if residual <= tol:                                               # relative residual on Ω
+        if residual <= tol:  # relative residual on Ω
             break
-        Y = Y + delta * R                                                 # Y^k = Y^{k−1} + δ P_Ω(M − X^k)
-    return X.cpu().numpy(), {"iterations": iterations, "residual": residual, "rank": rank,
-                             "converged": residual <= tol, "tau": tau, "delta": delta}
+        Y = Y + delta * R  # Y^k = Y^{k−1} + δ P_Ω(M − X^k)
+    return X.cpu().numpy(), {
+        "iterations": iterations,
+        "residual": residual,
+        "rank": rank,
+        "converged": residual <= tol,
+        "tau": tau,
+        "delta": delta,
+    }
 
 
 class SVTCompletion(MotionRefiner):
@@ -96,8 +119,15 @@ class SVTCompletion(MotionRefiner):
 
     min_frames = 2
 
-    def __init__(self, tau: float | None = None, delta: float | None = None, tol: float = 1e-4,
-                 max_iter: int = 500, center: bool = True, device: str = "cpu"):
+    def __init__(
+        self,
+        tau: float | None = None,
+        delta: float | None = None,
+        tol: float = 1e-4,
+        max_iter: int = 500,
+        center: bool = True,
+        device: str = "cpu",
+    ):
         self.tau = tau
         self.delta = delta
         self.tol = tol
@@ -116,8 +146,14 @@ class SVTCompletion(MotionRefiner):
         out = np.where(observed, X, np.nan)
         rows, cols = observed.any(axis=1), observed.any(axis=0)
         if observed[rows][:, cols].all():
-            self.info_ = {"iterations": 0, "residual": 0.0, "rank": None, "converged": True, "tau": self.tau,
-                          "delta": self.delta}
+            self.info_ = {
+                "iterations": 0,
+                "residual": 0.0,
+                "rank": None,
+                "converged": True,
+                "tau": self.tau,
+                "delta": self.delta,
+            }
             return out, None
         M, O = X[rows][:, cols], observed[rows][:, cols]
         if self.center:
@@ -125,8 +161,9 @@ class SVTCompletion(MotionRefiner):
             scale = float(np.sqrt((np.where(O, M - mean, 0.0) ** 2).sum() / O.sum())) or 1.0
         else:
             mean, scale = np.zeros(M.shape[1]), 1.0
-        completed, self.info_ = svt_complete((M - mean) / scale, O, self.tau, self.delta, self.tol, self.max_iter,
-                                             self.device)
+        completed, self.info_ = svt_complete(
+            (M - mean) / scale, O, self.tau, self.delta, self.tol, self.max_iter, self.device
+        )
         block = np.full(out.shape, np.nan)
         block[np.ix_(rows, cols)] = completed * scale + mean
         return np.where(observed, X, block), None

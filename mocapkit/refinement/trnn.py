@@ -51,6 +51,7 @@ data, ``argmax{i : σ_i − σ_{i+1} ≥ 0.1}``, taken literally on the singular
 real motion (the mean pose dominates ``σ₁``), which contradicts the thesis's ``r = 15 ≤ rank(X)``; that rule
 is available as ``rank_rule="normalised"``.
 """
+
 from __future__ import annotations
 
 import math
@@ -58,6 +59,7 @@ import math
 import numpy as np
 import torch
 
+from mocapkit.refinement.base import MotionRefiner, RefinementError
 from mocapkit.refinement.gap_filling import linear_fill
 from mocapkit.refinement.lrmf import (
     CMU_UNIT,
@@ -73,20 +75,32 @@ from mocapkit.refinement.lrmf import (
     resolve_dtype,
     soft,
 )
-from mocapkit.refinement.base import MotionRefiner, RefinementError
 
 
 def _orthonormal_maximiser(A: torch.Tensor) -> torch.Tensor:
     """``argmax_W tr(W A)`` s.t. ``W Wᵀ = I_r`` for ``A [k, r]``: ``W = Q Pᵀ`` with ``A = P Σ Qᵀ`` the economy
     SVD (Wang 2017 Appendix .1, after Hong et al. 2016). Returns ``W [r, k]``."""
-    P, _, Qh = torch.linalg.svd(A, full_matrices=False)      # P: k×r, Qh = Qᵀ: r×r
-    return (P @ Qh).mT                                        # Q Pᵀ = (P Qᵀ)ᵀ
+    P, _, Qh = torch.linalg.svd(A, full_matrices=False)  # P: k×r, Qh = Qᵀ: r×r
+    return (P @ Qh).mT  # Q Pᵀ = (P Qᵀ)ᵀ
 
 
-def trnn(X: np.ndarray, observed: np.ndarray, truncation: int = 15, width: int | None = None,
-         lam: float | None = None, mu: float = 100.0, rho: float = 1.4, eta: float = 1e-5, eta_max: float = 1e6,
-         max_iter: int = 500, tol: float = 1e-4, random_state: int | None = 0, device="cpu",
-         dtype=torch.float64, init: np.ndarray | None = None) -> LowRankResult:
+def trnn(
+    X: np.ndarray,
+    observed: np.ndarray,
+    truncation: int = 15,
+    width: int | None = None,
+    lam: float | None = None,
+    mu: float = 100.0,
+    rho: float = 1.4,
+    eta: float = 1e-5,
+    eta_max: float = 1e6,
+    max_iter: int = 500,
+    tol: float = 1e-4,
+    random_state: int | None = 0,
+    device="cpu",
+    dtype=torch.float64,
+    init: np.ndarray | None = None,
+) -> LowRankResult:
     """Algorithm 3 of Wang 2017 (corrected, see the module docstring).
 
     Args:
@@ -113,11 +127,13 @@ def trnn(X: np.ndarray, observed: np.ndarray, truncation: int = 15, width: int |
         raise ValueError(f"truncation must be >= 0, got {truncation}")
     d = min(m, n) if width is None else int(width)
     if not (r < d <= min(m, n)) and not (r == 0 and 1 <= d <= min(m, n)):
-        raise ValueError(f"factor width d={d} must satisfy truncation r={r} < d <= min(frames, features) = "
-                         f"{min(m, n)} (eq. 4.20 needs r <= rank(X) <= d)")
+        raise ValueError(
+            f"factor width d={d} must satisfy truncation r={r} < d <= min(frames, features) = "
+            f"{min(m, n)} (eq. 4.20 needs r <= rank(X) <= d)"
+        )
     lam = 100.0 / math.sqrt(max(m, n)) if lam is None else float(lam)
     obs_np = np.asarray(observed, bool)
-    Om = torch.as_tensor(np.ascontiguousarray(obs_np.T), device=device)          # Ω, m×n (time contiguous)
+    Om = torch.as_tensor(np.ascontiguousarray(obs_np.T), device=device)  # Ω, m×n (time contiguous)
     PD = torch.as_tensor(np.ascontiguousarray(np.where(obs_np, X, 0.0).T), device=device, dtype=dtype)  # P_Ω(D)
     norm_PD = float(torch.linalg.matrix_norm(PD))
     if norm_PD == 0:
@@ -132,12 +148,12 @@ def trnn(X: np.ndarray, observed: np.ndarray, truncation: int = 15, width: int |
     if r > 0:  # [fix: U, V start not given] top-r singular vectors of the interpolated data
         start = linear_fill(X, obs_np, empty=0.0) if init is None else np.asarray(init, dtype=np.float64)
         P, _, Qh = torch.linalg.svd(torch.as_tensor(start.T, device=device, dtype=dtype), full_matrices=False)
-        U, V = P[:, :r].mT.contiguous(), Qh[:r].contiguous()                     # U: r×m, V: r×n
+        U, V = P[:, :r].mT.contiguous(), Qh[:r].contiguous()  # U: r×m, V: r×n
     else:
         U = torch.zeros(0, m, device=device, dtype=dtype)
         V = torch.zeros(0, n, device=device, dtype=dtype)
     eye = torch.eye(d, device=device, dtype=dtype)
-    xi2 = (2 * torch.cos(math.pi * torch.arange(n, device=device, dtype=dtype) / n) - 2) ** 2   # ξ_i², eq. 4.25
+    xi2 = (2 * torch.cos(math.pi * torch.arange(n, device=device, dtype=dtype) / n) - 2) ** 2  # ξ_i², eq. 4.25
     X_prev = torch.zeros_like(PD)
     history: list[dict] = []
     converged = False
@@ -147,44 +163,54 @@ def trnn(X: np.ndarray, observed: np.ndarray, truncation: int = 15, width: int |
         T1 = (Y1 + Y2).add_(M, alpha=eta).add_(PD, alpha=eta).sub_(S, alpha=eta)
         if r > 0:
             T1.addmm_(U.mT, V)
-        L = _solve_right(T1 @ R, eye + 2 * eta * (R.mT @ R))                    # (4.24) L = T1 R T2⁻¹
-        R = _solve_right(T1.mT @ L, eye + 2 * eta * (L.mT @ L))                 # (4.24) R = T1ᵀ L T3⁻¹ (new L)
+        L = _solve_right(T1 @ R, eye + 2 * eta * (R.mT @ R))  # (4.24) L = T1 R T2⁻¹
+        R = _solve_right(T1.mT @ L, eye + 2 * eta * (L.mT @ L))  # (4.24) R = T1ᵀ L T3⁻¹ (new L)
         del T1
         LR = L @ R.mT
-        Ts = (PD - LR).add_(Y2, alpha=1 / eta)                                  # T_s of (4.24)
-        S = torch.where(Om, soft(Ts, lam / eta), Ts)                            # (4.24) S = P_Ωc(Ts) + P_Ω(T(Ts))
+        Ts = (PD - LR).add_(Y2, alpha=1 / eta)  # T_s of (4.24)
+        S = torch.where(Om, soft(Ts, lam / eta), Ts)  # (4.24) S = P_Ωc(Ts) + P_Ω(T(Ts))
         del Ts
         # (4.25) [fix: Γ_ii = 1/(η + μξ_i²), the thesis prints Y1 for η]: Mᵀ = IDCT(Γ DCT(Tmᵀ)), Tm = η L Rᵀ − Y1,
         # with the DCT along time (axis 1 here, i.e. along the columns of Tmᵀ)
-        C = dct((LR * eta).sub_(Y1), dim=1).mul_(1.0 / (eta + mu * xi2))        # DCT coefficients of M
+        C = dct((LR * eta).sub_(Y1), dim=1).mul_(1.0 / (eta + mu * xi2))  # DCT coefficients of M
         M = idct(C, dim=1)
         if r > 0:
-            U = _orthonormal_maximiser(L @ (V @ R).mT)                          # (4.26) SVD of L Rᵀ Vᵀ (m×r)
-            V = _orthonormal_maximiser(R @ (U @ L).mT)                          # (4.26) SVD of R Lᵀ Uᵀ (n×r)
+            U = _orthonormal_maximiser(L @ (V @ R).mT)  # (4.26) SVD of L Rᵀ Vᵀ (m×r)
+            V = _orthonormal_maximiser(R @ (U @ L).mT)  # (4.26) SVD of R Lᵀ Uᵀ (n×r)
         R1 = M - LR
         R2 = (PD - LR).sub_(S)
-        Y1.add_(R1, alpha=eta)                                                  # Algorithm 3 line 6
-        Y2.add_(R2, alpha=eta)                                                  # Algorithm 3 line 6
+        Y1.add_(R1, alpha=eta)  # Algorithm 3 line 6
+        Y2.add_(R2, alpha=eta)  # Algorithm 3 line 6
         norm_LR = float(torch.linalg.matrix_norm(LR))
         residual = float(torch.linalg.matrix_norm(R2)) / norm_PD
         change = float(torch.linalg.matrix_norm(X_prev.sub_(LR))) / max(norm_LR, 1e-300)
-        theta = max(residual, change)                                           # ϑ of §4.2.3 [fix: E^k is S^k]
+        theta = max(residual, change)  # ϑ of §4.2.3 [fix: E^k is S^k]
         # objective of (4.21) with M in the smoothness term; ‖MO‖² = Σ_i ξ_i² ‖DCT coefficient i‖² (Parseval)
-        objective = (0.5 * float(L.square().sum() + R.square().sum()) - float(((U @ L) * (V @ R)).sum())
-                     + lam * float(torch.where(Om, S, 0.0).abs_().sum())
-                     + 0.5 * mu * float((C.square().sum(0) * xi2).sum()))
-        history.append({"theta": theta, "residual": max(residual, float(torch.linalg.matrix_norm(R1)) / norm_PD),
-                        "objective": objective, "penalty": eta})
+        objective = (
+            0.5 * float(L.square().sum() + R.square().sum())
+            - float(((U @ L) * (V @ R)).sum())
+            + lam * float(torch.where(Om, S, 0.0).abs_().sum())
+            + 0.5 * mu * float((C.square().sum(0) * xi2).sum())
+        )
+        history.append(
+            {
+                "theta": theta,
+                "residual": max(residual, float(torch.linalg.matrix_norm(R1)) / norm_PD),
+                "objective": objective,
+                "penalty": eta,
+            }
+        )
         if not math.isfinite(theta):
             raise FloatingPointError(f"TrNN diverged at iteration {it} (non-finite residual)")
         X_prev = LR
-        eta = min(rho * eta, eta_max)                                           # Algorithm 3 line 7
+        eta = min(rho * eta, eta_max)  # Algorithm 3 line 7
         if theta < tol:
             converged = True
             break
     sparse = torch.where(Om, S, torch.zeros_like(S))
-    return LowRankResult(LR.mT.cpu().numpy().astype(np.float64), sparse.mT.cpu().numpy().astype(np.float64), it,
-                         converged, d, history)
+    return LowRankResult(
+        LR.mT.cpu().numpy().astype(np.float64), sparse.mT.cpu().numpy().astype(np.float64), it, converged, d, history
+    )
 
 
 class TrNN(MotionRefiner):
@@ -218,11 +244,25 @@ class TrNN(MotionRefiner):
     width must satisfy ``r < d ≤ min(frames, coordinates)``).
     """
 
-    def __init__(self, truncation: int = 15, rank: int | str = "auto", rank_threshold: float = 0.1,
-                 rank_rule: str = "absolute", lam: float | None = None, mu: float = 100.0, rho: float = 1.4,
-                 eta: float = 1e-5, eta_max: float = 1e6, outlier_threshold: float | None = 0.03,
-                 unit: float = CMU_UNIT, max_iter: int = 500, tol: float = 1e-4, random_state: int | None = 0,
-                 device="cpu", dtype=torch.float64):
+    def __init__(
+        self,
+        truncation: int = 15,
+        rank: int | str = "auto",
+        rank_threshold: float = 0.1,
+        rank_rule: str = "absolute",
+        lam: float | None = None,
+        mu: float = 100.0,
+        rho: float = 1.4,
+        eta: float = 1e-5,
+        eta_max: float = 1e6,
+        outlier_threshold: float | None = 0.03,
+        unit: float = CMU_UNIT,
+        max_iter: int = 500,
+        tol: float = 1e-4,
+        random_state: int | None = 0,
+        device="cpu",
+        dtype=torch.float64,
+    ):
         self.truncation = truncation
         self.rank = rank
         self.rank_threshold = rank_threshold
@@ -255,7 +295,7 @@ class TrNN(MotionRefiner):
             self.rank_ = d = min(int(self.rank), m, n)
         else:
             raise ValueError(f"rank must be 'auto' or a positive int, got {self.rank!r}")
-        return max(d, r + 1)                                    # [fix] r <= rank(X) <= d
+        return max(d, r + 1)  # [fix] r <= rank(X) <= d
 
     def _refine_matrix(self, X: np.ndarray, observed: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         """Fill ``X`` (float64 ``[frames, 3·joints]`` metres, 0 where not ``observed``); see the class docstring."""
@@ -266,19 +306,41 @@ class TrNN(MotionRefiner):
             raise ValueError(f"unit must be positive (metres per solver unit), got {self.unit!r}")
         n = X.shape[0]
         if n < self.min_frames:
-            raise RefinementError(f"TrNN with truncation r={r} needs at least {self.min_frames} frames "
-                                  f"(r < d <= frames), got {n}")
+            raise RefinementError(
+                f"TrNN with truncation r={r} needs at least {self.min_frames} frames (r < d <= frames), got {n}"
+            )
         keep = drop_empty_columns(X, observed)
         if keep.sum() < r + 1:
-            raise RefinementError(f"TrNN with truncation r={r} needs at least {r + 1} observed coordinates "
-                                  f"({(r + 3) // 3} markers; r < d <= coordinates), got {int(keep.sum())}")
+            raise RefinementError(
+                f"TrNN with truncation r={r} needs at least {r + 1} observed coordinates "
+                f"({(r + 3) // 3} markers; r < d <= coordinates), got {int(keep.sum())}"
+            )
         Xs, obs = X[:, keep] / self.unit, observed[:, keep]
         filled = linear_fill(Xs, obs, empty=0.0)
         width = self._width(Xs, obs, filled)
-        result = trnn(Xs, obs, r, width, self.lam, self.mu, self.rho, self.eta, self.eta_max, self.max_iter,
-                      self.tol, self.random_state, self.device, self.dtype, init=filled)
-        self.width_, self.n_iter_, self.converged_, self.history_ = width, result.n_iter, result.converged, \
-            result.history
+        result = trnn(
+            Xs,
+            obs,
+            r,
+            width,
+            self.lam,
+            self.mu,
+            self.rho,
+            self.eta,
+            self.eta_max,
+            self.max_iter,
+            self.tol,
+            self.random_state,
+            self.device,
+            self.dtype,
+            init=filled,
+        )
+        self.width_, self.n_iter_, self.converged_, self.history_ = (
+            width,
+            result.n_iter,
+            result.converged,
+            result.history,
+        )
         out = np.full(X.shape, np.nan)
         out[:, keep] = result.low_rank * self.unit
         sparse = np.zeros(X.shape)

@@ -10,17 +10,24 @@
 
 Metrics live in :mod:`mocapkit.retrieval.metrics`, the benchmark in :mod:`mocapkit.retrieval.benchmark`.
 """
+
+from mocapkit.motion.geometry import SkeletonInputError, normalised_landmarks
 from mocapkit.retrieval.base import RetrievalMethod
 from mocapkit.retrieval.index import (
-    METHODS,
-    RECOMMENDED,
     MotionIndex,
     RetrievalIndexError,
     build_index,
     make_method,
     search_index,
 )
-from mocapkit.motion.geometry import RetrievalInputError, normalised_landmarks
 
-__all__ = ["METHODS", "RECOMMENDED", "MotionIndex", "RetrievalIndexError", "RetrievalInputError", "RetrievalMethod",
-           "build_index", "make_method", "normalised_landmarks", "search_index"]
+__all__ = [
+    "MotionIndex",
+    "RetrievalIndexError",
+    "SkeletonInputError",
+    "RetrievalMethod",
+    "build_index",
+    "make_method",
+    "normalised_landmarks",
+    "search_index",
+]

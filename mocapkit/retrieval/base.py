@@ -28,6 +28,7 @@ plain arrays (no pickles), which :mod:`mocapkit.retrieval.index` writes to ``sta
 Class attributes: ``label_free`` (False when ``fit`` needs labels), ``needs_run`` (True when the method needs
 a trained checkpoint), ``min_frames`` (the shortest clip, in frames after resampling, the method can encode).
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -39,7 +40,7 @@ from sklearn.base import BaseEstimator
 from sklearn.exceptions import NotFittedError
 
 from mocapkit.motion.container import Motion
-from mocapkit.motion.geometry import RetrievalInputError, normalised_landmarks
+from mocapkit.motion.geometry import SkeletonInputError, normalised_landmarks
 
 
 class RetrievalMethod(BaseEstimator):
@@ -83,13 +84,12 @@ class RetrievalMethod(BaseEstimator):
             motions = [motions]
         motions = list(motions)
         if not motions:
-            raise RetrievalInputError(f"no {what} motions (an empty list or folder)")
+            raise SkeletonInputError(f"no {what} motions (an empty list or folder)")
         out = []
         for motion in motions:
             if not isinstance(motion, Motion):
                 raise TypeError(f"{what} items must be Motion objects (read_motion), got {type(motion).__name__}")
-            out.append(normalised_landmarks(motion, fps=self.fps, heading=self.heading,
-                                            min_frames=self.min_frames))
+            out.append(normalised_landmarks(motion, fps=self.fps, heading=self.heading, min_frames=self.min_frames))
         return out
 
     # ------------------------------------------------------------------ for subclasses
@@ -134,7 +134,7 @@ def ragged_to_state(prefix: str, arrays: list[np.ndarray]) -> dict[str, np.ndarr
 def ragged_from_state(prefix: str, state: dict[str, np.ndarray]) -> list[np.ndarray]:
     """The inverse of :func:`ragged_to_state`."""
     data, offsets = state[f"{prefix}_data"], state[f"{prefix}_offsets"]
-    return [data[offsets[i]:offsets[i + 1]] for i in range(len(offsets) - 1)]
+    return [data[offsets[i] : offsets[i + 1]] for i in range(len(offsets) - 1)]
 
 
 def file_sha1(path: str | os.PathLike) -> str:

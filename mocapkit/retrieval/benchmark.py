@@ -26,6 +26,7 @@ Metrics (:func:`~mocapkit.retrieval.metrics.retrieval_metrics`, pooled over ever
 The report keeps label-free methods (no labels, no training run), self-supervised ones (a run trained without
 labels) and supervised ones in separate tables.
 """
+
 from __future__ import annotations
 
 import time
@@ -66,14 +67,23 @@ class RetrievalBenchmark(Benchmark):
     title = "Motion retrieval"
     percent_metrics = ()
 
-    def __init__(self, dataset: str, root: str, protocols: list[str], clips_per_group: int | None = None,
-                 clip_seed: int = 0, n_folds: int | None = None):
+    def __init__(
+        self,
+        dataset: str,
+        root: str,
+        protocols: list[str],
+        clips_per_group: int | None = None,
+        clip_seed: int = 0,
+        n_folds: int | None = None,
+    ):
         if dataset not in PROTOCOLS:
             raise ComparisonError(f"benchmark.dataset={dataset!r}: one of {sorted(PROTOCOLS)}")
         unknown = [p for p in protocols if p not in PROTOCOLS[dataset]]
         if unknown or not protocols:
-            raise ComparisonError(f"benchmark.protocols: {unknown or protocols} not protocols of {dataset}; "
-                                  f"known: {sorted(PROTOCOLS[dataset])}")
+            raise ComparisonError(
+                f"benchmark.protocols: {unknown or protocols} not protocols of {dataset}; "
+                f"known: {sorted(PROTOCOLS[dataset])}"
+            )
         self.dataset, self.root = dataset, Path(root)
         self.protocols = tuple(protocols)
         self.clips_per_group, self.clip_seed = clips_per_group, int(clip_seed)
@@ -88,8 +98,10 @@ class RetrievalBenchmark(Benchmark):
 
             data = MSRAction3D(self.root)
             motions = list(data.motions)
-            fields = {"action": np.array([f"a{a:02d}" for a in data.actions]),
-                      "subject": np.array([str(s) for s in data.subjects])}   # as the data modules name them
+            fields = {
+                "action": np.array([f"a{a:02d}" for a in data.actions]),
+                "subject": np.array([str(s) for s in data.subjects]),
+            }  # as the data modules name them
             for motion, name in zip(motions, data.names):
                 motion.name = name
         else:
@@ -106,16 +118,26 @@ class RetrievalBenchmark(Benchmark):
                 clips = sorted(keep, key=lambda c: str(c["path"]))
             motions = read_clips(clips, progress=len(clips) > 100)
             if self.dataset == "hdm05":
-                fields = {"class": np.array([c["class"] for c in clips]), "group": np.array([c["group"] for c in clips])}
+                fields = {
+                    "class": np.array([c["class"] for c in clips]),
+                    "group": np.array([c["group"] for c in clips]),
+                }
             else:  # bandai: list_clips' group is the style, class the content
-                fields = {"content": np.array([c["class"] for c in clips]),
-                          "style": np.array([c["group"] for c in clips])}
+                fields = {
+                    "content": np.array([c["class"] for c in clips]),
+                    "style": np.array([c["group"] for c in clips]),
+                }
         return motions, fields
 
     def describe(self) -> dict:
-        return {"dataset": self.dataset, "root": str(self.root), "n_clips": len(self.motions),
-                "fields": {k: sorted(set(v.tolist())) for k, v in self.fields.items()},
-                "clips_per_group": self.clips_per_group, "n_folds": self.n_folds}
+        return {
+            "dataset": self.dataset,
+            "root": str(self.root),
+            "n_clips": len(self.motions),
+            "fields": {k: sorted(set(v.tolist())) for k, v in self.fields.items()},
+            "clips_per_group": self.clips_per_group,
+            "n_folds": self.n_folds,
+        }
 
     def data(self, indices: np.ndarray):
         return [self.motions[int(i)] for i in indices], None
@@ -134,7 +156,7 @@ class RetrievalBenchmark(Benchmark):
             return {"subjects 2-10 even": (everything[train], everything[~train])}
         groups = sorted(set(values.tolist()))
         if self.n_folds and len(groups) > int(self.n_folds):
-            held = [groups[i::int(self.n_folds)] for i in range(int(self.n_folds))]
+            held = [groups[i :: int(self.n_folds)] for i in range(int(self.n_folds))]
         else:
             held = [[g] for g in groups]
         return {"+".join(h): (everything[~np.isin(values, h)], everything[np.isin(values, h)]) for h in held}
@@ -146,8 +168,16 @@ class RetrievalBenchmark(Benchmark):
         train = np.unique(np.concatenate([db for db, _ in folds.values()]))
         test = np.unique(np.concatenate([q for _, q in folds.values()]))
         label = PROTOCOLS[self.dataset][protocol][0]
-        return Split(protocol, seed, train, test, {"label": label, "folds": {
-            name: {"n_database": len(db), "n_queries": len(q)} for name, (db, q) in folds.items()}})
+        return Split(
+            protocol,
+            seed,
+            train,
+            test,
+            {
+                "label": label,
+                "folds": {name: {"n_database": len(db), "n_queries": len(q)} for name, (db, q) in folds.items()},
+            },
+        )
 
     # -------------------------------------------------------------- scoring
     def evaluate_estimator(self, estimator, split: Split) -> dict:
@@ -161,9 +191,14 @@ class RetrievalBenchmark(Benchmark):
         kind = {"label_free": label_free, "needs_run": bool(getattr(estimator, "needs_run", False))}
         if split.protocol == "zhou_tp20":
             if not label_free or kind["needs_run"]:
-                return {"metrics": {"tp_ratio": float("nan")}, "detail": {
-                    **kind, "not_applicable": "the thesis's protocol fits and queries one set; a supervised or "
-                                              "trained method would have seen the queries"}}
+                return {
+                    "metrics": {"tp_ratio": float("nan")},
+                    "detail": {
+                        **kind,
+                        "not_applicable": "the thesis's protocol fits and queries one set; a supervised or "
+                        "trained method would have seen the queries",
+                    },
+                }
             fitted = clone(estimator)
             start = time.perf_counter()
             fitted.fit(self.motions)
@@ -178,25 +213,40 @@ class RetrievalBenchmark(Benchmark):
             fitted = clone(estimator)
             start = time.perf_counter()
             # the protocol's group of every database clip (a trained method picks the run that held out the rest)
-            database = [replace(self.motions[i], metadata={**self.motions[i].metadata,
-                                                           "group": str(self.fields[group_field][i])}) for i in db]
+            database = [
+                replace(
+                    self.motions[i], metadata={**self.motions[i].metadata, "group": str(self.fields[group_field][i])}
+                )
+                for i in db
+            ]
             fitted.fit(database, None if label_free else labels[db])
             fit_seconds.append(time.perf_counter() - start)
             start = time.perf_counter()
             d = fitted.distances([self.motions[i] for i in queries])
             query_ms.append(1000 * (time.perf_counter() - start) / len(queries))
             scores = retrieval_metrics(d, labels[queries], labels[db])
-            folds[fold] = {**scores["metrics"], "fit_seconds": fit_seconds[-1], "query_ms": query_ms[-1],
-                           "nearest": [self.names[db[j]] for j in scores["per_query"]["nearest"]],
-                           "queries": [self.names[i] for i in queries]}
+            folds[fold] = {
+                **scores["metrics"],
+                "fit_seconds": fit_seconds[-1],
+                "query_ms": query_ms[-1],
+                "nearest": [self.names[db[j]] for j in scores["per_query"]["nearest"]],
+                "queries": [self.names[i] for i in queries],
+            }
             q_labels.append(labels[queries])
             db_labels.append(labels[db])
             fold_scores.append(scores)
         kind["uses_labels"] = _uses_labels(fitted)
         pooled = _pooled(fold_scores)
         metrics = {**pooled, "fit_seconds": float(np.mean(fit_seconds)), "query_ms": float(np.mean(query_ms))}
-        return {"metrics": metrics, "detail": {**kind, "label": label, "folds": folds,
-                                               "confusion": _confusion(fold_scores, q_labels, db_labels)}}
+        return {
+            "metrics": metrics,
+            "detail": {
+                **kind,
+                "label": label,
+                "folds": folds,
+                "confusion": _confusion(fold_scores, q_labels, db_labels),
+            },
+        }
 
     # -------------------------------------------------------------- presentation
     def headline(self, protocol: str) -> list[str]:
@@ -206,17 +256,31 @@ class RetrievalBenchmark(Benchmark):
         lines = []
         cells = results.get("cells", [])
         protocols = results["protocols"]
-        for title, wanted in (("Label-free methods, no training run", "label_free"),
-                              ("Self-supervised methods (a training run without labels)", "self_supervised"),
-                              ("Supervised methods (labels of the database side)", "supervised")):
+        for title, wanted in (
+            ("Label-free methods, no training run", "label_free"),
+            ("Self-supervised methods (a training run without labels)", "self_supervised"),
+            ("Supervised methods (labels of the database side)", "supervised"),
+        ):
             keys = [k for k in dict.fromkeys(c["method"] for c in cells) if _kind(cells, k) == wanted]
             if not keys:
                 continue
-            lines += [f"## {title}", "", ("mean ± sd over seeds; mAP / P@1 / P@10 pooled over every query of every "
-                      "fold (the query is never in its own database)."), ""]
-            header = "| method | " + " | ".join(
-                f"{p} {'TP@20' if p == 'zhou_tp20' else 'mAP'} | {p} P@1" if p != "zhou_tp20" else f"{p} TP@20"
-                for p in protocols) + " | query ms |"
+            lines += [
+                f"## {title}",
+                "",
+                (
+                    "mean ± sd over seeds; mAP / P@1 / P@10 pooled over every query of every "
+                    "fold (the query is never in its own database)."
+                ),
+                "",
+            ]
+            header = (
+                "| method | "
+                + " | ".join(
+                    f"{p} {'TP@20' if p == 'zhou_tp20' else 'mAP'} | {p} P@1" if p != "zhou_tp20" else f"{p} TP@20"
+                    for p in protocols
+                )
+                + " | query ms |"
+            )
             lines += [header, "|" + "---|" * (header.count("|") - 1)]
             for key in keys:
                 row = [next(c["label"] for c in cells if c["method"] == key)]
@@ -272,8 +336,13 @@ def _pooled(fold_scores: list[dict]) -> dict:
         p1 += [scores["metrics"]["p@1"]] * n
         p10 += [scores["metrics"]["p@10"]] * n
         nn += [scores["metrics"]["nn_accuracy"]] * n
-    return {"map": float(np.mean(aps)) if aps else float("nan"), "p@1": float(np.mean(p1)),
-            "p@10": float(np.mean(p10)), "nn_accuracy": float(np.mean(nn)), "n_queries": len(p1)}
+    return {
+        "map": float(np.mean(aps)) if aps else float("nan"),
+        "p@1": float(np.mean(p1)),
+        "p@10": float(np.mean(p10)),
+        "nn_accuracy": float(np.mean(nn)),
+        "n_queries": len(p1),
+    }
 
 
 def _confusion(fold_scores, q_labels, db_labels) -> dict:
@@ -294,14 +363,21 @@ def _plot_confusions(results: dict, out_dir: Path) -> list[Path]:
 
     written = []
     for protocol in results["protocols"]:
-        cells = [c for c in results.get("cells", []) if c["protocol"] == protocol
-                 and (c.get("detail") or {}).get("confusion")]
+        cells = [
+            c
+            for c in results.get("cells", [])
+            if c["protocol"] == protocol and (c.get("detail") or {}).get("confusion")
+        ]
         if not cells:
             continue
         best = max(cells, key=lambda c: c["metrics"].get("map") or -1.0)
         confusion = best["detail"]["confusion"]
         path = out_dir / f"confusion_{protocol}.png"
-        plot_confusion_matrix(np.array(confusion["counts"]), confusion["classes"], path,
-                              title=f"{protocol}: 1-NN classes of {best['label']}")
+        plot_confusion_matrix(
+            np.array(confusion["counts"]),
+            confusion["classes"],
+            path,
+            title=f"{protocol}: 1-NN classes of {best['label']}",
+        )
         written.append(path)
     return written

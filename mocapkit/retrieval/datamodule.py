@@ -37,6 +37,7 @@ Batches are dicts::
     query      bool    [B]                  validation / test: a query (True) or a database clip (False)
     index      int64   [B]                  the clip's index in its part
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -46,10 +47,10 @@ import numpy as np
 import torch
 from torch.utils.data import DataLoader, Dataset
 
-from mocapkit.motion.layouts import LANDMARK_NAMES
 from mocapkit.datasets.mocap.folders import MocapFolderError, held_out_groups
-from mocapkit.retrieval.embedding import resample_frames
 from mocapkit.motion.geometry import normalised_landmarks
+from mocapkit.motion.layouts import LANDMARK_NAMES
+from mocapkit.retrieval.embedding import resample_frames
 
 DATASETS = ("hdm05", "bandai", "msr")
 #: Labels each data set offers (``class`` is the first one's alias).
@@ -60,14 +61,16 @@ AUGMENT_KEYS = ("crop", "rotation_deg", "scale", "jitter")
 @dataclass
 class Clip:
     """One clip: normalised landmarks ``[T, 20, 3]``, its label and group (strings) and its name."""
+
     landmarks: np.ndarray
     label: str
     group: str
     name: str
 
 
-def read_labelled_clips(dataset: str, root: str, label: str = "class", fps: float = 30.0,
-                        heading: str = "frame") -> list[Clip]:
+def read_labelled_clips(
+    dataset: str, root: str, label: str = "class", fps: float = 30.0, heading: str = "frame"
+) -> list[Clip]:
     """Every clip of ``dataset`` under ``root`` as a :class:`Clip` (see the module docstring for labels and groups)."""
     if dataset not in DATASETS:
         raise MocapFolderError(f"data.dataset={dataset!r}: one of {list(DATASETS)}")
@@ -78,8 +81,10 @@ def read_labelled_clips(dataset: str, root: str, label: str = "class", fps: floa
         from mocapkit.datasets.msr_action3d.dataset import ACTION_NAMES, MSRAction3D
 
         data = MSRAction3D(root)
-        return [Clip(normalised_landmarks(m, fps=fps, heading=heading), ACTION_NAMES[int(a) - 1], str(int(s)), name)
-                for m, a, s, name in zip(data.motions, data.actions, data.subjects, data.names)]
+        return [
+            Clip(normalised_landmarks(m, fps=fps, heading=heading), ACTION_NAMES[int(a) - 1], str(int(s)), name)
+            for m, a, s, name in zip(data.motions, data.actions, data.subjects, data.names)
+        ]
     from mocapkit.datasets.mocap.folders import list_clips, read_clips
 
     clips = list_clips(dataset, root)
@@ -88,20 +93,27 @@ def read_labelled_clips(dataset: str, root: str, label: str = "class", fps: floa
     out = []
     for clip, motion in zip(clips, motions):
         landmarks = normalised_landmarks(motion, fps=fps, heading=heading)
-        if dataset == "bandai" and label == "style":       # Bandai: group = the other factor (no actor is known)
+        if dataset == "bandai" and label == "style":  # Bandai: group = the other factor (no actor is known)
             out.append(Clip(landmarks, clip["group"], clip["class"], clip["name"]))
         else:
             out.append(Clip(landmarks, clip["class"], clip["group"], clip["name"]))
     return out
 
 
-def augment(sequence: np.ndarray, frames: int, rng: np.random.Generator, crop=(0.7, 1.0), rotation_deg: float = 30.0,
-            scale=(0.9, 1.1), jitter: float = 0.01) -> np.ndarray:
+def augment(
+    sequence: np.ndarray,
+    frames: int,
+    rng: np.random.Generator,
+    crop=(0.7, 1.0),
+    rotation_deg: float = 30.0,
+    scale=(0.9, 1.1),
+    jitter: float = 0.01,
+) -> np.ndarray:
     """One augmented view ``[frames, 20, 3]`` float32 of ``sequence`` ``[T, 20, 3]`` (module docstring)."""
     total = len(sequence)
     length = min(total, max(2, round(rng.uniform(*crop) * total)))
     start = int(rng.integers(total - length + 1))
-    x = resample_frames(sequence[start:start + length], frames).astype(np.float64)
+    x = resample_frames(sequence[start : start + length], frames).astype(np.float64)
     angle = np.deg2rad(rng.uniform(-rotation_deg, rotation_deg))
     c, s = np.cos(angle), np.sin(angle)
     rotation = np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
@@ -114,8 +126,16 @@ def augment(sequence: np.ndarray, frames: int, rng: np.random.Generator, crop=(0
 class TwoViews(Dataset):
     """Training clips, ``repeats`` times each, as two freshly augmented views."""
 
-    def __init__(self, clips: list[Clip], labels: np.ndarray, groups: np.ndarray, frames: int, repeats: int = 1,
-                 seed: int = 0, augmentation: dict | None = None):
+    def __init__(
+        self,
+        clips: list[Clip],
+        labels: np.ndarray,
+        groups: np.ndarray,
+        frames: int,
+        repeats: int = 1,
+        seed: int = 0,
+        augmentation: dict | None = None,
+    ):
         self.clips, self.labels, self.groups = clips, labels, groups
         self.frames, self.repeats, self.seed, self.calls = frames, max(1, int(repeats)), seed, 0
         self.augmentation = dict(augmentation or {})
@@ -128,10 +148,13 @@ class TwoViews(Dataset):
         rng = np.random.default_rng([self.seed, self.calls, index])
         i = index % len(self.clips)
         sequence = self.clips[i].landmarks
-        return {"landmarks": torch.from_numpy(augment(sequence, self.frames, rng, **self.augmentation)),
-                "view2": torch.from_numpy(augment(sequence, self.frames, rng, **self.augmentation)),
-                "label": torch.tensor(self.labels[i]), "group": torch.tensor(self.groups[i]),
-                "index": torch.tensor(i)}
+        return {
+            "landmarks": torch.from_numpy(augment(sequence, self.frames, rng, **self.augmentation)),
+            "view2": torch.from_numpy(augment(sequence, self.frames, rng, **self.augmentation)),
+            "label": torch.tensor(self.labels[i]),
+            "group": torch.tensor(self.groups[i]),
+            "index": torch.tensor(i),
+        }
 
 
 class RetrievalClips(Dataset):
@@ -147,9 +170,13 @@ class RetrievalClips(Dataset):
     def __getitem__(self, index: int) -> dict:
         if index not in self._cache:
             self._cache[index] = torch.from_numpy(resample_frames(self.clips[index].landmarks, self.frames))
-        return {"landmarks": self._cache[index], "label": torch.tensor(self.labels[index]),
-                "group": torch.tensor(self.groups[index]), "query": torch.tensor(bool(self.query[index])),
-                "index": torch.tensor(index)}
+        return {
+            "landmarks": self._cache[index],
+            "label": torch.tensor(self.labels[index]),
+            "group": torch.tensor(self.groups[index]),
+            "query": torch.tensor(bool(self.query[index])),
+            "index": torch.tensor(index),
+        }
 
 
 def stratified_split(labels: list[str], fraction: float, seed: int) -> np.ndarray:
@@ -184,11 +211,26 @@ class RetrievalDataModule(L.LightningDataModule):
         clips: instead of ``dataset`` / ``root``: :class:`Clip` objects (tests, or motions read elsewhere).
     """
 
-    def __init__(self, dataset: str = "hdm05", root: str | None = None, label: str = "class",
-                 test_groups: list | str | None = None, train_groups: list | None = None, val_fraction: float = 0.1,
-                 frames: int = 64, fps: float = 30.0, heading: str = "frame", repeats: int = 1,
-                 augmentation: dict | None = None, batch_size: int = 64, eval_batch_size: int = 128,
-                 num_workers: int = 0, split_seed: int = 0, seed: int = 0, clips: list[Clip] | None = None):
+    def __init__(
+        self,
+        dataset: str = "hdm05",
+        root: str | None = None,
+        label: str = "class",
+        test_groups: list | str | None = None,
+        train_groups: list | None = None,
+        val_fraction: float = 0.1,
+        frames: int = 64,
+        fps: float = 30.0,
+        heading: str = "frame",
+        repeats: int = 1,
+        augmentation: dict | None = None,
+        batch_size: int = 64,
+        eval_batch_size: int = 128,
+        num_workers: int = 0,
+        split_seed: int = 0,
+        seed: int = 0,
+        clips: list[Clip] | None = None,
+    ):
         super().__init__()
         if int(frames) < 8:
             raise ValueError(f"data.frames={frames}: at least 8")
@@ -196,16 +238,23 @@ class RetrievalDataModule(L.LightningDataModule):
             raise ValueError(f"data.val_fraction={val_fraction}: a fraction in (0, 1)")
         self.augmentation = dict(augmentation or {})
         if set(self.augmentation) - set(AUGMENT_KEYS):
-            raise ValueError(f"data.augmentation: unknown key(s) {sorted(set(self.augmentation) - set(AUGMENT_KEYS))};"
-                             f" it takes {list(AUGMENT_KEYS)}")
+            raise ValueError(
+                f"data.augmentation: unknown key(s) {sorted(set(self.augmentation) - set(AUGMENT_KEYS))};"
+                f" it takes {list(AUGMENT_KEYS)}"
+            )
         self.dataset_name, self.root, self.label = dataset, None if root is None else str(root), label
         self.frames, self.fps, self.heading = int(frames), float(fps), heading
         self.repeats, self.seed, self.split_seed = int(repeats), int(seed), int(split_seed)
-        self.batch_size, self.eval_batch_size, self.num_workers = int(batch_size), int(eval_batch_size), int(num_workers)
+        self.batch_size, self.eval_batch_size, self.num_workers = (
+            int(batch_size),
+            int(eval_batch_size),
+            int(num_workers),
+        )
         if clips is None:
             if root is None:
-                raise ValueError(f"data.root is not set: give the {dataset} folder (e.g. data.root=../shared/data/"
-                                 "hdm05_cuts11)")
+                raise ValueError(
+                    f"data.root is not set: give the {dataset} folder (e.g. data.root=../shared/data/hdm05_cuts11)"
+                )
             clips = read_labelled_clips(dataset, root, label, self.fps, heading)
         clips = list(clips)
         if not clips:
@@ -226,11 +275,21 @@ class RetrievalDataModule(L.LightningDataModule):
     def label_spaces(self) -> dict:
         """``{"class_names": [...], "source": {...}}``: the label space and how the training data was made (data set,
         label, groups, frames, fps, heading, landmark names), stored in the checkpoint and the ONNX metadata."""
-        return {"class_names": list(self.class_names_),
-                "source": {"dataset": self.dataset_name, "root": self.root, "label": self.label,
-                           "train_groups": list(self.groups["train"]), "test_groups": list(self.groups["test"]),
-                           "groups": list(self.groups["all"]), "frames": self.frames, "fps": self.fps,
-                           "heading": self.heading, "landmark_names": list(LANDMARK_NAMES)}}
+        return {
+            "class_names": list(self.class_names_),
+            "source": {
+                "dataset": self.dataset_name,
+                "root": self.root,
+                "label": self.label,
+                "train_groups": list(self.groups["train"]),
+                "test_groups": list(self.groups["test"]),
+                "groups": list(self.groups["all"]),
+                "frames": self.frames,
+                "fps": self.fps,
+                "heading": self.heading,
+                "landmark_names": list(LANDMARK_NAMES),
+            },
+        }
 
     @property
     def class_names(self) -> list[str]:
@@ -240,15 +299,24 @@ class RetrievalDataModule(L.LightningDataModule):
         return {"train": len(self.train_clips), "val": len(self.val_clips), "test": len(self.test_clips)}
 
     def describe(self) -> dict:
-        return {"split": f"groups: train {self.groups['train']}, test {self.groups['test']}",
-                "dataset": self.dataset_name, "root": self.root, "label": self.label, "frames": self.frames,
-                "fps": self.fps, "heading": self.heading, "classes": len(self.class_names_),
-                "sample_counts": self.sample_counts()}
+        return {
+            "split": f"groups: train {self.groups['train']}, test {self.groups['test']}",
+            "dataset": self.dataset_name,
+            "root": self.root,
+            "label": self.label,
+            "frames": self.frames,
+            "fps": self.fps,
+            "heading": self.heading,
+            "classes": len(self.class_names_),
+            "sample_counts": self.sample_counts(),
+        }
 
     # ------------------------------------------------------------------ loaders
     def _arrays(self, clips: list[Clip]) -> tuple[np.ndarray, np.ndarray]:
-        return (np.array([self._label_index[c.label] for c in clips], dtype=np.int64),
-                np.array([self._group_index[c.group] for c in clips], dtype=np.int64))
+        return (
+            np.array([self._label_index[c.label] for c in clips], dtype=np.int64),
+            np.array([self._group_index[c.group] for c in clips], dtype=np.int64),
+        )
 
     def _retrieval(self, queries: list[Clip], database: list[Clip]) -> RetrievalClips:
         clips = [*queries, *database]
@@ -260,17 +328,24 @@ class RetrievalDataModule(L.LightningDataModule):
         if not hasattr(self, "_datasets"):
             labels, groups = self._arrays(self.train_clips)
             self._datasets = {
-                "train": TwoViews(self.train_clips, labels, groups, self.frames, self.repeats, self.seed,
-                                  self.augmentation),
+                "train": TwoViews(
+                    self.train_clips, labels, groups, self.frames, self.repeats, self.seed, self.augmentation
+                ),
                 "val": self._retrieval(self.val_clips, self.train_clips),
-                "test": self._retrieval(self.test_clips, [*self.train_clips, *self.val_clips])}
+                "test": self._retrieval(self.test_clips, [*self.train_clips, *self.val_clips]),
+            }
         return self._datasets[part]
 
     def _loader(self, part: str) -> DataLoader:
         train = part == "train"
-        return DataLoader(self.dataset(part), batch_size=self.batch_size if train else self.eval_batch_size,
-                          shuffle=train, drop_last=train and len(self.dataset(part)) > self.batch_size,
-                          num_workers=self.num_workers, persistent_workers=self.num_workers > 0)
+        return DataLoader(
+            self.dataset(part),
+            batch_size=self.batch_size if train else self.eval_batch_size,
+            shuffle=train,
+            drop_last=train and len(self.dataset(part)) > self.batch_size,
+            num_workers=self.num_workers,
+            persistent_workers=self.num_workers > 0,
+        )
 
     def train_dataloader(self) -> DataLoader:
         return self._loader("train")
@@ -282,5 +357,12 @@ class RetrievalDataModule(L.LightningDataModule):
         return self._loader("test")
 
 
-__all__ = ["Clip", "RetrievalClips", "RetrievalDataModule", "TwoViews", "augment", "read_labelled_clips",
-           "stratified_split"]
+__all__ = [
+    "Clip",
+    "RetrievalClips",
+    "RetrievalDataModule",
+    "TwoViews",
+    "augment",
+    "read_labelled_clips",
+    "stratified_split",
+]

@@ -24,6 +24,7 @@ clips are not pushed down the list only for their length (the sum under the squa
 DTW distances from every database clip to a reference subset of at most ``n_reference`` database clips (all of
 them on libraries of up to ``n_reference`` clips), for the scales and the statistics.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -65,9 +66,17 @@ class DTWRetrieval(RetrievalMethod):
         parallel: let dtaidistance use OpenMP threads.
     """
 
-    def __init__(self, features: str | list[str] = "positions", window: float | None = None,
-                 length_normalised: bool = True, hubness: str | None = None, n_reference: int = 512,
-                 fps: float = 30.0, heading: str = "frame", parallel: bool = True):
+    def __init__(
+        self,
+        features: str | list[str] = "positions",
+        window: float | None = None,
+        length_normalised: bool = True,
+        hubness: str | None = None,
+        n_reference: int = 512,
+        fps: float = 30.0,
+        heading: str = "frame",
+        parallel: bool = True,
+    ):
         self.features = features
         self.window = window
         self.length_normalised = length_normalised
@@ -87,8 +96,10 @@ class DTWRetrieval(RetrievalMethod):
 
     # ------------------------------------------------------------------ the contract
     def _encode_sequences(self, sequences):
-        return {name: [np.ascontiguousarray(frame_features(s, name, self.fps)) for s in sequences]
-                for name in self.feature_names}
+        return {
+            name: [np.ascontiguousarray(frame_features(s, name, self.fps)) for s in sequences]
+            for name in self.feature_names
+        }
 
     def _fit_sequences(self, sequences, y):
         if self.hubness is not None and self.hubness not in HUBNESS_METHODS:
@@ -100,8 +111,10 @@ class DTWRetrieval(RetrievalMethod):
             return database
         reference = reference_indices(len(sequences), int(self.n_reference))
         if len(reference) < 2:
-            raise ValueError(f"{type(self).__name__}: several features or mutual proximity need a database of "
-                             f"at least 2 clips, got {len(sequences)}")
+            raise ValueError(
+                f"{type(self).__name__}: several features or mutual proximity need a database of "
+                f"at least 2 clips, got {len(sequences)}"
+            )
         raw = [self._feature_distances(database[n], [database[n][i] for i in reference]) for n in names]
         off_diagonal = np.ones(raw[0].shape, dtype=bool)
         off_diagonal[reference, np.arange(len(reference))] = False
@@ -136,11 +149,15 @@ class DTWRetrieval(RetrievalMethod):
         starts = range(0, len(queries), QUERY_BLOCK)
         blocks = []
         for start in tqdm(starts, desc="DTW", unit="block", disable=None if len(starts) > 1 else True, leave=False):
-            chunk = list(queries[start:start + QUERY_BLOCK])
+            chunk = list(queries[start : start + QUERY_BLOCK])
             nq = len(chunk)
-            full = dtw_ndim.distance_matrix_fast(chunk + list(database), window=window,
-                                                 block=((0, nq), (nq, nq + len(database))), compact=False,
-                                                 parallel=bool(self.parallel))
+            full = dtw_ndim.distance_matrix_fast(
+                chunk + list(database),
+                window=window,
+                block=((0, nq), (nq, nq + len(database))),
+                compact=False,
+                parallel=bool(self.parallel),
+            )
             blocks.append(np.asarray(full[:nq, nq:], dtype=np.float64))
         d = np.concatenate(blocks, axis=0) if blocks else np.zeros((0, len(database)))
         if self.length_normalised:

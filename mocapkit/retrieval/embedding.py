@@ -19,6 +19,7 @@ answers from it, and the returned distances are recomputed exactly (float64) for
 The state (``_state``) is the embeddings, the model's SHA-1 (``model_sha1_``: of the checkpoint or ONNX file;
 an index refuses a model file with another digest) and, for HNSW, the serialised FAISS index.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -35,7 +36,8 @@ from mocapkit.retrieval.base import RetrievalMethod, file_sha1, top_k
 
 INDEXES = ("auto", "flat", "hnsw")
 #: ``index="auto"`` builds HNSW for libraries of at least this many clips, an exact flat index below: exact search
-#: grows with the library (bench/RESULTS.md §14: 4.4 ms a query at 10^5 clips, HNSW 0.14 ms at recall@10 1.0),
+#: grows with the library (bench/RESULTS.md#retrieval-latency: 2.2 ms a query at 10^5 clips, HNSW 0.13 ms at
+#: recall@10 1.0),
 #: and below ~10^4 clips it stays under half a millisecond, without HNSW's build time and approximation.
 AUTO_HNSW_MIN_CLIPS = 20_000
 #: HNSW graph degree and build / search breadth (FAISS parameters).
@@ -81,9 +83,16 @@ class EmbeddingRetrieval(RetrievalMethod):
     needs_run = True
     min_frames = 2
 
-    def __init__(self, checkpoint: str | Sequence[str] | None = None, onnx: str | None = None,
-                 frames: int | None = None, index: str = "auto", fps: float = 30.0, heading: str = "frame",
-                 batch_size: int = 64):
+    def __init__(
+        self,
+        checkpoint: str | Sequence[str] | None = None,
+        onnx: str | None = None,
+        frames: int | None = None,
+        index: str = "auto",
+        fps: float = 30.0,
+        heading: str = "frame",
+        batch_size: int = 64,
+    ):
         self.checkpoint = checkpoint
         self.onnx = onnx
         self.frames = frames
@@ -95,8 +104,10 @@ class EmbeddingRetrieval(RetrievalMethod):
     # ------------------------------------------------------------------ the model
     def _model_paths(self) -> list[Path]:
         if (self.checkpoint is None) == (self.onnx is None):
-            raise ValueError("EmbeddingRetrieval: give checkpoint= (a trained run's best.ckpt, or a list of runs) or "
-                             "onnx= (an exported encoder), not both")
+            raise ValueError(
+                "EmbeddingRetrieval: give checkpoint= (a trained run's best.ckpt, or a list of runs) or "
+                "onnx= (an exported encoder), not both"
+            )
         if self.onnx is not None:
             return [Path(self.onnx)]
         paths = [self.checkpoint] if isinstance(self.checkpoint, (str, Path)) else list(self.checkpoint)
@@ -115,27 +126,31 @@ class EmbeddingRetrieval(RetrievalMethod):
             raise ValueError(f"{path}: onnxruntime cannot load it: {exc}") from exc
         meta = session.get_modelmeta().custom_metadata_map
         if "mocapkit_embedding" not in meta:
-            raise ValueError(f"{path}: not a mocapkit embedding export (no mocapkit_embedding metadata); export one with"
-                             " `mocapkit export ckpt_path=RUN/best.ckpt` of a retrieval_supcon / retrieval_simclr run")
+            raise ValueError(
+                f"{path}: not a mocapkit embedding export (no mocapkit_embedding metadata); export one with"
+                " `mocapkit export ckpt_path=RUN/best.ckpt` of a retrieval_supcon / retrieval_simclr run"
+            )
         self.model_info_ = json.loads(meta["mocapkit_embedding"])
         self._predict = lambda x: session.run(["embedding"], {"landmarks": x})[0]
 
     @staticmethod
     def _read_checkpoint(path: Path):
         """``(module, sha1)`` of an embedding run's checkpoint (read with ``weights_only=True`` and vetted)."""
+        from mocapkit.retrieval.module import MotionEmbeddingModule
         from mocapkit.train.checkpoints import (
             parse_checkpoint,
             read_checkpoint_bytes,
             restore_error_detail,
         )
-        from mocapkit.retrieval.module import MotionEmbeddingModule
 
         raw = read_checkpoint_bytes(path)
         checkpoint = parse_checkpoint(raw, path)
         hparams = checkpoint.get("hyper_parameters", {})
         if "source" not in hparams or "loss" not in hparams:
-            raise ValueError(f"{path}: not a motion-embedding checkpoint (no source / loss in its hyper-parameters); "
-                             "train one with `mocapkit train experiment=retrieval_supcon`")
+            raise ValueError(
+                f"{path}: not a motion-embedding checkpoint (no source / loss in its hyper-parameters); "
+                "train one with `mocapkit train experiment=retrieval_supcon`"
+            )
         try:
             module = MotionEmbeddingModule.load_from_checkpoint(io.BytesIO(raw), map_location="cpu", weights_only=True)
         except Exception as exc:
@@ -154,6 +169,7 @@ class EmbeddingRetrieval(RetrievalMethod):
         def predict(x: np.ndarray) -> np.ndarray:
             with torch.inference_mode():
                 return model(torch.from_numpy(x)).numpy()
+
         self._predict = predict
 
     def _matching_model(self, sha1: str) -> Path:
@@ -162,10 +178,12 @@ class EmbeddingRetrieval(RetrievalMethod):
         digests = {p: file_sha1(p) for p in paths if p.is_file()}
         match = [p for p, d in digests.items() if d == sha1]
         if not match:
-            raise ValueError(f"EmbeddingRetrieval: the index was built with the model of SHA-1 {sha1}, but "
-                             f"{[str(p) for p in paths]} {'has' if len(paths) == 1 else 'have'} digest(s) "
-                             f"{sorted(set(digests.values())) or 'none (missing files)'}: encode the database again "
-                             "with this model (fit), or give the model the index was built with")
+            raise ValueError(
+                f"EmbeddingRetrieval: the index was built with the model of SHA-1 {sha1}, but "
+                f"{[str(p) for p in paths]} {'has' if len(paths) == 1 else 'have'} digest(s) "
+                f"{sorted(set(digests.values())) or 'none (missing files)'}: encode the database again "
+                "with this model (fit), or give the model the index was built with"
+            )
         return match[0]
 
     def _load_model(self, groups: list[str] | None = None, sha1: str | None = None) -> None:
@@ -180,9 +198,11 @@ class EmbeddingRetrieval(RetrievalMethod):
             self._use_checkpoint(paths[0], module)
         else:
             if not groups:
-                raise ValueError("EmbeddingRetrieval.fit: with a list of checkpoints the database motions need groups "
-                                 "(motion.metadata['group'], e.g. the HDM05 actor) to pick the run that held out the "
-                                 "groups absent from the database")
+                raise ValueError(
+                    "EmbeddingRetrieval.fit: with a list of checkpoints the database motions need groups "
+                    "(motion.metadata['group'], e.g. the HDM05 actor) to pick the run that held out the "
+                    "groups absent from the database"
+                )
             runs = []
             for path in paths:
                 module, digest = self._read_checkpoint(path)
@@ -195,16 +215,20 @@ class EmbeddingRetrieval(RetrievalMethod):
                     self._use_checkpoint(path, module)
                     break
             else:
-                raise ValueError(f"EmbeddingRetrieval.fit: no checkpoint held out exactly the groups absent from the "
-                                 f"database (database groups {groups}; checkpoints and their held-out groups: "
-                                 f"{ {str(p): h for p, _, _, _, h in runs} })")
+                raise ValueError(
+                    f"EmbeddingRetrieval.fit: no checkpoint held out exactly the groups absent from the "
+                    f"database (database groups {groups}; checkpoints and their held-out groups: "
+                    f"{ {str(p): h for p, _, _, _, h in runs} })"
+                )
         if not hasattr(self, "frames_"):  # a restored state keeps the frames its database was encoded with
             self.frames_ = int(self.frames or self.model_info_.get("frames") or 64)
         for name in ("fps", "heading"):
             trained = self.model_info_.get(name)
             if trained is not None and trained != getattr(self, name):
-                warnings.warn(f"EmbeddingRetrieval: {name}={getattr(self, name)!r} but the model was trained with "
-                              f"{trained!r}", stacklevel=3)
+                warnings.warn(
+                    f"EmbeddingRetrieval: {name}={getattr(self, name)!r} but the model was trained with {trained!r}",
+                    stacklevel=3,
+                )
 
     def _ensure_model(self) -> None:
         if not hasattr(self, "_predict"):
@@ -217,8 +241,9 @@ class EmbeddingRetrieval(RetrievalMethod):
         if self.index not in INDEXES:
             raise ValueError(f"EmbeddingRetrieval: index={self.index!r}, one of {list(INDEXES)}")
         items = [motions] if isinstance(motions, Motion) else list(motions)
-        groups = sorted({str(m.metadata["group"]) for m in items
-                         if isinstance(m, Motion) and m.metadata.get("group") is not None})
+        groups = sorted(
+            {str(m.metadata["group"]) for m in items if isinstance(m, Motion) and m.metadata.get("group") is not None}
+        )
         for name in ("_predict", "model_sha1_", "index_", "index_kind_", "frames_", "model_info_", "checkpoint_used_"):
             self.__dict__.pop(name, None)
         self._load_model(groups=groups)
@@ -231,7 +256,7 @@ class EmbeddingRetrieval(RetrievalMethod):
         out = []
         step = max(1, int(self.batch_size))
         for start in range(0, len(sequences), step):
-            batch = np.stack([resample_frames(s, self.frames_) for s in sequences[start:start + step]])
+            batch = np.stack([resample_frames(s, self.frames_) for s in sequences[start : start + step]])
             out.append(np.asarray(self._predict(batch.astype(np.float32)), dtype=np.float32))
         z = np.concatenate(out)
         return (z / np.maximum(np.linalg.norm(z, axis=1, keepdims=True), 1e-12)).astype(np.float32)
@@ -255,7 +280,7 @@ class EmbeddingRetrieval(RetrievalMethod):
         exact = None
         for row in np.flatnonzero((found < 0).any(axis=1)):  # HNSW could not reach k clips: answer exactly
             exact = self._distances(q, self.database_) if exact is None else exact
-            found[row] = top_k(exact[row:row + 1], k)[0][0]
+            found[row] = top_k(exact[row : row + 1], k)[0][0]
         d = 1.0 - np.einsum("qd,qkd->qk", q.astype(np.float64), np.asarray(self.database_, np.float64)[found])
         order = np.lexsort((found, d), axis=1)
         return np.take_along_axis(found, order, axis=1), np.take_along_axis(d, order, axis=1)
@@ -283,9 +308,11 @@ class EmbeddingRetrieval(RetrievalMethod):
 
     def _state(self) -> dict[str, np.ndarray]:
         self._check_fitted()
-        state = {"embeddings": np.asarray(self.database_, dtype=np.float32),
-                 "model_sha1": np.frombuffer(bytes.fromhex(self.model_sha1_), dtype=np.uint8).copy(),
-                 "frames": np.array([self.frames_], dtype=np.int64)}
+        state = {
+            "embeddings": np.asarray(self.database_, dtype=np.float32),
+            "model_sha1": np.frombuffer(bytes.fromhex(self.model_sha1_), dtype=np.uint8).copy(),
+            "frames": np.array([self.frames_], dtype=np.int64),
+        }
         if self.index_kind_ == "hnsw":
             import faiss
 
@@ -300,12 +327,12 @@ class EmbeddingRetrieval(RetrievalMethod):
         for name in ("_predict", "model_info_", "checkpoint_used_"):
             self.__dict__.pop(name, None)
         sha1 = bytes(np.asarray(state["model_sha1"], dtype=np.uint8)).hex()
-        self._matching_model(sha1)              # refuses a model file of another digest (loaded when first needed)
+        self._matching_model(sha1)  # refuses a model file of another digest (loaded when first needed)
         self.model_sha1_ = sha1
         self.database_ = np.asarray(state["embeddings"], dtype=np.float32)
         self.n_database_ = len(self.database_)
         self.frames_ = int(np.asarray(state["frames"]).reshape(-1)[0])
-        if self.index in ("auto", "hnsw") and "hnsw_index" in state:   # a saved graph is used as it was built
+        if self.index in ("auto", "hnsw") and "hnsw_index" in state:  # a saved graph is used as it was built
             self.index_kind_ = "hnsw"
             self.index_ = faiss.deserialize_index(np.asarray(state["hnsw_index"], dtype=np.uint8))
         else:

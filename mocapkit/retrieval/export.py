@@ -9,6 +9,7 @@ metadata key ``mocapkit_embedding`` holds JSON: ``fps``, ``frames``, ``heading``
 ``embedding_dim``, ``loss``, ``temperature``, ``class_names`` and ``training_data`` (data set, label, groups).
 Parity with PyTorch is checked with onnxruntime on a batch size and a length other than the traced ones.
 """
+
 from __future__ import annotations
 
 import json
@@ -37,15 +38,29 @@ def embedding_metadata(module) -> dict:
     """The ``mocapkit_embedding`` description of a :class:`~mocapkit.retrieval.module.MotionEmbeddingModule`."""
     hp = module.hparams
     source = dict(hp.source or {})
-    return {"fps": source.get("fps", 30.0), "frames": source.get("frames", 64), "heading": source.get("heading", "frame"),
-            "landmark_names": source.get("landmark_names"), "embedding_dim": int(module.model.embedding_dim),
-            "loss": hp.loss, "temperature": hp.temperature, "class_names": list(hp.class_names or []),
-            "training_data": {k: source.get(k) for k in ("dataset", "label", "train_groups", "test_groups", "groups")}}
+    return {
+        "fps": source.get("fps", 30.0),
+        "frames": source.get("frames", 64),
+        "heading": source.get("heading", "frame"),
+        "landmark_names": source.get("landmark_names"),
+        "embedding_dim": int(module.model.embedding_dim),
+        "loss": hp.loss,
+        "temperature": hp.temperature,
+        "class_names": list(hp.class_names or []),
+        "training_data": {k: source.get(k) for k in ("dataset", "label", "train_groups", "test_groups", "groups")},
+    }
 
 
-def export_encoder(model: torch.nn.Module, out: str | Path, description: dict, opset: int = DEFAULT_OPSET,
-                   trace_shape: tuple[int, int] = (2, 64), check_shape: tuple[int, int] = (3, 97),
-                   atol: float = 1e-4, rtol: float = 1e-3) -> dict:
+def export_encoder(
+    model: torch.nn.Module,
+    out: str | Path,
+    description: dict,
+    opset: int = DEFAULT_OPSET,
+    trace_shape: tuple[int, int] = (2, 64),
+    check_shape: tuple[int, int] = (3, 97),
+    atol: float = 1e-4,
+    rtol: float = 1e-3,
+) -> dict:
     """Export ``model`` (landmarks → embedding) to ``out``, check it with onnxruntime, return the figures.
 
     Raises:
@@ -59,14 +74,26 @@ def export_encoder(model: torch.nn.Module, out: str | Path, description: dict, o
         warnings.simplefilter("ignore")
         batch = torch.export.Dim("batch", min=1, max=65536)
         frames = torch.export.Dim("frames", min=8, max=100_000)
-        proto = torch.onnx.export(model, (trace,), None, input_names=["landmarks"], output_names=["embedding"],
-                                  dynamic_shapes={"landmarks": {0: batch, 1: frames}}, dynamo=True,
-                                  opset_version=opset, optimize=False, verbose=False).model_proto
+        proto = torch.onnx.export(
+            model,
+            (trace,),
+            None,
+            input_names=["landmarks"],
+            output_names=["embedding"],
+            dynamic_shapes={"landmarks": {0: batch, 1: frames}},
+            dynamo=True,
+            opset_version=opset,
+            optimize=False,
+            verbose=False,
+        ).model_proto
     dim = int(description.get("embedding_dim", 0))
-    meta = {META_KEY: json.dumps(description), "producer": "mocapkit",
-            "input": "landmarks float32 [batch, frames, 20, 3] (mocapkit.motion.geometry.normalised_landmarks, "
-                     f"resampled to {description.get('frames')} frames)",
-            "output": f"embedding float32 [batch, {dim}] L2-normalised"}
+    meta = {
+        META_KEY: json.dumps(description),
+        "producer": "mocapkit",
+        "input": "landmarks float32 [batch, frames, 20, 3] (mocapkit.motion.geometry.normalised_landmarks, "
+        f"resampled to {description.get('frames')} frames)",
+        "output": f"embedding float32 [batch, {dim}] L2-normalised",
+    }
     save_checked_onnx(proto, meta, out)
     session = cpu_session(str(out))
     checks = []
@@ -77,21 +104,40 @@ def export_encoder(model: torch.nn.Module, out: str | Path, description: dict, o
         result = session.run(["embedding"], {"landmarks": landmarks.numpy()})[0]
         diff = float(np.abs(result - reference).max())
         checks.append({"shape": list(landmarks.shape), "max_abs_diff": diff})
-        if result.shape != reference.shape or not np.all(np.isfinite(result)) \
-                or not np.allclose(result, reference, atol=atol, rtol=rtol):
-            raise ParityError(f"onnxruntime differs from PyTorch on input {list(landmarks.shape)}: max |diff| = "
-                              f"{diff:.3g} > atol {atol} + rtol {rtol}·|ref|")
-    return {"onnx": str(out), "opset": opset, "exporter": "dynamo", "traced_shape": list(trace.shape),
-            "checked_shape": checks[0]["shape"], "checks": checks, "max_abs_diff": max(c["max_abs_diff"] for c in checks),
-            "atol": atol, "rtol": rtol}
+        if (
+            result.shape != reference.shape
+            or not np.all(np.isfinite(result))
+            or not np.allclose(result, reference, atol=atol, rtol=rtol)
+        ):
+            raise ParityError(
+                f"onnxruntime differs from PyTorch on input {list(landmarks.shape)}: max |diff| = "
+                f"{diff:.3g} > atol {atol} + rtol {rtol}·|ref|"
+            )
+    return {
+        "onnx": str(out),
+        "opset": opset,
+        "exporter": "dynamo",
+        "traced_shape": list(trace.shape),
+        "checked_shape": checks[0]["shape"],
+        "checks": checks,
+        "max_abs_diff": max(c["max_abs_diff"] for c in checks),
+        "atol": atol,
+        "rtol": rtol,
+    }
 
 
 def export_embedding_module(module, target: Path, export_cfg) -> dict:
     """Export a :class:`~mocapkit.retrieval.module.MotionEmbeddingModule` with the ``export`` config node."""
-    return export_encoder(module.model, target, embedding_metadata(module), opset=export_cfg.opset,
-                          trace_shape=(export_cfg.trace_batch, export_cfg.trace_frames),
-                          check_shape=(export_cfg.check_batch, export_cfg.check_frames),
-                          atol=export_cfg.atol, rtol=export_cfg.rtol)
+    return export_encoder(
+        module.model,
+        target,
+        embedding_metadata(module),
+        opset=export_cfg.opset,
+        trace_shape=(export_cfg.trace_batch, export_cfg.trace_frames),
+        check_shape=(export_cfg.check_batch, export_cfg.check_frames),
+        atol=export_cfg.atol,
+        rtol=export_cfg.rtol,
+    )
 
 
 __all__ = ["META_KEY", "embedding_metadata", "example_landmarks", "export_embedding_module", "export_encoder"]

@@ -49,6 +49,7 @@ local-regression matrix of AMFS divided by ``μ``: :func:`local_regression_lapla
 iteration: ``W`` = the ``c`` eigenvectors of ``M + γ diag(1 / 2‖w^i‖)`` of smallest eigenvalue, until the
 selection stops changing; features ranked by ``‖w^i‖`` (largest first).
 """
+
 from __future__ import annotations
 
 from collections.abc import Sequence
@@ -118,7 +119,7 @@ def _knn(X: np.ndarray, k: int) -> np.ndarray:
     nbrs = NearestNeighbors(n_neighbors=k).fit(X).kneighbors(X, return_distance=False).astype(np.int64)
     own = np.arange(N)
     has_self = (nbrs == own[:, None]).any(1)
-    nbrs[~has_self, -1] = own[~has_self]                 # exact duplicates can push a point out of its own list
+    nbrs[~has_self, -1] = own[~has_self]  # exact duplicates can push a point out of its own list
     return nbrs
 
 
@@ -128,13 +129,13 @@ def local_regression_laplacians(X: np.ndarray, nbrs: np.ndarray, mu: float) -> n
     N, k = nbrs.shape
     H = np.eye(k) - 1.0 / k
     out = np.empty((N, k, k))
-    chunk = max(1, int(2 ** 24 // max(1, k * X.shape[1])))
+    chunk = max(1, int(2**24 // max(1, k * X.shape[1])))
     for a in range(0, N, chunk):
-        Xn = X[nbrs[a:a + chunk]]                                          # [c, k, d]
-        HX = Xn - Xn.mean(1, keepdims=True)                                 # H X_i (rows centred)
-        M = HX @ HX.transpose(0, 2, 1) + mu * np.eye(k)                     # H K H + μI
-        L = mu * np.linalg.solve(M, np.broadcast_to(H, M.shape))            # μ M⁻¹ H = μ H M⁻¹ (they commute)
-        out[a:a + chunk] = 0.5 * (L + L.transpose(0, 2, 1))
+        Xn = X[nbrs[a : a + chunk]]  # [c, k, d]
+        HX = Xn - Xn.mean(1, keepdims=True)  # H X_i (rows centred)
+        M = HX @ HX.transpose(0, 2, 1) + mu * np.eye(k)  # H K H + μI
+        L = mu * np.linalg.solve(M, np.broadcast_to(H, M.shape))  # μ M⁻¹ H = μ H M⁻¹ (they commute)
+        out[a : a + chunk] = 0.5 * (L + L.transpose(0, 2, 1))
     return out
 
 
@@ -143,10 +144,10 @@ def laplacian_quadratic_diag(X: np.ndarray, nbrs: np.ndarray, L: np.ndarray) -> 
     ``Σ_i Σ_pq (L_i)_pq X[nbrs_ip] ∘ X[nbrs_iq]``."""
     N, k = nbrs.shape
     out = np.zeros(X.shape[1])
-    chunk = max(1, int(2 ** 24 // max(1, k * X.shape[1])))
+    chunk = max(1, int(2**24 // max(1, k * X.shape[1])))
     for a in range(0, N, chunk):
-        G = X[nbrs[a:a + chunk]]                                            # [c, k, D]
-        out += np.einsum("ckd,ckd->d", G, L[a:a + chunk] @ G)
+        G = X[nbrs[a : a + chunk]]  # [c, k, D]
+        out += np.einsum("ckd,ckd->d", G, L[a : a + chunk] @ G)
     return out
 
 
@@ -173,8 +174,17 @@ class AMFS(_ViewSelector):
 
     max_inner_iter = 100
 
-    def __init__(self, n_features: int, r: float = 4.0, mu: float = 0.1, n_neighbors: int = 10,
-                 max_iter: int = 20, order: str = "ascending", standardize: bool = True, random_state=0):
+    def __init__(
+        self,
+        n_features: int,
+        r: float = 4.0,
+        mu: float = 0.1,
+        n_neighbors: int = 10,
+        max_iter: int = 20,
+        order: str = "ascending",
+        standardize: bool = True,
+        random_state=0,
+    ):
         self.n_features = n_features
         self.r = r
         self.mu = mu
@@ -212,7 +222,7 @@ class AMFS(_ViewSelector):
         selected = np.sort(rng.choice(candidates, d, replace=False))
 
         def ratio(sel, a):
-            return float((a ** r) @ diag[:, sel].sum(1) / max(b[sel].sum(), 1e-300))
+            return float((a**r) @ diag[:, sel].sum(1) / max(b[sel].sum(), 1e-300))
 
         history = [ratio(selected, alphas)]
 
@@ -221,8 +231,8 @@ class AMFS(_ViewSelector):
         for _ in range(int(self.max_iter)):
             n_iter += 1
             previous = selected
-            A = (alphas ** r) @ diag                                            # diag of A
-            for _ in range(self.max_inner_iter):                               # Algorithm 4
+            A = (alphas**r) @ diag  # diag of A
+            for _ in range(self.max_inner_iter):  # Algorithm 4
                 lam = float(A[selected].sum() / max(b[selected].sum(), 1e-300))
                 scores = A - lam * b
                 if self.order == "ascending":
@@ -235,7 +245,7 @@ class AMFS(_ViewSelector):
                     break
                 selected = new
                 history.append(ratio(selected, alphas))
-            t = np.maximum(diag[:, selected].sum(1), 1e-300)                   # Algorithm 5
+            t = np.maximum(diag[:, selected].sum(1), 1e-300)  # Algorithm 5
             f = t ** (-1.0 / (r - 1.0))
             f = np.where(np.isfinite(f), f, np.finfo(float).max / (4 * M))
             alphas = f / f.sum()
@@ -325,8 +335,15 @@ class SPEC(_ViewSelector):
 
     rankings = ("phi1", "phi2", "phi3")
 
-    def __init__(self, n_features: int, ranking: str = "phi3", n_components: int = 10, n_neighbors: int = 5,
-                 t: float | None = None, standardize: bool = True):
+    def __init__(
+        self,
+        n_features: int,
+        ranking: str = "phi3",
+        n_components: int = 10,
+        n_neighbors: int = 5,
+        t: float | None = None,
+        standardize: bool = True,
+    ):
         self.n_features = n_features
         self.ranking = ranking
         self.n_components = n_components
@@ -343,9 +360,9 @@ class SPEC(_ViewSelector):
         if N < 3:
             raise ValueError("SPEC needs at least 3 samples")
         S, self.t_ = heat_kernel_graph(X, self.n_neighbors, self.t)
-        root = np.sqrt(np.maximum(np.asarray(S.sum(1)).ravel(), 1e-300))              # D^{1/2}
+        root = np.sqrt(np.maximum(np.asarray(S.sum(1)).ravel(), 1e-300))  # D^{1/2}
         normalised = sp.identity(N, format="csr") - sp.diags(1 / root) @ S @ sp.diags(1 / root)
-        F = root[:, None] * X                                                         # D^{1/2} f per column
+        F = root[:, None] * X  # D^{1/2} f per column
         norms = np.linalg.norm(F, axis=0)
         ok = norms > 1e-12 * max(1.0, norms.max())
         F = F / np.where(ok, norms, 1.0)
@@ -389,8 +406,16 @@ class UDFS(_ViewSelector):
     where that matters.
     """
 
-    def __init__(self, n_features: int, n_components: int = 10, gamma: float = 1.0, mu: float = 1.0,
-                 n_neighbors: int = 5, max_iter: int = 20, standardize: bool = True):
+    def __init__(
+        self,
+        n_features: int,
+        n_components: int = 10,
+        gamma: float = 1.0,
+        mu: float = 1.0,
+        n_neighbors: int = 5,
+        max_iter: int = 20,
+        standardize: bool = True,
+    ):
         self.n_features = n_features
         self.n_components = n_components
         self.gamma = gamma
@@ -411,11 +436,11 @@ class UDFS(_ViewSelector):
             raise ValueError("UDFS needs at least 2 samples")
         c = int(min(max(int(self.n_components), 1), D))
         nbrs = _knn(X, int(min(max(int(self.n_neighbors), 2), N)))
-        B = local_regression_laplacians(X, nbrs, float(self.mu)) / float(self.mu)   # H (H K_i H + μI)⁻¹ H
+        B = local_regression_laplacians(X, nbrs, float(self.mu)) / float(self.mu)  # H (H K_i H + μI)⁻¹ H
         k = nbrs.shape[1]
         rows = np.repeat(nbrs, k, axis=1).ravel()
         cols = np.tile(nbrs, (1, k)).ravel()
-        total = sp.csr_matrix((B.ravel(), (rows, cols)), shape=(N, N))             # Σ_i S_i B_i S_iᵀ (duplicates add)
+        total = sp.csr_matrix((B.ravel(), (rows, cols)), shape=(N, N))  # Σ_i S_i B_i S_iᵀ (duplicates add)
         M = X.T @ (total @ X)
         M = 0.5 * (M + M.T)
         weights = np.ones(D)

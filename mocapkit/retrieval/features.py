@@ -18,6 +18,7 @@ depend on ``heading``. Because the template is fixed, thresholds are in metres, 
 * :class:`GPFBagOfWords`: pose descriptors → k-means codebook → LLC codes → pooled bag of words, the
   clip-level GPF-BoVW view (spec §4.5 [rec]: LLC k = 5, max pooling, ℓ2 normalisation).
 """
+
 from __future__ import annotations
 
 from collections.abc import Sequence
@@ -28,6 +29,7 @@ from sklearn.cluster import KMeans, MiniBatchKMeans
 from sklearn.exceptions import NotFittedError
 from sklearn.utils import check_random_state
 
+from mocapkit.motion.geometry import L_HIP, R_HIP, facing_direction
 from mocapkit.motion.layouts import LANDMARK_NAMES
 
 _I = {name: k for k, name in enumerate(LANDMARK_NAMES)}
@@ -75,8 +77,8 @@ def _body_frame(P: np.ndarray) -> dict[str, np.ndarray]:
     return {
         # normal of the torso plane (pelvis, left shoulder, right shoulder): forward for an upright body
         "torso_forward": _unit(np.cross(l_sh - pelvis, r_sh - pelvis)),
-        # horizontal forward of the hips (hip line × up), independent of trunk bending
-        "hip_forward": _unit(np.cross(l_hip - r_hip, _UP)),
+        # horizontal forward of the hips ((left − right) × up), independent of trunk bending
+        "hip_forward": facing_direction(P, L_HIP, R_HIP, up="y", eps=1e-9),
         "torso_left": _unit(l_sh - r_sh),
         "hip_left": _unit(l_hip - r_hip),
         "spine": _unit(P[:, NECK] - pelvis),
@@ -86,20 +88,21 @@ def _body_frame(P: np.ndarray) -> dict[str, np.ndarray]:
 
 # --------------------------------------------------------------------------- relational features
 
+
 def _relational_values(P: np.ndarray, fps: float) -> dict[str, np.ndarray]:
     """The signed quantity [T] behind each relational feature (compared with its threshold)."""
     f = _body_frame(P)
     V = _velocity(P, fps)
-    speed = np.linalg.norm(V, axis=-1)                               # [T, 20] m/s, relative to the pelvis
+    speed = np.linalg.norm(V, axis=-1)  # [T, 20] m/s, relative to the pelvis
     pelvis = P[:, PELVIS]
-    height = P[..., 1] - f["floor"][:, None]                          # [T, 20] above the lowest foot
+    height = P[..., 1] - f["floor"][:, None]  # [T, 20] above the lowest foot
 
     def j(name):
         return P[:, _I[name]]
 
     out: dict[str, np.ndarray] = {}
     for s, o in (("l", "r"), ("r", "l")):
-        outward = 1.0 if s == "l" else -1.0                           # the left side is at +left
+        outward = 1.0 if s == "l" else -1.0  # the left side is at +left
         hand, elbow, shoulder, wrist = j(f"{s}_hand"), j(f"{s}_elbow"), j(f"{s}_shoulder"), j(f"{s}_wrist")
         out[f"{s}_hand_front"] = _dot(hand - pelvis, f["torso_forward"])
         out[f"{s}_hand_above_neck"] = _dot(hand - j("neck"), f["spine"])
@@ -135,18 +138,37 @@ def _relational_values(P: np.ndarray, fps: float) -> dict[str, np.ndarray]:
 def _relational_table() -> tuple[tuple[str, float, str], ...]:
     rows = []
     for s, o in (("l", "r"), ("r", "l")):
-        rows += [(f"{s}_hand_front", 0.25, "m"), (f"{s}_hand_above_neck", 0.0, "m"),
-                 (f"{s}_hand_above_head", 0.0, "m"), (f"{s}_hand_sideways", 0.3, "m"),
-                 (f"{s}_elbow_bent", np.deg2rad(60.0), "rad"), (f"{s}_elbow_raised", 0.0, "m"),
-                 (f"{s}_hand_fast", 1.2, "m/s"), (f"{s}_hand_near_head", -0.25, "m"),
-                 (f"{s}_hand_low", -0.5, "m"), (f"{s}_elbow_near_{o}_knee", -0.3, "m")]
+        rows += [
+            (f"{s}_hand_front", 0.25, "m"),
+            (f"{s}_hand_above_neck", 0.0, "m"),
+            (f"{s}_hand_above_head", 0.0, "m"),
+            (f"{s}_hand_sideways", 0.3, "m"),
+            (f"{s}_elbow_bent", np.deg2rad(60.0), "rad"),
+            (f"{s}_elbow_raised", 0.0, "m"),
+            (f"{s}_hand_fast", 1.2, "m/s"),
+            (f"{s}_hand_near_head", -0.25, "m"),
+            (f"{s}_hand_low", -0.5, "m"),
+            (f"{s}_elbow_near_{o}_knee", -0.3, "m"),
+        ]
     for s in _SIDES:
-        rows += [(f"{s}_foot_raised", 0.15, "m"), (f"{s}_foot_front", 0.3, "m"), (f"{s}_foot_behind", 0.3, "m"),
-                 (f"{s}_knee_bent", np.deg2rad(50.0), "rad"), (f"{s}_thigh_raised", np.deg2rad(45.0), "rad"),
-                 (f"{s}_leg_sideways", 0.25, "m"), (f"{s}_foot_fast", 1.2, "m/s")]
-    rows += [("hands_apart", 0.75, "m"), ("hands_near", -0.15, "m"), ("feet_apart", 0.5, "m"),
-             ("spine_bent_forward", np.deg2rad(30.0), "rad"), ("lying", np.deg2rad(65.0), "rad"),
-             ("pelvis_low", -0.6, "m"), ("head_low", -1.2, "m")]
+        rows += [
+            (f"{s}_foot_raised", 0.15, "m"),
+            (f"{s}_foot_front", 0.3, "m"),
+            (f"{s}_foot_behind", 0.3, "m"),
+            (f"{s}_knee_bent", np.deg2rad(50.0), "rad"),
+            (f"{s}_thigh_raised", np.deg2rad(45.0), "rad"),
+            (f"{s}_leg_sideways", 0.25, "m"),
+            (f"{s}_foot_fast", 1.2, "m/s"),
+        ]
+    rows += [
+        ("hands_apart", 0.75, "m"),
+        ("hands_near", -0.15, "m"),
+        ("feet_apart", 0.5, "m"),
+        ("spine_bent_forward", np.deg2rad(30.0), "rad"),
+        ("lying", np.deg2rad(65.0), "rad"),
+        ("pelvis_low", -0.6, "m"),
+        ("head_low", -1.2, "m"),
+    ]
     return tuple((name, float(thr), unit) for name, thr, unit in rows)
 
 
@@ -176,7 +198,7 @@ def relational_features(seq, fps: float = 30.0, soft: bool = False) -> np.ndarra
     """
     P = _as_sequence(seq)
     values = _relational_values(P, fps)
-    V = np.stack([values[name] for name in RELATIONAL_FEATURE_NAMES], axis=1)          # [T, F]
+    V = np.stack([values[name] for name in RELATIONAL_FEATURE_NAMES], axis=1)  # [T, F]
     thr = np.array([t for _, t, _ in RELATIONAL_FEATURES])
     if not soft:
         return (V > thr).astype(np.float32)
@@ -187,7 +209,7 @@ def relational_features(seq, fps: float = 30.0, soft: bool = False) -> np.ndarra
 
 # --------------------------------------------------------------------------- HOD
 
-HOD_PLANES: tuple[tuple[int, int], ...] = ((0, 1), (0, 2), (1, 2))     # xy, xz, yz
+HOD_PLANES: tuple[tuple[int, int], ...] = ((0, 1), (0, 2), (1, 2))  # xy, xz, yz
 
 
 def hod(seq, bins: int = 8, levels: int = 3) -> np.ndarray:
@@ -214,23 +236,23 @@ def hod(seq, bins: int = 8, levels: int = 3) -> np.ndarray:
     bins, levels = int(bins), int(levels)
     if bins < 1 or levels < 1:
         raise ValueError(f"bins and levels must be >= 1, got bins={bins}, levels={levels}")
-    n_joints, n_planes, n_seg = P.shape[1] - 1, len(HOD_PLANES), 2 ** levels - 1
+    n_joints, n_planes, n_seg = P.shape[1] - 1, len(HOD_PLANES), 2**levels - 1
     hist = np.zeros((n_joints, n_planes, n_seg, bins))
-    n = P.shape[0] - 1                                                    # displacements
+    n = P.shape[0] - 1  # displacements
     if n >= 1:
-        D = np.diff(np.delete(P, PELVIS, axis=1), axis=0)                 # [n, 19, 3]
+        D = np.diff(np.delete(P, PELVIS, axis=1), axis=0)  # [n, 19, 3]
         a = np.array([p[0] for p in HOD_PLANES])
         b = np.array([p[1] for p in HOD_PLANES])
-        u, v = D[..., a], D[..., b]                                       # [n, 19, 3 planes]
+        u, v = D[..., a], D[..., b]  # [n, 19, 3 planes]
         weight = np.hypot(u, v)
         angle_bin = np.floor((np.arctan2(v, u) + np.pi) / (2 * np.pi) * bins).astype(np.int64)
         angle_bin = np.clip(angle_bin, 0, bins - 1)
         t = np.arange(n)
-        segments = np.stack([2 ** lev - 1 + (t * 2 ** lev) // n for lev in range(levels)], axis=1)  # [n, levels]
+        segments = np.stack([2**lev - 1 + (t * 2**lev) // n for lev in range(levels)], axis=1)  # [n, levels]
         joint = np.arange(n_joints)[None, :, None, None]
         plane = np.arange(n_planes)[None, None, :, None]
         seg = segments[:, None, None, :]
-        index = ((joint * n_planes + plane) * n_seg + seg) * bins + angle_bin[..., None]    # [n, 19, 3, levels]
+        index = ((joint * n_planes + plane) * n_seg + seg) * bins + angle_bin[..., None]  # [n, 19, 3, levels]
         w = np.broadcast_to(weight[..., None], index.shape)
         hist = np.bincount(index.ravel(), weights=w.ravel(), minlength=hist.size).reshape(hist.shape)
         total = hist.sum(axis=-1, keepdims=True)
@@ -241,8 +263,18 @@ def hod(seq, bins: int = 8, levels: int = 3) -> np.ndarray:
 # --------------------------------------------------------------------------- geometric pose descriptors
 
 #: Landmarks of the pairwise distances of :func:`pose_descriptors` (the pelvis, head and the limb ends).
-POSE_DISTANCE_LANDMARKS = ("pelvis", "head", "l_elbow", "l_hand", "r_elbow", "r_hand",
-                           "l_knee", "l_foot", "r_knee", "r_foot")
+POSE_DISTANCE_LANDMARKS = (
+    "pelvis",
+    "head",
+    "l_elbow",
+    "l_hand",
+    "r_elbow",
+    "r_hand",
+    "l_knee",
+    "l_foot",
+    "r_knee",
+    "r_foot",
+)
 #: Landmarks whose signed distance to the torso plane (9) / the sagittal plane (8, all but the head) is taken.
 POSE_PLANE_LANDMARKS = ("head", "l_elbow", "l_hand", "r_elbow", "r_hand", "l_knee", "l_foot", "r_knee", "r_foot")
 #: Landmarks whose height over the lowest foot is taken.
@@ -281,11 +313,11 @@ def pose_descriptors(seq, fps: float = 30.0) -> np.ndarray:
     idx = [_I[n] for n in POSE_DISTANCE_LANDMARKS]
     iu, ju = np.triu_indices(len(idx), k=1)
     L = P[:, idx]
-    dist = np.linalg.norm(L[:, iu] - L[:, ju], axis=-1)                                    # [T, 45]
+    dist = np.linalg.norm(L[:, iu] - L[:, ju], axis=-1)  # [T, 45]
     plane_pts = P[:, [_I[n] for n in POSE_PLANE_LANDMARKS]]
-    front = _dot(plane_pts - pelvis[:, None], f["torso_forward"][:, None])                  # [T, 9]
-    side = _dot(plane_pts[:, 1:] - neck[:, None], f["torso_left"][:, None])                 # [T, 8]
-    heights = P[:, [_I[n] for n in POSE_HEIGHT_LANDMARKS], 1] - f["floor"][:, None]          # [T, 6]
+    front = _dot(plane_pts - pelvis[:, None], f["torso_forward"][:, None])  # [T, 9]
+    side = _dot(plane_pts[:, 1:] - neck[:, None], f["torso_left"][:, None])  # [T, 8]
+    heights = P[:, [_I[n] for n in POSE_HEIGHT_LANDMARKS], 1] - f["floor"][:, None]  # [T, 6]
     spine = neck - pelvis
     angles = []
     for s in _SIDES:
@@ -306,8 +338,7 @@ def pose_descriptors(seq, fps: float = 30.0) -> np.ndarray:
 POOLINGS = ("max", "mean")
 
 
-def llc_codes(X: np.ndarray, codebook: np.ndarray, k: int = 5, beta: float = 1e-4,
-              chunk: int = 4096) -> np.ndarray:
+def llc_codes(X: np.ndarray, codebook: np.ndarray, k: int = 5, beta: float = 1e-4, chunk: int = 4096) -> np.ndarray:
     """Approximated LLC codes (Wang et al. 2010) of the rows of ``X`` [n, F] on ``codebook`` [K, F]: float64 [n, K].
 
     For each row ``x``: its ``k`` nearest codewords ``B`` [k, F] (Euclidean), ``C = (B − 1xᵀ)(B − 1xᵀ)ᵀ``,
@@ -321,16 +352,16 @@ def llc_codes(X: np.ndarray, codebook: np.ndarray, k: int = 5, beta: float = 1e-
     b2 = (B * B).sum(1)
     eye = np.eye(k)
     for a in range(0, n, chunk):
-        x = X[a:a + chunk]
+        x = X[a : a + chunk]
         d2 = (x * x).sum(1, keepdims=True) - 2.0 * x @ B.T + b2
         nn = np.argpartition(d2, k - 1, axis=1)[:, :k] if k < K else np.broadcast_to(np.arange(K), (len(x), K))
-        Z = B[nn] - x[:, None, :]                                            # [c, k, F]
+        Z = B[nn] - x[:, None, :]  # [c, k, F]
         C = Z @ Z.transpose(0, 2, 1)
         tr = np.trace(C, axis1=1, axis2=2)[:, None, None]
         C = C + (beta * tr + 1e-12) * eye
         w = np.linalg.solve(C, np.ones((len(x), k, 1)))[..., 0]
         w = w / w.sum(1, keepdims=True)
-        np.put_along_axis(codes[a:a + chunk], nn, w, axis=1)
+        np.put_along_axis(codes[a : a + chunk], nn, w, axis=1)
     return codes
 
 
@@ -353,8 +384,15 @@ class GPFBagOfWords(TransformerMixin, BaseEstimator):
     #: at most this many frames (sampled uniformly without replacement) train the codebook
     max_fit_frames = 50_000
 
-    def __init__(self, n_words: int = 256, llc_k: int = 5, llc_beta: float = 1e-4, pooling: str = "max",
-                 fps: float = 30.0, random_state=0):
+    def __init__(
+        self,
+        n_words: int = 256,
+        llc_k: int = 5,
+        llc_beta: float = 1e-4,
+        pooling: str = "max",
+        fps: float = 30.0,
+        random_state=0,
+    ):
         self.n_words = n_words
         self.llc_k = llc_k
         self.llc_beta = llc_beta

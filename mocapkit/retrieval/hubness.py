@@ -16,9 +16,10 @@ labels and no parameter; its only state is the mean and standard deviation of ea
 the database (to a reference subset of at most ``n_reference`` clips on large libraries), computed at ``fit``.
 The query's own statistics come from its row of distances to the whole database.
 
-Chosen for the label-free retrieval default on training groups only (README *Motion retrieval*;
-bench/RESULTS.md §14 holds the rule's outcome and the validation table).
+Chosen for the label-free retrieval default on training groups only (the rule, its outcome and the validation
+table: docs/decisions.md#retrieval-default-mutual-proximity).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -66,6 +67,7 @@ def mutual_proximity(distances: np.ndarray, database_mean: np.ndarray, database_
     query_mean = d.mean(axis=1, keepdims=True)
     query_std = np.maximum(d.std(axis=1, keepdims=True), tiny)
     log_beyond_query = norm.logsf(d, loc=query_mean, scale=query_std)
-    log_beyond_database = norm.logsf(d, loc=np.asarray(database_mean)[None, :],
-                                     scale=np.maximum(np.asarray(database_std), tiny)[None, :])
+    log_beyond_database = norm.logsf(
+        d, loc=np.asarray(database_mean)[None, :], scale=np.maximum(np.asarray(database_std), tiny)[None, :]
+    )
     return -(log_beyond_query + log_beyond_database)

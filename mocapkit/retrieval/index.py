@@ -11,21 +11,25 @@ An index is a **folder**::
 :func:`build_index` reads every file under ``src`` that :func:`~mocapkit.datasets.read_motion` reads
 (recursively), fits the method on them (the whole folder is the database) and writes the folder;
 :meth:`MotionIndex.search` ranks the indexed files for query files or motions. A query that is itself indexed
-(same resolved path) is left out of its own results. Methods are named (:data:`METHODS`); the one used without
-``--method`` is :data:`RECOMMENDED`, the label-free method that needs no training run and won our benchmark
-(README, *Motion retrieval*).
+(same resolved path) is left out of its own results. Methods are the registry's retrieval methods
+(``configs/retrieval/method/NAME.yaml``, :mod:`mocapkit.train.registry`; ``mocapkit methods retrieval``), with
+``--set key=value`` overrides (Hydra's grammar); the one used without ``--method`` is the registry's default
+(``configs/retrieval/method.yaml``: the label-free method without a training run that won our validation).
+Loading an index rebuilds its method from the registry's class of that name with the saved parameters: no class
+name is read from the index.
 
 Refusals, each naming both sides: a query method (or model) other than the index's, a query whose skeleton lacks
 landmarks every indexed clip has, a query shorter than the method can encode; an unreadable file fails naming it
 unless ``skip_bad`` (then it is skipped and reported); an empty folder is an error.
 """
+
 from __future__ import annotations
 
-import importlib
 import json
 import os
 import sys
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -34,56 +38,32 @@ from mocapkit.io_atomic import atomic_path, atomic_write_text
 from mocapkit.retrieval.base import file_sha1
 
 FORMAT = "mocapkit-retrieval-index"
-VERSION = 2   # 2: DTW indexes keep one database per feature (and mutual-proximity statistics)
-#: Method name → (class, default parameters). Label-free methods need no labels; ``embedding`` needs a trained
-#: encoder (``--ckpt RUN/best.ckpt`` or an exported ``.onnx``).
-METHODS: dict[str, tuple[str, dict]] = {
-    "dtw_positions": ("mocapkit.retrieval.dtw.DTWRetrieval", {"features": "positions"}),
-    "dtw_relational": ("mocapkit.retrieval.dtw.DTWRetrieval", {"features": "relational"}),
-    "dtw_mutual_proximity": ("mocapkit.retrieval.dtw.DTWRetrieval", {"features": ["positions", "relational"],
-                                                                     "hubness": "mutual_proximity"}),
-    "hod": ("mocapkit.retrieval.selected_features.FeatureRetrieval", {"views": ["hod"], "selector": None}),
-    "gpf": ("mocapkit.retrieval.selected_features.FeatureRetrieval", {"views": ["gpf"], "selector": None}),
-    "amfs": ("mocapkit.retrieval.selected_features.FeatureRetrieval", {"views": ["hod", "gpf"], "selector": "amfs"}),
-    "laplacian_score": ("mocapkit.retrieval.selected_features.FeatureRetrieval",
-                        {"views": ["hod", "gpf"], "selector": "laplacian"}),
-    "tsr_stpm": ("mocapkit.retrieval.tsr_stpm.TSRSTPMRetrieval", {"n_atoms": 64, "n_nonzero": 4,
-                                                                  "normalize_kernel": True}),
-    "tsr_stpm_thesis": ("mocapkit.retrieval.tsr_stpm.TSRSTPMRetrieval", {}),
-    "embedding": ("mocapkit.retrieval.embedding.EmbeddingRetrieval", {}),
-}
-#: The default of ``mocapkit index``: the label-free method without a training run chosen on the training groups of
-#: our four retrieval protocols (HDM05 cross-performer, Bandai content and style, MSR cross-subject): DTW on
-#: positions and relational features with mutual proximity (the rule and the validation table: README *Motion
-#: retrieval on real data*, bench/RESULTS.md §14).
-RECOMMENDED = "dtw_mutual_proximity"
+VERSION = 2  # 2: DTW indexes keep one database per feature (and mutual-proximity statistics)
 
 
 class RetrievalIndexError(ValueError):
     """An index that cannot be built, read or queried as asked; the message names the file, method or key."""
 
 
-def _class(name: str):
-    if name not in METHODS:
-        raise RetrievalIndexError(f"--method {name!r}: unknown; known: {', '.join(METHODS)}")
-    module, _, cls = METHODS[name][0].rpartition(".")
-    return getattr(importlib.import_module(module), cls)
+def make_method(name: str, overrides: Sequence[str] = (), ckpt: str | os.PathLike | None = None):
+    """A fresh retrieval method: the registry's ``name`` with the ``--set`` Hydra ``overrides``; ``ckpt`` is the
+    trained model of ``embedding`` (a ``best.ckpt`` or an exported ``.onnx``), stored resolved so that the
+    manifest finds it from any working directory.
 
+    Raises:
+        ConfigError: an unknown name (the message lists the names), an unknown key or bad value, a required
+            parameter left unset (``embedding`` without ``--ckpt``).
+        RetrievalIndexError: ``ckpt`` for a method that needs no trained model.
+    """
+    from mocapkit.train.registry import build_method, method_config
 
-def make_method(name: str, ckpt: str | os.PathLike | None = None, **params):
-    """A fresh retrieval method by name (:data:`METHODS`), its defaults updated by ``params``; ``ckpt`` is the
-    trained model of ``embedding`` (a ``best.ckpt`` or an exported ``.onnx``)."""
-    cls = _class(name)
-    values = {**METHODS[name][1], **params}
-    if name == "embedding":
-        if ckpt is None:
-            raise RetrievalIndexError("--method embedding needs --ckpt RUN/best.ckpt or an exported model.onnx "
-                                      "(mocapkit train experiment=retrieval_supcon; mocapkit export ckpt_path=...)")
-        key = "onnx" if str(ckpt).endswith(".onnx") else "checkpoint"
-        values[key] = str(Path(ckpt).resolve())   # the manifest must find it from any working directory
-    elif ckpt is not None:
-        raise RetrievalIndexError(f"--ckpt is for --method embedding; {name} needs no trained model")
-    return cls(**values)
+    overrides = list(overrides)
+    if ckpt is not None:
+        if "checkpoint" not in method_config("retrieval", name):
+            raise RetrievalIndexError(f"--ckpt is for --method embedding; {name} needs no trained model")
+        path = str(Path(ckpt).resolve()).replace("\\", "\\\\").replace("'", "\\'")
+        overrides += ["checkpoint=null", f"onnx='{path}'"] if str(ckpt).endswith(".onnx") else [f"checkpoint='{path}'"]
+    return build_method("retrieval", name, overrides)
 
 
 def _jsonable(value):
@@ -112,8 +92,16 @@ def _progress(text: str, quiet: bool) -> None:
 class MotionIndex:
     """A fitted retrieval method over a list of files (see the module docstring); :meth:`load` / :meth:`save`."""
 
-    def __init__(self, method_name: str, method, files: list[dict], landmarks: list[str], skipped: list[dict],
-                 src: str | None = None, model_sha1: str | None = None):
+    def __init__(
+        self,
+        method_name: str,
+        method,
+        files: list[dict],
+        landmarks: list[str],
+        skipped: list[dict],
+        src: str | None = None,
+        model_sha1: str | None = None,
+    ):
         self.method_name = method_name
         self.method = method
         self.files = files
@@ -135,11 +123,20 @@ class MotionIndex:
         state = self.method._state()
         with atomic_path(out / "state.npz") as tmp, open(tmp, "wb") as handle:
             np.savez(handle, **state)
-        manifest = {"format": FORMAT, "version": VERSION, "method": self.method_name,
-                    "target": METHODS[self.method_name][0],
-                    "params": _jsonable(self.method.get_params(deep=False)), "model_sha1": self.model_sha1,
-                    "landmarks": self.landmarks, "src": self.src, "n_files": len(self.files), "files": self.files,
-                    "skipped": self.skipped, "created": time.strftime("%Y-%m-%d %H:%M:%S")}
+        manifest = {
+            "format": FORMAT,
+            "version": VERSION,
+            "method": self.method_name,
+            "target": f"{type(self.method).__module__}.{type(self.method).__qualname__}",
+            "params": _jsonable(self.method.get_params(deep=False)),
+            "model_sha1": self.model_sha1,
+            "landmarks": self.landmarks,
+            "src": self.src,
+            "n_files": len(self.files),
+            "files": self.files,
+            "skipped": self.skipped,
+            "created": time.strftime("%Y-%m-%d %H:%M:%S"),
+        }
         atomic_write_text(out / "manifest.json", json.dumps(manifest, indent=1))
         return out
 
@@ -148,22 +145,39 @@ class MotionIndex:
         path = Path(path)
         manifest_path = path / "manifest.json"
         if not manifest_path.is_file():
-            raise RetrievalIndexError(f"--index {path}: not an index folder (no manifest.json; build one with "
-                                      "mocapkit index --src DIR --out INDEX)")
+            raise RetrievalIndexError(
+                f"--index {path}: not an index folder (no manifest.json; build one with "
+                "mocapkit index --src DIR --out INDEX)"
+            )
         try:
             manifest = json.loads(manifest_path.read_text())
         except json.JSONDecodeError as exc:
             raise RetrievalIndexError(f"{manifest_path}: not valid JSON ({exc})") from exc
         if manifest.get("format") != FORMAT or manifest.get("version") != VERSION:
-            raise RetrievalIndexError(f"{manifest_path}: format {manifest.get('format')!r} version "
-                                      f"{manifest.get('version')!r}, expected {FORMAT!r} version {VERSION} "
-                                      "(build it again: mocapkit index --src DIR --out INDEX)")
+            raise RetrievalIndexError(
+                f"{manifest_path}: format {manifest.get('format')!r} version "
+                f"{manifest.get('version')!r}, expected {FORMAT!r} version {VERSION} "
+                "(build it again: mocapkit index --src DIR --out INDEX)"
+            )
         name = manifest["method"]
-        method = _class(name)(**manifest["params"])    # only classes of METHODS: nothing else is imported
+        from mocapkit.train.errors import ConfigError
+        from mocapkit.train.registry import method_class
+
+        try:  # the registry's class of that name, never a class named by the file
+            method = method_class("retrieval", name)(**manifest["params"])
+        except (ConfigError, TypeError) as exc:
+            raise RetrievalIndexError(f"{manifest_path}: method {name!r}: {exc}") from exc
         with np.load(path / "state.npz", allow_pickle=False) as data:
             method._set_state({k: data[k] for k in data.files})
-        return cls(name, method, manifest["files"], manifest["landmarks"], manifest.get("skipped", []),
-                   manifest.get("src"), manifest.get("model_sha1"))
+        return cls(
+            name,
+            method,
+            manifest["files"],
+            manifest["landmarks"],
+            manifest.get("skipped", []),
+            manifest.get("src"),
+            manifest.get("model_sha1"),
+        )
 
     # ------------------------------------------------------------------ queries
     def check_query(self, motion, path: str) -> None:
@@ -174,9 +188,11 @@ class MotionIndex:
         lacking = [lm for lm in self.landmarks if lm not in have]
         if lacking:
             layouts = sorted({f.get("skeleton") or "?" for f in self.files})
-            raise RetrievalIndexError(f"query {path}: its skeleton ({motion.num_joints} joints: "
-                                      f"{', '.join(list(motion.joint_names)[:8])}...) lacks the landmarks {lacking} "
-                                      f"that every clip of the index ({', '.join(layouts)} skeletons) has")
+            raise RetrievalIndexError(
+                f"query {path}: its skeleton ({motion.num_joints} joints: "
+                f"{', '.join(list(motion.joint_names)[:8])}...) lacks the landmarks {lacking} "
+                f"that every clip of the index ({', '.join(layouts)} skeletons) has"
+            )
 
     def search(self, queries, k: int = 10, method: str | None = None, ckpt: str | os.PathLike | None = None) -> list:
         """Rank the indexed files for each query.
@@ -191,13 +207,17 @@ class MotionIndex:
             first; a query that is itself indexed is left out of its own results.
         """
         if method is not None and method != self.method_name:
-            raise RetrievalIndexError(f"the index was built with --method {self.method_name}; it cannot be queried "
-                                      f"with --method {method} (build another index with that method)")
+            raise RetrievalIndexError(
+                f"the index was built with --method {self.method_name}; it cannot be queried "
+                f"with --method {method} (build another index with that method)"
+            )
         if ckpt is not None:
             sha1 = file_sha1(ckpt)
             if sha1 != self.model_sha1:
-                raise RetrievalIndexError(f"--ckpt {ckpt} (SHA-1 {sha1[:12]}) is not the model the index was built "
-                                          f"with (SHA-1 {str(self.model_sha1)[:12]})")
+                raise RetrievalIndexError(
+                    f"--ckpt {ckpt} (SHA-1 {sha1[:12]}) is not the model the index was built "
+                    f"with (SHA-1 {str(self.model_sha1)[:12]})"
+                )
         names, motions = [], []
         for query in queries:
             if isinstance(query, tuple):
@@ -216,52 +236,73 @@ class MotionIndex:
         out = []
         for name, row_i, row_d in zip(names, indices, distances):
             self_index = own.get(str(Path(name).resolve()))
-            results = [{"path": self.paths[int(i)], "distance": float(d)} for i, d in zip(row_i, row_d)
-                       if int(i) != self_index]
+            results = [
+                {"path": self.paths[int(i)], "distance": float(d)} for i, d in zip(row_i, row_d) if int(i) != self_index
+            ]
             out.append({"query": name, "results": results[:want]})
         return out
 
 
-def build_index(src: str | os.PathLike, out: str | os.PathLike | None = None, method: str | None = None,
-                ckpt: str | os.PathLike | None = None, skip_bad: bool = False, quiet: bool = False,
-                **params) -> MotionIndex:
+def build_index(
+    src: str | os.PathLike,
+    out: str | os.PathLike | None = None,
+    method: str | None = None,
+    overrides: Sequence[str] = (),
+    ckpt: str | os.PathLike | None = None,
+    skip_bad: bool = False,
+    quiet: bool = False,
+) -> MotionIndex:
     """Index every motion file under ``src`` (see the module docstring); written to ``out`` when given.
+
+    ``method`` is a registry name (None: the registry's default), ``overrides`` its ``--set`` Hydra overrides,
+    ``ckpt`` the trained model of ``embedding`` (:func:`make_method`).
 
     Raises:
         RetrievalIndexError: no motion file under ``src``; a file that cannot be read or used (named) unless
-            ``skip_bad``; nothing usable at all; an unknown method.
+            ``skip_bad``; nothing usable at all.
+        ConfigError: an unknown method, parameter or value.
     """
-    from mocapkit.motion.layouts import find_landmarks
     from mocapkit.datasets.formats.motion_io import find_motion_files
+    from mocapkit.motion.layouts import find_landmarks
+    from mocapkit.train.registry import default_method
 
     src = Path(src)
     if not src.is_dir():
         raise RetrievalIndexError(f"--src {src}: not a folder")
-    name = method or RECOMMENDED
-    estimator = make_method(name, ckpt=ckpt, **params)
+    name = method or default_method("retrieval")
+    estimator = make_method(name, overrides, ckpt=ckpt)
     paths = find_motion_files(src)
     if not paths:
-        raise RetrievalIndexError(f"--src {src}: no motion files in this folder (looked for .amc, .bvh, .c3d, "
-                                  ".skeleton, MSR *_skeleton3D.txt, recursively)")
+        raise RetrievalIndexError(
+            f"--src {src}: no motion files in this folder (looked for .amc, .bvh, .c3d, "
+            ".skeleton, MSR *_skeleton3D.txt, recursively)"
+        )
     _progress(f"indexing {len(paths)} files under {src} with {name}", quiet)
     motions, files, skipped, landmark_sets = [], [], [], []
     for n, path in enumerate(paths, 1):
         try:
             motion = _read(path)
-            estimator.sequences([motion], what="indexed")    # the checks the method makes (landmarks, length)
+            estimator.sequences([motion], what="indexed")  # the checks the method makes (landmarks, length)
         except Exception as exc:
             why = f"{type(exc).__name__}: {exc}"
             if not skip_bad:
                 message = str(exc) if str(path) in str(exc) else f"{path}: {why}"
-                raise RetrievalIndexError(f"cannot index {message} (--skip-bad skips such files and reports "
-                                          "them)") from exc
+                raise RetrievalIndexError(
+                    f"cannot index {message} (--skip-bad skips such files and reports them)"
+                ) from exc
             skipped.append({"path": str(path.resolve()), "why": why})
             _progress(f"skipped {path}: {why}", quiet)
             continue
         motions.append(motion)
         landmark_sets.append(set(find_landmarks(motion.joint_names, motion.layout_name)))
-        files.append({"path": str(path.resolve()), "frames": motion.num_frames, "fps": motion.fps,
-                      "skeleton": motion.layout_name or f"{motion.num_joints} joints"})
+        files.append(
+            {
+                "path": str(path.resolve()),
+                "frames": motion.num_frames,
+                "fps": motion.fps,
+                "skeleton": motion.layout_name or f"{motion.num_joints} joints",
+            }
+        )
         if n % 100 == 0 or n == len(paths):
             _progress(f"read {n}/{len(paths)} files", quiet)
     if not motions:
@@ -273,16 +314,22 @@ def build_index(src: str | os.PathLike, out: str | os.PathLike | None = None, me
     from mocapkit.motion.layouts import LANDMARK_NAMES
 
     model_sha1 = getattr(estimator, "model_sha1_", None)
-    index = MotionIndex(name, estimator, files, [lm for lm in LANDMARK_NAMES if lm in common], skipped,
-                        str(src.resolve()), model_sha1)
+    index = MotionIndex(
+        name, estimator, files, [lm for lm in LANDMARK_NAMES if lm in common], skipped, str(src.resolve()), model_sha1
+    )
     if out is not None:
         index.save(out)
         _progress(f"wrote {out} ({len(files)} clips, {len(skipped)} skipped)", quiet)
     return index
 
 
-def search_index(index: str | os.PathLike | MotionIndex, queries, k: int = 10, method: str | None = None,
-                 ckpt: str | os.PathLike | None = None) -> list:
+def search_index(
+    index: str | os.PathLike | MotionIndex,
+    queries,
+    k: int = 10,
+    method: str | None = None,
+    ckpt: str | os.PathLike | None = None,
+) -> list:
     """:meth:`MotionIndex.search` on an index folder (or a loaded index)."""
     if not isinstance(index, MotionIndex):
         index = MotionIndex.load(index)

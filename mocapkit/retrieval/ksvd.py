@@ -29,6 +29,7 @@ triangular back-substitution at the end. It selects the same atoms and gives the
 coefficients as ``orthogonal_mp_gram`` (tests check it). A row stops early (fewer than ``n_nonzero`` non-zeros)
 when its residual vanishes or the next atom is numerically in the span of the chosen ones, as scikit-learn does.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -78,9 +79,9 @@ def _omp_block(Y: np.ndarray, D: np.ndarray, m: int, D32: np.ndarray, G: np.ndar
     # step-major layouts ([m, n, ...]) keep every per-step slice contiguous
     n, d = Y.shape
     rows = np.arange(n)
-    Q = np.zeros((m, n, d))              # orthonormal basis of the chosen atoms (Gram–Schmidt), per row
-    L = np.zeros((m, m, n))              # Cholesky factor of the chosen atoms' Gram matrix: D_S = L Q
-    z = np.zeros((m, n))                 # Q y
+    Q = np.zeros((m, n, d))  # orthonormal basis of the chosen atoms (Gram–Schmidt), per row
+    L = np.zeros((m, m, n))  # Cholesky factor of the chosen atoms' Gram matrix: D_S = L Q
+    z = np.zeros((m, n))  # Q y
     idx = np.zeros((m, n), dtype=np.int64)
     active = np.ones(n, dtype=bool)
     residual = Y.copy()
@@ -89,9 +90,9 @@ def _omp_block(Y: np.ndarray, D: np.ndarray, m: int, D32: np.ndarray, G: np.ndar
         corr = residual.astype(np.float32) @ D32.T
         np.abs(corr, out=corr)
         if k:
-            corr[rows[None, :], idx[:k]] = -1.0          # never re-select (the residual is orthogonal to them)
+            corr[rows[None, :], idx[:k]] = -1.0  # never re-select (the residual is orthogonal to them)
         new = np.argmax(corr, axis=1)
-        active &= np.einsum("nd,nd->n", residual, residual) > floor ** 2
+        active &= np.einsum("nd,nd->n", residual, residual) > floor**2
         idx[k] = np.where(active, new, idx[k - 1] if k else new)
         # w = L⁻¹ G[S, new] (forward substitution): the new atom's coordinates on the current basis
         g = G[idx[:k], idx[k][None, :]]
@@ -110,7 +111,7 @@ def _omp_block(Y: np.ndarray, D: np.ndarray, m: int, D32: np.ndarray, G: np.ndar
     # coefficients: D_S^T γ = Q^T L^T γ ≈ y  →  L^T γ = Q y = z  (back-substitution; inactive slots give 0)
     gamma = np.zeros((m, n))
     for k in range(m - 1, -1, -1):
-        gamma[k] = (z[k] - np.einsum("jn,jn->n", L[k + 1:, k], gamma[k + 1:])) / L[k, k]
+        gamma[k] = (z[k] - np.einsum("jn,jn->n", L[k + 1 :, k], gamma[k + 1 :])) / L[k, k]
     return idx.T, gamma.T
 
 
@@ -143,8 +144,15 @@ class KSVD(BaseEstimator):
         n_replaced_: atoms replaced because no row used them (summed over iterations).
     """
 
-    def __init__(self, n_atoms: int = 700, n_nonzero: int = 35, max_iter: int = 10, tol: float = 1e-6,
-                 random_state=0, max_samples: int | None = None):
+    def __init__(
+        self,
+        n_atoms: int = 700,
+        n_nonzero: int = 35,
+        max_iter: int = 10,
+        tol: float = 1e-6,
+        random_state=0,
+        max_samples: int | None = None,
+    ):
         self.n_atoms = n_atoms
         self.n_nonzero = n_nonzero
         self.max_iter = max_iter
@@ -192,7 +200,7 @@ class KSVD(BaseEstimator):
         taken = np.zeros(len(Y), dtype=bool)
         replaced = []
         for k in range(q):
-            pos = order[bounds[k]:bounds[k + 1]]
+            pos = order[bounds[k] : bounds[k + 1]]
             if len(pos) == 0:
                 replaced.append(k)
                 continue

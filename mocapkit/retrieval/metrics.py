@@ -15,6 +15,7 @@ never in its own database here (the benchmark excludes it). With ``distances [n_
 of the mixed database (MT) and the top ``K`` of the clips of the query's own class (ST, ranked by the same
 method) are compared; the ratio is ``|MT_K ∩ ST_K| / K`` with ``K = min(20, clips of the class - 1)``.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -45,8 +46,10 @@ def retrieval_metrics(distances, query_labels, database_labels, ks=(1, 10)) -> d
     metrics["nn_accuracy"] = float((db[order[:, 0]] == q).mean())
     metrics["n_queries"] = len(q)
     metrics["n_without_relevant"] = int(np.isnan(ap).sum())
-    return {"metrics": metrics, "per_query": {"ap": ap.tolist(), "p@1": ranked[:, 0].astype(float).tolist(),
-                                               "nearest": order[:, 0].tolist()}}
+    return {
+        "metrics": metrics,
+        "per_query": {"ap": ap.tolist(), "p@1": ranked[:, 0].astype(float).tolist(), "nearest": order[:, 0].tolist()},
+    }
 
 
 def tp_ratio(distances, labels, query_indices, k: int = 20) -> dict:
@@ -76,5 +79,8 @@ def tp_ratio(distances, labels, query_indices, k: int = 20) -> dict:
         ratios.append(ratio)
         per_class.setdefault(str(labels[i]), []).append(ratio)
         k_used[str(labels[i])] = kk
-    return {"tp_ratio": float(np.mean(ratios)) if ratios else float("nan"),
-            "per_class": {c: float(np.mean(v)) for c, v in sorted(per_class.items())}, "k_used": k_used}
+    return {
+        "tp_ratio": float(np.mean(ratios)) if ratios else float("nan"),
+        "per_class": {c: float(np.mean(v)) for c, v in sorted(per_class.items())},
+        "k_used": k_used,
+    }

@@ -22,6 +22,7 @@ clips of performers the network trains on), and the first epoch at 1.0 generalis
 later ones (fold mm: mAP 0.92 against 0.98 at the last epoch): ties must not keep the first.
 :func:`evaluate_embedding` is the task's ``mocapkit eval`` (held-out groups; writes ``metrics.json``).
 """
+
 from __future__ import annotations
 
 import json
@@ -42,8 +43,14 @@ from mocapkit.train.optimization import (
 LOSSES = ("supcon", "simclr")
 
 
-def retrieval_scores(queries: np.ndarray, query_labels: np.ndarray, database: np.ndarray, database_labels: np.ndarray,
-                     query_groups: np.ndarray | None = None, database_groups: np.ndarray | None = None) -> dict:
+def retrieval_scores(
+    queries: np.ndarray,
+    query_labels: np.ndarray,
+    database: np.ndarray,
+    database_labels: np.ndarray,
+    query_groups: np.ndarray | None = None,
+    database_groups: np.ndarray | None = None,
+) -> dict:
     """``{"map", "p1", "n_queries"}`` of unit-norm ``queries`` ``[Q, D]`` ranked against ``database`` ``[N, D]`` by
     cosine. AP per query: ``sklearn.metrics.average_precision_score(db_labels == label, similarity)``. With groups,
     a query is ranked only against the database clips of *other* groups (cross-performer); queries without any
@@ -65,9 +72,15 @@ def retrieval_scores(queries: np.ndarray, query_labels: np.ndarray, database: np
     return {"map": float(np.mean(aps)), "p1": float(np.mean(hits)), "n_queries": len(aps)}
 
 
-def retrieval_loss(queries: torch.Tensor, query_labels: torch.Tensor, database: torch.Tensor,
-                   database_labels: torch.Tensor, temperature: float = 0.1, query_groups: torch.Tensor | None = None,
-                   database_groups: torch.Tensor | None = None) -> torch.Tensor:
+def retrieval_loss(
+    queries: torch.Tensor,
+    query_labels: torch.Tensor,
+    database: torch.Tensor,
+    database_labels: torch.Tensor,
+    temperature: float = 0.1,
+    query_groups: torch.Tensor | None = None,
+    database_groups: torch.Tensor | None = None,
+) -> torch.Tensor:
     """The supervised contrastive loss of unit-norm ``queries`` over a ``database``: for each query, minus the mean
     log-softmax (over the database clips it is ranked against: those of other groups where groups are given) of its
     relevant clips, averaged over the queries that have one (0 when none has)."""
@@ -94,8 +107,16 @@ class MotionEmbeddingModule(ConfiguredOptimization, StagedSteps, L.LightningModu
         loss: ``"supcon"`` or ``"simclr"``. temperature: of the softmax (0.1).
     """
 
-    def __init__(self, model: dict, optimizer: dict, scheduler: dict | None = None, class_names: list | None = None,
-                 source: dict | None = None, loss: str = "supcon", temperature: float = 0.1):
+    def __init__(
+        self,
+        model: dict,
+        optimizer: dict,
+        scheduler: dict | None = None,
+        class_names: list | None = None,
+        source: dict | None = None,
+        loss: str = "supcon",
+        temperature: float = 0.1,
+    ):
         super().__init__()
         if loss not in LOSSES:
             raise ValueError(f"module.loss={loss!r}: one of {list(LOSSES)}")
@@ -103,9 +124,17 @@ class MotionEmbeddingModule(ConfiguredOptimization, StagedSteps, L.LightningModu
             raise ValueError(f"module.temperature={temperature}: must be positive")
         model, optimizer = as_plain_dict(model), as_plain_dict(optimizer)
         scheduler = as_plain_dict(scheduler) if scheduler is not None else None
-        self.save_hyperparameters({"model": model, "optimizer": optimizer, "scheduler": scheduler,
-                                   "class_names": list(class_names or []), "source": as_plain_dict(source or {}),
-                                   "loss": loss, "temperature": float(temperature)})
+        self.save_hyperparameters(
+            {
+                "model": model,
+                "optimizer": optimizer,
+                "scheduler": scheduler,
+                "class_names": list(class_names or []),
+                "source": as_plain_dict(source or {}),
+                "loss": loss,
+                "temperature": float(temperature),
+            }
+        )
         self.model = instantiate(model)
         self._outputs: dict[str, list] = {}
 
@@ -128,7 +157,8 @@ class MotionEmbeddingModule(ConfiguredOptimization, StagedSteps, L.LightningModu
             return loss
         z = self.model(batch["landmarks"])
         self._outputs.setdefault(stage, []).append(
-            {"z": z.detach().cpu(), **{k: batch[k].detach().cpu() for k in ("label", "group", "query")}})
+            {"z": z.detach().cpu(), **{k: batch[k].detach().cpu() for k in ("label", "group", "query")}}
+        )
         return None
 
     def predict_step(self, batch: dict, batch_idx: int) -> dict:
@@ -146,11 +176,21 @@ class MotionEmbeddingModule(ConfiguredOptimization, StagedSteps, L.LightningModu
         scores = retrieval_scores(out["z"][q], out["label"][q], out["z"][d], out["label"][d], qg, dg)
         if scores["n_queries"] == 0:  # no query class in the database: nothing to rank
             scores = {"map": 0.0, "p1": 0.0}
+
         def tensor(a):
             return None if a is None else torch.from_numpy(a)
 
-        loss = float(retrieval_loss(tensor(out["z"][q]), tensor(out["label"][q]), tensor(out["z"][d]),
-                                    tensor(out["label"][d]), self.hparams.temperature, tensor(qg), tensor(dg)))
+        loss = float(
+            retrieval_loss(
+                tensor(out["z"][q]),
+                tensor(out["label"][q]),
+                tensor(out["z"][d]),
+                tensor(out["label"][d]),
+                self.hparams.temperature,
+                tensor(qg),
+                tensor(dg),
+            )
+        )
         self.log(f"{stage}/map", scores["map"], prog_bar=True, sync_dist=True)
         self.log(f"{stage}/p1", scores["p1"], prog_bar=True, sync_dist=True)
         self.log(f"{stage}/loss", loss, sync_dist=True)
@@ -175,20 +215,26 @@ def evaluate_embedding(module, datamodule, cfg, out_dir: Path) -> dict:
     out = predict_outputs(module, loader, cfg)
     q, d = out["query"], ~out["query"]
     names = module.hparams.class_names
-    report = {"part": part, "loss": module.hparams.loss, **datamodule.describe(),
-              **retrieval_scores(out["embedding"][q], out["label"][q], out["embedding"][d], out["label"][d])}
+    report = {
+        "part": part,
+        "loss": module.hparams.loss,
+        **datamodule.describe(),
+        **retrieval_scores(out["embedding"][q], out["label"][q], out["embedding"][d], out["label"][d]),
+    }
     per_class = {}
     for c in np.unique(out["label"][q]):
         sel = q & (out["label"] == c)
         per_class[names[c] if c < len(names) else str(c)] = retrieval_scores(
-            out["embedding"][sel], out["label"][sel], out["embedding"][d], out["label"][d])
+            out["embedding"][sel], out["label"][sel], out["embedding"][d], out["label"][d]
+        )
     report["per_class"] = per_class
     atomic_write_text(out_dir / "metrics.json", json.dumps(report, indent=2))
-    print(f"[mocapkit] {cfg.get('experiment_name', 'embedding')} {part} ({report['split']}): "
-          f"mAP {report['map']:.3f}, P@1 {report['p1']:.3f} over {report['n_queries']} queries")
+    print(
+        f"[mocapkit] {cfg.get('experiment_name', 'embedding')} {part} ({report['split']}): "
+        f"mAP {report['map']:.3f}, P@1 {report['p1']:.3f} over {report['n_queries']} queries"
+    )
     print(f"[mocapkit] wrote {out_dir / 'metrics.json'}")
     return report
 
 
-__all__ = ["LOSSES", "MotionEmbeddingModule", "evaluate_embedding", "retrieval_loss",
-           "retrieval_scores"]
+__all__ = ["LOSSES", "MotionEmbeddingModule", "evaluate_embedding", "retrieval_loss", "retrieval_scores"]

@@ -4,19 +4,19 @@ The pipeline of ``../shared/spec/thesis-wang-2017-mocap-processing.md`` §4.1 (F
 fixed-length vector of one or two views (§4.5: :func:`~mocapkit.retrieval.features.hod`, the HOD of its
 landmarks, and :class:`~mocapkit.retrieval.features.GPFBagOfWords`, the LLC bag of words of its geometric pose
 features); the method learns on the database (label-free: the database is the training set) the GPF codebook, the
-z-score of the stacked features and, with ``selector``, a feature selection (:class:`~mocapkit.classical.
-feature_selection.AMFS`, or a baseline: :class:`~mocapkit.retrieval.feature_selection.LaplacianScore`,
+z-score of the stacked features and, with ``selector``, a feature selection (:class:`~mocapkit.retrieval.feature_selection.AMFS`, or a baseline: :class:`~mocapkit.retrieval.feature_selection.LaplacianScore`,
 :class:`~mocapkit.retrieval.feature_selection.SPEC`, :class:`~mocapkit.retrieval.feature_selection.UDFS`); queries
 get the same
 codebook, z-score and selection, and the database is ranked by **plain Euclidean distance**.
 """
+
 from __future__ import annotations
 
 import numpy as np
 from sklearn.metrics.pairwise import euclidean_distances
 
-from mocapkit.retrieval.feature_selection import AMFS, SPEC, UDFS, LaplacianScore
 from mocapkit.retrieval.base import RetrievalMethod
+from mocapkit.retrieval.feature_selection import AMFS, SPEC, UDFS, LaplacianScore
 from mocapkit.retrieval.features import GPFBagOfWords, hod
 
 VIEWS = ("hod", "gpf")
@@ -55,9 +55,19 @@ class FeatureRetrieval(RetrievalMethod):
     needs_run = False
     min_frames = 2
 
-    def __init__(self, views=("hod", "gpf"), selector=None, n_features: int = 200, r: float = 4.0,
-                 mu: float = 0.1, n_neighbors: int = 3, n_words: int = 64, fps: float = 30.0,
-                 heading: str = "frame", random_state=0):
+    def __init__(
+        self,
+        views=("hod", "gpf"),
+        selector=None,
+        n_features: int = 200,
+        r: float = 4.0,
+        mu: float = 0.1,
+        n_neighbors: int = 3,
+        n_words: int = 64,
+        fps: float = 30.0,
+        heading: str = "frame",
+        random_state=0,
+    ):
         self.views = views
         self.selector = selector
         self.n_features = n_features
@@ -108,8 +118,9 @@ class FeatureRetrieval(RetrievalMethod):
             self.selector_ = None
         else:
             if self.selector == "amfs":
-                sel = AMFS(n_features=d, r=self.r, mu=self.mu, n_neighbors=self.n_neighbors,
-                           random_state=self.random_state)
+                sel = AMFS(
+                    n_features=d, r=self.r, mu=self.mu, n_neighbors=self.n_neighbors, random_state=self.random_state
+                )
             elif self.selector == "udfs":
                 sel = UDFS(n_features=d, mu=self.mu, n_neighbors=self.n_neighbors)
             elif self.selector == "spec":
@@ -133,8 +144,10 @@ class FeatureRetrieval(RetrievalMethod):
         """float32 ``[n, n_selected]`` from the views ``[n, d_v]`` of :meth:`_view_features`."""
         X = np.concatenate(features, axis=1)
         if X.shape[1] != int(np.sum(self.view_dims_)):
-            raise ValueError(f"views {self.views!r} give {X.shape[1]} features, the fitted state has "
-                             f"{int(np.sum(self.view_dims_))}: restore a state with the parameters it was fitted with")
+            raise ValueError(
+                f"views {self.views!r} give {X.shape[1]} features, the fitted state has "
+                f"{int(np.sum(self.view_dims_))}: restore a state with the parameters it was fitted with"
+            )
         s = self.selected_
         return ((X[:, s] - self.mean_[s]) / self.scale_[s]).astype(np.float32)
 
@@ -143,11 +156,14 @@ class FeatureRetrieval(RetrievalMethod):
 
     def _state(self) -> dict[str, np.ndarray]:
         self._check_fitted()
-        state = {"mean": np.asarray(self.mean_, dtype=np.float64), "scale": np.asarray(self.scale_, np.float64),
-                 "selected": np.asarray(self.selected_, dtype=np.int64),
-                 "view_dims": np.asarray(self.view_dims_, dtype=np.int64),
-                 "views": np.array([VIEWS.index(v) for v in self._views()], dtype=np.int64),
-                 "database": np.asarray(self.database_, dtype=np.float32)}
+        state = {
+            "mean": np.asarray(self.mean_, dtype=np.float64),
+            "scale": np.asarray(self.scale_, np.float64),
+            "selected": np.asarray(self.selected_, dtype=np.int64),
+            "view_dims": np.asarray(self.view_dims_, dtype=np.int64),
+            "views": np.array([VIEWS.index(v) for v in self._views()], dtype=np.int64),
+            "database": np.asarray(self.database_, dtype=np.float32),
+        }
         if self.gpf_ is not None:
             state.update(gpf_mean=self.gpf_.mean_, gpf_scale=self.gpf_.scale_, gpf_codebook=self.gpf_.codebook_)
         if self.selector_ is not None and hasattr(self.selector_, "alphas_"):
@@ -157,8 +173,10 @@ class FeatureRetrieval(RetrievalMethod):
     def _set_state(self, state: dict[str, np.ndarray]) -> None:
         views = self._views()
         if "views" in state and [VIEWS[int(i)] for i in state["views"]] != list(views):
-            raise ValueError(f"the state was fitted with views {[VIEWS[int(i)] for i in state['views']]}, "
-                             f"this method has views={self.views!r}")
+            raise ValueError(
+                f"the state was fitted with views {[VIEWS[int(i)] for i in state['views']]}, "
+                f"this method has views={self.views!r}"
+            )
         if "gpf" in views:
             if "gpf_codebook" not in state:
                 raise ValueError("state has no GPF codebook but views include 'gpf'")

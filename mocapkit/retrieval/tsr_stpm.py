@@ -34,7 +34,7 @@ Choices where the thesis is ambiguous (spec §7, Chapter 3):
 * **σ** (§7.6) is in frames **at ``fps``**: 7 frames at the default 120 Hz is the thesis's 58 ms. Queries of any
   rate (Kinect at 30 Hz) are resampled to ``fps`` first, so σ keeps its duration. A clip needs at least ``σ + 1``
   frames at ``fps`` (:attr:`TSRSTPMRetrieval.min_frames`); a shorter one raises
-  :class:`~mocapkit.motion.geometry.RetrievalInputError` naming the file.
+  :class:`~mocapkit.motion.geometry.SkeletonInputError` naming the file.
 * **Codes** (§7.7): ``m = 35`` of ``q = 700`` with ``d = 60`` as stated; no centring; OMP codes may be negative,
   the pooled cubes hold absolute values; the K-SVD seed is ``random_state``.
 * **No kernel normalisation** (the thesis mentions none) by default, so a long clip with many distinct
@@ -59,6 +59,7 @@ Measured behaviour (HDM05, 11 classes, cross-performer): with the thesis's ``m =
 most of the HIK mass, and retrieval across actors is near chance (mAP ≈ 0.18); sparser codes work
 (``n_atoms=64, n_nonzero=4``: mAP ≈ 0.82, P@1 ≈ 0.94). The defaults stay the thesis's.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -68,8 +69,8 @@ import numpy as np
 import scipy.sparse as sp
 from sklearn.exceptions import NotFittedError
 
-from mocapkit.retrieval.ksvd import KSVD, batch_omp
 from mocapkit.retrieval.base import RetrievalMethod
+from mocapkit.retrieval.ksvd import KSVD, batch_omp
 
 BLOCK_NORMS = ("none", "l1", "l2")
 #: Positions are fed to K-SVD in centimetres (metres × 100), as the spec suggests.
@@ -102,16 +103,20 @@ def split_bounds(n: int, parts: int) -> np.ndarray:
 
 def n_cubes(level: int) -> int:
     """Cubes at pyramid level ``level``: ``2^l`` temporal segments × ``(l+1)²`` spatial blocks."""
-    return 2 ** level * (level + 1) ** 2
+    return 2**level * (level + 1) ** 2
 
 
 def stpm_cubes(n_slices: int, n_atoms: int, level: int) -> list[tuple[slice, slice, slice]]:
     """The cubes of level ``level`` as ``(slices, rows, cols)`` index ranges of a ``[n_slices, q, q]`` TSR,
     temporal segment major (empty ranges where a clip has fewer slices than segments)."""
-    t = split_bounds(n_slices, 2 ** level)
+    t = split_bounds(n_slices, 2**level)
     s = split_bounds(n_atoms, level + 1)
-    return [(slice(t[a], t[a + 1]), slice(s[b], s[b + 1]), slice(s[c], s[c + 1]))
-            for a in range(2 ** level) for b in range(level + 1) for c in range(level + 1)]
+    return [
+        (slice(t[a], t[a + 1]), slice(s[b], s[b + 1]), slice(s[c], s[c + 1]))
+        for a in range(2**level)
+        for b in range(level + 1)
+        for c in range(level + 1)
+    ]
 
 
 def rows_per_clip(n_levels: int) -> int:
@@ -124,8 +129,9 @@ def level_of_rows(n_levels: int) -> np.ndarray:
     return np.repeat(np.arange(int(n_levels)), 2 ** np.arange(int(n_levels)))
 
 
-def pool_pyramid(indices: np.ndarray, coefs: np.ndarray, n_atoms: int, sigma: int, n_levels: int,
-                 block_norm: str = "none") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def pool_pyramid(
+    indices: np.ndarray, coefs: np.ndarray, n_atoms: int, sigma: int, n_levels: int, block_norm: str = "none"
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The STPM pyramid of one clip from its OMP codes, as sparse rows (no level weights).
 
     Args:
@@ -151,7 +157,7 @@ def pool_pyramid(indices: np.ndarray, coefs: np.ndarray, n_atoms: int, sigma: in
     flat, val = flat[keep], val[keep]
     datas, cols, lengths = [], [], []
     for level in range(int(n_levels)):
-        n_seg = 2 ** level
+        n_seg = 2**level
         seg = np.searchsorted(split_bounds(n_slices, n_seg), slice_of, side="right") - 1
         key = seg * qq + flat
         order = np.argsort(key, kind="stable")
@@ -164,7 +170,7 @@ def pool_pyramid(indices: np.ndarray, coefs: np.ndarray, n_atoms: int, sigma: in
             nb = level + 1
             block = np.repeat(np.arange(nb), np.diff(split_bounds(q, nb)))
             group = (useg * nb + block[ucol // q]) * nb + block[ucol % q]
-            w = pooled if block_norm == "l1" else pooled ** 2
+            w = pooled if block_norm == "l1" else pooled**2
             norm = np.bincount(group, weights=w, minlength=n_seg * nb * nb)
             if block_norm == "l2":
                 norm = np.sqrt(norm)
@@ -198,7 +204,7 @@ class STPMPyramids:
     def clip_vectors(self) -> sp.csr_matrix:
         """One weighted row per clip, ``[n_clips, (2^n_levels − 1) · q²]``: the rows of a clip side by side, each
         scaled by its level weight ``2^-l``, so that the STPM kernel is one HIK between these rows."""
-        R, qq = rows_per_clip(self.n_levels), self.n_atoms ** 2
+        R, qq = rows_per_clip(self.n_levels), self.n_atoms**2
         M = self.matrix
         lengths = np.diff(M.indptr)
         row_in_clip = np.arange(M.shape[0]) % R
@@ -252,8 +258,10 @@ def stpm_kernel(queries: STPMPyramids, database: STPMPyramids, normalize: bool =
     """float64 ``[n_queries, n_database]``: ``K = Σ_l 2^-l Σ_h HIK(Z_lh, Z'_lh)`` between pyramids
     (``normalize``: ``K(a, b) / sqrt(K(a, a) K(b, b))``, where ``K(a, a) = Σ`` of ``a``'s weighted values)."""
     if (queries.n_levels, queries.n_atoms) != (database.n_levels, database.n_atoms):
-        raise ValueError(f"pyramids differ: queries (n_levels, n_atoms) = {(queries.n_levels, queries.n_atoms)}, "
-                         f"database {(database.n_levels, database.n_atoms)}")
+        raise ValueError(
+            f"pyramids differ: queries (n_levels, n_atoms) = {(queries.n_levels, queries.n_atoms)}, "
+            f"database {(database.n_levels, database.n_atoms)}"
+        )
     index = database.column_index()
     vectors = queries.clip_vectors()
     K = index.hik(vectors)
@@ -264,8 +272,9 @@ def stpm_kernel(queries: STPMPyramids, database: STPMPyramids, normalize: bool =
     return K
 
 
-def pyramids_from_codes(codes: list[tuple[np.ndarray, np.ndarray]], n_atoms: int, sigma: int, n_levels: int,
-                        block_norm: str = "none") -> STPMPyramids:
+def pyramids_from_codes(
+    codes: list[tuple[np.ndarray, np.ndarray]], n_atoms: int, sigma: int, n_levels: int, block_norm: str = "none"
+) -> STPMPyramids:
     """The :class:`STPMPyramids` of clips given by their OMP codes ``[(indices [T, m], coefs [T, m]), …]``."""
     datas, cols, lengths = [], [], []
     for indices, coefs in codes:
@@ -315,9 +324,20 @@ class TSRSTPMRetrieval(RetrievalMethod):
     needs_run = False
     min_frames = _MinFrames()
 
-    def __init__(self, n_atoms: int = 700, n_nonzero: int = 35, sigma: int = 7, n_levels: int = 3,
-                 block_norm: str = "none", ksvd_iter: int = 10, max_dictionary_frames: int | None = 20000,
-                 normalize_kernel: bool = False, fps: float = 120.0, heading: str = "frame", random_state=0):
+    def __init__(
+        self,
+        n_atoms: int = 700,
+        n_nonzero: int = 35,
+        sigma: int = 7,
+        n_levels: int = 3,
+        block_norm: str = "none",
+        ksvd_iter: int = 10,
+        max_dictionary_frames: int | None = 20000,
+        normalize_kernel: bool = False,
+        fps: float = 120.0,
+        heading: str = "frame",
+        random_state=0,
+    ):
         self.n_atoms = n_atoms
         self.n_nonzero = n_nonzero
         self.sigma = sigma
@@ -345,8 +365,13 @@ class TSRSTPMRetrieval(RetrievalMethod):
 
     def _fit_sequences(self, sequences: list[np.ndarray], y) -> None:
         self._check_params()
-        self.ksvd_ = KSVD(n_atoms=int(self.n_atoms), n_nonzero=int(self.n_nonzero), max_iter=int(self.ksvd_iter),
-                          random_state=self.random_state, max_samples=self.max_dictionary_frames)
+        self.ksvd_ = KSVD(
+            n_atoms=int(self.n_atoms),
+            n_nonzero=int(self.n_nonzero),
+            max_iter=int(self.ksvd_iter),
+            random_state=self.random_state,
+            max_samples=self.max_dictionary_frames,
+        )
         self.ksvd_.fit(self._frames(sequences))
 
     def _encode_sequences(self, sequences: list[np.ndarray]) -> STPMPyramids:
@@ -355,8 +380,13 @@ class TSRSTPMRetrieval(RetrievalMethod):
         self._check_params()
         indices, coefs = batch_omp(self._frames(sequences), self.ksvd_.components_, int(self.n_nonzero))
         bounds = np.concatenate([[0], np.cumsum([len(s) for s in sequences])])
-        return pyramids_from_codes([(indices[a:b], coefs[a:b]) for a, b in pairwise(bounds)], int(self.n_atoms),
-                                   int(self.sigma), int(self.n_levels), self.block_norm)
+        return pyramids_from_codes(
+            [(indices[a:b], coefs[a:b]) for a, b in pairwise(bounds)],
+            int(self.n_atoms),
+            int(self.sigma),
+            int(self.n_levels),
+            self.block_norm,
+        )
 
     def _distances(self, queries: STPMPyramids, database: STPMPyramids) -> np.ndarray:
         return -stpm_kernel(queries, database, normalize=bool(self.normalize_kernel))
@@ -375,8 +405,9 @@ class TSRSTPMRetrieval(RetrievalMethod):
             "pyramid_data": np.asarray(M.data, dtype=np.float32),
             "pyramid_indices": np.asarray(M.indices, dtype=np.int32),
             "pyramid_indptr": np.asarray(M.indptr, dtype=np.int64),
-            "pyramid_shape": np.array([self.database_.n_clips, self.database_.n_levels, self.database_.n_atoms],
-                                      dtype=np.int64),
+            "pyramid_shape": np.array(
+                [self.database_.n_clips, self.database_.n_levels, self.database_.n_atoms], dtype=np.int64
+            ),
         }
 
     def _set_state(self, state: dict[str, np.ndarray]) -> None:
@@ -384,19 +415,31 @@ class TSRSTPMRetrieval(RetrievalMethod):
         n_clips, n_levels, q = (int(v) for v in state["pyramid_shape"])
         D = np.asarray(state["dictionary"], dtype=np.float64)
         if (n_levels, q) != (int(self.n_levels), int(self.n_atoms)) or D.shape[0] != q:
-            raise ValueError(f"state was saved with n_levels={n_levels}, n_atoms={q} (dictionary {D.shape}); "
-                             f"this instance has n_levels={self.n_levels}, n_atoms={self.n_atoms}")
+            raise ValueError(
+                f"state was saved with n_levels={n_levels}, n_atoms={q} (dictionary {D.shape}); "
+                f"this instance has n_levels={self.n_levels}, n_atoms={self.n_atoms}"
+            )
         indptr = np.asarray(state["pyramid_indptr"], dtype=np.int64)
         if len(indptr) != n_clips * rows_per_clip(n_levels) + 1:
             raise ValueError(f"state: {len(indptr) - 1} pyramid rows for {n_clips} clips of {n_levels} levels")
-        ksvd = KSVD(n_atoms=q, n_nonzero=int(self.n_nonzero), max_iter=int(self.ksvd_iter),
-                    random_state=self.random_state, max_samples=self.max_dictionary_frames)
+        ksvd = KSVD(
+            n_atoms=q,
+            n_nonzero=int(self.n_nonzero),
+            max_iter=int(self.ksvd_iter),
+            random_state=self.random_state,
+            max_samples=self.max_dictionary_frames,
+        )
         ksvd.components_ = D
         ksvd.error_ = [float(e) for e in state.get("ksvd_error", [])]
         ksvd.n_iter_ = len(ksvd.error_)
         self.ksvd_ = ksvd
-        matrix = sp.csr_matrix((np.asarray(state["pyramid_data"], dtype=np.float32),
-                                np.asarray(state["pyramid_indices"], dtype=np.int64), indptr),
-                               shape=(len(indptr) - 1, q * q))
+        matrix = sp.csr_matrix(
+            (
+                np.asarray(state["pyramid_data"], dtype=np.float32),
+                np.asarray(state["pyramid_indices"], dtype=np.int64),
+                indptr,
+            ),
+            shape=(len(indptr) - 1, q * q),
+        )
         self.database_ = STPMPyramids(matrix, n_levels, q)
         self.n_database_ = n_clips

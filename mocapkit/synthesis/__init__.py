@@ -12,6 +12,7 @@ The contract every synthesiser follows (fit on example clips, sample variants as
 - :mod:`~mocapkit.synthesis.synthesize`: ``mocapkit synthesize``. Metrics: :mod:`mocapkit.synthesis.metrics`;
   the comparison: ``mocapkit compare synthesis_hdm05``.
 """
+
 from mocapkit.synthesis.base import MotionSynthesizer
 from mocapkit.synthesis.clips import DofLayout, SynthesisInputError, check_clips, dof_matrix, dof_values
 

@@ -22,6 +22,7 @@ The shared checks (AMC clips, one hierarchy, enough clips, long enough clips), t
 matrix (:func:`dof_matrix`, :func:`dof_values`) and its resampling in time (:func:`time_warp`,
 :func:`resample_clip`, for methods that model a lower frame rate than the data's) live here.
 """
+
 from __future__ import annotations
 
 import sys
@@ -80,7 +81,7 @@ class MotionSynthesizer(BaseEstimator):
         if hasattr(self, "footskate_cleanup"):
             from mocapkit.synthesis.footskate import planted_ankle_height
 
-            self._cleans_feet()                      # checks the parameters before a long fit
+            self._cleans_feet()  # checks the parameters before a long fit
             self.floor_ = planted_ankle_height(clips)
         self._smoothing_seconds()
         self._fit_clips(clips)
@@ -94,8 +95,9 @@ class MotionSynthesizer(BaseEstimator):
 
         cleans = check_flag(self, "footskate_cleanup")
         if self.footskate_root not in ROOT_MOVES:
-            raise ValueError(f"{type(self).__name__}: footskate_root must be one of {list(ROOT_MOVES)}, got "
-                             f"{self.footskate_root!r}")
+            raise ValueError(
+                f"{type(self).__name__}: footskate_root must be one of {list(ROOT_MOVES)}, got {self.footskate_root!r}"
+            )
         return cleans
 
     def _smoothing_seconds(self) -> float:
@@ -103,12 +105,14 @@ class MotionSynthesizer(BaseEstimator):
         checks it."""
         seconds = getattr(self, "smoothing_seconds", 0.0)
         if isinstance(seconds, (str, bool)) or not float(seconds) >= 0:
-            raise ValueError(f"{type(self).__name__}: smoothing_seconds must be a number >= 0 (seconds), got "
-                             f"{seconds!r}")
+            raise ValueError(
+                f"{type(self).__name__}: smoothing_seconds must be a number >= 0 (seconds), got {seconds!r}"
+            )
         return float(seconds)
 
-    def sample(self, n_variants: int, n_frames: int | None = None, seed: int | None = None,
-               skeleton: AsfSkeleton | None = None) -> list[Motion]:
+    def sample(
+        self, n_variants: int, n_frames: int | None = None, seed: int | None = None, skeleton: AsfSkeleton | None = None
+    ) -> list[Motion]:
         """``n_variants`` new clips of ``n_frames`` frames (default: the mean training length) on ``skeleton``
         (default: the first training clip's)."""
         if not hasattr(self, "layout_"):
@@ -120,8 +124,9 @@ class MotionSynthesizer(BaseEstimator):
             raise ValueError(f"n_frames must be >= 1, got {n_frames}")
         skeleton = self.skeleton_ if skeleton is None else skeleton
         if DofLayout.of(skeleton) != self.layout_:
-            raise SynthesisInputError(f"sample: skeleton {skeleton.source or skeleton.name} does not match the "
-                                      f"training clips' bones/dofs")
+            raise SynthesisInputError(
+                f"sample: skeleton {skeleton.source or skeleton.name} does not match the training clips' bones/dofs"
+            )
         rng = np.random.default_rng(seed)
         cleans = self._cleans_feet()
         smoothing = self._smoothing_seconds()
@@ -132,11 +137,15 @@ class MotionSynthesizer(BaseEstimator):
             if cleans:
                 from mocapkit.synthesis.footskate import cleanup_footskate
 
-                values, report = cleanup_footskate(values, skeleton, self.fps_, floor=self.floor_,
-                                                   move_root=self.footskate_root)
+                values, report = cleanup_footskate(
+                    values, skeleton, self.fps_, floor=self.floor_, move_root=self.footskate_root
+                )
                 self.footskate_reports_.append(report)
-            out.append(amc_motion(skeleton, values, fps=self.fps_, angle_unit="deg",
-                                  name=f"{type(self).__name__}_variant_{k:03d}"))
+            out.append(
+                amc_motion(
+                    skeleton, values, fps=self.fps_, angle_unit="deg", name=f"{type(self).__name__}_variant_{k:03d}"
+                )
+            )
         return out
 
     # ------------------------------------------------------------------ noise scale
@@ -168,8 +177,12 @@ class MotionSynthesizer(BaseEstimator):
             ratio = variation(self.sample(self.auto_variants, seed=self.random_state)).v / reference
             self.variation_by_noise_scale_[scale] = ratio
             if getattr(self, "verbose", False):
-                print(f"[{type(self).__name__}] noise_scale {scale}: V / V_train = {ratio:.2f} "
-                      f"(target {self.target_variation})", file=sys.stderr, flush=True)
+                print(
+                    f"[{type(self).__name__}] noise_scale {scale}: V / V_train = {ratio:.2f} "
+                    f"(target {self.target_variation})",
+                    file=sys.stderr,
+                    flush=True,
+                )
             if ratio >= self.target_variation:
                 break
 

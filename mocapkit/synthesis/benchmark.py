@@ -43,6 +43,7 @@ runner (classifier cross-validation) does not apply. :meth:`~SynthesisBenchmark.
 protocol with the variants' numbers beside the real references; :meth:`~SynthesisBenchmark.plots` draws V per
 method with the training set's and the held-out set's V as lines (``variation.png``).
 """
+
 from __future__ import annotations
 
 import math
@@ -56,11 +57,26 @@ import numpy as np
 from mocapkit.evaluation.compare.base import Benchmark, ComparisonError, Split
 
 #: Metric name → digits in the tables.
-DIGITS = {"v_variants": 1, "v_train": 1, "v_heldout": 1, "v_ratio": 3, "v_variants_per_step": 3,
-          "foot_skating_cms": 1, "real_foot_skating_cms": 1, "real_foot_skating_cms_max": 1, "bone_drift_mm": 4,
-          "real_bone_drift_mm": 4, "jerk": 0, "real_jerk": 0, "real_jerk_max": 0, "feature_distance": 3,
-          "feature_distance_real": 3,
-          "feature_distance_real_sd": 3, "fit_seconds": 2, "sample_seconds_per_second": 3}
+DIGITS = {
+    "v_variants": 1,
+    "v_train": 1,
+    "v_heldout": 1,
+    "v_ratio": 3,
+    "v_variants_per_step": 3,
+    "foot_skating_cms": 1,
+    "real_foot_skating_cms": 1,
+    "real_foot_skating_cms_max": 1,
+    "bone_drift_mm": 4,
+    "real_bone_drift_mm": 4,
+    "jerk": 0,
+    "real_jerk": 0,
+    "real_jerk_max": 0,
+    "feature_distance": 3,
+    "feature_distance_real": 3,
+    "feature_distance_real_sd": 3,
+    "fit_seconds": 2,
+    "sample_seconds_per_second": 3,
+}
 
 
 class SynthesisBenchmark(Benchmark):
@@ -83,19 +99,30 @@ class SynthesisBenchmark(Benchmark):
     title = "Motion variation synthesis on real motion types"
     percent_metrics = ("within_real", "within_real_skating", "within_real_jerk", "within_real_all")
 
-    def __init__(self, root: str, protocols: list[str], n_train: int = 10, n_variants: int = 20,
-                 dataset: str = "hdm05", types: dict | None = None, window_seconds: float | None = None,
-                 heldout_takes: list[str] | None = None):
+    def __init__(
+        self,
+        root: str,
+        protocols: list[str],
+        n_train: int = 10,
+        n_variants: int = 20,
+        dataset: str = "hdm05",
+        types: dict | None = None,
+        window_seconds: float | None = None,
+        heldout_takes: list[str] | None = None,
+    ):
         if dataset not in ("hdm05", "cmu", "bandai"):
-            raise ComparisonError(f"benchmark.dataset={dataset!r}: one of 'hdm05', 'cmu' (ASF/AMC) or 'bandai' (BVH, "
-                                  "converted to ASF/AMC)")
+            raise ComparisonError(
+                f"benchmark.dataset={dataset!r}: one of 'hdm05', 'cmu' (ASF/AMC) or 'bandai' (BVH, "
+                "converted to ASF/AMC)"
+            )
         if root is None:
             raise ComparisonError(f"benchmark.root is not set: give the {dataset} folder")
         if not protocols:
             raise ComparisonError("benchmark.protocols: give at least one motion type, e.g. hopBothLegs1hops")
         if int(n_train) < 2 or int(n_variants) < 2:
-            raise ComparisonError(f"benchmark.n_train={n_train}, n_variants={n_variants}: both must be >= 2 "
-                                  "(V averages pairs)")
+            raise ComparisonError(
+                f"benchmark.n_train={n_train}, n_variants={n_variants}: both must be >= 2 (V averages pairs)"
+            )
         from mocapkit.datasets.formats.errors import MotionFormatError
         from mocapkit.datasets.mocap.folders import (
             MocapFolderError,
@@ -112,7 +139,7 @@ class SynthesisBenchmark(Benchmark):
         except MocapFolderError as exc:
             raise ComparisonError(f"benchmark.{exc}") from exc
         wanted = [str(p) for p in protocols]
-        if types is not None:          # file names carry no motion type (CMU): the type is a list of takes
+        if types is not None:  # file names carry no motion type (CMU): the type is a list of takes
             types = {str(k): [str(t) for t in v] for k, v in dict(types).items()}
             unknown = sorted(set(wanted) - set(types))
             if unknown:
@@ -128,7 +155,7 @@ class SynthesisBenchmark(Benchmark):
             raise ComparisonError(f"benchmark.heldout_takes: {missing} are not takes of benchmark.protocols")
         found = [c for c in found if c["class"] in wanted]
         try:
-            motions = as_amc_clips(read_clips(found))      # BVH (Bandai): one T-pose rest, the first clip's
+            motions = as_amc_clips(read_clips(found))  # BVH (Bandai): one T-pose rest, the first clip's
         except (MocapFolderError, MotionFormatError) as exc:
             raise ComparisonError(f"benchmark: {exc}") from exc
         self.motions, self.clips, self.frames_left_out = [], [], {}
@@ -136,15 +163,21 @@ class SynthesisBenchmark(Benchmark):
             if window_seconds is None:
                 pieces = [motion]
             else:
-                try:        # named after the take, so the windows are <take>[start:stop] (clip_segment's names)
+                try:  # named after the take, so the windows are <take>[start:stop] (clip_segment's names)
                     pieces = clip_windows(replace(motion, name=clip["name"]), window_seconds)
                 except ValueError as exc:
                     raise ComparisonError(f"benchmark.window_seconds: {exc}") from exc
                 self.frames_left_out[clip["name"]] = motion.num_frames - sum(p.num_frames for p in pieces)
             for piece in pieces:
                 self.motions.append(piece)
-                self.clips.append({"name": clip["name"] if window_seconds is None else piece.name, "take": clip["name"],
-                                   "class": clip["class"], "group": clip["group"]})
+                self.clips.append(
+                    {
+                        "name": clip["name"] if window_seconds is None else piece.name,
+                        "take": clip["name"],
+                        "class": clip["class"],
+                        "group": clip["group"],
+                    }
+                )
         self.classes = np.asarray([c["class"] for c in self.clips])
         short = {}
         for p in wanted:
@@ -154,16 +187,23 @@ class SynthesisBenchmark(Benchmark):
             if drawable < self.n_train or references < 2:
                 short[p] = {"to draw from": drawable, "held out": references}
         if short:
-            raise ComparisonError(f"benchmark.protocols: {short} clips under {self.root}; each motion type needs "
-                                  f"n_train = {self.n_train} clips to draw from and at least two held out")
+            raise ComparisonError(
+                f"benchmark.protocols: {short} clips under {self.root}; each motion type needs "
+                f"n_train = {self.n_train} clips to draw from and at least two held out"
+            )
         self.protocols = tuple(wanted)
         self._references: dict[tuple[str, int], dict] = {}
 
     # -------------------------------------------------------------- data
     def describe(self) -> dict:
-        out = {"dataset": self.dataset, "root": str(self.root), "n_train": self.n_train, "n_variants": self.n_variants,
-               "clips": {p: int((self.classes == p).sum()) for p in self.protocols},
-               "fps": float(self.motions[0].fps)}
+        out = {
+            "dataset": self.dataset,
+            "root": str(self.root),
+            "n_train": self.n_train,
+            "n_variants": self.n_variants,
+            "clips": {p: int((self.classes == p).sum()) for p in self.protocols},
+            "fps": float(self.motions[0].fps),
+        }
         if self.window_seconds is not None:
             out.update(window_seconds=float(self.window_seconds), frames_left_out=self.frames_left_out)
         if self.heldout_takes:
@@ -188,17 +228,25 @@ class SynthesisBenchmark(Benchmark):
         train = np.sort(rng.choice(mine[~held], size=self.n_train, replace=False)).astype(np.int64)
         test = (mine[held] if held.any() else np.setdiff1d(mine, train)).astype(np.int64)
         groups = lambda idx: sorted({self.clips[i]["group"] for i in idx})
-        return Split(protocol, seed, train, test, {
-            "train_clips": [self.clips[i]["name"] for i in train], "train_performers": groups(train),
-            "heldout_performers": groups(test),
-            "train_frames": [self.motions[i].num_frames for i in train]})
+        return Split(
+            protocol,
+            seed,
+            train,
+            test,
+            {
+                "train_clips": [self.clips[i]["name"] for i in train],
+                "train_performers": groups(train),
+                "heldout_performers": groups(test),
+                "train_frames": [self.motions[i].num_frames for i in train],
+            },
+        )
 
     # -------------------------------------------------------------- scoring
     def references(self, split: Split) -> dict:
         """The split's real-clip numbers (computed once per protocol and seed): ``{"metrics", "heldout"}`` with
         ``heldout`` the held-out clips posed on the reference skeleton."""
-        from mocapkit.synthesis.metrics import clip_naturalness, proxy_means, variation
         from mocapkit.synthesis.clips import on_skeleton
+        from mocapkit.synthesis.metrics import clip_naturalness, proxy_means, variation
 
         key = (split.protocol, split.seed)
         if key not in self._references:
@@ -209,10 +257,16 @@ class SynthesisBenchmark(Benchmark):
             posed_heldout = [on_skeleton(m, skeleton) for m in heldout]
             proxies = clip_naturalness(heldout)
             real = proxy_means(proxies)
-            metrics = {"v_train": variation(posed_train).v, "v_heldout": variation(posed_heldout).v,
-                       **{f"real_{k}": v for k, v in real.items()},
-                       **{f"real_{k}_max": float(np.nanmax(v)) if np.isfinite(v).any() else float("nan")
-                          for k, v in proxies.items() if k != "bone_drift_mm"}}
+            metrics = {
+                "v_train": variation(posed_train).v,
+                "v_heldout": variation(posed_heldout).v,
+                **{f"real_{k}": v for k, v in real.items()},
+                **{
+                    f"real_{k}_max": float(np.nanmax(v)) if np.isfinite(v).any() else float("nan")
+                    for k, v in proxies.items()
+                    if k != "bone_drift_mm"
+                },
+            }
             self._references[key] = {"metrics": metrics, "heldout": posed_heldout, "proxies": proxies}
         return self._references[key]
 
@@ -240,30 +294,58 @@ class SynthesisBenchmark(Benchmark):
         proxies = clip_naturalness(variants)
         within = proxies_within(proxies, reference["proxies"], distances)
         frames = variants[0].num_frames
-        metrics = {"v_variants": v.v, "v_variants_per_step": v.v_per_step, **reference["metrics"],
-                   "v_ratio": v.v / reference["metrics"]["v_train"], **proxy_means(proxies),
-                   **distances.summary(), "within_real_skating": float(within["foot_skating_cms"].mean()),
-                   "within_real_jerk": float(within["jerk"].mean()),
-                   "within_real_all": float(within["every_proxy"].mean()),
-                   "fit_seconds": fit_seconds,
-                   "sample_seconds_per_second": sample_seconds / (len(variants) * frames / variants[0].fps)}
-        detail = {"n_frames": frames, "fps": float(variants[0].fps), "n_variants": len(variants),
-                  "train_clips": split.info["train_clips"], "n_heldout": len(split.test),
-                  "variant_feature_distances": distances.variants.tolist(),
-                  "real_feature_distances": distances.real.tolist(),
-                  "variant_proxies": {k: v.tolist() for k, v in proxies.items()},
-                  "real_proxies": {k: v.tolist() for k, v in reference["proxies"].items()},
-                  "fitted": {k: _json(getattr(estimator, k)) for k in ("width_", "cv_log_likelihood_", "sigma_",
-                                                                 "train_seconds_", "noise_scale_",
-                                                                 "variation_by_noise_scale_")
-                             if hasattr(estimator, k)},
-                  "angle_flips": [list(flip) for flip in getattr(estimator, "angle_flips_", [])]}
+        metrics = {
+            "v_variants": v.v,
+            "v_variants_per_step": v.v_per_step,
+            **reference["metrics"],
+            "v_ratio": v.v / reference["metrics"]["v_train"],
+            **proxy_means(proxies),
+            **distances.summary(),
+            "within_real_skating": float(within["foot_skating_cms"].mean()),
+            "within_real_jerk": float(within["jerk"].mean()),
+            "within_real_all": float(within["every_proxy"].mean()),
+            "fit_seconds": fit_seconds,
+            "sample_seconds_per_second": sample_seconds / (len(variants) * frames / variants[0].fps),
+        }
+        detail = {
+            "n_frames": frames,
+            "fps": float(variants[0].fps),
+            "n_variants": len(variants),
+            "train_clips": split.info["train_clips"],
+            "n_heldout": len(split.test),
+            "variant_feature_distances": distances.variants.tolist(),
+            "real_feature_distances": distances.real.tolist(),
+            "variant_proxies": {k: v.tolist() for k, v in proxies.items()},
+            "real_proxies": {k: v.tolist() for k, v in reference["proxies"].items()},
+            "fitted": {
+                k: _json(getattr(estimator, k))
+                for k in (
+                    "width_",
+                    "cv_log_likelihood_",
+                    "sigma_",
+                    "train_seconds_",
+                    "noise_scale_",
+                    "variation_by_noise_scale_",
+                )
+                if hasattr(estimator, k)
+            },
+            "angle_flips": [list(flip) for flip in getattr(estimator, "angle_flips_", [])],
+        }
         return {"metrics": metrics, "detail": detail}
 
     # -------------------------------------------------------------- presentation
     def headline(self, protocol: str) -> list[str]:
-        return ["v_variants", "v_ratio", "foot_skating_cms", "jerk", "feature_distance", "within_real",
-                "within_real_all", "fit_seconds", "sample_seconds_per_second"]
+        return [
+            "v_variants",
+            "v_ratio",
+            "foot_skating_cms",
+            "jerk",
+            "feature_distance",
+            "within_real",
+            "within_real_all",
+            "fit_seconds",
+            "sample_seconds_per_second",
+        ]
 
     def format_metric(self, name, mean, sd=None) -> str:
         if mean is None or (isinstance(mean, float) and math.isnan(mean)):
@@ -277,13 +359,19 @@ class SynthesisBenchmark(Benchmark):
         rows = results.get("summary") or []
         if not rows:
             return ""
-        lines = ["## Variation and naturalness per motion type", "",
-                 ("V: Zhou eq. 4.5, mean pairwise DTW cost of root-normalised joint positions (Euclidean local cost, "
-                  "unnormalised path sum; metres × steps) of the variants, all on the reference skeleton; ratio: "
-                  "V / V of the training clips. Naturalness proxies: foot skating (cm/s during contacts), jerk "
-                  "(m/s³), bone-length drift (mm); feature distance: standardised mean/sd distance of per-frame pose "
-                  "and velocity features to the held-out real clips (dimensionless), beside the real clips' own "
-                  "leave-one-out distance (mean ± sd over held-out clips). Mean over seeds."), ""]
+        lines = [
+            "## Variation and naturalness per motion type",
+            "",
+            (
+                "V: Zhou eq. 4.5, mean pairwise DTW cost of root-normalised joint positions (Euclidean local cost, "
+                "unnormalised path sum; metres × steps) of the variants, all on the reference skeleton; ratio: "
+                "V / V of the training clips. Naturalness proxies: foot skating (cm/s during contacts), jerk "
+                "(m/s³), bone-length drift (mm); feature distance: standardised mean/sd distance of per-frame pose "
+                "and velocity features to the held-out real clips (dimensionless), beside the real clips' own "
+                "leave-one-out distance (mean ± sd over held-out clips). Mean over seeds."
+            ),
+            "",
+        ]
         for protocol in results["protocols"]:
             mine = [r for r in rows if r["protocol"] == protocol]
             if not mine:
@@ -291,26 +379,47 @@ class SynthesisBenchmark(Benchmark):
             get = lambda r, k: (r["metrics"].get(k) or {}).get("mean")
             first = mine[0]
             fmt = self.format_metric
-            lines += [f"### {protocol}", "",
-                      (f"Training set V = {fmt('v_train', get(first, 'v_train'))}, held-out set V = "
-                       f"{fmt('v_heldout', get(first, 'v_heldout'))}; held-out real clips: foot skating "
-                       f"{fmt('real_foot_skating_cms', get(first, 'real_foot_skating_cms'))} cm/s (at most "
-                       f"{fmt('real_foot_skating_cms_max', get(first, 'real_foot_skating_cms_max'))}), jerk "
-                       f"{fmt('real_jerk', get(first, 'real_jerk'))} m/s³ (at most "
-                       f"{fmt('real_jerk_max', get(first, 'real_jerk_max'))}), bone drift "
-                       f"{fmt('real_bone_drift_mm', get(first, 'real_bone_drift_mm'))} mm, feature distance "
-                       f"{fmt('feature_distance_real', get(first, 'feature_distance_real'))} ± "
-                       f"{fmt('feature_distance_real_sd', get(first, 'feature_distance_real_sd'))}."), "",
-                      ("| method | V | V / V_train | V per step (m) | foot skating (cm/s) | jerk (m/s³) | "
-                       "bone drift (mm) | feature distance | within real: distance | skating | jerk | "
-                       "every proxy | fit (s) | sample (s per s) |"),
-                      "|---|" + "---|" * 13]
+            lines += [
+                f"### {protocol}",
+                "",
+                (
+                    f"Training set V = {fmt('v_train', get(first, 'v_train'))}, held-out set V = "
+                    f"{fmt('v_heldout', get(first, 'v_heldout'))}; held-out real clips: foot skating "
+                    f"{fmt('real_foot_skating_cms', get(first, 'real_foot_skating_cms'))} cm/s (at most "
+                    f"{fmt('real_foot_skating_cms_max', get(first, 'real_foot_skating_cms_max'))}), jerk "
+                    f"{fmt('real_jerk', get(first, 'real_jerk'))} m/s³ (at most "
+                    f"{fmt('real_jerk_max', get(first, 'real_jerk_max'))}), bone drift "
+                    f"{fmt('real_bone_drift_mm', get(first, 'real_bone_drift_mm'))} mm, feature distance "
+                    f"{fmt('feature_distance_real', get(first, 'feature_distance_real'))} ± "
+                    f"{fmt('feature_distance_real_sd', get(first, 'feature_distance_real_sd'))}."
+                ),
+                "",
+                (
+                    "| method | V | V / V_train | V per step (m) | foot skating (cm/s) | jerk (m/s³) | "
+                    "bone drift (mm) | feature distance | within real: distance | skating | jerk | "
+                    "every proxy | fit (s) | sample (s per s) |"
+                ),
+                "|---|" + "---|" * 13,
+            ]
             for r in mine:
-                cells = [fmt(k, get(r, k)) for k in ("v_variants", "v_ratio", "v_variants_per_step",
-                                                      "foot_skating_cms", "jerk", "bone_drift_mm",
-                                                      "feature_distance", "within_real", "within_real_skating",
-                                                      "within_real_jerk", "within_real_all", "fit_seconds",
-                                                      "sample_seconds_per_second")]
+                cells = [
+                    fmt(k, get(r, k))
+                    for k in (
+                        "v_variants",
+                        "v_ratio",
+                        "v_variants_per_step",
+                        "foot_skating_cms",
+                        "jerk",
+                        "bone_drift_mm",
+                        "feature_distance",
+                        "within_real",
+                        "within_real_skating",
+                        "within_real_jerk",
+                        "within_real_all",
+                        "fit_seconds",
+                        "sample_seconds_per_second",
+                    )
+                ]
                 lines.append(f"| {r['label']} | " + " | ".join(cells) + " |")
             lines.append("")
         return "\n".join(lines)
@@ -339,8 +448,11 @@ class SynthesisBenchmark(Benchmark):
             ax.set_ylabel("V (Zhou eq. 4.5; m × DTW steps)")
             ax.grid(axis="y", alpha=0.3)
             ax.legend(fontsize=7, frameon=False)
-        fig.suptitle(f"Variation of {results['benchmark'].get('n_variants', '')} variants per method "
-                     f"(mean ± sd over seeds {results['seeds']})", fontsize=10)
+        fig.suptitle(
+            f"Variation of {results['benchmark'].get('n_variants', '')} variants per method "
+            f"(mean ± sd over seeds {results['seeds']})",
+            fontsize=10,
+        )
         return [save_figure(fig, Path(out_dir) / "variation.png")]
 
 

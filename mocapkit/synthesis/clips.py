@@ -2,6 +2,7 @@
 enough clips), the packing of AMC values into one matrix (:func:`dof_matrix`, :func:`dof_values`), its resampling
 and smoothing in time (:func:`time_warp`, :func:`resample_clip`, :func:`smooth_values`) and BVH → AMC conversion
 (:func:`as_amc_clips`). The contract that uses them is :mod:`mocapkit.synthesis.base`."""
+
 from __future__ import annotations
 
 from collections.abc import Sequence
@@ -12,12 +13,10 @@ import numpy as np
 from mocapkit.datasets.formats.asf_amc import AsfSkeleton, amc_motion
 from mocapkit.motion.container import Motion
 
-
-#: Default ``smoothing_seconds`` of every generator (:class:`MotionSynthesizer`, *Smoothing*): two frames at 30 fps
-#: (67 ms), chosen by the rule in bench/RESULTS.md §16 (*Smoothing the variants, and every proxy at once*) on
-#: training clips only (``scripts/select_synthesis_defaults.py --param smoothing_seconds``: the share of SLFM
-#: variants within the training clips' spread on every proxy, mean over HDM05 hops and squats and Bandai walks,
-#: 0.05 / 0.23 / 0.31 / 0.34 at 0, 33, 67, 100 ms; the smallest within 0.05 of the best).
+#: Default ``smoothing_seconds`` of every generator (:class:`MotionSynthesizer`, *Smoothing*): a Gaussian of two
+#: frames at 30 fps (67 ms) on each variant's joint-angle curves. Chosen on training clips only
+#: (``scripts/selection/select_synthesis_defaults.py --param smoothing_seconds``); the rule and the numbers:
+#: docs/decisions.md#synthesis-smoothing.
 SMOOTHING_SECONDS = 2 / 30
 
 
@@ -119,14 +118,20 @@ def time_warp(matrix: np.ndarray, n_frames: int, angles: np.ndarray | None = Non
     return np.stack([np.interp(target, source, column) for column in matrix.T], axis=1)
 
 
-def smooth_values(values: dict[str, np.ndarray], layout: DofLayout, fps: float, seconds: float
-                  ) -> dict[str, np.ndarray]:
+def smooth_values(
+    values: dict[str, np.ndarray], layout: DofLayout, fps: float, seconds: float
+) -> dict[str, np.ndarray]:
     """One variant's AMC values (bone → ``[T, len(dof)]``, degrees and ASF units) low-passed in time by a Gaussian of
     standard deviation ``seconds`` (``seconds · fps`` frames; scipy ``gaussian_filter1d``, ``mode="nearest"``, so
     the ends are not pulled towards zero). Angle columns are unwrapped (period 360°) first, so a turn through
     ±180° is not smeared into a spin. ``seconds <= 0`` returns a copy."""
-    matrix = np.concatenate([np.asarray(values[bone], dtype=np.float64).reshape(-1, len(dofs))
-                             for bone, dofs in zip(layout.bones, layout.dofs)], axis=1)
+    matrix = np.concatenate(
+        [
+            np.asarray(values[bone], dtype=np.float64).reshape(-1, len(dofs))
+            for bone, dofs in zip(layout.bones, layout.dofs)
+        ],
+        axis=1,
+    )
     sigma = float(seconds) * float(fps)
     if sigma > 0 and len(matrix) > 1:
         from scipy.ndimage import gaussian_filter1d
@@ -149,8 +154,9 @@ def resample_clip(clip: Motion, fps: float) -> Motion:
         return clip
     matrix, layout = dof_matrix(clip)
     values = dof_values(time_warp(matrix, model_frames(len(matrix), clip.fps, fps), rotation_columns(layout)), layout)
-    return amc_motion(clip.metadata["asf"], values, fps=float(fps), angle_unit="deg", name=clip.name,
-                      source=clip.source)
+    return amc_motion(
+        clip.metadata["asf"], values, fps=float(fps), angle_unit="deg", name=clip.name, source=clip.source
+    )
 
 
 def clip_segment(clip: Motion, start: int, stop: int) -> Motion:
@@ -160,9 +166,15 @@ def clip_segment(clip: Motion, start: int, stop: int) -> Motion:
     values = {bone: np.asarray(v)[start:stop] for bone, v in clip.metadata["amc_values"].items()}
     suffix = f"[{start}:{stop}]"
     kept = {key: clip.metadata[key] for key in ("asf_path", "bvh_rig") if clip.metadata.get(key) is not None}
-    return amc_motion(clip.metadata["asf"], values, fps=clip.fps,
-                      angle_unit=clip.metadata.get("amc_angle_unit", "deg"), name=f"{clip.name}{suffix}",
-                      source=f"{clip.source}{suffix}" if clip.source else None, metadata=kept)
+    return amc_motion(
+        clip.metadata["asf"],
+        values,
+        fps=clip.fps,
+        angle_unit=clip.metadata.get("amc_angle_unit", "deg"),
+        name=f"{clip.name}{suffix}",
+        source=f"{clip.source}{suffix}" if clip.source else None,
+        metadata=kept,
+    )
 
 
 def clip_windows(clip: Motion, seconds: float) -> list[Motion]:
@@ -177,19 +189,23 @@ def clip_windows(clip: Motion, seconds: float) -> list[Motion]:
     frames = round(float(seconds) * clip.fps)
     if not seconds > 0 or frames < 4:
         raise ValueError(f"window of {seconds} s = {frames} frames at {clip.fps:g} fps; give at least 4 frames")
-    return [clip_segment(clip, start, start + frames)
-            for start in range(0, len(clip.positions) - frames + 1, frames)]
+    return [clip_segment(clip, start, start + frames) for start in range(0, len(clip.positions) - frames + 1, frames)]
 
 
 def on_skeleton(clip: Motion, skeleton: AsfSkeleton) -> Motion:
     """An AMC clip posed on another ``skeleton`` by its own AMC values (same frame rate), so that clips of
     different performers compare without their body sizes."""
-    return amc_motion(skeleton, clip.metadata["amc_values"], fps=clip.fps,
-                      angle_unit=clip.metadata.get("amc_angle_unit", "deg"), name=clip.name, source=clip.source)
+    return amc_motion(
+        skeleton,
+        clip.metadata["amc_values"],
+        fps=clip.fps,
+        angle_unit=clip.metadata.get("amc_angle_unit", "deg"),
+        name=clip.name,
+        source=clip.source,
+    )
 
 
-def as_amc_clips(motions: Sequence[Motion], reference: Motion | None = None, reference_frame: int = 0
-                 ) -> list[Motion]:
+def as_amc_clips(motions: Sequence[Motion], reference: Motion | None = None, reference_frame: int = 0) -> list[Motion]:
     """Training clips as AMC motions: ASF/AMC clips as they are, BVH clips
     (:func:`~mocapkit.datasets.formats.bvh.read_bvh`) converted exactly to ASF/AMC
     (:func:`~mocapkit.datasets.formats.bvh_to_amc.bvh_to_amc`) on **one** rig, whose rest pose is the posture of
@@ -219,31 +235,39 @@ def check_clips(clips: Sequence[Motion], min_clips: int = 2, min_frames: int = 4
     """
     clips = list(clips)
     if len(clips) < min_clips:
-        raise SynthesisInputError(f"{what}: {len(clips)} training clip(s); this synthesiser needs at least {min_clips} "
-                                  f"of one motion type")
+        raise SynthesisInputError(
+            f"{what}: {len(clips)} training clip(s); this synthesiser needs at least {min_clips} of one motion type"
+        )
     layout = None
     for clip in clips:
         if not isinstance(clip, Motion) or "amc_values" not in clip.metadata or "asf" not in clip.metadata:
-            raise SynthesisInputError(f"{what}: {clip_label(clip) if isinstance(clip, Motion) else type(clip).__name__}"
-                                      f" is not an ASF/AMC motion (read it with mocapkit.datasets.formats.asf_amc."
-                                      f"read_amc, or convert a BVH with mocapkit.synthesis.base.as_amc_clips); "
-                                      f"synthesis works on joint angles")
+            raise SynthesisInputError(
+                f"{what}: {clip_label(clip) if isinstance(clip, Motion) else type(clip).__name__}"
+                f" is not an ASF/AMC motion (read it with mocapkit.datasets.formats.asf_amc."
+                f"read_amc, or convert a BVH with mocapkit.synthesis.base.as_amc_clips); "
+                f"synthesis works on joint angles"
+            )
         if len(clip.positions) < min_frames:
-            raise SynthesisInputError(f"{what}: {clip_label(clip)} has {len(clip.positions)} frames; this synthesiser "
-                                      f"needs at least {min_frames}")
+            raise SynthesisInputError(
+                f"{what}: {clip_label(clip)} has {len(clip.positions)} frames; this synthesiser "
+                f"needs at least {min_frames}"
+            )
         this = DofLayout.of(clip.metadata["asf"])
         if layout is None:
             layout, first = this, clip
         elif this != layout:
             diff = sorted(set(zip(this.bones, this.dofs)) ^ set(zip(layout.bones, layout.dofs)))
-            raise SynthesisInputError(f"{what}: {clip_label(clip)} has a different skeleton from {clip_label(first)} "
-                                      f"(bones/dofs that differ: {diff[:6]})")
+            raise SynthesisInputError(
+                f"{what}: {clip_label(clip)} has a different skeleton from {clip_label(first)} "
+                f"(bones/dofs that differ: {diff[:6]})"
+            )
         matrix, _ = dof_matrix(clip)
         bad = ~np.isfinite(matrix)
         if bad.any():
             frame, column = np.argwhere(bad)[0]
-            raise SynthesisInputError(f"{what}: {clip_label(clip)} has a non-finite AMC value at frame {frame + 1} "
-                                      f"(column {column})")
+            raise SynthesisInputError(
+                f"{what}: {clip_label(clip)} has a non-finite AMC value at frame {frame + 1} (column {column})"
+            )
     return layout
 
 

@@ -35,6 +35,7 @@ stretches the legs against the travel (jerk 2.4× the training clips'); halting 
 feet set the travel instead, at the price of a travel speed that is the legs' and not the sampled one. The
 numbers behind the defaults are in :func:`cleanup_footskate`.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -50,12 +51,9 @@ from mocapkit.synthesis.representation import dof_axes, euler_near, partitions
 #: The ways :func:`cleanup_footskate` may move the root (its ``move_root``).
 ROOT_MOVES = ("full", "stance", "vertical", "none")
 #: The ``footskate_root`` of every generator (:class:`~mocapkit.synthesis.base.MotionSynthesizer`) unless set:
-#: ``"stance"``, chosen on training clips only by the rule in bench/RESULTS.md §16 (*Smoothing the variants, and
-#: every proxy at once*, round 2; ``scripts/selection/select_synthesis_defaults.py --param footskate_root full stance``): the
-#: share of SLFM variants within the training clips' spread on every proxy, mean over HDM05 hops and squats and
-#: Bandai walks, 0.41 against ``"full"``'s 0.31 (walks 0.80 / 0.60, squats 0.15 / 0.00, hops 0.28 / 0.33); on the
-#: real training clips themselves it keeps more of their travel (root speed after / before: walks 0.80 against
-#: 0.48, hops 0.96 against 0.90).
+#: ``"stance"``, which keeps more of a real clip's travel than ``"full"``. Chosen on training clips only
+#: (``scripts/selection/select_synthesis_defaults.py --param footskate_root full stance``); the rule and the
+#: numbers: docs/decisions.md#synthesis-footskate-root.
 DEFAULT_ROOT_MOVE = "stance"
 
 
@@ -98,9 +96,16 @@ def _smoothed(signal: np.ndarray, frames: int) -> np.ndarray:
     return uniform_filter1d(signal, size=max(1, min(int(frames), len(signal))), axis=0, mode="nearest")
 
 
-def detect_contacts(ankle: np.ndarray, fps: float, floor: float, max_height: float = 0.12,
-                    height_tolerance: float = 0.03, vertical_speed: float = 0.3, min_contact_frames: int = 3,
-                    smoothing_frames: int = 9) -> np.ndarray:
+def detect_contacts(
+    ankle: np.ndarray,
+    fps: float,
+    floor: float,
+    max_height: float = 0.12,
+    height_tolerance: float = 0.03,
+    vertical_speed: float = 0.3,
+    min_contact_frames: int = 3,
+    smoothing_frames: int = 9,
+) -> np.ndarray:
     """bool ``[T]``: the frames where a foot is planted (stance).
 
     A stance is a run of frames where the ankle barely moves **vertically** (the moving average over
@@ -131,8 +136,9 @@ def detect_contacts(ankle: np.ndarray, fps: float, floor: float, max_height: flo
     return contact
 
 
-def _pin_targets(ankle: np.ndarray, contact: np.ndarray, blend_frames: int, floor: float | None = None
-                 ) -> tuple[np.ndarray, np.ndarray]:
+def _pin_targets(
+    ankle: np.ndarray, contact: np.ndarray, blend_frames: int, floor: float | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Ankle targets ``[T, 3]`` and their weights ``[T]`` (1 in contacts, linear ramps ``blend_frames`` long).
 
     Each contact run's target is the ankle's mean position over the run, at height ``floor`` when given."""
@@ -164,8 +170,14 @@ def _follow(path: np.ndarray, slack: float) -> np.ndarray:
     return out
 
 
-def root_shift(ankles: list[np.ndarray], contacts: list[np.ndarray], floor: float, blend_frames: int = 6,
-               slack: float = 0.0, ramps: bool = True) -> np.ndarray:
+def root_shift(
+    ankles: list[np.ndarray],
+    contacts: list[np.ndarray],
+    floor: float,
+    blend_frames: int = 6,
+    slack: float = 0.0,
+    ramps: bool = True,
+) -> np.ndarray:
     """float64 ``[T, 3]`` metres: the shift of the root that grounds and halts the planted feet.
 
     - **Horizontal** (x, z): the root's step in each frame loses the weighted mean horizontal step of the
@@ -175,7 +187,7 @@ def root_shift(ankles: list[np.ndarray], contacts: list[np.ndarray], floor: floa
       contact begins or ends), so that a planted foot stands still while the body moves over
       it; the shift is the running sum of those corrections (0 at frame 0). The ramps cover the frames where the
       foot lands and lifts off, when it swings forward fast: their steps, taken out of the root's, slow the body
-      down (real HDM05 jogs by 24 %, real Bandai walks by half; bench/RESULTS.md §16).
+      down (real HDM05 jogs by 24 %, real Bandai walks by half; docs/decisions.md#synthesis-footskate-root).
     - **Vertical** (y): in contact frames, ``floor`` minus the mean height of the planted ankles over their
       contact runs (each run lifted or lowered as a whole, so the foot's own small motion within a stance is
       kept); between contacts linearly interpolated, then smoothed over ``2·blend_frames + 1`` frames; 0
@@ -196,7 +208,7 @@ def root_shift(ankles: list[np.ndarray], contacts: list[np.ndarray], floor: floa
     for ankle, contact in zip(ankles, contacts):
         if ramps:
             _, weight = _pin_targets(ankle, contact, blend_frames)
-        else:                                   # the steps t-1 → t with the foot planted at both ends
+        else:  # the steps t-1 → t with the foot planted at both ends
             weight = (contact & np.concatenate([[False], contact[:-1]])).astype(np.float64)
         if T > 1:
             step += weight[:, None] * np.diff(ankle[:, [0, 2]], axis=0, prepend=ankle[:1, [0, 2]])
@@ -206,7 +218,7 @@ def root_shift(ankles: list[np.ndarray], contacts: list[np.ndarray], floor: floa
             count[start:stop] += 1
     shift = np.zeros((T, 3))
     correction = step / np.maximum(total, 1.0)[:, None]
-    if not ramps:       # switched on and off at the contacts' ends: spread each step over 2·blend_frames + 1 frames
+    if not ramps:  # switched on and off at the contacts' ends: spread each step over 2·blend_frames + 1 frames
         correction = _smoothed(correction, 2 * blend_frames + 1)
     shift[:, [0, 2]] = -np.cumsum(correction, axis=0)
     if slack > 0 and T > 1:
@@ -286,15 +298,27 @@ def _minimal_rotation(u: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 
 def _sliding(ankles: list[np.ndarray], contacts: list[np.ndarray], fps: float) -> float:
-    speeds = [np.linalg.norm(np.gradient(a[:, [0, 2]], axis=0), axis=1)[c] * fps
-              for a, c in zip(ankles, contacts) if c.any() and len(a) > 1]
+    speeds = [
+        np.linalg.norm(np.gradient(a[:, [0, 2]], axis=0), axis=1)[c] * fps
+        for a, c in zip(ankles, contacts)
+        if c.any() and len(a) > 1
+    ]
     return float(np.mean(np.concatenate(speeds))) if speeds else float("nan")
 
 
-def cleanup_footskate(values: dict[str, np.ndarray], skeleton: AsfSkeleton, fps: float, floor: float | None = None,
-                      max_height: float = 0.12, height_tolerance: float = 0.03, vertical_speed: float = 0.3,
-                      min_contact_frames: int = 3, blend_frames: int = 12, move_root: str = DEFAULT_ROOT_MOVE,
-                      root_slack: float = 0.0) -> tuple[dict[str, np.ndarray], FootskateReport]:
+def cleanup_footskate(
+    values: dict[str, np.ndarray],
+    skeleton: AsfSkeleton,
+    fps: float,
+    floor: float | None = None,
+    max_height: float = 0.12,
+    height_tolerance: float = 0.03,
+    vertical_speed: float = 0.3,
+    min_contact_frames: int = 3,
+    blend_frames: int = 12,
+    move_root: str = DEFAULT_ROOT_MOVE,
+    root_slack: float = 0.0,
+) -> tuple[dict[str, np.ndarray], FootskateReport]:
     """Ground and pin planted feet (module docstring).
 
     Args:
@@ -339,8 +363,11 @@ def cleanup_footskate(values: dict[str, np.ndarray], skeleton: AsfSkeleton, fps:
     legs, skipped = [], []
     for name in ("LL", "RL"):
         chain = parts[name]
-        if (len(chain) < 2 or skeleton.parent_names.get(chain[1]) != chain[0]
-                or len(dof_axes(skeleton.bone(chain[1]).dof)) not in (1, 3)):
+        if (
+            len(chain) < 2
+            or skeleton.parent_names.get(chain[1]) != chain[0]
+            or len(dof_axes(skeleton.bone(chain[1]).dof)) not in (1, 3)
+        ):
             skipped.append(f"{name}: needs a thigh and a one- or three-dof shin below it, has {list(chain[:2])}")
             continue
         legs.append((chain[0], chain[1]))
@@ -349,8 +376,10 @@ def cleanup_footskate(values: dict[str, np.ndarray], skeleton: AsfSkeleton, fps:
     if floor is None:
         floor = min(float(positions[:, index[shin], 1].min()) for _, shin in legs)
     before = [positions[:, index[shin]].astype(np.float64) for _, shin in legs]
-    masks = [detect_contacts(ankle, fps, floor, max_height, height_tolerance, vertical_speed, min_contact_frames)
-             for ankle in before]
+    masks = [
+        detect_contacts(ankle, fps, floor, max_height, height_tolerance, vertical_speed, min_contact_frames)
+        for ankle in before
+    ]
     contacts = {thigh: mask for (thigh, _), mask in zip(legs, masks)}
     shift = np.zeros((len(positions), 3))
     if move_root != "none" and any(mask.any() for mask in masks):
@@ -381,19 +410,20 @@ def cleanup_footskate(values: dict[str, np.ndarray], skeleton: AsfSkeleton, fps:
         # knee: hinge angle giving |ankle - hip| == |target - hip|
         c_shin = _bone_frame(skeleton, shin)
         shin_axes = dof_axes(skeleton.bone(shin).dof)
-        frame_shin = glob[frames, j_thigh] @ c_shin                       # G: shin offset = G · M · w
+        frame_shin = glob[frames, j_thigh] @ c_shin  # G: shin offset = G · M · w
         w = c_shin.T @ offsets[j_shin]
         l_thigh, l_shin = np.linalg.norm(offsets[j_thigh]), np.linalg.norm(offsets[j_shin])
-        reach = np.clip(np.linalg.norm(target[frames] - hip, axis=1), abs(l_thigh - l_shin) + 1e-6,
-                        l_thigh + l_shin - 1e-6)
-        h = np.einsum("tji,tj->ti", frame_shin, knee - hip)               # Gᵀ (knee - hip)
+        reach = np.clip(
+            np.linalg.norm(target[frames] - hip, axis=1), abs(l_thigh - l_shin) + 1e-6, l_thigh + l_shin - 1e-6
+        )
+        h = np.einsum("tji,tj->ti", frame_shin, knee - hip)  # Gᵀ (knee - hip)
         wanted = (reach**2 - l_thigh**2 - l_shin**2) / 2
-        if len(shin_axes) == 1:                                           # a hinge: M = R_axis(θ)
+        if len(shin_axes) == 1:  # a hinge: M = R_axis(θ)
             hinge_axis = np.eye(3)["xyz".index(shin_axes)]
             theta = _hinge_angle(h, np.tile(w, (len(frames), 1)), hinge_axis, wanted, np.radians(out[shin][frames, 0]))
             out[shin][frames, 0] = np.degrees(theta)
             bent = Rotation.from_rotvec(theta[:, None] * hinge_axis).apply(np.tile(w, (len(frames), 1)))
-        else:                                                             # M' = R_a(φ) · M, a ⊥ thigh and shin
+        else:  # M' = R_a(φ) · M, a ⊥ thigh and shin
             m_shin = Rotation.from_euler(shin_axes, np.radians(out[shin][frames]))
             shin_now = m_shin.apply(w)
             flexion = _flexion_axes(h, shin_now)
@@ -409,6 +439,5 @@ def cleanup_footskate(values: dict[str, np.ndarray], skeleton: AsfSkeleton, fps:
         c_thigh = _bone_frame(skeleton, thigh)
         m_thigh = c_thigh.T @ np.swapaxes(glob[frames, j_hip], 1, 2) @ thigh_global @ c_thigh
         axes = dof_axes(skeleton.bone(thigh).dof)
-        out[thigh][frames] = np.degrees(euler_near(Rotation.from_matrix(m_thigh), axes,
-                                                   np.radians(out[thigh][frames])))
+        out[thigh][frames] = np.degrees(euler_near(Rotation.from_matrix(m_thigh), axes, np.radians(out[thigh][frames])))
     return out, FootskateReport(contacts, _sliding(before, masks, fps), _sliding(after, masks, fps), skipped, shift)

@@ -28,6 +28,7 @@ the training clips are used (gap 22). ``width_`` holds the choice, ``cv_log_like
 ``Δy_t ~ N(m(x_t), s²(x_t))`` and ``y_t = y_{t−1} + Δy_t`` for ``t = 2 … n_frames − 1``; the features are decoded
 (:func:`~mocapkit.synthesis.representation.decode`) from the drawn clip's start position and heading.
 """
+
 from __future__ import annotations
 
 from collections.abc import Sequence
@@ -75,7 +76,7 @@ def conditional(weights: np.ndarray, outputs: np.ndarray) -> tuple[np.ndarray, n
     """``(mean [n, d], variance [n, d])`` of the kernel-weighted Gaussian conditional (module docstring)."""
     mean = weights @ outputs
     variance = weights @ (outputs * outputs) - mean * mean
-    return mean, np.maximum(variance, 0.0) + MIN_SPREAD ** 2
+    return mean, np.maximum(variance, 0.0) + MIN_SPREAD**2
 
 
 class LauDBNSynthesizer(MotionSynthesizer):
@@ -104,9 +105,15 @@ class LauDBNSynthesizer(MotionSynthesizer):
 
     min_frames = 4
 
-    def __init__(self, widths: Sequence[float] = WIDTHS, start_noise: float = 0.1,
-                 max_turn_speed: float | None = 5400.0, footskate_cleanup: bool = True,
-                 footskate_root: str = DEFAULT_ROOT_MOVE, smoothing_seconds: float = SMOOTHING_SECONDS):
+    def __init__(
+        self,
+        widths: Sequence[float] = WIDTHS,
+        start_noise: float = 0.1,
+        max_turn_speed: float | None = 5400.0,
+        footskate_cleanup: bool = True,
+        footskate_root: str = DEFAULT_ROOT_MOVE,
+        smoothing_seconds: float = SMOOTHING_SECONDS,
+    ):
         self.widths = widths
         self.start_noise = start_noise
         self.max_turn_speed = max_turn_speed
@@ -159,7 +166,7 @@ class LauDBNSynthesizer(MotionSynthesizer):
                 held, kept = clip_of == clip, clip_of != clip
                 mean, variance = conditional(_weights(sq[np.ix_(held, kept)], width, dim), self.outputs_[kept])
                 residual = self.outputs_[held] - mean
-                total += float(np.sum(-0.5 * (np.log(2 * np.pi * variance) + residual ** 2 / variance)))
+                total += float(np.sum(-0.5 * (np.log(2 * np.pi * variance) + residual**2 / variance)))
             scores[width] = total / self.outputs_.size
         return scores
 

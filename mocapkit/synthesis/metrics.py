@@ -36,6 +36,7 @@ not say in which space (§7 gap 20); here, as that gap proposes:
   against the other held-out clips, the same one-clip-against-a-set distance, so a variant "within the spread
   of real clips" has a distance no larger than theirs.
 """
+
 from __future__ import annotations
 
 from collections.abc import Sequence
@@ -43,8 +44,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mocapkit.motion.layouts import find_landmarks, hip_joints
 from mocapkit.motion.container import Motion
+from mocapkit.motion.geometry import hip_line_heading, turn_about_up
+from mocapkit.motion.layouts import find_landmarks, hip_joints
 
 #: Landmarks whose joints are checked for foot skating (ankle and ball of each foot).
 FOOT_LANDMARKS = ("l_ankle", "l_foot", "r_ankle", "r_foot")
@@ -78,20 +80,9 @@ def heading_angles(motion: Motion) -> np.ndarray:
     hips = hip_joints(motion.joint_names, motion.layout_name)
     if hips is None:
         raise ValueError(f"{_label(motion)}: cannot find the left and right hip joints for the heading")
-    p = _checked(motion)
-    line = p[:, hips[1]] - p[:, hips[0]]
-    return np.arctan2(line[:, 2], line[:, 0])
-
-
-def _turn(vectors: np.ndarray, angle: np.ndarray) -> np.ndarray:
-    """Rotate ``[T, ..., 3]`` vectors about +y by ``-angle[T]`` (so that direction ``angle`` lands on +x)."""
-    c = np.cos(angle).reshape(-1, *([1] * (vectors.ndim - 2)))
-    s = np.sin(angle).reshape(c.shape)
-    out = vectors.copy()
-    x, z = vectors[..., 0], vectors[..., 2]
-    out[..., 0] = c * x + s * z
-    out[..., 2] = -s * x + c * z
-    return out
+    # hip line onto +x, as the variation feature was defined (the landmarks' "-x" is a turn by π: same distances,
+    # other rounding)
+    return hip_line_heading(_checked(motion), hips[0], hips[1], up="y", along="+x")
 
 
 def root_normalised_positions(motion: Motion) -> np.ndarray:
@@ -100,14 +91,14 @@ def root_normalised_positions(motion: Motion) -> np.ndarray:
     p = _checked(motion)
     root = p[:, _root_index(motion)]
     centred = p - np.stack([root[:, 0], np.zeros(len(p)), root[:, 2]], axis=1)[:, None]
-    return _turn(centred, heading_angles(motion))
+    return turn_about_up(centred, heading_angles(motion), up="y", along="+x")
 
 
 def pose_features(motion: Motion) -> np.ndarray:
     """float64 ``[T − 1, 6J]`` per-frame features of :func:`feature_distance`: the root-normalised positions of
     frames 1.. (metres) and the world velocities ``(p_t − p_{t−1}) · fps`` turned into frame t's heading (m/s)."""
     p = _checked(motion, min_frames=2)
-    velocity = _turn((p[1:] - p[:-1]) * float(motion.fps), heading_angles(motion)[1:])
+    velocity = turn_about_up((p[1:] - p[:-1]) * float(motion.fps), heading_angles(motion)[1:], up="y", along="+x")
     positions = root_normalised_positions(motion)[1:]
     return np.concatenate([positions.reshape(len(positions), -1), velocity.reshape(len(velocity), -1)], axis=1)
 
@@ -162,8 +153,12 @@ def variation(motions: Sequence[Motion]) -> Variation:
             distances[i, j], steps[i, j] = dtw_cost(features[i], features[j])
             distances[j, i], steps[j, i] = distances[i, j], steps[i, j]
     upper = np.triu_indices(n, 1)
-    return Variation(v=float(distances[upper].mean()), v_per_step=float((distances[upper] / steps[upper]).mean()),
-                     distances=distances, path_lengths=steps)
+    return Variation(
+        v=float(distances[upper].mean()),
+        v_per_step=float((distances[upper] / steps[upper]).mean()),
+        distances=distances,
+        path_lengths=steps,
+    )
 
 
 # ------------------------------------------------------------------------------------------ naturalness proxies
@@ -220,21 +215,27 @@ def mean_jerk(motion: Motion) -> float:
     return float(np.linalg.norm(jerk, axis=-1).mean())
 
 
-def clip_naturalness(motions: Sequence[Motion], height_threshold: float = 0.03,
-                     vertical_speed: float = 0.15) -> dict[str, np.ndarray]:
+def clip_naturalness(
+    motions: Sequence[Motion], height_threshold: float = 0.03, vertical_speed: float = 0.15
+) -> dict[str, np.ndarray]:
     """The proxies of every clip: ``{"foot_skating_cms", "bone_drift_mm", "jerk"}``, each ``[len(motions)]``
     (cm/s, mm, m/s³; the foot skating is NaN for a clip without contacts)."""
-    return {"foot_skating_cms": np.array([foot_skating(m, height_threshold, vertical_speed) for m in motions]),
-            "bone_drift_mm": np.array([bone_length_drift(m) for m in motions]),
-            "jerk": np.array([mean_jerk(m) for m in motions])}
+    return {
+        "foot_skating_cms": np.array([foot_skating(m, height_threshold, vertical_speed) for m in motions]),
+        "bone_drift_mm": np.array([bone_length_drift(m) for m in motions]),
+        "jerk": np.array([mean_jerk(m) for m in motions]),
+    }
 
 
 def proxy_means(table: dict[str, np.ndarray]) -> dict[str, float]:
     """The means over clips of a :func:`clip_naturalness` table (a clip without contacts does not count towards the
     foot skating; NaN when none has contacts)."""
     skating = table["foot_skating_cms"][np.isfinite(table["foot_skating_cms"])]
-    return {"foot_skating_cms": float(skating.mean()) if skating.size else float("nan"),
-            "bone_drift_mm": float(table["bone_drift_mm"].mean()), "jerk": float(table["jerk"].mean())}
+    return {
+        "foot_skating_cms": float(skating.mean()) if skating.size else float("nan"),
+        "bone_drift_mm": float(table["bone_drift_mm"].mean()),
+        "jerk": float(table["jerk"].mean()),
+    }
 
 
 def naturalness(motions: Sequence[Motion], height_threshold: float = 0.03, vertical_speed: float = 0.15) -> dict:
@@ -274,7 +275,7 @@ def feature_distance(features: np.ndarray, reference: np.ndarray, scale: np.ndar
     frames ``[N, F]``: ``sqrt(mean_k ((μ_k − μ'_k)² + (s_k − s'_k)²) / scale_k²)`` (dimensionless)."""
     mean, sd = _moments(features)
     ref_mean, ref_sd = _moments(reference)
-    return float(np.sqrt(np.mean(((mean - ref_mean) ** 2 + (sd - ref_sd) ** 2) / scale ** 2)))
+    return float(np.sqrt(np.mean(((mean - ref_mean) ** 2 + (sd - ref_sd) ** 2) / scale**2)))
 
 
 @dataclass
@@ -293,9 +294,12 @@ class FeatureDistances:
         """``{"feature_distance", "feature_distance_real", "feature_distance_real_sd", "within_real"}``: the mean
         distance of the variants, the mean and sd of the real clips', and the fraction of variants whose distance
         is at most the largest real clip's."""
-        return {"feature_distance": float(self.variants.mean()), "feature_distance_real": float(self.real.mean()),
-                "feature_distance_real_sd": float(self.real.std(ddof=1)) if len(self.real) > 1 else 0.0,
-                "within_real": float(within_spread(self.variants, self.real).mean())}
+        return {
+            "feature_distance": float(self.variants.mean()),
+            "feature_distance_real": float(self.real.mean()),
+            "feature_distance_real_sd": float(self.real.std(ddof=1)) if len(self.real) > 1 else 0.0,
+            "within_real": float(within_spread(self.variants, self.real).mean()),
+        }
 
 
 def feature_distances(variants: Sequence[Motion], real: Sequence[Motion]) -> FeatureDistances:
@@ -314,24 +318,51 @@ def feature_distances(variants: Sequence[Motion], real: Sequence[Motion]) -> Fea
     scale = pooled.std(axis=0)
     scale = np.maximum(scale, 1e-6 * scale.max())
     ours = np.array([feature_distance(pose_features(m), pooled, scale) for m in variants])
-    own = np.array([feature_distance(f, np.concatenate(real_features[:i] + real_features[i + 1:]), scale)
-                    for i, f in enumerate(real_features)])
+    own = np.array(
+        [
+            feature_distance(f, np.concatenate(real_features[:i] + real_features[i + 1 :]), scale)
+            for i, f in enumerate(real_features)
+        ]
+    )
     return FeatureDistances(variants=ours, real=own)
 
 
-def proxies_within(variant_proxies: dict[str, np.ndarray], real_proxies: dict[str, np.ndarray],
-                   distances: FeatureDistances) -> dict[str, np.ndarray]:
+def proxies_within(
+    variant_proxies: dict[str, np.ndarray], real_proxies: dict[str, np.ndarray], distances: FeatureDistances
+) -> dict[str, np.ndarray]:
     """Per variant, whether it lies within the real clips' spread (:func:`within_spread`, each proxy at its
     :data:`PROXY_RESOLUTION`): bool ``[n_variants]`` per :func:`clip_naturalness` proxy, ``"feature_distance"``
     (:func:`feature_distances` of the variants against the real clips) and ``"every_proxy"`` (all of them)."""
-    within = {name: within_spread(values, real_proxies[name], PROXY_RESOLUTION.get(name, 0.0))
-              for name, values in variant_proxies.items()}
+    within = {
+        name: within_spread(values, real_proxies[name], PROXY_RESOLUTION.get(name, 0.0))
+        for name, values in variant_proxies.items()
+    }
     within["feature_distance"] = within_spread(distances.variants, distances.real)
     within["every_proxy"] = np.logical_and.reduce(list(within.values()))
     return within
 
 
-__all__ = ["FOOT_LANDMARKS", "FeatureDistances", "Variation", "bone_length_drift", "clip_naturalness", "dtw_cost",
-           "feature_distance", "feature_distances", "foot_contacts", "foot_joints", "foot_skating", "heading_angles",
-           "mean_jerk", "naturalness", "pose_features", "proxies_within", "proxy_means", "root_normalised_positions",
-           "variation", "within_spread", "BONE_DRIFT_RESOLUTION_MM", "PROXY_RESOLUTION"]
+__all__ = [
+    "FOOT_LANDMARKS",
+    "FeatureDistances",
+    "Variation",
+    "bone_length_drift",
+    "clip_naturalness",
+    "dtw_cost",
+    "feature_distance",
+    "feature_distances",
+    "foot_contacts",
+    "foot_joints",
+    "foot_skating",
+    "heading_angles",
+    "mean_jerk",
+    "naturalness",
+    "pose_features",
+    "proxies_within",
+    "proxy_means",
+    "root_normalised_positions",
+    "variation",
+    "within_spread",
+    "BONE_DRIFT_RESOLUTION_MM",
+    "PROXY_RESOLUTION",
+]

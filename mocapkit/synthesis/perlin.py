@@ -28,6 +28,7 @@ posed on the reference skeleton by their AMC angles (:mod:`mocapkit.synthesis.ba
   performances) and ``frequency=2`` Hz (about the rate of the movement phases of the HDM05 motion types: a hop,
   a squat or a kick lasts 0.5–1.5 s) are our choice.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -74,8 +75,9 @@ class CopyTrainingClips(MotionSynthesizer):
     def _copies(self, n_variants: int, n_frames: int, rng: np.random.Generator) -> list[np.ndarray]:
         """The time-warped training clip of every variant (balanced draws: module docstring)."""
         order = rng.permutation(len(self.train_matrices_))
-        return [time_warp(self.train_matrices_[order[k % len(order)]], n_frames, self.angles_)
-                for k in range(n_variants)]
+        return [
+            time_warp(self.train_matrices_[order[k % len(order)]], n_frames, self.angles_) for k in range(n_variants)
+        ]
 
     def _sample_values(self, n_variants: int, n_frames: int, rng: np.random.Generator) -> list[dict[str, np.ndarray]]:
         return [dof_values(m, self.layout_) for m in self._copies(n_variants, n_frames, rng)]
@@ -97,8 +99,14 @@ class PerlinNoiseSynthesizer(CopyTrainingClips):
     frame / radians per frame for the root's ``dx, dz, dyaw``, ASF units for its height, radians otherwise).
     """
 
-    def __init__(self, amplitude: float = 1.0, frequency: float = 2.0, footskate_cleanup: bool = True,
-                 footskate_root: str = DEFAULT_ROOT_MOVE, smoothing_seconds: float = SMOOTHING_SECONDS):
+    def __init__(
+        self,
+        amplitude: float = 1.0,
+        frequency: float = 2.0,
+        footskate_cleanup: bool = True,
+        footskate_root: str = DEFAULT_ROOT_MOVE,
+        smoothing_seconds: float = SMOOTHING_SECONDS,
+    ):
         self.amplitude = amplitude
         self.frequency = frequency
         self.footskate_cleanup = footskate_cleanup
@@ -122,7 +130,7 @@ class PerlinNoiseSynthesizer(CopyTrainingClips):
         self.sigma_ = within_class_sd([self._encoded(m)[0] for m in warped])
 
     def _sample_values(self, n_variants: int, n_frames: int, rng: np.random.Generator) -> list[dict[str, np.ndarray]]:
-        lattice = np.arange(n_frames) / self.fps_ * float(self.frequency)          # [n_frames] lattice units
+        lattice = np.arange(n_frames) / self.fps_ * float(self.frequency)  # [n_frames] lattice units
         channels = len(self.sigma_)
         points = int(np.floor(lattice[-1])) + 3
         out = []

@@ -30,6 +30,7 @@ the previous frame; then unwrapped), so decoded AMC curves have no 360° jumps.
 
 :func:`partitions` splits a skeleton into the five partitions of Zhou Fig. 4.1 (§3.2).
 """
+
 from __future__ import annotations
 
 import itertools
@@ -41,6 +42,7 @@ from scipy.spatial.transform import Rotation
 
 from mocapkit.datasets.formats.asf_amc import AsfSkeleton
 from mocapkit.motion.container import Motion
+from mocapkit.motion.geometry import direction_yaw
 from mocapkit.synthesis.clips import DofLayout, SynthesisInputError, clip_label, clip_segment, dof_matrix, resample_clip
 
 ROOT_FEATURES = 7
@@ -75,10 +77,15 @@ class FeatureClip:
         """The inverse of :meth:`flat` for the bones ``bones``."""
         flat = np.asarray(flat, dtype=np.float64)
         if flat.ndim != 2 or flat.shape[1] != ROOT_FEATURES + 3 * len(bones):
-            raise ValueError(f"flat features must be [frames, {ROOT_FEATURES + 3 * len(bones)}] for {len(bones)} "
-                             f"bones, got {list(flat.shape)}")
-        return cls(root=flat[:, :ROOT_FEATURES].copy(),
-                   joints=flat[:, ROOT_FEATURES:].reshape(len(flat), len(bones), 3).copy(), bones=tuple(bones))
+            raise ValueError(
+                f"flat features must be [frames, {ROOT_FEATURES + 3 * len(bones)}] for {len(bones)} "
+                f"bones, got {list(flat.shape)}"
+            )
+        return cls(
+            root=flat[:, :ROOT_FEATURES].copy(),
+            joints=flat[:, ROOT_FEATURES:].reshape(len(flat), len(bones), 3).copy(),
+            bones=tuple(bones),
+        )
 
 
 # --------------------------------------------------------------------------- rotations
@@ -182,7 +189,7 @@ def euler_near(rotation: Rotation, axes: str, reference: np.ndarray) -> np.ndarr
     if missing:
         use_second = np.sum(_wrap(second[:, k:]) ** 2, axis=1) < np.sum(_wrap(first[:, k:]) ** 2, axis=1)
     else:
-        use_second = (np.sum(_wrap(second - reference) ** 2, axis=1) < np.sum(_wrap(first - reference) ** 2, axis=1))
+        use_second = np.sum(_wrap(second - reference) ** 2, axis=1) < np.sum(_wrap(first - reference) ** 2, axis=1)
     angles = np.where(use_second[:, None], second, first)[:, :k]
     return reference + _wrap(angles - reference)
 
@@ -205,9 +212,9 @@ def project_expmap(rotvec: np.ndarray, axes: str) -> np.ndarray:
 
 
 def heading(rotation: Rotation) -> np.ndarray:
-    """float64 ``[T]`` radians: the yaw about ``+y`` of each rotation's forward axis ``R·e_z``."""
-    forward = rotation.apply(np.array([0.0, 0.0, 1.0]))
-    return np.arctan2(forward[:, 0], forward[:, 2])
+    """float64 ``[T]`` radians: the yaw about ``+y`` of each rotation's forward axis ``R·e_z``
+    (:func:`~mocapkit.motion.geometry.direction_yaw`, the convention of a body facing ``+z``)."""
+    return direction_yaw(rotation.apply(np.array([0.0, 0.0, 1.0])))
 
 
 def yaw_rotation(yaw: np.ndarray) -> Rotation:
@@ -303,8 +310,9 @@ class ContinuousPieces:
     unused: list[tuple[str, int, int]]
 
 
-def continuous_pieces(clips: list[Motion], fps: float, min_frames: int, max_turn_speed: float | None = 5400.0,
-                      what: str = "fit") -> ContinuousPieces:
+def continuous_pieces(
+    clips: list[Motion], fps: float, min_frames: int, max_turn_speed: float | None = 5400.0, what: str = "fit"
+) -> ContinuousPieces:
     """The clips cut at their :func:`angle_flips` and resampled to ``fps``
     (:func:`~mocapkit.synthesis.clips.resample_clip`), so that a model of successive frames never learns a flip as
     motion; pieces of fewer than ``min_frames`` frames at ``fps`` are left out. One warning per clip with flips
@@ -328,9 +336,11 @@ def continuous_pieces(clips: list[Motion], fps: float, min_frames: int, max_turn
                 out.unused.append((clip_label(clip), start, stop))
         if flips:
             turns = ", ".join(f"{bone} {degrees:.0f}° at frame {frame}" for frame, bone, degrees in flips)
-            warnings.warn(f"{what}: {clip_label(clip)}: joint-angle flips ({turns}: changes of representation, not "
-                          "motion); the clip is cut there" + (f", frames {', '.join(unused)} too short to use"
-                                                              if unused else ""), stacklevel=3)
+            warnings.warn(
+                f"{what}: {clip_label(clip)}: joint-angle flips ({turns}: changes of representation, not "
+                "motion); the clip is cut there" + (f", frames {', '.join(unused)} too short to use" if unused else ""),
+                stacklevel=3,
+            )
     return out
 
 
@@ -348,8 +358,12 @@ def root_start(motion: Motion) -> tuple[tuple[float, float], float]:
     return (float(position[0]), float(position[2])), float(heading(rotation)[0])
 
 
-def decode(features: FeatureClip | np.ndarray, skeleton: AsfSkeleton, start_xz: tuple[float, float] = (0.0, 0.0),
-           start_yaw: float = 0.0) -> dict[str, np.ndarray]:
+def decode(
+    features: FeatureClip | np.ndarray,
+    skeleton: AsfSkeleton,
+    start_xz: tuple[float, float] = (0.0, 0.0),
+    start_yaw: float = 0.0,
+) -> dict[str, np.ndarray]:
     """AMC values from features: bone → float64 ``[T, len(dof)]`` (degrees; root translation in ASF units), ready
     for :func:`~mocapkit.datasets.formats.asf_amc.amc_motion` or ``write_amc``.
 
@@ -365,8 +379,10 @@ def decode(features: FeatureClip | np.ndarray, skeleton: AsfSkeleton, start_xz: 
     if isinstance(features, np.ndarray):
         features = FeatureClip.from_flat(features, layout.bones[1:])
     if tuple(features.bones) != layout.bones[1:]:
-        raise ValueError(f"the features are for bones {list(features.bones)[:4]}..., the skeleton "
-                         f"{skeleton.source or skeleton.name} has {list(layout.bones[1:])[:4]}...")
+        raise ValueError(
+            f"the features are for bones {list(features.bones)[:4]}..., the skeleton "
+            f"{skeleton.source or skeleton.name} has {list(layout.bones[1:])[:4]}..."
+        )
     root = np.asarray(features.root, dtype=np.float64)
     T = len(root)
     yaw = start_yaw + np.cumsum(root[:, 2])
@@ -389,8 +405,13 @@ def decode(features: FeatureClip | np.ndarray, skeleton: AsfSkeleton, start_xz: 
     return values
 
 
-def decode_flat(flat: np.ndarray, layout: DofLayout, skeleton: AsfSkeleton, start_xz: tuple[float, float] = (0.0, 0.0),
-                start_yaw: float = 0.0) -> dict[str, np.ndarray]:
+def decode_flat(
+    flat: np.ndarray,
+    layout: DofLayout,
+    skeleton: AsfSkeleton,
+    start_xz: tuple[float, float] = (0.0, 0.0),
+    start_yaw: float = 0.0,
+) -> dict[str, np.ndarray]:
     """:func:`decode` of a flat ``[T, 7 + 3B]`` matrix whose bones are ``layout.bones[1:]``; refuses a layout that
     is not the skeleton's."""
     if DofLayout.of(skeleton) != layout:
@@ -458,16 +479,20 @@ def partitions(skeleton: AsfSkeleton) -> dict[str, tuple[str, ...]]:
                 reaches_feet = min(rest[m][1] for m in members) <= foot_level
                 name = ("L" if ends.mean() > 0 else "R") + ("L" if reaches_feet else "A")
                 if name in limbs:
-                    raise SynthesisInputError(f"{skeleton.source or skeleton.name}: two {name} limbs ({limbs[name][0]}"
-                                              f", {child}); cannot split it into Zhou's five partitions")
+                    raise SynthesisInputError(
+                        f"{skeleton.source or skeleton.name}: two {name} limbs ({limbs[name][0]}"
+                        f", {child}); cannot split it into Zhou's five partitions"
+                    )
                 limbs[name] = members
             else:
                 torso.append(child)
                 frontier.append(child)
     missing = [p for p in PARTITION_NAMES[:4] if p not in limbs]
     if missing:
-        raise SynthesisInputError(f"{skeleton.source or skeleton.name}: no {', '.join(missing)} limb found; cannot "
-                                  f"split it into Zhou's five partitions (arms, legs, torso)")
+        raise SynthesisInputError(
+            f"{skeleton.source or skeleton.name}: no {', '.join(missing)} limb found; cannot "
+            f"split it into Zhou's five partitions (arms, legs, torso)"
+        )
     out = {name: tuple(b for b in limbs[name] if b in has_dofs) for name in PARTITION_NAMES[:4]}
     out["TH"] = tuple(b for b in torso if b in has_dofs)
     return out

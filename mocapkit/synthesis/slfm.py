@@ -34,6 +34,7 @@ prediction costs ``O(Q² M²)`` flops, batched over queries (the synthesis varia
 **The synthesiser** (:class:`SLFMSynthesizer`) builds one such model per joint and per case of eq. 4.2 (§3.3,
 §3.4, §3.6); see its docstring for the inputs, the root and the sampling loop.
 """
+
 from __future__ import annotations
 
 import math
@@ -47,7 +48,17 @@ from scipy.spatial.transform import Rotation
 from mocapkit.datasets.formats.asf_amc import AsfSkeleton
 from mocapkit.motion.container import Motion
 from mocapkit.synthesis.base import MotionSynthesizer
-from mocapkit.synthesis.clips import SMOOTHING_SECONDS, SynthesisInputError, check_flag, clip_label, dof_values, model_frames, resample_clip, rotation_columns, time_warp
+from mocapkit.synthesis.clips import (
+    SMOOTHING_SECONDS,
+    SynthesisInputError,
+    check_flag,
+    clip_label,
+    dof_values,
+    model_frames,
+    resample_clip,
+    rotation_columns,
+    time_warp,
+)
 from mocapkit.synthesis.footskate import DEFAULT_ROOT_MOVE
 from mocapkit.synthesis.representation import (
     ROOT_FEATURES,
@@ -114,8 +125,11 @@ def _gpytorch_model(x, y, n_outputs: int, min_noise: float):
     class LMCExactGP(gpytorch.models.ExactGP):
         def __init__(self):
             likelihood = gpytorch.likelihoods.MultitaskGaussianLikelihood(
-                num_tasks=n_outputs, rank=0, has_global_noise=False,
-                noise_constraint=gpytorch.constraints.GreaterThan(min_noise))
+                num_tasks=n_outputs,
+                rank=0,
+                has_global_noise=False,
+                noise_constraint=gpytorch.constraints.GreaterThan(min_noise),
+            )
             super().__init__(x, y, likelihood)
             self.mean_module = gpytorch.means.MultitaskMean(gpytorch.means.ZeroMean(), num_tasks=n_outputs)
             base = [gpytorch.kernels.RBFKernel() + gpytorch.kernels.ConstantKernel() for _ in range(n_outputs)]
@@ -126,8 +140,9 @@ def _gpytorch_model(x, y, n_outputs: int, min_noise: float):
                 index.raw_var.data.fill_(-1e4)  # softplus(-1e4) == 0: B_p = phi_p phi_pᵀ exactly (SLFM, not B + diag)
 
         def forward(self, inputs):
-            return gpytorch.distributions.MultitaskMultivariateNormal(self.mean_module(inputs),
-                                                                      self.covar_module(inputs))
+            return gpytorch.distributions.MultitaskMultivariateNormal(
+                self.mean_module(inputs), self.covar_module(inputs)
+            )
 
     return LMCExactGP().to(torch.float64)
 
@@ -139,12 +154,17 @@ def _read_params(model) -> SLFMParams:
         lengthscale.append(float(rbf.lengthscale.detach().reshape(-1)[0]))
         bias.append(float(constant.constant.detach().reshape(-1)[0]))
         mixing.append(multitask.task_covar_module.covar_factor.detach().cpu().numpy()[:, 0])
-    return SLFMParams(lengthscale=np.array(lengthscale), bias=np.array(bias), mixing=np.stack(mixing, axis=1),
-                      noise=model.likelihood.task_noises.detach().cpu().numpy().astype(np.float64).reshape(-1))
+    return SLFMParams(
+        lengthscale=np.array(lengthscale),
+        bias=np.array(bias),
+        mixing=np.stack(mixing, axis=1),
+        noise=model.likelihood.task_noises.detach().cpu().numpy().astype(np.float64).reshape(-1),
+    )
 
 
-def fit_slfm_hyperparameters(X: np.ndarray, Y: np.ndarray, max_iter: int = 50, min_noise: float = 1e-4,
-                             seed: int = 0) -> SLFMParams:
+def fit_slfm_hyperparameters(
+    X: np.ndarray, Y: np.ndarray, max_iter: int = 50, min_noise: float = 1e-4, seed: int = 0
+) -> SLFMParams:
     """Maximise the exact SLFM log marginal likelihood (GPyTorch, L-BFGS) on standardised data.
 
     Args:
@@ -250,36 +270,37 @@ class SLFMPosterior:
             except np.linalg.LinAlgError:
                 if attempt == 5:
                     raise
-        Linv = np.linalg.inv(L)                                                # [Q, M, M]
-        A = Linv @ latent_kernels(params, self.Z, X)                           # [Q, M, N]: a_p(X)
+        Linv = np.linalg.inv(L)  # [Q, M, M]
+        A = Linv @ latent_kernels(params, self.Z, X)  # [Q, M, N]: a_p(X)
         phi, inv_noise = params.mixing, 1.0 / params.noise
-        coupling = phi.T @ (inv_noise[:, None] * phi)                           # [Q, Q]: sum_i phi_ip phi_iq / s_i²
+        coupling = phi.T @ (inv_noise[:, None] * phi)  # [Q, Q]: sum_i phi_ip phi_iq / s_i²
         precision = np.einsum("pq,pmn,qkn->pmqk", coupling, A, A).reshape(Q * M, Q * M) + np.eye(Q * M)
         rhs = np.einsum("pmn,np->pm", A, np.asarray(Y, dtype=np.float64) @ (inv_noise[:, None] * phi)).reshape(-1)
         chol = np.linalg.cholesky(precision)
         mean_w = np.linalg.solve(chol.T, np.linalg.solve(chol, rhs)).reshape(Q, M)
         cov_w = np.linalg.inv(precision)
-        self._r = np.einsum("pmk,pm->pk", Linv, mean_w)                       # [Q, M]: L_p⁻ᵀ m_w,p
+        self._r = np.einsum("pmk,pm->pk", Linv, mean_w)  # [Q, M]: L_p⁻ᵀ m_w,p
         G = (cov_w - np.eye(Q * M)).reshape(Q, M, Q, M)
-        H = np.einsum("pmk,pmqn,qnl->pkql", Linv, G, Linv)                     # [Q, M, Q, M]
+        H = np.einsum("pmk,pmqn,qnl->pkql", Linv, G, Linv)  # [Q, M, Q, M]
         self._H = H.reshape(Q, M, Q * M)
-        self._prior = np.einsum("ip,jp,p->ij", phi, phi, 1.0 + params.bias)   # [D, D]: Cov f(x) under the prior
+        self._prior = np.einsum("ip,jp,p->ij", phi, phi, 1.0 + params.bias)  # [D, D]: Cov f(x) under the prior
 
     def predict(self, Xstar: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Mean float64 ``[V, D]`` and covariance ``[V, D, D]`` of the latent ``f`` at ``Xstar`` ``[V, d]`` (no
         observation noise: add ``diag(params.noise)`` for ``y``)."""
         p = self.params
         Q, M = p.n_latent, len(self.Z)
-        K = latent_kernels(p, Xstar, self.Z)                                   # [Q, V, M]
-        mean = np.sum(K * self._r[:, None, :], axis=2).T @ p.mixing.T          # [V, D]
-        HK = np.matmul(K, self._H).reshape(Q, len(Xstar), Q, M)                # [p, V, q, M]: k_pᵀ H_pq
+        K = latent_kernels(p, Xstar, self.Z)  # [Q, V, M]
+        mean = np.sum(K * self._r[:, None, :], axis=2).T @ p.mixing.T  # [V, D]
+        HK = np.matmul(K, self._H).reshape(Q, len(Xstar), Q, M)  # [p, V, q, M]: k_pᵀ H_pq
         S = np.sum(HK * K.transpose(1, 0, 2)[None], axis=3).transpose(1, 0, 2)  # [V, p, q]: k_p H_pq k_q
         cov = self._prior[None] + p.mixing[None] @ S @ p.mixing.T
         return mean, cov
 
 
-def gaussian_samples(mean: np.ndarray, cov: np.ndarray, rng: np.random.Generator,
-                     z: np.ndarray | None = None) -> np.ndarray:
+def gaussian_samples(
+    mean: np.ndarray, cov: np.ndarray, rng: np.random.Generator, z: np.ndarray | None = None
+) -> np.ndarray:
     """One draw per row from ``N(mean [V, D], cov [V, D, D])`` (negative eigenvalues from round-off clipped to 0),
     from the standard normals ``z`` ``[V, D]`` when given (else drawn from ``rng``)."""
     values, vectors = np.linalg.eigh(0.5 * (cov + np.swapaxes(cov, 1, 2)))
@@ -307,8 +328,15 @@ class SLFMRegressor:
     that constant with zero variance.
     """
 
-    def __init__(self, n_fit: int = 200, n_inducing: int = 64, max_iter: int = 50, mean_function: str = "linear",
-                 ridge: float = 1.0, min_noise: float = 1e-4):
+    def __init__(
+        self,
+        n_fit: int = 200,
+        n_inducing: int = 64,
+        max_iter: int = 50,
+        mean_function: str = "linear",
+        ridge: float = 1.0,
+        min_noise: float = 1e-4,
+    ):
         self.n_fit = n_fit
         self.n_inducing = n_inducing
         self.max_iter = max_iter
@@ -342,8 +370,13 @@ class SLFMRegressor:
             return self
         residual = residual / self.r_scale_
         subset = rng.permutation(len(Xs))[: self.n_fit] if len(Xs) > self.n_fit else np.arange(len(Xs))
-        params = fit_slfm_hyperparameters(Xs[subset], residual[subset], max_iter=self.max_iter,
-                                          min_noise=self.min_noise, seed=int(rng.integers(2**31)))
+        params = fit_slfm_hyperparameters(
+            Xs[subset],
+            residual[subset],
+            max_iter=self.max_iter,
+            min_noise=self.min_noise,
+            seed=int(rng.integers(2**31)),
+        )
         Z = Xs[farthest_points(Xs, self.n_inducing, rng)]
         self.posterior_ = SLFMPosterior(params, Xs, residual, Z)
         return self
@@ -418,7 +451,7 @@ class StackedSLFM:
             self.prior[g, out[:, None], out[None, :]] = post._prior
             self.noise[g, out] = post.params.noise
         self.H = self.H.reshape(G, Q, M, Q * M)
-        self.z_sq = np.sum(self.Z**2, axis=2)[:, None, :]                       # [G, 1, M]
+        self.z_sq = np.sum(self.Z**2, axis=2)[:, None, :]  # [G, 1, M]
 
     def predict(self, X: np.ndarray, noise: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """Mean ``[G, V, D]`` and covariance ``[G, V, D, D]`` of every model at its inputs ``X`` ``[G, V, d]``
@@ -427,18 +460,23 @@ class StackedSLFM:
         Q, M = self.r.shape[1:]
         Xs = np.clip((X - self.x_mean[:, None]) / self.x_scale[:, None], self.x_low[:, None], self.x_high[:, None])
         sq = (np.sum(Xs**2, axis=2)[:, :, None] + self.z_sq - 2.0 * Xs @ np.swapaxes(self.Z, 1, 2)).clip(min=0.0)
-        K = np.exp(-sq[:, None] / (2.0 * self.lengthscale**2)) + self.bias            # [G, Q, V, M]
+        K = np.exp(-sq[:, None] / (2.0 * self.lengthscale**2)) + self.bias  # [G, Q, V, M]
         latent_mean = np.einsum("gqvm,gqm->gvq", K, self.r)
-        mean = self.y_mean[:, None] + Xs @ self.weights + self.scale[:, None] * (latent_mean @ np.swapaxes(self.mixing, 1, 2))
-        HK = np.matmul(K, self.H).reshape(G, Q, V, Q, M)                               # [g, p, V, q, M]
+        mean = (
+            self.y_mean[:, None]
+            + Xs @ self.weights
+            + self.scale[:, None] * (latent_mean @ np.swapaxes(self.mixing, 1, 2))
+        )
+        HK = np.matmul(K, self.H).reshape(G, Q, V, Q, M)  # [g, p, V, q, M]
         S = np.einsum("gpvqm,gqvm->gvpq", HK, K)
         cov = self.prior[:, None] + self.mixing[:, None] @ S @ np.swapaxes(self.mixing, 1, 2)[:, None]
         if noise:
             cov = cov + self.noise[:, None, :, None] * np.eye(cov.shape[-1])
         return mean, cov * self.scale[:, None, :, None] * self.scale[:, None, None, :]
 
-    def sample(self, X: np.ndarray, rng: np.random.Generator, noise: bool = True,
-               z: np.ndarray | None = None) -> np.ndarray:
+    def sample(
+        self, X: np.ndarray, rng: np.random.Generator, noise: bool = True, z: np.ndarray | None = None
+    ) -> np.ndarray:
         """Draws ``[G, V, D]`` given inputs ``X`` ``[G, V, d]`` (zero-padded), from standard normals ``z``
         ``[G, V, D]`` when given."""
         mean, cov = self.predict(X, noise=noise)
@@ -491,7 +529,7 @@ class RootFrameKinematics:
         ``joints`` ``[N, B, 3]`` (radians)."""
         N, B = joints.shape[:2]
         M = Rotation.from_rotvec(joints.reshape(-1, 3)).as_matrix().reshape(N, B, 3, 3)
-        local = self.frames[None] @ M @ np.swapaxes(self.frames, 1, 2)[None]     # C·M·C⁻¹
+        local = self.frames[None] @ M @ np.swapaxes(self.frames, 1, 2)[None]  # C·M·C⁻¹
         J = len(self.parents)
         glob = np.empty((N, J, 3, 3))
         pos = np.empty((N, J, 3))
@@ -558,18 +596,24 @@ class _CaseSampler:
         self.slots = np.concatenate([g * D + np.arange(len(m.outputs)) for g, m in enumerate(models)])
         self.columns = np.concatenate([m.outputs for m in models])
 
-    def draw(self, context: np.ndarray, rng: np.random.Generator, noise: bool,
-             z: np.ndarray | None = None, output_margin: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def draw(
+        self,
+        context: np.ndarray,
+        rng: np.random.Generator,
+        noise: bool,
+        z: np.ndarray | None = None,
+        output_margin: float | None = None,
+    ) -> tuple[np.ndarray, np.ndarray]:
         """The flat-feature columns and their draws ``[V, n]`` given a context ``[V, width + 1]`` (from standard
         normals ``z`` ``[G, V, D]`` when given), clipped to each output's training range widened by
         ``output_margin`` times that range on both sides when given."""
-        X = np.swapaxes(context[:, self.gather], 0, 1)                          # [G, V, d]
-        draws = self.stack.sample(X, rng, noise=noise, z=z)                     # [G, V, D]
+        X = np.swapaxes(context[:, self.gather], 0, 1)  # [G, V, d]
+        draws = self.stack.sample(X, rng, noise=noise, z=z)  # [G, V, D]
         if output_margin is not None:
             low, high = self.stack.y_low[:, None], self.stack.y_high[:, None]
             span = np.where(np.isfinite(high - low), high - low, 0.0)
             draws = np.clip(draws, low - output_margin * span, high + output_margin * span)
-        draws = np.swapaxes(draws, 0, 1)                                        # [V, G, D]
+        draws = np.swapaxes(draws, 0, 1)  # [V, G, D]
         return self.columns, draws.reshape(len(context), -1)[:, self.slots]
 
 
@@ -688,14 +732,27 @@ class SLFMSynthesizer(MotionSynthesizer):
     noise_scales = NOISE_SCALES
     auto_variants = AUTO_VARIANTS
 
-    def __init__(self, frame_stride: int = 1, n_fit: int = 100, n_inducing: int = 32, max_iter: int = 30,
-                 sample_noise: bool = True, noise_correlation: float = 0.9, dynamic_feature: str = "position",
-                 footskate_cleanup: bool = True, footskate_root: str = DEFAULT_ROOT_MOVE,
-                 smoothing_seconds: float = SMOOTHING_SECONDS, model_fps: float | None = 30.0,
-                 noise_scale: float | str = "auto",
-                 target_variation: float = 1.28, output_margin: float | None = 0.0,
-                 max_turn_speed: float | None = 5400.0, cross_partition: bool = True, random_state: int | None = 0,
-                 verbose: bool = False):
+    def __init__(
+        self,
+        frame_stride: int = 1,
+        n_fit: int = 100,
+        n_inducing: int = 32,
+        max_iter: int = 30,
+        sample_noise: bool = True,
+        noise_correlation: float = 0.9,
+        dynamic_feature: str = "position",
+        footskate_cleanup: bool = True,
+        footskate_root: str = DEFAULT_ROOT_MOVE,
+        smoothing_seconds: float = SMOOTHING_SECONDS,
+        model_fps: float | None = 30.0,
+        noise_scale: float | str = "auto",
+        target_variation: float = 1.28,
+        output_margin: float | None = 0.0,
+        max_turn_speed: float | None = 5400.0,
+        cross_partition: bool = True,
+        random_state: int | None = 0,
+        verbose: bool = False,
+    ):
         self.frame_stride = frame_stride
         self.n_fit = n_fit
         self.n_inducing = n_inducing
@@ -717,8 +774,9 @@ class SLFMSynthesizer(MotionSynthesizer):
 
     # ------------------------------------------------------------------ features
 
-    def _dynamic(self, flat_now: np.ndarray, flat_before: np.ndarray, pos_now: np.ndarray,
-                 pos_before: np.ndarray) -> np.ndarray:
+    def _dynamic(
+        self, flat_now: np.ndarray, flat_before: np.ndarray, pos_now: np.ndarray, pos_before: np.ndarray
+    ) -> np.ndarray:
         """Dynamic features ``[..., Fd]`` of frames ``flat_now`` given the frames before (flat ``[..., F]``, bone
         positions ``[..., B, 3]``); column layout in :meth:`_columns`."""
         if self.dynamic_feature == "position":
@@ -761,10 +819,24 @@ class SLFMSynthesizer(MotionSynthesizer):
                     same_frame = np.concatenate([self._columns(m)[0] for m in ancestors[node]])
                     out.append(_NodeModel(node, "t1", out_cols, [("flat", 0, same_frame)]))
                 out.append(_NodeModel(node, "t2", out_cols, [("flat", 1, scf_cols)]))
-                out.append(_NodeModel(node, "t3", out_cols, [("flat", 1, scf_cols), ("flat", 2, scf_cols),
-                                                             ("dynamic", 1, dyn_cols)]))
-                out.append(_NodeModel(node, "t>3", out_cols, [("flat", 1, scf_cols), ("flat", 2, scf_cols),
-                                                              ("dynamic", 1, dyn_cols), ("dynamic", 2, dyn_cols)]))
+                out.append(
+                    _NodeModel(
+                        node, "t3", out_cols, [("flat", 1, scf_cols), ("flat", 2, scf_cols), ("dynamic", 1, dyn_cols)]
+                    )
+                )
+                out.append(
+                    _NodeModel(
+                        node,
+                        "t>3",
+                        out_cols,
+                        [
+                            ("flat", 1, scf_cols),
+                            ("flat", 2, scf_cols),
+                            ("dynamic", 1, dyn_cols),
+                            ("dynamic", 2, dyn_cols),
+                        ],
+                    )
+                )
         return out
 
     # ------------------------------------------------------------------ fit
@@ -783,14 +855,17 @@ class SLFMSynthesizer(MotionSynthesizer):
         resampled = [resample_clip(clip, self.model_fps_) for clip in clips]
         short = [c for c in resampled if c.num_frames < self.min_frames]
         if short:
-            raise SynthesisInputError(f"SLFMSynthesizer.fit: {clip_label(short[0])} has {short[0].num_frames} frames "
-                                      f"at model_fps={self.model_fps_:g}; the second-order model needs "
-                                      f"{self.min_frames} (raise model_fps)")
+            raise SynthesisInputError(
+                f"SLFMSynthesizer.fit: {clip_label(short[0])} has {short[0].num_frames} frames "
+                f"at model_fps={self.model_fps_:g}; the second-order model needs "
+                f"{self.min_frames} (raise model_fps)"
+            )
         rng = np.random.default_rng(self.random_state)
         self.bones_ = tuple(self.layout_.bones[1:])
         self.partitions_ = partitions(self.skeleton_)
-        cut = continuous_pieces(clips, self.model_fps_, self.min_frames, self.max_turn_speed,
-                                what="SLFMSynthesizer.fit")
+        cut = continuous_pieces(
+            clips, self.model_fps_, self.min_frames, self.max_turn_speed, what="SLFMSynthesizer.fit"
+        )
         self.angle_flips_, self.unused_pieces_ = cut.flips, cut.unused
         states, first = [], []
         for piece, starts_clip in zip(cut.pieces, cut.starts_clip):
@@ -801,8 +876,10 @@ class SLFMSynthesizer(MotionSynthesizer):
             if starts_clip:
                 first.append(states[-1][0][0])
         if not first:
-            raise SynthesisInputError("SLFMSynthesizer.fit: every clip's first frames are cut off by angle flips "
-                                      "(see the warnings); no first-frame statistics")
+            raise SynthesisInputError(
+                "SLFMSynthesizer.fit: every clip's first frames are cut off by angle flips "
+                "(see the warnings); no first-frame statistics"
+            )
         first = np.stack(first)
         self.first_frame_mean_ = first.mean(axis=0)
         self.first_frame_std_ = first.std(axis=0)
@@ -815,32 +892,47 @@ class SLFMSynthesizer(MotionSynthesizer):
         self._set_noise_scale(clips)
         self.fit_seconds_ = time.perf_counter() - start
 
-    def _training_pairs(self, model: _NodeModel, states: list[tuple[np.ndarray, np.ndarray]]
-                        ) -> tuple[np.ndarray, np.ndarray]:
+    def _training_pairs(
+        self, model: _NodeModel, states: list[tuple[np.ndarray, np.ndarray]]
+    ) -> tuple[np.ndarray, np.ndarray]:
         X, Y = [], []
         for flat, dynamic in states:
             T = len(flat)
-            frames = {"t1": np.arange(0, T, self.frame_stride), "t2": np.arange(1, T, self.frame_stride), "t3": np.arange(2, T, self.frame_stride),
-                      "t>3": np.arange(3, T, self.frame_stride)}[model.case]
+            frames = {
+                "t1": np.arange(0, T, self.frame_stride),
+                "t2": np.arange(1, T, self.frame_stride),
+                "t3": np.arange(2, T, self.frame_stride),
+                "t>3": np.arange(3, T, self.frame_stride),
+            }[model.case]
             X.append(model.features(flat[None], dynamic[None], frames))
             Y.append(flat[frames][:, model.outputs])
         return np.concatenate(X), np.concatenate(Y)
 
-    def _fit_models(self, pairs: list[tuple[np.ndarray, np.ndarray]], states: list[tuple[np.ndarray, np.ndarray]],
-                    rng: np.random.Generator) -> None:
+    def _fit_models(
+        self,
+        pairs: list[tuple[np.ndarray, np.ndarray]],
+        states: list[tuple[np.ndarray, np.ndarray]],
+        rng: np.random.Generator,
+    ) -> None:
         """Fit every model on its ``(X, Y)`` pairs and stack them into the samplers of each case."""
         for n, (model, (X, Y)) in enumerate(zip(self.models_, pairs)):
             tick = time.perf_counter()
-            model.regressor = SLFMRegressor(n_fit=self.n_fit, n_inducing=self.n_inducing, max_iter=self.max_iter
-                                            ).fit(X, Y, rng)
+            model.regressor = SLFMRegressor(n_fit=self.n_fit, n_inducing=self.n_inducing, max_iter=self.max_iter).fit(
+                X, Y, rng
+            )
             if self.verbose:
-                print(f"[slfm] model {n + 1}/{len(self.models_)}: {model.node} {model.case}, {len(X)} pairs, "
-                      f"{X.shape[1]}-D inputs, {time.perf_counter() - tick:.2f} s", file=sys.stderr, flush=True)
+                print(
+                    f"[slfm] model {n + 1}/{len(self.models_)}: {model.node} {model.case}, {len(X)} pairs, "
+                    f"{X.shape[1]}-D inputs, {time.perf_counter() - tick:.2f} s",
+                    file=sys.stderr,
+                    flush=True,
+                )
         width = {("flat", b): len(self.first_frame_mean_) for b in (0, 1, 2)}
         width.update({("dynamic", b): states[0][1].shape[1] for b in (1, 2)})
         self.samplers_ = {"t1": [_CaseSampler([m], width) for m in self.models_ if m.case == "t1"]}
-        self.samplers_.update({case: _CaseSampler([m for m in self.models_ if m.case == case], width)
-                               for case in CASES[1:]})
+        self.samplers_.update(
+            {case: _CaseSampler([m for m in self.models_ if m.case == case], width) for case in CASES[1:]}
+        )
 
     # ------------------------------------------------------------------ sample
 
@@ -869,12 +961,12 @@ class SLFMSynthesizer(MotionSynthesizer):
         V, T = flat.shape[:2]
         positions = np.zeros((V, T, len(self.bones_), 3))
         positions[:, 0] = RootFrameKinematics(self.skeleton_, self.bones_).positions(
-            flat[:, 0, ROOT_FEATURES:].reshape(V, -1, 3))
+            flat[:, 0, ROOT_FEATURES:].reshape(V, -1, 3)
+        )
         width = self._dynamic(flat[:, 0], flat[:, 0], positions[:, 0], positions[:, 0]).shape[1]
         return positions, np.zeros((V, T, width))
 
-    def _rollout(self, flat: np.ndarray, positions: np.ndarray, dynamic: np.ndarray, rng: np.random.Generator
-                 ) -> None:
+    def _rollout(self, flat: np.ndarray, positions: np.ndarray, dynamic: np.ndarray, rng: np.random.Generator) -> None:
         """Draw frames 1 … ``T-1`` of ``flat [V, T, F]`` (and their ``positions``, ``dynamic``) in place, each
         from the model of its case given the frames before (the sampling loop of the class docstring)."""
         kinematics = RootFrameKinematics(self.skeleton_, self.bones_)
@@ -886,8 +978,9 @@ class SLFMSynthesizer(MotionSynthesizer):
             eps = rng.standard_normal((G, V, D))
             # from frame 4 on, AR(1) standard normals: each stays N(0, 1), successive frames' draws correlate by rho
             z = rho * z + math.sqrt(1.0 - rho * rho) * eps if k > 3 and rho > 0 and z is not None else eps
-            columns, draws = sampler.draw(_context(flat, dynamic, k), rng, self.sample_noise, tau * z,
-                                          self.output_margin)
+            columns, draws = sampler.draw(
+                _context(flat, dynamic, k), rng, self.sample_noise, tau * z, self.output_margin
+            )
             flat[:, k, columns] = draws
             self._project(flat[:, k])
             positions[:, k] = kinematics.positions(flat[:, k, ROOT_FEATURES:].reshape(V, -1, 3))
@@ -895,31 +988,41 @@ class SLFMSynthesizer(MotionSynthesizer):
 
     def _sample_values(self, n_variants: int, n_frames: int, rng: np.random.Generator) -> list[dict[str, np.ndarray]]:
         V, F = n_variants, ROOT_FEATURES + 3 * len(self.bones_)
-        T = max(model_frames(n_frames, self.fps_, self.model_fps_), 2)     # frames at the model's rate
+        T = max(model_frames(n_frames, self.fps_, self.model_fps_), 2)  # frames at the model's rate
         flat = np.zeros((V, T, F))
         # frame 1: nodes without ancestors from the first-frame statistics, the others top-down from t1
-        top = np.concatenate([np.arange(3, ROOT_FEATURES)] + [self._columns(part[0])[0]
-                                                               for name, part in self.partitions_.items()
-                                                               if name != "TH"])
+        top = np.concatenate(
+            [np.arange(3, ROOT_FEATURES)]
+            + [self._columns(part[0])[0] for name, part in self.partitions_.items() if name != "TH"]
+        )
         flat[:, 0, top] = self.first_frame_mean_[top] + self.first_frame_std_[top] * rng.standard_normal((V, len(top)))
         self._project(flat[:, 0])
         _, dynamic = self._start_arrays(flat)
         for sampler in self.samplers_["t1"]:
             G, D = sampler.stack.y_mean.shape
-            columns, draws = sampler.draw(_context(flat, dynamic, 0), rng, self.sample_noise,
-                                          self._noise_scale() * rng.standard_normal((G, V, D)),
-                                          self.output_margin)
+            columns, draws = sampler.draw(
+                _context(flat, dynamic, 0),
+                rng,
+                self.sample_noise,
+                self._noise_scale() * rng.standard_normal((G, V, D)),
+                self.output_margin,
+            )
             flat[:, 0, columns] = draws
             self._project(flat[:, 0])
         positions, dynamic = self._start_arrays(flat)
         self._rollout(flat, positions, dynamic, rng)
         out = []
         for v in range(V):
-            values = decode(FeatureClip.from_flat(flat[v], self.bones_), self.skeleton_, start_xz=self.start_xz_,
-                            start_yaw=self.start_yaw_)
-            if T != n_frames:                         # back to the data's rate by a cubic spline
+            values = decode(
+                FeatureClip.from_flat(flat[v], self.bones_),
+                self.skeleton_,
+                start_xz=self.start_xz_,
+                start_yaw=self.start_yaw_,
+            )
+            if T != n_frames:  # back to the data's rate by a cubic spline
                 matrix = np.concatenate([values[bone] for bone in self.layout_.bones], axis=1)
-                values = dof_values(time_warp(matrix, n_frames, rotation_columns(self.layout_), kind="cubic"),
-                                    self.layout_)
+                values = dof_values(
+                    time_warp(matrix, n_frames, rotation_columns(self.layout_), kind="cubic"), self.layout_
+                )
             out.append(values)
         return out

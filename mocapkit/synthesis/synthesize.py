@@ -8,6 +8,7 @@ self-contained ``variant_000.bvh`` … (the same joints, bone lengths and frame 
 default for BVH input, and then in the input's own rig: hierarchy, joint frames and channel orders,
 :func:`~mocapkit.datasets.formats.bvh_to_amc.amc_to_bvh`), and ``report.json``.
 """
+
 from __future__ import annotations
 
 import json
@@ -31,12 +32,6 @@ from mocapkit.synthesis.clips import SynthesisInputError, as_amc_clips, clip_win
 OUTPUT_FORMATS = ("amc", "bvh")
 #: File suffixes of training clips: ASF/AMC joint angles, or BVH (converted).
 INPUT_SUFFIXES = (".amc", ".bvh")
-
-#: Synthesiser name → class: Zhou's SLFM and the baselines of the comparison (configs/compare/synthesis_hdm05.yaml).
-METHODS = {"slfm": "mocapkit.synthesis.slfm.SLFMSynthesizer",
-           "perlin": "mocapkit.synthesis.perlin.PerlinNoiseSynthesizer",
-           "lau": "mocapkit.synthesis.lau.LauDBNSynthesizer",
-           "cvae": "mocapkit.synthesis.cvae.CVAESynthesizer"}
 
 
 def find_clips(inputs: Sequence[str | os.PathLike], motion_type: str | None = None) -> list[Path]:
@@ -67,8 +62,10 @@ def find_clips(inputs: Sequence[str | os.PathLike], motion_type: str | None = No
     kinds = {p.suffix.lower() for p in found}
     if len(kinds) > 1:
         examples = ", ".join(str(next(p for p in found if p.suffix.lower() == kind)) for kind in sorted(kinds))
-        raise SynthesisInputError(f"the training clips mix {' and '.join(sorted(kinds))} files ({examples}); give "
-                                  f"clips of one skeleton, in one format")
+        raise SynthesisInputError(
+            f"the training clips mix {' and '.join(sorted(kinds))} files ({examples}); give "
+            f"clips of one skeleton, in one format"
+        )
     return found
 
 
@@ -77,28 +74,42 @@ def read_clip(path: Path):
     return read_bvh(path) if path.suffix.lower() == ".bvh" else read_amc(path)
 
 
-def make_synthesizer(method: str, seed: int, footskate_cleanup: bool, options: dict | None = None
-                     ) -> MotionSynthesizer:
-    """The synthesiser ``method`` (a key of :data:`METHODS`) seeded with ``seed``, with ``options`` as parameters
-    (``set_params``: an unknown one is a ``ValueError`` listing the valid ones). ``footskate_cleanup`` switches
-    the footskate cleanup that every method shares (:class:`~mocapkit.synthesis.base.MotionSynthesizer`)."""
-    import importlib
+def make_synthesizer(
+    method: str, seed: int, footskate_cleanup: bool, overrides: Sequence[str] = ()
+) -> MotionSynthesizer:
+    """The registry's synthesis method ``method`` (``configs/synthesis/method/NAME.yaml``) seeded with ``seed``
+    (its ``random_state``, where it has one), with the ``--set`` Hydra ``overrides`` applied last.
+    ``footskate_cleanup`` switches the footskate cleanup that every method shares
+    (:class:`~mocapkit.synthesis.base.MotionSynthesizer`).
 
-    if method not in METHODS:
-        raise ValueError(f"unknown synthesis method {method!r}; known: {', '.join(METHODS)}")
-    module, _, name = METHODS[method].rpartition(".")
-    synthesizer = getattr(importlib.import_module(module), name)()
-    params = synthesizer.get_params()
-    defaults = {"random_state": seed} if "random_state" in params else {}
-    if "footskate_cleanup" in params:
-        defaults["footskate_cleanup"] = footskate_cleanup
-    return synthesizer.set_params(**defaults, **dict(options or {}))
+    Raises:
+        ConfigError: an unknown method (the message lists the names), an unknown parameter (named, with the
+            method's parameters) or a bad value.
+    """
+    from mocapkit.train.registry import build_method, method_config
+
+    node = method_config("synthesis", method)
+    settings = [f"random_state={int(seed)}"] if "random_state" in node else []
+    if "footskate_cleanup" in node:
+        settings.append(f"footskate_cleanup={str(bool(footskate_cleanup)).lower()}")
+    return build_method("synthesis", method, [*settings, *overrides])
 
 
-def synthesize(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, n_variants: int = 10,
-               n_frames: int | None = None, seed: int = 0, method: str = "slfm", motion_type: str | None = None,
-               max_clips: int = 10, footskate_cleanup: bool = True, options: dict | None = None,
-               progress: bool = True, output_format: str | None = None, window_seconds: float | None = None) -> dict:
+def synthesize(
+    inputs: Sequence[str | os.PathLike],
+    out_dir: str | os.PathLike,
+    n_variants: int = 10,
+    n_frames: int | None = None,
+    seed: int = 0,
+    method: str | None = None,
+    motion_type: str | None = None,
+    max_clips: int = 10,
+    footskate_cleanup: bool = True,
+    overrides: Sequence[str] = (),
+    progress: bool = True,
+    output_format: str | None = None,
+    window_seconds: float | None = None,
+) -> dict:
     """Fit ``method`` on example clips and write ``n_variants`` variants to ``out_dir``.
 
     Args:
@@ -109,12 +120,13 @@ def synthesize(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, 
         n_variants: variants to write.
         n_frames: frames per variant (default: the mean training length).
         seed: seeds the fit (``random_state``) and the sampling.
-        method: ``"slfm"`` (:class:`~mocapkit.synthesis.slfm.SLFMSynthesizer`).
+        method: a synthesis method of the registry (``mocapkit methods synthesis``; None: its default, ``slfm``,
+            :class:`~mocapkit.synthesis.slfm.SLFMSynthesizer`).
         motion_type: keep only files whose name contains this (e.g. ``"hopBothLegs1hops"``).
         max_clips: use the first ``max_clips`` matching files (sorted by path; the thesis trains on 10); with
             ``window_seconds``, the first ``max_clips`` windows.
         footskate_cleanup: ground and pin planted feet in the variants.
-        options: further constructor parameters of the synthesiser (e.g. ``{"n_inducing": 32}``).
+        overrides: ``--set`` Hydra overrides of the method's parameters (e.g. ``["n_inducing=32"]``).
         progress: progress lines on stderr.
         output_format: ``"amc"`` (with the reference skeleton's ``.asf``) or ``"bvh"`` (one self-contained file
             per variant, positions in metres; :func:`~mocapkit.datasets.formats.bvh.read_bvh` reads back the
@@ -135,6 +147,7 @@ def synthesize(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, 
     Raises:
         SynthesisInputError: no matching clips, too few, too short, or clips on different skeletons (named).
     """
+
     def say(message: str) -> None:
         if progress:
             print(f"[synthesize] {message}", file=sys.stderr, flush=True)
@@ -159,7 +172,7 @@ def synthesize(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, 
             take = read_clip(f)
             if first_take is None:
                 first_take = take
-            take = as_amc_clips([take], reference=first_take)[0]        # BVH: one rest pose, the first take's
+            take = as_amc_clips([take], reference=first_take)[0]  # BVH: one rest pose, the first take's
             windows = clip_windows(take, window_seconds)
             used = windows[: max_clips - len(clips)]
             left_out[str(f)] = len(take.positions) - sum(len(w.positions) for w in used)
@@ -170,7 +183,10 @@ def synthesize(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, 
         if short:
             say(f"shorter than one {window_seconds:g} s window, not used: {', '.join(short)}")
         say(f"cut {len(left_out) - len(short)} file(s) into {len(clips)} window(s) of {window_seconds:g} s")
-    synthesizer = make_synthesizer(method, seed, footskate_cleanup, options)
+    from mocapkit.train.registry import default_method
+
+    method = method or default_method("synthesis")
+    synthesizer = make_synthesizer(method, seed, footskate_cleanup, overrides)
     if progress and hasattr(synthesizer, "verbose"):
         synthesizer.set_params(verbose=True)
     say(f"fitting {type(synthesizer).__name__} on {len(clips)} clips")
@@ -233,22 +249,34 @@ def synthesize(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, 
         report["frames_left_out"] = left_out
     if hasattr(synthesizer, "noise_scale_"):
         report["noise_scale"] = synthesizer.noise_scale_
-        report["variation_by_noise_scale"] = {str(k): round(v, 4)
-                                              for k, v in synthesizer.variation_by_noise_scale_.items()}
+        report["variation_by_noise_scale"] = {
+            str(k): round(v, 4) for k, v in synthesizer.variation_by_noise_scale_.items()
+        }
     if getattr(synthesizer, "angle_flips_", None):
-        report["angle_flips"] = [{"clip": clip, "frame": frame, "bone": bone, "degrees": round(degrees, 1)}
-                                 for clip, frame, bone, degrees in synthesizer.angle_flips_]
+        report["angle_flips"] = [
+            {"clip": clip, "frame": frame, "bone": bone, "degrees": round(degrees, 1)}
+            for clip, frame, bone, degrees in synthesizer.angle_flips_
+        ]
     reports = getattr(synthesizer, "footskate_reports_", None)
     if footskate_cleanup and reports:
         report["footskate_sliding_m_per_s"] = {
             "before": [None if r.sliding_before != r.sliding_before else round(r.sliding_before, 4) for r in reports],
-            "after": [None if r.sliding_after != r.sliding_after else round(r.sliding_after, 4) for r in reports]}
+            "after": [None if r.sliding_after != r.sliding_after else round(r.sliding_after, 4) for r in reports],
+        }
         report["footskate_root_shift_m"] = {
-            "horizontal_max": [round(float(np.hypot(r.root_shift[:, 0], r.root_shift[:, 2]).max()), 4) for r in reports],
-            "vertical_max": [round(float(np.abs(r.root_shift[:, 1]).max()), 4) for r in reports]}
+            "horizontal_max": [
+                round(float(np.hypot(r.root_shift[:, 0], r.root_shift[:, 2]).max()), 4) for r in reports
+            ],
+            "vertical_max": [round(float(np.abs(r.root_shift[:, 1]).max()), 4) for r in reports],
+        }
     (out / "report.json").write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")
-    files_written = f"{len(written)} variant(s), {asf_name} and report.json" if asf_name else \
-        f"{len(written)} variant(s) and report.json"
-    say(f"wrote {files_written} to {out} "
-        f"({report['sample_seconds_per_motion_second']:.4f} s of compute per second of motion)")
+    files_written = (
+        f"{len(written)} variant(s), {asf_name} and report.json"
+        if asf_name
+        else f"{len(written)} variant(s) and report.json"
+    )
+    say(
+        f"wrote {files_written} to {out} "
+        f"({report['sample_seconds_per_motion_second']:.4f} s of compute per second of motion)"
+    )
     return report

@@ -27,6 +27,7 @@ and is restarted after a crash, hang or memory blow-up. Cases flagged ``blocking
 ``open()`` waits for a writer forever) each get their own worker, run concurrently, since a
 blocked process costs no CPU.
 """
+
 from __future__ import annotations
 
 import json
@@ -54,12 +55,21 @@ GOOD = ("ok", "clean_error")
 
 #: Formats: sample glob under ``shared/samples``, the file name a special file gets, how it is read.
 FORMATS = {
-    "ntu": {"glob": "ntu_skeleton/*.skeleton", "special": "S001C001P001R001A001.skeleton", "kind": "ntu", "binary": False},
+    "ntu": {
+        "glob": "ntu_skeleton/*.skeleton",
+        "special": "S001C001P001R001A001.skeleton",
+        "kind": "ntu",
+        "binary": False,
+    },
     "amc": {"glob": "asf_amc/*/*.amc", "special": "x.amc", "kind": "motion", "binary": False},
     "bvh": {"glob": "bvh/*.bvh", "special": "x.bvh", "kind": "motion", "binary": False},
     "c3d": {"glob": "c3d/*.c3d", "special": "x.c3d", "kind": "motion", "binary": True},
-    "msr": {"glob": "msr3d/*_skeleton*.txt", "special": "a01_s01_e01_skeleton3D.txt", "kind": "motion",
-            "binary": False},
+    "msr": {
+        "glob": "msr3d/*_skeleton*.txt",
+        "special": "a01_s01_e01_skeleton3D.txt",
+        "kind": "motion",
+        "binary": False,
+    },
     "png": {"glob": None, "special": "001-nm-01-090-001.png", "kind": "silhouette", "binary": True},
 }
 
@@ -117,16 +127,42 @@ class Outcome:
 # =========================================================================== mutators: text
 
 _NUM = re.compile(rb"(?<![\w.+\-])[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?(?![\w.])")
-_COUNT_PATTERNS = (re.compile(rb"(?m)^[ \t]*(\d+)[ \t]*\r?$"),           # a line holding one integer
-                   re.compile(rb"Frames:[ \t]*(\d+)"),                   # BVH
-                   re.compile(rb"CHANNELS[ \t]+(\d+)"),
-                   re.compile(rb"(?m)^[ \t]*(?:length|id|dof)[ \t]+(\S+)"))  # ASF
+_COUNT_PATTERNS = (
+    re.compile(rb"(?m)^[ \t]*(\d+)[ \t]*\r?$"),  # a line holding one integer
+    re.compile(rb"Frames:[ \t]*(\d+)"),  # BVH
+    re.compile(rb"CHANNELS[ \t]+(\d+)"),
+    re.compile(rb"(?m)^[ \t]*(?:length|id|dof)[ \t]+(\S+)"),
+)  # ASF
 NONFINITE_TOKENS = (b"nan", b"NaN", b"inf", b"-inf", b"Infinity", b"1e309", b"-1e309", b"nan(0x1)")
-ODD_NUMBERS = (b"-0", b"+0.0", b"1e39", b"-1e39", b"1e-400", b"99999999999999999999", b"-2147483649",
-               b"18446744073709551616", b"0x10", b"1_000", b"1.2.3", b"--1", b"1e", b".", b"\xd9\xa1\xd9\xa2",
-               b"\xef\xbc\x91")  # Arabic-Indic "12", full-width "1": float() accepts both
-HUGE_COUNTS = (b"2147483647", b"2147483648", b"4294967296", b"999999999999", b"100000000", b"-1", b"0",
-               b"9" * 40, b"1e9")
+ODD_NUMBERS = (
+    b"-0",
+    b"+0.0",
+    b"1e39",
+    b"-1e39",
+    b"1e-400",
+    b"99999999999999999999",
+    b"-2147483649",
+    b"18446744073709551616",
+    b"0x10",
+    b"1_000",
+    b"1.2.3",
+    b"--1",
+    b"1e",
+    b".",
+    b"\xd9\xa1\xd9\xa2",
+    b"\xef\xbc\x91",
+)  # Arabic-Indic "12", full-width "1": float() accepts both
+HUGE_COUNTS = (
+    b"2147483647",
+    b"2147483648",
+    b"4294967296",
+    b"999999999999",
+    b"100000000",
+    b"-1",
+    b"0",
+    b"9" * 40,
+    b"1e9",
+)
 
 
 def _pick_token(data: bytes, rng: random.Random, pattern=_NUM) -> re.Match | None:
@@ -138,7 +174,7 @@ def _pick_token(data: bytes, rng: random.Random, pattern=_NUM) -> re.Match | Non
 
 
 def _replace(data: bytes, m: re.Match, new: bytes, group: int = 0) -> bytes:
-    return data[:m.start(group)] + new + data[m.end(group):]
+    return data[: m.start(group)] + new + data[m.end(group) :]
 
 
 def _lines(data: bytes) -> list[bytes]:
@@ -191,8 +227,11 @@ def m_odd_number(data, rng):
     if m is None:
         return data + b"1e309\n", "append 1e309", True
     tok = rng.choice(ODD_NUMBERS)
-    return _replace(data, m, tok), (f"number {m.group().decode('latin-1')!r} -> {tok!r} "
-                                    f"(line {_line_of(data, m.start())})"), False
+    return (
+        _replace(data, m, tok),
+        (f"number {m.group().decode('latin-1')!r} -> {tok!r} (line {_line_of(data, m.start())})"),
+        False,
+    )
 
 
 def m_huge_count(data, rng):
@@ -210,9 +249,14 @@ def m_huge_count(data, rng):
     # headers first: half the time the earliest count of the file
     m = min(cands, key=lambda c: c.start()) if rng.random() < 0.5 else rng.choice(cands)
     tok = rng.choice(HUGE_COUNTS)
-    return _replace(data, m, tok, 1 if m.re.groups else 0), (
-        f"count {m.group(1 if m.re.groups else 0).decode('latin-1')!r} -> {tok.decode()} "
-        f"(line {_line_of(data, m.start())})"), False
+    return (
+        _replace(data, m, tok, 1 if m.re.groups else 0),
+        (
+            f"count {m.group(1 if m.re.groups else 0).decode('latin-1')!r} -> {tok.decode()} "
+            f"(line {_line_of(data, m.start())})"
+        ),
+        False,
+    )
 
 
 def _line_of(data: bytes, offset: int) -> int:
@@ -224,7 +268,7 @@ def m_dup_lines(data, rng):
     i = rng.randrange(len(lines))
     k = rng.randint(1, 30)
     j = rng.randrange(len(lines) + 1)
-    chunk = lines[i:i + k]
+    chunk = lines[i : i + k]
     return b"".join(lines[:j] + chunk + lines[j:]), f"duplicate lines {i + 1}..{i + len(chunk)} at line {j + 1}", False
 
 
@@ -232,7 +276,7 @@ def m_delete_lines(data, rng):
     lines = _lines(data)
     i = rng.randrange(len(lines)) if rng.random() < 0.7 else rng.randrange(min(len(lines), 10))
     k = rng.randint(1, 30)
-    return b"".join(lines[:i] + lines[i + k:]), f"delete lines {i + 1}..{min(len(lines), i + k)}", False
+    return b"".join(lines[:i] + lines[i + k :]), f"delete lines {i + 1}..{min(len(lines), i + k)}", False
 
 
 def m_line_ends(data, rng):
@@ -282,7 +326,7 @@ def m_fields(data, rng):
     lines = _lines(data)
     i = rng.randrange(len(lines))
     ln = lines[i]
-    body, end = ln.rstrip(b"\r\n"), ln[len(ln.rstrip(b"\r\n")):]
+    body, end = ln.rstrip(b"\r\n"), ln[len(ln.rstrip(b"\r\n")) :]
     toks = body.split()
     how = rng.choice(("extra", "drop", "drop-all", "garbage"))
     if how == "extra":
@@ -310,21 +354,30 @@ def m_wipe(data, rng):
 
 
 TEXT_MUTATORS = {
-    "truncate": (m_truncate, 3), "flip_bits": (m_flip_bits, 2), "set_bytes": (m_set_bytes, 2),
-    "nonfinite": (m_nonfinite, 4), "odd_number": (m_odd_number, 3), "huge_count": (m_huge_count, 4),
-    "dup_lines": (m_dup_lines, 2), "delete_lines": (m_delete_lines, 2), "line_ends": (m_line_ends, 2),
-    "encoding": (m_encoding, 3), "fields": (m_fields, 2), "wipe": (m_wipe, 1),
+    "truncate": (m_truncate, 3),
+    "flip_bits": (m_flip_bits, 2),
+    "set_bytes": (m_set_bytes, 2),
+    "nonfinite": (m_nonfinite, 4),
+    "odd_number": (m_odd_number, 3),
+    "huge_count": (m_huge_count, 4),
+    "dup_lines": (m_dup_lines, 2),
+    "delete_lines": (m_delete_lines, 2),
+    "line_ends": (m_line_ends, 2),
+    "encoding": (m_encoding, 3),
+    "fields": (m_fields, 2),
+    "wipe": (m_wipe, 1),
 }
 
 
 # =========================================================================== mutators: C3D
 
+
 @dataclass
 class C3DParam:
     group: str
     name: str
-    dtype: int          # -1 char, 1 byte, 2 int16, 4 float
-    ndim_offset: int    # byte holding the number of dimensions
+    dtype: int  # -1 char, 1 byte, 2 int16, 4 float
+    ndim_offset: int  # byte holding the number of dimensions
     data_offset: int
     data_len: int
 
@@ -347,7 +400,7 @@ def c3d_layout(data: bytes) -> tuple[str, list[C3DParam], int, bool]:
         if nlen == 0:
             break
         nlen = abs(nlen)
-        name = data[pos + 2:pos + 2 + nlen].decode("latin-1")
+        name = data[pos + 2 : pos + 2 + nlen].decode("latin-1")
         off = pos + 2 + nlen
         if off + 2 > stop:
             break
@@ -357,7 +410,7 @@ def c3d_layout(data: bytes) -> tuple[str, list[C3DParam], int, bool]:
         elif off + 4 <= stop:
             q = off + 2
             dtype, ndim = struct.unpack_from("bB", data, q)
-            dims = list(data[q + 2:q + 2 + ndim])
+            dims = list(data[q + 2 : q + 2 + ndim])
             raw.append((gid, name, dtype, q + 1, q + 2 + ndim, abs(dtype) * math.prod(dims)))
         if nxt <= 0:
             break
@@ -366,10 +419,23 @@ def c3d_layout(data: bytes) -> tuple[str, list[C3DParam], int, bool]:
     return order, params, data_start, not (scale >= 0)
 
 
-_C3D_KEY_PARAMS = {("POINT", "USED"), ("POINT", "FRAMES"), ("POINT", "SCALE"), ("POINT", "RATE"),
-                   ("POINT", "LABELS"), ("POINT", "UNITS"), ("POINT", "DATA_START"), ("ANALOG", "USED"),
-                   ("ANALOG", "RATE"), ("ANALOG", "LABELS"), ("ANALOG", "SCALE"), ("ANALOG", "GEN_SCALE"),
-                   ("TRIAL", "ACTUAL_END_FIELD"), ("TRIAL", "ACTUAL_START_FIELD"), ("POINT", "LONG_FRAMES")}
+_C3D_KEY_PARAMS = {
+    ("POINT", "USED"),
+    ("POINT", "FRAMES"),
+    ("POINT", "SCALE"),
+    ("POINT", "RATE"),
+    ("POINT", "LABELS"),
+    ("POINT", "UNITS"),
+    ("POINT", "DATA_START"),
+    ("ANALOG", "USED"),
+    ("ANALOG", "RATE"),
+    ("ANALOG", "LABELS"),
+    ("ANALOG", "SCALE"),
+    ("ANALOG", "GEN_SCALE"),
+    ("TRIAL", "ACTUAL_END_FIELD"),
+    ("TRIAL", "ACTUAL_START_FIELD"),
+    ("POINT", "LONG_FRAMES"),
+}
 _BAD_FLOATS = (float("nan"), float("inf"), float("-inf"), 1e38, -1e38, 0.0, -0.0, 1e-45)
 _BAD_INT16 = (0x7FFF, 0xFFFF, 0x8000, 0)
 
@@ -391,8 +457,16 @@ def m_c3d_header(data, rng):
         return bytes(b), f"header parameter block -> {b[0]}", False
     v = rng.choice(_BAD_INT16)
     struct.pack_into(order + "H", b, 2 * (word - 1), v)
-    names = {1: "parameter block/key", 2: "points", 3: "analog per frame", 4: "first frame", 5: "last frame",
-             6: "max gap", 9: "data start block", 10: "analog samples per frame"}
+    names = {
+        1: "parameter block/key",
+        2: "points",
+        3: "analog per frame",
+        4: "first frame",
+        5: "last frame",
+        6: "max gap",
+        9: "data start block",
+        10: "analog samples per frame",
+    }
     return bytes(b), f"header word {word} ({names[word]}) -> {v:#x}", False
 
 
@@ -406,7 +480,7 @@ def m_c3d_param(data, rng):
     label = f"{p.group}:{p.name}"
     how = rng.random()
     if how < 0.2 and p.ndim_offset < len(b):
-        if b[p.ndim_offset] and rng.random() < 0.5:           # a dimension, not the count of them
+        if b[p.ndim_offset] and rng.random() < 0.5:  # a dimension, not the count of them
             b[p.ndim_offset + 1] = 255
             return bytes(b), f"param {label} first dimension -> 255", False
         b[p.ndim_offset] = rng.choice((7, 255))
@@ -424,7 +498,7 @@ def m_c3d_param(data, rng):
     if p.dtype == -1:
         junk = rng.choice((b"\xfc\xe9", b"\x00\x00", "é".encode(), b"\xff\xfe", b"\x80"))
         i = p.data_offset + rng.randrange(max(p.data_len - len(junk), 1))
-        b[i:i + len(junk)] = junk
+        b[i : i + len(junk)] = junk
         return bytes(b), f"param {label} chars -> {junk!r}", False
     b[p.data_offset] = rng.choice((0, 255))
     return bytes(b), f"param {label} byte -> {b[p.data_offset]}", False
@@ -459,8 +533,16 @@ def m_c3d_section(data, rng):
 
 def m_c3d_truncate(data, rng):
     _, _, data_start, _ = c3d_layout(data)
-    choices = [512, 516, max(data_start - 1, 0), data_start, data_start + 7, len(data) - 1,
-               len(data) - 512, rng.randrange(len(data))]
+    choices = [
+        512,
+        516,
+        max(data_start - 1, 0),
+        data_start,
+        data_start + 7,
+        len(data) - 1,
+        len(data) - 512,
+        rng.randrange(len(data)),
+    ]
     off = max(0, min(len(data) - 1, rng.choice(choices)))
     return data[:off], f"truncate at byte {off}/{len(data)} (data section at {data_start})", False
 
@@ -475,13 +557,19 @@ def m_c3d_encoding(data, rng):
 
 
 BINARY_MUTATORS = {
-    "truncate": (m_c3d_truncate, 3), "flip_bits": (m_flip_bits, 3), "set_bytes": (m_set_bytes, 2),
-    "header": (m_c3d_header, 4), "param": (m_c3d_param, 5), "section": (m_c3d_section, 4),
-    "encoding": (m_c3d_encoding, 1), "wipe": (m_wipe, 1),
+    "truncate": (m_c3d_truncate, 3),
+    "flip_bits": (m_flip_bits, 3),
+    "set_bytes": (m_set_bytes, 2),
+    "header": (m_c3d_header, 4),
+    "param": (m_c3d_param, 5),
+    "section": (m_c3d_section, 4),
+    "encoding": (m_c3d_encoding, 1),
+    "wipe": (m_wipe, 1),
 }
 
 
 # =========================================================================== mutators: PNG
+
 
 def png_chunks(data: bytes) -> list[tuple[int, bytes, int]]:
     """``(offset, type, length)`` of each chunk after the signature."""
@@ -497,7 +585,7 @@ def _png_set_chunk(data: bytes, offset: int, payload: bytes) -> bytes:
     """Replace a chunk's payload, with a valid CRC (so the damage is in the meaning, not the checksum)."""
     length, ctype = struct.unpack_from(">I4s", data, offset)
     new = struct.pack(">I4s", len(payload), ctype) + payload + struct.pack(">I", zlib.crc32(ctype + payload))
-    return data[:offset] + new + data[offset + 12 + length:]
+    return data[:offset] + new + data[offset + 12 + length :]
 
 
 def m_png_header(data, rng):
@@ -505,11 +593,12 @@ def m_png_header(data, rng):
     ihdr = next((c for c in chunks if c[1] == b"IHDR"), None)
     if ihdr is None:
         return m_flip_bits(data, rng)
-    payload = bytearray(data[ihdr[0] + 8:ihdr[0] + 8 + ihdr[2]])
+    payload = bytearray(data[ihdr[0] + 8 : ihdr[0] + 8 + ihdr[2]])
     how = rng.choice(("size", "size", "depth", "colour", "interlace"))
     if how == "size":
-        w, h = rng.choice(((0x7FFFFFFF, 0x7FFFFFFF), (100000, 100000), (10000, 10000), (0, 10), (1, 1 << 30),
-                           (65535, 65535), (3, 2)))
+        w, h = rng.choice(
+            ((0x7FFFFFFF, 0x7FFFFFFF), (100000, 100000), (10000, 10000), (0, 10), (1, 1 << 30), (65535, 65535), (3, 2))
+        )
         struct.pack_into(">II", payload, 0, w, h)
         desc = f"IHDR size -> {w}x{h} (CRC fixed)"
     elif how == "depth":
@@ -541,22 +630,22 @@ def m_png_chunks(data, rng):
     idat = [c for c in chunks if c[1] == b"IDAT"]
     if how == "no-iend":
         iend = [c for c in chunks if c[1] == b"IEND"]
-        return (data[:iend[0][0]] if iend else data), "IEND removed", False
+        return (data[: iend[0][0]] if iend else data), "IEND removed", False
     if not idat:
         return m_truncate(data, rng)
     off, _, length = idat[0]
     if how == "dup-idat":
-        chunk = data[off:off + 12 + length]
+        chunk = data[off : off + 12 + length]
         return data[:off] + chunk + data[off:], "IDAT duplicated", False
     if how == "no-idat":
-        return data[:off] + data[off + 12 + length:], "IDAT removed", False
+        return data[:off] + data[off + 12 + length :], "IDAT removed", False
     if how == "huge-length":
         b = bytearray(data)
         struct.pack_into(">I", b, off, rng.choice((0x7FFFFFFF, 0xFFFFFFFF, length + 1000)))
         return bytes(b), f"IDAT length -> {struct.unpack_from('>I', b, off)[0]:#x}", False
-    if how == "bomb":   # a small IDAT that inflates to 32 MiB
+    if how == "bomb":  # a small IDAT that inflates to 32 MiB
         return _png_set_chunk(data, off, _zlib_bomb()), "IDAT inflates to 32 MiB (CRC fixed)", False
-    payload = bytearray(data[off + 8:off + 8 + length])
+    payload = bytearray(data[off + 8 : off + 8 + length])
     for _ in range(rng.randint(1, 6)):
         if payload:
             payload[rng.randrange(len(payload))] = rng.randrange(256)
@@ -564,8 +653,12 @@ def m_png_chunks(data, rng):
 
 
 PNG_MUTATORS = {
-    "truncate": (m_truncate, 3), "flip_bits": (m_flip_bits, 3), "set_bytes": (m_set_bytes, 2),
-    "header": (m_png_header, 4), "chunks": (m_png_chunks, 4), "wipe": (m_wipe, 1),
+    "truncate": (m_truncate, 3),
+    "flip_bits": (m_flip_bits, 3),
+    "set_bytes": (m_set_bytes, 2),
+    "header": (m_png_header, 4),
+    "chunks": (m_png_chunks, 4),
+    "wipe": (m_wipe, 1),
 }
 
 
@@ -585,6 +678,7 @@ def mutate(fmt: str, data: bytes, rng: random.Random) -> tuple[bytes, str, bool]
 
 
 # =========================================================================== cases
+
 
 def sample_files(samples: Path, fmt: str) -> list[Path]:
     """The seed files of a format under ``samples`` (``shared/samples``), sorted."""
@@ -612,9 +706,9 @@ def make_silhouette_seeds(folder: Path, frames: int = 3, size: tuple[int, int] =
         img = Image.new("L", (w, h), 0)
         d = ImageDraw.Draw(img)
         cx = w // 2 + t
-        d.ellipse((cx - 5, 2, cx + 5, 12), fill=255)                        # head
-        d.rectangle((cx - 6, 12, cx + 6, 34), fill=255)                     # trunk
-        d.line((cx, 34, cx - 6 + 3 * t, h - 1), fill=255, width=4)          # legs
+        d.ellipse((cx - 5, 2, cx + 5, 12), fill=255)  # head
+        d.rectangle((cx - 6, 12, cx + 6, 34), fill=255)  # trunk
+        d.line((cx, 34, cx - 6 + 3 * t, h - 1), fill=255, width=4)  # legs
         d.line((cx, 34, cx + 6 - 3 * t, h - 1), fill=255, width=4)
         mode = ("L", "1", "P")[t % 3]
         path = folder / f"001-nm-01-090-{t + 1:03d}.png"
@@ -661,7 +755,7 @@ def make_cases(fmt: str, seeds: list[Path], out_dir: Path, n: int, seed: int = 0
                 if asf is not None:
                     shutil.copyfile(asf, case_dir / asf.name)
                     names.append(str(case_dir / asf.name))
-                    if rng.random() < 1 / 3:                       # mutate the ASF, keep the AMC
+                    if rng.random() < 1 / 3:  # mutate the ASF, keep the AMC
                         shutil.copyfile(src, path)
                         target, mut_src, label = case_dir / asf.name, asf, f"{src.name} with [ASF] {asf.name}"
             src = mut_src
@@ -670,8 +764,18 @@ def make_cases(fmt: str, seeds: list[Path], out_dir: Path, n: int, seed: int = 0
         new, desc, nonfinite = mutate(fmt, cache[src], rng)
         target.write_bytes(new)
         orig = seeds[i % len(seeds)]
-        cases.append(Case(id=f"{fmt}-{i:05d}", fmt=fmt, mutation=f"{label}: {desc}", path=str(path), kind=kind,
-                          seed=str(orig), nonfinite_token=nonfinite, names=names))
+        cases.append(
+            Case(
+                id=f"{fmt}-{i:05d}",
+                fmt=fmt,
+                mutation=f"{label}: {desc}",
+                path=str(path),
+                kind=kind,
+                seed=str(orig),
+                nonfinite_token=nonfinite,
+                names=names,
+            )
+        )
     return cases
 
 
@@ -702,12 +806,22 @@ def make_special_cases(fmt: str, out_dir: Path, companion: Path | None = None) -
             p.write_bytes(b"")
         else:
             p.symlink_to(d / "does-not-exist")
-        cases.append(Case(id=f"{fmt}-special-{special}", fmt=fmt, mutation=f"special file: {special} ({name})",
-                          path=str(p), kind=FORMATS[fmt]["kind"], blocking=special == "fifo", names=[str(p)]))
+        cases.append(
+            Case(
+                id=f"{fmt}-special-{special}",
+                fmt=fmt,
+                mutation=f"special file: {special} ({name})",
+                path=str(p),
+                kind=FORMATS[fmt]["kind"],
+                blocking=special == "fifo",
+                names=[str(p)],
+            )
+        )
     return cases
 
 
 # =========================================================================== runner (parent side)
+
 
 class _Worker:
     """One worker process: JSON-line requests on stdin, JSON-line answers on stdout."""
@@ -722,12 +836,27 @@ class _Worker:
 
     def start(self) -> None:
         self.err = tempfile.TemporaryFile()  # noqa: SIM115 - lives as long as the worker
-        env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1",
-                   PYTHONFAULTHANDLER="1", MOCAPKIT_FUZZ_MEM=str(self.mem_limit))
-        entry = (f"import sys; sys.path.insert(0, {str(PACKAGE_ROOT)!r}); "
-                 "from mocapkit.testing import fuzzing; fuzzing.worker_main()")
-        self.proc = subprocess.Popen([self.python, "-c", entry], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                     stderr=self.err, cwd=str(PACKAGE_ROOT), env=env, bufsize=0)
+        env = dict(
+            os.environ,
+            OMP_NUM_THREADS="1",
+            OPENBLAS_NUM_THREADS="1",
+            MKL_NUM_THREADS="1",
+            PYTHONFAULTHANDLER="1",
+            MOCAPKIT_FUZZ_MEM=str(self.mem_limit),
+        )
+        entry = (
+            f"import sys; sys.path.insert(0, {str(PACKAGE_ROOT)!r}); "
+            "from mocapkit.testing import fuzzing; fuzzing.worker_main()"
+        )
+        self.proc = subprocess.Popen(
+            [self.python, "-c", entry],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=self.err,
+            cwd=str(PACKAGE_ROOT),
+            env=env,
+            bufsize=0,
+        )
         self.starts += 1
         line = self._readline(self.startup_timeout)
         if line is None or json.loads(line).get("ready") is not True:
@@ -780,8 +909,18 @@ class _Worker:
             self.kill()
             self.start()
         t = time.monotonic()
-        req = json.dumps({"path": case.path, "kind": case.kind, "seed": case.seed, "names": case.names,
-                          "nonfinite_token": case.nonfinite_token}) + "\n"
+        req = (
+            json.dumps(
+                {
+                    "path": case.path,
+                    "kind": case.kind,
+                    "seed": case.seed,
+                    "names": case.names,
+                    "nonfinite_token": case.nonfinite_token,
+                }
+            )
+            + "\n"
+        )
         try:
             self.proc.stdin.write(req.encode())
         except BrokenPipeError:
@@ -790,8 +929,9 @@ class _Worker:
         dt = time.monotonic() - t
         if line is not None:
             ans = json.loads(line)
-            return Outcome(case, ans["outcome"], ans.get("exc_type", ""), ans.get("message", ""),
-                           ans.get("names_file", True), dt)
+            return Outcome(
+                case, ans["outcome"], ans.get("exc_type", ""), ans.get("message", ""), ans.get("names_file", True), dt
+            )
         if self.timed_out:
             self.kill()
             return Outcome(case, "hang", "", f"no answer in {timeout:g} s (worker killed)", True, dt)
@@ -805,13 +945,15 @@ class _Worker:
                 sig = f"signal {-rc}"
         else:
             sig = f"exit code {rc}"
-        outcome = "memory" if re.search(r"bad_alloc|MemoryError|Cannot allocate memory|out of memory", tail) \
-            else "crash"
+        outcome = (
+            "memory" if re.search(r"bad_alloc|MemoryError|Cannot allocate memory|out of memory", tail) else "crash"
+        )
         return Outcome(case, outcome, sig, tail or "(no stderr)", True, dt)
 
 
-def run_cases(cases: list[Case], timeout: float = 10.0, mem_limit: int = 2 << 30, python: str | None = None,
-              progress=None) -> list[Outcome]:
+def run_cases(
+    cases: list[Case], timeout: float = 10.0, mem_limit: int = 2 << 30, python: str | None = None, progress=None
+) -> list[Outcome]:
     """Read every case in a worker (see the module docstring) and classify it; outcomes in case order.
 
     ``progress(done, total, outcome)`` is called after each case (from worker threads, under a lock).
@@ -865,8 +1007,9 @@ def failures(outcomes: list[Outcome]) -> list[Outcome]:
 
 def describe_failures(outcomes: list[Outcome]) -> str:
     bad = failures(outcomes)
-    return f"{len(bad)} of {len(outcomes)} fuzz cases failed (format | mutation | outcome | exception):\n" + \
-        "\n".join(f"  {o.line()}" for o in bad)
+    return f"{len(bad)} of {len(outcomes)} fuzz cases failed (format | mutation | outcome | exception):\n" + "\n".join(
+        f"  {o.line()}" for o in bad
+    )
 
 
 def outcome_dict(o: Outcome) -> dict:
@@ -924,7 +1067,7 @@ def _read(kind: str, path: str):
     """Read one case; returns (Motion or None, extra non-finite report)."""
     import numpy as np
 
-    if kind.startswith("fake:"):              # the runner's self-test (tests/test_fuzz.py)
+    if kind.startswith("fake:"):  # the runner's self-test (tests/test_fuzz.py)
         what = kind[5:]
         if what == "segv":
             os.kill(os.getpid(), signal.SIGSEGV)
@@ -939,20 +1082,24 @@ def _read(kind: str, path: str):
         return None, "fake: 3 infinite values" if what == "inf" else ""
     if kind == "silhouette":
         from mocapkit.datasets.formats.casia_b import read_silhouette
+
         mask = read_silhouette(path)
         ok = mask.dtype == np.uint8 and mask.ndim == 2
         return None, "" if ok else f"mask dtype {mask.dtype} ndim {mask.ndim}"
     if kind == "sequence":
         from mocapkit.datasets.formats.casia_b import GaitSequence, parse_sequence_folder, read_sequence
+
         folder = Path(path).parent
         rel = folder.relative_to(folder.parents[2])
         seq = GaitSequence(parse_sequence_folder(rel), folder, tuple(sorted(folder.glob("*.png"))))
         read_sequence(seq)
         return None, ""
     from mocapkit.datasets.formats.motion_io import read_motion
+
     extra = ""
     if kind == "ntu":
         from mocapkit.datasets.formats.ntu_skeleton import read_skeleton
+
         seq = read_skeleton(path)
         present = np.asarray(seq.present, dtype=bool)
         bad = int((~np.isfinite(np.asarray(seq.joints)[present])).sum())
@@ -971,8 +1118,9 @@ def _classify_exception(exc: BaseException, names: list[str]) -> dict:
     first = (msg.splitlines() or [""])[0][:300]
     if isinstance(exc, MemoryError):
         outcome = "memory"
-    elif isinstance(exc, (MotionFormatError, OSError)) or \
-            (isinstance(exc, ValueError) and etype.__module__.startswith("mocapkit")):
+    elif isinstance(exc, (MotionFormatError, OSError)) or (
+        isinstance(exc, ValueError) and etype.__module__.startswith("mocapkit")
+    ):
         outcome = "clean_error"
     else:
         outcome = "raw_exception"
@@ -986,12 +1134,13 @@ def worker_main() -> None:
 
     limit = int(os.environ.get("MOCAPKIT_FUZZ_MEM", str(2 << 30)))
     answers = os.fdopen(os.dup(1), "w", buffering=1)
-    os.dup2(2, 1)                              # anything a reader prints goes to stderr, not the protocol
+    os.dup2(2, 1)  # anything a reader prints goes to stderr, not the protocol
     sys.stdout = sys.stderr
     resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
     import numpy as np  # noqa: F401
 
     import mocapkit.datasets.formats.motion_io  # noqa: F401
+
     answers.write(json.dumps({"ready": True}) + "\n")
     baselines: dict[str, int] = {}
     for line in sys.stdin:
@@ -1012,8 +1161,10 @@ def worker_main() -> None:
                             baselines[seed] = None
                     b = baselines[seed]
                     if b is not None and b[0] == motion.positions.shape and int(motion.missing.sum()) > b[1]:
-                        report = (f"non-finite token read as missing: {int(motion.missing.sum()) - b[1]} more "
-                                  f"missing samples than the original")
+                        report = (
+                            f"non-finite token read as missing: {int(motion.missing.sum()) - b[1]} more "
+                            f"missing samples than the original"
+                        )
             ans = {"outcome": "non_finite", "exc_type": "", "message": report} if report else {"outcome": "ok"}
         except MemoryError as exc:
             ans = {"outcome": "memory", "exc_type": "MemoryError", "message": str(exc)[:300]}

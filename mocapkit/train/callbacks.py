@@ -1,4 +1,5 @@
 """A Lightning callback that prints one line per epoch, for logs and runs without a progress bar."""
+
 from __future__ import annotations
 
 import time
@@ -17,7 +18,12 @@ class EpochSummary(L.Callback):
             return
         # Lightning 2 calls this after the epoch's validation, so both sets of metrics are here
         metrics = trainer.callback_metrics
-        shown = "  ".join(f"{k} {float(metrics[k]):.4f}" for k in ("train/loss_epoch", "train/acc", "val/loss", "val/acc", "val/mje_cm")
-                          if k in metrics)
-        print(f"epoch {trainer.current_epoch + 1}/{trainer.max_epochs}  {shown}  {time.time() - self._start:.1f} s",
-              flush=True)
+        shown = "  ".join(
+            f"{k} {float(metrics[k]):.4f}"
+            for k in ("train/loss_epoch", "train/acc", "val/loss", "val/acc", "val/mje_cm")
+            if k in metrics
+        )
+        print(
+            f"epoch {trainer.current_epoch + 1}/{trainer.max_epochs}  {shown}  {time.time() - self._start:.1f} s",
+            flush=True,
+        )

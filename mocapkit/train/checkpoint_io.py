@@ -7,6 +7,7 @@
 copy in place when that is another filesystem). Loading (``resume=``) always uses ``weights_only=True``.
 :func:`mocapkit.train.training.train` passes it to the trainer as a plugin.
 """
+
 from __future__ import annotations
 
 from pathlib import Path

@@ -5,6 +5,7 @@ torch default), its ``hyper_parameters`` are vetted against :data:`~mocapkit.tra
 before anything is built, and the module class comes from the run's (vetted) config. A file that is not a
 checkpoint — empty, text, a zip of something else — is refused with one line naming it.
 """
+
 from __future__ import annotations
 
 import io
@@ -59,8 +60,10 @@ def parse_checkpoint(raw: bytes, source: str | Path) -> dict:
         detail = flat[start:].split(". ")[0].split(" Check the documentation")[0][:200] if start >= 0 else None
         if detail is None and "weights only load failed" in str(exc).lower():
             detail = "it holds objects other than tensors and plain data"
-        raise ConfigError(f"{source}: not a PyTorch checkpoint that loads with weights_only=True (no code is "
-                          f"run from a checkpoint): {detail or _first_line(exc)}") from exc
+        raise ConfigError(
+            f"{source}: not a PyTorch checkpoint that loads with weights_only=True (no code is "
+            f"run from a checkpoint): {detail or _first_line(exc)}"
+        ) from exc
     if not isinstance(checkpoint, Mapping) or not isinstance(checkpoint.get("state_dict"), Mapping):
         raise ConfigError(f"{source}: not a Lightning checkpoint (no state_dict)")
     check_checkpoint(checkpoint, source)
@@ -84,8 +87,9 @@ def load_module(cfg: DictConfig, ckpt_path: str | Path) -> L.LightningModule:
     ckpt_path = Path(ckpt_path)
     target = cfg.module.get("_target_") if isinstance(cfg.get("module"), Mapping) else None
     if not isinstance(target, str) or not LIGHTNING_MODULE.allows(target):
-        raise UnsafeConfigError(f"{ckpt_path.parent}: module._target_={target!r} is not allowed: expected "
-                                f"{LIGHTNING_MODULE.expected}")
+        raise UnsafeConfigError(
+            f"{ckpt_path.parent}: module._target_={target!r} is not allowed: expected {LIGHTNING_MODULE.expected}"
+        )
     raw = read_checkpoint_bytes(ckpt_path)
     parse_checkpoint(raw, ckpt_path)  # vetted before anything is built
     try:

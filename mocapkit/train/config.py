@@ -2,8 +2,9 @@
 
 ``mocapkit train`` runs under ``@hydra.main`` (:func:`mocapkit.train.training.main`), so the whole
 Hydra command line works: ``key=value``, ``group=option``, ``+new_key=value``, ``~key``, ``-m`` sweeps,
-``--cfg job``. :func:`compose_config` composes the same tree from Python. Every run folder keeps
-the config it ran with:
+``--cfg job``, ``--help``. :func:`compose_config` composes the same tree from Python. The ``trainer``
+node holds every argument of ``lightning.Trainer`` (:mod:`mocapkit.train.trainer_schema`). Every run
+folder keeps the config it ran with:
 
 ``config.yaml``
     resolved, to read;
@@ -11,21 +12,44 @@ the config it ran with:
     unresolved, so interpolations stay live (``trainer.max_epochs=50`` on resume also moves
     ``scheduler.T_max``). ``mocapkit eval``, ``export`` and ``train resume=`` compose it again with
     their overrides through Hydra (:func:`load_run_config`), so the grammar and the error for an
-    unknown key are Hydra's own.
+    unknown key are Hydra's own. A run saved before the trainer schema, whose ``trainer`` holds only the
+    keys it set, takes the other Trainer arguments too.
 """
+
 from __future__ import annotations
 
+import difflib
 import os
 from pathlib import Path
 
 from hydra import compose, initialize_config_dir
 from hydra.core.override_parser.overrides_parser import OverridesParser
+from hydra.errors import MissingConfigException
 from omegaconf import DictConfig, OmegaConf, open_dict
 
 from mocapkit.train.errors import ConfigError
+from mocapkit.train.trainer_schema import (
+    SCHEMA_NAME,
+    SET_ELSEWHERE,
+    register_trainer_schema,
+    schema_registered,
+    trainer_keys,
+)
 
-#: The configs folder: ``$MOCAPKIT_CONFIG_DIR`` or ``configs/`` at the repository root.
-CONFIG_DIR = Path(os.environ.get("MOCAPKIT_CONFIG_DIR", Path(__file__).resolve().parents[2] / "configs"))
+
+def _config_dir() -> Path:
+    """``$MOCAPKIT_CONFIG_DIR``; else ``mocapkit/configs/``, the copy of ``configs/`` an installed wheel ships
+    (setup.py); else ``configs/`` at the root of the checkout (a source tree or ``pip install -e .``)."""
+    if os.environ.get("MOCAPKIT_CONFIG_DIR"):
+        return Path(os.environ["MOCAPKIT_CONFIG_DIR"])
+    package = Path(__file__).resolve().parents[1]
+    packaged = package / "configs"
+    return packaged if packaged.is_dir() else package.parent / "configs"
+
+
+#: The configs folder (:func:`_config_dir`): ``$MOCAPKIT_CONFIG_DIR``, the wheel's ``mocapkit/configs/`` or the
+#: checkout's ``configs/``.
+CONFIG_DIR = _config_dir()
 
 RUN_CONFIG = "config.yaml"
 #: The unresolved config of a run, relative to its folder (where Hydra keeps it).
@@ -48,9 +72,18 @@ def _compose(config_dir: Path, config_name: str, overrides: list[str]) -> DictCo
     try:
         with initialize_config_dir(config_dir=str(config_dir.resolve()), version_base="1.3"):
             return compose(config_name=config_name, overrides=list(overrides))
+    except MissingConfigException as exc:
+        # configs/trainer/default.yaml extends the Trainer schema, which imports Lightning (seconds): it is
+        # registered the first time a config asks for it, not for the configs that never do (refiners, ...)
+        if SCHEMA_NAME in str(exc) and not schema_registered():
+            register_trainer_schema()
+            return _compose(config_dir, config_name, overrides)
+        raise ConfigError(str(exc)) from exc
     except Exception as exc:  # Hydra raises several types; all name the offending override
         if type(exc).__module__.startswith(("hydra", "omegaconf", "yaml")):
-            raise ConfigError(str(exc)) from exc
+            # "Error merging override trainer.min_epochs=abc" says why in its cause (OmegaConf's type error)
+            cause = str(exc.__cause__ or "").strip()
+            raise ConfigError(f"{exc}: {cause}" if cause and cause not in str(exc) else str(exc)) from exc
         raise
 
 
@@ -58,6 +91,8 @@ def compose_config(overrides: list[str] | None = None, config_name: str = "train
     """Compose ``configs/<config_name>.yaml`` with Hydra overrides (what ``mocapkit train`` runs)."""
     if not (CONFIG_DIR / f"{config_name}.yaml").is_file():
         raise ConfigError(f"config {config_name!r} not found in {CONFIG_DIR} (set MOCAPKIT_CONFIG_DIR)")
+    if config_name == "train":
+        check_trainer_keys(list(overrides or []))
     return _compose(CONFIG_DIR, config_name, list(overrides or []))
 
 
@@ -67,16 +102,59 @@ def load_run_config(run_dir: str | Path, overrides: list[str] | None = None) -> 
     path = run_dir / RUN_CONFIG_UNRESOLVED
     if not path.is_file():
         raise ConfigError(f"{path} not found: is {run_dir} a mocapkit run folder?")
+    overrides = list(overrides or [])
     try:
-        cfg = _compose(path.parent, path.stem, list(overrides or []))
+        cfg = saved = _compose(path.parent, path.stem, [])
         if overrides:
-            check_override_types(list(overrides), _compose(path.parent, path.stem, []))
+            check_trainer_keys(overrides)
+            check_override_types(overrides, saved)
+            cfg = _compose(path.parent, path.stem, _add_missing_trainer_keys(overrides, saved))
     except ConfigError as exc:
         raise ConfigError(f"{path}: {exc}") from exc
     from mocapkit.train.safety import check_run_config
 
     check_run_config(cfg, path)  # before anything in it is instantiated (mocapkit.train.safety.RUN_POLICY)
     return cfg
+
+
+def check_trainer_keys(overrides: list[str]) -> None:
+    """Refuse ``trainer.KEY=...`` (``+`` or not) where KEY is not an argument of ``lightning.Trainer``, naming it,
+    and the arguments the run sets from other keys (:data:`~mocapkit.train.trainer_schema.SET_ELSEWHERE`),
+    naming the key to use. Lightning is imported only when an override names a ``trainer.`` key."""
+    for item, parsed in parse_overrides(overrides, strict=False):
+        if parsed is None or parsed.package is not None or not parsed.key_or_group.startswith("trainer."):
+            continue
+        name = parsed.key_or_group.split(".")[1]
+        if name in SET_ELSEWHERE:
+            raise ConfigError(f"override {item!r}: the run sets trainer.{name} itself; use {SET_ELSEWHERE[name]}")
+        known = trainer_keys()
+        if name not in known:
+            close = difflib.get_close_matches(name, known, n=1)
+            hint = f" (did you mean trainer.{close[0]}?)" if close else ""
+            raise ConfigError(
+                f"override {item!r}: lightning.Trainer has no argument {name!r}{hint}; "
+                "`mocapkit train --cfg job --package trainer` lists the trainer keys"
+            )
+
+
+def _add_missing_trainer_keys(overrides: list[str], saved: DictConfig) -> list[str]:
+    """``trainer.KEY=...`` as ``+trainer.KEY=...`` where the run's saved config lacks KEY: runs saved before the
+    trainer schema (:mod:`mocapkit.train.trainer_schema`) hold only the trainer keys they set, new runs all of
+    them, and :func:`check_trainer_keys` has checked that KEY is a Trainer argument."""
+    trainer = saved.get("trainer") or {}
+    upgraded = []
+    for item, parsed in parse_overrides(overrides, strict=False):
+        if (
+            parsed is not None
+            and parsed.package is None
+            and not parsed.is_add()
+            and not parsed.is_delete()
+            and parsed.key_or_group.startswith("trainer.")
+            and parsed.key_or_group.split(".")[1] not in trainer
+        ):
+            item = f"+{item}"
+        upgraded.append(item)
+    return upgraded
 
 
 def parse_overrides(overrides: list[str], strict: bool = True):
@@ -121,11 +199,21 @@ NAME_KEYS = ("experiment_name", "run_name")
 def check_path_component(value, key: str) -> str:
     """``value`` as one folder name, or a ConfigError naming ``key``: no separators, not ``.``/``..``, not empty."""
     text = str(value)
-    bad = (not text.strip() or text in (".", "..") or "/" in text or "\\" in text or "\0" in text
-           or os.sep in text or (os.altsep and os.altsep in text) or Path(text).is_absolute())
+    bad = (
+        not text.strip()
+        or text in (".", "..")
+        or "/" in text
+        or "\\" in text
+        or "\0" in text
+        or os.sep in text
+        or (os.altsep and os.altsep in text)
+        or Path(text).is_absolute()
+    )
     if bad:
-        raise ConfigError(f"{key}={text!r}: expected a single folder name (no '/', '..' or absolute path); "
-                          f"runs are written under output_root/<experiment_name>/<run_name>")
+        raise ConfigError(
+            f"{key}={text!r}: expected a single folder name (no '/', '..' or absolute path); "
+            f"runs are written under output_root/<experiment_name>/<run_name>"
+        )
     return text
 
 
@@ -159,8 +247,10 @@ def check_output_paths(cfg: DictConfig) -> Path:
         except OSError:
             inside = False
         if not inside or run_abs == root_abs:
-            raise ConfigError(f"run_dir={run_dir}: the run folder must lie inside output_root={root} "
-                              f"(as <output_root>/<experiment_name>/<run_name>)")
+            raise ConfigError(
+                f"run_dir={run_dir}: the run folder must lie inside output_root={root} "
+                f"(as <output_root>/<experiment_name>/<run_name>)"
+            )
     return run_dir
 
 
@@ -169,14 +259,16 @@ def check_override_names(overrides: list[str]) -> None:
     for _, parsed in parse_overrides(overrides, strict=False):
         if parsed is None or parsed.key_or_group not in NAME_KEYS or parsed.package is not None:
             continue
-        values = (list(parsed.sweep_string_iterator()) if parsed.is_sweep_override()
-                  else [parsed.get_value_element_as_str()])
+        values = (
+            list(parsed.sweep_string_iterator()) if parsed.is_sweep_override() else [parsed.get_value_element_as_str()]
+        )
         for value in values:
             check_path_component(value, parsed.key_or_group)
 
 
-#: Keys whose default is a number but which also take a word (Lightning's ``devices=auto``).
-WORDS_ALSO = ("trainer.devices",)
+#: Keys whose default's type is not the only one they take: Lightning's ``devices=auto`` (or 2, or [0, 1]) and
+#: ``fast_dev_run=5`` (batches; the default is false). Lightning checks them when the Trainer is built.
+WORDS_ALSO = ("trainer.devices", "trainer.fast_dev_run")
 
 
 def _type_error(key: str, value, reference) -> str | None:
@@ -196,11 +288,16 @@ def check_override_types(overrides: list[str], reference: DictConfig, source: st
     """Refuse an override whose value has the wrong type for its key, naming both (``trainer.max_epochs=abc``:
     expected an integer). ``reference`` holds the defaults (the config without those overrides); every value
     of a sweep is checked. Keys that are new, null by default, or not numbers / booleans are not checked."""
-    for item, parsed in parse_overrides(overrides, strict=False):
+    for _, parsed in parse_overrides(overrides, strict=False):
         if parsed is None:
             continue
-        if parsed.is_delete() or parsed.is_add() or parsed.package is not None or "." not in parsed.key_or_group \
-                and (CONFIG_DIR / parsed.key_or_group).is_dir():
+        if (
+            parsed.is_delete()
+            or parsed.is_add()
+            or parsed.package is not None
+            or "." not in parsed.key_or_group
+            and (CONFIG_DIR / parsed.key_or_group).is_dir()
+        ):
             continue
         key = parsed.key_or_group
         try:
@@ -224,8 +321,9 @@ def prepare_run_dir(cfg: DictConfig) -> Path:
     run folder outside ``output_root`` (:func:`check_output_paths`) before creating anything."""
     run_dir = check_output_paths(cfg)
     if (run_dir / "last.ckpt").exists():
-        raise ConfigError(f"{run_dir} already holds a run; continue it with resume={run_dir / 'last.ckpt'} "
-                          "or choose another run_name")
+        raise ConfigError(
+            f"{run_dir} already holds a run; continue it with resume={run_dir / 'last.ckpt'} or choose another run_name"
+        )
     with open_dict(cfg):
         cfg.run_name = run_dir.name
         cfg.run_dir = str(run_dir)

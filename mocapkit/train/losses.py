@@ -3,6 +3,7 @@
 :func:`contrastive_loss` trains the retrieval embeddings (:mod:`mocapkit.retrieval.module`: SupCon and
 SimCLR) and the gait network's metric term (:mod:`mocapkit.gait.module`, ``metric_weight``).
 """
+
 from __future__ import annotations
 
 import torch

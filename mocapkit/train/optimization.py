@@ -4,6 +4,7 @@ A module stores the ``optimizer`` and ``scheduler`` configs (``_partial_: true``
 hyper-parameters; :class:`ConfiguredOptimization` turns them into ``configure_optimizers`` and
 makes resumed runs keep the *configured* schedule parameters (e.g. a longer ``T_max``).
 """
+
 from __future__ import annotations
 
 from hydra.utils import instantiate

@@ -14,6 +14,7 @@ Logged metrics (torchmetrics, synchronised across processes): ``<stage>/loss`` a
 mean 3-D joint error over corrupted entries in centimetres (in the data's units ×100: metres → cm), which
 ``best.ckpt`` follows (lowest).
 """
+
 from __future__ import annotations
 
 import lightning as L
@@ -42,15 +43,31 @@ class MotionRefinementModule(ConfiguredOptimization, StagedSteps, L.LightningMod
         clean_weight, bone_weight, velocity_weight: loss weights (module docstring).
     """
 
-    def __init__(self, model: dict, optimizer: dict, skeleton: dict, scheduler: dict | None = None,
-                 clean_weight: float = 0.1, bone_weight: float = 0.1, velocity_weight: float = 0.5):
+    def __init__(
+        self,
+        model: dict,
+        optimizer: dict,
+        skeleton: dict,
+        scheduler: dict | None = None,
+        clean_weight: float = 0.1,
+        bone_weight: float = 0.1,
+        velocity_weight: float = 0.5,
+    ):
         super().__init__()
         model, optimizer = as_plain_dict(model), as_plain_dict(optimizer)
         scheduler = as_plain_dict(scheduler) if scheduler is not None else None
         skeleton = as_plain_dict(skeleton)
-        self.save_hyperparameters({"model": model, "optimizer": optimizer, "scheduler": scheduler,
-                                   "skeleton": skeleton, "clean_weight": clean_weight, "bone_weight": bone_weight,
-                                   "velocity_weight": velocity_weight})
+        self.save_hyperparameters(
+            {
+                "model": model,
+                "optimizer": optimizer,
+                "scheduler": scheduler,
+                "skeleton": skeleton,
+                "clean_weight": clean_weight,
+                "bone_weight": bone_weight,
+                "velocity_weight": velocity_weight,
+            }
+        )
         network_args = {k: skeleton[k] for k in ("joint_names", "parents", "up_axis", "hips", "bone_lengths", "fps")}
         self.model = instantiate(model, **network_args)
         self.mje = nn.ModuleDict({f"{stage}_mje": MeanMetric() for stage in STAGES})
@@ -65,17 +82,23 @@ class MotionRefinementModule(ConfiguredOptimization, StagedSteps, L.LightningMod
         """``(total loss, {name: value}, output positions [B, T, J, 3] in the data's units)``."""
         refined, stats = self.model.normalised_forward(batch["positions"], batch["missing"])
         target = self.model.normalizer(batch["clean"], stats)
-        error = torch.linalg.vector_norm(refined - target, dim=-1)                  # [B,T,J]
+        error = torch.linalg.vector_norm(refined - target, dim=-1)  # [B,T,J]
         corrupted = batch["corrupted"].to(error.dtype)
         clean = (~batch["corrupted"] & ~batch["missing"]).to(error.dtype)
-        parts = {"corrupted": (error * corrupted).sum() / corrupted.sum().clamp_min(1),
-                 "clean": (error * clean).sum() / clean.sum().clamp_min(1)}
+        parts = {
+            "corrupted": (error * corrupted).sum() / corrupted.sum().clamp_min(1),
+            "clean": (error * clean).sum() / clean.sum().clamp_min(1),
+        }
         bone = lambda x: torch.linalg.vector_norm(x[:, :, self._child] - x[:, :, self._parent], dim=-1)
         parts["bone"] = (bone(refined) - bone(target)).abs().mean()
         parts["velocity"] = torch.linalg.vector_norm(refined.diff(dim=1) - target.diff(dim=1), dim=-1).mean()
         hp = self.hparams
-        total = (parts["corrupted"] + hp.clean_weight * parts["clean"] + hp.bone_weight * parts["bone"]
-                 + hp.velocity_weight * parts["velocity"])
+        total = (
+            parts["corrupted"]
+            + hp.clean_weight * parts["clean"]
+            + hp.bone_weight * parts["bone"]
+            + hp.velocity_weight * parts["velocity"]
+        )
         return total, parts, self.model.normalizer.inverse(refined, stats)
 
     def _step(self, batch: dict, stage: str) -> torch.Tensor:

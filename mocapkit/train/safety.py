@@ -7,7 +7,7 @@ checked against a policy **before anything is instantiated**; anything else is r
 :class:`UnsafeConfigError` (a :class:`~mocapkit.train.config.ConfigError`: one line, exit code 2)
 naming the file and the offending key.
 
-Per-key policies (:data:`RUN_POLICY`, :data:`CHECKPOINT_POLICY`, :data:`REFINER_POLICY`): what a config
+Per-key policies (:data:`RUN_POLICY`, :data:`CHECKPOINT_POLICY`, :data:`METHOD_POLICIES`): what a config
     read from a *run folder* or a *checkpoint* (``eval``, ``export``, ``train resume=``, ``compare`` reading
     its runs), the config ``train`` is about to run, or a refiner may name, key by key. ``mocapkit.`` alone is not enough
     there: a mocapkit function that writes files (``mocapkit.datasets.formats.motion_io.write_motion``)
@@ -18,31 +18,39 @@ Per-key policies (:data:`RUN_POLICY`, :data:`CHECKPOINT_POLICY`, :data:`REFINER_
     ==================  =====================================================================
     key                 allowed ``_target_``
     ==================  =====================================================================
-    ``module``          a ``LightningModule`` subclass defined under ``mocapkit.train.``
+    ``module``          a ``LightningModule`` subclass defined under ``mocapkit.train.`` or a task
+                        package (``mocapkit.recognition.``, ``mocapkit.refinement.``, ...)
     ``model``,          a model builder: an ``nn.Module`` subclass or a public function defined
     ``module.model``    under ``mocapkit.models.``
     ``optimizer``,      a ``torch.optim.Optimizer`` subclass under ``torch.optim.``
     ``module.optimizer``
     ``scheduler``,      an ``LRScheduler`` subclass under ``torch.optim.lr_scheduler.``
     ``module.scheduler``
-    ``data``            a ``LightningDataModule`` subclass under ``mocapkit.datasets.`` whose
-                        name ends in ``DataModule``
+    ``data``            a ``LightningDataModule`` subclass under ``mocapkit.datasets.`` or a task
+                        package whose name ends in ``DataModule``
     ``trainer``         exactly ``lightning.Trainer`` (or ``lightning.pytorch.Trainer``)
     ``callbacks.*``     a ``Callback`` subclass under ``lightning.pytorch.callbacks.`` or
                         ``mocapkit.train.callbacks.``
     ``logger.*``        a ``Logger`` subclass under ``lightning.pytorch.loggers.``
     ``eval.evaluator``  exactly ``mocapkit.recognition.evaluate.evaluate_action``,
                         ``mocapkit.gait.evaluate.evaluate_gait``,
-                        ``mocapkit.refinement.evaluate.evaluate_refinement`` or
-                        ``mocapkit.retrieval.module.evaluate_embedding``
+                        ``mocapkit.refinement.evaluate.evaluate_refinement``,
+                        ``mocapkit.retrieval.module.evaluate_embedding`` or
+                        ``mocapkit.kinect.learned.evaluate_kinect_corrector``
     ``export.exporter`` exactly ``mocapkit.recognition.export.export_action_module``,
                         ``mocapkit.gait.export.export_gait_module``,
-                        ``mocapkit.deploy.refiner_export.export_refinement_module`` or
-                        ``mocapkit.retrieval.export.export_embedding_module``
+                        ``mocapkit.deploy.refiner_export.export_refinement_module``,
+                        ``mocapkit.retrieval.export.export_embedding_module`` or
+                        ``mocapkit.kinect.learned.export_kinect_corrector_module``
     checkpoint          ``hyper_parameters.model`` / ``.optimizer`` / ``.scheduler``: as above;
                         no other ``_target_`` anywhere in the checkpoint, and no Lightning
                         ``_instantiator`` / ``_class_path`` keys
-    ``refiner``         a ``mocapkit.refinement.base.MotionRefiner`` subclass under ``mocapkit.``
+    method (root of     by task (:data:`METHOD_RULES`; ``configs/<task>/method/NAME.yaml``, nested targets too):
+    a registry entry)   refinement: a ``MotionRefiner`` subclass under ``mocapkit.``; retrieval: a
+                        ``RetrievalMethod`` subclass; synthesis: a ``MotionSynthesizer`` subclass; kinect: a
+                        scikit-learn estimator class under ``mocapkit.kinect.``; recognition, gait,
+                        clustering: a scikit-learn estimator class under ``sklearn.`` or ``mocapkit.``, or
+                        ``sklearn.pipeline.make_pipeline``
     ==================  =====================================================================
 
     A ``_target_`` nested inside an allowed node (say ``model.energy._target_``) must satisfy the rule
@@ -50,6 +58,7 @@ Per-key policies (:data:`RUN_POLICY`, :data:`CHECKPOINT_POLICY`, :data:`REFINER_
     refused. ``_partial_`` / ``_args_`` change nothing: the target itself must be allowed. A target must
     be a plain string.
 """
+
 from __future__ import annotations
 
 import importlib
@@ -90,7 +99,8 @@ def _defined_under(obj, prefixes: Sequence[str]) -> bool:
 @dataclass(frozen=True)
 class Rule:
     """``prefixes`` (or ``exact`` names) the target string must match, and ``accepts(obj)`` for what it names."""
-    expected: str                                   # for messages: what the key must name
+
+    expected: str  # for messages: what the key must name
     prefixes: tuple[str, ...] = ()
     exact: tuple[str, ...] = ()
     accepts: Callable[[object], bool] | None = None
@@ -118,6 +128,7 @@ def _subclass_of(dotted: str, alternatives: tuple[str, ...] = ()) -> Callable[[o
             except Exception:
                 continue
         return inspect.isclass(obj) and any(issubclass(obj, b) for b in bases)
+
     return accepts
 
 
@@ -133,41 +144,84 @@ def _datamodule(obj) -> bool:
     return _subclass_of("lightning.LightningDataModule")(obj) and obj.__name__.endswith("DataModule")
 
 
-LIGHTNING_MODULE = Rule("a LightningModule class under mocapkit.train", ("mocapkit.train.",),
-                        accepts=_subclass_of("lightning.LightningModule"))
-MODEL = Rule("a model builder under mocapkit.models (an nn.Module class or a public function)",
-             ("mocapkit.models.",), accepts=_model_builder)
+#: The task packages: each holds its LightningModule (``module.py``) and, where it has one, its data module.
+TASK_PACKAGES = (
+    "mocapkit.recognition.",
+    "mocapkit.gait.",
+    "mocapkit.clustering.",
+    "mocapkit.refinement.",
+    "mocapkit.retrieval.",
+    "mocapkit.synthesis.",
+    "mocapkit.kinect.",
+)
+LIGHTNING_MODULE = Rule(
+    "a LightningModule class of a mocapkit task package or mocapkit.train",
+    ("mocapkit.train.", *TASK_PACKAGES),
+    accepts=_subclass_of("lightning.LightningModule"),
+)
+MODEL = Rule(
+    "a model builder under mocapkit.models (an nn.Module class or a public function)",
+    ("mocapkit.models.",),
+    accepts=_model_builder,
+)
 OPTIMIZER = Rule("a torch.optim optimizer class", ("torch.optim.",), accepts=_subclass_of("torch.optim.Optimizer"))
-SCHEDULER = Rule("a torch.optim.lr_scheduler class", ("torch.optim.lr_scheduler.",),
-                 accepts=_subclass_of("torch.optim.lr_scheduler.LRScheduler",
-                                      ("torch.optim.lr_scheduler._LRScheduler",
-                                       "torch.optim.lr_scheduler.ReduceLROnPlateau")))
-DATAMODULE = Rule("a LightningDataModule class under mocapkit.datasets named *DataModule", ("mocapkit.datasets.",),
-                  accepts=_datamodule)
+SCHEDULER = Rule(
+    "a torch.optim.lr_scheduler class",
+    ("torch.optim.lr_scheduler.",),
+    accepts=_subclass_of(
+        "torch.optim.lr_scheduler.LRScheduler",
+        ("torch.optim.lr_scheduler._LRScheduler", "torch.optim.lr_scheduler.ReduceLROnPlateau"),
+    ),
+)
+DATAMODULE = Rule(
+    "a LightningDataModule class named *DataModule under mocapkit.datasets or a task package",
+    ("mocapkit.datasets.", *TASK_PACKAGES),
+    accepts=_datamodule,
+)
 TRAINER = Rule("lightning.Trainer", exact=("lightning.Trainer", "lightning.pytorch.Trainer"))
-CALLBACK = Rule("a Lightning callback class (lightning.pytorch.callbacks or mocapkit.train.callbacks)",
-                ("lightning.pytorch.callbacks.", "mocapkit.train.callbacks."), accepts=_subclass_of("lightning.Callback"))
-LOGGER = Rule("a Lightning logger class (lightning.pytorch.loggers)", ("lightning.pytorch.loggers.",),
-              accepts=_subclass_of("lightning.pytorch.loggers.Logger"))
-EVALUATOR = Rule("mocapkit's evaluator of the task",
-                 exact=("mocapkit.recognition.evaluate.evaluate_action",
-                        "mocapkit.gait.evaluate.evaluate_gait",
-                        "mocapkit.refinement.evaluate.evaluate_refinement",
-                        "mocapkit.retrieval.module.evaluate_embedding"))
-EXPORTER = Rule("mocapkit's ONNX exporter of the task",
-                exact=("mocapkit.recognition.export.export_action_module",
-                       "mocapkit.gait.export.export_gait_module",
-                       "mocapkit.deploy.refiner_export.export_refinement_module",
-                       "mocapkit.retrieval.export.export_embedding_module"))
-REFINER = Rule("a mocapkit MotionRefiner class", ("mocapkit.",),
-               accepts=_subclass_of("mocapkit.refinement.base.MotionRefiner"))
+CALLBACK = Rule(
+    "a Lightning callback class (lightning.pytorch.callbacks or mocapkit.train.callbacks)",
+    ("lightning.pytorch.callbacks.", "mocapkit.train.callbacks."),
+    accepts=_subclass_of("lightning.Callback"),
+)
+LOGGER = Rule(
+    "a Lightning logger class (lightning.pytorch.loggers)",
+    ("lightning.pytorch.loggers.",),
+    accepts=_subclass_of("lightning.pytorch.loggers.Logger"),
+)
+EVALUATOR = Rule(
+    "mocapkit's evaluator of the task",
+    exact=(
+        "mocapkit.recognition.evaluate.evaluate_action",
+        "mocapkit.gait.evaluate.evaluate_gait",
+        "mocapkit.refinement.evaluate.evaluate_refinement",
+        "mocapkit.retrieval.module.evaluate_embedding",
+        "mocapkit.kinect.learned.evaluate_kinect_corrector",
+    ),
+)
+EXPORTER = Rule(
+    "mocapkit's ONNX exporter of the task",
+    exact=(
+        "mocapkit.recognition.export.export_action_module",
+        "mocapkit.gait.export.export_gait_module",
+        "mocapkit.deploy.refiner_export.export_refinement_module",
+        "mocapkit.retrieval.export.export_embedding_module",
+        "mocapkit.kinect.learned.export_kinect_corrector_module",
+    ),
+)
+REFINER = Rule(
+    "a mocapkit MotionRefiner class", ("mocapkit.",), accepts=_subclass_of("mocapkit.refinement.base.MotionRefiner")
+)
 
 #: A run folder's config (``.hydra/config.yaml``) and the config ``train`` runs: key → rule.
 RUN_POLICY: dict[str, Rule] = {
     "module": LIGHTNING_MODULE,
-    "module.model": MODEL, "model": MODEL,
-    "module.optimizer": OPTIMIZER, "optimizer": OPTIMIZER,
-    "module.scheduler": SCHEDULER, "scheduler": SCHEDULER,
+    "module.model": MODEL,
+    "model": MODEL,
+    "module.optimizer": OPTIMIZER,
+    "optimizer": OPTIMIZER,
+    "module.scheduler": SCHEDULER,
+    "scheduler": SCHEDULER,
     "data": DATAMODULE,
     "trainer": TRAINER,
     "callbacks.*": CALLBACK,
@@ -177,8 +231,38 @@ RUN_POLICY: dict[str, Rule] = {
 }
 #: A checkpoint's ``hyper_parameters`` (what the LightningModule's ``__init__`` instantiates): key → rule.
 CHECKPOINT_POLICY: dict[str, Rule] = {"model": MODEL, "optimizer": OPTIMIZER, "scheduler": SCHEDULER}
-#: The ``refiner`` node of ``configs/refiner.yaml`` (``mocapkit refine``): key → rule.
-REFINER_POLICY: dict[str, Rule] = {"": REFINER}
+RETRIEVAL = Rule(
+    "a mocapkit RetrievalMethod class", ("mocapkit.",), accepts=_subclass_of("mocapkit.retrieval.base.RetrievalMethod")
+)
+SYNTHESIZER = Rule(
+    "a mocapkit MotionSynthesizer class",
+    ("mocapkit.",),
+    accepts=_subclass_of("mocapkit.synthesis.base.MotionSynthesizer"),
+)
+KINECT = Rule(
+    "a scikit-learn estimator class of mocapkit.kinect",
+    ("mocapkit.kinect.",),
+    accepts=_subclass_of("sklearn.base.BaseEstimator"),
+)
+ESTIMATOR = Rule(
+    "a scikit-learn estimator class (sklearn or mocapkit) or sklearn.pipeline.make_pipeline",
+    ("sklearn.", "mocapkit."),
+    exact=("sklearn.pipeline.make_pipeline",),
+    accepts=_subclass_of("sklearn.base.BaseEstimator"),
+)
+#: What a method of the registry (``configs/<task>/method/NAME.yaml``, :mod:`mocapkit.train.registry`) may name,
+#: by task: the rule of its root ``_target_`` and of every nested one.
+METHOD_RULES: dict[str, Rule] = {
+    "refinement": REFINER,
+    "retrieval": RETRIEVAL,
+    "synthesis": SYNTHESIZER,
+    "kinect": KINECT,
+    "recognition": ESTIMATOR,
+    "gait": ESTIMATOR,
+    "clustering": ESTIMATOR,
+}
+#: :data:`METHOD_RULES` as per-key policies for :func:`check_targets`.
+METHOD_POLICIES: dict[str, dict[str, Rule]] = {task: {"": rule} for task, rule in METHOD_RULES.items()}
 
 
 def _rule_for(path: tuple[str, ...], policy: Mapping[str, Rule]) -> tuple[str, Rule] | None:
@@ -233,11 +317,11 @@ def check_targets(cfg, policy: Mapping[str, Rule], source: str | Path, prefix: s
             raise UnsafeConfigError(f"{source}: {key}._target_ must be a dotted name, got {type(target).__name__}")
         found = _rule_for(path, policy)
         if found is None:
-            raise UnsafeConfigError(f"{source}: {key}._target_={target!r} is not allowed: no object may be "
-                                    f"instantiated at {key}")
+            raise UnsafeConfigError(
+                f"{source}: {key}._target_={target!r} is not allowed: no object may be instantiated at {key}"
+            )
         if not found[1].allows(target):
-            raise UnsafeConfigError(f"{source}: {key}._target_={target!r} is not allowed: expected "
-                                    f"{found[1].expected}")
+            raise UnsafeConfigError(f"{source}: {key}._target_={target!r} is not allowed: expected {found[1].expected}")
 
 
 def check_run_config(cfg, source: str | Path) -> None:

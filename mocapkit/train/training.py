@@ -12,8 +12,10 @@ the data module (``data``), the LightningModule (``module``, given the data modu
                          without a validation part (``data.val_fraction=0``), whose checkpoint is last.ckpt
     tensorboard/         TensorBoard logs
 """
+
 from __future__ import annotations
 
+import argparse
 import sys
 import warnings
 from pathlib import Path
@@ -24,7 +26,7 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.errors import InstantiationException
 from hydra.utils import instantiate
 from lightning.pytorch.callbacks import ModelCheckpoint
-from omegaconf import DictConfig, open_dict
+from omegaconf import DictConfig, OmegaConf, open_dict
 
 from mocapkit.train.config import (
     CONFIG_DIR,
@@ -35,9 +37,11 @@ from mocapkit.train.config import (
     compose_config,
     load_run_config,
     parse_overrides,
+    pop_override,
     prepare_run_dir,
     save_run_config,
 )
+from mocapkit.train.trainer_schema import register_trainer_schema
 
 
 def build(node: DictConfig, **kwargs):
@@ -54,6 +58,25 @@ def build(node: DictConfig, **kwargs):
 def build_datamodule(cfg: DictConfig):
     """The data module of ``cfg.data``, seeded with ``cfg.seed``."""
     return build(cfg.data, seed=cfg.seed)
+
+
+def build_trainer(trainer: DictConfig | None = None, **arguments) -> L.Trainer:
+    """The Lightning ``Trainer`` of a trainer config node (``cfg.trainer``; None: ``configs/trainer/default.yaml``),
+    with ``arguments`` (Trainer arguments by name: plain values or objects such as callbacks) replacing or adding
+    to the config's. ``mocapkit train`` and the learned estimators' ``fit`` (their ``trainer`` parameter) build
+    their trainers here; an argument the Trainer does not take is a :class:`ConfigError` naming it."""
+    import inspect
+
+    known = set(inspect.signature(L.Trainer.__init__).parameters) - {"self"}
+    unknown = sorted(str(name) for name in arguments if name not in known)
+    if unknown:
+        raise ConfigError(
+            f"trainer: {unknown} are not arguments of lightning.Trainer (e.g. accelerator, devices, "
+            f"strategy, precision, max_steps)"
+        )
+    if trainer is None:
+        trainer = compose_config(config_name="trainer/default").trainer
+    return build(trainer, **arguments)
 
 
 def resume_config(resume: str | Path, overrides: list[str]) -> DictConfig:
@@ -96,8 +119,10 @@ def train(cfg: DictConfig) -> Path:
     counts = datamodule.sample_counts()
     validate = counts["val"] > 0
     if counts["train"] == 0 or (counts["val"] == 0 and cfg.data.get("val_fraction", 1) != 0):
-        raise ConfigError(f"split {datamodule.describe()['split']!r} leaves {counts}: "
-                          "training and validation both need samples (data.val_fraction=0: no validation)")
+        raise ConfigError(
+            f"split {datamodule.describe()['split']!r} leaves {counts}: "
+            "training and validation both need samples (data.val_fraction=0: no validation)"
+        )
     module = build(cfg.module, **datamodule.label_spaces())
     callbacks = [build(node) for node in (cfg.get("callbacks") or {}).values() if node]
     if not validate:  # nothing to monitor: the run's checkpoint is last.ckpt
@@ -106,8 +131,15 @@ def train(cfg: DictConfig) -> Path:
     loggers = [build(node) for node in (cfg.get("logger") or {}).values() if node]
     plugins = [*(cfg.trainer.get("plugins") or []), AtomicCheckpointIO()]
     extra = {} if validate else {"limit_val_batches": 0, "num_sanity_val_steps": 0}
-    trainer = build(cfg.trainer, callbacks=callbacks, logger=loggers or False, deterministic=cfg.deterministic,
-                    default_root_dir=str(run_dir), plugins=plugins, **extra)
+    trainer = build_trainer(
+        cfg.trainer,
+        callbacks=callbacks,
+        logger=loggers or False,
+        deterministic=cfg.deterministic,
+        default_root_dir=str(run_dir),
+        plugins=plugins,
+        **extra,
+    )
     # the run folder already holds config.yaml, by design
     warnings.filterwarnings("ignore", message=r"Checkpoint directory .* exists and is not empty")
     print(f"[mocapkit] run folder: {run_dir}")
@@ -118,8 +150,10 @@ def train(cfg: DictConfig) -> Path:
         print(f"[mocapkit] wrote {run_dir / 'config.yaml'}")
         for callback in callbacks:
             if isinstance(callback, ModelCheckpoint) and callback.monitor:
-                print(f"[mocapkit] wrote {callback.best_model_path} "
-                      f"(best {callback.monitor} {float(callback.best_model_score or 0):.4f})")
+                print(
+                    f"[mocapkit] wrote {callback.best_model_path} "
+                    f"(best {callback.monitor} {float(callback.best_model_score or 0):.4f})"
+                )
             elif isinstance(callback, ModelCheckpoint) and (callback.last_model_path or callback.best_model_path):
                 print(f"[mocapkit] wrote {callback.last_model_path or callback.best_model_path}")
         if loggers:
@@ -171,35 +205,91 @@ def _reference_config(overrides: list[str]) -> DictConfig:
     """The defaults the overrides' types are checked against: the config with only its group choices
     (``experiment=...``, ``model=...``; the first value of a swept group) applied."""
     groups = []
-    for item, parsed in parse_overrides(overrides, strict=False):
+    for _, parsed in parse_overrides(overrides, strict=False):
         if parsed is None:
             continue
         if "." in parsed.key_or_group or not (CONFIG_DIR / parsed.key_or_group).is_dir() or parsed.is_delete():
             continue
-        value = next(iter(parsed.sweep_string_iterator())) if parsed.is_sweep_override() \
+        value = (
+            next(iter(parsed.sweep_string_iterator()))
+            if parsed.is_sweep_override()
             else parsed.get_value_element_as_str()
+        )
         groups.append(f"{'+' if parsed.is_add() else ''}{parsed.key_or_group}={value}")
     return compose_config(groups)
 
 
-def main(overrides: list[str]) -> None:
-    """``mocapkit train OVERRIDES``: Hydra's command line (``-m`` sweeps, ``--cfg job``, ``--help``).
+def hydra_arguments(argv: list[str]) -> tuple[argparse.Namespace, list[str]]:
+    """``argv`` read by Hydra's own command-line parser: ``(namespace, flags)``.
 
-    A single run's overrides are composed once beforehand, so that an unknown key or a bad value is
-    reported as a :class:`ConfigError` naming it; the first failed job's error is raised after Hydra returns.
+    ``namespace.overrides`` holds the overrides; ``flags`` is Hydra's flags alone, each with its value
+    (``--cfg job``, ``--package trainer``), in the order Hydra reads them: before the overrides. The flags may
+    come anywhere on the command line and give their value as a separate word or after ``=``.
     """
-    flags = [o for o in overrides if o.startswith("-")]
+    from hydra._internal.utils import get_args_parser
+
+    parser = get_args_parser()
+    parser.exit_on_error = False  # a bad flag is one line (ConfigError), not argparse's usage text
+    try:
+        args, unknown = parser.parse_known_intermixed_args(argv)
+    except argparse.ArgumentError as exc:
+        raise ConfigError(f"mocapkit train: {exc} (Hydra's flags: mocapkit train --hydra-help)") from None
+    if unknown:
+        raise ConfigError(
+            f"mocapkit train: unrecognized arguments: {' '.join(unknown)} (Hydra's flags: mocapkit train --hydra-help)"
+        )
+    flags = []
+    for action in parser._actions:
+        value = getattr(args, action.dest, action.default)
+        if action.option_strings and value != action.default:
+            flags += [action.option_strings[0]] if action.nargs == 0 else [action.option_strings[0], str(value)]
+    return args, flags
+
+
+def _print_resumed_config(cfg: DictConfig, args: argparse.Namespace, flags: list[str]) -> None:
+    """``mocapkit train resume=RUN/last.ckpt --cfg job [--resolve]``: the config the resumed run would use."""
+    if args.cfg != "job" or set(flags) - {"--cfg", "job", "--resolve"}:
+        raise ConfigError(
+            f"resume= continues a run from its saved config: of Hydra's flags it takes --cfg job "
+            f"[--resolve] (print that config) only, not {' '.join(flags)}"
+        )
+    print(OmegaConf.to_yaml(cfg, resolve=args.resolve))
+
+
+def main(argv: list[str]) -> None:
+    """``mocapkit train [FLAGS] OVERRIDES``: Hydra's command line (``-m`` sweeps, ``--cfg job``, ``--help``, ...);
+    ``resume=RUN/last.ckpt [OVERRIDES]`` continues a run from its own saved config instead.
+
+    The overrides are composed once beforehand, so that an unknown key or a bad value is reported as a
+    :class:`ConfigError` naming it; the first failed job's error is raised after Hydra returns.
+    """
+    args, flags = hydra_arguments(argv)
+    overrides = list(args.overrides)
+    resume, rest = pop_override(overrides, "resume")
+    if resume:  # continue a run in its own folder, from its saved config
+        cfg = resume_config(resume, rest)
+        if flags:
+            _print_resumed_config(cfg, args, flags)
+        else:
+            train(cfg)
+        return
     check_override_names(overrides)  # before Hydra creates any folder (every value of a sweep)
-    if not flags:
-        check_output_paths(compose_config(overrides))
-    elif {"-m", "--multirun"} & set(flags):  # a sweep: its first job composed, so a bad key is named here
-        check_output_paths(compose_config(_first_job(overrides)))
-    check_override_types(overrides, _reference_config(overrides))
+    runs = not (args.help or args.hydra_help or args.cfg or args.info or args.shell_completion)
+    if not (args.config_path or args.config_name or args.config_dir or args.shell_completion):
+        check_override_types(overrides, _reference_config(overrides))
+        # a sweep: its first job; --cfg / --help print this config: a bad key is named here on one line
+        cfg = compose_config(_first_job(overrides) if args.multirun else overrides)
+        if runs:
+            check_output_paths(cfg)
+    register_trainer_schema()  # configs/trainer/default.yaml extends it
     _ARGV[:] = sys.argv
     _JOB_ERRORS.clear()
-    sys.argv[:] = ["mocapkit train", *overrides]
+    sys.argv[:] = ["mocapkit train", *flags, *overrides]
     try:
         _hydra_task()
+    except SystemExit as exc:  # --help and --hydra-help exit(0) once printed
+        if exc.code not in (0, None):
+            raise
     finally:
         sys.argv[:] = _ARGV
     if _JOB_ERRORS:

@@ -25,6 +25,7 @@ Drawing rules, the same for both:
 Figures are made with ``matplotlib.figure.Figure`` and the Agg canvas, so the
 pyplot state and the active backend are left alone.
 """
+
 from __future__ import annotations
 
 import os
@@ -60,15 +61,24 @@ def as_motions(motion) -> list[Motion]:
     if isinstance(motion, Motion):
         motions = [motion] + _other_bodies(motion)
     elif hasattr(motion, "positions") and hasattr(motion, "layout") and np.ndim(motion.positions) == 4:
-        pos = np.asarray(motion.positions, dtype=np.float32)                  # [B, T, J, 3]
+        pos = np.asarray(motion.positions, dtype=np.float32)  # [B, T, J, 3]
         layout = motion.layout
-        absent = ~np.any(pos != 0, axis=(2, 3))                              # [B, T]
+        absent = ~np.any(pos != 0, axis=(2, 3))  # [B, T]
         motions = []
         for b in range(pos.shape[0]):
             missing = np.broadcast_to(absent[b][:, None], pos.shape[1:3]).copy()
-            motions.append(Motion(positions=pos[b], joint_names=layout.joint_names, parents=layout.parents,
-                                  missing=missing, fps=30.0, up_axis="y", name=f"{getattr(motion, 'name', '')}#{b}",
-                                  layout_name=layout.name))
+            motions.append(
+                Motion(
+                    positions=pos[b],
+                    joint_names=layout.joint_names,
+                    parents=layout.parents,
+                    missing=missing,
+                    fps=30.0,
+                    up_axis="y",
+                    name=f"{getattr(motion, 'name', '')}#{b}",
+                    layout_name=layout.name,
+                )
+            )
     else:
         motions = list(motion)
         if not motions or not all(isinstance(m, Motion) for m in motions):
@@ -90,8 +100,17 @@ def _other_bodies(motion: Motion) -> list[Motion]:
         body = np.asarray(body, dtype=np.float32)
         if body.shape != motion.positions.shape:
             continue
-        out.append(Motion(positions=body, joint_names=motion.joint_names, parents=motion.parents, fps=motion.fps,
-                          up_axis=motion.up_axis, name=f"{motion.name}#{k + 1}", layout_name=motion.layout_name))
+        out.append(
+            Motion(
+                positions=body,
+                joint_names=motion.joint_names,
+                parents=motion.parents,
+                fps=motion.fps,
+                up_axis=motion.up_axis,
+                name=f"{motion.name}#{k + 1}",
+                layout_name=motion.layout_name,
+            )
+        )
     return out
 
 
@@ -114,9 +133,9 @@ def frame_indices(num_frames: int, source_fps: float, fps: float | None = None, 
 def _plot_coords(motion: Motion) -> np.ndarray:
     """float32 ``[T, J, 3]`` in plotting axes: right-handed, third axis = the motion's up axis."""
     up = AXES[motion.up_axis]
-    h1, h2 = (up + 1) % 3, (up + 2) % 3   # cyclic, so (h1, h2, up) is a proper rotation of (x, y, z)
+    h1, h2 = (up + 1) % 3, (up + 2) % 3  # cyclic, so (h1, h2, up) is a proper rotation of (x, y, z)
     p = motion.positions
-    if motion.up_axis == "y":             # y up, z towards the viewer: draw x right, -z into the screen
+    if motion.up_axis == "y":  # y up, z towards the viewer: draw x right, -z into the screen
         return np.stack([p[..., 0], -p[..., 2], p[..., 1]], axis=-1)
     return np.stack([p[..., h1], p[..., h2], p[..., up]], axis=-1)
 
@@ -150,8 +169,19 @@ def _bone_polyline(coords: np.ndarray, parents: tuple[int, ...] | None) -> np.nd
 class _Scene:
     """A figure with one panel per requested frame (strip) or one panel updated per frame (animation)."""
 
-    def __init__(self, motions: list[Motion], view: str, panels: int, panel_size: float, dpi: int,
-                 elev: float, azim: float, title: str | None, marker_size: float, line_width: float):
+    def __init__(
+        self,
+        motions: list[Motion],
+        view: str,
+        panels: int,
+        panel_size: float,
+        dpi: int,
+        elev: float,
+        azim: float,
+        title: str | None,
+        marker_size: float,
+        line_width: float,
+    ):
         if view not in VIEWS:
             raise ValueError(f"view must be one of {VIEWS}, got {view!r}")
         self.view = view
@@ -188,7 +218,7 @@ class _Scene:
                 arts.append((line, dots))
             self.axes.append(ax)
             self.artists.append(arts)
-        top = 1.0 - (0.3 if panels > 1 and title else 0.18) * 2.0 / panel_size   # room for the titles
+        top = 1.0 - (0.3 if panels > 1 and title else 0.18) * 2.0 / panel_size  # room for the titles
         self.fig.subplots_adjust(left=0.01, right=0.99, bottom=0.01, top=top, wspace=0.04)
 
     def _limits(self) -> tuple[np.ndarray, np.ndarray]:
@@ -202,7 +232,7 @@ class _Scene:
         centre = (lo + hi) / 2
         half = max(float((hi - lo).max()) / 2 * 1.05, 1e-3)
         low, high = centre - half, centre + half
-        if self.view in ("3d", "front", "side"):   # the floor (lowest point) at the bottom of the frame
+        if self.view in ("3d", "front", "side"):  # the floor (lowest point) at the bottom of the frame
             up = low.shape[0] - 1
             low[up] = lo[up] - 0.025 * half
             high[up] = low[up] + 2 * half
@@ -236,9 +266,20 @@ class _Scene:
 # --------------------------------------------------------------------------- public API
 
 
-def render_motion(motion, out_path: str | os.PathLike, fps: float | None = None, step: int | None = None,
-                  title: str | None = None, view: str = "3d", size: float = 4.0, dpi: int = 80,
-                  elev: float = 15.0, azim: float = -70.0, marker_size: float = 2.5, line_width: float = 1.5) -> Path:
+def render_motion(
+    motion,
+    out_path: str | os.PathLike,
+    fps: float | None = None,
+    step: int | None = None,
+    title: str | None = None,
+    view: str = "3d",
+    size: float = 4.0,
+    dpi: int = 80,
+    elev: float = 15.0,
+    azim: float = -70.0,
+    marker_size: float = 2.5,
+    line_width: float = 1.5,
+) -> Path:
     """Animate ``motion`` into ``out_path`` (``.gif`` with Pillow, ``.mp4`` with ffmpeg).
 
     Args:
@@ -270,8 +311,10 @@ def render_motion(motion, out_path: str | os.PathLike, fps: float | None = None,
         writer = PillowWriter(fps=out_fps)
     elif suffix == ".mp4":
         if not (writers.is_available("ffmpeg") and shutil.which("ffmpeg")):
-            raise RenderError(f"cannot write {out_path}: .mp4 needs the ffmpeg program, which is not installed "
-                              "(install ffmpeg or write a .gif)")
+            raise RenderError(
+                f"cannot write {out_path}: .mp4 needs the ffmpeg program, which is not installed "
+                "(install ffmpeg or write a .gif)"
+            )
         writer = FFMpegWriter(fps=out_fps)
     else:
         raise RenderError(f"cannot write {out_path}: unknown suffix {suffix!r} (use .gif or .mp4)")
@@ -283,9 +326,19 @@ def render_motion(motion, out_path: str | os.PathLike, fps: float | None = None,
     return out_path
 
 
-def render_strip(motion, out_png: str | os.PathLike, n: int = 8, title: str | None = None, view: str = "3d",
-                 panel_size: float = 2.0, dpi: int = 100, elev: float = 15.0, azim: float = -70.0,
-                 marker_size: float = 2.0, line_width: float = 1.2) -> Path:
+def render_strip(
+    motion,
+    out_png: str | os.PathLike,
+    n: int = 8,
+    title: str | None = None,
+    view: str = "3d",
+    panel_size: float = 2.0,
+    dpi: int = 100,
+    elev: float = 15.0,
+    azim: float = -70.0,
+    marker_size: float = 2.0,
+    line_width: float = 1.2,
+) -> Path:
     """Write a PNG of ``n`` evenly spaced frames (first and last included) side by side.
 
     The image is exactly ``(n * panel_size * dpi) x (panel_size * dpi)`` pixels
@@ -322,4 +375,3 @@ def render_file(path: str | os.PathLike, out: str | os.PathLike, strip: bool = F
 
 
 __all__ = ["VIEWS", "RenderError", "as_motions", "frame_indices", "render_file", "render_motion", "render_strip"]
-

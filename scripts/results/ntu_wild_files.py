@@ -9,6 +9,7 @@ spurious body (listed first in about half of the files) and CRLF line ends
 of each sample). ``score`` reads a prepared cache's ``report.json`` and prints how often body 0 is a
 real person.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -31,12 +32,15 @@ def main() -> None:
     score.add_argument("--manifest", required=True, help=MANIFEST + " written by the write command")
     args = parser.parse_args()
     if args.command == "write":
-        manifest = wild_copy(args.src, args.out, seed=args.seed, empty_frame_prob=args.empty_frame_prob,
-                             flicker_prob=args.flicker_prob)
+        manifest = wild_copy(
+            args.src, args.out, seed=args.seed, empty_frame_prob=args.empty_frame_prob, flicker_prob=args.flicker_prob
+        )
         flickers = sum(info["flicker_body_id"] is not None for info in manifest.values())
         first = sum(info["flicker_first"] for info in manifest.values())
-        print(f"wrote {len(manifest)} files to {args.out}: {flickers} with a flickering body "
-              f"({first} listed first), {sum(i['empty_frames'] for i in manifest.values())} frames without bodies")
+        print(
+            f"wrote {len(manifest)} files to {args.out}: {flickers} with a flickering body "
+            f"({first} listed first), {sum(i['empty_frames'] for i in manifest.values())} frames without bodies"
+        )
     else:
         result = body0_correct(f"{args.cache}/report.json", args.manifest)
         print(json.dumps({k: v for k, v in result.items() if k != "wrong"}, indent=1))

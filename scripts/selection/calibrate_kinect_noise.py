@@ -24,6 +24,7 @@ off (tracked joints only, the regime of MSR's mostly unoccluded actions).
 
 Simulated errors are not comparable with the thesis's Table 5.2 (real sensor, other motions).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -88,8 +89,10 @@ def simulate(clips, config: KinectNoiseConfig, seed: int, fps: float) -> list[tu
 def simulate_all(clips, config: KinectNoiseConfig, seed: int, fps: float, simulated=None):
     """Per clip ``(distance [T, 20] m, state [T, 20])`` (of ``simulated``, when already simulated)."""
     simulated = simulated if simulated is not None else simulate(clips, config, seed, fps)
-    return [(np.linalg.norm(noisy.astype(np.float64) - clean, axis=-1), state)
-            for (_, clean), (noisy, state) in zip(clips, simulated)]
+    return [
+        (np.linalg.norm(noisy.astype(np.float64) - clean, axis=-1), state)
+        for (_, clean), (noisy, state) in zip(clips, simulated)
+    ]
 
 
 def mean_steadiness(positions, step: int = 1) -> tuple[float, float]:
@@ -128,40 +131,65 @@ def parse_set(items: list[str]) -> dict:
 
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--src", type=Path, default=REPO / ".." / "shared" / "data" / "hdm05_cuts11",
-                        help="folder of HDM05 cuts (default: ../shared/data/hdm05_cuts11 from the repo root)")
+    parser.add_argument(
+        "--src",
+        type=Path,
+        default=REPO / ".." / "shared" / "data" / "hdm05_cuts11",
+        help="folder of HDM05 cuts (default: ../shared/data/hdm05_cuts11 from the repo root)",
+    )
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--max-files", type=int, default=None, help="use this many files, spread over the folder")
     parser.add_argument("--fps", type=float, default=30.0)
-    parser.add_argument("--preset", choices=NOISE_PRESETS, default="mean_error",
-                        help="the calibration to start from (default: mean_error, the default config)")
-    parser.add_argument("--msr", type=Path, default=REPO / ".." / "shared" / "data" / "msr_action3d",
-                        help="MSR Action3D folder for the steadiness reference (skipped when absent)")
-    parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
-                        help="override a KinectNoiseConfig field (Python literal), repeatable")
+    parser.add_argument(
+        "--preset",
+        choices=NOISE_PRESETS,
+        default="mean_error",
+        help="the calibration to start from (default: mean_error, the default config)",
+    )
+    parser.add_argument(
+        "--msr",
+        type=Path,
+        default=REPO / ".." / "shared" / "data" / "msr_action3d",
+        help="MSR Action3D folder for the steadiness reference (skipped when absent)",
+    )
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="FIELD=VALUE",
+        help="override a KinectNoiseConfig field (Python literal), repeatable",
+    )
     parser.add_argument("--no-ablation", action="store_true", help="skip the per-component runs")
     args = parser.parse_args(argv)
 
     start = time.time()
     clips = load(args.src.resolve(), args.max_files, args.fps)
     frames = sum(len(c) for _, c in clips)
-    print(f"{len(clips)} files, {frames} frames at {args.fps:g} fps from {args.src.resolve()} "
-          f"(read in {time.time() - start:.1f} s)")
+    print(
+        f"{len(clips)} files, {frames} frames at {args.fps:g} fps from {args.src.resolve()} "
+        f"(read in {time.time() - start:.1f} s)"
+    )
     config = replace(KinectNoiseConfig.preset(args.preset), **parse_set(args.set))
 
     simulated = simulate(clips, config, args.seed, args.fps)
     results = simulate_all(clips, config, args.seed, args.fps, simulated)
-    distance = np.concatenate([d for d, _ in results]) * 100.0            # [frames, 20] cm
+    distance = np.concatenate([d for d, _ in results]) * 100.0  # [frames, 20] cm
     state = np.concatenate([s for _, s in results])
-    print(f"\nraw error, preset {args.preset} (seed {args.seed}): {distance.mean():.2f} cm "
-          f"(median clip {np.median([d.mean() * 100 for d, _ in results]):.2f} cm)")
-    shares = {name: float((state == value).mean()) for name, value in
-              (("TRACKED", TRACKED), ("INFERRED", INFERRED), ("NOT_TRACKED", NOT_TRACKED))}
+    print(
+        f"\nraw error, preset {args.preset} (seed {args.seed}): {distance.mean():.2f} cm "
+        f"(median clip {np.median([d.mean() * 100 for d, _ in results]):.2f} cm)"
+    )
+    shares = {
+        name: float((state == value).mean())
+        for name, value in (("TRACKED", TRACKED), ("INFERRED", INFERRED), ("NOT_TRACKED", NOT_TRACKED))
+    }
     print("states: " + ", ".join(f"{k} {100 * v:.1f} %" for k, v in shares.items()))
     tracked = state == TRACKED
-    print(f"error on TRACKED entries {distance[tracked].mean():.2f} cm, on INFERRED/NOT_TRACKED "
-          f"{distance[~tracked].mean() if (~tracked).any() else float('nan'):.2f} cm; share of the total error "
-          f"from INFERRED/NOT_TRACKED entries {100 * distance[~tracked].sum() / distance.sum():.1f} %")
+    print(
+        f"error on TRACKED entries {distance[tracked].mean():.2f} cm, on INFERRED/NOT_TRACKED "
+        f"{distance[~tracked].mean() if (~tracked).any() else float('nan'):.2f} cm; share of the total error "
+        f"from INFERRED/NOT_TRACKED entries {100 * distance[~tracked].sum() / distance.sum():.1f} %"
+    )
 
     print("\nper joint (cm, % not tracked):")
     per_joint = distance.mean(axis=0)
@@ -179,10 +207,14 @@ def main(argv: list[str] | None = None) -> None:
 
     step = max(1, round(args.fps / 15.0))
     print(f"\nsteadiness at {args.fps / step:g} fps (cm, mean over clips): bone-length sd, jitter")
-    rows = [("clean mocap", [clean for _, clean in clips]),
-            ("simulated, every component", [noisy for noisy, _ in simulated]),
-            ("simulated, no occlusion or swaps",
-             [noisy for noisy, _ in simulate(clips, config.without("occlusion", "swaps"), args.seed, args.fps)])]
+    rows = [
+        ("clean mocap", [clean for _, clean in clips]),
+        ("simulated, every component", [noisy for noisy, _ in simulated]),
+        (
+            "simulated, no occlusion or swaps",
+            [noisy for noisy, _ in simulate(clips, config.without("occlusion", "swaps"), args.seed, args.fps)],
+        ),
+    ]
     for label, positions in rows:
         bone, jitter = mean_steadiness(positions, step)
         print(f"  {label:<36}{bone:6.2f} {jitter:6.2f}")

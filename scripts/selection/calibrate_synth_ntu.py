@@ -17,6 +17,7 @@ The same baseline on a prepared cache, beside the learned models:
 ``mocapkit compare ntu_recognition benchmark.root=CACHE``. Samples are generated in memory with ``synthesize_sample`` (identical to the files up
 to their 7 printed digits) unless ``--files`` is given.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -43,7 +44,6 @@ def main_bodies(seq) -> np.ndarray:
     return select_main_bodies(seq, max_bodies=2, denoise_spread=True, min_frames=12).positions
 
 
-
 def dataset(config: NTUSynthConfig, files: str | None = None):
     """Features ``[N, 600]``, labels ``[N]`` and subjects ``[N]`` for every sample of ``config``."""
     names = sample_names(config)
@@ -60,6 +60,7 @@ def dataset(config: NTUSynthConfig, files: str | None = None):
                     cache.clear()
                     cache[key] = perform(config, *key)
                 yield synthesize_sample(n, config, cache[key])
+
         seqs = gen()
     X = PooledJointStatistics(bodies=2).fit_transform([main_bodies(s) for s in seqs])
     y = np.array([n.action - 1 for n in names])
@@ -100,11 +101,15 @@ SWEEP = [
 ]
 
 
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
-                        help="override an NTUSynthConfig field (Python literal), repeatable")
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="FIELD=VALUE",
+        help="override an NTUSynthConfig field (Python literal), repeatable",
+    )
     parser.add_argument("--sweep", action="store_true", help="run the knob table instead")
     parser.add_argument("--files", metavar="DIR", help="write real files to DIR ('tmp' for a temp dir) and read them")
     args = parser.parse_args()
@@ -123,9 +128,12 @@ def main() -> None:
                 acc = evaluate(config, tmp)
         else:
             acc = evaluate(config, args.files)
-        print(f"{str(overrides or 'default'):70s} logreg {acc['logreg']:.3f} (train {acc['logreg_train']:.3f})  "
-              f"rbf-svm {acc['rbf_svm']:.3f} (train {acc['rbf_svm_train']:.3f})  chance {chance:.3f}  "
-              f"[{time.perf_counter() - t0:.1f}s]", flush=True)
+        print(
+            f"{str(overrides or 'default'):70s} logreg {acc['logreg']:.3f} (train {acc['logreg_train']:.3f})  "
+            f"rbf-svm {acc['rbf_svm']:.3f} (train {acc['rbf_svm_train']:.3f})  chance {chance:.3f}  "
+            f"[{time.perf_counter() - t0:.1f}s]",
+            flush=True,
+        )
 
 
 if __name__ == "__main__":

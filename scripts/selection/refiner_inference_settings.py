@@ -49,6 +49,7 @@ Usage (from the repository root)::
     python scripts/selection/refiner_inference_settings.py --setting pose_prior_short_gaps --models pose_prior --noise-floor 0.005 \
         --train-clips-per-performer 10 --folds bd bk dg mm
 """
+
 from __future__ import annotations
 
 import argparse
@@ -56,11 +57,11 @@ from pathlib import Path
 
 import numpy as np
 
-from mocapkit.refinement.datamodule import MocapRefinementDataModule
 from mocapkit.refinement.benchmark import central_crop
-from mocapkit.refinement.metrics import joint_errors
 from mocapkit.refinement.corruptions import CorruptionError, corrupt
+from mocapkit.refinement.datamodule import MocapRefinementDataModule
 from mocapkit.refinement.learned import LearnedRefiner
+from mocapkit.refinement.metrics import joint_errors
 from mocapkit.refinement.screening import (
     SCREEN_HALF_WINDOW,
     SCREEN_N_SIGMAS,
@@ -69,36 +70,95 @@ from mocapkit.refinement.screening import (
 
 ROOT = Path(__file__).resolve().parents[1]
 SETTINGS = {
-    "threshold": {"values": [0.0, 0.005, 0.01, 0.015, 0.02, 0.03, float("inf")], "unit": "m",
-                  "protocols": [("rdcrypt", 0.3), ("mxcrypt", 0.3), ("spikes", 0.01), ("random_missing", 0.2),
-                                ("continuous_missing", 40)]},
-    "short_gaps": {"values": [0, 4, 8, 12, 24], "unit": "frames",
-                   "protocols": [("random_missing", 0.2), ("random_missing", 0.5), ("continuous_missing", 10),
-                                 ("continuous_missing", 20), ("continuous_missing", 40)]},
-    "short_gap_points": {"values": [0, 24, -24], "unit": "frames (< 0: through the repaired samples)",
-                         "protocols": [("random_missing", 0.2), ("random_missing", 0.5), ("continuous_missing", 10),
-                                       ("continuous_missing", 20), ("continuous_missing", 40), ("mxcrypt", 0.3)]},
-    "screen": {"values": [0.0, 0.005, 0.0075, 0.01, 0.015], "unit": "m",
-               "protocols": [("rdcrypt", 0.3), ("mxcrypt", 0.3), ("random_missing", 0.2), ("continuous_missing", 10),
-                             ("continuous_missing", 40)]},
-    "pose_prior": {"values": [0.04, 0.12, 0.38], "unit": "m/s",
-                   "protocols": [("random_missing", 0.2), ("continuous_missing", 10), ("continuous_missing", 40),
-                                 ("long_gaps", "20x100"), ("long_gaps", "5x2s")]},
-    "pose_prior_short_gaps": {"values": [0, 12, 24, 48, 72, 96], "unit": "frames",
-                              "protocols": [("random_missing", 0.2), ("random_missing", 0.5), ("continuous_missing", 10),
-                                            ("continuous_missing", 20), ("continuous_missing", 40),
-                                            ("continuous_missing", 60), ("long_gaps", "20x100"),
-                                            ("long_gaps", "5x2s")]},
-    "window": {"values": [1, 2, 4], "unit": "× training window",
-               "protocols": [("rdcrypt", 0.3), ("mxcrypt", 0.3), ("random_missing", 0.2), ("continuous_missing", 40),
-                             ("long_gaps", "20x100"), ("long_gaps", "5x2s")]},
+    "threshold": {
+        "values": [0.0, 0.005, 0.01, 0.015, 0.02, 0.03, float("inf")],
+        "unit": "m",
+        "protocols": [
+            ("rdcrypt", 0.3),
+            ("mxcrypt", 0.3),
+            ("spikes", 0.01),
+            ("random_missing", 0.2),
+            ("continuous_missing", 40),
+        ],
+    },
+    "short_gaps": {
+        "values": [0, 4, 8, 12, 24],
+        "unit": "frames",
+        "protocols": [
+            ("random_missing", 0.2),
+            ("random_missing", 0.5),
+            ("continuous_missing", 10),
+            ("continuous_missing", 20),
+            ("continuous_missing", 40),
+        ],
+    },
+    "short_gap_points": {
+        "values": [0, 24, -24],
+        "unit": "frames (< 0: through the repaired samples)",
+        "protocols": [
+            ("random_missing", 0.2),
+            ("random_missing", 0.5),
+            ("continuous_missing", 10),
+            ("continuous_missing", 20),
+            ("continuous_missing", 40),
+            ("mxcrypt", 0.3),
+        ],
+    },
+    "screen": {
+        "values": [0.0, 0.005, 0.0075, 0.01, 0.015],
+        "unit": "m",
+        "protocols": [
+            ("rdcrypt", 0.3),
+            ("mxcrypt", 0.3),
+            ("random_missing", 0.2),
+            ("continuous_missing", 10),
+            ("continuous_missing", 40),
+        ],
+    },
+    "pose_prior": {
+        "values": [0.04, 0.12, 0.38],
+        "unit": "m/s",
+        "protocols": [
+            ("random_missing", 0.2),
+            ("continuous_missing", 10),
+            ("continuous_missing", 40),
+            ("long_gaps", "20x100"),
+            ("long_gaps", "5x2s"),
+        ],
+    },
+    "pose_prior_short_gaps": {
+        "values": [0, 12, 24, 48, 72, 96],
+        "unit": "frames",
+        "protocols": [
+            ("random_missing", 0.2),
+            ("random_missing", 0.5),
+            ("continuous_missing", 10),
+            ("continuous_missing", 20),
+            ("continuous_missing", 40),
+            ("continuous_missing", 60),
+            ("long_gaps", "20x100"),
+            ("long_gaps", "5x2s"),
+        ],
+    },
+    "window": {
+        "values": [1, 2, 4],
+        "unit": "× training window",
+        "protocols": [
+            ("rdcrypt", 0.3),
+            ("mxcrypt", 0.3),
+            ("random_missing", 0.2),
+            ("continuous_missing", 40),
+            ("long_gaps", "20x100"),
+            ("long_gaps", "5x2s"),
+        ],
+    },
 }
 
 
 def rms_error_mm(clean, refined, entries: np.ndarray) -> float:
     """RMS 3-D distance (mm) between ``refined`` and ``clean`` over ``entries [T, J]``."""
     distance = joint_errors(clean, refined)[entries]
-    return float(np.sqrt(np.mean(distance ** 2)) * 1000.0)
+    return float(np.sqrt(np.mean(distance**2)) * 1000.0)
 
 
 def score_on_clips(clips, protocols, refiners) -> np.ndarray:
@@ -124,17 +184,22 @@ def base_refiner(model: str, checkpoint: str, short_gap_frames: int | None = Non
     given) or the classical ``pchip`` / ``lrmf``."""
     if model == "pchip":
         from mocapkit.refinement.gap_filling import PchipInterpolation
+
         return PchipInterpolation(extrapolate="hold")
     if model == "lrmf":
         from mocapkit.refinement.lrmf import LRMF
+
         return LRMF()
     extra = {} if short_gap_frames is None else {"short_gap_frames": int(short_gap_frames)}
     return LearnedRefiner(checkpoint=checkpoint, **extra).fit()
 
 
 def _screened(refiner, threshold: float, half_window: int, n_sigmas: float | None):
-    return refiner if threshold <= 0 else MedianScreen(refiner, half_window=half_window, threshold=threshold,
-                                                       n_sigmas=n_sigmas)
+    return (
+        refiner
+        if threshold <= 0
+        else MedianScreen(refiner, half_window=half_window, threshold=threshold, n_sigmas=n_sigmas)
+    )
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -144,30 +209,60 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--models", nargs="+", default=["bigru", "transformer"])
     parser.add_argument("--folds", nargs="+", default=["bd", "bk", "mm"])
     parser.add_argument("--frames", type=int, default=250, help="threshold: clips cropped to this many frames")
-    parser.add_argument("--values", type=float, nargs="+", default=None,
-                        help="the setting's values to score (default: the grid of SETTINGS)")
-    parser.add_argument("--half-window", type=int, default=SCREEN_HALF_WINDOW,
-                        help="screen: the median's neighbours on each side (default: MedianScreen's)")
-    parser.add_argument("--n-sigmas", type=float, default=SCREEN_N_SIGMAS,
-                        help="screen: the Hampel rule's n_sigmas (default: the fixed threshold alone)")
-    parser.add_argument("--clean", action="store_true",
-                        help="screen: also score the uncorrupted clips (RMS over every observed sample)")
-    parser.add_argument("--short-gap-frames", type=int, default=None,
-                        help="screen: the learned refiners' short_gap_frames (default: theirs)")
+    parser.add_argument(
+        "--values",
+        type=float,
+        nargs="+",
+        default=None,
+        help="the setting's values to score (default: the grid of SETTINGS)",
+    )
+    parser.add_argument(
+        "--half-window",
+        type=int,
+        default=SCREEN_HALF_WINDOW,
+        help="screen: the median's neighbours on each side (default: MedianScreen's)",
+    )
+    parser.add_argument(
+        "--n-sigmas",
+        type=float,
+        default=SCREEN_N_SIGMAS,
+        help="screen: the Hampel rule's n_sigmas (default: the fixed threshold alone)",
+    )
+    parser.add_argument(
+        "--clean", action="store_true", help="screen: also score the uncorrupted clips (RMS over every observed sample)"
+    )
+    parser.add_argument(
+        "--short-gap-frames",
+        type=int,
+        default=None,
+        help="screen: the learned refiners' short_gap_frames (default: theirs)",
+    )
     parser.add_argument("--n-components", type=int, default=90, help="pose_prior: PPCA components")
-    parser.add_argument("--sweep", choices=["drift", "noise_floor"], default="drift",
-                        help="pose_prior: the parameter the values are (drift m/s, or noise_floor m)")
+    parser.add_argument(
+        "--sweep",
+        choices=["drift", "noise_floor"],
+        default="drift",
+        help="pose_prior: the parameter the values are (drift m/s, or noise_floor m)",
+    )
     parser.add_argument("--drift", type=float, default=0.2, help="pose_prior, --sweep noise_floor: the drift, m/s")
     parser.add_argument("--noise-floor", type=float, default=0.0, help="pose_prior, --sweep drift: the noise floor, m")
-    parser.add_argument("--train-clips-per-performer", type=int, default=None,
-                        help="pose_prior: fit on this many seeded clips per training performer (None: all)")
-    parser.add_argument("--runs", type=Path, default=ROOT / "checkpoints",
-                        help="the folder holding refine_<model>/fold_<P>/ (the output_root of the runs)")
+    parser.add_argument(
+        "--train-clips-per-performer",
+        type=int,
+        default=None,
+        help="pose_prior: fit on this many seeded clips per training performer (None: all)",
+    )
+    parser.add_argument(
+        "--runs",
+        type=Path,
+        default=ROOT / "checkpoints",
+        help="the folder holding refine_<model>/fold_<P>/ (the output_root of the runs)",
+    )
     args = parser.parse_args(argv)
     setting = SETTINGS[args.setting]
     values, protocols = args.values or setting["values"], list(setting["protocols"])
-    if args.setting == "pose_prior_short_gaps":              # the grid in frames at 120 fps (HDM05), the parameter
-        values = [int(v) for v in values]                    # in seconds
+    if args.setting == "pose_prior_short_gaps":  # the grid in frames at 120 fps (HDM05), the parameter
+        values = [int(v) for v in values]  # in seconds
     if args.clean:
         protocols.append(("clean", None))
 
@@ -184,50 +279,70 @@ def main(argv: list[str] | None = None) -> None:
                 refiners = [LearnedRefiner(checkpoint=checkpoint, short_gap_frames=int(v)).fit() for v in values]
             elif args.setting == "screen":
                 clips = list(data.val_motions)
-                refiners = [_screened(base_refiner(model, checkpoint, args.short_gap_frames), v, args.half_window,
-                                      args.n_sigmas) for v in values]
+                refiners = [
+                    _screened(
+                        base_refiner(model, checkpoint, args.short_gap_frames), v, args.half_window, args.n_sigmas
+                    )
+                    for v in values
+                ]
             elif args.setting in ("pose_prior", "pose_prior_short_gaps"):
                 from mocapkit.refinement.pose_prior import PosePriorRefiner
+
                 clips = list(data.val_motions)
                 fit = data.train_motions
-                if args.train_clips_per_performer:           # as the benchmark's fits: N seeded clips per performer
+                if args.train_clips_per_performer:  # as the benchmark's fits: N seeded clips per performer
                     rng, by_group = np.random.default_rng(0), {}
                     for m in fit:
                         by_group.setdefault(m.metadata["group"], []).append(m)
-                    fit = [ms[i] for _, ms in sorted(by_group.items())
-                           for i in sorted(rng.choice(len(ms), min(len(ms), args.train_clips_per_performer),
-                                                      replace=False))]
+                    fit = [
+                        ms[i]
+                        for _, ms in sorted(by_group.items())
+                        for i in sorted(
+                            rng.choice(len(ms), min(len(ms), args.train_clips_per_performer), replace=False)
+                        )
+                    ]
                 if args.setting == "pose_prior_short_gaps":
                     sweep, fixed = "short_gap_seconds", {"drift": args.drift, "noise_floor": args.noise_floor}
                     sweep_values = [v / 120.0 for v in values]
                 else:
-                    sweep = args.sweep                        # rounds 1-3 ran without the short-gap spline
+                    sweep = args.sweep  # rounds 1-3 ran without the short-gap spline
                     fixed = {"drift": args.drift} if sweep == "noise_floor" else {"noise_floor": args.noise_floor}
                     fixed["short_gap_seconds"] = 0
                     sweep_values = values
-                refiners = [PosePriorRefiner(n_components=args.n_components, **fixed, **{sweep: v}).fit(fit)
-                            for v in sweep_values]
+                refiners = [
+                    PosePriorRefiner(n_components=args.n_components, **fixed, **{sweep: v}).fit(fit)
+                    for v in sweep_values
+                ]
             elif args.setting == "short_gap_points":
                 clips = list(data.val_motions)
-                refiners = [LearnedRefiner(checkpoint=checkpoint, short_gap_frames=int(abs(v)),
-                                           short_gap_points="repaired" if v < 0 else "observed").fit() for v in values]
+                refiners = [
+                    LearnedRefiner(
+                        checkpoint=checkpoint,
+                        short_gap_frames=int(abs(v)),
+                        short_gap_points="repaired" if v < 0 else "observed",
+                    ).fit()
+                    for v in values
+                ]
             else:
                 clips = list(data.val_motions)
-                trained = int(LearnedRefiner(checkpoint=checkpoint).fit().skeleton_["window"])   # training window
+                trained = int(LearnedRefiner(checkpoint=checkpoint).fit().skeleton_["window"])  # training window
                 refiners = [LearnedRefiner(checkpoint=checkpoint, window=int(v * trained)).fit() for v in values]
             for p, (protocol, level) in enumerate(protocols):
                 scores = np.full((len(values), len(clips)), np.nan)
                 for i, clip in enumerate(clips):
-                    if protocol == "clean":                      # what false flags cost: every observed sample
+                    if protocol == "clean":  # what false flags cost: every observed sample
                         corrupted, entries = clip, ~clip.missing
                     else:
                         try:
                             corruption = corrupt(clip, protocol, level, seed=i)
-                        except CorruptionError:                  # a clip too short for the protocol: not scored
+                        except CorruptionError:  # a clip too short for the protocol: not scored
                             continue
                         corrupted = corruption.motion
-                        entries = (~corrupted.missing if args.setting == "threshold"
-                                   else corruption.removed | corruption.perturbed)
+                        entries = (
+                            ~corrupted.missing
+                            if args.setting == "threshold"
+                            else corruption.removed | corruption.perturbed
+                        )
                     for k, refiner in enumerate(refiners):
                         scores[k, i] = rms_error_mm(clip, refiner.refine(corrupted), entries)
                 table[p, :, f] = np.nanmean(scores, axis=1)

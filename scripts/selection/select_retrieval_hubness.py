@@ -1,4 +1,4 @@
-"""Selection of a label-free re-ranking of DTW retrieval distances, on training groups only (issue 12).
+"""Selection of a label-free re-ranking of DTW retrieval distances, on training groups only.
 
 Candidates: three base distances (DTW on normalised positions, on relational features, and the sum of the two
 each divided by its median among the database clips) × five re-rankings (none; Gaussian mutual proximity,
@@ -11,13 +11,14 @@ content and style, MSR cross-subject; :class:`~mocapkit.retrieval.benchmark.Retr
 the fold's **database** groups are used: each of them in turn queries the others (HDM05: the other three
 performers; Bandai: the database styles or contents dealt into 3 inner folds; MSR: the training subjects 1 3 5 7
 9, one at a time). mAP pooled over the inner queries, averaged over the outer folds. The test queries are never
-read by this script. The rule and its result: README *Motion retrieval on real data* and bench/RESULTS.md §14
+read by this script. The rule and its result: docs/decisions.md#retrieval-default-mutual-proximity
 (the rule file was written into the git-ignored ``checkpoints/select_retrieval_rerank/``).
 
 Usage (from the repository root; about 2 min, most of it the DTW matrices)::
 
     OMP_NUM_THREADS=2 python scripts/selection/select_retrieval_hubness.py [--out checkpoints/select_retrieval_rerank]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -27,9 +28,9 @@ from pathlib import Path
 import numpy as np
 
 from mocapkit.retrieval.benchmark import PROTOCOLS, RetrievalBenchmark
-from mocapkit.retrieval.metrics import retrieval_metrics
 from mocapkit.retrieval.dtw import DTWRetrieval
 from mocapkit.retrieval.hubness import database_statistics, mutual_proximity
+from mocapkit.retrieval.metrics import retrieval_metrics
 
 SHARED = Path(os.environ.get("MOCAPKIT_SHARED", "../shared")) / "data"
 ROOTS = {"hdm05": SHARED / "hdm05_cuts11", "bandai": SHARED / "bandai_motion_1", "msr": SHARED / "msr_action3d"}
@@ -59,8 +60,8 @@ def k_reciprocal(dq, dd, k1=20, k2=6, lam=0.3):
         rank = np.argsort(d, 1, kind="stable")
         v = np.zeros((n, n))
         for a in range(n):
-            forward = rank[a, :k1 + 1]
-            recip = forward[np.any(rank[forward, :k1 + 1] == a, 1)]
+            forward = rank[a, : k1 + 1]
+            recip = forward[np.any(rank[forward, : k1 + 1] == a, 1)]
             expanded = recip
             for c in recip:
                 half = round(k1 / 2) + 1
@@ -77,17 +78,22 @@ def k_reciprocal(dq, dd, k1=20, k2=6, lam=0.3):
     return out
 
 
-RERANKINGS = {"none": lambda dq, dd: dq, "mutual_proximity": mp,
-              "local_scaling_5": lambda dq, dd: local_scaling(dq, dd, 5),
-              "local_scaling_10": lambda dq, dd: local_scaling(dq, dd, 10), "k_reciprocal": k_reciprocal}
+RERANKINGS = {
+    "none": lambda dq, dd: dq,
+    "mutual_proximity": mp,
+    "local_scaling_5": lambda dq, dd: local_scaling(dq, dd, 5),
+    "local_scaling_10": lambda dq, dd: local_scaling(dq, dd, 10),
+    "k_reciprocal": k_reciprocal,
+}
 BASES = ("positions", "relational", "sum")
 
 
 # ------------------------------------------------------------------------------------- data and folds
 def matrices(dataset: str) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], RetrievalBenchmark]:
     protocols = [p for p in PROTOCOLS[dataset] if p != "zhou_tp20"]
-    bench = RetrievalBenchmark(dataset, str(ROOTS[dataset]), protocols,
-                               n_folds=3 if dataset == "bandai" else None)     # as configs/compare/retrieval_*.yaml
+    bench = RetrievalBenchmark(
+        dataset, str(ROOTS[dataset]), protocols, n_folds=3 if dataset == "bandai" else None
+    )  # as configs/compare/retrieval_*.yaml
     out = {}
     for feature in ("positions", "relational"):
         method = DTWRetrieval(features=feature).fit(bench.motions)
@@ -117,7 +123,7 @@ def base_distances(d, name, q, db):
 
 def validation_map(dataset, protocol, d, fields, bench, base, reranking) -> float:
     per_fold = []
-    for database, _queries in bench.folds(protocol).values():        # the test queries are not used
+    for database, _queries in bench.folds(protocol).values():  # the test queries are not used
         aps = []
         for db, q, label in inner_folds(dataset, fields, protocol, database):
             dq, dd = base_distances(d, base, q, db)

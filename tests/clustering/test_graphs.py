@@ -1,4 +1,5 @@
 """Sample graphs for GNMF / NMC (mocapkit.clustering.graphs)."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -6,8 +7,15 @@ import pytest
 import scipy.sparse as sp
 import torch
 
-from mocapkit.clustering.graphs import combine_graphs, knn_graph, label_graph, laplacian, sparse_graph, split_laplacian
-from mocapkit.clustering.graphs import check_graph
+from mocapkit.clustering.graphs import (
+    check_graph,
+    combine_graphs,
+    knn_graph,
+    label_graph,
+    laplacian,
+    sparse_graph,
+    split_laplacian,
+)
 
 
 @pytest.fixture(scope="module")
@@ -29,9 +37,10 @@ def test_knn_graph_binary_neighbours_symmetry(X):
     np.fill_diagonal(distances, np.inf)
     nearest = np.argsort(distances, axis=1)[:, :5]
     for i in range(40):
-        assert np.all(dense[i, nearest[i]] == 1)                   # its own 5 neighbours are in
-        assert set(np.flatnonzero(dense[i])) == set(nearest[i]) | set(np.flatnonzero(
-            (nearest == i).any(axis=1)))                           # plus exactly those who chose i
+        assert np.all(dense[i, nearest[i]] == 1)  # its own 5 neighbours are in
+        assert set(np.flatnonzero(dense[i])) == set(nearest[i]) | set(
+            np.flatnonzero((nearest == i).any(axis=1))
+        )  # plus exactly those who chose i
     assert (dense.sum(axis=1) >= 5).all()
     assert np.allclose(knn_graph(torch.from_numpy(X), 5).toarray(), dense)
 
@@ -42,12 +51,12 @@ def test_knn_graph_heat_weights(X):
     assert _is_symmetric(S) and (S != 0).toarray().tolist() == (B != 0).toarray().tolist()
     i, j = S.nonzero()
     d2 = ((X[i] - X[j]) ** 2).sum(axis=1)
-    assert np.allclose(np.asarray(S[i, j]).ravel(), np.exp(-d2 / (2 * 0.3 ** 2)))
+    assert np.allclose(np.asarray(S[i, j]).ravel(), np.exp(-d2 / (2 * 0.3**2)))
     # default sigma = mean distance to the 4 nearest neighbours
     distances = np.sort(np.linalg.norm(X[:, None] - X[None], axis=-1), axis=1)[:, 1:5]
     S_default = knn_graph(X, n_neighbors=4, weight="heat")
     sigma = distances.mean()
-    assert np.allclose(np.asarray(S_default[i, j]).ravel(), np.exp(-d2 / (2 * sigma ** 2)))
+    assert np.allclose(np.asarray(S_default[i, j]).ravel(), np.exp(-d2 / (2 * sigma**2)))
 
 
 def test_knn_graph_errors(X):
@@ -97,7 +106,7 @@ def test_laplacian_and_split(X):
     assert np.allclose(L.toarray().sum(axis=1), 0)
     assert np.allclose(D.diagonal(), S.toarray().sum(axis=1))
     eigenvalues = np.linalg.eigvalsh(L.toarray())
-    assert eigenvalues.min() > -1e-10                                     # positive semi-definite
+    assert eigenvalues.min() > -1e-10  # positive semi-definite
     plus, minus = split_laplacian(L)
     assert np.allclose((plus - minus).toarray(), L.toarray())
     assert plus.data.min() >= 0 and minus.data.min() >= 0

@@ -1,5 +1,6 @@
 """The bag-of-clip-words pipeline (mocapkit.clustering.bag_of_words) as scikit-learn estimators, and the MSR Action3D
 NMF benchmark (``configs/compare/msr3d_nmf.yaml`` through the comparison runner) on a small subset of the real data."""
+
 import json
 import math
 
@@ -13,7 +14,6 @@ from sklearn.exceptions import NotFittedError
 from sklearn.model_selection import GridSearchCV
 from sklearn.pipeline import Pipeline
 
-from mocapkit.clustering.nmf import NMF
 from mocapkit.clustering.bag_of_words import (
     BagOfWordsClassifier,
     ClipConditioner,
@@ -24,6 +24,7 @@ from mocapkit.clustering.bag_of_words import (
     fit_words,
     word_histograms,
 )
+from mocapkit.clustering.nmf import NMF
 from tests.shared_data import SHARED, needs
 
 MSR_ROOT = SHARED / "data" / "msr_action3d"
@@ -39,7 +40,7 @@ def test_word_histograms_are_l1_normalised_per_sequence():
 def test_code_histograms_average_l1_normalised_codes():
     codes = np.array([[1.0, 3.0, 0.0], [0.0, 0.0, 2.0], [5.0, 5.0, 0.0], [0.0, 0.0, 0.0]])
     hist = code_histograms(codes, [0, 0, 2, 2], n_sequences=3)
-    np.testing.assert_allclose(hist, [[0.125, 0.375, 0.5], [0, 0, 0], [0.5, 0.5, 0]])   # zero code row: no word
+    np.testing.assert_allclose(hist, [[0.125, 0.375, 0.5], [0, 0, 0], [0.5, 0.5, 0]])  # zero code row: no word
     with pytest.raises(ValueError, match="non-negative"):
         code_histograms(-codes, [0, 0, 2, 2], 3)
     with pytest.raises(ValueError, match=r"sequence_of_clip must lie in \[0, 2\)"):
@@ -48,7 +49,7 @@ def test_code_histograms_average_l1_normalised_codes():
 
 def test_clip_conditioner_centres_the_signed_clips_and_sign_splits_again():
     rng = np.random.default_rng(0)
-    signed = rng.normal(1.0, 0.5, size=(50, 6))                              # a shared offset ("mean pose")
+    signed = rng.normal(1.0, 0.5, size=(50, 6))  # a shared offset ("mean pose")
     X = np.concatenate([np.maximum(signed, 0), np.maximum(-signed, 0)], 1)
     conditioner = ClipConditioner().fit(X[:40])
     np.testing.assert_allclose(conditioner.mean_, signed[:40].mean(0))
@@ -56,7 +57,7 @@ def test_clip_conditioner_centres_the_signed_clips_and_sign_splits_again():
     assert out.shape == X.shape and out.min() >= 0
     np.testing.assert_allclose(out[:, :6] - out[:, 6:], signed - signed[:40].mean(0), atol=1e-12)
     np.testing.assert_allclose((out[:40, :6] - out[:40, 6:]).mean(0), 0, atol=1e-12)
-    assert (np.minimum(out[:, :6], out[:, 6:]) == 0).all()                      # one side of each sign is zero
+    assert (np.minimum(out[:, :6], out[:, 6:]) == 0).all()  # one side of each sign is zero
     np.testing.assert_allclose(ClipConditioner(centre=False).fit(X).transform(X), X)
     unit = ClipConditioner(unit_norm=True).fit(X).transform(X)
     np.testing.assert_allclose(np.linalg.norm(unit, axis=1), 1.0)
@@ -104,8 +105,9 @@ def _sequences(seed: int, **kwargs):
     return [X[owner == s] for s in range(len(y))], y
 
 
-@pytest.mark.parametrize("clusterer", [KMeans(6, n_init=4, random_state=0),
-                                       SklearnNMF(6, init="nndsvda", max_iter=500, random_state=0)])
+@pytest.mark.parametrize(
+    "clusterer", [KMeans(6, n_init=4, random_state=0), SklearnNMF(6, init="nndsvda", max_iter=500, random_state=0)]
+)
 def test_bag_of_words_classifier_recognises_separable_sequences(clusterer):
     X, y = _sequences(0)
     X_test, y_test = _sequences(1)
@@ -113,7 +115,7 @@ def test_bag_of_words_classifier_recognises_separable_sequences(clusterer):
     assert model.n_words_ == 6 and len(model.train_words_) == sum(len(x) for x in X)
     np.testing.assert_array_equal(model.train_clip_sequence_, np.repeat(np.arange(len(y)), 4))
     assert model.best_C_ in model.Cs and list(model.classes_) == [0, 1, 2]
-    assert model.score(X_test, y_test) == 1.0                      # ClassifierMixin.score: accuracy over sequences
+    assert model.score(X_test, y_test) == 1.0  # ClassifierMixin.score: accuracy over sequences
     hist = model.histograms(X_test)
     assert hist.shape == (len(y_test), 6)
     np.testing.assert_allclose(hist.sum(1), 1.0)
@@ -122,18 +124,24 @@ def test_bag_of_words_classifier_recognises_separable_sequences(clusterer):
 def test_soft_prefit_model_reuses_the_fitted_clusterer_and_conditioner():
     X, y = _sequences(0)
     X_test, y_test = _sequences(1)
-    hard = BagOfWordsClassifier(NMF(6, init="nndsvda", max_iter=300, random_state=0),
-                                conditioner=ClipConditioner(centre=False)).fit(X, y)
-    soft = BagOfWordsClassifier(hard.clusterer_, assignment="soft", conditioner=hard.conditioner_,
-                                prefit=True).fit(X, y)
+    hard = BagOfWordsClassifier(
+        NMF(6, init="nndsvda", max_iter=300, random_state=0), conditioner=ClipConditioner(centre=False)
+    ).fit(X, y)
+    soft = BagOfWordsClassifier(hard.clusterer_, assignment="soft", conditioner=hard.conditioner_, prefit=True).fit(
+        X, y
+    )
     assert soft.clusterer_ is hard.clusterer_ and soft.conditioner_ is hard.conditioner_
     codes = assign_codes(hard.clusterer_, hard.conditioner_.transform(np.concatenate(X_test)))
-    np.testing.assert_allclose(soft.histograms(X_test), code_histograms(codes, np.repeat(np.arange(len(y_test)), 4),
-                                                                        len(y_test)))
+    np.testing.assert_allclose(
+        soft.histograms(X_test), code_histograms(codes, np.repeat(np.arange(len(y_test)), 4), len(y_test))
+    )
     assert soft.score(X_test, y_test) == 1.0
     # a soft model fitted from scratch with the same seed reads the same clustering
-    refit = BagOfWordsClassifier(NMF(6, init="nndsvda", max_iter=300, random_state=0), assignment="soft",
-                                 conditioner=ClipConditioner(centre=False)).fit(X, y)
+    refit = BagOfWordsClassifier(
+        NMF(6, init="nndsvda", max_iter=300, random_state=0),
+        assignment="soft",
+        conditioner=ClipConditioner(centre=False),
+    ).fit(X, y)
     np.testing.assert_allclose(refit.histograms(X_test), soft.histograms(X_test))
     with pytest.raises(ValueError, match="assignment must be one of"):
         BagOfWordsClassifier(hard.clusterer_, assignment="fuzzy").fit(X, y)  # checked in fit, not __init__
@@ -143,12 +151,12 @@ def test_bag_of_words_classifier_follows_the_scikit_learn_contract():
     X, y = _sequences(0)
     model = BagOfWordsClassifier(KMeans(6, n_init=2, random_state=0), Cs=[1.0, 10.0], cv=2)
     params = model.get_params()
-    assert params["Cs"] == [1.0, 10.0] and params["clusterer__n_clusters"] == 6     # stored untouched, nested
+    assert params["Cs"] == [1.0, 10.0] and params["clusterer__n_clusters"] == 6  # stored untouched, nested
     twin = clone(model)
     assert twin.get_params()["clusterer"] is not model.clusterer
     assert twin.set_params(clusterer__n_clusters=4, assignment="soft").clusterer.n_clusters == 4
-    assert model.clusterer.n_clusters == 6                                           # the clone is independent
-    assert BagOfWordsClassifier(None, assignment="nope").assignment == "nope"        # no validation in __init__
+    assert model.clusterer.n_clusters == 6  # the clone is independent
+    assert BagOfWordsClassifier(None, assignment="nope").assignment == "nope"  # no validation in __init__
     with pytest.raises(NotFittedError):
         model.predict(X)
     with pytest.raises(ValueError, match="Negative values"):
@@ -164,18 +172,22 @@ def test_bag_of_words_classifier_follows_the_scikit_learn_contract():
 def test_bag_of_words_in_a_pipeline_and_grid_search_over_sequences():
     """SequenceClips → BagOfWordsClassifier from skeleton sequences; GridSearchCV folds over sequences."""
     rng = np.random.default_rng(0)
-    gestures = rng.normal(0, 0.3, size=(2, 20, 3))                 # per class, a joint displacement pattern
+    gestures = rng.normal(0, 0.3, size=(2, 20, 3))  # per class, a joint displacement pattern
     sequences, labels = [], []
     for c in range(2):
         for _ in range(8):
             t = np.linspace(0, 2 * np.pi, int(rng.integers(24, 40)))[:, None, None]
             base = np.zeros((len(t), 20, 3), np.float32)
-            base[:, :, 1] = np.linspace(0, 1.6, 20)                    # a standing body: joints up the y axis
+            base[:, :, 1] = np.linspace(0, 1.6, 20)  # a standing body: joints up the y axis
             sequences.append((base + np.sin(t) * gestures[c] + rng.normal(0, 0.01, base.shape)).astype(np.float32))
             labels.append(c)
     labels = np.array(labels)
-    pipe = Pipeline([("clips", SequenceClips(window=10, layout="msr20")),
-                     ("bow", BagOfWordsClassifier(KMeans(4, n_init=2, random_state=0), cv=2))])
+    pipe = Pipeline(
+        [
+            ("clips", SequenceClips(window=10, layout="msr20")),
+            ("bow", BagOfWordsClassifier(KMeans(4, n_init=2, random_state=0), cv=2)),
+        ]
+    )
     clips = clone(pipe[0]).fit(sequences).transform(sequences[:2])
     assert [c.shape for c in clips] == [((len(s) - 10) // 5 + 1, 1200) for s in sequences[:2]]
     pipe.fit(sequences, labels)
@@ -205,9 +217,19 @@ def _msr_quick_config(tmp_path, only, overrides=()):
     """configs/compare/msr3d_nmf.yaml on the first take of actions a08-a11 (40 files), tiny vocabularies."""
     from mocapkit.evaluation.compare import compose
 
-    cfg = compose(["msr3d_nmf", f"benchmark.root={MSR_ROOT}", f"out={tmp_path / 'out'}",
-                   "benchmark.actions=[8,9,10,11]", "benchmark.takes=[1]", "seeds=[0]", f"only=[{','.join(only)}]", *overrides])
-    for name in ("kmeans", "nmf", "onmf", "gnmf", "nmc"):           # 5 words, 20 iterations: seconds, not minutes
+    cfg = compose(
+        [
+            "msr3d_nmf",
+            f"benchmark.root={MSR_ROOT}",
+            f"out={tmp_path / 'out'}",
+            "benchmark.actions=[8,9,10,11]",
+            "benchmark.takes=[1]",
+            "seeds=[0]",
+            f"only=[{','.join(only)}]",
+            *overrides,
+        ]
+    )
+    for name in ("kmeans", "nmf", "onmf", "gnmf", "nmc"):  # 5 words, 20 iterations: seconds, not minutes
         key = "n_clusters" if name == "kmeans" else "n_components"
         OmegaConf.update(cfg, f"templates.{name}.steps.1.1.clusterer.{key}", 5)
         OmegaConf.update(cfg, f"templates.{name}.steps.1.1.clusterer.max_iter", 20)
@@ -227,16 +249,17 @@ def test_msr_nmf_comparison_on_a_real_subset(tmp_path):
     results = run_comparison(_msr_quick_config(tmp_path, methods))
     saved = json.loads((tmp_path / "out" / "results.json").read_text())
     assert saved["benchmark"]["n_sequences"] == 40 and saved["benchmark"]["subset"]["actions"] == [8, 9, 10, 11]
-    assert {(c["method"], c["protocol"], c["seed"]) for c in saved["cells"]} == \
-        {(m, p, 0) for m in methods for p in ("random_half", "cross_subject")}
+    assert {(c["method"], c["protocol"], c["seed"]) for c in saved["cells"]} == {
+        (m, p, 0) for m in methods for p in ("random_half", "cross_subject")
+    }
     for protocol in ("random_half", "cross_subject"):
         chosen = saved["selection"]["nmc_w30"][protocol]
         assert chosen["params"]["bow__clusterer__n_components"] in (3, 5) and len(chosen["tried"]) == 2 + 2
         assert chosen["cv_score"] == max(t["cv_score"] for t in chosen["tried"])
-        assert set(saved["selection"]) == {"kmeans_w30", "nmc_w30"}            # soft reuses the hard selection
+        assert set(saved["selection"]) == {"kmeans_w30", "nmc_w30"}  # soft reuses the hard selection
         cells = {c["method"]: c for c in saved["cells"] if c["protocol"] == protocol}
         assert cells["nmc_soft_w30"]["params"] == {"bow__assignment": "soft", **chosen["params"]}
-        assert len({c["test_sha1"] for c in cells.values()}) == 1                # same test sequences
+        assert len({c["test_sha1"] for c in cells.values()}) == 1  # same test sequences
         assert cells["kmeans_w30"]["test_sha1"] == saved["splits"][protocol]["0"]["test_sha1"]
         for c in cells.values():
             for key in ("accuracy", "clip_acc", "clip_nmi", "clip_ari"):
@@ -255,10 +278,18 @@ def test_msr_nmf_layer_cell_scores_the_same_test_sequences(tmp_path):
     """The end-to-end NMF layer (2 epochs) beside k-means: trained with train(), scored with evaluate()."""
     from mocapkit.evaluation.compare import run_comparison
 
-    cfg = _msr_quick_config(tmp_path, ["kmeans_w30", "layer_w30"], [
-        "protocols=[cross_subject]", ("learned_overrides=['trainer.max_epochs=2','model.n_components=8',"
-                                      "'model.encoder_hidden=16','data.val_fraction=0.2',"
-                                      "'trainer.enable_progress_bar=false']")])
+    cfg = _msr_quick_config(
+        tmp_path,
+        ["kmeans_w30", "layer_w30"],
+        [
+            "protocols=[cross_subject]",
+            (
+                "learned_overrides=['trainer.max_epochs=2','model.n_components=8',"
+                "'model.encoder_hidden=16','data.val_fraction=0.2',"
+                "'trainer.enable_progress_bar=false']"
+            ),
+        ],
+    )
     results = run_comparison(cfg)
     layer, kmeans = (next(c for c in results["cells"] if c["method"] == m) for m in ("layer_w30", "kmeans_w30"))
     assert layer["test_sha1"] == kmeans["test_sha1"] and layer["kind"] == "learned"
@@ -275,8 +306,18 @@ def test_msr_nmf_config_lists_every_method_and_window():
     assert list(cfg.protocols) == ["random_half", "cross_subject"] and list(cfg.seeds) == [0, 1, 2]
     for window in (30, 10):
         keys = [k for k in methods if k.endswith(f"_w{window}")]
-        assert [k.rsplit("_", 1)[0] for k in keys] == ["kmeans", "nmf", "nmf_soft", "onmf", "onmf_soft", "gnmf",
-                                                       "gnmf_soft", "nmc", "nmc_soft", "layer"]
+        assert [k.rsplit("_", 1)[0] for k in keys] == [
+            "kmeans",
+            "nmf",
+            "nmf_soft",
+            "onmf",
+            "onmf_soft",
+            "gnmf",
+            "gnmf_soft",
+            "nmc",
+            "nmc_soft",
+            "layer",
+        ]
         assert methods[f"layer_w{window}"].spec["overrides"][0] == f"model.window={window}"
     assert methods["nmc_w10"].params == {"clips__window": 10}
     assert methods["gnmf_w30"].select["stages"][1] == {"bow__clusterer__lam": [0.01, 0.1, 1.0]}

@@ -1,4 +1,5 @@
 """Classical NMF solvers (mocapkit.clustering.nmf): descent, sklearn parity, orthogonality, clustering, errors."""
+
 from __future__ import annotations
 
 import itertools
@@ -10,9 +11,8 @@ import torch
 from scipy.optimize import linear_sum_assignment
 from sklearn.decomposition import NMF as SklearnNMF
 
-from mocapkit.clustering.nmf import GNMF, NMC, NMF, OrthogonalNMF
-
 from mocapkit.clustering.graphs import knn_graph
+from mocapkit.clustering.nmf import GNMF, NMC, NMF, OrthogonalNMF
 
 #: relative slack allowed on "non-increasing" (round-off of the objective itself)
 MONOTONE_RTOL = 1e-9
@@ -42,7 +42,7 @@ def parts_blobs(seed, n_per=40, k=4, d=32, noise=0.1):
     centres = 0.1 * rng.random((k, d))
     block = d // k
     for c in range(k):
-        centres[c, c * block:(c + 1) * block] += 1 + rng.random(block)
+        centres[c, c * block : (c + 1) * block] += 1 + rng.random(block)
     y = np.repeat(np.arange(k), n_per)
     return np.abs(centres[y] + noise * rng.standard_normal((len(y), d))), y
 
@@ -63,12 +63,16 @@ def data():
 # ---------------------------------------------------------------------------- descent
 
 
-@pytest.mark.parametrize("model", [
-    NMF(5, beta_loss="frobenius", max_iter=150, tol=0, random_state=0),
-    NMF(5, beta_loss="kullback-leibler", max_iter=150, tol=0, random_state=0),
-    GNMF(5, lam=1.0, max_iter=150, tol=0, random_state=0),
-    GNMF(5, lam=10.0, graph="heat", max_iter=150, tol=0, random_state=0),
-], ids=["nmf-frobenius", "nmf-kl", "gnmf-knn", "gnmf-heat"])
+@pytest.mark.parametrize(
+    "model",
+    [
+        NMF(5, beta_loss="frobenius", max_iter=150, tol=0, random_state=0),
+        NMF(5, beta_loss="kullback-leibler", max_iter=150, tol=0, random_state=0),
+        GNMF(5, lam=1.0, max_iter=150, tol=0, random_state=0),
+        GNMF(5, lam=10.0, graph="heat", max_iter=150, tol=0, random_state=0),
+    ],
+    ids=["nmf-frobenius", "nmf-kl", "gnmf-knn", "gnmf-heat"],
+)
 def test_objective_never_increases(model, data):
     X, _, _ = data
     model.fit(X)
@@ -151,14 +155,15 @@ def test_convergence_stops_on_relative_change(data):
 # ---------------------------------------------------------------------------- orthogonality
 
 
-@pytest.mark.parametrize("make", [lambda: OrthogonalNMF(4, random_state=0), lambda: NMC(4, random_state=0)],
-                         ids=["onmf", "nmc"])
+@pytest.mark.parametrize(
+    "make", [lambda: OrthogonalNMF(4, random_state=0), lambda: NMC(4, random_state=0)], ids=["onmf", "nmc"]
+)
 def test_components_are_near_orthonormal(make):
     X, _ = parts_blobs(0)
     model = make().fit(X)
     gram = model.components_ @ model.components_.T
-    assert np.allclose(np.diag(gram), 1.0, atol=1e-12)       # rows normalised
-    assert np.abs(gram - np.eye(4)).max() < 0.02              # Ding's update: near, not exactly, orthogonal
+    assert np.allclose(np.diag(gram), 1.0, atol=1e-12)  # rows normalised
+    assert np.abs(gram - np.eye(4)).max() < 0.02  # Ding's update: near, not exactly, orthogonal
     # on overlapping blobs orthogonality is only approximate, but much closer than plain NMF's
     X, _ = blobs(0)
     H_nmf = NMF(4, random_state=0).fit(X).components_
@@ -173,18 +178,22 @@ def test_gnmf_rows_of_components_are_unit_norm_and_wh_kept(data):
     W = model.fit_transform(X, W=W0, H=H0)
     assert np.allclose(np.linalg.norm(model.components_, axis=1), 1.0)
     assert np.linalg.norm(X - W @ model.components_) == pytest.approx(model.reconstruction_err_, rel=1e-12)
-    assert model.reconstruction_err_ ** 2 <= model.objective_[-1]
+    assert model.reconstruction_err_**2 <= model.objective_[-1]
 
 
 # ---------------------------------------------------------------------------- clustering
 
 
-@pytest.mark.parametrize("make", [
-    lambda s: NMC(4, random_state=s),
-    lambda s: NMC(4, eta=1.0, random_state=s),
-    lambda s: GNMF(4, random_state=s),
-    lambda s: NMC(4, graph="heat", random_state=s),
-], ids=["nmc", "nmc-eta1", "gnmf", "nmc-heat"])
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda s: NMC(4, random_state=s),
+        lambda s: NMC(4, eta=1.0, random_state=s),
+        lambda s: GNMF(4, random_state=s),
+        lambda s: NMC(4, graph="heat", random_state=s),
+    ],
+    ids=["nmc", "nmc-eta1", "gnmf", "nmc-heat"],
+)
 @pytest.mark.parametrize("seed", [0, 1])
 def test_clusters_well_separated_blobs(make, seed):
     for X, y in (blobs(seed), parts_blobs(seed)):
@@ -198,7 +207,7 @@ def test_nmc_label_graph_and_precomputed_graph():
     y_partial = np.where(np.arange(len(y)) % 4 == 0, y, -1)
     model = NMC(4, graph="label", random_state=0).fit(X, y_partial)
     assert clustering_accuracy(y, model.labels_) > 0.9
-    assert model.affinity_[0, 4] >= 1.0                       # same label, both labelled
+    assert model.affinity_[0, 4] >= 1.0  # same label, both labelled
     S = knn_graph(X, 5)
     a = GNMF(4, max_iter=30, tol=0, random_state=0).fit(X)
     b = GNMF(4, graph=S.toarray(), max_iter=30, tol=0, random_state=0).fit(X)
@@ -213,7 +222,7 @@ def test_transform_of_training_data_recovers_labels():
     for model in (NMC(4, random_state=0), GNMF(4, random_state=0), OrthogonalNMF(4, random_state=0)):
         model.fit(X)
         assert clustering_accuracy(y, model.predict(X)) > 0.9
-        assert np.array_equal(model.predict(X[::3]), model.predict(X)[::3])   # other n: no training graph used
+        assert np.array_equal(model.predict(X[::3]), model.predict(X)[::3])  # other n: no training graph used
 
 
 # ---------------------------------------------------------------------------- bad input
@@ -236,7 +245,7 @@ def test_bad_input_errors(data):
         NMF(5).fit(X[0])
     with pytest.raises(ValueError, match="nndsvda"):
         NMF(26, init="nndsvda").fit(X)
-    assert NMF(26, init="random", max_iter=5).fit(X).components_.shape == (26, 25)   # as sklearn: allowed
+    assert NMF(26, init="random", max_iter=5).fit(X).components_.shape == (26, 25)  # as sklearn: allowed
     with pytest.raises(ValueError, match=r"initial W must have shape \[n_samples, n_components\] = \[60, 5\]"):
         NMF(5).fit(X, W=W0[:, :4], H=H0)
     with pytest.raises(ValueError, match="initial H"):

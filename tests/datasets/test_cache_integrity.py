@@ -1,4 +1,5 @@
-"""Prepared caches check themselves on opening (issue 14): damaged files fail naming the file."""
+"""Prepared caches check themselves on opening: damaged files fail naming the file."""
+
 from __future__ import annotations
 
 import json
@@ -44,16 +45,16 @@ def test_meta_records_integrity(ntu_cache):
 
 def test_positions_that_lost_rows(ntu_cache):
     path = ntu_cache / "positions.npy"
-    np.save(path, np.load(path)[:28])          # still a valid .npy, half the rows
+    np.save(path, np.load(path)[:28])  # still a valid .npy, half the rows
     with pytest.raises(CacheIntegrityError, match=r"positions.npy: shape \[28, 2, 25, 3\], meta.json recorded"):
         NTUCache(ntu_cache)
 
 
 def test_positions_that_lost_rows_without_integrity_record(ntu_cache):
     meta = json.loads((ntu_cache / "meta.json").read_text())
-    del meta["integrity"]                      # a cache written before the record existed
+    del meta["integrity"]  # a cache written before the record existed
     (ntu_cache / "meta.json").write_text(json.dumps(meta))
-    NTUCache(ntu_cache)                        # still opens when intact
+    NTUCache(ntu_cache)  # still opens when intact
     path = ntu_cache / "positions.npy"
     np.save(path, np.load(path)[:28])
     with pytest.raises(CacheIntegrityError, match=r"positions.npy: .*samples point outside its 28 rows"):
@@ -99,7 +100,7 @@ def test_bad_meta_json_names_the_file(ntu_cache, content):
 
 def test_nan_rows_are_reported(ntu_cache):
     positions = np.load(ntu_cache / "positions.npy", mmap_mode="r+")
-    positions[13, 0, 4, 1] = np.nan             # sample 1 (rows 12..31), frame 1
+    positions[13, 0, 4, 1] = np.nan  # sample 1 (rows 12..31), frame 1
     positions.flush()
     del positions
     cache = NTUCache(ntu_cache)
@@ -108,13 +109,20 @@ def test_nan_rows_are_reported(ntu_cache):
         cache.verify()
     with pytest.raises(CacheIntegrityError, match=r"sample S001C001P001R001A002 holds NaN \(row 13, frame 1"):
         cache.positions(1)
-    cache.positions(0)                          # other samples stay readable
+    cache.positions(0)  # other samples stay readable
 
 
 def _gei_cache(out: Path) -> Path:
     geis = np.random.default_rng(0).random((6, 8, 5))
-    index = {"names": [f"001/nm-01/{v:03d}" for v in range(6)], "subjects": np.ones(6), "conditions": np.zeros(6),
-             "sequences": np.ones(6), "views": np.arange(6) * 18, "cycles": np.zeros(6), "frames": np.full(6, 30)}
+    index = {
+        "names": [f"001/nm-01/{v:03d}" for v in range(6)],
+        "subjects": np.ones(6),
+        "conditions": np.zeros(6),
+        "sequences": np.ones(6),
+        "views": np.arange(6) * 18,
+        "cycles": np.zeros(6),
+        "frames": np.full(6, 30),
+    }
     return write_gei_cache(out, geis, index, {"per": "sequence"})
 
 
@@ -134,5 +142,6 @@ def test_gei_cache_checks(tmp_path):
 
 def test_errors_are_picklable():
     import pickle
+
     err = pickle.loads(pickle.dumps(CacheIntegrityError("x/index.npz", "truncated")))
     assert str(err) == "x/index.npz: truncated; prepare the cache again" and err.path == "x/index.npz"

@@ -1,4 +1,5 @@
 """``prepare_casia_b``: silhouette folders -> GEI cache, report, skip_bad, sizes and workers."""
+
 from __future__ import annotations
 
 import json
@@ -45,8 +46,11 @@ def casia_root(tmp_path_factory) -> Path:
     root = tmp_path_factory.mktemp("casia_b")
     for i, (key, cycle) in enumerate(CYCLES.items()):
         speed = (-1.0) ** i
-        write_sequence(root, key, walking_silhouettes(FRAMES, cycle, x0=80.0 - 30 * speed, speed=speed,
-                                                      scale=1.0 + 0.1 * i, phase=0.4 * i))
+        write_sequence(
+            root,
+            key,
+            walking_silhouettes(FRAMES, cycle, x0=80.0 - 30 * speed, speed=speed, scale=1.0 + 0.1 * i, phase=0.4 * i),
+        )
     (root / "002" / "notes.doc").write_text("not a walk")  # a listing problem, reported
     return root
 
@@ -147,7 +151,7 @@ def test_by_default_a_sequence_without_a_period_gives_one_gei_over_the_whole_seq
     """The documented command must not stop on sequences whose period is not detected (0° / 180° views)."""
     root, _, corrupt = bad_root
     shutil.rmtree(root / corrupt.name)
-    short = "002/nm-03/090"                               # 12 frames: too short to find a 25-frame cycle
+    short = "002/nm-03/090"  # 12 frames: too short to find a 25-frame cycle
     report = prepare_casia_b(root, tmp_path / "cache", progress=False)
     assert not report.skipped and report.whole_sequence == [short] and not report.fallback_period
     cache = GEICache(tmp_path / "cache")
@@ -156,7 +160,7 @@ def test_by_default_a_sequence_without_a_period_gives_one_gei_over_the_whole_seq
     seq = next(s for s in list_casia_b(root).sequences if s.key.name == short)
     whole, _ = gait_energy_images(read_sequence(seq), per="sequence")
     np.testing.assert_array_equal(cache.all_geis[rows], np.round(whole * 255).astype(np.uint8))
-    for key, cycle in CYCLES.items():                     # the others still give one GEI per cycle
+    for key, cycle in CYCLES.items():  # the others still give one GEI per cycle
         if key != corrupt:
             assert (cache.names == key.name).sum() == FRAMES // cycle
     assert report.totals()["one_gei_per_sequence_no_period"] == 1 and cache.meta["options"]["no_period"] == "sequence"
@@ -174,14 +178,49 @@ def test_no_period_options_from_the_command_line(bad_root, tmp_path, capsys):
     assert main(["prepare", "casia-b", "--src", str(root), "--out", str(tmp_path / "a"), "--quiet"]) == 0
     out = capsys.readouterr().out
     assert "1 without a detectable period" in out and len(out.splitlines()) <= 4
-    assert main(["prepare", "casia-b", "--src", str(root), "--out", str(tmp_path / "b"), "--quiet",
-                 "--no-period", "error"]) == 2
+    assert (
+        main(
+            ["prepare", "casia-b", "--src", str(root), "--out", str(tmp_path / "b"), "--quiet", "--no-period", "error"]
+        )
+        == 2
+    )
     assert "nm-03" in capsys.readouterr().err
-    assert main(["prepare", "casia-b", "--src", str(root), "--out", str(tmp_path / "c"), "--quiet",
-                 "--no-period", "error", "--skip-bad"]) == 0
+    assert (
+        main(
+            [
+                "prepare",
+                "casia-b",
+                "--src",
+                str(root),
+                "--out",
+                str(tmp_path / "c"),
+                "--quiet",
+                "--no-period",
+                "error",
+                "--skip-bad",
+            ]
+        )
+        == 0
+    )
     assert json.loads((tmp_path / "c" / "report.json").read_text())["skipped"][0]["reason"] == "no_period"
-    assert main(["prepare", "casia-b", "--src", str(root), "--out", str(tmp_path / "d"), "--quiet",
-                 "--no-period", "error", "--fallback-period", "10"]) == 2
+    assert (
+        main(
+            [
+                "prepare",
+                "casia-b",
+                "--src",
+                str(root),
+                "--out",
+                str(tmp_path / "d"),
+                "--quiet",
+                "--no-period",
+                "error",
+                "--fallback-period",
+                "10",
+            ]
+        )
+        == 2
+    )
     assert "contradicts" in capsys.readouterr().err
 
 
@@ -208,7 +247,9 @@ def test_subjects_filter_and_a_fallback_period(casia_root, tmp_path):
         prepare_casia_b(root, tmp_path / "cache2", no_period="error", progress=False)
     report = prepare_casia_b(root, tmp_path / "cache3", subjects=[2], progress=False)  # the default
     assert report.whole_sequence == ["002/nm-04/090"] and not report.fallback_period
-    assert (GEICache(tmp_path / "cache3").frames[GEICache(tmp_path / "cache3").names == "002/nm-04/090"] == FRAMES).all()
+    assert (
+        GEICache(tmp_path / "cache3").frames[GEICache(tmp_path / "cache3").names == "002/nm-04/090"] == FRAMES
+    ).all()
 
 
 def test_everything_skipped_is_an_error_after_the_report(tmp_path):
@@ -227,10 +268,15 @@ def test_bad_arguments_and_empty_sources_are_clear_errors(tmp_path):
     (tmp_path / "empty").mkdir()
     with pytest.raises(ValueError, match="no CASIA-B sequence"):
         prepare_casia_b(tmp_path / "empty", tmp_path / "out", progress=False)
-    for kwargs, match in (({"per": "frame"}, "per must be"), ({"size": (64,)}, "size"), ({"workers": 0}, "workers"),
-                          ({"no_period": "skip"}, "no_period must be"), ({"no_period": "fallback"}, "needs fallback"),
-                          ({"no_period": "error", "fallback_period": 25}, "contradicts"),
-                          ({"fallback_period": 0}, "fallback_period must be")):
+    for kwargs, match in (
+        ({"per": "frame"}, "per must be"),
+        ({"size": (64,)}, "size"),
+        ({"workers": 0}, "workers"),
+        ({"no_period": "skip"}, "no_period must be"),
+        ({"no_period": "fallback"}, "needs fallback"),
+        ({"no_period": "error", "fallback_period": 25}, "contradicts"),
+        ({"fallback_period": 0}, "fallback_period must be"),
+    ):
         with pytest.raises(ValueError, match=match):
             prepare_casia_b(tmp_path / "empty", tmp_path / "out", progress=False, **kwargs)
 

@@ -10,6 +10,7 @@ whose message names the file). The failure message lists every failing case.
 
 The longer run is ``bench/bench_fuzz.py``.
 """
+
 from __future__ import annotations
 
 import os
@@ -97,8 +98,15 @@ def test_runner_classifies_crash_hang_memory_and_raw(tmp_path, monkeypatch):
     ]
     got = {o.case.id: o for o in fuzzing.run_cases(cases, timeout=3.0, mem_limit=1 << 30)}
     assert {k: o.outcome for k, o in got.items()} == {
-        "ok": "ok", "segv": "crash", "hang": "hang", "mem": "memory", "raw": "raw_exception",
-        "inf": "non_finite", "clean": "clean_error", "after": "ok"}
+        "ok": "ok",
+        "segv": "crash",
+        "hang": "hang",
+        "mem": "memory",
+        "raw": "raw_exception",
+        "inf": "non_finite",
+        "clean": "clean_error",
+        "after": "ok",
+    }
     assert got["segv"].exc_type == "SIGSEGV"
     assert got["raw"].exc_type == "IndexError"
     assert got["clean"].names_file

@@ -1,17 +1,19 @@
 """The GEI data module: closed-set and cross-subject splits, validation, label spaces, batches, errors."""
+
 from __future__ import annotations
 
 import numpy as np
 import pytest
 import torch
 
-from mocapkit.datasets.formats.casia_b import CONDITIONS, SEQUENCES_PER_CONDITION, VIEWS
-from mocapkit.datasets.casia_b.datamodule import GaitDataModule, GEIShift
 from mocapkit.datasets.casia_b.cache import write_gei_cache
+from mocapkit.datasets.casia_b.datamodule import GaitDataModule, GEIShift
+from mocapkit.datasets.formats.casia_b import CONDITIONS, SEQUENCES_PER_CONDITION, VIEWS
 
 
-def write_synthetic_gei_cache(root, num_subjects: int = 6, height: int = 64, width: int = 44, cycles: int = 1,
-                              seed: int = 0, views=VIEWS):
+def write_synthetic_gei_cache(
+    root, num_subjects: int = 6, height: int = 64, width: int = 44, cycles: int = 1, seed: int = 0, views=VIEWS
+):
     """A small CASIA-B-shaped GEI cache whose classes are easy to learn.
 
     Each subject is a body blob with its own torso height, width and head size plus an "arm" blob at its
@@ -24,12 +26,12 @@ def write_synthetic_gei_cache(root, num_subjects: int = 6, height: int = 64, wid
     geis, index = [], {k: [] for k in ("names", "subjects", "conditions", "sequences", "views", "cycles", "frames")}
     order = rng.permutation(num_subjects)
     for s in range(1, num_subjects + 1):
-        k = order[s - 1] / max(num_subjects - 1, 1)                    # 0..1, distinct per subject
+        k = order[s - 1] / max(num_subjects - 1, 1)  # 0..1, distinct per subject
         torso_y, torso_h, head, arm_y = 0.45 + 0.2 * k, 0.35 - 0.1 * k, 0.06 + 0.05 * (1 - k), 0.3 + 0.4 * k
         for c, condition in enumerate(CONDITIONS):
             for n in range(1, SEQUENCES_PER_CONDITION[condition] + 1):
                 for v in views:
-                    lateral = np.sin(np.deg2rad(v))                  # 0 at 0°/180°, 1 at 90°
+                    lateral = np.sin(np.deg2rad(v))  # 0 at 0°/180°, 1 at 90°
                     cx = 0.5 + 0.25 * np.cos(np.deg2rad(v))
                     w = 0.12 * (0.5 + lateral) * (1.5 if condition == "cl" else 1.0)
                     for cycle in range(cycles):
@@ -40,12 +42,22 @@ def write_synthetic_gei_cache(root, num_subjects: int = 6, height: int = 64, wid
                             g += 0.8 * np.exp(-(((yy - 0.6) / 0.08) ** 2 + ((xx - cx + 1.5 * w) / 0.1) ** 2))
                         g += rng.normal(0, 0.02, g.shape)
                         geis.append(np.clip(g, 0, 1))
-                        for key, value in (("names", f"{s:03d}/{condition}-{n:02d}/{v:03d}"), ("subjects", s),
-                                           ("conditions", c), ("sequences", n), ("views", v), ("cycles", cycle),
-                                           ("frames", 25)):
+                        for key, value in (
+                            ("names", f"{s:03d}/{condition}-{n:02d}/{v:03d}"),
+                            ("subjects", s),
+                            ("conditions", c),
+                            ("sequences", n),
+                            ("views", v),
+                            ("cycles", cycle),
+                            ("frames", 25),
+                        ):
                             index[key].append(value)
-    return write_gei_cache(root, np.stack(geis).astype(np.float32), {k: np.asarray(v) for k, v in index.items()},
-                           {"per": "cycle" if cycles > 1 else "sequence", "source": "synthetic test"})
+    return write_gei_cache(
+        root,
+        np.stack(geis).astype(np.float32),
+        {k: np.asarray(v) for k, v in index.items()},
+        {"per": "cycle" if cycles > 1 else "sequence", "source": "synthetic test"},
+    )
 
 
 @pytest.fixture(scope="module")
@@ -137,7 +149,7 @@ def test_shift_augmentation_translates_without_flipping():
         y, x = (int(i) for i in torch.nonzero(out[0])[0])
         assert abs(y - 4) <= 2 and abs(x - 2) <= 2
         seen.add((y - 4, x - 2))
-    assert len(seen) > 10      # many of the 25 offsets occur; a flip would have moved x to 5
+    assert len(seen) > 10  # many of the 25 offsets occur; a flip would have moved x to 5
 
 
 def test_bad_settings_and_caches_fail_with_the_parameter_named(cache_root, tmp_path):
@@ -153,10 +165,13 @@ def test_bad_settings_and_caches_fail_with_the_parameter_named(cache_root, tmp_p
         GaitDataModule(cache_root, val_fraction=1.0)
     with pytest.raises(FileNotFoundError, match="not a prepared GEI cache"):
         GaitDataModule(tmp_path)
-    empty = write_gei_cache(tmp_path / "empty", np.zeros((0, 8, 8), np.uint8),
-                            {k: np.zeros(0, np.int64) for k in ("subjects", "conditions", "sequences", "views",
-                                                                 "cycles", "frames")} | {"names": np.zeros(0, str)},
-                            {"per": "sequence"})
+    empty = write_gei_cache(
+        tmp_path / "empty",
+        np.zeros((0, 8, 8), np.uint8),
+        {k: np.zeros(0, np.int64) for k in ("subjects", "conditions", "sequences", "views", "cycles", "frames")}
+        | {"names": np.zeros(0, str)},
+        {"per": "sequence"},
+    )
     with pytest.raises(ValueError, match="empty"):
         GaitDataModule(empty)
     two = write_synthetic_gei_cache(tmp_path / "two", num_subjects=2, height=24, width=16, views=(90,))
@@ -168,8 +183,11 @@ def test_bad_settings_and_caches_fail_with_the_parameter_named(cache_root, tmp_p
     # a cache where every (subject, view, condition) has a single sequence: everything is tested
     c = GaitDataModule(two).cache
     keep = np.flatnonzero(c.sequences == 1)
-    single = write_gei_cache(tmp_path / "single", c.all_geis[keep],
-                             {k: getattr(c, k)[keep] for k in ("names", "subjects", "conditions", "sequences",
-                                                               "views", "cycles", "frames")}, {"per": "sequence"})
+    single = write_gei_cache(
+        tmp_path / "single",
+        c.all_geis[keep],
+        {k: getattr(c, k)[keep] for k in ("names", "subjects", "conditions", "sequences", "views", "cycles", "frames")},
+        {"per": "sequence"},
+    )
     with pytest.raises(ValueError, match="no training GEIs"):
         GaitDataModule(single)

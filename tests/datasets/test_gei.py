@@ -1,4 +1,5 @@
 """Gait Energy Images: silhouette normalisation, gait period and per-cycle GEIs."""
+
 from __future__ import annotations
 
 import math
@@ -18,8 +19,15 @@ from mocapkit.datasets.casia_b.gei import (
 )
 
 
-def walking_silhouettes(num_frames: int, cycle: float, size: tuple[int, int] = (120, 160), x0: float = 30.0,
-                        speed: float = 1.0, scale: float = 1.0, phase: float = 0.0) -> np.ndarray:
+def walking_silhouettes(
+    num_frames: int,
+    cycle: float,
+    size: tuple[int, int] = (120, 160),
+    x0: float = 30.0,
+    speed: float = 1.0,
+    scale: float = 1.0,
+    phase: float = 0.0,
+) -> np.ndarray:
     """A stick walker, uint8 ``[T, H, W]`` in {0, 255}: head, torso and two legs swinging ±0.45 rad.
 
     The legs' angle is ``±0.45 sin(2π t / cycle + phase)``, so they are together twice per
@@ -35,15 +43,18 @@ def walking_silhouettes(num_frames: int, cycle: float, size: tuple[int, int] = (
         draw.ellipse([cx - 5 * scale, 10, cx + 5 * scale, 10 + 9 * scale], fill=255)
         draw.rectangle([cx - 6 * scale, 10 + 9 * scale, cx + 6 * scale, hip], fill=255)
         for side in (1, -1):
-            draw.line([cx, hip, cx + side * leg * math.sin(theta), hip + leg * math.cos(theta)], fill=255,
-                      width=max(1, int(6 * scale)))
+            draw.line(
+                [cx, hip, cx + side * leg * math.sin(theta), hip + leg * math.cos(theta)],
+                fill=255,
+                width=max(1, int(6 * scale)),
+            )
         frames[t] = np.asarray(image)
     return frames
 
 
 def rectangle_frame(top: int, left: int, height: int, width: int, size=(120, 160)) -> np.ndarray:
     frame = np.zeros(size, dtype=np.uint8)
-    frame[top:top + height, left:left + width] = 255
+    frame[top : top + height, left : left + width] = 255
     return frame
 
 
@@ -51,8 +62,14 @@ def rectangle_frame(top: int, left: int, height: int, width: int, size=(120, 160
 
 
 def test_a_rectangle_aligns_the_same_wherever_and_however_large_it_is():
-    frames = np.stack([rectangle_frame(10, 30, 40, 20), rectangle_frame(70, 120, 40, 20),
-                       rectangle_frame(5, 60, 80, 40), rectangle_frame(0, 0, 20, 10)])
+    frames = np.stack(
+        [
+            rectangle_frame(10, 30, 40, 20),
+            rectangle_frame(70, 120, 40, 20),
+            rectangle_frame(5, 60, 80, 40),
+            rectangle_frame(0, 0, 20, 10),
+        ]
+    )
     aligned, kept = normalize_silhouettes(frames, height=64, width=44)
     assert aligned.shape == (4, 64, 44) and aligned.dtype == np.float32
     np.testing.assert_array_equal(kept, [0, 1, 2, 3])
@@ -122,8 +139,9 @@ def dense_box_alignment(frames: np.ndarray, height: int, width: int) -> np.ndarr
             edges, k = start + np.arange(n_out + 1) / scale, np.arange(n_in)
             return np.clip(np.minimum(edges[1:, None], k + 1) - np.maximum(edges[:-1, None], k), 0, None) * scale
 
-        out.append(box(rows[0], height, frame.shape[0]) @ frame @ box(median - width / 2 / scale, width,
-                                                                        frame.shape[1]).T)
+        out.append(
+            box(rows[0], height, frame.shape[0]) @ frame @ box(median - width / 2 / scale, width, frame.shape[1]).T
+        )
     return np.clip(np.array(out), 0, 1)
 
 
@@ -136,15 +154,16 @@ def test_the_batched_resampler_equals_the_dense_box_filter_definition(size):
         for t in range(4):  # random speckled blobs anywhere, also touching the sides
             a, b = sorted(rng.integers(0, rows, 2))
             c, d = sorted(rng.integers(0, cols, 2))
-            frames[t, a:b + 1, c:d + 1] = 255 * (rng.random((b - a + 1, d - c + 1)) > 0.3)
+            frames[t, a : b + 1, c : d + 1] = 255 * (rng.random((b - a + 1, d - c + 1)) > 0.3)
         aligned, _ = normalize_silhouettes(frames, *size)
         expected = dense_box_alignment(frames, *size)
         assert aligned.shape == expected.shape
         np.testing.assert_allclose(aligned, expected, atol=1e-5)
 
 
-@pytest.mark.parametrize("frames, match", [(np.zeros((10, 10), np.uint8), r"\[T, H, W\]"),
-                                           (np.zeros((2, 10, 10), np.float32), "dtype")])
+@pytest.mark.parametrize(
+    "frames, match", [(np.zeros((10, 10), np.uint8), r"\[T, H, W\]"), (np.zeros((2, 10, 10), np.float32), "dtype")]
+)
 def test_bad_frames_are_rejected_with_a_clear_message(frames, match):
     with pytest.raises(ValueError, match=match):
         normalize_silhouettes(frames)
@@ -166,8 +185,12 @@ def test_the_period_of_a_synthetic_leg_signal_is_exact(cycle):
     t = np.arange(100)
     rng = np.random.default_rng(cycle)
     # One oscillation per step (two per cycle), slightly uneven legs, a drift and noise.
-    signal = (np.cos(4 * np.pi * t / cycle) + 0.2 * np.cos(2 * np.pi * t / cycle + 0.5)
-              + 0.01 * t + 0.1 * rng.normal(size=len(t)))
+    signal = (
+        np.cos(4 * np.pi * t / cycle)
+        + 0.2 * np.cos(2 * np.pi * t / cycle + 0.5)
+        + 0.01 * t
+        + 0.1 * rng.normal(size=len(t))
+    )
     assert period_from_signal(100 + 20 * signal) == cycle
 
 
@@ -210,6 +233,7 @@ def test_dropped_frames_keep_the_sequence_clock():
 @pytest.mark.parametrize("subject, view", [(1, 90), (2, 90), (3, 36), (4, 144), (5, 72)])
 def test_the_period_of_a_synthetic_casia_b_walk_is_within_one_frame(subject, view):
     from mocapkit.datasets.synthetic import casia_b as synthetic
+
     params = synthetic.draw_subject(0, subject)
     rng = np.random.default_rng(100 * subject + view)
     walk = synthetic.draw_walk(rng)

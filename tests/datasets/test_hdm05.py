@@ -1,10 +1,21 @@
 """HDM05 clip names, the 130/65/25 class tables and their merge rules, cross-actor splits."""
+
 import numpy as np
 import pytest
 
-from mocapkit.datasets.mocap import hdm05_classes as hdm05
-from mocapkit.datasets.mocap.hdm05_classes import ACTORS, HDM05ClipName, class_index_map, class_names, class_table, labels, merge_25, merge_65, parse_clip_name
 from mocapkit.datasets.hdm05.splits import k_actors_train, leave_one_actor_out
+from mocapkit.datasets.mocap import hdm05_classes as hdm05
+from mocapkit.datasets.mocap.hdm05_classes import (
+    ACTORS,
+    HDM05ClipName,
+    class_index_map,
+    class_names,
+    class_table,
+    labels,
+    merge_25,
+    merge_65,
+    parse_clip_name,
+)
 
 
 def test_clip_names():
@@ -57,9 +68,32 @@ def test_65_merge_matches_the_literature_examples():
 
 def test_25_merge_is_the_stem():
     assert set(class_names(25)) == {
-        "cartwheel", "clap", "deposit", "elbowToKnee", "grab", "hitRHandHead", "hop", "jog", "jumpDown",
-        "jumpingJack", "kick", "lieDownFloor", "punch", "rotateArms", "runOnPlace", "shuffle", "sitDown", "skier",
-        "sneak", "squat", "staircase", "standUp", "throw", "turn", "walk"}
+        "cartwheel",
+        "clap",
+        "deposit",
+        "elbowToKnee",
+        "grab",
+        "hitRHandHead",
+        "hop",
+        "jog",
+        "jumpDown",
+        "jumpingJack",
+        "kick",
+        "lieDownFloor",
+        "punch",
+        "rotateArms",
+        "runOnPlace",
+        "shuffle",
+        "sitDown",
+        "skier",
+        "sneak",
+        "squat",
+        "staircase",
+        "standUp",
+        "throw",
+        "turn",
+        "walk",
+    }
     assert merge_25("punchRSide2Reps") == "punch" and merge_25("walkRightCircle6StepsLstart") == "walk"
     assert merge_25("jumpDown") != merge_25("jumpingJack1Reps")  # different leading words
     assert merge_25("turnLeft") == merge_25("turnRight") == "turn"
@@ -68,13 +102,19 @@ def test_25_merge_is_the_stem():
 
 
 def test_labels():
-    names = ["punchLFront1Reps", "punchLFront2Reps", "punchRFront1Reps_bd_001", HDM05ClipName("kickLSide1Reps", "tr", 1)]
+    names = [
+        "punchLFront1Reps",
+        "punchLFront2Reps",
+        "punchRFront1Reps_bd_001",
+        HDM05ClipName("kickLSide1Reps", "tr", 1),
+    ]
     l130, l65, l25 = labels(names, 130), labels(names, 65), labels(names, 25)
     assert l130.dtype == np.int64 and len(set(l130)) == 4
     assert l65[0] == l65[1] != l65[2] and l25[0] == l25[1] == l25[2] != l25[3]
     assert class_names(25)[l25[0]] == "punch"
-    assert l130.tolist() == [class_index_map(130)[n] for n in ("punchLFront1Reps", "punchLFront2Reps",
-                                                                  "punchRFront1Reps", "kickLSide1Reps")]
+    assert l130.tolist() == [
+        class_index_map(130)[n] for n in ("punchLFront1Reps", "punchLFront2Reps", "punchRFront1Reps", "kickLSide1Reps")
+    ]
 
 
 def test_leave_one_actor_out():

@@ -1,5 +1,6 @@
 """Kinect v1 noise simulator (mocapkit.datasets.synthetic.kinect_noise): hand-built poses, and real HDM05 cuts
 where ``../shared/data/hdm05_cuts11`` is present."""
+
 from __future__ import annotations
 
 from dataclasses import replace
@@ -7,7 +8,6 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from mocapkit.motion.layouts import LANDMARK_NAMES
 from mocapkit.datasets.formats.motion_io import read_motion
 from mocapkit.datasets.synthetic.kinect_noise import (
     COMPONENTS,
@@ -24,6 +24,7 @@ from mocapkit.datasets.synthetic.kinect_noise import (
     simulate_pairs,
 )
 from mocapkit.kinect.metrics import joint_error_cm
+from mocapkit.motion.layouts import LANDMARK_NAMES
 from tests.shared_data import SHARED
 
 HDM05 = SHARED / "data" / "hdm05_cuts11"
@@ -31,10 +32,18 @@ J = {name: k for k, name in enumerate(LANDMARK_NAMES)}
 
 #: A standing adult facing +z, y up, left = +x (metres), arms hanging at the sides.
 STANDING = {
-    "pelvis": (0.0, 1.00, 0.0), "spine": (0.0, 1.25, 0.0), "neck": (0.0, 1.47, 0.0), "head": (0.0, 1.65, 0.02),
-    "l_shoulder": (0.19, 1.44, 0.0), "l_elbow": (0.23, 1.17, -0.02), "l_wrist": (0.25, 0.93, 0.02),
-    "l_hand": (0.26, 0.85, 0.04), "l_hip": (0.09, 0.92, 0.03), "l_knee": (0.10, 0.50, 0.04),
-    "l_ankle": (0.10, 0.09, 0.0), "l_foot": (0.10, 0.03, 0.13),
+    "pelvis": (0.0, 1.00, 0.0),
+    "spine": (0.0, 1.25, 0.0),
+    "neck": (0.0, 1.47, 0.0),
+    "head": (0.0, 1.65, 0.02),
+    "l_shoulder": (0.19, 1.44, 0.0),
+    "l_elbow": (0.23, 1.17, -0.02),
+    "l_wrist": (0.25, 0.93, 0.02),
+    "l_hand": (0.26, 0.85, 0.04),
+    "l_hip": (0.09, 0.92, 0.03),
+    "l_knee": (0.10, 0.50, 0.04),
+    "l_ankle": (0.10, 0.09, 0.0),
+    "l_foot": (0.10, 0.03, 0.13),
 }
 
 
@@ -111,12 +120,12 @@ def test_long_turning_clip_has_all_three_states():
     _, state = simulate_kinect(clip, KinectNoiseConfig().without("swaps"), seed=0)
     t, j = np.nonzero((state[1:] == NOT_TRACKED) & (state[:-1] != NOT_TRACKED))
     assert len(t) and (state[t, j] == INFERRED).all()
-    assert all((state[max(k - 14, 0):k + 1, i] == INFERRED).all() for k, i in zip(t, j))   # 0.5 s at 30 fps
+    assert all((state[max(k - 14, 0) : k + 1, i] == INFERRED).all() for k, i in zip(t, j))  # 0.5 s at 30 fps
 
 
 def test_arm_behind_the_back_is_inferred_and_snaps_towards_the_camera():
     pose = standing_pose()
-    pose[J["l_elbow"]] = (0.17, 1.18, -0.16)         # left arm bent behind the back
+    pose[J["l_elbow"]] = (0.17, 1.18, -0.16)  # left arm bent behind the back
     pose[J["l_wrist"]] = (0.05, 1.05, -0.20)
     pose[J["l_hand"]] = (-0.02, 1.00, -0.20)
     clip = np.repeat(pose[None], 10, axis=0).astype(np.float32)
@@ -144,15 +153,18 @@ def test_surface_bias_moves_every_joint_towards_the_camera_by_its_radius():
     noisy, _ = simulate_kinect(clip, config, seed=0, camera=camera)
     before = np.linalg.norm(clip - camera.position, axis=-1)
     after = np.linalg.norm(noisy - camera.position, axis=-1)
-    np.testing.assert_allclose(before - after, np.broadcast_to(config.per_joint("surface_radius_m"), before.shape),
-                               atol=1e-5)
+    np.testing.assert_allclose(
+        before - after, np.broadcast_to(config.per_joint("surface_radius_m"), before.shape), atol=1e-5
+    )
     assert config.per_joint("surface_radius_m")[J["spine"]] > config.per_joint("surface_radius_m")[J["l_wrist"]]
 
 
 def test_error_grows_with_the_noise_level():
     clip = moving_clip(seconds=6.0, turns=0.5)
-    errors = [joint_error_cm(clip, simulate_kinect(clip, KinectNoiseConfig().scaled(k), seed=1)[0])
-              for k in (0.25, 0.5, 1.0, 2.0)]
+    errors = [
+        joint_error_cm(clip, simulate_kinect(clip, KinectNoiseConfig().scaled(k), seed=1)[0])
+        for k in (0.25, 0.5, 1.0, 2.0)
+    ]
     assert errors == sorted(errors) and errors[-1] > 1.5 * errors[0]
 
 
@@ -161,7 +173,7 @@ def test_depth_noise_grows_with_distance():
     config = KinectNoiseConfig.off(depth_noise=True)
     near, far = (simulate_kinect(clip, config, seed=0, camera=front_camera(d))[0] for d in (1.5, 4.0))
     near_error, far_error = joint_error_cm(clip, near), joint_error_cm(clip, far)
-    assert far_error > 4 * near_error      # σ ∝ depth²: (4 / 1.5)² ≈ 7
+    assert far_error > 4 * near_error  # σ ∝ depth²: (4 / 1.5)² ≈ 7
 
 
 def test_leg_swaps_are_more_frequent_side_on():
@@ -217,12 +229,17 @@ def test_kinect20_from_real_hdm05_clip_is_y_up_and_body_sized():
     motion = read_motion(path)
     skeleton = kinect20_from_motion(motion, fps=30.0)
     assert skeleton.dtype == np.float32 and skeleton.shape[1:] == (20, 3)
-    assert len(skeleton) == int(np.floor((motion.num_frames - 1) / 4 + 1e-6)) + 1      # 120 → 30 fps
+    assert len(skeleton) == int(np.floor((motion.num_frames - 1) / 4 + 1e-6)) + 1  # 120 → 30 fps
     first = skeleton[0]
     height = first[J["head"], 1] - min(first[J["l_foot"], 1], first[J["r_foot"], 1])
     assert 1.4 < height < 2.0
-    assert first[J["head"], 1] > first[J["neck"], 1] > first[J["pelvis"], 1] > first[J["l_knee"], 1] > first[
-        J["l_ankle"], 1]
+    assert (
+        first[J["head"], 1]
+        > first[J["neck"], 1]
+        > first[J["pelvis"], 1]
+        > first[J["l_knee"], 1]
+        > first[J["l_ankle"], 1]
+    )
     noisy, _ = simulate_kinect(skeleton, seed=0)
     assert 2.0 < joint_error_cm(skeleton, noisy) < 40.0
 
@@ -230,8 +247,11 @@ def test_kinect20_from_real_hdm05_clip_is_y_up_and_body_sized():
 def test_bad_files_raise_naming_the_file_or_are_reported(tmp_path):
     from mocapkit.datasets.synthetic.hdm05 import HDM05SynthConfig, synthesize_hdm05
 
-    good = synthesize_hdm05(tmp_path, HDM05SynthConfig(classes=("squat1Reps",), actors=("bd",), clips_per_actor=1,
-                                                       max_frames=90), progress=False)[0]
+    good = synthesize_hdm05(
+        tmp_path,
+        HDM05SynthConfig(classes=("squat1Reps",), actors=("bd",), clips_per_actor=1, max_frames=90),
+        progress=False,
+    )[0]
     bad = tmp_path / "broken.bvh"
     bad.write_text("not a bvh file\n")
     with pytest.raises(KinectInputError, match="broken.bvh"):

@@ -1,12 +1,13 @@
 """MSR Action3D: the text reader, the dataset listing, its protocols and the data module (real files)."""
+
 import numpy as np
 import pytest
 import torch
 
-from mocapkit.motion.layouts import MSR20
-from mocapkit.datasets.msr_action3d.dataset import ACTION_SUBSETS, MSRAction3D
 from mocapkit.datasets.formats.msr_action3d import MSRFormatError, parse_msr_name, read_msr_skeleton
+from mocapkit.datasets.msr_action3d.dataset import ACTION_SUBSETS, MSRAction3D
 from mocapkit.datasets.msr_action3d.splits import msr_split_indices
+from mocapkit.motion.layouts import MSR20
 from tests.shared_data import SHARED, needs
 
 MSR_ROOT = SHARED / "data" / "msr_action3d"
@@ -20,6 +21,7 @@ def dataset():
 
 # ---------------------------------------------------------------- reader on written files
 
+
 def _write(path, rows):
     path.write_text("".join(" ".join(f"{v:.6f}" for v in row) + "\n" for row in rows))
     return path
@@ -28,7 +30,7 @@ def _write(path, rows):
 def test_reader_shapes_units_and_missing(tmp_path):
     rng = np.random.default_rng(0)
     rows = np.concatenate([rng.normal(size=(40, 3)) + [0, 0, 2.5], rng.uniform(size=(40, 1))], axis=1)
-    rows[20 + 5, :3] = 0.0                                  # frame 2, joint 5 untracked
+    rows[20 + 5, :3] = 0.0  # frame 2, joint 5 untracked
     motion = read_msr_skeleton(_write(tmp_path / "a02_s03_e01_skeleton3D.txt", rows))
     assert motion.positions.shape == (2, 20, 3) and motion.fps == 15
     assert motion.joint_names == MSR20.joint_names and motion.parents == MSR20.parents
@@ -68,13 +70,14 @@ def test_name_parsing():
 
 # ---------------------------------------------------------------- real files
 
+
 @needs(MSR_SAMPLES)
 def test_real_samples_and_all_zero_file():
     motion = read_msr_skeleton(MSR_SAMPLES / "a01_s01_e01_skeleton3D.txt")
     assert motion.num_frames == 54 and not motion.missing.any()
-    assert 2.0 < np.nanmean(motion.positions[..., 2]) < 3.5          # depth in metres
+    assert 2.0 < np.nanmean(motion.positions[..., 2]) < 3.5  # depth in metres
     head, pelvis = motion.positions[:, MSR20.index("Head")], motion.positions[:, MSR20.index("HipCenter")]
-    assert (head[:, 1] > pelvis[:, 1]).all()                          # y is up
+    assert (head[:, 1] > pelvis[:, 1]).all()  # y is up
     zero = read_msr_skeleton(MSR_SAMPLES / "a13_s09_e02_skeleton3D.txt")
     assert zero.metadata["all_zero"] is True and zero.num_frames == 38 and zero.missing.all()
     screen = read_msr_skeleton(MSR_SAMPLES / "a01_s01_e01_skeleton.txt")
@@ -96,20 +99,22 @@ def test_all_567_files_listed_and_the_all_zero_file_excluded_with_reason(dataset
     assert sum(m.num_frames for m in dataset.motions) == 23478 - 38
     with caplog.at_level("WARNING"):
         MSRAction3D(MSR_ROOT)
-    assert any("a13_s09_e02" in r.getMessage() for r in caplog.records)   # the exclusion is logged
+    assert any("a13_s09_e02" in r.getMessage() for r in caplog.records)  # the exclusion is logged
 
 
 @needs(MSR_ROOT)
 def test_second_joint_of_each_pair_is_the_right_side(dataset):
     """Subjects used the right arm / leg for one-limb actions (Li et al. 2010): the MSR20 right joints move."""
+
     def moving_right(actions, left, right):
         votes = []
         for i in np.flatnonzero(np.isin(dataset.actions, actions)):
             p = dataset.motions[i].positions
             votes.append(np.nanstd(p[:, MSR20.index(right)], 0).sum() > np.nanstd(p[:, MSR20.index(left)], 0).sum())
         return np.mean(votes)
-    assert moving_right([1, 2, 3, 4, 5, 6, 7], "WristLeft", "WristRight") > 0.95    # one-arm actions
-    assert moving_right([14, 15], "AnkleLeft", "AnkleRight") > 0.95                # kicks
+
+    assert moving_right([1, 2, 3, 4, 5, 6, 7], "WristLeft", "WristRight") > 0.95  # one-arm actions
+    assert moving_right([14, 15], "AnkleLeft", "AnkleRight") > 0.95  # kicks
 
 
 @needs(MSR_ROOT)
@@ -151,8 +156,9 @@ def test_random_half_per_class_is_seeded(dataset):
 def test_datamodule_contract():
     from mocapkit.datasets.msr_action3d.datamodule import MSRAction3DDataModule
 
-    dm = MSRAction3DDataModule(MSR_ROOT, subset="AS1", batch_size=8, max_frames=32, seed=1,
-                               augment={"rotate_deg": 10.0, "crop": [0.8, 1.0]})
+    dm = MSRAction3DDataModule(
+        MSR_ROOT, subset="AS1", batch_size=8, max_frames=32, seed=1, augment={"rotate_deg": 10.0, "crop": [0.8, 1.0]}
+    )
     assert dm.num_classes == 8 and len(dm.class_names) == 8 and dm.class_names[0].startswith("a02")
     info = dm.describe()
     assert info["split"] == "AS1_cross_subject" and info["test_subjects"] == [2, 4, 6, 8, 10]
@@ -164,7 +170,7 @@ def test_datamodule_contract():
     assert sk.dtype == torch.float32 and sk.shape[1:] == (1, sk.shape[2], 20, 3) and sk.shape[2] <= 32
     assert batch["labels"].max() < 8 and set(batch["subjects"].tolist()) <= {2, 4, 6, 8, 10}
     for b, length in enumerate(batch["lengths"].tolist()):
-        assert (sk[b, :, length:] == 0).all()                        # zero padding
+        assert (sk[b, :, length:] == 0).all()  # zero padding
     assert not torch.isnan(sk).any()
     train = next(iter(dm.train_dataloader()))
     assert train["skeletons"].shape[0] == 8

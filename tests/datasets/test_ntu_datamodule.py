@@ -1,4 +1,5 @@
 """Augmentation invariants and the data module's splits over a prepared cache."""
+
 import math
 
 import numpy as np
@@ -7,32 +8,36 @@ import torch
 
 from mocapkit.datasets.augment import SkeletonAugment
 from mocapkit.datasets.datamodule import pad_collate
-from mocapkit.motion.frames import true_runs, uniform_frame_indices
 from mocapkit.datasets.ntu.datamodule import NTUDataModule
 from mocapkit.datasets.ntu.prepare import prepare_ntu
 from mocapkit.datasets.synthetic.ntu import NTUSynthConfig, synthesize_ntu
+from mocapkit.motion.frames import true_runs, uniform_frame_indices
 
 
 def test_augment_keeps_absent_bodies_zero_and_is_rigid():
     torch.manual_seed(0)
     x = torch.randn(2, 40, 25, 3) + torch.tensor([0.0, 0.0, 3.0])
-    x[1] = 0.0            # second body absent
-    x[0, 30:] = 0.0       # padding frames
+    x[1] = 0.0  # second body absent
+    x[0, 30:] = 0.0  # padding frames
     out = SkeletonAugment(rotate_deg=45, crop=(0.5, 0.9), min_frames=8)(x)
     assert 8 <= out.shape[1] <= 36
     assert (out[1] == 0).all()
     present = out[0].abs().sum((-1, -2)) > 0
     assert present.sum() >= 1 and (out[0][~present] == 0).all()
     # rotation about the vertical axis: heights unchanged, pairwise distances unchanged
-    start = next(s for s in range(41 - out.shape[1]) if torch.allclose(out[0, :, :, 1], x[0, s:s + out.shape[1], :, 1], atol=1e-5))
-    a, b = x[0, start:start + out.shape[1]][present], out[0][present]
+    start = next(
+        s
+        for s in range(41 - out.shape[1])
+        if torch.allclose(out[0, :, :, 1], x[0, s : s + out.shape[1], :, 1], atol=1e-5)
+    )
+    a, b = x[0, start : start + out.shape[1]][present], out[0][present]
     assert torch.allclose(torch.cdist(a, a), torch.cdist(b, b), atol=1e-4)
 
 
 def test_augment_tilt_and_scale_stay_within_their_bounds():
     torch.manual_seed(1)
     x = torch.randn(1, 30, 25, 3) + torch.tensor([0.5, 1.0, 3.0])
-    x[0, 20:] = 0.0                                                   # padding frames stay zeros
+    x[0, 20:] = 0.0  # padding frames stay zeros
     present = x[0].abs().sum(-1) > 0
     centroid = x[0][present].mean(0)
     tilt = SkeletonAugment(tilt_deg=10)
@@ -41,9 +46,10 @@ def test_augment_tilt_and_scale_stay_within_their_bounds():
         assert (out[0, 20:] == 0).all()
         a, b = x[0][present], out[0][present]
         exact = "donot_use_mm_for_euclid_dist"
-        assert torch.allclose(torch.cdist(a, a, compute_mode=exact), torch.cdist(b, b, compute_mode=exact),
-                              atol=1e-5)                                            # a rotation
-        assert torch.allclose(b.mean(0), centroid, atol=1e-5)                     # about the centroid
+        assert torch.allclose(
+            torch.cdist(a, a, compute_mode=exact), torch.cdist(b, b, compute_mode=exact), atol=1e-5
+        )  # a rotation
+        assert torch.allclose(b.mean(0), centroid, atol=1e-5)  # about the centroid
         # the vertical axis tilts by at most 10 degrees about x and z each
         up = torch.linalg.lstsq(a - centroid, b - centroid).solution.T @ torch.tensor([0.0, 1.0, 0.0])
         assert math.degrees(math.acos(float(up[1]))) <= 10 * math.sqrt(2) + 1e-3
@@ -80,8 +86,9 @@ def test_uniform_frame_indices_and_collate_padding():
 @pytest.fixture(scope="module")
 def cache(tmp_path_factory):
     root = tmp_path_factory.mktemp("dm")
-    config = NTUSynthConfig(num_classes=3, num_subjects=10, setups=(1,), cameras=(1, 2), replications=(1,),
-                            length_scale=0.5)
+    config = NTUSynthConfig(
+        num_classes=3, num_subjects=10, setups=(1,), cameras=(1, 2), replications=(1,), length_scale=0.5
+    )
     synthesize_ntu(root / "synth", config, progress=False)
     prepare_ntu(root / "synth", root / "cache", progress=False)
     return root / "cache"

@@ -1,4 +1,5 @@
 """prepare_ntu -> cache folder -> NTUCache, on real samples plus synthetic and broken files."""
+
 from __future__ import annotations
 
 import json
@@ -80,8 +81,13 @@ def test_cache_matches_reader_and_body_selection(tmp_path):
         assert got.dtype == np.float32 and got.shape == expected.shape == (2, cache.lengths[i], 25, 3)
         np.testing.assert_array_equal(got, expected)
         s = parse_ntu_name(name)
-        assert (cache.labels[i], cache.subjects[i], cache.cameras[i], cache.setups[i], cache.replications[i]) == \
-            (s.action - 1, s.subject, s.camera, s.setup, s.replication)
+        assert (cache.labels[i], cache.subjects[i], cache.cameras[i], cache.setups[i], cache.replications[i]) == (
+            s.action - 1,
+            s.subject,
+            s.camera,
+            s.setup,
+            s.replication,
+        )
     # Samples are concatenated with no gaps.
     assert cache.offsets[0] == 0
     np.testing.assert_array_equal(cache.offsets[1:], np.cumsum(cache.lengths)[:-1])
@@ -106,8 +112,10 @@ def test_report_lists_dropped_bodies_and_meta(tmp_path):
     assert single["kept"][0]["rule"] == "only_candidate" and single["kept"][0]["reason"] == "the only track"
     on_disk = json.loads((tmp_path / "cache" / "report.json").read_text())
     assert on_disk["bodies"] == report.bodies
-    assert on_disk["bodies"][[b["name"] for b in report.bodies].index(THREE_BODY)]["dropped"][0]["body_id"] == \
-        THREE_BODY_IDS[0]  # exact 64-bit ID
+    assert (
+        on_disk["bodies"][[b["name"] for b in report.bodies].index(THREE_BODY)]["dropped"][0]["body_id"]
+        == THREE_BODY_IDS[0]
+    )  # exact 64-bit ID
     assert on_disk["totals"]["tracks_dropped_less_motion"] == 1 and on_disk["totals"]["tracks_kept_most_motion"] == 4
     text = (tmp_path / "cache" / "report.txt").read_text()
     assert str(THREE_BODY_IDS[0]) in text and "[less_motion]" in text
@@ -146,8 +154,9 @@ def test_missing_list_excludes_samples(tmp_path):
 @needs_samples
 def test_official_missing_lists_keep_the_real_samples(tmp_path):
     src = _tree(tmp_path)
-    report = prepare_ntu(src, tmp_path / "cache", progress=False,
-                         missing_list=SAMPLES / "NTU_RGBD120_samples_with_missing_skeletons.txt")
+    report = prepare_ntu(
+        src, tmp_path / "cache", progress=False, missing_list=SAMPLES / "NTU_RGBD120_samples_with_missing_skeletons.txt"
+    )
     assert report.samples_written == 6 and not report.skipped
 
 
@@ -188,8 +197,7 @@ def test_skip_bad_reports_and_continues(tmp_path, workers):
     (src / "walk_01.skeleton").write_text("1\n0\n")
     report = prepare_ntu(src, tmp_path / "cache", workers=workers, skip_bad=True, progress=False)
     reasons = {s["name"]: s["reason"] for s in report.skipped}
-    assert reasons == {"S003C001P001R001A001": "malformed", "S001C001P001R001A001": "malformed",
-                       "walk_01": "bad_name"}
+    assert reasons == {"S003C001P001R001A001": "malformed", "S001C001P001R001A001": "malformed", "walk_01": "bad_name"}
     message = next(s["message"] for s in report.skipped if s["name"] == "S003C001P001R001A001")
     assert f"{bad}, line 34" in message
     cache = NTUCache(tmp_path / "cache")

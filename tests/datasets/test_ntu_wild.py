@@ -4,6 +4,7 @@ The files are ``mocapkit synth ntu`` output rewritten by :mod:`mocapkit.datasets
 independent generator wrote the files on which the former default body selection (most motion wins) put
 the flickering body first in most samples.
 """
+
 from __future__ import annotations
 
 import json
@@ -28,8 +29,9 @@ AUTHORS_RULES = {"min_frames": 12, "denoise_spread": True, "denoise_flicker": Fa
 def wild(tmp_path_factory):
     """48 clean synthetic files (default sensor artefacts, incl. synth's own chairs and passers-by) and their wild copies."""
     root = tmp_path_factory.mktemp("wild")
-    config = NTUSynthConfig(num_classes=12, num_subjects=2, setups=(1,), cameras=(1, 2), replications=(1,),
-                            length_scale=0.5)
+    config = NTUSynthConfig(
+        num_classes=12, num_subjects=2, setups=(1,), cameras=(1, 2), replications=(1,), length_scale=0.5
+    )
     synthesize_ntu(root / "clean", config, progress=False)
     manifest = wild_copy(root / "clean", root / "wild", seed=0)
     return root, manifest
@@ -50,15 +52,15 @@ def test_the_wild_files_have_what_they_should(wild):
     first = 0
     for name, info in manifest.items():
         raw = (root / "wild" / f"{name}.skeleton").read_bytes()
-        assert raw.count(b"\r\n") == raw.count(b"\n")                          # CRLF line ends
+        assert raw.count(b"\r\n") == raw.count(b"\n")  # CRLF line ends
         seq = read_skeleton(root / "wild" / f"{name}.skeleton")
         assert (~seq.present.any(axis=0)).sum() == info["empty_frames"]
         flicker = seq.body_ids.index(info["flicker_body_id"])
         observed = seq.present.any(axis=0)
-        assert 0.25 < seq.present[flicker][observed].mean() < 0.8                # comes and goes
+        assert 0.25 < seq.present[flicker][observed].mean() < 0.8  # comes and goes
         first += seq.body_ids[0] == info["flicker_body_id"]
         assert set(info["real_body_ids"]) <= set(seq.body_ids)
-    assert 0 < first < len(manifest)                                            # listed first in some files
+    assert 0 < first < len(manifest)  # listed first in some files
     assert sum(info["empty_frames"] > 0 for info in manifest.values()) > len(manifest) // 2
 
 
@@ -68,7 +70,7 @@ def test_default_selection_keeps_a_real_person_as_body_0(wild):
     old = body0_rate(root / "wild", manifest, **OLD_DEFAULT)
     authors = body0_rate(root / "wild", manifest, **AUTHORS_RULES)
     assert new >= 0.95
-    assert old < 0.5 and authors < 0.5             # the test can fail: the former rules pick the flicker
+    assert old < 0.5 and authors < 0.5  # the test can fail: the former rules pick the flicker
     assert body0_rate(root / "clean", manifest) == 1.0
 
 
@@ -89,9 +91,9 @@ def test_prepare_reports_every_decision_and_keeps_empty_frames_as_zeros(wild, tm
     cache = NTUCache(tmp_path / "cache")
     for i, name in enumerate(cache.names):
         info, seq = manifest[name], read_skeleton(root / "wild" / f"{name}.skeleton")
-        assert cache.lengths[i] == seq.num_frames                              # frames are not trimmed
+        assert cache.lengths[i] == seq.num_frames  # frames are not trimmed
         empty = ~seq.present.any(axis=0)
-        assert not cache.positions(i)[:, empty].any()                          # frames without bodies: zeros
+        assert not cache.positions(i)[:, empty].any()  # frames without bodies: zeros
 
 
 def test_nothing_downstream_breaks_on_frames_without_bodies(wild, tmp_path):
@@ -101,11 +103,18 @@ def test_nothing_downstream_breaks_on_frames_without_bodies(wild, tmp_path):
 
     root, _ = wild
     prepare_ntu(root / "wild", tmp_path / "cache", progress=False)
-    dm = NTUDataModule(str(tmp_path / "cache"), split="custom", train_subjects=[1], test_subjects=[2],
-                       val_fraction=0.25, val_by_subject=False, batch_size=8)
+    dm = NTUDataModule(
+        str(tmp_path / "cache"),
+        split="custom",
+        train_subjects=[1],
+        test_subjects=[2],
+        val_fraction=0.25,
+        val_by_subject=False,
+        batch_size=8,
+    )
     batch = next(iter(dm.train_dataloader()))
     x = batch["skeletons"]
-    assert (x.abs().sum((1, 3, 4)) == 0).any()                                 # some frames have no body
+    assert (x.abs().sum((1, 3, 4)) == 0).any()  # some frames have no body
     torch.manual_seed(0)
     with torch.no_grad():
         assert torch.isfinite(stgcn(12, scale=True, channels=[8, 8], strides=[2, 1]).eval()(x)).all()
@@ -120,7 +129,7 @@ def test_console_prints_a_bounded_summary(wild, tmp_path, capsys):
     out = tmp_path / "cache"
     assert cli_main(["prepare", "ntu", "--src", str(root / "wild"), "--out", str(out), "--quiet"]) == 0
     lines = capsys.readouterr().out.strip().splitlines()
-    assert len(lines) <= 8, lines                                              # not one line per sample
+    assert len(lines) <= 8, lines  # not one line per sample
     assert any(str(out / "report.txt") in line for line in lines)
     assert any("flickering" in line for line in lines)
     assert len((out / "report.txt").read_text().splitlines()) > len(lines)  # the details are in the file
@@ -129,13 +138,34 @@ def test_console_prints_a_bounded_summary(wild, tmp_path, capsys):
 def test_former_behaviour_is_reachable_from_the_command_line(wild, tmp_path, capsys):
     root, manifest = wild
     out = tmp_path / "old"
-    assert cli_main(["prepare", "ntu", "--src", str(root / "wild"), "--out", str(out), "--quiet",
-                     "--min-body-frames", "1", "--no-denoise-spread", "--no-denoise-flicker"]) == 0
+    assert (
+        cli_main(
+            [
+                "prepare",
+                "ntu",
+                "--src",
+                str(root / "wild"),
+                "--out",
+                str(out),
+                "--quiet",
+                "--min-body-frames",
+                "1",
+                "--no-denoise-spread",
+                "--no-denoise-flicker",
+            ]
+        )
+        == 0
+    )
     meta = json.loads((out / "meta.json").read_text())
-    assert {k: meta["options"][k] for k in ("min_body_frames", "denoise_spread", "denoise_flicker")} == \
-        {"min_body_frames": 1, "denoise_spread": False, "denoise_flicker": False}
+    assert {k: meta["options"][k] for k in ("min_body_frames", "denoise_spread", "denoise_flicker")} == {
+        "min_body_frames": 1,
+        "denoise_spread": False,
+        "denoise_flicker": False,
+    }
     assert body0_correct(out / "report.json", manifest)["rate"] < 0.5
-    out2 = tmp_path / "spread"   # --denoise-spread is still accepted: the default
-    assert cli_main(["prepare", "ntu", "--src", str(root / "clean"), "--out", str(out2), "--quiet",
-                     "--denoise-spread"]) == 0
+    out2 = tmp_path / "spread"  # --denoise-spread is still accepted: the default
+    assert (
+        cli_main(["prepare", "ntu", "--src", str(root / "clean"), "--out", str(out2), "--quiet", "--denoise-spread"])
+        == 0
+    )
     assert json.loads((out2 / "meta.json").read_text())["options"]["denoise_spread"] is True

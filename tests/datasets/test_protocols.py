@@ -1,4 +1,5 @@
 """NTU evaluation splits, custom subject splits and validation hold-outs."""
+
 from __future__ import annotations
 
 from types import SimpleNamespace
@@ -6,7 +7,14 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from mocapkit.datasets.ntu.splits import NTU120_XSUB_TRAIN_SUBJECTS, NTU60_XSUB_TRAIN_SUBJECTS, SPLITS, format_split_summary, split_indices, split_summary
+from mocapkit.datasets.ntu.splits import (
+    NTU60_XSUB_TRAIN_SUBJECTS,
+    NTU120_XSUB_TRAIN_SUBJECTS,
+    SPLITS,
+    format_split_summary,
+    split_indices,
+    split_summary,
+)
 from mocapkit.datasets.splits import validation_split
 
 
@@ -119,7 +127,7 @@ def test_validation_by_subject_bounds():
         validation_split(np.arange(6), subjects, val_fraction=1.0)
     with pytest.raises(ValueError, match="val_fraction"):
         validation_split(np.arange(6), subjects, val_fraction=-0.1)
-    for by_subject in (True, False):   # 0: no validation part, every training sample trains
+    for by_subject in (True, False):  # 0: no validation part, every training sample trains
         tr, val = validation_split(np.array([4, 0, 2]), subjects, val_fraction=0, by_subject=by_subject)
         assert tr.tolist() == [0, 2, 4] and val.size == 0
 
@@ -145,9 +153,9 @@ def test_summary(grid):
 
 
 def test_works_on_a_prepared_cache(tmp_path):
+    from mocapkit.datasets.formats.ntu_skeleton import sequence_from_positions, write_skeleton
     from mocapkit.datasets.ntu.cache import NTUCache
     from mocapkit.datasets.ntu.prepare import prepare_ntu
-    from mocapkit.datasets.formats.ntu_skeleton import sequence_from_positions, write_skeleton
 
     src = tmp_path / "src"
     src.mkdir()

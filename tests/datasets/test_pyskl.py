@@ -1,4 +1,5 @@
 """pyskl / MMAction2 annotation pickles: export an NTU cache, import it back, refuse bad or unsafe pickles."""
+
 from __future__ import annotations
 
 import collections
@@ -29,8 +30,9 @@ CACHE_FILES = {"meta.json", "index.npz", "positions.npy", "report.json", "report
 def prepared(tmp_path_factory):
     """A small synthetic NTU cache (10 actions incl. the two-person A010, 3 subjects, 2 cameras) and its export."""
     root = tmp_path_factory.mktemp("pyskl")
-    config = NTUSynthConfig(num_classes=10, num_subjects=3, setups=(1,), cameras=(1, 2), replications=(1,),
-                            length_scale=0.3)
+    config = NTUSynthConfig(
+        num_classes=10, num_subjects=3, setups=(1,), cameras=(1, 2), replications=(1,), length_scale=0.3
+    )
     synthesize_ntu(root / "synth", config, progress=False)
     prepare_ntu(root / "synth", root / "cache", progress=False)
     summary = export_pyskl(root / "cache", root / "ntu.pkl")
@@ -45,8 +47,12 @@ def load(path):
 def annotation(name: str, frames: int = 6, persons: int = 1, seed: int = 0, **changes) -> dict:
     rng = np.random.default_rng(seed)
     action = int(name[-3:])
-    item = {"frame_dir": name, "label": action - 1, "total_frames": frames,
-            "keypoint": (rng.normal(size=(persons, frames, 25, 3)) + [0, 0, 3]).astype(np.float32)}
+    item = {
+        "frame_dir": name,
+        "label": action - 1,
+        "total_frames": frames,
+        "keypoint": (rng.normal(size=(persons, frames, 25, 3)) + [0, 0, 3]).astype(np.float32),
+    }
     item.update(changes)
     return item
 
@@ -61,8 +67,11 @@ NAMES = ["S001C001P001R001A001", "S001C002P003R001A010", "S018C001P044R002A100"]
 
 
 def small_pickle(tmp_path, items=None, **top):
-    items = [annotation(n, seed=k, persons=2 if n.endswith("A010") else 1) for k, n in enumerate(NAMES)] \
-        if items is None else items
+    items = (
+        [annotation(n, seed=k, persons=2 if n.endswith("A010") else 1) for k, n in enumerate(NAMES)]
+        if items is None
+        else items
+    )
     data = {"split": {"xsub_train": NAMES[:2], "xsub_val": NAMES[2:]}, "annotations": items, **top}
     return write_pickle(tmp_path / "small.pkl", data)
 
@@ -128,8 +137,7 @@ def test_round_trip_is_exact(prepared, tmp_path):
     assert json.loads((tmp_path / "back" / PYSKL_SPLIT_FILE).read_text()) == data["split"]
     meta = json.loads((tmp_path / "back" / "meta.json").read_text())
     assert meta["pyskl_split"]["file"] == PYSKL_SPLIT_FILE
-    assert meta["pyskl_split"]["lists"]["xsub_train"] == {"count": len(data["split"]["xsub_train"]),
-                                                          "not_imported": []}
+    assert meta["pyskl_split"]["lists"]["xsub_train"] == {"count": len(data["split"]["xsub_train"]), "not_imported": []}
     assert "ntu60_xsub" in meta["pyskl_split"]["agrees_with"]["xsub"]
     assert meta["pyskl_split"]["agrees_with"]["xview"] == ["ntu60_xview"]
     assert meta["options"]["imported_from"] == "pyskl" and meta["source"] == str((root / "ntu.pkl").resolve())
@@ -161,11 +169,16 @@ def test_cli_round_trip(prepared, tmp_path, capsys):
     assert main(["pyskl", "export", "--cache", str(root / "cache"), "--out", str(pkl)]) == 0
     assert "xsub_train" in capsys.readouterr().out
     assert pkl.read_bytes() == (root / "ntu.pkl").read_bytes()
-    assert main(["pyskl", "import", "--pkl", str(pkl), "--out", str(back), "--classes",
-                 str(root / "synth" / "classes.txt")]) == 0
+    assert (
+        main(
+            ["pyskl", "import", "--pkl", str(pkl), "--out", str(back), "--classes", str(root / "synth" / "classes.txt")]
+        )
+        == 0
+    )
     assert "samples_written" in capsys.readouterr().out
-    np.testing.assert_array_equal(np.asarray(NTUCache(back).all_positions),
-                                  np.asarray(NTUCache(root / "cache").all_positions))
+    np.testing.assert_array_equal(
+        np.asarray(NTUCache(back).all_positions), np.asarray(NTUCache(root / "cache").all_positions)
+    )
     assert main(["pyskl", "export", "--cache", str(back), "--out", str(tmp_path / "again.pkl")]) == 0
     assert (tmp_path / "again.pkl").read_bytes() == pkl.read_bytes()
     # errors are one line naming the file
@@ -187,8 +200,12 @@ def test_ntu120_cache_gets_pyskl_ntu120_splits(tmp_path):
     assert summary["protocols"] == {"xsub": "ntu120_xsub", "xset": "ntu120_xset"}
     assert split == {"xsub_train": NAMES[:1], "xsub_val": NAMES[1:], "xset_train": NAMES[2:], "xset_val": NAMES[:2]}
     export_pyskl(tmp_path / "c120", tmp_path / "60.pkl", splits="ntu60")  # NTU-60 lists skip setup S018
-    assert load(tmp_path / "60.pkl")["split"] == {"xsub_train": NAMES[:1], "xsub_val": NAMES[1:2],
-                                                  "xview_train": NAMES[1:2], "xview_val": NAMES[:1]}
+    assert load(tmp_path / "60.pkl")["split"] == {
+        "xsub_train": NAMES[:1],
+        "xsub_val": NAMES[1:2],
+        "xview_train": NAMES[1:2],
+        "xview_val": NAMES[:1],
+    }
     export_pyskl(tmp_path / "c120", tmp_path / "own.pkl", splits={"cs": "ntu120_xsub"})
     assert list(load(tmp_path / "own.pkl")["split"]) == ["cs_train", "cs_val"]
     for splits in ("ntu90", {"xsub": "custom"}, {"xsub": "nope"}):
@@ -201,9 +218,11 @@ def test_ntu120_cache_gets_pyskl_ntu120_splits(tmp_path):
 def test_other_pickle_protocols_and_pyskl_variants_import(tmp_path, protocol):
     """mmcv writes protocol 2; labels may be numpy integers, dicts OrderedDicts, keypoints float64
     with keypoint_score; zero-frame samples survive."""
-    items = [annotation(NAMES[0], keypoint_score=np.ones((1, 6, 25), np.float32), label=np.int64(0)),
-             collections.OrderedDict(annotation(NAMES[1], persons=2, total_frames=np.int32(6))),
-             annotation(NAMES[2], frames=0)]
+    items = [
+        annotation(NAMES[0], keypoint_score=np.ones((1, 6, 25), np.float32), label=np.int64(0)),
+        collections.OrderedDict(annotation(NAMES[1], persons=2, total_frames=np.int32(6))),
+        annotation(NAMES[2], frames=0),
+    ]
     items[1]["keypoint"] = items[1]["keypoint"].astype(np.float64)
     data = {"split": {"xsub_train": NAMES + ["S001C001P001R001A002"]}, "annotations": items}
     report = import_pyskl(write_pickle(tmp_path / "p.pkl", data, protocol), tmp_path / "c")
@@ -235,6 +254,7 @@ def _set(key, value):
     def change(item):
         item[key] = value(item) if callable(value) else value
         return item
+
     return change
 
 
@@ -242,6 +262,7 @@ def _drop(key):
     def change(item):
         del item[key]
         return item
+
     return change
 
 
@@ -256,8 +277,10 @@ BAD_ITEMS = {
     "17 joints": (_set("keypoint", lambda it: it["keypoint"][:, :, :17]), "expected [M, T, 25, 3]"),
     "2D pickle": (_set("keypoint", lambda it: it["keypoint"][..., :2]), "only 3D pickles"),
     "C=4": (_set("keypoint", lambda it: np.concatenate([it["keypoint"]] * 2, -1)[..., :4]), "expected [M, T, 25, 3]"),
-    "NaN": (_set("keypoint", lambda it: np.where(np.arange(6)[None, :, None, None] == 4, np.nan, it["keypoint"])),
-            "NaN or Inf (first in frame 4)"),
+    "NaN": (
+        _set("keypoint", lambda it: np.where(np.arange(6)[None, :, None, None] == 4, np.nan, it["keypoint"])),
+        "NaN or Inf (first in frame 4)",
+    ),
     "Inf": (_set("keypoint", lambda it: it["keypoint"] * np.float32(np.inf)), "NaN or Inf"),
     "integers": (_set("keypoint", lambda it: it["keypoint"].astype(np.int32)), "expected floats"),
     "a list": (_set("keypoint", lambda it: it["keypoint"].tolist()), "expected a numpy array"),
@@ -288,16 +311,19 @@ def test_bad_annotation_is_named(tmp_path, case):
     assert [p.name for p in (tmp_path / "c").iterdir()] == ["keep.txt"]  # nothing written
 
 
-@pytest.mark.parametrize("data, message", [
-    (["not", "a", "dict"], "expected a dict with 'split' and 'annotations', found list"),
-    ({"annotations": []}, "missing top-level key split"),
-    ({"split": {}}, "missing top-level key annotations"),
-    ({"split": [], "annotations": []}, "'split' is a list"),
-    ({"split": {"xsub_train": "S001C001P001R001A001"}, "annotations": []}, "split['xsub_train'] must be a list"),
-    ({"split": {"xsub_train": [1, 2]}, "annotations": []}, "split['xsub_train'] must be a list"),
-    ({"split": {}, "annotations": {}}, "'annotations' is a dict"),
-    ({"split": {}, "annotations": []}, "'annotations' is empty"),
-])
+@pytest.mark.parametrize(
+    "data, message",
+    [
+        (["not", "a", "dict"], "expected a dict with 'split' and 'annotations', found list"),
+        ({"annotations": []}, "missing top-level key split"),
+        ({"split": {}}, "missing top-level key annotations"),
+        ({"split": [], "annotations": []}, "'split' is a list"),
+        ({"split": {"xsub_train": "S001C001P001R001A001"}, "annotations": []}, "split['xsub_train'] must be a list"),
+        ({"split": {"xsub_train": [1, 2]}, "annotations": []}, "split['xsub_train'] must be a list"),
+        ({"split": {}, "annotations": {}}, "'annotations' is a dict"),
+        ({"split": {}, "annotations": []}, "'annotations' is empty"),
+    ],
+)
 def test_bad_pickle_structure(tmp_path, data, message):
     pkl = write_pickle(tmp_path / "bad.pkl", data)
     with pytest.raises(PysklFormatError, match=None) as caught:
@@ -321,22 +347,30 @@ def test_unreadable_files(tmp_path):
 
 
 def test_skip_bad_lists_every_skipped_annotation(tmp_path):
-    items = [annotation("S001C001P001R001A001"), annotation("S001C001P001R001A002", label=5),
-             ["not", "a", "dict"],
-             annotation("S001C001P003R001A001", frames=4, total_frames=9),
-             annotation("S001C001P001R001A001"), annotation("S001C002P001R001A001")]
+    items = [
+        annotation("S001C001P001R001A001"),
+        annotation("S001C001P001R001A002", label=5),
+        ["not", "a", "dict"],
+        annotation("S001C001P003R001A001", frames=4, total_frames=9),
+        annotation("S001C001P001R001A001"),
+        annotation("S001C002P001R001A001"),
+    ]
     report = import_pyskl(small_pickle(tmp_path, items), tmp_path / "c", skip_bad=True)
     assert [(s["index"], s["frame_dir"], s["reason"]) for s in report.skipped] == [
-        (1, "S001C001P001R001A002", "bad_label"), (2, None, "not_a_dict"),
-        (3, "S001C001P003R001A001", "bad_total_frames"), (4, "S001C001P001R001A001", "duplicate_name")]
+        (1, "S001C001P001R001A002", "bad_label"),
+        (2, None, "not_a_dict"),
+        (3, "S001C001P003R001A001", "bad_total_frames"),
+        (4, "S001C001P001R001A001", "duplicate_name"),
+    ]
     assert NTUCache(tmp_path / "c").names.tolist() == ["S001C001P001R001A001", "S001C002P001R001A001"]
     assert report.samples_written == 2 and report.annotations_found == 6
     on_disk = json.loads((tmp_path / "c" / "report.json").read_text())
     assert on_disk["skipped"] == report.skipped and on_disk["totals"]["skipped_bad_label"] == 1
     assert "annotations[3] (S001C001P003R001A001)" in (tmp_path / "c" / "report.txt").read_text()
     with pytest.raises(PysklFormatError, match=r"none of the 1 annotations.*not an NTU sample name"):
-        import_pyskl(small_pickle(tmp_path, [annotation("S001C001P001R001A001", frame_dir="x")]),
-                     tmp_path / "d", skip_bad=True)
+        import_pyskl(
+            small_pickle(tmp_path, [annotation("S001C001P001R001A001", frame_dir="x")]), tmp_path / "d", skip_bad=True
+        )
 
 
 # --------------------------------------------------------------------------- unsafe pickles
@@ -355,17 +389,23 @@ class _Eval:
         return (eval, ("__import__('pathlib').Path('VICTIM').touch()",))
 
 
-@pytest.mark.parametrize("payload, refused", [
-    (lambda victim: _System(f"touch {victim}"), "system"),
-    (lambda victim: _Eval(), "builtins.eval"),
-    (lambda victim: NTUCache, "mocapkit.datasets.ntu.cache.NTUCache"),
-])
+@pytest.mark.parametrize(
+    "payload, refused",
+    [
+        (lambda victim: _System(f"touch {victim}"), "system"),
+        (lambda victim: _Eval(), "builtins.eval"),
+        (lambda victim: NTUCache, "mocapkit.datasets.ntu.cache.NTUCache"),
+    ],
+)
 def test_malicious_pickle_is_refused(tmp_path, monkeypatch, capsys, payload, refused):
     monkeypatch.chdir(tmp_path)
     victim = tmp_path / "VICTIM"
     for where in ("top", "nested"):
-        data = payload(victim) if where == "top" else {
-            "split": {}, "annotations": [annotation(NAMES[0], keypoint_score=payload(victim))]}
+        data = (
+            payload(victim)
+            if where == "top"
+            else {"split": {}, "annotations": [annotation(NAMES[0], keypoint_score=payload(victim))]}
+        )
         pkl = write_pickle(tmp_path / f"{where}.pkl", data)
         with pytest.raises(PysklFormatError, match=f"refused to load the global .*{refused}") as caught:
             import_pyskl(pkl, tmp_path / "c")

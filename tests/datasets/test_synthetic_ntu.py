@@ -1,4 +1,5 @@
 """Tests for the synthetic NTU stand-in (mocapkit.datasets.synthetic.ntu) and its FK model."""
+
 from __future__ import annotations
 
 import json
@@ -6,9 +7,8 @@ import json
 import numpy as np
 import pytest
 
-from mocapkit.datasets.synthetic import kinematics as kin
-from mocapkit.motion.layouts import NTU25
 from mocapkit.datasets.formats.ntu_skeleton import NTUSampleName, parse_ntu_name, read_skeleton, select_main_bodies
+from mocapkit.datasets.synthetic import kinematics as kin
 from mocapkit.datasets.synthetic.ntu import (
     ACTIONS,
     NTUSynthConfig,
@@ -18,6 +18,7 @@ from mocapkit.datasets.synthetic.ntu import (
     synthesize_ntu,
     synthesize_sample,
 )
+from mocapkit.motion.layouts import NTU25
 
 CLEAN = dict(jitter_m=0.0, drop_frame_prob=0.0, extra_body_prob=0.0)
 TINY = dict(num_classes=12, num_subjects=2, setups=(1,), cameras=(1, 2), replications=(1,), length_scale=0.5)
@@ -52,7 +53,7 @@ def test_files_are_named_and_read_back(tiny_set):
     assert [str(parse_ntu_name(p)) for p in paths] == [str(n) for n in sample_names(config)]
     assert (out / "classes.txt").read_text().splitlines() == class_names(12)
     assert NTUSynthConfig.from_dict(json.loads((out / "synth_config.json").read_text())) == config
-    for path in paths[:: 5]:
+    for path in paths[::5]:
         seq = read_skeleton(path)
         assert seq.name == path.stem
         assert seq.joints.shape[2:] == (25, 12)
@@ -79,9 +80,17 @@ def test_class_names_and_config_errors():
     assert len(set(names)) == 20 and names[:12] == class_names(12)
     with pytest.raises(ValueError, match="num_classes"):
         class_names(21)
-    for field, value in [("num_classes", 0), ("num_classes", 21), ("cameras", (4,)), ("setups", ()),
-                         ("drop_frame_prob", 1.5), ("jitter_m", -0.1), ("style_noise", float("nan")),
-                         ("height_range_m", (1.9, 1.5)), ("length_scale", 0.0)]:
+    for field, value in [
+        ("num_classes", 0),
+        ("num_classes", 21),
+        ("cameras", (4,)),
+        ("setups", ()),
+        ("drop_frame_prob", 1.5),
+        ("jitter_m", -0.1),
+        ("style_noise", float("nan")),
+        ("height_range_m", (1.9, 1.5)),
+        ("length_scale", 0.0),
+    ]:
         with pytest.raises(ValueError, match=field):
             NTUSynthConfig(**{field: value})
     with pytest.raises(ValueError, match="unknown"):
@@ -131,8 +140,20 @@ def test_forward_kinematics_is_rigid(tmp_path):
 
 def test_subjects_differ_in_body_size():
     config = NTUSynthConfig(num_subjects=6, **CLEAN)
-    chain = [kin.J[n] for n in ("FootLeft", "AnkleLeft", "KneeLeft", "HipLeft", "SpineBase", "SpineMid",
-                                 "SpineShoulder", "Neck", "Head")]
+    chain = [
+        kin.J[n]
+        for n in (
+            "FootLeft",
+            "AnkleLeft",
+            "KneeLeft",
+            "HipLeft",
+            "SpineBase",
+            "SpineMid",
+            "SpineShoulder",
+            "Neck",
+            "Head",
+        )
+    ]
     sizes = []
     for subject in range(1, 7):
         pos = perform(config, 1, subject, 1, WAVE)[0][0]
@@ -190,8 +211,7 @@ def _rigid_fit(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
 
 def test_cameras_see_the_same_motion_from_different_viewpoints():
     config = NTUSynthConfig(**CLEAN)
-    views = [synthesize_sample(NTUSampleName(2, c, 3, 1, 4), config).positions[0].astype(np.float64)
-             for c in (1, 2, 3)]
+    views = [synthesize_sample(NTUSampleName(2, c, 3, 1, 4), config).positions[0].astype(np.float64) for c in (1, 2, 3)]
     assert len({v.shape for v in views}) == 1
     # The same motion (one rigid transform explains every joint of every frame), seen
     # from azimuths 45° apart (C001 → C002 / C003) and 90° apart (C002 → C003).
@@ -232,8 +252,8 @@ def test_extra_bodies_are_removed_by_body_selection(tmp_path):
         reasons_spread = [r for r in spread_only.dropped.values() if "spread" in r]
         if reasons_spread:
             assert len(spread_only.kept) == actors
-    assert any("spread" in r for r in reasons)          # chair-like blobs
-    assert any("frames" in r for r in reasons)          # short-lived passers-by
+    assert any("spread" in r for r in reasons)  # chair-like blobs
+    assert any("frames" in r for r in reasons)  # short-lived passers-by
 
 
 def test_kinematics_mirror_and_rest_pose():

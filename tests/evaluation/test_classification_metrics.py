@@ -1,4 +1,5 @@
 """Classification metrics against hand-computed values and an independent computation (torchmetrics, loops)."""
+
 import numpy as np
 import pytest
 import torch
@@ -49,8 +50,9 @@ def test_accuracies_match_an_independent_computation(num_classes):
         expected = float((rank < k).mean())
         assert topk_accuracy(scores, labels, k) == pytest.approx(expected, abs=1e-12), k
         if k < num_classes:  # torchmetrics, a second library (no ties in random scores)
-            tm = multiclass_accuracy(torch.from_numpy(scores), torch.from_numpy(labels), num_classes=num_classes,
-                                     top_k=k, average="micro")
+            tm = multiclass_accuracy(
+                torch.from_numpy(scores), torch.from_numpy(labels), num_classes=num_classes, top_k=k, average="micro"
+            )
             assert float(tm) == pytest.approx(expected, abs=1e-6), k
     assert r["top1"] == pytest.approx(float((scores.argmax(1) == labels).mean()), abs=1e-12)
     assert r["top5"] == pytest.approx(float((rank < 5).mean()), abs=1e-12)

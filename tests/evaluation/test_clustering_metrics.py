@@ -1,4 +1,5 @@
 """Clustering metrics: Hungarian accuracy (rectangular too), NMI normalisation, ARI."""
+
 import numpy as np
 import pytest
 from sklearn.metrics import normalized_mutual_info_score
@@ -8,7 +9,7 @@ from mocapkit.evaluation.clustering import clustering_accuracy, clustering_repor
 
 def test_permuted_labels_give_perfect_scores():
     truth = np.repeat([0, 1, 2, 3], 5)
-    permuted = np.array([2, 0, 3, 1])[truth] + 10             # renamed clusters, arbitrary values
+    permuted = np.array([2, 0, 3, 1])[truth] + 10  # renamed clusters, arbitrary values
     report = clustering_report(truth, permuted)
     assert report["acc"] == 1.0 and report["nmi"] == pytest.approx(1.0) and report["ari"] == pytest.approx(1.0)
 

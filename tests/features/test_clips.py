@@ -1,4 +1,5 @@
 """Sliding-window clips and their non-negative features (numpy reference and batched torch version)."""
+
 import numpy as np
 import pytest
 import torch
@@ -23,8 +24,9 @@ def _sequence(frames: int, seed: int = 0) -> np.ndarray:
     return (pose + drift).astype(np.float32)
 
 
-@pytest.mark.parametrize("length, expected", [(10, 1), (29, 1), (30, 1), (44, 1), (45, 2), (46, 2), (60, 3),
-                                               (100, 5), (936, 61)])
+@pytest.mark.parametrize(
+    "length, expected", [(10, 1), (29, 1), (30, 1), (44, 1), (45, 2), (46, 2), (60, 3), (100, 5), (936, 61)]
+)
 def test_window_count_follows_the_corrected_formula(length, expected):
     windows = clip_windows(length, window=30)
     assert clip_count(length, 30) == len(windows) == expected
@@ -51,7 +53,7 @@ def test_features_are_non_negative_with_expected_shape_and_sign_split():
     assert features.shape == (clip_count(70, 30), feature_dim(20, 10)) == (3, 1200)
     assert features.dtype == np.float32 and (features >= 0).all()
     positive, negative = features[:, :600], features[:, 600:]
-    assert not ((positive > 0) & (negative > 0)).any()          # one of the two parts is zero per coordinate
+    assert not ((positive > 0) & (negative > 0)).any()  # one of the two parts is zero per coordinate
     # clip 0, frame 0, root joint (HipCenter, index 6) is the origin: all zero
     root = MSR20.parents.index(-1)
     first = (positive - negative)[0].reshape(10, 20, 3)
@@ -73,7 +75,7 @@ def test_short_sequence_is_edge_padded_to_one_window():
     offsets = clip_frame_offsets(30, 10)
     past_end = offsets >= 11
     assert past_end.sum() >= 5
-    for f in np.flatnonzero(past_end):                          # the last frame, repeated
+    for f in np.flatnonzero(past_end):  # the last frame, repeated
         np.testing.assert_allclose(frames[f], frames[np.flatnonzero(past_end)[0]], atol=1e-6)
 
 
@@ -82,7 +84,7 @@ def test_trailing_zero_frames_are_padding_and_untracked_joints_are_zero():
     padded = np.concatenate([seq, np.zeros((25, 20, 3), np.float32)])
     np.testing.assert_allclose(clip_features(padded), clip_features(seq), atol=1e-6)
     holes = seq.copy()
-    holes[5, 3] = 0.0                                           # joint 3 untracked in frame 5
+    holes[5, 3] = 0.0  # joint 3 untracked in frame 5
     features = clip_features(holes, window=30, frames_per_clip=30)
     frames = (features[0, :1800] - features[0, 1800:]).reshape(30, 20, 3)
     assert (frames[5, 3] == 0).all() and (frames[5, 2] != 0).any()
@@ -108,7 +110,7 @@ def test_sequence_clip_features_stacks_and_tags_owners():
 def test_torch_features_equal_numpy_features_in_a_zero_padded_batch():
     lengths = [12, 30, 45, 61, 100]
     seqs = [_sequence(n, seed=i) for i, n in enumerate(lengths)]
-    seqs[3][10:13] = 0.0                                        # an untracked stretch inside a sequence
+    seqs[3][10:13] = 0.0  # an untracked stretch inside a sequence
     seqs[4][20, 5] = 0.0
     batch = torch.zeros(len(seqs), max(lengths), 20, 3)
     for i, s in enumerate(seqs):

@@ -1,4 +1,5 @@
 """Gait metrics on hand-made predictions and embeddings whose answers are known."""
+
 from __future__ import annotations
 
 import json
@@ -7,8 +8,14 @@ import numpy as np
 import pytest
 
 from mocapkit.datasets.formats.casia_b import VIEWS
-from mocapkit.gait.metrics import (closed_set_markdown, closed_set_report, cross_view_markdown, cross_view_rank1,
-                                      plot_per_view, plot_per_view_panels)
+from mocapkit.gait.metrics import (
+    closed_set_markdown,
+    closed_set_report,
+    cross_view_markdown,
+    cross_view_rank1,
+    plot_per_view,
+    plot_per_view_panels,
+)
 
 SEQUENCES = [(0, s) for s in range(1, 7)] + [(1, 1), (1, 2), (2, 1), (2, 2)]  # (condition, repetition) of CASIA-B
 
@@ -24,10 +31,17 @@ def test_closed_set_report_per_view_and_condition():
     # subject task: wrong for subject 1 in views 5..10; view task: wrong for every cl GEI
     predicted_subject = np.where((views >= 5) & (subjects == 1), 0, subjects)
     predicted_view = np.where(conditions == 2, (views + 1) % 11, views)
-    report = closed_set_report({"subject_logits": _one_hot(predicted_subject, 2), "subjects": subjects,
-                                "view_logits": _one_hot(predicted_view, 11), "views": views,
-                                "conditions": conditions, "subject_ids": subjects + 1,
-                                "sequences": np.ones_like(views)})
+    report = closed_set_report(
+        {
+            "subject_logits": _one_hot(predicted_subject, 2),
+            "subjects": subjects,
+            "view_logits": _one_hot(predicted_view, 11),
+            "views": views,
+            "conditions": conditions,
+            "subject_ids": subjects + 1,
+            "sequences": np.ones_like(views),
+        }
+    )
     assert report["per"] == "sequence" and report["num_geis"] == report["num_sequences"] == 66
     assert set(report["tasks"]) == {"subject", "view"}  # no condition logits, no condition task
     subject = report["tasks"]["subject"]
@@ -54,12 +68,27 @@ def test_closed_set_report_per_view_and_condition():
 
 def test_closed_set_votes_over_a_sequences_cycles():
     # two test videos of three cycles each (subject label 0 of 2)
-    logits = np.array([[1, 0], [1, 0], [0, 5],     # video A: 2/3 cycles right, the summed logits pick subject 1
-                       [0, 1], [3, 0], [3, 0]],    # video B: 2/3 cycles right, the sum picks subject 0
-                      dtype=float)
-    report = closed_set_report({"subject_logits": logits, "subjects": np.zeros(6, int),
-                                "subject_ids": np.ones(6, int), "views": np.full(6, 5),
-                                "conditions": np.array([0, 0, 0, 1, 1, 1]), "sequences": np.array([5, 5, 5, 1, 1, 1])})
+    logits = np.array(
+        [
+            [1, 0],
+            [1, 0],
+            [0, 5],  # video A: 2/3 cycles right, the summed logits pick subject 1
+            [0, 1],
+            [3, 0],
+            [3, 0],
+        ],  # video B: 2/3 cycles right, the sum picks subject 0
+        dtype=float,
+    )
+    report = closed_set_report(
+        {
+            "subject_logits": logits,
+            "subjects": np.zeros(6, int),
+            "subject_ids": np.ones(6, int),
+            "views": np.full(6, 5),
+            "conditions": np.array([0, 0, 0, 1, 1, 1]),
+            "sequences": np.array([5, 5, 5, 1, 1, 1]),
+        }
+    )
     subject = report["tasks"]["subject"]
     assert report["per"] == "cycle" and report["num_sequences"] == 2
     assert subject["accuracy"] == pytest.approx(4 / 6)
@@ -73,8 +102,12 @@ def test_closed_set_votes_over_a_sequences_cycles():
 
 
 def test_closed_set_rejects_bad_input():
-    base = {"subject_logits": np.zeros((2, 3)), "subjects": np.array([0, -1]), "views": np.zeros(2, int),
-            "conditions": np.zeros(2, int)}
+    base = {
+        "subject_logits": np.zeros((2, 3)),
+        "subjects": np.array([0, -1]),
+        "views": np.zeros(2, int),
+        "conditions": np.zeros(2, int),
+    }
     with pytest.raises(ValueError, match="-1 marks a subject outside"):
         closed_set_report(base)
     with pytest.raises(KeyError, match="views"):
@@ -143,8 +176,13 @@ def _two_subject_probe(probe_embedding):
     """Gallery nm-01 of subjects 1, 2 at 0°; one probe nm-05 of subject 1 at 18° (cycles = rows)."""
     probe_embedding = np.atleast_2d(probe_embedding)
     k = len(probe_embedding)
-    return (np.vstack([[10.0, 0.0], [0.9, 0.5], probe_embedding]), np.array([1, 2] + [1] * k),
-            np.zeros(2 + k, int), np.array([1, 1] + [5] * k), np.array([0, 0] + [18] * k))
+    return (
+        np.vstack([[10.0, 0.0], [0.9, 0.5], probe_embedding]),
+        np.array([1, 2] + [1] * k),
+        np.zeros(2 + k, int),
+        np.array([1, 1] + [5] * k),
+        np.array([0, 0] + [18] * k),
+    )
 
 
 def test_euclidean_and_cosine_differ_and_missing_views_are_reported():
@@ -191,8 +229,9 @@ def test_per_view_plots(tmp_path):
     series = {"multi-task": {"0": 0.9, "90": 0.8}, "PCA+LDA": {str(v): 0.5 for v in VIEWS}}
     path = plot_per_view(series, tmp_path / "one.png", "closed set")
     assert path.stat().st_size > 1000
-    both = plot_per_view_panels({"closed set": series, "cross subject NM": {"x": {18: None, 36: 0.2}}},
-                                tmp_path / "two.png")
+    both = plot_per_view_panels(
+        {"closed set": series, "cross subject NM": {"x": {18: None, 36: 0.2}}}, tmp_path / "two.png"
+    )
     assert both.stat().st_size > path.stat().st_size / 2
     with pytest.raises(ValueError, match="empty"):
         plot_per_view_panels({}, tmp_path / "none.png")

@@ -1,5 +1,6 @@
 """evaluate_gait with a module whose answers are known, the gait comparison's side-by-side tables, and
 `mocapkit gait-report` (an alias of `mocapkit compare gait`) end to end."""
+
 from __future__ import annotations
 
 import json
@@ -10,10 +11,10 @@ import torch
 import torch.nn.functional as F
 from omegaconf import OmegaConf
 
-from mocapkit.gait.gei_pca_lda import GEIPCALDA
 from mocapkit.datasets.formats.casia_b import VIEWS
 from mocapkit.gait.benchmark import GaitBenchmark, closed_set_table, cross_subject_tables, per_view_panels
 from mocapkit.gait.evaluate import evaluate_gait
+from mocapkit.gait.gei_pca_lda import GEIPCALDA
 from tests.gait.test_gei_pca_lda import make_tiny_gei_cache
 
 CFG = OmegaConf.create({"trainer": {"accelerator": "cpu", "enable_progress_bar": False}, "experiment_name": "oracle"})
@@ -30,11 +31,13 @@ class OracleGaitModule(L.LightningModule):
     def predict_step(self, batch: dict, batch_idx: int) -> dict:
         subjects = batch["subjects"].clamp(min=0)
         wrong_at_90 = torch.where(batch["views"] == VIEWS.index(90), (subjects + 1) % self.num_subjects, subjects)
-        return {"embedding": F.one_hot(batch["subject_ids"], 32).float(),
-                "subject_logits": F.one_hot(wrong_at_90, self.num_subjects).float(),
-                "view_logits": F.one_hot(batch["views"], 11).float(),
-                "condition_logits": F.one_hot((batch["conditions"] + 1) % 3, 3).float(),
-                **{k: batch[k] for k in ("subjects", "subject_ids", "views", "conditions", "sequences", "indices")}}
+        return {
+            "embedding": F.one_hot(batch["subject_ids"], 32).float(),
+            "subject_logits": F.one_hot(wrong_at_90, self.num_subjects).float(),
+            "view_logits": F.one_hot(batch["views"], 11).float(),
+            "condition_logits": F.one_hot((batch["conditions"] + 1) % 3, 3).float(),
+            **{k: batch[k] for k in ("subjects", "subject_ids", "views", "conditions", "sequences", "indices")},
+        }
 
 
 @pytest.fixture(scope="module")
@@ -88,14 +91,20 @@ def test_report_tables_side_by_side(tiny_cache, tmp_path):
     pca_cross = benchmark.evaluate_estimator(GEIPCALDA(), benchmark.split("cross_subject", 0))["detail"]
     text = closed_set_table({"multi-task CNN": oracle_closed["closed_set"], "GEI+PCA+LDA": pca_closed["closed_set"]})
     header = next(line for line in text.splitlines() if line.startswith("| Probe | multi-task CNN: identify subject"))
-    assert header.split(" | ")[1:5] == ["multi-task CNN: identify subject", "multi-task CNN: predict view",
-                                        "multi-task CNN: predict condition", "GEI+PCA+LDA: identify subject"]
+    assert header.split(" | ")[1:5] == [
+        "multi-task CNN: identify subject",
+        "multi-task CNN: predict view",
+        "multi-task CNN: predict condition",
+        "GEI+PCA+LDA: identify subject",
+    ]
     assert "| 90° | 0.00 | 100.00 | 0.00 | " in text and "| 95.80 | 99.63 | 97.11 |" in text
     text = cross_subject_tables({"multi-task CNN": oracle_cross["cross_view"], "GEI+PCA+LDA": pca_cross["cross_view"]})
     assert "| NM | 100.00 | " in text and "| 89.9 | 95.8 | 90.5 |" in text
-    cells = [{"protocol": "closed_set", "label": "multi-task CNN", "detail": oracle_closed},
-             {"protocol": "closed_set", "label": "GEI+PCA+LDA", "detail": pca_closed},
-             {"protocol": "cross_subject", "label": "multi-task CNN", "detail": oracle_cross}]
+    cells = [
+        {"protocol": "closed_set", "label": "multi-task CNN", "detail": oracle_closed},
+        {"protocol": "closed_set", "label": "GEI+PCA+LDA", "detail": pca_closed},
+        {"protocol": "cross_subject", "label": "multi-task CNN", "detail": oracle_cross},
+    ]
     panels = per_view_panels({"protocols": ["closed_set", "cross_subject"], "cells": cells})
     assert list(panels["closed set: subject accuracy per view"]) == ["multi-task CNN", "GEI+PCA+LDA"]
     assert panels["closed set: subject accuracy per view"]["multi-task CNN"]["90"] == 0.0
@@ -110,11 +119,30 @@ def test_gait_report_end_to_end(tmp_path):
 
     cache = make_tiny_gei_cache(tmp_path / "cache", num_subjects=4, height=64, width=44)
     out = tmp_path / "report"
-    assert cli(["gait-report", "--data", str(cache.root), "--out", str(out), "--seed", "1",
-                "--experiments", "casiab_multitask", "--", "trainer.max_epochs=1", "trainer.enable_progress_bar=false",
-                "trainer.accelerator=cpu", "data.batch_size=16", "data.holdout_seed=2"]) == 0
+    assert (
+        cli(
+            [
+                "gait-report",
+                "--data",
+                str(cache.root),
+                "--out",
+                str(out),
+                "--seed",
+                "1",
+                "--experiments",
+                "casiab_multitask",
+                "--",
+                "trainer.max_epochs=1",
+                "trainer.enable_progress_bar=false",
+                "trainer.accelerator=cpu",
+                "data.batch_size=16",
+                "data.holdout_seed=2",
+            ]
+        )
+        == 0
+    )
     result = json.loads((out / "results.json").read_text())
-    assert result["seeds"] == [1] and result["benchmark"]["holdout_seed"] == 2       # the split follows the override
+    assert result["seeds"] == [1] and result["benchmark"]["holdout_seed"] == 2  # the split follows the override
     for protocol in ("closed_set", "cross_subject"):
         cells = {c["method"]: c for c in result["cells"] if c["protocol"] == protocol}
         assert list(cells) == ["casiab_multitask", "gei_pca_lda"]
@@ -132,8 +160,24 @@ def test_gait_report_end_to_end(tmp_path):
     assert (out / "per_view.png").stat().st_size > 1000
     assert (out / "runs" / "casiab_multitask" / "casiab_multitask_closed_set_seed1" / "eval" / "metrics.json").is_file()
     # --no-pca-lda and --protocols / --experiments select cells
-    assert cli(["gait-report", "--data", str(cache.root), "--out", str(tmp_path / "small"), "trainer.max_epochs=1",
-                "--no-pca-lda", "--protocols", "closed_set", "--experiments", "casiab_single_subject"]) == 0
+    assert (
+        cli(
+            [
+                "gait-report",
+                "--data",
+                str(cache.root),
+                "--out",
+                str(tmp_path / "small"),
+                "trainer.max_epochs=1",
+                "--no-pca-lda",
+                "--protocols",
+                "closed_set",
+                "--experiments",
+                "casiab_single_subject",
+            ]
+        )
+        == 0
+    )
     small = json.loads((tmp_path / "small" / "results.json").read_text())
     assert [(c["method"], c["protocol"]) for c in small["cells"]] == [("casiab_single_subject", "closed_set")]
     assert list(small["cells"][0]["detail"]["closed_set"]["tasks"]) == ["subject"]

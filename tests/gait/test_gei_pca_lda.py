@@ -1,5 +1,6 @@
 """GEI+PCA+LDA: separable synthetic GEIs, clamped dimensions, the scikit-learn contract, and both protocols on a
 tiny GEI cache through the comparison runner's gait benchmark (the split code the CNN data module uses)."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -10,15 +11,16 @@ from sklearn.model_selection import GridSearchCV
 from sklearn.pipeline import Pipeline
 from sklearn.preprocessing import FunctionTransformer
 
-from mocapkit.gait.gei_pca_lda import GEIPCALDA
 from mocapkit.datasets.casia_b.cache import GEICache, write_gei_cache
 from mocapkit.datasets.formats.casia_b import CONDITIONS, VIEWS
+from mocapkit.gait.gei_pca_lda import GEIPCALDA
 
 SEQUENCES = [(0, s) for s in range(1, 7)] + [(1, 1), (1, 2), (2, 1), (2, 2)]  # (condition, repetition)
 
 
-def make_tiny_gei_cache(root, num_subjects: int = 10, height: int = 32, width: int = 22, cycles: int = 1,
-                        noise: float = 0.03, seed: int = 0) -> GEICache:
+def make_tiny_gei_cache(
+    root, num_subjects: int = 10, height: int = 32, width: int = 22, cycles: int = 1, noise: float = 0.03, seed: int = 0
+) -> GEICache:
     """A CASIA-B-shaped GEI cache: every subject × 10 sequences × 11 views × ``cycles`` GEIs.
 
     A GEI = 0.5 + identity (3 shared "body shape" images weighted per subject, so LDA learnt on some
@@ -34,15 +36,35 @@ def make_tiny_gei_cache(root, num_subjects: int = 10, height: int = 32, width: i
         for condition, repetition in SEQUENCES:
             for v, view in enumerate(VIEWS):
                 for cycle in range(cycles):
-                    gei = (0.5 + 0.12 * np.tensordot(body[s], shape_basis, 1) + 0.06 * view_pattern[v]
-                           + 0.06 * condition_pattern[condition] + noise * rng.normal(size=(height, width)))
+                    gei = (
+                        0.5
+                        + 0.12 * np.tensordot(body[s], shape_basis, 1)
+                        + 0.06 * view_pattern[v]
+                        + 0.06 * condition_pattern[condition]
+                        + noise * rng.normal(size=(height, width))
+                    )
                     geis.append(np.clip(gei, 0, 1))
-                    rows.append((f"{s + 1:03d}/{CONDITIONS[condition]}-{repetition:02d}/{view:03d}", s + 1, condition,
-                                 repetition, view, cycle, 30))
+                    rows.append(
+                        (
+                            f"{s + 1:03d}/{CONDITIONS[condition]}-{repetition:02d}/{view:03d}",
+                            s + 1,
+                            condition,
+                            repetition,
+                            view,
+                            cycle,
+                            30,
+                        )
+                    )
     names, subjects, conditions, sequences, views, cycle_ids, frames = zip(*rows)
-    index = {"names": np.array(names), "subjects": np.array(subjects), "conditions": np.array(conditions),
-             "sequences": np.array(sequences), "views": np.array(views), "cycles": np.array(cycle_ids),
-             "frames": np.array(frames)}
+    index = {
+        "names": np.array(names),
+        "subjects": np.array(subjects),
+        "conditions": np.array(conditions),
+        "sequences": np.array(sequences),
+        "views": np.array(views),
+        "cycles": np.array(cycle_ids),
+        "frames": np.array(frames),
+    }
     write_gei_cache(root, np.stack(geis), index, {"per": "cycle" if cycles > 1 else "sequence", "source": "test"})
     return GEICache(root)
 

@@ -1,5 +1,6 @@
 """The Kinect reconstruction benchmark through the one comparison runner: held-out performers, selection on the
 training performers only, one fit shared by the prediction-parameter variants, the report (real HDM05 cuts)."""
+
 from __future__ import annotations
 
 import importlib
@@ -8,9 +9,9 @@ import json
 import pytest
 from omegaconf import open_dict
 
-from mocapkit.kinect.reconstruction import KinectPostureReconstructor
 from mocapkit.evaluation.compare import ComparisonError, compose, run_comparison
 from mocapkit.kinect.benchmark import KinectReconstructionBenchmark
+from mocapkit.kinect.reconstruction import KinectPostureReconstructor
 from tests.shared_data import SHARED, needs
 
 HDM05 = SHARED / "data" / "hdm05_cuts11"
@@ -33,10 +34,23 @@ class RecordingReconstructor(KinectPostureReconstructor):
 @pytest.fixture(scope="module")
 def quick(tmp_path_factory):
     out = tmp_path_factory.mktemp("kinect_quick")
-    cfg = compose(["kinect_hdm05", f"out={out}", f"benchmark.root={HDM05}", "benchmark.clips_per_group=3",
-                   "protocols=[mm]", "seeds=[0]", "only=[sdk_filter,forest,zhou,zhou_ST,zhou_S]"])
-    tiny = {"_target_": "tests.kinect.test_compare_kinect.RecordingReconstructor", "gp_iterations": 3,
-            "n_inducing": 20, "max_train_frames": 400}
+    cfg = compose(
+        [
+            "kinect_hdm05",
+            f"out={out}",
+            f"benchmark.root={HDM05}",
+            "benchmark.clips_per_group=3",
+            "protocols=[mm]",
+            "seeds=[0]",
+            "only=[sdk_filter,forest,zhou,zhou_ST,zhou_S]",
+        ]
+    )
+    tiny = {
+        "_target_": "tests.kinect.test_compare_kinect.RecordingReconstructor",
+        "gp_iterations": 3,
+        "n_inducing": 20,
+        "max_train_frames": 400,
+    }
     with open_dict(cfg):
         for key in ("zhou", "zhou_ST", "zhou_S"):
             cfg.methods[key].estimator = dict(tiny)
@@ -55,7 +69,7 @@ def test_cells_metrics_and_report(quick):
     cells = {c["method"]: c for c in saved["cells"]}
     assert set(cells) == {"sdk_filter", "forest", "zhou", "zhou_ST", "zhou_S"}
     raw = {c["metrics"]["raw_cm"] for c in cells.values()}
-    assert len(raw) == 1 and 5.0 < raw.pop() < 30.0                   # one simulated test set for every method
+    assert len(raw) == 1 and 5.0 < raw.pop() < 30.0  # one simulated test set for every method
     for c in cells.values():
         m = c["metrics"]
         assert m["reduction"] == pytest.approx(1 - m["error_cm"] / m["raw_cm"])
@@ -96,8 +110,9 @@ def test_noise_preset_is_a_benchmark_option():
     bench = KinectReconstructionBenchmark(str(HDM05), clips_per_group=1, noise="msr_steadiness")
     assert bench.describe()["noise"] == "msr_steadiness"
     pair = bench.pairs(0)[0]
-    expected, _ = simulate_kinect(pair.clean, KinectNoiseConfig.preset("msr_steadiness"),
-                                  seed=file_seed(0, pair.path), fps=30.0)
+    expected, _ = simulate_kinect(
+        pair.clean, KinectNoiseConfig.preset("msr_steadiness"), seed=file_seed(0, pair.path), fps=30.0
+    )
     assert (pair.noisy == expected).all()
 
 
@@ -107,22 +122,33 @@ BANDAI = SHARED / "data" / "bandai_motion_1"
 @needs(HDM05)
 @needs(BANDAI)
 def test_another_data_set_is_scored_by_models_of_every_performer(tmp_path):
-    bench = KinectReconstructionBenchmark(str(HDM05), protocols=["bd", "bandai"], clips_per_group=2,
-                                          transfer_root=str(BANDAI), transfer_name="bandai")
+    bench = KinectReconstructionBenchmark(
+        str(HDM05), protocols=["bd", "bandai"], clips_per_group=2, transfer_root=str(BANDAI), transfer_name="bandai"
+    )
     groups = bench.groups
     transfer = bench.split("bandai", 0)
     assert set(groups[transfer.test]) == {"bandai"} and len(transfer.test) == 2
-    assert set(groups[transfer.train]) == {"bd", "bk", "dg", "mm"}           # every performer, no Bandai take
+    assert set(groups[transfer.train]) == {"bd", "bk", "dg", "mm"}  # every performer, no Bandai take
     held_out = bench.split("bd", 0)
-    assert set(groups[held_out.train]) == {"bk", "dg", "mm"}                  # Bandai never trains a fold
+    assert set(groups[held_out.train]) == {"bk", "dg", "mm"}  # Bandai never trains a fold
     assert all(str(bench.files[i]).endswith(".bvh") for i in transfer.test)
     kinect, mocap = bench.data(transfer.test, 0)
     assert kinect[0].shape[1:] == (20, 3) and mocap[0].shape == kinect[0].shape
     with pytest.raises(ComparisonError, match="transfer_name='bd' is a performer folder"):
         KinectReconstructionBenchmark(str(HDM05), clips_per_group=1, transfer_root=str(BANDAI), transfer_name="bd")
-    cfg = compose(["kinect_hdm05", f"out={tmp_path}", f"benchmark.root={HDM05}", "benchmark.clips_per_group=2",
-                   f"+benchmark.transfer_root={BANDAI}", "+benchmark.transfer_name=bandai",
-                   "benchmark.protocols=[bd,bandai]", "seeds=[0]", "only=[forest]"])
+    cfg = compose(
+        [
+            "kinect_hdm05",
+            f"out={tmp_path}",
+            f"benchmark.root={HDM05}",
+            "benchmark.clips_per_group=2",
+            f"+benchmark.transfer_root={BANDAI}",
+            "+benchmark.transfer_name=bandai",
+            "benchmark.protocols=[bd,bandai]",
+            "seeds=[0]",
+            "only=[forest]",
+        ]
+    )
     with open_dict(cfg):
         cfg.methods.forest.estimator.n_estimators = 5
     run_comparison(cfg)

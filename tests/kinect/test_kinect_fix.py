@@ -1,6 +1,7 @@
 """``mocapkit kinect-fix``'s library: training on simulated pairs of real mocap, saving and loading the model,
 correcting real MSR Action3D Kinect files (the all-zero one refused or reported), wild input (missing joints),
 and the Kinect SDK smoothing baseline."""
+
 from __future__ import annotations
 
 import json
@@ -9,9 +10,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mocapkit.kinect.reconstruction import DoubleExponentialSmoother, KinectPostureReconstructor
-from mocapkit.motion.layouts import LANDMARK_NAMES, MSR20, find_landmarks
-from mocapkit.motion.container import Motion
 from mocapkit.datasets.formats.motion_io import read_motion
 from mocapkit.kinect.kinect_fix import (
     KinectFixError,
@@ -19,6 +17,9 @@ from mocapkit.kinect.kinect_fix import (
     kinect_clip,
     train_kinect_model,
 )
+from mocapkit.kinect.reconstruction import DoubleExponentialSmoother, KinectPostureReconstructor
+from mocapkit.motion.container import Motion
+from mocapkit.motion.layouts import LANDMARK_NAMES, MSR20, find_landmarks
 from tests.shared_data import SHARED, needs
 
 HDM05 = SHARED / "data" / "hdm05_cuts11"
@@ -31,7 +32,9 @@ def model_path(tmp_path_factory):
     if not HDM05.is_dir():
         pytest.skip(f"{HDM05} is absent")
     out = tmp_path_factory.mktemp("kinect_model") / "model.npz"
-    report = train_kinect_model(sorted((HDM05 / "bd").glob("*.amc"))[:4], out, **TINY)
+    report = train_kinect_model(
+        sorted((HDM05 / "bd").glob("*.amc"))[:4], out, overrides=[f"{k}={v}" for k, v in TINY.items()]
+    )
     assert report["files"] == 4 and report["frames"] > 100 and not report["skipped"]
     return out
 
@@ -45,8 +48,9 @@ def test_saved_model_predicts_exactly_as_the_fitted_one(tmp_path):
     loaded = KinectPostureReconstructor.load(model.save(tmp_path / "sub" / "model.npz"))
     assert loaded.get_params() == model.get_params() and loaded.n_train_frames_ == model.n_train_frames_
     test = pairs[2]
-    np.testing.assert_array_equal(model.predict(test.noisy, state=test.state),
-                                  loaded.predict(test.noisy, state=test.state))
+    np.testing.assert_array_equal(
+        model.predict(test.noisy, state=test.state), loaded.predict(test.noisy, state=test.state)
+    )
 
 
 def test_a_file_that_is_not_a_model_is_named(tmp_path):
@@ -71,7 +75,7 @@ def test_msr_files_are_corrected_and_the_all_zero_file_is_refused_or_reported(mo
         motion = read_motion(entry["output"])
         source = read_motion(entry["input"])
         assert motion.layout_name == "msr20" and motion.fps == 30.0 and source.fps == 15.0
-        assert abs(motion.num_frames - 2 * source.num_frames) <= 2          # 15 → 30 fps over the same duration
+        assert abs(motion.num_frames - 2 * source.num_frames) <= 2  # 15 → 30 fps over the same duration
         assert np.isfinite(motion.positions).all()
         # corrections are offsets of centimetres, not a different motion
         raw, _, _ = kinect_clip(source.resample(30.0))
@@ -87,22 +91,37 @@ def test_missing_joints_are_filled_marked_not_tracked_and_counted():
     positions = np.zeros((12, 20, 3), dtype=np.float32)
     rng = np.random.default_rng(1)
     positions[:] = rng.normal(size=(20, 3)) * 0.3
-    positions[:, :, 0] += t[:, None]                                     # everyone walks 1 m along x
+    positions[:, :, 0] += t[:, None]  # everyone walks 1 m along x
     missing = np.zeros((12, 20), dtype=bool)
     missing[4:7, 5] = True
     positions[missing] = np.nan
-    motion = Motion(positions=positions, joint_names=MSR20.joint_names, parents=MSR20.parents, fps=30.0,
-                    missing=missing, layout_name="msr20", name="gappy")
+    motion = Motion(
+        positions=positions,
+        joint_names=MSR20.joint_names,
+        parents=MSR20.parents,
+        fps=30.0,
+        missing=missing,
+        layout_name="msr20",
+        name="gappy",
+    )
     clip, state, filled = kinect_clip(motion)
     assert filled == 3 and np.isfinite(clip).all()
     assert (state == 0).sum() == 3 and (state == 2).sum() == 12 * 20 - 3
     k = int(np.flatnonzero((state == 0).any(axis=0))[0])
-    np.testing.assert_allclose(clip[4:7, k, 0] - clip[3, k, 0], (t[4:7] - t[3]), atol=1e-5)   # linear in time
+    np.testing.assert_allclose(clip[4:7, k, 0] - clip[3, k, 0], (t[4:7] - t[3]), atol=1e-5)  # linear in time
     every = motion.positions.copy()
     every[:, 5] = np.nan
     with pytest.raises(KinectFixError, match="gappy.*missing in every frame"):
-        kinect_clip(Motion(positions=every, joint_names=MSR20.joint_names, parents=MSR20.parents, fps=30.0,
-                           layout_name="msr20", name="gappy"))
+        kinect_clip(
+            Motion(
+                positions=every,
+                joint_names=MSR20.joint_names,
+                parents=MSR20.parents,
+                fps=30.0,
+                layout_name="msr20",
+                name="gappy",
+            )
+        )
 
 
 def test_sdk_smoother_keeps_still_joints_bounds_deviation_and_reduces_noise():
@@ -127,19 +146,60 @@ def test_cli_trains_and_applies_and_names_the_bad_file(tmp_path, capsys):
     tiny = ["--set", "gp_iterations=2", "--set", "n_inducing=10", "--set", "max_train_frames=200"]
     assert main(["kinect-fix", "train", "--mocap", *clips, "--out", str(model), *tiny]) == 0
     assert "noise mean_error" in (printed := capsys.readouterr().out) and "written to" in printed and model.is_file()
-    assert main(["kinect-fix", "train", "--mocap", *clips, "--out", str(tmp_path / "s.npz"),
-                 "--noise", "msr_steadiness", *tiny]) == 0
+    assert (
+        main(
+            [
+                "kinect-fix",
+                "train",
+                *clips,
+                "--out",
+                str(tmp_path / "s.npz"),  # inputs positional
+                "--noise",
+                "msr_steadiness",
+                *tiny,
+            ]
+        )
+        == 0
+    )
     assert "noise msr_steadiness" in capsys.readouterr().out
     assert main(["kinect-fix", "train", "--mocap", *clips, "--out", str(tmp_path / "x.npz"), "--noise", "loud"]) == 2
     assert "--noise loud" in capsys.readouterr().err
     good, empty = MSR / "a05_s02_e01_skeleton3D.txt", MSR / "a13_s09_e02_skeleton3D.txt"
-    assert main(["kinect-fix", "apply", str(good), "--model", str(model), "--out", str(tmp_path / "o"),
-                 "--set", "energy_unit=0.1"]) == 0
+    assert (
+        main(
+            [
+                "kinect-fix",
+                "apply",
+                str(good),
+                "--model",
+                str(model),
+                "--out",
+                str(tmp_path / "o"),
+                "--set",
+                "energy_unit=0.1",
+            ]
+        )
+        == 0
+    )
     assert "corrected 1 file" in capsys.readouterr().out and (tmp_path / "o" / f"{good.stem}.c3d").is_file()
     assert main(["kinect-fix", "apply", str(empty), "--model", str(model), "--out", str(tmp_path / "p")]) == 2
     assert "a13_s09_e02" in capsys.readouterr().err
-    assert main(["kinect-fix", "apply", str(good), "--model", str(model), "--out", str(tmp_path / "q"),
-                 "--set", "w_banana=1"]) == 2
+    assert (
+        main(
+            [
+                "kinect-fix",
+                "apply",
+                str(good),
+                "--model",
+                str(model),
+                "--out",
+                str(tmp_path / "q"),
+                "--set",
+                "w_banana=1",
+            ]
+        )
+        == 2
+    )
     assert "w_banana" in capsys.readouterr().err
 
 
@@ -150,21 +210,52 @@ def test_cli_trains_a_learned_corrector_and_applies_it_to_real_kinect_files(tmp_
 
     model = tmp_path / "bigru.pt"
     clips = [str(p) for p in sorted((HDM05 / "dg").glob("*.amc"))[:3]]
-    tiny = ["--set", "steps=3", "--set", "window=16", "--set", "network={'hidden': 16}"]
+    tiny = ["--set", "steps=3", "--set", "window=16", "--set", "network={hidden: 16}"]
     assert main(["kinect-fix", "train", "--mocap", *clips, "--out", str(model), "--method", "bigru", *tiny]) == 0
     assert "(bigru)" in capsys.readouterr().out and model.is_file()
     assert LearnedKinectCorrector.load(model).get_params()["network"] == {"hidden": 16}
-    assert main(["kinect-fix", "train", "--mocap", *clips, "--out", str(tmp_path / "x.pt"), "--method", "bigru",
-                 "--set", "gp_iterations=2"]) == 2
+    assert (
+        main(
+            [
+                "kinect-fix",
+                "train",
+                "--mocap",
+                *clips,
+                "--out",
+                str(tmp_path / "x.pt"),
+                "--method",
+                "bigru",
+                "--set",
+                "gp_iterations=2",
+            ]
+        )
+        == 2
+    )
     assert "gp_iterations" in capsys.readouterr().err
     good = MSR / "a05_s02_e01_skeleton3D.txt"
-    assert main(["kinect-fix", "apply", str(good), "--model", str(model), "--out", str(tmp_path / "o"),
-                 "--set", "inference_window=32"]) == 0
+    assert (
+        main(
+            [
+                "kinect-fix",
+                "apply",
+                str(good),
+                "--model",
+                str(model),
+                "--out",
+                str(tmp_path / "o"),
+                "--set",
+                "inference_window=32",
+            ]
+        )
+        == 0
+    )
     assert "corrected 1 file" in capsys.readouterr().out
     fixed = read_motion(tmp_path / "o" / f"{good.stem}.c3d")
     assert fixed.positions.shape[1:] == (20, 3) and np.isfinite(fixed.positions).all()
-    assert main(["kinect-fix", "apply", str(good), "--model", str(tmp_path / "absent.pt"), "--out",
-                 str(tmp_path / "p")]) == 2
+    assert (
+        main(["kinect-fix", "apply", str(good), "--model", str(tmp_path / "absent.pt"), "--out", str(tmp_path / "p")])
+        == 2
+    )
     assert "absent.pt: no such file" in capsys.readouterr().err
 
 
@@ -174,7 +265,7 @@ def test_cli_exports_a_learned_corrector_to_onnx_and_applies_it(tmp_path, capsys
 
     model, onnx_file = tmp_path / "bigru.pt", tmp_path / "bigru.onnx"
     clips = [str(p) for p in sorted((HDM05 / "dg").glob("*.amc"))[:2]]
-    tiny = ["--set", "steps=3", "--set", "window=16", "--set", "network={'hidden': 16}"]
+    tiny = ["--set", "steps=3", "--set", "window=16", "--set", "network={hidden: 16}"]
     assert main(["kinect-fix", "train", "--mocap", *clips, "--out", str(model), "--method", "bigru", *tiny]) == 0
     assert main(["kinect-fix", "export", "--model", str(model), "--out", str(onnx_file)]) == 0
     assert "ONNX Kinect corrector written" in capsys.readouterr().out and onnx_file.is_file()
@@ -183,7 +274,7 @@ def test_cli_exports_a_learned_corrector_to_onnx_and_applies_it(tmp_path, capsys
         assert main(["kinect-fix", "apply", str(good), "--model", str(path), "--out", str(tmp_path / name)]) == 0
     capsys.readouterr()
     eager, exported = (read_motion(tmp_path / name / f"{good.stem}.c3d").positions for name in ("pt", "onnx"))
-    np.testing.assert_allclose(exported, eager, atol=2e-3)    # C3D stores mm as float32: a rounding below 1 mm
+    np.testing.assert_allclose(exported, eager, atol=2e-3)  # C3D stores mm as float32: a rounding below 1 mm
     gp = tmp_path / "gp.npz"
     gp.write_bytes(b"")
     assert main(["kinect-fix", "export", "--model", str(gp), "--out", str(tmp_path / "gp.onnx")]) == 2

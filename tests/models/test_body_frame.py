@@ -1,12 +1,13 @@
 """Body 0's reference frame (mocapkit.models.body_frame): masked medians, and both models shrug off glitch frames."""
+
 import numpy as np
 import pytest
 import torch
 
-from mocapkit.motion.layouts import NTU25
 from mocapkit.models import EnergyImage
 from mocapkit.models.body_frame import body0_origin, body0_size, masked_median
 from mocapkit.models.stgcn import stgcn
+from mocapkit.motion.layouts import NTU25
 from tests.models.test_energy_image import batch, standing_skeleton
 
 
@@ -14,9 +15,9 @@ def test_masked_median_matches_numpy_and_gives_zero_without_frames():
     rng = np.random.default_rng(0)
     values = rng.normal(size=(5, 13, 3)).astype(np.float32)
     mask = rng.random((5, 13)) < 0.6
-    mask[3] = False                       # no frame at all
+    mask[3] = False  # no frame at all
     mask[4] = False
-    mask[4, [2, 7]] = True                # an even count: mean of the two middle values
+    mask[4, [2, 7]] = True  # an even count: mean of the two middle values
     got = masked_median(torch.from_numpy(values), torch.from_numpy(mask)).numpy()
     for n in range(5):
         expected = np.median(values[n][mask[n]], axis=0) if mask[n].any() else np.zeros(3)
@@ -55,14 +56,14 @@ def test_graph_network_input_is_not_moved_by_a_glitch_in_the_first_frame():
     present = x.abs().sum((-1, -2)) > 0
     normalized = model.normalize(x, present)
     root = NTU25.index("SpineBase")
-    assert normalized[0, 0, 1:, root].abs().max() < 1e-5         # every real frame centred on its root
+    assert normalized[0, 0, 1:, root].abs().max() < 1e-5  # every real frame centred on its root
     reference = model.normalize(batch(clean, torch.zeros_like(clean)), present)
     torch.testing.assert_close(normalized[0, 0, 1:], reference[0, 0, 1:])
 
 
 def test_energy_image_is_not_moved_by_a_glitch_in_the_first_frame():
     """With origin="median" (the default origin="first" is moved by it; "start" nearly not: the test below)."""
-    clean, glitch = glitched(jump=2.0)   # 4 spine lengths aside and away: off every plane's grid
+    clean, glitch = glitched(jump=2.0)  # 4 spine lengths aside and away: off every plane's grid
     energy = EnergyImage(size=48, bone_samples=2, align=False, origin="median")
     zeros = torch.zeros_like(clean)
     torch.testing.assert_close(energy(batch(glitch, zeros)), energy(batch(clean, zeros)), atol=1e-5, rtol=1e-5)
@@ -75,19 +76,19 @@ def test_first_frame_origin_is_body0_first_present_frame():
     clean, _ = glitched()
     walking = clean + torch.linspace(0, 1, len(clean)).view(-1, 1, 1) * torch.tensor([1.0, 0.0, 0.0])
     x = torch.stack([batch(walking, torch.zeros_like(walking))[0], torch.zeros_like(batch(walking, walking)[0])])
-    x[0, 0, :3] = 0                                                      # body 0 enters at frame 3
+    x[0, 0, :3] = 0  # body 0 enters at frame 3
     present = x.abs().sum((-1, -2)) > 0
     root = NTU25.index("SpineBase")
     origin = body0_first(x, present, root)
     torch.testing.assert_close(origin[0], walking[3, root])
     torch.testing.assert_close(origin[1], torch.zeros(3))
     median = body0_origin(x, present, root)[0]
-    assert abs(float(median[0] - origin[0, 0])) > 0.4                    # a walk: the median is mid-path
-    energy_first = EnergyImage(size=48, bone_samples=2, align=False)                # the default origin
+    assert abs(float(median[0] - origin[0, 0])) > 0.4  # a walk: the median is mid-path
+    energy_first = EnergyImage(size=48, bone_samples=2, align=False)  # the default origin
     energy_median = EnergyImage(size=48, bone_samples=2, align=False, origin="median")
     assert not torch.allclose(energy_first(x[:1]), energy_median(x[:1]))
     centred = energy_first.normalize(x[:1], present[:1])
-    assert centred[0, 0, 3, root].abs().max() < 1e-6                     # the first present frame at the origin
+    assert centred[0, 0, 3, root].abs().max() < 1e-6  # the first present frame at the origin
     with pytest.raises(ValueError, match="origin"):
         EnergyImage(origin="mean")
 
@@ -106,11 +107,11 @@ def test_start_origin_is_where_the_walk_began_and_ignores_a_first_frame_glitch()
     x_clean, x_glitch = batch(walking, zeros), batch(glitch, zeros)
     present = x_clean.abs().sum((-1, -2)) > 0
     start = body0_start(x_clean, present, root)[0]
-    torch.testing.assert_close(start, walking[2, root])                  # the middle of frames 0-4
-    assert abs(float(start[0] - body0_origin(x_clean, present, root)[0, 0])) > 0.6   # not the middle of the walk
-    torch.testing.assert_close(body0_start(x_glitch, present, root)[0], walking[3, root])   # one frame on, not 2 m
+    torch.testing.assert_close(start, walking[2, root])  # the middle of frames 0-4
+    assert abs(float(start[0] - body0_origin(x_clean, present, root)[0, 0])) > 0.6  # not the middle of the walk
+    torch.testing.assert_close(body0_start(x_glitch, present, root)[0], walking[3, root])  # one frame on, not 2 m
     energy = EnergyImage(size=48, bone_samples=2, align=False, origin="start")
     moved = EnergyImage(size=48, bone_samples=2, align=False, origin="first")
-    change = (energy(x_glitch) - energy(x_clean)).abs().sum()            # the glitch frame's own points, ~2 %
+    change = (energy(x_glitch) - energy(x_clean)).abs().sum()  # the glitch frame's own points, ~2 %
     assert change < 0.05 * (moved(x_glitch) - moved(x_clean)).abs().sum()
     assert change < 0.05 * energy(x_clean).abs().sum()

@@ -1,25 +1,44 @@
 """The 3D energy image: geometry, invariances, options and ONNX export."""
+
 import math
 
 import numpy as np
 import pytest
 import torch
 
-from mocapkit.motion.layouts import NTU25
 from mocapkit.models import EnergyImage
+from mocapkit.motion.layouts import NTU25
 
 
 def standing_skeleton(frames: int = 10, x: float = 0.0, z: float = 3.0) -> torch.Tensor:
     """A rough upright 25-joint body ``[frames, 25, 3]``: spine base at height 0, spine 0.5 m long."""
     pose = torch.zeros(25, 3)
-    heights = {"SpineBase": 0.0, "SpineMid": 0.25, "SpineShoulder": 0.5, "Neck": 0.6, "Head": 0.75,
-               "HipLeft": -0.05, "HipRight": -0.05, "KneeLeft": -0.5, "KneeRight": -0.5,
-               "AnkleLeft": -0.9, "AnkleRight": -0.9, "FootLeft": -0.95, "FootRight": -0.95}
+    heights = {
+        "SpineBase": 0.0,
+        "SpineMid": 0.25,
+        "SpineShoulder": 0.5,
+        "Neck": 0.6,
+        "Head": 0.75,
+        "HipLeft": -0.05,
+        "HipRight": -0.05,
+        "KneeLeft": -0.5,
+        "KneeRight": -0.5,
+        "AnkleLeft": -0.9,
+        "AnkleRight": -0.9,
+        "FootLeft": -0.95,
+        "FootRight": -0.95,
+    }
     for name, h in heights.items():
         pose[NTU25.index(name), 1] = h
     for side, sx in (("Left", -1.0), ("Right", 1.0)):
-        for name, (dx, h) in {"Shoulder": (0.2, 0.5), "Elbow": (0.25, 0.2), "Wrist": (0.27, -0.05),
-                              "Hand": (0.28, -0.1), "HandTip": (0.28, -0.18), "Thumb": (0.26, -0.12)}.items():
+        for name, (dx, h) in {
+            "Shoulder": (0.2, 0.5),
+            "Elbow": (0.25, 0.2),
+            "Wrist": (0.27, -0.05),
+            "Hand": (0.28, -0.1),
+            "HandTip": (0.28, -0.18),
+            "Thumb": (0.26, -0.12),
+        }.items():
             pose[NTU25.index(name + side)] = torch.tensor([sx * dx, h, 0.0])
         for name in ("Hip", "Knee", "Ankle", "Foot"):
             pose[NTU25.index(name + side), 0] = sx * 0.1
@@ -39,8 +58,9 @@ def test_nearest_splat_is_an_exact_time_averaged_histogram():
     assert image.shape == (1, 3, 32, 32)
     # With nearest binning and a static pose every frame hits the same pixels, so the
     # normalised histogram's peak pixel holds the largest number of coincident joints.
-    raw = energy.splat(*[energy.normalize(x, x.abs().sum((-1, -2)) > 0)[0, 0, 0, :, a][None] for a in (0, 1)],
-                       torch.full((1, 25), 1.0))
+    raw = energy.splat(
+        *[energy.normalize(x, x.abs().sum((-1, -2)) > 0)[0, 0, 0, :, a][None] for a in (0, 1)], torch.full((1, 25), 1.0)
+    )
     assert raw.sum() == pytest.approx(25.0)
     assert image.amax() == pytest.approx(1.0)
 
@@ -85,11 +105,11 @@ def test_planes_show_what_they_should():
     image = energy(batch(left, right))[0]
     cols_xy = image[0].sum(0).nonzero().flatten()
     cols_zy = image[1].sum(0).nonzero().flatten()
-    assert cols_xy.max() - cols_xy.min() > 15         # two people side by side, ~1 m apart
-    assert cols_zy.max() - cols_zy.min() < 5          # from the side they overlap (same depth)
+    assert cols_xy.max() - cols_xy.min() > 15  # two people side by side, ~1 m apart
+    assert cols_zy.max() - cols_zy.min() < 5  # from the side they overlap (same depth)
     rows_xy = image[0].sum(1).nonzero().flatten()
     head_row = rows_xy.min()
-    assert head_row < 32 - 3 and rows_xy.max() > 32   # head above the spine base, feet below
+    assert head_row < 32 - 3 and rows_xy.max() > 32  # head above the spine base, feet below
 
 
 def test_temporal_weighting_and_smoothing_change_the_image():
@@ -111,13 +131,21 @@ def test_bad_options_and_shapes_are_rejected():
 
 def test_energy_image_exports_to_onnx_with_dynamic_batch_and_frames(tmp_path):
     import onnxruntime as ort
+
     from mocapkit.recognition.export import example_skeletons
 
     energy = EnergyImage(size=32, bone_samples=1, align=True).eval()
     path = tmp_path / "energy.onnx"
-    torch.onnx.export(energy, (example_skeletons(2, 16),), str(path), input_names=["skeletons"],
-                      output_names=["image"], dynamo=True, optimize=False,
-                      dynamic_shapes={"skeletons": {0: torch.export.Dim("b"), 2: torch.export.Dim("t")}})
+    torch.onnx.export(
+        energy,
+        (example_skeletons(2, 16),),
+        str(path),
+        input_names=["skeletons"],
+        output_names=["image"],
+        dynamo=True,
+        optimize=False,
+        dynamic_shapes={"skeletons": {0: torch.export.Dim("b"), 2: torch.export.Dim("t")}},
+    )
     x = example_skeletons(3, 41, seed=5)
     got = ort.InferenceSession(str(path)).run(None, {"skeletons": x.numpy()})[0]
     np.testing.assert_allclose(got, energy(x).numpy(), atol=1e-5)

@@ -1,4 +1,5 @@
 """The VGG-style 3D motion CNN: thesis structure, variants, any input size."""
+
 import pytest
 import torch
 from torch import nn
@@ -15,14 +16,16 @@ def test_faithful_vgg16_matches_thesis_table_6_4():
     convs = [m for m in model.features if isinstance(m, nn.Conv2d)]
     assert [c.out_channels for c in convs] == [64, 64, 128, 128, 256, 256, 256, 512, 512, 512, 512, 512, 512]
     assert all(c.kernel_size == (3, 3) and c.padding == (1, 1) for c in convs)
-    assert count(model.features, nn.MaxPool2d) == 4            # the fifth is replaced by RoI/adaptive pooling
+    assert count(model.features, nn.MaxPool2d) == 4  # the fifth is replaced by RoI/adaptive pooling
     assert isinstance(model.pool, nn.AdaptiveMaxPool2d) and model.pool.output_size == 7
     linears = [m for m in model.classifier if isinstance(m, nn.Linear)]
     assert [(l.in_features, l.out_features) for l in linears] == [(512 * 49, 4096), (4096, 4096), (4096, 60)]
     assert [m.p for m in model.classifier if isinstance(m, nn.Dropout)] == [0.5, 0.5]
 
 
-@pytest.mark.parametrize("arch,bn,convs", [("vgg11", False, 8), ("vgg11", True, 8), ("vgg13", True, 10), ("vgg19", False, 16)])
+@pytest.mark.parametrize(
+    "arch,bn,convs", [("vgg11", False, 8), ("vgg11", True, 8), ("vgg13", True, 10), ("vgg19", False, 16)]
+)
 def test_variants(arch, bn, convs):
     model = energy_vgg(arch, num_classes=7, batch_norm=bn, width=0.125, pool_size=2, hidden=32)
     assert count(model, nn.Conv2d) == convs
@@ -45,8 +48,16 @@ def test_unknown_arch_and_pretrained_width_are_errors():
 
 def test_classifier_takes_raw_skeletons_and_learns():
     torch.manual_seed(0)
-    model = energy_image_vgg(2, arch="vgg11", batch_norm=True, width=0.125, pool_size=2, hidden=32, dropout=0.0,
-                             energy={"size": 32, "bone_samples": 1})
+    model = energy_image_vgg(
+        2,
+        arch="vgg11",
+        batch_norm=True,
+        width=0.125,
+        pool_size=2,
+        hidden=32,
+        dropout=0.0,
+        energy={"size": 32, "bone_samples": 1},
+    )
     assert isinstance(model, EnergyImageClassifier)
     # two "classes": right arm raised vs left arm raised, on 16 bodies that differ in pose
     base = torch.randn(1, 1, 1, 25, 3) * 0.25 + torch.tensor([0.0, 0.0, 3.0])

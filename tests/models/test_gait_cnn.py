@@ -1,4 +1,5 @@
 """The multi-task gait CNN: Table 6.1 layer by layer, other input sizes, single-task mode, outputs."""
+
 from __future__ import annotations
 
 import pytest
@@ -16,8 +17,11 @@ def _recorded_shapes(model: nn.Module, x: torch.Tensor) -> dict[str, tuple[int, 
     shapes, hooks = {}, []
     for name, module in model.named_modules():
         if isinstance(module, (nn.Conv2d, nn.MaxPool2d, nn.Linear)):
-            hooks.append(module.register_forward_hook(
-                lambda mod, inp, out, name=name: shapes.__setitem__(name, tuple(out.shape))))
+            hooks.append(
+                module.register_forward_hook(
+                    lambda mod, inp, out, name=name: shapes.__setitem__(name, tuple(out.shape))
+                )
+            )
     with torch.no_grad():
         model(x)
     for hook in hooks:
@@ -63,7 +67,7 @@ def test_outputs_and_embedding():
         out = model(x)
     assert set(out) == {"subject", "view", "condition", "embedding"}
     assert out["subject"].shape == (5, 7) and out["view"].shape == (5, 11) and out["condition"].shape == (5, 3)
-    assert out["embedding"].shape == (5, 512) and (out["embedding"] >= 0).all()   # after the ReLU
+    assert out["embedding"].shape == (5, 512) and (out["embedding"] >= 0).all()  # after the ReLU
     # the embedding is the shared FC's ReLU output (before dropout)
     with torch.no_grad():
         expected = torch.relu(model.shared_fc(model.trunk(x).flatten(1)))
@@ -81,8 +85,14 @@ def test_outputs_and_embedding():
 
 def test_opengait_64x44_input_size():
     model = MultiTaskGaitCNN(num_subjects=74, input_size=(64, 44)).eval()
-    assert model.feature_map_sizes() == {"c1": (24, 54, 34), "pool1": (24, 27, 17), "c2": (32, 22, 12),
-                                         "pool2": (32, 11, 6), "c3": (40, 7, 2), "pool3": (40, 3, 1)}
+    assert model.feature_map_sizes() == {
+        "c1": (24, 54, 34),
+        "pool1": (24, 27, 17),
+        "c2": (32, 22, 12),
+        "pool2": (32, 11, 6),
+        "c3": (40, 7, 2),
+        "pool3": (40, 3, 1),
+    }
     assert model.flat_features == 120 and model.shared_fc.in_features == 120
     shapes = _recorded_shapes(model, torch.rand(3, 1, 64, 44))
     assert shapes["trunk.pool3"] == (3, 40, 3, 1) and shapes["heads.subject.3"] == (3, 74)

@@ -1,5 +1,6 @@
 """NMFLayer (non-negative codes, monotone MU descent, one-step gradient, safety, graph option, ONNX parity)
 and the end-to-end model built on it, mocapkit.models.clip_bow (shapes, padding masks, export, training)."""
+
 import warnings
 
 import lightning as L
@@ -11,8 +12,8 @@ from torch.utils.data import DataLoader, TensorDataset
 
 from mocapkit.models.clip_bow import ClipNMFBagOfWords, clip_nmf_bow
 from mocapkit.models.nmf_layer import NMFLayer
-from mocapkit.recognition.module import ActionRecognitionModule
 from mocapkit.recognition.export import example_skeletons, export_onnx
+from mocapkit.recognition.module import ActionRecognitionModule
 
 
 def _data(batch=3, n=12, d=8, k=4, seed=0):
@@ -160,8 +161,16 @@ def test_onnx_export_with_dynamic_batch_and_items_matches_torch(tmp_path):
     batch, items = torch.export.Dim("batch", min=1, max=1024), torch.export.Dim("items", min=2, max=4096)
     with warnings.catch_warnings(), torch.no_grad():
         warnings.simplefilter("ignore")
-        program = torch.onnx.export(layer, (_data(2, 9),), None, input_names=["x"], output_names=["codes"],
-                                    dynamic_shapes={"x": {0: batch, 1: items}}, dynamo=True, optimize=False)
+        program = torch.onnx.export(
+            layer,
+            (_data(2, 9),),
+            None,
+            input_names=["x"],
+            output_names=["codes"],
+            dynamic_shapes={"x": {0: batch, 1: items}},
+            dynamo=True,
+            optimize=False,
+        )
     path = tmp_path / "nmf.onnx"
     program.save(str(path))
     session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
@@ -175,6 +184,7 @@ def test_onnx_export_with_dynamic_batch_and_items_matches_torch(tmp_path):
 
 
 # ---------------------------------------------------------------- the end-to-end model (clip_bow)
+
 
 def _model(**kwargs) -> ClipNMFBagOfWords:
     torch.manual_seed(0)
@@ -207,8 +217,9 @@ def test_zero_padded_batch_equals_each_sample_alone(graph_reg):
     model = _model(graph_reg=graph_reg)
     g = torch.Generator().manual_seed(1)
     lengths = [20, 47, 90]
-    samples = [torch.randn(1, 1, n, 20, 3, generator=g).cumsum(2) * 0.02 + torch.tensor([0.0, 0.0, 2.5])
-               for n in lengths]
+    samples = [
+        torch.randn(1, 1, n, 20, 3, generator=g).cumsum(2) * 0.02 + torch.tensor([0.0, 0.0, 2.5]) for n in lengths
+    ]
     batch = torch.zeros(3, 1, 90, 20, 3)
     for i, s in enumerate(samples):
         batch[i, :, : s.shape[2]] = s[0]
@@ -244,8 +255,12 @@ def _synthetic_actions(n_per_class: int, classes: int, frames: int, seed: int):
         direction[c % 3] = 1.0 if c < 3 else -1.0
         joints = [9, 10, 11, 12] if c % 2 == 0 else [13, 14, 15, 16]
         for _ in range(n_per_class):
-            pose = body + torch.randn(1, 20, 3, generator=g) * 0.02 + torch.randn(1, 1, 3, generator=g) * 0.3 \
+            pose = (
+                body
+                + torch.randn(1, 20, 3, generator=g) * 0.02
+                + torch.randn(1, 1, 3, generator=g) * 0.3
                 + torch.tensor([0.0, 0.0, 2.5])
+            )
             t = torch.linspace(0, 1, frames)[:, None]
             seq = pose.repeat(frames, 1, 1)
             seq[:, joints] += (0.4 * t * direction)[:, None, :]
@@ -263,22 +278,43 @@ def test_trains_through_action_recognition_module_above_chance():
     classes = 6
     x_train, y_train = _synthetic_actions(12, classes, 45, seed=0)
     x_test, y_test = _synthetic_actions(6, classes, 45, seed=1)
-    model_cfg = {"_target_": "mocapkit.models.clip_bow.clip_nmf_bow", "layout": "msr20", "window": 20, "stride": 10,
-                 "frames_per_clip": 5, "n_components": 16, "n_iter": 5, "encoder_hidden": 32}
-    module = ActionRecognitionModule(model=model_cfg, num_classes=classes,
-                                     optimizer={"_target_": "torch.optim.AdamW", "_partial_": True, "lr": 1e-2})
+    model_cfg = {
+        "_target_": "mocapkit.models.clip_bow.clip_nmf_bow",
+        "layout": "msr20",
+        "window": 20,
+        "stride": 10,
+        "frames_per_clip": 5,
+        "n_components": 16,
+        "n_iter": 5,
+        "encoder_hidden": 32,
+    }
+    module = ActionRecognitionModule(
+        model=model_cfg, num_classes=classes, optimizer={"_target_": "torch.optim.AdamW", "_partial_": True, "lr": 1e-2}
+    )
 
     def loader(x, y, shuffle):
         data = TensorDataset(x, y)
-        return DataLoader(data, batch_size=12, shuffle=shuffle,
-                          collate_fn=lambda b: {"skeletons": torch.stack([s for s, _ in b]),
-                                                "labels": torch.stack([t for _, t in b])})
+        return DataLoader(
+            data,
+            batch_size=12,
+            shuffle=shuffle,
+            collate_fn=lambda b: {
+                "skeletons": torch.stack([s for s, _ in b]),
+                "labels": torch.stack([t for _, t in b]),
+            },
+        )
 
-    trainer = L.Trainer(max_epochs=25, accelerator="cpu", logger=False, enable_checkpointing=False,
-                        enable_progress_bar=False, enable_model_summary=False)
+    trainer = L.Trainer(
+        max_epochs=25,
+        accelerator="cpu",
+        logger=False,
+        enable_checkpointing=False,
+        enable_progress_bar=False,
+        enable_model_summary=False,
+    )
     trainer.fit(module, loader(x_train, y_train, True))
     module.eval()
     with torch.no_grad():
         accuracy = (module(x_test).argmax(1) == y_test).float().mean().item()
-    assert accuracy > 2.0 / classes, accuracy          # chance is 1/6
+    assert accuracy > 2.0 / classes, accuracy  # chance is 1/6
     assert np.isfinite(module.model.nmf.dictionary.detach().numpy()).all()

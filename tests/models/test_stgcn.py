@@ -1,10 +1,11 @@
 """The ST-GCN-family graph network: adjacency from a layout, shapes, padding invariance, learning, ONNX."""
+
 import numpy as np
 import pytest
 import torch
 
-from mocapkit.motion.layouts import CMU31, MSR20, NTU25
 from mocapkit.models.stgcn import STGCN, spatial_adjacency, stgcn
+from mocapkit.motion.layouts import CMU31, MSR20, NTU25
 from tests.shared_data import NTU_SAMPLES, needs
 
 
@@ -40,26 +41,32 @@ def test_forward_shapes(layout, bodies):
     model = stgcn(7, layout=layout, streams=["joint", "velocity", "bone"], scale=True)
     x = torch.randn(3, bodies, 30, model.num_joints, 3)
     assert model(x).shape == (3, 7)
-    assert STGCN(MSR20, 4)(torch.randn(2, 1, 12, 20, 3)).shape == (2, 4)   # a SkeletonLayout works too
+    assert STGCN(MSR20, 4)(torch.randn(2, 1, 12, 20, 3)).shape == (2, 4)  # a SkeletonLayout works too
     with pytest.raises(ValueError, match="unknown skeleton layout"):
         stgcn(3, layout="kinect15")
 
 
-@pytest.mark.parametrize("temporal,topology", [("conv", "shared"), ("multiscale", "shared"),
-                                               ("conv", "channelwise")])
+@pytest.mark.parametrize("temporal,topology", [("conv", "shared"), ("multiscale", "shared"), ("conv", "channelwise")])
 def test_zero_padded_frames_and_absent_bodies_do_not_change_the_output(temporal, topology):
     torch.manual_seed(0)
-    model = stgcn(5, layout="ntu25", streams=["joint", "velocity", "bone"], scale=True, dropout=0.2,
-                  temporal=temporal, topology=topology).eval()
-    for m in model.modules():                   # BN statistics away from 0 / 1, so a leak of padding would show
+    model = stgcn(
+        5,
+        layout="ntu25",
+        streams=["joint", "velocity", "bone"],
+        scale=True,
+        dropout=0.2,
+        temporal=temporal,
+        topology=topology,
+    ).eval()
+    for m in model.modules():  # BN statistics away from 0 / 1, so a leak of padding would show
         if isinstance(m, torch.nn.BatchNorm2d):
             m.running_mean.uniform_(-1, 1)
             m.bias.data.uniform_(-1, 1)
-        if hasattr(m, "alpha"):                 # the channel-wise refinement switched on
+        if hasattr(m, "alpha"):  # the channel-wise refinement switched on
             m.alpha.data.fill_(0.5)
     x = torch.randn(4, 2, 37, 25, 3) * 0.3 + torch.tensor([0.0, 0.0, 3.0])
-    x[:, 1] = 0.0                                                  # second body absent
-    x[2, :, 21:] = 0.0                                             # a shorter sample
+    x[:, 1] = 0.0  # second body absent
+    x[2, :, 21:] = 0.0  # a shorter sample
     with torch.no_grad():
         ref = model(x)
         padded = model(torch.cat([x, torch.zeros(4, 2, 26, 25, 3)], dim=2))
@@ -104,7 +111,7 @@ def test_channelwise_topology_starts_from_the_shared_graph_and_then_depends_on_t
     refined = GraphConv(6, 16, a, topology="channelwise")
     refined.load_state_dict(shared.state_dict(), strict=False)
     x = torch.randn(3, 6, 10, 20)
-    torch.testing.assert_close(refined(x), shared(x))                 # alpha = 0: CTR-GCN's starting point
+    torch.testing.assert_close(refined(x), shared(x))  # alpha = 0: CTR-GCN's starting point
     assert refined.relation_channels == 8
     refined.alpha.data.fill_(1.0)
     out = refined(x)
@@ -136,7 +143,7 @@ def test_it_learns_a_toy_two_class_problem():
     for i in range(n):
         wrist = MSR20.index("WristRight") if labels[i] == 0 else MSR20.index("WristLeft")
         x[i, 0, :, wrist, 1] += ramp
-        x[i, 0, int(torch.randint(12, t + 1, ())):] = 0.0
+        x[i, 0, int(torch.randint(12, t + 1, ())) :] = 0.0
     model = stgcn(2, layout="msr20", channels=[32, 32], strides=[1, 2], kernel_size=3)
     opt = torch.optim.Adam(model.parameters(), lr=3e-3)
     for _ in range(40):
@@ -154,13 +161,22 @@ def test_onnx_export_on_msr20_one_body(tmp_path, temporal, topology):
     """`mocapkit export`'s function takes the joint count from ``model.layout``; bodies and frames are dynamic."""
     from mocapkit.recognition.export import export_onnx
 
-    model = stgcn(4, layout="msr20", streams=["joint", "velocity", "bone"], scale=True,
-                  channels=[16, 16], strides=[2, 1], temporal=temporal, topology=topology)
+    model = stgcn(
+        4,
+        layout="msr20",
+        streams=["joint", "velocity", "bone"],
+        scale=True,
+        channels=[16, 16],
+        strides=[2, 1],
+        temporal=temporal,
+        topology=topology,
+    )
     for m in model.modules():
         if hasattr(m, "alpha"):
             m.alpha.data.fill_(0.5)
-    report = export_onnx(model, tmp_path / "gcn.onnx", class_names=list("abcd"), trace_shape=(2, 32),
-                         check_shape=(3, 41))
+    report = export_onnx(
+        model, tmp_path / "gcn.onnx", class_names=list("abcd"), trace_shape=(2, 32), check_shape=(3, 41)
+    )
     assert report["layout"] == "msr20" and report["traced_shape"][3] == 20
     assert report["max_abs_diff"] < 1e-4 and report["same_top1"]
 
@@ -170,8 +186,9 @@ def test_multi_stream_ensemble_trains_each_member_and_averages_at_inference(tmp_
     from mocapkit.recognition.module import ActionRecognitionModule
 
     torch.manual_seed(0)
-    net = stgcn_ensemble(5, layout="msr20", streams=[["joint"], ["bone"], ["bone_velocity"]], channels=[8, 8],
-                         strides=[1, 1])
+    net = stgcn_ensemble(
+        5, layout="msr20", streams=[["joint"], ["bone"], ["bone_velocity"]], channels=[8, 8], strides=[1, 1]
+    )
     x = torch.randn(4, 1, 12, 20, 3)
     net.train()
     members = net(x)
@@ -183,15 +200,19 @@ def test_multi_stream_ensemble_trains_each_member_and_averages_at_inference(tmp_
     member = net.members[2]
     assert member.features(still, still.abs().sum((-1, -2)) > 0).abs().max() < 1e-5
 
-    spec = {"_target_": "mocapkit.models.stgcn.stgcn_ensemble", "layout": "msr20", "channels": [8, 8],
-            "strides": [1, 1], "streams": [["joint"], ["bone"]]}
-    module = ActionRecognitionModule(spec, {"_target_": "torch.optim.SGD", "_partial_": True, "lr": 0.1},
-                                     num_classes=5)
+    spec = {
+        "_target_": "mocapkit.models.stgcn.stgcn_ensemble",
+        "layout": "msr20",
+        "channels": [8, 8],
+        "strides": [1, 1],
+        "streams": [["joint"], ["bone"]],
+    }
+    module = ActionRecognitionModule(spec, {"_target_": "torch.optim.SGD", "_partial_": True, "lr": 0.1}, num_classes=5)
     module.train()
     batch = {"skeletons": x, "labels": torch.tensor([0, 1, 2, 3])}
     loss = module._step(batch, "train")
     each = [torch.nn.functional.cross_entropy(m(x), batch["labels"]) for m in module.model.members]
-    torch.testing.assert_close(loss, each[0] + each[1])           # each member on its own loss
+    torch.testing.assert_close(loss, each[0] + each[1])  # each member on its own loss
 
 
 @needs(NTU_SAMPLES)
@@ -199,19 +220,20 @@ def test_predict_samples_frames_as_training_did(tmp_path):
     """The exported model stores data.max_frames; `mocapkit predict` subsamples a longer file to it, uniformly."""
     import onnxruntime as ort
 
-    from mocapkit.motion.frames import uniform_frame_indices
-    from mocapkit.recognition.predict import model_input, predict_files
-    from mocapkit.recognition.export import export_onnx
     from mocapkit.models.stgcn import stgcn_ensemble
+    from mocapkit.motion.frames import uniform_frame_indices
+    from mocapkit.recognition.export import export_onnx
+    from mocapkit.recognition.predict import model_input, predict_files
 
     torch.manual_seed(0)
     model = stgcn_ensemble(3, layout="ntu25", streams=[["joint"], ["bone"]], channels=[8, 8], strides=[1, 1])
     out = tmp_path / "ens.onnx"
-    report = export_onnx(model, out, class_names=["a", "b", "c"], trace_shape=(2, 16), check_shape=(3, 21),
-                         max_frames=8)
+    report = export_onnx(
+        model, out, class_names=["a", "b", "c"], trace_shape=(2, 16), check_shape=(3, 21), max_frames=8
+    )
     assert report["layout"] == "ntu25" and report["same_top1"]
     sample = min(NTU_SAMPLES.glob("*.skeleton"))
-    x = model_input(sample, "ntu25").astype(np.float32)                      # [1, 2, T, 25, 3]
+    x = model_input(sample, "ntu25").astype(np.float32)  # [1, 2, T, 25, 3]
     assert x.shape[2] > 8
     session = ort.InferenceSession(str(out), providers=["CPUExecutionProvider"])
     sampled = session.run(None, {"skeletons": x[:, :, uniform_frame_indices(x.shape[2], 8)]})[0][0]
@@ -220,4 +242,4 @@ def test_predict_samples_frames_as_training_did(tmp_path):
     top = dict(result["top"])
     np.testing.assert_allclose([top[n] for n in "abc"], probs, rtol=1e-5)
     full = session.run(None, {"skeletons": x})[0][0]
-    assert not np.allclose(full, sampled)                # all frames would have given another answer
+    assert not np.allclose(full, sampled)  # all frames would have given another answer

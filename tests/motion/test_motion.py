@@ -1,9 +1,10 @@
 """The Motion container (mocapkit.motion.container): constructor checks and views."""
+
 import numpy as np
 import pytest
 
-from mocapkit.motion.layouts import LANDMARKS, MSR20, NTU25, SkeletonLayout
 from mocapkit.motion.container import Motion
+from mocapkit.motion.layouts import LANDMARKS, MSR20, NTU25, SkeletonLayout
 
 
 def _ntu(frames=11, fps=100.0, seed=0, up_axis="y", **kw) -> Motion:
@@ -17,9 +18,9 @@ def _ntu(frames=11, fps=100.0, seed=0, up_axis="y", **kw) -> Motion:
 
 def test_basics_and_missing_consistency():
     pos = np.zeros((4, 2, 3))
-    pos[1, 0, 2] = np.nan                                   # one NaN coordinate: the joint is missing
+    pos[1, 0, 2] = np.nan  # one NaN coordinate: the joint is missing
     missing = np.zeros((4, 2), dtype=bool)
-    missing[3, 1] = True                                    # flagged missing: its coordinates become NaN
+    missing[3, 1] = True  # flagged missing: its coordinates become NaN
     m = Motion(pos, ["a", "b"], 30.0, missing=missing)
     assert m.positions.dtype == np.float32 and m.num_frames == 4 and m.num_joints == 2
     assert m.duration == pytest.approx(0.1)
@@ -32,19 +33,22 @@ def test_basics_and_missing_consistency():
         _ = m.layout
 
 
-@pytest.mark.parametrize("kwargs, match", [
-    ({"positions": np.zeros((4, 2))}, r"positions must be \[frames, joints, 3\]"),
-    ({"positions": np.zeros((4, 2, 2))}, r"positions must be \[frames, joints, 3\]"),
-    ({"joint_names": ["a"]}, "1 joint names for 2 joints"),
-    ({"parents": (-1,)}, "parents must give one index"),
-    ({"parents": (-1, 2)}, "parents must give one index"),
-    ({"parents": (-2, 0)}, "parents must give one index"),
-    ({"fps": 0}, "frame rate must be positive"),
-    ({"fps": -30.0}, "frame rate must be positive"),
-    ({"up_axis": "w"}, "up_axis must be x, y or z"),
-    ({"missing": np.zeros((5, 3), dtype=bool)}, None),     # shape mismatch (ValueError from numpy or the check)
-    ({"rotations": np.zeros((4, 2, 3))}, r"rotations must be \[4, 2, 3, 3\]"),
-])
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"positions": np.zeros((4, 2))}, r"positions must be \[frames, joints, 3\]"),
+        ({"positions": np.zeros((4, 2, 2))}, r"positions must be \[frames, joints, 3\]"),
+        ({"joint_names": ["a"]}, "1 joint names for 2 joints"),
+        ({"parents": (-1,)}, "parents must give one index"),
+        ({"parents": (-1, 2)}, "parents must give one index"),
+        ({"parents": (-2, 0)}, "parents must give one index"),
+        ({"fps": 0}, "frame rate must be positive"),
+        ({"fps": -30.0}, "frame rate must be positive"),
+        ({"up_axis": "w"}, "up_axis must be x, y or z"),
+        ({"missing": np.zeros((5, 3), dtype=bool)}, None),  # shape mismatch (ValueError from numpy or the check)
+        ({"rotations": np.zeros((4, 2, 3))}, r"rotations must be \[4, 2, 3, 3\]"),
+    ],
+)
 def test_constructor_errors(kwargs, match):
     args = {"positions": np.zeros((4, 2, 3)), "joint_names": ["a", "b"], "fps": 30.0, "source": "clip.bvh"}
     args.update(kwargs)
@@ -88,7 +92,7 @@ def test_resample_propagates_missing():
     assert double.missing.sum() == 3 and np.isnan(double.positions[7:10, 3]).all()
     half = m.resample(50.0)
     assert np.flatnonzero(half.missing[:, 3]).tolist() == [2] and half.missing.sum() == 1
-    third = m.resample(100.0 / 3)                           # source frames 0, 3, 6, 9: frame 4 is not one
+    third = m.resample(100.0 / 3)  # source frames 0, 3, 6, 9: frame 4 is not one
     assert third.num_frames == 4 and not third.missing.any()
 
 
@@ -96,7 +100,7 @@ def test_resample_drops_rotations_and_checks_fps():
     rot = np.tile(np.eye(3, dtype=np.float32), (11, 25, 1, 1))
     m = _ntu(frames=11, rotations=rot)
     assert m.resample(50.0).rotations is None
-    assert m.resample(100.0).rotations is not None          # same rate: nothing to interpolate
+    assert m.resample(100.0).rotations is not None  # same rate: nothing to interpolate
     with pytest.raises(ValueError, match="fps must be positive"):
         m.resample(0)
 
@@ -112,8 +116,8 @@ def test_root_centered():
     h = m.root_centered("Head")
     assert (h.positions[:, NTU25.index("Head")] == 0).all()
     markers = Motion(np.random.default_rng(1).normal(size=(3, 4, 3)), list("abcd"), 10.0)
-    assert (markers.root_centered().positions[:, 0] == 0).all()   # no hierarchy: joint 0
-    assert m.positions[:, 0].any()                                # the original is unchanged
+    assert (markers.root_centered().positions[:, 0] == 0).all()  # no hierarchy: joint 0
+    assert m.positions[:, 0].any()  # the original is unchanged
 
 
 @pytest.mark.parametrize("up_axis", ["y", "z"])
@@ -122,11 +126,11 @@ def test_torso_aligned_hip_line_along_x(up_axis):
     up = "xyz".index(up_axis)
     a = m.torso_aligned("HipLeft", "HipRight")
     hips = a.positions[:, NTU25.index("HipRight")] - a.positions[:, NTU25.index("HipLeft")]
-    other = next(ax for ax in (1, 2) if ax != up)          # the horizontal axis that is not x
+    other = next(ax for ax in (1, 2) if ax != up)  # the horizontal axis that is not x
     assert np.abs(hips[:, other]).max() < 1e-5
-    assert (hips[:, 0] > 0).all()                          # left -> right points to +x
+    assert (hips[:, 0] > 0).all()  # left -> right points to +x
     np.testing.assert_allclose(hips[:, up], (m.positions[:, 16] - m.positions[:, 12])[:, up], atol=1e-5)
-    assert (a.positions[:, 0] == 0).all()                  # root centred
+    assert (a.positions[:, 0] == 0).all()  # root centred
     # a rotation about the up axis: every joint keeps its distance to the root and its height
     c = m.root_centered()
     np.testing.assert_allclose(np.linalg.norm(a.positions, axis=2), np.linalg.norm(c.positions, axis=2), atol=1e-5)
@@ -140,7 +144,7 @@ def test_map_layout_ntu_msr_ntu():
     m = _ntu(frames=5)
     msr = m.map_layout(MSR20)
     assert msr.joint_names == MSR20.joint_names and msr.parents == MSR20.parents and msr.layout_name == "msr20"
-    assert not msr.missing.any()                          # every MSR joint is a shared landmark
+    assert not msr.missing.any()  # every MSR joint is a shared landmark
     back = msr.map_layout(NTU25)
     shared = {LANDMARKS["ntu25"][lm] for lm in LANDMARKS["ntu25"] if lm in LANDMARKS["msr20"]}
     for j, name in enumerate(NTU25.joint_names):
@@ -150,10 +154,16 @@ def test_map_layout_ntu_msr_ntu():
         else:
             assert back.missing[:, j].all() and np.isnan(back.positions[:, j]).all()
     assert sorted(n for n in NTU25.joint_names if n not in shared) == [
-        "HandTipLeft", "HandTipRight", "Neck", "ThumbLeft", "ThumbRight"]
+        "HandTipLeft",
+        "HandTipRight",
+        "Neck",
+        "ThumbLeft",
+        "ThumbRight",
+    ]
     assert back.metadata["mapped_from"] == "msr20"
-    np.testing.assert_array_equal(msr.positions[:, MSR20.index("ShoulderCenter")],
-                                  m.positions[:, NTU25.index("SpineShoulder")])
+    np.testing.assert_array_equal(
+        msr.positions[:, MSR20.index("ShoulderCenter")], m.positions[:, NTU25.index("SpineShoulder")]
+    )
 
 
 def test_map_layout_keeps_missing_and_needs_known_layouts():
@@ -162,7 +172,7 @@ def test_map_layout_keeps_missing_and_needs_known_layouts():
     msr = _ntu(frames=5, missing=missing).map_layout(MSR20)
     assert msr.missing[2, MSR20.index("KneeLeft")] and msr.missing.sum() == 1
     with pytest.raises(ValueError, match="no landmark table"):
-        Motion(np.zeros((2, 25, 3)), NTU25.joint_names, 30.0).map_layout(MSR20)   # no layout_name
+        Motion(np.zeros((2, 25, 3)), NTU25.joint_names, 30.0).map_layout(MSR20)  # no layout_name
     with pytest.raises(ValueError, match="no landmark table"):
         _ntu().map_layout(SkeletonLayout("other", ("a",), (-1,)))
 
@@ -176,8 +186,8 @@ def test_select_keeps_parents():
     assert s.parents == (-1, 0, 1, 2, 3) and s.layout.bones == ((1, 0), (2, 1), (3, 2), (4, 3))
     np.testing.assert_array_equal(s.positions, m.positions[:, [0, 1, 20, 2, 3]])
     assert s.layout_name is None
-    reordered = m.select(["Head", "Neck", "SpineBase"])    # Head -> Neck; Neck's parent not selected
-    assert reordered.parents is None                        # two roots: not a tree any more
+    reordered = m.select(["Head", "Neck", "SpineBase"])  # Head -> Neck; Neck's parent not selected
+    assert reordered.parents is None  # two roots: not a tree any more
     by_index = m.select([0, 12, 13])
     assert by_index.parents == (-1, 0, 1) and by_index.joint_names == ("SpineBase", "HipLeft", "KneeLeft")
 
@@ -216,13 +226,14 @@ def test_coordinate_helpers_match_numpy_reductions():
 
 # --------------------------------------------------------------------------- mirror image
 
+
 def test_mirror_joints_pairs_asf_bvh_and_kinect_names():
     from mocapkit.motion.layouts import CMU31, mirror_joints
 
     names = list(CMU31.joint_names)
     swap = mirror_joints(names)
     assert names[swap[names.index("lhumerus")]] == "rhumerus" and names[swap[names.index("rtoes")]] == "ltoes"
-    for mid in ("root", "lowerback", "lowerneck", "head"):           # an l / r first letter alone is not a side
+    for mid in ("root", "lowerback", "lowerneck", "head"):  # an l / r first letter alone is not a side
         assert swap[names.index(mid)] == names.index(mid)
     assert all(swap[swap[j]] == j for j in range(len(names)))
     rig = ["Hips", "LeftUpLeg", "RightUpLeg", "Spine", "UpperArm_L", "UpperArm_R", "L_Hand", "R_Hand"]
@@ -239,12 +250,16 @@ def test_mirrored_swaps_sides_negates_one_horizontal_axis_and_is_an_involution(u
     mirrored = motion.mirrored()
     names = list(NTU25.joint_names)
     left, right = names.index("HandLeft"), names.index("HandRight")
-    first = 0                                                        # x is the first horizontal axis for y and z up
-    assert np.allclose(mirrored.positions[~mirrored.missing[:, right], right, first],
-                       -motion.positions[~motion.missing[:, left], left, first])
+    first = 0  # x is the first horizontal axis for y and z up
+    assert np.allclose(
+        mirrored.positions[~mirrored.missing[:, right], right, first],
+        -motion.positions[~motion.missing[:, left], left, first],
+    )
     keep = [a for a in range(3) if a != first]
-    assert np.allclose(mirrored.positions[~mirrored.missing[:, right]][:, right][:, keep],
-                       motion.positions[~motion.missing[:, left]][:, left][:, keep])
+    assert np.allclose(
+        mirrored.positions[~mirrored.missing[:, right]][:, right][:, keep],
+        motion.positions[~motion.missing[:, left]][:, left][:, keep],
+    )
     assert np.array_equal(mirrored.missing[:, right], motion.missing[:, left])
     twice = mirrored.mirrored()
     assert np.array_equal(twice.missing, motion.missing)
@@ -256,6 +271,6 @@ def test_mirrored_swaps_sides_negates_one_horizontal_axis_and_is_an_involution(u
 
 def test_mirrored_rejects_an_asymmetric_hierarchy():
     names = ("Hips", "LeftUpLeg", "RightUpLeg", "Spine")
-    motion = Motion(np.zeros((3, 4, 3)), names, 30.0, parents=(-1, 0, 3, 0))     # the right leg hangs off the spine
+    motion = Motion(np.zeros((3, 4, 3)), names, 30.0, parents=(-1, 0, 3, 0))  # the right leg hangs off the spine
     with pytest.raises(ValueError, match="not left-right symmetric"):
         motion.mirrored()

@@ -1,5 +1,6 @@
 """HDM05 action recognition: the data module over a folder of clips (synthetic or the real cuts), one
 performer held out, and the comparison's learned run and baseline scoring the same clips."""
+
 from __future__ import annotations
 
 import json
@@ -18,14 +19,15 @@ REAL = SHARED / "data" / "hdm05_cuts11"
 
 @pytest.fixture(scope="module")
 def folder(tmp_path_factory):
-    return synthetic_hdm05_folder(tmp_path_factory, CLASSES, actors=("bd", "bk", "mm"), clips_per_actor=3,
-                                  max_frames=90)
+    return synthetic_hdm05_folder(
+        tmp_path_factory, CLASSES, actors=("bd", "bk", "mm"), clips_per_actor=3, max_frames=90
+    )
 
 
 def test_one_performer_held_out_classes_from_file_names(folder):
     dm = HDM05ActionDataModule(str(folder), val_fraction=0.2, seed=0)
     assert dm.performers == ["bd", "bk", "mm"]
-    assert dm.test_actors == ["bd"] and dm.train_actors == ["bk", "mm"]         # default: the first performer
+    assert dm.test_actors == ["bd"] and dm.train_actors == ["bk", "mm"]  # default: the first performer
     assert dm.class_names == sorted(CLASSES) and dm.num_classes == 3
     described = dm.describe()
     assert described["test_subjects"] == ["bd"] and set(described["val_subjects"]) <= {"bk", "mm"}
@@ -52,17 +54,30 @@ def test_overrides_merged_labels_and_bad_performers(folder, tmp_path):
 @pytest.mark.slow
 def test_compare_trains_and_scores_the_held_out_performer(folder, tmp_path):
     out = tmp_path / "cmp"
-    assert main(["compare", "hdm05_recognition", f"benchmark.root={folder}", f"out={out}", "seeds=[0]",
-                 "protocols=[test_mm]", "only=[hdm05_gcn,pooled_logreg]", "+methods.hdm05_gcn.learned.checkpoint=last",
-                 "learned_overrides=['trainer.max_epochs=1','trainer.enable_progress_bar=false',"
-                 "'model.channels=[16,16]','model.strides=[2,1]','data.val_fraction=0']"]) == 0
+    assert (
+        main(
+            [
+                "compare",
+                "hdm05_recognition",
+                f"benchmark.root={folder}",
+                f"out={out}",
+                "seeds=[0]",
+                "protocols=[test_mm]",
+                "only=[hdm05_gcn,pooled_logreg]",
+                "+methods.hdm05_gcn.learned.checkpoint=last",
+                "learned_overrides=['trainer.max_epochs=1','trainer.enable_progress_bar=false',"
+                "'model.channels=[16,16]','model.strides=[2,1]','data.val_fraction=0']",
+            ]
+        )
+        == 0
+    )
     saved = json.loads((out / "results.json").read_text())
     cells = {c["method"]: c for c in saved["cells"]}
     run = out / "runs" / "hdm05_gcn" / "hdm05_gcn_test_mm_seed0"
-    assert cells["hdm05_gcn"]["checkpoint"] == "last.ckpt"                    # no validation part: no best.ckpt
+    assert cells["hdm05_gcn"]["checkpoint"] == "last.ckpt"  # no validation part: no best.ckpt
     assert (run / "last.ckpt").is_file() and not (run / "best.ckpt").exists()
     assert cells["hdm05_gcn"]["test_sha1"] == cells["pooled_logreg"]["test_sha1"]
-    assert cells["hdm05_gcn"]["n_test"] == 9                                  # 3 classes x 3 clips of mm
+    assert cells["hdm05_gcn"]["n_test"] == 9  # 3 classes x 3 clips of mm
     assert saved["splits"]["test_mm"]["0"]["test_actors"] == ["mm"]
 
 
@@ -83,13 +98,16 @@ def test_the_hdm05_ensemble_is_the_msr_recipe_on_hdm05_data():
 
     from mocapkit.train.config import compose_config
 
-    hdm, msr = (OmegaConf.to_container(compose_config([f"experiment={name}"]), resolve=False)
-                for name in ("hdm05_gcn_ensemble", "msr3d_gcn_ensemble"))
+    hdm, msr = (
+        OmegaConf.to_container(compose_config([f"experiment={name}"]), resolve=False)
+        for name in ("hdm05_gcn_ensemble", "msr3d_gcn_ensemble")
+    )
     for key in ("model", "optimizer", "scheduler", "module"):
         assert hdm[key] == msr[key], key
     assert hdm["trainer"]["max_epochs"] == msr["trainer"]["max_epochs"] == 60
     for key in ("val_fraction", "batch_size", "max_frames"):
         assert hdm["data"][key] == msr["data"][key], key
-    assert {k: hdm["data"]["augment"][k] for k in ("tilt_deg", "scale", "crop")} == \
-        {k: msr["data"]["augment"][k] for k in ("tilt_deg", "scale", "crop")}
+    assert {k: hdm["data"]["augment"][k] for k in ("tilt_deg", "scale", "crop")} == {
+        k: msr["data"]["augment"][k] for k in ("tilt_deg", "scale", "crop")
+    }
     assert "hdm05" in hdm["data"]["_target_"] and hdm["experiment_name"] == "hdm05_gcn_ensemble"

@@ -1,5 +1,6 @@
 """End to end on the real MSR Action3D files: `mocapkit train experiment=msr3d_gcn` for one short epoch,
 then `mocapkit eval` on its checkpoint (an AS1 subset and a small network keep it to seconds)."""
+
 import json
 
 import pytest
@@ -13,9 +14,17 @@ pytestmark = [pytest.mark.slow, needs(MSR_ROOT)]
 
 
 def test_train_and_eval_msr3d_gcn(tmp_path):
-    quick = [f"data.root={MSR_ROOT}", f"output_root={tmp_path}", "run_name=r", "trainer.max_epochs=1",
-             "trainer.enable_progress_bar=false", "data.subset=AS1", "data.max_frames=16",
-             "model.channels=[16,16]", "model.strides=[2,1]"]
+    quick = [
+        f"data.root={MSR_ROOT}",
+        f"output_root={tmp_path}",
+        "run_name=r",
+        "trainer.max_epochs=1",
+        "trainer.enable_progress_bar=false",
+        "data.subset=AS1",
+        "data.max_frames=16",
+        "model.channels=[16,16]",
+        "model.strides=[2,1]",
+    ]
     assert main(["train", "experiment=msr3d_gcn", *quick]) == 0
     run = tmp_path / "msr3d_gcn" / "r"
     assert (run / "best.ckpt").is_file() and (run / "last.ckpt").is_file()
@@ -57,5 +66,5 @@ def test_benchmark_subset_protocols_are_cross_subject_on_the_subset():
     overrides = dict(o.split("=", 1) for o in bench.learned_overrides("AS2", 0))
     assert overrides["data.subset"] == "AS2" and overrides["data.split"] == "cross_subject"
     dm = MSRAction3DDataModule(str(MSR_ROOT), split="cross_subject", subset="AS2", val_fraction=0)
-    np.testing.assert_array_equal(dm.test_idx, split.test)                    # the run scores the same clips
+    np.testing.assert_array_equal(dm.test_idx, split.test)  # the run scores the same clips
     assert len(dm.val_idx) == 0 and len(dm.train_idx) == len(split.train)

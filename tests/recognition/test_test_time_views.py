@@ -1,4 +1,5 @@
 """Test-time augmentation of skeleton classifiers: the fixed views, their dataset and the averaging."""
+
 import math
 
 import numpy as np
@@ -14,7 +15,7 @@ from mocapkit.train.config import ConfigError
 def _skeleton(frames=30):
     torch.manual_seed(0)
     x = torch.randn(2, frames, 20, 3) + torch.tensor([0.0, 0.0, 3.0])
-    x[1, frames - 5:] = 0.0                       # the second body leaves
+    x[1, frames - 5 :] = 0.0  # the second body leaves
     return x
 
 
@@ -24,24 +25,26 @@ def test_views_are_start_centre_end_crops_at_every_rotation():
     out = views(x)
     assert len(views) == len(out) == (1 + 3) * 2
     assert [v.shape[1] for v in out] == [30, 30, 27, 27, 27, 27, 27, 27]
-    torch.testing.assert_close(out[0], x)                                 # whole clip, no rotation
-    for view, start in zip(out[2::2], (0, 1, 3)):                         # unrotated crops: start, centre, end
-        torch.testing.assert_close(view, x[:, start:start + 27])
+    torch.testing.assert_close(out[0], x)  # whole clip, no rotation
+    for view, start in zip(out[2::2], (0, 1, 3)):  # unrotated crops: start, centre, end
+        torch.testing.assert_close(view, x[:, start : start + 27])
     rotated = out[1]
-    assert (rotated[1, 25:] == 0).all()                                   # absent joints stay zeros
-    torch.testing.assert_close(rotated[..., 1], x[..., 1])                # heights kept
+    assert (rotated[1, 25:] == 0).all()  # absent joints stay zeros
+    torch.testing.assert_close(rotated[..., 1], x[..., 1])  # heights kept
+
     def distances(points):
         return torch.cdist(points, points, compute_mode="donot_use_mm_for_euclid_dist")
 
-    torch.testing.assert_close(distances(x[0].reshape(-1, 3)), distances(rotated[0].reshape(-1, 3)),
-                               atol=1e-5, rtol=0)                           # rigid
+    torch.testing.assert_close(
+        distances(x[0].reshape(-1, 3)), distances(rotated[0].reshape(-1, 3)), atol=1e-5, rtol=0
+    )  # rigid
     assert not torch.allclose(rotated, x)
 
 
 def test_rotation_by_ninety_degrees_maps_x_to_minus_z():
     x = torch.zeros(1, 1, 2, 3)
     x[0, 0, 0] = torch.tensor([1.0, 0.0, 0.0])
-    x[0, 0, 1] = torch.tensor([-1.0, 0.0, 0.0])                         # centroid at the origin
+    x[0, 0, 1] = torch.tensor([-1.0, 0.0, 0.0])  # centroid at the origin
     out = rotate_about_vertical(x, math.pi / 2)
     torch.testing.assert_close(out[0, 0, 0], torch.tensor([0.0, 0.0, -1.0]), atol=1e-6, rtol=0)
 
@@ -61,7 +64,7 @@ def test_view_dataset_yields_each_sample_views_in_a_row():
     data = ViewDataset(items, views)
     assert len(data) == 3 * 4
     assert [data[k]["index"] for k in range(len(data))] == [10] * 4 + [11] * 4 + [12] * 4
-    torch.testing.assert_close(data[5]["skeleton"], items[1]["skeleton"][:, :16])   # sample 1, crop at the start
+    torch.testing.assert_close(data[5]["skeleton"], items[1]["skeleton"][:, :16])  # sample 1, crop at the start
 
 
 def test_mean_over_views_averages_probabilities_per_sample():

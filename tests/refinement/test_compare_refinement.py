@@ -6,6 +6,7 @@ method × protocol × seed cell is written, no fit ever sees a clip of the perfo
 the plots are written. Plus: linear interpolation is exact on linear trajectories through the whole pipeline
 (corrupt → refine → score), and malformed protocols / empty folders fail with messages that name them.
 """
+
 from __future__ import annotations
 
 import importlib
@@ -15,10 +16,10 @@ import numpy as np
 import pytest
 from omegaconf import open_dict
 
-from mocapkit.refinement.gap_filling import LinearInterpolation
 from mocapkit.evaluation.compare import ComparisonError, compose, run_comparison
-from mocapkit.refinement.benchmark import RefinementBenchmark, parse_protocol
 from mocapkit.refinement.base import MotionRefiner
+from mocapkit.refinement.benchmark import RefinementBenchmark, parse_protocol
+from mocapkit.refinement.gap_filling import LinearInterpolation
 from tests.shared_data import SHARED, needs
 
 HDM05 = SHARED / "data" / "hdm05_cuts11"
@@ -57,13 +58,20 @@ def quick(tmp_path_factory):
     out = tmp_path_factory.mktemp("refine_quick")
     cfg = compose(["refine_quick", f"out={out}", f"benchmark.root={HDM05}"])
     with open_dict(cfg):
-        cfg.methods["spy"] = {"label": "recording", "estimator": {"_target_": "tests.refinement.test_compare_refinement."
-                                                                            "RecordingRefiner"}, "reseed": False}
+        cfg.methods["spy"] = {
+            "label": "recording",
+            "estimator": {"_target_": "tests.refinement.test_compare_refinement.RecordingRefiner"},
+            "reseed": False,
+        }
         # the same behind the median outlier screen: the wrapper's fit must follow the folds too
         cfg.methods["spy_screened"] = {
-            "label": "recording, screened", "reseed": False,
-            "estimator": {"_target_": "mocapkit.refinement.screening.MedianScreen",
-                          "refiner": {"_target_": "tests.refinement.test_compare_refinement.RecordingRefiner", "tag": "screened"}}}
+            "label": "recording, screened",
+            "reseed": False,
+            "estimator": {
+                "_target_": "mocapkit.refinement.screening.MedianScreen",
+                "refiner": {"_target_": "tests.refinement.test_compare_refinement.RecordingRefiner", "tag": "screened"},
+            },
+        }
     recorded_fits().clear()
     results = run_comparison(cfg)
     return out, results
@@ -76,8 +84,9 @@ def test_every_cell_is_written(quick):
     protocols = ["random_missing@0.2", "random_missing@0.4", "continuous_missing@20", "continuous_missing@40"]
     assert saved["protocols"] == protocols and saved["seeds"] == [0, 1]
     cells = {(c["method"], c["protocol"], c["seed"]) for c in saved["cells"]}
-    assert cells == {(m, p, s) for m in ("linear", "pchip", "trnn", "spy", "spy_screened") for p in protocols
-                     for s in (0, 1)}
+    assert cells == {
+        (m, p, s) for m in ("linear", "pchip", "trnn", "spy", "spy_screened") for p in protocols for s in (0, 1)
+    }
     for cell in saved["cells"]:
         detail = cell["detail"]
         assert set(detail["folds"]) == {"bd", "bk", "dg", "mm"}
@@ -89,8 +98,11 @@ def test_every_cell_is_written(quick):
     # every method of a (protocol, seed) saw the same clips with the same corruption seeds
     for protocol in protocols:
         for seed in (0, 1):
-            seen = {c["method"]: [(r["clip"], r["corruption_seed"]) for r in c["detail"]["clips"]]
-                    for c in saved["cells"] if c["protocol"] == protocol and c["seed"] == seed}
+            seen = {
+                c["method"]: [(r["clip"], r["corruption_seed"]) for r in c["detail"]["clips"]]
+                for c in saved["cells"]
+                if c["protocol"] == protocol and c["seed"] == seed
+            }
             assert len({tuple(v) for v in seen.values()}) == 1
     # the recording refiner is linear interpolation: identical numbers
     by = {(c["method"], c["protocol"], c["seed"]): c["metrics"]["rmse_cm"] for c in saved["cells"]}
@@ -102,7 +114,7 @@ def test_data_driven_fits_never_see_the_test_performer(quick):
     _, results = quick
     fits = recorded_fits()
     assert fits, "the data-driven method was never fitted"
-    assert len(fits) == 8                       # one fit per held-out performer and method, cached across cells
+    assert len(fits) == 8  # one fit per held-out performer and method, cached across cells
     for cell in (c for c in results["cells"] if c["method"] in ("spy", "spy_screened")):
         for fold, info in cell["detail"]["folds"].items():
             assert fold not in info["fit_groups"] and info["fit_groups"] == sorted({"bd", "bk", "dg", "mm"} - {fold})
@@ -124,7 +136,7 @@ def test_report_and_plots_are_written(quick):
     table = text.split("## Refinement: methods × protocols")[1]
     header = "| method | random_missing@0.2 | random_missing@0.4 | continuous_missing@20 | continuous_missing@40 |"
     assert header in table
-    assert table.count("**") >= 8               # a bold winner per protocol in each table
+    assert table.count("**") >= 8  # a bold winner per protocol in each table
     assert "Against the interpolation baselines" in text and "TrNN beats linear interpolation on gaps" in text
     for name in ("rmse_vs_mr.png", "rmse_vs_ml.png", "rmse_curves.png", "summary.png"):
         assert (out / name).stat().st_size > 5000, name
@@ -132,10 +144,16 @@ def test_report_and_plots_are_written(quick):
 
 @needs(HDM05)
 def test_interpolation_is_exact_on_linear_trajectories():
-    bench = RefinementBenchmark("hdm05", str(HDM05), ["continuous_missing@30", "rgloss@10x60"], clips_per_fold=1,
-                                clips_per_performer=2, max_frames=120)
+    bench = RefinementBenchmark(
+        "hdm05",
+        str(HDM05),
+        ["continuous_missing@30", "rgloss@10x60"],
+        clips_per_fold=1,
+        clips_per_performer=2,
+        max_frames=120,
+    )
     rng = np.random.default_rng(0)
-    for i, motion in enumerate(bench.motions):           # every clip becomes straight lines at constant speed
+    for i, motion in enumerate(bench.motions):  # every clip becomes straight lines at constant speed
         frames, joints = motion.positions.shape[:2]
         start, velocity = rng.normal(size=(1, joints, 3)), rng.normal(scale=0.01, size=(1, joints, 3))
         bench.motions[i].positions = (start + velocity * np.arange(frames)[:, None, None]).astype(np.float32)

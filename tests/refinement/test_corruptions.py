@@ -1,12 +1,13 @@
 """Corruption protocols: exact amounts, gap geometry, reproducibility, clamping, errors, stated lengths."""
+
 import re
 
 import numpy as np
 import pytest
-from tests.shared_data import SHARED, needs
 
 from mocapkit.motion.container import Motion
 from mocapkit.refinement import PROTOCOLS, Corruption, CorruptionError, corrupt
+from tests.shared_data import SHARED, needs
 
 HDM05_CLIP = SHARED / "data" / "hdm05_cuts11" / "bd" / "HDM_bd_depositFloorR_001_120.amc"
 
@@ -36,11 +37,14 @@ def test_every_protocol_is_consistent_reproducible_and_seed_dependent(protocol, 
     b = corrupt(clean, protocol, level, seed=3)
     c = corrupt(clean, protocol, level, seed=4)
     assert isinstance(a, Corruption) and a.protocol == protocol and a.level == level
-    assert np.array_equal(clean.positions, before)                          # input untouched
+    assert np.array_equal(clean.positions, before)  # input untouched
     assert np.array_equal(a.removed, b.removed) and np.array_equal(a.perturbed, b.perturbed)
     assert np.array_equal(a.motion.positions, b.motion.positions, equal_nan=True)
-    assert not (np.array_equal(a.removed, c.removed) and np.array_equal(a.perturbed, c.perturbed)
-                and np.array_equal(a.motion.positions, c.motion.positions, equal_nan=True))
+    assert not (
+        np.array_equal(a.removed, c.removed)
+        and np.array_equal(a.perturbed, c.perturbed)
+        and np.array_equal(a.motion.positions, c.motion.positions, equal_nan=True)
+    )
     # removed entries are NaN and missing; perturbed ones moved; everything else bit-identical
     assert np.array_equal(a.motion.missing, clean.missing | a.removed)
     assert np.isnan(a.motion.positions[a.removed]).all()
@@ -52,8 +56,9 @@ def test_every_protocol_is_consistent_reproducible_and_seed_dependent(protocol, 
     assert "fps" in a.description and "frames" in a.description
 
 
-@pytest.mark.parametrize("protocol,level", [("rdloss", 0.3), ("missing_ratio", 0.1), ("missing_ratio", 0.2),
-                                            ("missing_ratio", 0.3)])
+@pytest.mark.parametrize(
+    "protocol,level", [("rdloss", 0.3), ("missing_ratio", 0.1), ("missing_ratio", 0.2), ("missing_ratio", 0.3)]
+)
 def test_random_entry_loss_removes_exactly_the_fraction(protocol, level):
     clean = smooth_motion()
     c = corrupt(clean, protocol, level)
@@ -84,15 +89,16 @@ def test_random_missing_removes_the_fraction_of_markers_in_every_frame(mr):
     assert (c.removed.sum(axis=1) == round(mr * 31)).all()
 
 
-@pytest.mark.parametrize("protocol,level,length", [("rgloss", None, 60)] +
-                         [("continuous_missing", ml, ml) for ml in (20, 30, 40, 50, 60)])
+@pytest.mark.parametrize(
+    "protocol,level,length", [("rgloss", None, 60)] + [("continuous_missing", ml, ml) for ml in (20, 30, 40, 50, 60)]
+)
 def test_gap_protocols_remove_10_markers_for_consecutive_frames_away_from_the_ends(protocol, level, length):
     clean = smooth_motion()
     c = corrupt(clean, protocol, level, seed=1)
     markers = np.flatnonzero(c.removed.any(axis=0))
     assert len(markers) == 10 and c.removed.sum() == 10 * length
     for j in markers:
-        (start, stop), = runs(c.removed[:, j])
+        ((start, stop),) = runs(c.removed[:, j])
         assert stop - start == length and start >= 1 and stop <= clean.num_frames - 1
     assert len(c.gaps) == 10 and all(g[2] == length for g in c.gaps)
     assert f"{length} frames = {length / 120:.3g} s at 120 fps" in c.description
@@ -114,8 +120,8 @@ def test_long_gaps_may_put_several_separated_gaps_on_one_marker():
     for j in range(8):
         gaps = runs(c.removed[:, j])
         assert sum(stop - start for start, stop in gaps) == 100 * sum(g[0] == j for g in c.gaps)
-        assert all(stop - start == 100 and start >= 1 and stop <= 499 for start, stop in gaps)   # separated
-    assert max(sum(g[0] == j for g in c.gaps) for j in range(8)) >= 2               # 20 gaps, 8 markers
+        assert all(stop - start == 100 and start >= 1 and stop <= 499 for start, stop in gaps)  # separated
+    assert max(sum(g[0] == j for g in c.gaps) for j in range(8)) >= 2  # 20 gaps, 8 markers
 
 
 def test_swaps_exchange_marker_trajectories():
@@ -136,7 +142,7 @@ def test_spikes_are_isolated_single_frame_jumps_of_10_to_30_cm():
     assert c.perturbed.sum() == round(0.01 * clean.missing.size) and not c.removed.any()
     jump = np.linalg.norm(c.motion.positions - clean.positions, axis=2)[c.perturbed]
     assert jump.min() >= 0.0999 and jump.max() <= 0.3001
-    assert not (c.perturbed[1:] & c.perturbed[:-1]).any()                 # never two frames in a row
+    assert not (c.perturbed[1:] & c.perturbed[:-1]).any()  # never two frames in a row
     assert c.perturbed[[0, -1]].sum() == 0
 
 
@@ -160,7 +166,7 @@ def test_a_sequence_shorter_than_the_gap_is_an_error_naming_motion_and_protocol(
 def test_already_missing_entries_are_never_counted():
     clean = smooth_motion()
     positions = clean.positions.copy()
-    positions[100:400, :8] = np.nan                                     # long real gaps on 8 markers
+    positions[100:400, :8] = np.nan  # long real gaps on 8 markers
     holey = Motion(positions=positions, joint_names=clean.joint_names, fps=clean.fps, name="holey")
     observed = int((~holey.missing).sum())
     for protocol, level in ALL:
@@ -175,13 +181,24 @@ def test_registry_lists_the_thesis_levels():
     assert PROTOCOLS["random_missing"].levels == (0.2, 0.3, 0.4, 0.5, 0.6)
     assert PROTOCOLS["continuous_missing"].levels == (20, 30, 40, 50, 60)
     assert PROTOCOLS["missing_ratio"].levels == (0.1, 0.2, 0.3)
-    assert set(PROTOCOLS) == {"rdcrypt", "rdloss", "mxcrypt", "rgloss", "random_missing", "continuous_missing",
-                              "missing_ratio", "long_gaps", "swaps", "spikes"}
+    assert set(PROTOCOLS) == {
+        "rdcrypt",
+        "rdloss",
+        "mxcrypt",
+        "rgloss",
+        "random_missing",
+        "continuous_missing",
+        "missing_ratio",
+        "long_gaps",
+        "swaps",
+        "spikes",
+    }
 
 
 @needs(HDM05_CLIP)
 def test_real_hdm05_clip_rgloss_states_frames_and_seconds():
     from mocapkit.datasets.formats.motion_io import read_motion
+
     clip = read_motion(HDM05_CLIP)
     c = corrupt(clip, "rgloss", seed=0)
     assert c.removed.sum() == 600 and c.motion.num_frames == clip.num_frames

@@ -1,22 +1,33 @@
 """Gap-filling baselines (interpolation, PCA after Gløersen & Federolf 2016) and SVT completion."""
+
 import numpy as np
 import pytest
 import torch
-from tests.shared_data import SHARED, needs
 from sklearn.base import clone
 
-from mocapkit.refinement.gap_filling import HoldLastValue, LinearInterpolation, PCAGapFilling, PchipInterpolation, SplineInterpolation
-
-from mocapkit.refinement.svt import SVTCompletion
-from mocapkit.refinement.svt import svt_complete
 from mocapkit.motion.container import Motion
-from mocapkit.refinement.metrics import score_refinement
 from mocapkit.refinement import RefinementError, corrupt
+from mocapkit.refinement.gap_filling import (
+    HoldLastValue,
+    LinearInterpolation,
+    PCAGapFilling,
+    PchipInterpolation,
+    SplineInterpolation,
+)
+from mocapkit.refinement.metrics import score_refinement
+from mocapkit.refinement.svt import SVTCompletion, svt_complete
+from tests.shared_data import SHARED, needs
 
 HDM05_CLIP = SHARED / "data" / "hdm05_cuts11" / "bd" / "HDM_bd_depositFloorR_001_120.amc"
 
-FAST = [LinearInterpolation(), PchipInterpolation(), SplineInterpolation(), HoldLastValue(),
-        PCAGapFilling(max_iter=5), SVTCompletion(max_iter=100)]
+FAST = [
+    LinearInterpolation(),
+    PchipInterpolation(),
+    SplineInterpolation(),
+    HoldLastValue(),
+    PCAGapFilling(max_iter=5),
+    SVTCompletion(max_iter=100),
+]
 NAMES = [type(r).__name__ for r in FAST]
 
 
@@ -78,11 +89,11 @@ def test_interpolants_are_exact_on_what_they_can_represent():
 def test_pca_recovers_a_long_gap_from_correlated_markers_where_interpolation_cannot():
     clean = latent_motion(frames=400)
     mask = np.zeros(clean.missing.shape, bool)
-    mask[100:300, 3] = True                                      # 200 frames = 1.7 s on one marker
+    mask[100:300, 3] = True  # 200 frames = 1.7 s on one marker
     holey = with_missing(clean, mask)
     linear = np.abs(LinearInterpolation().refine(holey).positions[mask] - clean.positions[mask]).max()
     assert linear > 0.02
-    for method in ("complete", "iterative"):                     # the published one pass, and the default
+    for method in ("complete", "iterative"):  # the published one pass, and the default
         pca = PCAGapFilling(method=method)
         error = np.abs(pca.refine(holey).positions[mask] - clean.positions[mask]).max()
         assert pca.basis_ == method and error < 1e-3
@@ -90,13 +101,13 @@ def test_pca_recovers_a_long_gap_from_correlated_markers_where_interpolation_can
 
 def test_pca_iterative_basis_when_no_frame_is_complete():
     clean = latent_motion(frames=300)
-    c = corrupt(clean, "random_missing", 0.3, seed=0)            # every frame misses 4 of 12 markers
-    pca = PCAGapFilling(max_iter=30, weight_scale=100.0)          # no distance weighting: plain iterative PCA
+    c = corrupt(clean, "random_missing", 0.3, seed=0)  # every frame misses 4 of 12 markers
+    pca = PCAGapFilling(max_iter=30, weight_scale=100.0)  # no distance weighting: plain iterative PCA
     out = pca.refine(c.motion)
     assert pca.basis_ == "iterative" and 1 <= pca.n_iter_ <= 30
     observed = ~c.motion.missing
     assert np.array_equal(out.positions[observed], c.motion.positions[observed])
-    assert score_refinement(out, clean, c).mean_error_mm < 0.01    # converges to the exact low-rank fill
+    assert score_refinement(out, clean, c).mean_error_mm < 0.01  # converges to the exact low-rank fill
     with pytest.raises(RefinementError, match="complete"):
         PCAGapFilling(method="complete").refine(c.motion)
 
@@ -152,7 +163,7 @@ def test_clear_errors_and_reports(refiner):
     with pytest.raises(RefinementError, match=r"non-finite value at frame 7 of marker 'm2'"):
         refiner.refine(Motion(positions=inf, joint_names=clean.joint_names, fps=clean.fps))
     mask = np.zeros(clean.missing.shape, bool)
-    mask[:, 4] = True                                             # marker m4 missing in every frame
+    mask[:, 4] = True  # marker m4 missing in every frame
     mask[40:50, 1] = True
     out = refiner.refine(with_missing(clean, mask))
     assert out.metadata["refinement"]["unfilled"] == {"m4": 120}
@@ -162,11 +173,17 @@ def test_clear_errors_and_reports(refiner):
 @needs(HDM05_CLIP)
 def test_short_gaps_on_real_hdm05_beat_holding_the_last_value():
     from mocapkit.datasets.formats.motion_io import read_motion
+
     clip = read_motion(HDM05_CLIP)
-    c = corrupt(clip, "continuous_missing", 20, seed=0)        # 10 markers × 20 frames (0.17 s at 120 fps)
+    c = corrupt(clip, "continuous_missing", 20, seed=0)  # 10 markers × 20 frames (0.17 s at 120 fps)
     hold = score_refinement(HoldLastValue().refine(c.motion), clip, c)
-    for refiner in (LinearInterpolation(), PchipInterpolation(), SplineInterpolation(), PCAGapFilling(max_iter=10),
-                    SVTCompletion(max_iter=300)):
+    for refiner in (
+        LinearInterpolation(),
+        PchipInterpolation(),
+        SplineInterpolation(),
+        PCAGapFilling(max_iter=10),
+        SVTCompletion(max_iter=300),
+    ):
         out = refiner.refine(c.motion)
         score = score_refinement(out, clip, c)
         assert score.coverage == 1.0 and score.changed_clean == 0
@@ -176,8 +193,9 @@ def test_short_gaps_on_real_hdm05_beat_holding_the_last_value():
 @needs(HDM05_CLIP)
 def test_iterative_pca_improves_on_its_interpolation_start_on_real_hdm05():
     from mocapkit.datasets.formats.motion_io import read_motion
+
     clip = read_motion(HDM05_CLIP)
-    c = corrupt(clip, "rgloss", seed=0)                           # 10 markers × 60 frames, few complete frames
+    c = corrupt(clip, "rgloss", seed=0)  # 10 markers × 60 frames, few complete frames
     linear = score_refinement(LinearInterpolation().refine(c.motion), clip, c)
     pca = PCAGapFilling(max_iter=20)
     score = score_refinement(pca.refine(c.motion), clip, c)
@@ -199,8 +217,9 @@ def test_pca_gap_filling_does_not_diverge_when_many_markers_are_gone_at_once():
 
     clip = read_motion(DIVERGING_CLIP)
     start = max(0, (clip.num_frames - 250) // 2)
-    clip = replace(clip, positions=clip.positions[start:start + 250], missing=clip.missing[start:start + 250],
-                   rotations=None)
+    clip = replace(
+        clip, positions=clip.positions[start : start + 250], missing=clip.missing[start : start + 250], rotations=None
+    )
     corruption = corrupt(clip, "long_gaps", "20x100", seed=3467547118)
     pca = score_refinement(PCAGapFilling().refine(corruption.motion), clip, corruption).rmse_cm
     linear = score_refinement(LinearInterpolation().refine(corruption.motion), clip, corruption).rmse_cm

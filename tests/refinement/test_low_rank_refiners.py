@@ -4,18 +4,19 @@ Synthetic checks of the corrected ALM updates (constraint residuals → 0, RPCA 
 smoothness solve, the refiner contract (observed entries bit-identical unless flagged), a real HDM05 clip with
 10 markers × 60-frame gaps against linear interpolation, and the errors for inputs the methods cannot handle.
 """
+
 import numpy as np
 import pytest
 import scipy.fft
 import torch
 from sklearn.base import clone
 
-from mocapkit.refinement.lrmf import LRMF
-
-from mocapkit.refinement.trnn import TrNN
+from mocapkit.motion.container import Motion
+from mocapkit.refinement.base import RefinementError
 from mocapkit.refinement.gap_filling import linear_fill
 from mocapkit.refinement.lrmf import (
     CMU_UNIT,
+    LRMF,
     _dct_fft,
     _idct_fft,
     apply_second_difference,
@@ -26,9 +27,7 @@ from mocapkit.refinement.lrmf import (
     second_difference,
     smooth_solve,
 )
-from mocapkit.refinement.trnn import trnn
-from mocapkit.motion.container import Motion
-from mocapkit.refinement.base import RefinementError
+from mocapkit.refinement.trnn import TrNN, trnn
 from tests.shared_data import SHARED, needs
 
 HDM_BD = SHARED / "data" / "hdm05_cuts11" / "bd"
@@ -48,11 +47,12 @@ def relative_error(estimate, truth) -> float:
 
 def synthetic_motion(frames=240, joints=12, seed=0) -> Motion:
     X = smooth_low_rank(frames, 3 * joints, rank=5, scale=0.3, seed=seed)
-    X += np.tile([0.0, 1.0, 0.0], joints)                               # standing about 1 m up
+    X += np.tile([0.0, 1.0, 0.0], joints)  # standing about 1 m up
     return Motion(X.reshape(frames, joints, 3), [f"m{j}" for j in range(joints)], 120.0)
 
 
 # --------------------------------------------------------------------------- numerical pieces
+
 
 def test_dct_matches_scipy_and_diagonalises_the_second_difference():
     rng = np.random.default_rng(0)
@@ -60,14 +60,14 @@ def test_dct_matches_scipy_and_diagonalises_the_second_difference():
         x = rng.standard_normal((n, 4))
         ref = scipy.fft.dct(x, axis=0, norm="ortho")
         assert np.allclose(dct(torch.tensor(x)).numpy(), ref, atol=1e-12)
-        assert np.allclose(_dct_fft(torch.tensor(x)).numpy(), ref, atol=1e-12)      # the non-CPU path
+        assert np.allclose(_dct_fft(torch.tensor(x)).numpy(), ref, atol=1e-12)  # the non-CPU path
         assert np.allclose(_idct_fft(torch.tensor(ref)).numpy(), x, atol=1e-12)
         assert np.allclose(idct(dct(torch.tensor(x.T.copy()), dim=1), dim=1).numpy(), x.T, atol=1e-12)
     n = 60
     O = second_difference(n)
-    assert O[0, :2].tolist() == [-1, 1] and O[-1, -2:].tolist() == [1, -1]       # eq. 4.22, not 4.2
+    assert O[0, :2].tolist() == [-1, 1] and O[-1, -2:].tolist() == [1, -1]  # eq. 4.22, not 4.2
     xi = np.sort(2 * np.cos(np.pi * np.arange(n) / n) - 2)
-    assert np.allclose(np.linalg.eigvalsh(O), xi, atol=1e-10)                    # eigenvalues of eq. 4.25
+    assert np.allclose(np.linalg.eigvalsh(O), xi, atol=1e-10)  # eigenvalues of eq. 4.25
     T = rng.standard_normal((n, 5))
     dense = np.linalg.solve(0.7 * np.eye(n) + 30.0 * O @ O, T)
     assert np.allclose(smooth_solve(torch.tensor(T), 0.7, 30.0).numpy(), dense, atol=1e-10)
@@ -80,17 +80,18 @@ def test_interpolation_and_lsj_rank_rules():
     observed = np.ones_like(X, bool)
     observed[3:6, 0] = observed[0, 1] = observed[9, 1] = False
     filled = linear_fill(np.where(observed, X, 0), observed, empty=0.0)
-    assert np.allclose(filled[:, 0], X[:, 0])                                     # interior gap: exact for a line
-    assert filled[0, 1] == 2.0 and filled[9, 1] == 16.0                           # ends held
+    assert np.allclose(filled[:, 0], X[:, 0])  # interior gap: exact for a line
+    assert filled[0, 1] == 2.0 and filled[9, 1] == 16.0  # ends held
     s = np.array([100.0, 10.0, 9.0, 3.0, 2.95, 0.01])
-    assert lsj_rank(s, 0.1, "absolute") == 5         # last gap >= 0.1 is σ5 − σ6
-    assert lsj_rank(s, 0.1, "normalised") == 1       # only σ1 − σ2 is >= 0.1·σ1
+    assert lsj_rank(s, 0.1, "absolute") == 5  # last gap >= 0.1 is σ5 − σ6
+    assert lsj_rank(s, 0.1, "normalised") == 1  # only σ1 − σ2 is >= 0.1·σ1
     assert lsj_rank(s, 0.1, "largest") == 1
     with pytest.raises(ValueError, match="rule"):
         lsj_rank(s, 0.1, "median")
 
 
 # --------------------------------------------------------------------------- the ALM solvers
+
 
 def test_trnn_solves_synthetic_rpca_and_residual_vanishes():
     """Thesis §4.2.3 synthetic protocol (smaller): D = X* + S*, 10 % of entries replaced by U[−10, 10]."""
@@ -100,13 +101,22 @@ def test_trnn_solves_synthetic_rpca_and_residual_vanishes():
     D = truth.copy()
     hit = rng.random(D.shape) < 0.1
     D[hit] = rng.uniform(-10, 10, hit.sum())
-    res = trnn(D.T, np.ones((n, m), bool), truncation=r0, width=6, lam=1 / np.sqrt(max(m, n)), mu=0.0, rho=1.5,
-               eta=1.25 / np.linalg.norm(D, 2), tol=1e-7)
+    res = trnn(
+        D.T,
+        np.ones((n, m), bool),
+        truncation=r0,
+        width=6,
+        lam=1 / np.sqrt(max(m, n)),
+        mu=0.0,
+        rho=1.5,
+        eta=1.25 / np.linalg.norm(D, 2),
+        tol=1e-7,
+    )
     assert res.converged and res.n_iter < 100
-    assert relative_error(res.low_rank.T, truth) < 1e-5                           # NRE
+    assert relative_error(res.low_rank.T, truth) < 1e-5  # NRE
     residuals = [h["residual"] for h in res.history]
     assert residuals[-1] < 1e-6 < residuals[0]
-    assert (np.abs(res.sparse.T) > 1e-3)[hit].mean() > 0.95                       # the outliers sit in S
+    assert (np.abs(res.sparse.T) > 1e-3)[hit].mean() > 0.95  # the outliers sit in S
 
 
 @pytest.mark.parametrize("truncation", [0, 3])
@@ -116,7 +126,7 @@ def test_trnn_recovers_a_smooth_rank3_matrix_from_60_percent(truncation):
     res = trnn(np.where(observed, X, 0), observed, truncation=truncation, width=5)
     assert res.converged
     assert relative_error(res.low_rank, X) < 1e-2
-    assert res.history[-1]["residual"] < 1e-4                                     # constraints hold at the end
+    assert res.history[-1]["residual"] < 1e-4  # constraints hold at the end
 
 
 def test_lrmf_residuals_vanish_and_recover_a_smooth_rank3_matrix():
@@ -127,7 +137,7 @@ def test_lrmf_residuals_vanish_and_recover_a_smooth_rank3_matrix():
     assert relative_error(res.low_rank, X) < 1e-2
     residuals = [h["residual"] for h in res.history]
     assert residuals[-1] < 1e-4 and residuals[0] > 1e-1
-    assert np.all(np.diff(np.log([h["penalty"] for h in res.history])) >= 0)     # λ schedule never decreases
+    assert np.all(np.diff(np.log([h["penalty"] for h in res.history])) >= 0)  # λ schedule never decreases
 
 
 def test_lrmf_puts_gross_outliers_in_the_sparse_term():
@@ -145,17 +155,18 @@ def test_lrmf_puts_gross_outliers_in_the_sparse_term():
 
 # --------------------------------------------------------------------------- the refiner contract
 
+
 @pytest.mark.parametrize("refiner", [TrNN(truncation=5), TrNN(truncation=0), LRMF()], ids=["trnn", "tsmc", "lrmf"])
 def test_refine_fills_gaps_and_keeps_observed_entries(refiner):
     clean = synthetic_motion()
     missing = np.zeros_like(clean.missing)
     missing[50:90, [1, 4, 7]] = True
     missing[::7, 2] = True
-    missing[:, 11] = True                                                         # never observed: stays missing
+    missing[:, 11] = True  # never observed: stays missing
     positions = clean.positions.copy()
     spikes = [(30, 3), (120, 5), (200, 9)]
     for f, j in spikes:
-        positions[f, j] += [0.25, 0.0, 0.0]                                       # 25 cm outliers
+        positions[f, j] += [0.25, 0.0, 0.0]  # 25 cm outliers
     corrupted = Motion(positions, clean.joint_names, clean.fps, missing=missing)
     out = refiner.refine(corrupted)
     report = out.metadata["refinement"]
@@ -187,11 +198,11 @@ def test_parameters_stored_untouched_and_cloneable():
 @needs(HDM_BD)
 def test_trnn_beats_linear_interpolation_on_hdm05_gaps():
     from mocapkit.datasets import read_motion
-    from mocapkit.refinement.metrics import score_refinement
     from mocapkit.refinement.corruptions import corrupt
+    from mocapkit.refinement.metrics import score_refinement
 
     clean = read_motion(HDM_BD / "HDM_bd_depositFloorR_001_120.amc", asf=HDM_BD / "HDM_bd.asf")
-    corruption = corrupt(clean, "continuous_missing", 60, seed=0)                # 10 markers × 60 frames
+    corruption = corrupt(clean, "continuous_missing", 60, seed=0)  # 10 markers × 60 frames
     assert corruption.removed.sum() == 600
     refiner = TrNN()
     out = refiner.refine(corruption.motion)
@@ -207,17 +218,18 @@ def test_trnn_beats_linear_interpolation_on_hdm05_gaps():
 
 # --------------------------------------------------------------------------- errors
 
+
 def test_clear_errors_for_inputs_the_methods_cannot_handle():
     motion = synthetic_motion(frames=15)
     with pytest.raises(RefinementError, match=r"15 frames, TrNN needs at least 16"):
-        TrNN().refine(motion)                                                     # r = 15 < d <= frames
+        TrNN().refine(motion)  # r = 15 < d <= frames
     with pytest.raises(RefinementError, match=r"truncation r=15 needs at least 16 frames"):
         TrNN()._refine_matrix(np.ones((15, 36)), np.ones((15, 36), bool))
     assert TrNN().refine(synthetic_motion(frames=16)).num_frames == 16
-    TrNN(truncation=3).refine(motion)                                             # fine with a smaller r
+    TrNN(truncation=3).refine(motion)  # fine with a smaller r
     with pytest.raises(RefinementError, match="2 frames, LRMF needs at least 3"):
         LRMF().refine(synthetic_motion(frames=2))
-    few = synthetic_motion(frames=100, joints=5)                                  # 15 coordinates < r + 1
+    few = synthetic_motion(frames=100, joints=5)  # 15 coordinates < r + 1
     with pytest.raises(RefinementError, match=r"needs at least 16 observed coordinates"):
         TrNN().refine(few)
     with pytest.raises(ValueError, match="factor width"):
@@ -236,7 +248,7 @@ def test_cuda_matches_cpu():
     observed = np.random.default_rng(2).random(X.shape) < 0.6
     a = trnn(np.where(observed, X, 0), observed, truncation=3, width=5)
     b = trnn(np.where(observed, X, 0), observed, truncation=3, width=5, device="cuda")
-    assert abs(a.n_iter - b.n_iter) <= 2 and relative_error(b.low_rank, a.low_rank) < 1e-3   # same to ~tol
+    assert abs(a.n_iter - b.n_iter) <= 2 and relative_error(b.low_rank, a.low_rank) < 1e-3  # same to ~tol
     c = lrmf(np.where(observed, X, 0), observed, width=4, device="cuda")
     assert relative_error(c.low_rank, X) < 1e-2
     assert CMU_UNIT == pytest.approx(0.056444)

@@ -1,15 +1,16 @@
 """The pose-prior gap filler (mocapkit.refinement.pose_prior): fusion of the cubic guess with a PPCA pose model."""
+
 from __future__ import annotations
 
 import numpy as np
 import pytest
 from sklearn.exceptions import NotFittedError
 
-from mocapkit.refinement.pose_prior import PosePriorRefiner, nearest_sample_distance
-from mocapkit.motion.layouts import CMU31
 from mocapkit.motion.container import Motion
+from mocapkit.motion.layouts import CMU31
 from mocapkit.refinement.base import RefinementError
 from mocapkit.refinement.corruptions import corrupt
+from mocapkit.refinement.pose_prior import PosePriorRefiner, nearest_sample_distance
 
 ARM = ("lhumerus", "lradius", "lwrist", "lhand", "lfingers", "lthumb")
 
@@ -18,12 +19,12 @@ def swinging_body(frames: int, seed: int, fps: float = 120.0) -> Motion:
     """A CMU31 body with fixed joint offsets whose left arm swings (one phase for the whole chain, so the hand
     follows the wrist) while the body turns about the vertical and walks: in a pose frame every joint is a linear
     function of the swing, in time the hand's path is a curve no gap-end interpolation can guess."""
-    rng = np.random.default_rng(0)                                       # the same body in every take
+    rng = np.random.default_rng(0)  # the same body in every take
     offsets = rng.normal(0.0, 0.1, (CMU31.num_joints, 3))
     swing_dirs = rng.normal(0.0, 1.0, (CMU31.num_joints, 3))
     take = np.random.default_rng(seed)
     t = np.arange(frames) / fps
-    swing = 0.25 * np.sin(2 * np.pi * take.uniform(0.6, 1.2) * t + take.uniform(0, 2 * np.pi))        # [T]
+    swing = 0.25 * np.sin(2 * np.pi * take.uniform(0.6, 1.2) * t + take.uniform(0, 2 * np.pi))  # [T]
     local = np.zeros((frames, CMU31.num_joints, 3))
     for j, p in enumerate(CMU31.parents):
         if p >= 0:
@@ -56,16 +57,21 @@ def test_a_long_gap_is_filled_from_the_pose_where_the_cubic_guess_misses(fitted)
     clean = swinging_body(300, 11)
     hand = CMU31.joint_names.index("lhand")
     missing = np.zeros((300, CMU31.num_joints), bool)
-    missing[40:260, hand] = True                                          # 1.8 s
-    gappy = Motion(np.where(missing[..., None], np.nan, clean.positions), clean.joint_names, clean.fps,
-                   parents=clean.parents, layout_name="cmu31")
+    missing[40:260, hand] = True  # 1.8 s
+    gappy = Motion(
+        np.where(missing[..., None], np.nan, clean.positions),
+        clean.joint_names,
+        clean.fps,
+        parents=clean.parents,
+        layout_name="cmu31",
+    )
     filled = fitted.refine(gappy)
     cubic = fitted.temporal_guess(gappy.positions, ~gappy.missing)
     error = np.linalg.norm(filled.positions[missing] - clean.positions[missing], axis=-1).mean()
     cubic_error = np.linalg.norm(cubic[missing] - clean.positions[missing], axis=-1).mean()
-    assert cubic_error > 0.05 and error < 0.1 * cubic_error                 # the swing is recovered, not bridged
+    assert cubic_error > 0.05 and error < 0.1 * cubic_error  # the swing is recovered, not bridged
     assert not filled.missing.any()
-    assert np.array_equal(filled.positions[~missing], gappy.positions[~missing])   # observed entries untouched
+    assert np.array_equal(filled.positions[~missing], gappy.positions[~missing])  # observed entries untouched
     assert filled.metadata["refinement"]["filled"] == int(missing.sum())
 
 
@@ -73,10 +79,15 @@ def test_short_gaps_stay_with_the_temporal_guess_and_a_never_seen_joint_comes_fr
     clean = swinging_body(200, 12)
     missing = np.zeros((200, CMU31.num_joints), bool)
     wrist, thumb = CMU31.joint_names.index("lwrist"), CMU31.joint_names.index("lthumb")
-    missing[100:103, wrist] = True                                        # 3 frames: the cubic guess is right
-    missing[:, thumb] = True                                              # never observed in the take
-    gappy = Motion(np.where(missing[..., None], np.nan, clean.positions), clean.joint_names, clean.fps,
-                   parents=clean.parents, layout_name="cmu31")
+    missing[100:103, wrist] = True  # 3 frames: the cubic guess is right
+    missing[:, thumb] = True  # never observed in the take
+    gappy = Motion(
+        np.where(missing[..., None], np.nan, clean.positions),
+        clean.joint_names,
+        clean.fps,
+        parents=clean.parents,
+        layout_name="cmu31",
+    )
     filled = fitted.refine(gappy)
     cubic = fitted.temporal_guess(gappy.positions, ~gappy.missing)
     short = np.linalg.norm(filled.positions[100:103, wrist] - clean.positions[100:103, wrist], axis=-1).max()
@@ -102,34 +113,53 @@ def test_errors_not_fitted_other_layout_no_complete_frame_and_bad_parameters(fit
     other = Motion(motion.positions[:, :5], CMU31.joint_names[:5], 120.0, parents=CMU31.parents[:5])
     with pytest.raises(RefinementError, match="another skeleton layout"):
         fitted.refine(other)
-    gappy = Motion(np.where(np.eye(50, 31, dtype=bool)[..., None], np.nan, motion.positions), CMU31.joint_names,
-                   120.0, parents=CMU31.parents)
+    gappy = Motion(
+        np.where(np.eye(50, 31, dtype=bool)[..., None], np.nan, motion.positions),
+        CMU31.joint_names,
+        120.0,
+        parents=CMU31.parents,
+    )
     gappy.missing[:, 0] = True
     with pytest.raises(RefinementError, match="fewer than 2 training frames with every joint observed"):
-        PosePriorRefiner().fit([Motion(np.where(gappy.missing[..., None], np.nan, motion.positions),
-                                       CMU31.joint_names, 120.0, parents=CMU31.parents)])
+        PosePriorRefiner().fit(
+            [
+                Motion(
+                    np.where(gappy.missing[..., None], np.nan, motion.positions),
+                    CMU31.joint_names,
+                    120.0,
+                    parents=CMU31.parents,
+                )
+            ]
+        )
     with pytest.raises(ValueError, match="drift"):
         PosePriorRefiner(drift=0).fit([motion])
 
 
 def test_the_noise_floor_bounds_the_prior_confidence_and_keeps_short_gaps_with_the_guess():
-    train = [swinging_body(300, s) for s in range(2)]                 # exactly low-rank poses
+    train = [swinging_body(300, s) for s in range(2)]  # exactly low-rank poses
     tight = PosePriorRefiner(n_components=90, noise_floor=0.0, short_gap_seconds=0).fit(train)
     floored = PosePriorRefiner(n_components=90, noise_floor=0.01, short_gap_seconds=0).fit(train)
     assert tight.noise_variance_ < 1e-8 and floored.noise_variance_ == pytest.approx(1e-4)
     clean = swinging_body(200, 21)
     tibia = CMU31.joint_names.index("ltibia")
     t = np.arange(200) / 120.0
-    positions = clean.positions.copy()                                  # a knee motion the training poses lack
+    positions = clean.positions.copy()  # a knee motion the training poses lack
     positions[:, tibia] += 0.02 * np.stack([np.sin(2 * t), np.cos(3 * t), np.sin(5 * t)], axis=1)
     missing = np.zeros((200, CMU31.num_joints), bool)
-    missing[50:150:2, tibia] = True                                     # every other frame: a 1-frame gap each
-    gappy = Motion(np.where(missing[..., None], np.nan, positions), clean.joint_names, clean.fps,
-                   parents=clean.parents, layout_name="cmu31")
-    error = {name: np.linalg.norm(r.refine(gappy).positions[missing] - positions[missing], axis=-1).mean()
-             for name, r in (("tight", tight), ("floored", floored))}
-    assert error["tight"] > 0.005                       # the exact prior pulls the knee back into its subspace
-    assert error["floored"] < 0.1 * error["tight"]      # the floor leaves the gap to the temporal guess
+    missing[50:150:2, tibia] = True  # every other frame: a 1-frame gap each
+    gappy = Motion(
+        np.where(missing[..., None], np.nan, positions),
+        clean.joint_names,
+        clean.fps,
+        parents=clean.parents,
+        layout_name="cmu31",
+    )
+    error = {
+        name: np.linalg.norm(r.refine(gappy).positions[missing] - positions[missing], axis=-1).mean()
+        for name, r in (("tight", tight), ("floored", floored))
+    }
+    assert error["tight"] > 0.005  # the exact prior pulls the knee back into its subspace
+    assert error["floored"] < 0.1 * error["tight"]  # the floor leaves the gap to the temporal guess
 
 
 def test_short_gaps_go_to_the_spline_and_longer_ones_stay_with_the_fusion(fitted):
@@ -140,31 +170,46 @@ def test_short_gaps_go_to_the_spline_and_longer_ones_stay_with_the_fusion(fitted
     clean = swinging_body(300, 12)
     hand, knee = CMU31.joint_names.index("lhand"), CMU31.joint_names.index("ltibia")
     missing = np.zeros((300, CMU31.num_joints), bool)
-    missing[100:110, hand] = True                                         # 10 frames: short
-    missing[150:200, hand] = True                                         # 50 frames: long
-    missing[:8, knee] = True                                              # at the start: not interior
-    gappy = Motion(np.where(missing[..., None], np.nan, clean.positions), clean.joint_names, clean.fps,
-                   parents=clean.parents, layout_name="cmu31")
-    handed = PosePriorRefiner(**{**fitted.get_params(), "short_gap_seconds": 0.2}).fit(
-        [swinging_body(300, s) for s in range(4)]).refine(gappy).positions
+    missing[100:110, hand] = True  # 10 frames: short
+    missing[150:200, hand] = True  # 50 frames: long
+    missing[:8, knee] = True  # at the start: not interior
+    gappy = Motion(
+        np.where(missing[..., None], np.nan, clean.positions),
+        clean.joint_names,
+        clean.fps,
+        parents=clean.parents,
+        layout_name="cmu31",
+    )
+    handed = (
+        PosePriorRefiner(**{**fitted.get_params(), "short_gap_seconds": 0.2})
+        .fit([swinging_body(300, s) for s in range(4)])
+        .refine(gappy)
+        .positions
+    )
     fused = fitted.refine(gappy).positions
     spline = SplineInterpolation().refine(gappy).positions
     np.testing.assert_allclose(handed[100:110, hand], spline[100:110, hand], atol=1e-9)
-    assert np.abs(fused[100:110, hand] - spline[100:110, hand]).max() > 1e-4     # the fusion differs there
+    assert np.abs(fused[100:110, hand] - spline[100:110, hand]).max() > 1e-4  # the fusion differs there
     np.testing.assert_allclose(handed[150:200, hand], fused[150:200, hand], atol=1e-9)
     np.testing.assert_allclose(handed[:8, knee], fused[:8, knee], atol=1e-9)
     np.testing.assert_array_equal(handed[~missing], clean.positions[~missing])
     with pytest.raises(ValueError, match="short_gap_seconds"):
         PosePriorRefiner(short_gap_seconds=-1).fit([clean])
     # in seconds: at 30 fps 0.2 s is 6 frames, so a 10-frame gap stays with the fusion
-    train30 = [Motion(swinging_body(1200, s).positions[::4], CMU31.joint_names, 30.0, parents=CMU31.parents)
-               for s in range(4)]
+    train30 = [
+        Motion(swinging_body(1200, s).positions[::4], CMU31.joint_names, 30.0, parents=CMU31.parents) for s in range(4)
+    ]
     prior30 = PosePriorRefiner(n_components=8).fit(train30)
     assert prior30.get_params()["short_gap_seconds"] == 0.2
     slow_missing = missing[::4].copy()
-    slow_missing[60:70, hand] = True                                      # 10 frames at 30 fps: 0.33 s
-    slow = Motion(np.where(slow_missing[..., None], np.nan, clean.positions[::4]), clean.joint_names, 30.0,
-                  parents=clean.parents, layout_name="cmu31")
+    slow_missing[60:70, hand] = True  # 10 frames at 30 fps: 0.33 s
+    slow = Motion(
+        np.where(slow_missing[..., None], np.nan, clean.positions[::4]),
+        clean.joint_names,
+        30.0,
+        parents=clean.parents,
+        layout_name="cmu31",
+    )
     spline30 = SplineInterpolation().refine(slow).positions[60:70, hand]
     handed30 = prior30.refine(slow).positions
     fused30 = PosePriorRefiner(n_components=8, short_gap_seconds=0).fit(train30).refine(slow).positions

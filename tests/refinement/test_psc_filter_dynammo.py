@@ -2,20 +2,18 @@
 
 Small dictionaries / few iterations throughout so that the file runs in well under a minute on one core.
 """
+
 import numpy as np
 import pytest
 from sklearn.exceptions import NotFittedError
 
-from mocapkit.refinement.dynammo import DynaMMo
-
-from mocapkit.refinement.filter_bases import FilterBasesRefiner
-
-from mocapkit.refinement.gap_filling import LinearInterpolation
-
-from mocapkit.refinement.psc import PSCRefiner
 from mocapkit.motion.container import Motion
-from mocapkit.refinement.metrics import matrix_rmse
 from mocapkit.refinement import RefinementError, corrupt
+from mocapkit.refinement.dynammo import DynaMMo
+from mocapkit.refinement.filter_bases import FilterBasesRefiner
+from mocapkit.refinement.gap_filling import LinearInterpolation
+from mocapkit.refinement.metrics import matrix_rmse
+from mocapkit.refinement.psc import PSCRefiner
 from tests.shared_data import SHARED, needs
 
 HDM05 = SHARED / "data" / "hdm05_cuts11"
@@ -33,18 +31,24 @@ def synthetic(frames: int = 420, joints: int = 8, seed: int = 0, mixing_seed: in
     rng = np.random.default_rng(seed)
     t = np.arange(frames) / FPS
     phases, amps = rng.uniform(0, 2 * np.pi, 3), rng.uniform(0.7, 1.3, 3)
-    latent = np.concatenate([[a * np.sin(2 * np.pi * f * t + p), a * np.cos(2 * np.pi * f * t + p)]
-                             for f, p, a in zip((0.8, 1.3, 2.1), phases, amps, strict=True)]).T  # [frames, 6]
+    latent = np.concatenate(
+        [
+            [a * np.sin(2 * np.pi * f * t + p), a * np.cos(2 * np.pi * f * t + p)]
+            for f, p, a in zip((0.8, 1.3, 2.1), phases, amps, strict=True)
+        ]
+    ).T  # [frames, 6]
     positions = (latent @ mixing + rest).reshape(frames, joints, 3)
-    return Motion(positions=positions, joint_names=tuple(f"m{j}" for j in range(joints)), fps=FPS,
-                  name=f"synthetic{seed}")
+    return Motion(
+        positions=positions, joint_names=tuple(f"m{j}" for j in range(joints)), fps=FPS, name=f"synthetic{seed}"
+    )
 
 
 def with_gap(motion: Motion, joints=(2, 5), start: int = 200, length: int = 30) -> Motion:
     missing = np.zeros(motion.missing.shape, bool)
-    missing[start:start + length, list(joints)] = True
-    return Motion(positions=motion.positions, joint_names=motion.joint_names, fps=motion.fps, missing=missing,
-                  name=motion.name)
+    missing[start : start + length, list(joints)] = True
+    return Motion(
+        positions=motion.positions, joint_names=motion.joint_names, fps=motion.fps, missing=missing, name=motion.name
+    )
 
 
 def assert_observed_kept(out: Motion, corrupted: Motion) -> np.ndarray:
@@ -93,9 +97,9 @@ def test_psc_poselet_joints_absent_from_layout_are_named():
 def test_dynammo_fills_gap_of_correlated_sinusoids_and_keeps_observed():
     clean = synthetic(seed=3)
     gapped = with_gap(clean)
-    out = DynaMMo(hidden_dim=8, max_iter=60).refine(gapped)    # 6 latent sinusoid states + slack for the means
+    out = DynaMMo(hidden_dim=8, max_iter=60).refine(gapped)  # 6 latent sinusoid states + slack for the means
     changed = assert_observed_kept(out, gapped)
-    assert not changed.any()                                   # a pure gap filler flags nothing
+    assert not changed.any()  # a pure gap filler flags nothing
     linear = LinearInterpolation().refine(gapped)
     err, lin = matrix_rmse(clean, out, gapped.missing), matrix_rmse(clean, linear, gapped.missing)
     assert err < 0.1 * lin, (err, lin)
@@ -147,7 +151,7 @@ def test_filter_bases_flag_and_repair_a_20cm_spike():
     out = refiner.refine(spiked)
     changed = assert_observed_kept(out, spiked)
     assert changed[150, 4]
-    assert changed.sum() <= 3                                   # the spike, at most its neighbours
+    assert changed.sum() <= 3  # the spike, at most its neighbours
     assert np.linalg.norm(out.positions[150, 4] - clean.positions[150, 4]) < 0.02
     assert refiner.weights_[150, 4] < refiner.outlier_weight
 

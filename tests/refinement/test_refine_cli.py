@@ -5,6 +5,7 @@ the refiner did not fill bit-identical (coordinates and residuals); filled sampl
 could not fill still missing and named in the printed report. Joint positions (HDM05 AMC) go to ``.npz`` and
 ``.c3d``. Bad input exits with code 2 and a one-line error naming the file.
 """
+
 from __future__ import annotations
 
 import inspect
@@ -17,25 +18,40 @@ import numpy as np
 import pytest
 import yaml
 
-from mocapkit.refinement.gap_filling import LinearInterpolation, PchipInterpolation
 from mocapkit.cli import main
 from mocapkit.datasets.formats.c3d import read_c3d, write_c3d
 from mocapkit.motion.container import Motion
 from mocapkit.refinement.apply import build_refiner, refine_motion, refiner_names
 from mocapkit.refinement.base import RefinementError
+from mocapkit.refinement.gap_filling import LinearInterpolation, PchipInterpolation
 from mocapkit.train.config import CONFIG_DIR
 from tests.shared_data import SHARED, needs
 
 C3D = SHARED / "samples" / "c3d"
-WALK = C3D / "Walking_Hybrid_1_1.c3d"        # Qualisys, float storage, gaps stored as (0, 0, 0)
-EB_INT = C3D / "Eb015pi.c3d"                 # integer storage, invalid residuals
-EB_REAL = C3D / "Eb015pr.c3d"                # the same take, float storage
-EB_DEC = C3D / "Eb015vr.c3d"                 # the same take, DEC floats
-PC = C3D / "pc_real.c3d"                     # float storage, invalid residuals, 36 markers
+WALK = C3D / "Walking_Hybrid_1_1.c3d"  # Qualisys, float storage, gaps stored as (0, 0, 0)
+EB_INT = C3D / "Eb015pi.c3d"  # integer storage, invalid residuals
+EB_REAL = C3D / "Eb015pr.c3d"  # the same take, float storage
+EB_DEC = C3D / "Eb015vr.c3d"  # the same take, DEC floats
+PC = C3D / "pc_real.c3d"  # float storage, invalid residuals, 36 markers
 AMC = SHARED / "data" / "hdm05_cuts11" / "mm" / "HDM_mm_squat1Reps_040_120.amc"
 BVH = SHARED / "samples" / "bvh" / "test_freebvh.bvh"
 
-NAMES = ["dynammo", "filter-bases", "linear", "lrmf", "pca", "pchip", "pose-prior", "psc", "svt", "trnn"]
+NAMES = [
+    "dynammo",
+    "filter-bases",
+    "learned",
+    "linear",
+    "lrmf",
+    "onnx",
+    "pca",
+    "pchip",
+    "pose-prior",
+    "psc",
+    "spline",
+    "svt",
+    "trnn",
+]
+TRAINED = {"learned", "onnx"}  # need a model file (checkpoint / path: ???)
 
 
 def refine(capsys, *argv) -> tuple[int, str, str]:
@@ -47,7 +63,7 @@ def refine(capsys, *argv) -> tuple[int, str, str]:
 def error_line(err: str) -> str:
     lines = err.strip().splitlines()
     assert lines and lines[0].startswith("mocapkit: error: "), err
-    assert len(lines) == 2 and lines[1].startswith("(set MOCAPKIT_DEBUG=1"), err   # the error is one line
+    assert len(lines) == 2 and lines[1].startswith("(set MOCAPKIT_DEBUG=1"), err  # the error is one line
     return lines[0]
 
 
@@ -56,21 +72,22 @@ def error_line(err: str) -> str:
 
 def test_configs_are_the_registry():
     assert refiner_names() == NAMES
-    primary = yaml.safe_load((CONFIG_DIR / "refiner.yaml").read_text())
-    assert primary["defaults"][0] == {"refiner": "linear"}
-    stable = set(NAMES)                                           # every config holds its class defaults
+    primary = yaml.safe_load((CONFIG_DIR / "refinement" / "method.yaml").read_text())
+    assert primary["defaults"][0] == {"method": "linear"}
     for name in NAMES:
-        node = yaml.safe_load((CONFIG_DIR / "refiner" / f"{name}.yaml").read_text())
-        assert node["_target_"].startswith("mocapkit.classical."), name
-        if name not in stable:
-            continue
-        refiner = build_refiner(name)
+        node = yaml.safe_load((CONFIG_DIR / "refinement" / "method" / f"{name}.yaml").read_text())
+        assert node["_target_"].startswith("mocapkit.refinement."), name
+        extra = [f"{key}=model.file" for key, value in node.items() if value == "???"]
+        assert bool(extra) == (name in TRAINED), name
+        refiner = build_refiner(name, extra)
         signature = inspect.signature(type(refiner).__init__).parameters
         for key, value in node.items():
-            if key != "_target_":
+            if key != "_target_" and value != "???":
                 assert key in signature, (name, key)
-                assert signature[key].default == value, (name, key, value)   # the YAML holds the class defaults
-        assert set(signature) - set(node) <= {"self", "dtype"}, name        # every parameter is declared
+                default = signature[key].default
+                default = list(default) if isinstance(default, tuple) else default
+                assert default == value, (name, key, value)  # the YAML holds the class defaults
+        assert set(signature) - set(node) <= {"self", "dtype"}, name  # every parameter is declared
 
 
 def test_set_overrides_and_their_errors(capsys):
@@ -83,6 +100,14 @@ def test_set_overrides_and_their_errors(capsys):
     rc, _, err = refine(capsys, "in.c3d", "out.c3d", "--method", "nope")
     line = error_line(err)
     assert rc == 2 and "'nope'" in line and all(name in line for name in NAMES)
+    rc, _, err = refine(capsys, "in.c3d", "out.c3d", "--out", "other.c3d", "--method", "linear")
+    assert rc == 2 and "give OUT once" in error_line(err)
+
+
+@needs(AMC)
+def test_out_may_be_given_as_an_option(tmp_path, capsys):
+    rc, printed, err = refine(capsys, AMC, "--out", tmp_path / "squat.npz", "--method", "pchip")
+    assert rc == 0 and (tmp_path / "squat.npz").is_file(), err
 
 
 # --------------------------------------------------------------------------- C3D in, C3D out
@@ -102,12 +127,12 @@ def _check_c3d(src: Path, out: Path, capture: str) -> None:
     assert after.joint_names == before.joint_names and after.fps == before.fps
     assert after.metadata["events"] == before.metadata["events"]
     expected = LinearInterpolation().refine(before)
-    filled = before.missing & ~expected.missing                             # [frames, markers]
+    filled = before.missing & ~expected.missing  # [frames, markers]
     assert filled.any() and expected.missing.any()
 
-    xyz_a, xyz_b = a["data"]["points"][:3], b["data"]["points"][:3]        # [3, markers, frames]
+    xyz_a, xyz_b = a["data"]["points"][:3], b["data"]["points"][:3]  # [3, markers, frames]
     res_a, res_b = (c["data"]["meta_points"]["residuals"][0] for c in (a, b))
-    kept = ~filled.T                                                        # [markers, frames]
+    kept = ~filled.T  # [markers, frames]
     observed = ~before.missing.T
     # every originally observed sample, and every sample not filled, is bit-identical
     assert np.array_equal(xyz_a[:, observed], xyz_b[:, observed])
@@ -126,24 +151,29 @@ def _check_c3d(src: Path, out: Path, capture: str) -> None:
     for j in np.flatnonzero(left.any(axis=0)):
         name = before.joint_names[j]
         first = int(np.flatnonzero(left[:, j])[0])
-        assert re.search(rf"^  {re.escape(name)}\s+{int(left[:, j].sum())} samples: frames {first}[-\s]", capture,
-                         re.MULTILINE), name
+        assert re.search(
+            rf"^  {re.escape(name)}\s+{int(left[:, j].sum())} samples: frames {first}[-\s]", capture, re.MULTILINE
+        ), name
     for j in np.flatnonzero(filled.any(axis=0)):
         n = int(filled[:, j].sum())
-        assert re.search(rf"^{re.escape(before.joint_names[j])}\s+filled {n} samples, longest gap \d+ frames "
-                         rf"\(\d+\.\d{{3}} s\)", capture, re.MULTILINE)
+        assert re.search(
+            rf"^{re.escape(before.joint_names[j])}\s+filled {n} samples, longest gap \d+ frames "
+            rf"\(\d+\.\d{{3}} s\)",
+            capture,
+            re.MULTILINE,
+        )
 
 
 @needs(C3D)
 @pytest.mark.parametrize("name", ["Walking_Hybrid_1_1.c3d", "Eb015pi.c3d", "Eb015vr.c3d"])
 def test_real_c3d_gaps_filled_in_place(tmp_path, capsys, name):
     src, out = C3D / name, tmp_path / f"refined_{name}"
-    assert read_c3d(src).metadata["gaps"]["total"] > 0                      # real gaps, as exported
+    assert read_c3d(src).metadata["gaps"]["total"] > 0  # real gaps, as exported
     rc, printed, err = refine(capsys, src, out, "--method", "linear")
     assert rc == 0, err
     assert f"wrote {out}" in printed
     _check_c3d(src, out, printed)
-    if name == "Eb015pi.c3d":                                               # integer storage stays integer
+    if name == "Eb015pi.c3d":  # integer storage stays integer
         assert "integer storage" in printed
         assert read_c3d(out).metadata["storage"] == "integer"
         assert out.stat().st_size == src.stat().st_size
@@ -178,15 +208,23 @@ def test_amc_with_a_gap_to_npz_and_c3d(tmp_path, capsys, monkeypatch):
     truth = real_read(AMC)
     gaps = {"lwrist": slice(60, 90), "rtibia": slice(100, 112)}
 
-    def read_with_gap(path, **options):              # AMC holds angles, never gaps: cut them out after reading
+    def read_with_gap(path, **options):  # AMC holds angles, never gaps: cut them out after reading
         motion = real_read(path, **options)
         if Path(path) != AMC:
             return motion
         positions = motion.positions.copy()
         for joint, frames in gaps.items():
             positions[frames, motion.joint_names.index(joint)] = np.nan
-        return Motion(positions=positions, joint_names=motion.joint_names, fps=motion.fps, parents=motion.parents,
-                      up_axis=motion.up_axis, name=motion.name, source=motion.source, metadata=motion.metadata)
+        return Motion(
+            positions=positions,
+            joint_names=motion.joint_names,
+            fps=motion.fps,
+            parents=motion.parents,
+            up_axis=motion.up_axis,
+            name=motion.name,
+            source=motion.source,
+            metadata=motion.metadata,
+        )
 
     monkeypatch.setattr(motion_io, "read_motion", read_with_gap)
     gap = np.zeros(truth.missing.shape, bool)
@@ -195,15 +233,19 @@ def test_amc_with_a_gap_to_npz_and_c3d(tmp_path, capsys, monkeypatch):
 
     rc, printed, err = refine(capsys, AMC, tmp_path / "squat.npz", "--method", "pchip")
     assert rc == 0, err
-    assert re.search(r"^lwrist\s+filled 30 samples, longest gap 30 frames \(0\.250 s\)$", printed, re.MULTILINE), printed
-    assert re.search(r"^rtibia\s+filled 12 samples, longest gap 12 frames \(0\.100 s\)$", printed, re.MULTILINE), printed
+    assert re.search(r"^lwrist\s+filled 30 samples, longest gap 30 frames \(0\.250 s\)$", printed, re.MULTILINE), (
+        printed
+    )
+    assert re.search(r"^rtibia\s+filled 12 samples, longest gap 12 frames \(0\.100 s\)$", printed, re.MULTILINE), (
+        printed
+    )
     with np.load(tmp_path / "squat.npz") as z:
         assert z["positions"].dtype == np.float32 and z["positions"].shape == truth.positions.shape
         assert tuple(z["joint_names"]) == truth.joint_names and float(z["fps"]) == 120.0
         assert not z["missing"].any() and np.array_equal(z["filled"], gap)
-        assert np.array_equal(z["positions"][~gap], truth.positions[~gap])       # observed joints untouched
+        assert np.array_equal(z["positions"][~gap], truth.positions[~gap])  # observed joints untouched
         error = np.linalg.norm(z["positions"][gap] - truth.positions[gap], axis=1)
-        assert error.max() < 0.10 and np.sqrt((error ** 2).mean()) < 0.05        # a smooth squat: within cm
+        assert error.max() < 0.10 and np.sqrt((error**2).mean()) < 0.05  # a smooth squat: within cm
         positions = z["positions"]
 
     rc, printed, err = refine(capsys, AMC, tmp_path / "squat.c3d", "--method", "pchip")
@@ -236,7 +278,7 @@ def test_data_driven_method_needs_train_and_checks_layout(tmp_path, capsys, monk
     assert rc == 0, err
     assert "trained on 1 motion file(s)" in printed and f"skipped training file {folder / 'broken.c3d'}" in printed
 
-    rc, _, err = refine(capsys, EB_REAL, tmp_path / "x.c3d", "--method", "linear", "--train", PC)   # 36 markers
+    rc, _, err = refine(capsys, EB_REAL, tmp_path / "x.c3d", "--method", "linear", "--train", PC)  # 36 markers
     line = error_line(err)
     assert rc == 2 and "Eb015pr.c3d" in line and "another skeleton layout" in line
 
@@ -251,12 +293,13 @@ def test_data_driven_method_needs_train_and_checks_layout(tmp_path, capsys, monk
 def test_bad_input_exits_2_naming_the_file(tmp_path, capsys):
     out = tmp_path / "out.c3d"
     all_nan = tmp_path / "all_nan.c3d"
-    write_c3d(all_nan, Motion(positions=np.full((40, 3, 3), np.nan, np.float32), joint_names=("A", "B", "C"),
-                              fps=100.0))
+    write_c3d(
+        all_nan, Motion(positions=np.full((40, 3, 3), np.nan, np.float32), joint_names=("A", "B", "C"), fps=100.0)
+    )
     rc, _, err = refine(capsys, all_nan, out, "--method", "linear")
     assert rc == 2 and "all_nan.c3d" in error_line(err) and "every entry is missing" in err
 
-    c3d = ezc3d.c3d(str(PC))                                 # a real file with every residual invalidated
+    c3d = ezc3d.c3d(str(PC))  # a real file with every residual invalidated
     data = c3d.c3d_swig.data()
     markers, frames = c3d["data"]["points"].shape[1:]
     for f in range(frames):
@@ -280,8 +323,14 @@ def test_bad_input_exits_2_naming_the_file(tmp_path, capsys):
 
 
 def _first_frames(motion: Motion, n: int) -> Motion:
-    return Motion(positions=motion.positions[:n], joint_names=motion.joint_names, fps=motion.fps,
-                  missing=motion.missing[:n], up_axis=motion.up_axis, name=motion.name)
+    return Motion(
+        positions=motion.positions[:n],
+        joint_names=motion.joint_names,
+        fps=motion.fps,
+        missing=motion.missing[:n],
+        up_axis=motion.up_axis,
+        name=motion.name,
+    )
 
 
 @needs(BVH)
@@ -294,11 +343,10 @@ def test_inf_in_an_observed_entry(tmp_path, capsys):
     bad = tmp_path / "inf.bvh"
     bad.write_text("\n".join(lines) + "\n")
     rc, _, err = refine(capsys, bad, tmp_path / "out.npz", "--method", "linear")
-    assert rc == 2 and "inf.bvh" in error_line(err)                 # the reader rejects it, naming file and line
+    assert rc == 2 and "inf.bvh" in error_line(err)  # the reader rejects it, naming file and line
 
-    motion = Motion(positions=np.zeros((20, 2, 3), np.float32), joint_names=("a", "b"), fps=30.0,
-                    source="take.c3d")
-    motion.positions[5, 1, 2] = np.inf                               # what a reader could let through
+    motion = Motion(positions=np.zeros((20, 2, 3), np.float32), joint_names=("a", "b"), fps=30.0, source="take.c3d")
+    motion.positions[5, 1, 2] = np.inf  # what a reader could let through
     with pytest.raises(RefinementError, match=r"take\.c3d: non-finite value at frame 5 of marker 'b'"):
         refine_motion(PchipInterpolation(), motion)
 
@@ -309,15 +357,15 @@ def spiky_walk(tmp_path: Path) -> tuple[Path, int, int, np.ndarray]:
     spiky = tmp_path / "spiky.c3d"
     c3d = ezc3d.c3d(str(WALK))
     points = c3d["data"]["points"]
-    valid = np.isfinite(points[:3]).all(axis=0) & (points[:3] != 0).any(axis=0)   # [markers, frames]
+    valid = np.isfinite(points[:3]).all(axis=0) & (points[:3] != 0).any(axis=0)  # [markers, frames]
     marker, frame = np.argwhere(valid[:, 20:70])[0]
-    points[0, marker, 20 + frame] += 300.0                                  # a 30 cm spike (mm file)
+    points[0, marker, 20 + frame] += 300.0  # a 30 cm spike (mm file)
     c3d["data"]["points"] = points
     c3d.write(str(spiky))
     return spiky, int(marker), int(20 + frame), ezc3d.c3d(str(spiky))["data"]["points"][:3]
 
 
-@needs(C3D)   # on the test: a skip mark on the helper it calls does nothing
+@needs(C3D)  # on the test: a skip mark on the helper it calls does nothing
 def test_robust_method_keeps_observed_samples_unless_asked_to_repair(tmp_path, capsys):
     """TrNN flags observed outliers; the command writes only the gap fills unless --repair-outliers."""
     spiky, marker, frame, before = spiky_walk(tmp_path)
@@ -330,4 +378,4 @@ def test_robust_method_keeps_observed_samples_unless_asked_to_repair(tmp_path, c
     assert rc == 0, err
     after = ezc3d.c3d(str(repaired))["data"]["points"][:3]
     assert "repaired" in printed
-    assert abs(after[0, marker, frame] - before[0, marker, frame]) > 100.0   # the spike was pulled back
+    assert abs(after[0, marker, frame] - before[0, marker, frame]) > 100.0  # the spike was pulled back

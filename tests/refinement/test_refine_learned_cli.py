@@ -5,6 +5,7 @@ A tiny bigru refiner (8 units, window 32, one epoch on synthetic CMU31 takes) is
 saved as a checkpoint and exported to ONNX; nothing here depends on files outside the test's folders (the
 HDM05 AMC round trip is skipped without the shared data).
 """
+
 from __future__ import annotations
 
 import os
@@ -19,17 +20,17 @@ import pytest
 
 from mocapkit.cli import main
 from mocapkit.datasets.formats.c3d import known_layout, read_c3d, write_c3d
-from mocapkit.motion.layouts import CMU31, NTU25
 from mocapkit.motion.container import Motion
-from tests.shared_data import SHARED, needs
+from mocapkit.motion.layouts import CMU31, NTU25
 from tests.refinement.test_refine_cli import error_line, refine
+from tests.shared_data import SHARED, needs
 
 AMC = SHARED / "data" / "hdm05_cuts11" / "mm" / "HDM_mm_squat1Reps_040_120.amc"
 REPO = Path(__file__).resolve().parents[2]
 WINDOW = 32
-FRAMES = 200                                   # longer than the window: refined in overlapping windows
+FRAMES = 200  # longer than the window: refined in overlapping windows
 GAPS = {"lwrist": slice(50, 80), "rtibia": slice(120, 131), "head": slice(150, 152)}
-LEADING = 3                                    # frames with every joint missing at the start: never invented
+LEADING = 3  # frames with every joint missing at the start: never invented
 
 
 def synthetic_take(seed: int, frames: int, names=CMU31.joint_names, parents=CMU31.parents, group="a") -> Motion:
@@ -39,8 +40,15 @@ def synthetic_take(seed: int, frames: int, names=CMU31.joint_names, parents=CMU3
     base = np.asarray([0.0, 1.0, 0.0]) + rng.normal(0.0, 0.3, (len(names), 3))
     freq, phase = rng.uniform(0.3, 1.5, (1, len(names), 3)), rng.uniform(0, 6, (1, len(names), 3))
     positions = base[None] + 0.05 * np.sin(2 * np.pi * freq * t + phase)
-    return Motion(positions=positions.astype(np.float32), joint_names=tuple(names), parents=parents, fps=120.0,
-                  up_axis="y", name=f"take{seed}", metadata={"group": group})
+    return Motion(
+        positions=positions.astype(np.float32),
+        joint_names=tuple(names),
+        parents=parents,
+        fps=120.0,
+        up_axis="y",
+        name=f"take{seed}",
+        metadata={"group": group},
+    )
 
 
 def with_gaps(motion: Motion) -> Motion:
@@ -48,8 +56,14 @@ def with_gaps(motion: Motion) -> Motion:
     for joint, frames in GAPS.items():
         positions[frames, motion.joint_names.index(joint)] = np.nan
     positions[:LEADING] = np.nan
-    return Motion(positions=positions, joint_names=motion.joint_names, parents=motion.parents, fps=motion.fps,
-                  up_axis=motion.up_axis, name=motion.name)
+    return Motion(
+        positions=positions,
+        joint_names=motion.joint_names,
+        parents=motion.parents,
+        fps=motion.fps,
+        up_axis=motion.up_axis,
+        name=motion.name,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -64,14 +78,30 @@ def trained(tmp_path_factory):
     torch.set_num_threads(1)
     folder = tmp_path_factory.mktemp("refiner")
     motions = [synthetic_take(seed, 96) for seed in range(4)]
-    module = train_on_motions("refine_bigru", motions, [
-        "model.hidden=8", "model.layers=1", f"data.window={WINDOW}", "data.windows_per_epoch=64",
-        "data.batch_size=16", "trainer.max_epochs=1", "data.eval_windows_per_clip=1"])
-    with torch.no_grad():   # one short epoch leaves the last layer near its zero start: make the corrections visible
+    module = train_on_motions(
+        "refine_bigru",
+        motions,
+        [
+            "model.hidden=8",
+            "model.layers=1",
+            f"data.window={WINDOW}",
+            "data.windows_per_epoch=64",
+            "data.batch_size=16",
+            "trainer.max_epochs=1",
+            "data.eval_windows_per_clip=1",
+        ],
+    )
+    with torch.no_grad():  # one short epoch leaves the last layer near its zero start: make the corrections visible
         torch.nn.init.normal_(module.model.out.weight, std=0.05, generator=torch.Generator().manual_seed(0))
     ckpt = folder / "best.ckpt"
-    torch.save({"state_dict": module.state_dict(), "hyper_parameters": dict(module.hparams),
-                "pytorch-lightning_version": lightning.__version__}, ckpt)
+    torch.save(
+        {
+            "state_dict": module.state_dict(),
+            "hyper_parameters": dict(module.hparams),
+            "pytorch-lightning_version": lightning.__version__,
+        },
+        ckpt,
+    )
     onnx = folder / "model.onnx"
     export_refiner(module.model, onnx, dict(module.hparams.skeleton), trace_shape=(2, 4), check_shape=(2, 40))
     return ckpt, onnx
@@ -83,8 +113,6 @@ def gappy(tmp_path_factory) -> Path:
     path = tmp_path_factory.mktemp("takes") / "gappy.c3d"
     write_c3d(path, with_gaps(synthetic_take(10, FRAMES)))
     return path
-
-
 
 
 def gap_mask(names) -> np.ndarray:
@@ -104,12 +132,12 @@ def test_c3d_labels_of_a_layout_give_its_hierarchy(tmp_path):
     assert motion.layout_name == "cmu31" and motion.parents == CMU31.parents
     assert motion.joint_names == CMU31.joint_names
 
-    order = np.random.default_rng(1).permutation(CMU31.num_joints)    # the same joints in another order
+    order = np.random.default_rng(1).permutation(CMU31.num_joints)  # the same joints in another order
     names = tuple(CMU31.joint_names[i] for i in order)
     shuffled = synthetic_take(0, 10, names=names, parents=None)
     write_c3d(tmp_path / "shuffled.c3d", shuffled)
     motion = read_c3d(tmp_path / "shuffled.c3d")
-    assert motion.joint_names == names and motion.layout_name == "cmu31"       # the file's order is kept
+    assert motion.joint_names == names and motion.layout_name == "cmu31"  # the file's order is kept
     for j, name in enumerate(names):
         parent = CMU31.parents[CMU31.index(name)]
         expected = -1 if parent < 0 else names.index(CMU31.joint_names[parent])
@@ -140,7 +168,7 @@ def test_amc_written_as_c3d_reads_back_as_cmu31(tmp_path, capsys):
     assert back.up_axis == "y" and back.fps == 120.0 and not back.missing.any()
     np.testing.assert_allclose(back.positions, amc.positions, atol=1e-6)
 
-    rc, _, err = refine(capsys, AMC, tmp_path / "refined.c3d", "--method", "pchip")     # what refine writes
+    rc, _, err = refine(capsys, AMC, tmp_path / "refined.c3d", "--method", "pchip")  # what refine writes
     assert rc == 0, err
     refined = read_c3d(tmp_path / "refined.c3d")
     assert refined.layout_name == "cmu31" and refined.parents == CMU31.parents
@@ -165,19 +193,19 @@ def test_checkpoint_and_onnx_fill_the_gaps_alike(trained, gappy, tmp_path, capsy
         assert f"method {model} ({name})" in printed, printed
         assert re.search(r"^lwrist\s+filled 30 samples, longest gap 30 frames", printed, re.MULTILINE), printed
         assert re.search(r"^rtibia\s+filled 11 samples", printed, re.MULTILINE), printed
-        assert f"0-{LEADING - 1} (leading)" in printed                    # empty frames are not invented
+        assert f"0-{LEADING - 1} (leading)" in printed  # empty frames are not invented
         refined = read_c3d(out)
         assert refined.joint_names == source.joint_names and refined.layout_name == "cmu31"
-        assert np.array_equal(refined.missing, source.missing & ~gap)    # every gap filled, the leading frames left
+        assert np.array_equal(refined.missing, source.missing & ~gap)  # every gap filled, the leading frames left
         observed = ~source.missing
-        assert np.array_equal(refined.positions[observed], source.positions[observed])   # bit-identical
+        assert np.array_equal(refined.positions[observed], source.positions[observed])  # bit-identical
         assert np.isfinite(refined.positions[gap]).all()
-        assert np.abs(refined.positions[gap]).max() < 5.0                 # metres: a body, not garbage
+        assert np.abs(refined.positions[gap]).max() < 5.0  # metres: a body, not garbage
         outputs[kind] = refined.positions
 
     np.testing.assert_allclose(outputs["onnx"][gap], outputs["ckpt"][gap], atol=1e-4, rtol=0)
 
-    rc, _, err = refine(capsys, gappy, tmp_path / "ckpt.npz", "--method", ckpt)            # npz out too
+    rc, _, err = refine(capsys, gappy, tmp_path / "ckpt.npz", "--method", ckpt)  # npz out too
     assert rc == 0, err
     with np.load(tmp_path / "ckpt.npz") as z:
         assert np.array_equal(z["filled"], gap)
@@ -188,8 +216,9 @@ def test_repair_outliers_changes_observed_samples_only_when_asked(trained, gappy
     _, onnx = trained
     source = read_c3d(gappy)
     observed = ~source.missing
-    rc, printed, err = refine(capsys, gappy, tmp_path / "repaired.c3d", "--onnx", onnx, "--repair-outliers",
-                              "--set", "repair_threshold=0.001")
+    rc, printed, err = refine(
+        capsys, gappy, tmp_path / "repaired.c3d", "--onnx", onnx, "--repair-outliers", "--set", "repair_threshold=0.001"
+    )
     assert rc == 0, err
     assert "repaired" in printed
     repaired = read_c3d(tmp_path / "repaired.c3d")
@@ -207,12 +236,11 @@ def test_screen_outliers_in_front_of_the_onnx_refiner_pulls_a_spike_back(trained
     _, onnx = trained
     source = read_c3d(gappy)
     joint, frame = source.joint_names.index("lhumerus"), 150
-    assert not source.missing[frame - 3:frame + 4, joint].any()
+    assert not source.missing[frame - 3 : frame + 4, joint].any()
     positions = source.positions.copy()
-    positions[frame, joint] += [0.2, 0.0, 0.0]                             # a 20 cm spike
+    positions[frame, joint] += [0.2, 0.0, 0.0]  # a 20 cm spike
     write_c3d(tmp_path / "spiky.c3d", replace(source, positions=positions))
-    rc, printed, err = refine(capsys, tmp_path / "spiky.c3d", tmp_path / "out.c3d", "--onnx", onnx,
-                              "--screen-outliers")
+    rc, printed, err = refine(capsys, tmp_path / "spiky.c3d", tmp_path / "out.c3d", "--onnx", onnx, "--screen-outliers")
     assert rc == 0, err
     assert "MedianScreen(OnnxRefiner)" in printed and "repaired" in printed
     out = read_c3d(tmp_path / "out.c3d")
@@ -229,13 +257,24 @@ def test_joints_in_another_order_with_an_extra_marker(trained, tmp_path, capsys)
         positions[frames, names.index(joint)] = np.nan
     positions[60:70, names.index("extra")] = np.nan
     write_c3d(tmp_path / "mixed.c3d", Motion(positions=positions, joint_names=names, fps=120.0, up_axis="y"))
-    rc, printed, err = refine(capsys, tmp_path / "mixed.c3d", tmp_path / "out.c3d", "--method", ckpt,
-                              "--set", "window=48", "--set", "overlap=8", "--set", "max_empty_frames=0")
+    rc, printed, err = refine(
+        capsys,
+        tmp_path / "mixed.c3d",
+        tmp_path / "out.c3d",
+        "--method",
+        ckpt,
+        "--set",
+        "window=48",
+        "--set",
+        "overlap=8",
+        "--set",
+        "max_empty_frames=0",
+    )
     assert rc == 0, err
     out, source = read_c3d(tmp_path / "out.c3d"), read_c3d(tmp_path / "mixed.c3d")
     assert out.joint_names == names
-    assert not out.missing[:, :-1].any()                                  # the trained joints: filled
-    assert out.missing[60:70, -1].all()                                   # the extra marker: left as it was
+    assert not out.missing[:, :-1].any()  # the trained joints: filled
+    assert out.missing[60:70, -1].all()  # the extra marker: left as it was
     assert "interior, not filled by the method" in printed
     assert np.array_equal(out.positions[~source.missing], source.positions[~source.missing])
 
@@ -243,16 +282,19 @@ def test_joints_in_another_order_with_an_extra_marker(trained, tmp_path, capsys)
 def test_onnx_path_never_imports_torch(trained, gappy, tmp_path):
     _, onnx = trained
     out = tmp_path / "no_torch.c3d"
-    code = ("import sys\n"
-            "from mocapkit.refinement.apply import refine_file\n"
-            f"report = refine_file({str(gappy)!r}, {str(out)!r}, onnx={str(onnx)!r}, screen_outliers=True)\n"
-            "assert report.filled > 0, report.to_text()\n"
-            "heavy = sorted(m for m in sys.modules if m.split('.')[0] in ('torch', 'lightning'))\n"
-            "assert not heavy, heavy[:5]\n"
-            "print('ok', report.filled)\n")
+    code = (
+        "import sys\n"
+        "from mocapkit.refinement.apply import refine_file\n"
+        f"report = refine_file({str(gappy)!r}, {str(out)!r}, onnx={str(onnx)!r}, screen_outliers=True)\n"
+        "assert report.filled > 0, report.to_text()\n"
+        "heavy = sorted(m for m in sys.modules if m.split('.')[0] in ('torch', 'lightning'))\n"
+        "assert not heavy, heavy[:5]\n"
+        "print('ok', report.filled)\n"
+    )
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
-    done = subprocess.run([sys.executable, "-c", code], cwd=REPO, env=env, capture_output=True, text=True, check=False,
-                          timeout=120)
+    done = subprocess.run(
+        [sys.executable, "-c", code], cwd=REPO, env=env, capture_output=True, text=True, check=False, timeout=120
+    )
     assert done.returncode == 0, done.stderr[-2000:]
     assert done.stdout.startswith("ok ") and out.is_file()
 
@@ -271,17 +313,17 @@ def test_unknown_or_bad_set_keys_fail_listing_the_parameters(trained, gappy, tmp
     rc, _, err = refine(capsys, gappy, out, "--onnx", onnx, "--set", "hidden=4")
     assert rc == 2 and "OnnxRefiner" in error_line(err) and "repair_threshold" in err
     for setting in ("_target_=builtins.open", "+refiner._target_=builtins.open", "refiner.checkpoint=/etc/passwd"):
-        rc, _, err = refine(capsys, gappy, out, "--method", ckpt, "--set", setting)    # only the listed keys
+        rc, _, err = refine(capsys, gappy, out, "--method", ckpt, "--set", setting)  # only the listed keys
         assert rc == 2 and "has no parameter" in error_line(err), setting
     rc, _, err = refine(capsys, gappy, out, "--method", ckpt, "--set", "window=abc")
-    assert rc == 2 and "window must be an integer" in error_line(err)
+    assert rc == 2 and "window must be an integer" in error_line(err) and "'abc'" in error_line(err)
     rc, _, err = refine(capsys, gappy, out, "--onnx", onnx, "--set", "overlap=40", "--set", "window=32")
     assert rc == 2 and "overlap=40" in error_line(err)
     rc, _, err = refine(capsys, gappy, out, "--method", ckpt, "--train", gappy)
     assert rc == 2 and "--train" in error_line(err) and "trained refiner" in err
     rc, _, err = refine(capsys, gappy, out, "--method", tmp_path / "absent.ckpt")
     assert rc == 2 and "absent.ckpt" in error_line(err)
-    with pytest.raises(SystemExit):                                      # argparse: one of --method / --onnx
+    with pytest.raises(SystemExit):  # argparse: one of --method / --onnx
         main(["refine", str(gappy), str(out), "--method", "linear", "--onnx", str(onnx)])
     capsys.readouterr()
     assert not out.exists()
@@ -304,8 +346,9 @@ def test_another_layout_fails_naming_the_missing_joints(trained, tmp_path, capsy
 
     # the right joints in another up axis fail, naming both
     take = with_gaps(synthetic_take(13, 80))
-    write_c3d(tmp_path / "zup.c3d", Motion(positions=take.positions, joint_names=take.joint_names, fps=120.0,
-                                           up_axis="z"))
+    write_c3d(
+        tmp_path / "zup.c3d", Motion(positions=take.positions, joint_names=take.joint_names, fps=120.0, up_axis="z")
+    )
     rc, _, err = refine(capsys, tmp_path / "zup.c3d", tmp_path / "out.c3d", "--onnx", onnx)
     assert rc == 2 and "z-up" in error_line(err) and "y-up" in err
     assert not (tmp_path / "out.c3d").exists()
@@ -315,8 +358,8 @@ def test_a_take_at_another_frame_rate_is_refined_at_the_model_rate_and_brought_b
     from mocapkit.refinement.learned import OnnxRefiner
 
     _, onnx = trained
-    slow = with_gaps(synthetic_take(13, FRAMES))                     # 120 fps, the network's rate
-    fast = slow.resample(240.0)                                      # the same take at 240 fps (gaps included)
+    slow = with_gaps(synthetic_take(13, FRAMES))  # 120 fps, the network's rate
+    fast = slow.resample(240.0)  # the same take at 240 fps (gaps included)
     refiner = OnnxRefiner(str(onnx)).fit()
     at_120, at_240 = refiner.refine(slow), refiner.refine(fast)
     assert at_240.metadata["refinement"]["resampled"]["refined_at_fps"] == 120.0
@@ -325,17 +368,18 @@ def test_a_take_at_another_frame_rate_is_refined_at_the_model_rate_and_brought_b
     even = fast.missing[::2]
     np.testing.assert_allclose(at_240.positions[::2][even], at_120.positions[even], atol=1e-6)
     odd = fast.missing[1:-1:2] & ~at_240.missing[1:-1:2]
-    np.testing.assert_allclose(at_240.positions[1:-1:2][odd],
-                               0.5 * (at_120.positions[:-1] + at_120.positions[1:])[odd], atol=1e-6)
+    np.testing.assert_allclose(
+        at_240.positions[1:-1:2][odd], 0.5 * (at_120.positions[:-1] + at_120.positions[1:])[odd], atol=1e-6
+    )
     np.testing.assert_array_equal(at_240.positions[~fast.missing], fast.positions[~fast.missing])
-    assert at_240.missing[:2 * LEADING].all() and not at_240.missing[2 * LEADING:].any()
+    assert at_240.missing[: 2 * LEADING].all() and not at_240.missing[2 * LEADING :].any()
 
     path = tmp_path / "fast.c3d"
     write_c3d(path, fast)
     rc, out, _ = refine(capsys, path, tmp_path / "out.c3d", "--onnx", onnx)
     assert rc == 0 and "refined at the model's 120 fps" in out and "240 fps frames" in out
     written = read_c3d(tmp_path / "out.c3d")
-    assert written.fps == 240.0 and not written.missing[2 * LEADING:].any()
+    assert written.fps == 240.0 and not written.missing[2 * LEADING :].any()
     observed = ~read_c3d(path).missing
     np.testing.assert_array_equal(written.positions[observed], read_c3d(path).positions[observed])
 
@@ -367,8 +411,9 @@ def test_profile_script_splits_the_time_by_operator_part_and_node(trained, capsy
     script = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(script)
     _, onnx = trained
-    script.main([str(onnx), "--frames", "120", "--clips", "2", "--runs", "3", "--top", "3",
-                 "--data", str(SHARED / "data")])
+    script.main(
+        [str(onnx), "--frames", "120", "--clips", "2", "--runs", "3", "--top", "3", "--data", str(SHARED / "data")]
+    )
     out = capsys.readouterr().out
     operators = out.split("per operator type")[1].split("per part of the network")[0]
     parts = out.split("per part of the network")[1].split("slowest 3 nodes")[0]

@@ -3,23 +3,35 @@
 The folder is built from the synthetic HDM05 generator's output, renamed to HDM05's own layout
 (``<actor>/HDM_<actor>_<class>_<nnn>_120.amc`` beside ``<actor>/HDM_<actor>.asf``), so it runs in CI.
 """
+
 from __future__ import annotations
 
 import json
 from pathlib import Path
 
 import pytest
+
 from tests.shared_data import synthetic_hdm05_folder
 
-TINY = ["model.hidden=8", "model.layers=1", "data.window=48", "data.windows_per_epoch=64", "data.batch_size=16",
-        "data.eval_windows_per_clip=1", "trainer.max_epochs=1", "logger=none", "callbacks.learning_rate=null",
-        "trainer.enable_progress_bar=false"]
+TINY = [
+    "model.hidden=8",
+    "model.layers=1",
+    "data.window=48",
+    "data.windows_per_epoch=64",
+    "data.batch_size=16",
+    "data.eval_windows_per_clip=1",
+    "trainer.max_epochs=1",
+    "logger=none",
+    "callbacks.learning_rate=null",
+    "trainer.enable_progress_bar=false",
+]
 
 
 @pytest.fixture(scope="module")
 def hdm05_folder(tmp_path_factory) -> Path:
-    return synthetic_hdm05_folder(tmp_path_factory, ("walk2StepsLstart", "hopBothLegs1hops"), clips_per_actor=2,
-                                  max_frames=160)
+    return synthetic_hdm05_folder(
+        tmp_path_factory, ("walk2StepsLstart", "hopBothLegs1hops"), clips_per_actor=2, max_frames=160
+    )
 
 
 @pytest.fixture(scope="module")
@@ -28,8 +40,16 @@ def refiner_run(hdm05_folder, tmp_path_factory) -> Path:
     from mocapkit.train.training import train
 
     out = tmp_path_factory.mktemp("runs")
-    cfg = compose_config(["experiment=refine_bigru", f"data.root={hdm05_folder}", "data.test_groups=[mm]",
-                          f"output_root={out}", "run_name=tiny", *TINY])
+    cfg = compose_config(
+        [
+            "experiment=refine_bigru",
+            f"data.root={hdm05_folder}",
+            "data.test_groups=[mm]",
+            f"output_root={out}",
+            "run_name=tiny",
+            *TINY,
+        ]
+    )
     return Path(train(cfg))
 
 
@@ -62,9 +82,13 @@ def test_first_guess_rules_are_recorded_and_can_be_restored_for_old_runs(refiner
 def test_eval_writes_the_benchmark_table_with_classical_rows(refiner_run):
     from mocapkit.evaluation.evaluate import evaluate
 
-    overrides = [("eval.overrides=['seeds=[0]','benchmark.protocols=[continuous_missing@10,rdloss@0.3]',"
-                  "'only=[linear,pchip,learned]','benchmark.clips_per_fold=1','benchmark.max_frames=100',"
-                  "'benchmark.claims=[]']")]
+    overrides = [
+        (
+            "eval.overrides=['seeds=[0]','benchmark.protocols=[continuous_missing@10,rdloss@0.3]',"
+            "'only=[linear,pchip,learned]','benchmark.clips_per_fold=1','benchmark.max_frames=100',"
+            "'benchmark.claims=[]']"
+        )
+    ]
     report = evaluate(refiner_run / "best.ckpt", overrides)
     assert report["held_out"] == ["mm"]
     results = json.loads((refiner_run / "eval" / "results.json").read_text())
@@ -74,7 +98,7 @@ def test_eval_writes_the_benchmark_table_with_classical_rows(refiner_run):
     for cell in results["cells"]:
         if cell["method"] == "learned":
             fold = cell["detail"]["folds"]["mm"]
-            assert fold["fit_groups"] == ["bd"]                 # fitted (chosen) on the other performer only
+            assert fold["fit_groups"] == ["bd"]  # fitted (chosen) on the other performer only
             assert cell["metrics"]["coverage"] > 0.99 and cell["metrics"]["n_failed"] == 0
     table = (refiner_run / "eval" / "results.md").read_text()
     assert "learned (refine_bigru)" in table and "PCHIP" in table

@@ -1,9 +1,11 @@
 """Refinement metrics: Wang eq. 3.18/4.16 per-frame RMSE (cm), §4.2.3 matrix RMSE, mean 3-D error (mm)."""
+
 import numpy as np
 import pytest
 
-from mocapkit.refinement.gap_filling import LinearInterpolation
 from mocapkit.motion.container import Motion
+from mocapkit.refinement import corrupt
+from mocapkit.refinement.gap_filling import LinearInterpolation
 from mocapkit.refinement.metrics import (
     matrix_rmse,
     mean_joint_error,
@@ -11,7 +13,6 @@ from mocapkit.refinement.metrics import (
     score_refinement,
     sequence_rmse,
 )
-from mocapkit.refinement import corrupt
 
 
 def motion(positions):
@@ -23,10 +24,10 @@ def motion(positions):
 def pair():
     clean = np.zeros((4, 3, 3))
     refined = clean.copy()
-    refined[0, 0, 0] = 0.03                 # frame 0: 3 cm and 4 cm errors on the two corrupted markers
+    refined[0, 0, 0] = 0.03  # frame 0: 3 cm and 4 cm errors on the two corrupted markers
     refined[0, 1, 1] = 0.04
-    refined[1, 2] = [0.0, 0.0, 0.02]        # frame 1: one corrupted marker, 2 cm
-    refined[2, 0, 0] = 0.05                 # frame 2: an error on an UNcorrupted marker only
+    refined[1, 2] = [0.0, 0.0, 0.02]  # frame 1: one corrupted marker, 2 cm
+    refined[2, 0, 0] = 0.05  # frame 2: an error on an UNcorrupted marker only
     mask = np.zeros((4, 3), bool)
     mask[0, :2] = mask[1, 2] = mask[2, 1] = True
     return clean, refined, mask
@@ -35,16 +36,16 @@ def pair():
 def test_per_frame_rmse_is_wang_eq_3_18_in_cm(pair):
     clean, refined, mask = pair
     curve = per_frame_rmse(clean, refined, mask, numerator="corrupted")
-    assert curve[0] == pytest.approx(np.sqrt((3 ** 2 + 4 ** 2) / 2))       # divided by n_e = 2 markers
+    assert curve[0] == pytest.approx(np.sqrt((3**2 + 4**2) / 2))  # divided by n_e = 2 markers
     assert curve[1] == pytest.approx(2.0)
     assert curve[2] == pytest.approx(0.0)
-    assert np.isnan(curve[3])                                               # no corrupted entry in frame 3
+    assert np.isnan(curve[3])  # no corrupted entry in frame 3
     assert sequence_rmse(clean, refined, mask, "corrupted") == pytest.approx((np.sqrt(12.5) + 2.0 + 0.0) / 3)
 
 
 def test_literal_frame_numerator_counts_changes_to_uncorrupted_entries(pair):
     clean, refined, mask = pair
-    curve = per_frame_rmse(clean, refined, mask)                           # numerator="frame" (literal eq.)
+    curve = per_frame_rmse(clean, refined, mask)  # numerator="frame" (literal eq.)
     assert curve[0] == pytest.approx(np.sqrt(12.5)) and curve[2] == pytest.approx(5.0)
     with pytest.raises(ValueError, match="numerator"):
         per_frame_rmse(clean, refined, mask, numerator="all")
@@ -54,14 +55,14 @@ def test_matrix_rmse_and_mean_error(pair):
     clean, refined, mask = pair
     # §4.2.3: RMS over the 3 coordinates of each of the 4 corrupted entries
     assert matrix_rmse(clean, refined, mask) == pytest.approx(np.sqrt((9 + 16 + 4 + 0) / 12))
-    assert mean_joint_error(clean, refined, mask) == pytest.approx((30 + 40 + 20 + 0) / 4)   # mm
+    assert mean_joint_error(clean, refined, mask) == pytest.approx((30 + 40 + 20 + 0) / 4)  # mm
     assert np.isnan(mean_joint_error(clean, refined, np.zeros_like(mask)))
 
 
 def test_unfilled_and_ground_truth_missing_entries_are_not_scored(pair):
     clean, refined, mask = pair
-    refined[1, 2] = np.nan                                                  # refiner left it missing
-    clean[0, 1] = np.nan                                                    # no ground truth here
+    refined[1, 2] = np.nan  # refiner left it missing
+    clean[0, 1] = np.nan  # no ground truth here
     curve = per_frame_rmse(clean, refined, mask, numerator="corrupted")
     assert curve[0] == pytest.approx(3.0) and np.isnan(curve[1])
     with pytest.raises(ValueError, match="mask"):

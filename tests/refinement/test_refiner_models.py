@@ -5,6 +5,7 @@ Everything runs on synthetic CMU31-layout motions (smooth random trajectories, 1
 test, which uses a few real clips of ``../shared/data/hdm05_cuts11`` and is skipped without them. One tiny BiGRU
 (8 units, one layer, 32-frame windows, one epoch of 64 windows) is trained once for the module.
 """
+
 from __future__ import annotations
 
 import itertools
@@ -15,9 +16,6 @@ import numpy as np
 import pytest
 import torch
 
-from mocapkit.motion.layouts import CMU31
-from mocapkit.motion.container import Motion
-from mocapkit.refinement.datamodule import MocapRefinementDataModule
 from mocapkit.datasets.mocap.folders import MocapFolderError
 from mocapkit.models.refiners import (
     PoseNormalizer,
@@ -26,8 +24,12 @@ from mocapkit.models.refiners import (
     refine_bigru,
     refine_transformer,
 )
+from mocapkit.motion.container import Motion
+from mocapkit.motion.frames import blend_weights, refine_windows, window_starts
+from mocapkit.motion.layouts import CMU31
 from mocapkit.refinement.base import RefinementError
 from mocapkit.refinement.corruptions import TRAINING_MIXTURE, training_corruption
+from mocapkit.refinement.datamodule import MocapRefinementDataModule
 from mocapkit.refinement.learned import (
     INFERENCE_WINDOW_FACTOR,
     LearnedRefiner,
@@ -35,13 +37,19 @@ from mocapkit.refinement.learned import (
     empty_frames_kept,
     train_on_motions,
 )
-from mocapkit.motion.frames import blend_weights, refine_windows, window_starts
 from tests.shared_data import SHARED, needs
 
 HDM05 = SHARED / "data" / "hdm05_cuts11"
-HIPS = (1, 6)                                     # lhipjoint, rhipjoint of CMU31
-TINY = ["model.hidden=8", "model.layers=1", "data.window=32", "data.windows_per_epoch=64", "data.batch_size=16",
-        "trainer.max_epochs=1", "data.eval_windows_per_clip=1"]
+HIPS = (1, 6)  # lhipjoint, rhipjoint of CMU31
+TINY = [
+    "model.hidden=8",
+    "model.layers=1",
+    "data.window=32",
+    "data.windows_per_epoch=64",
+    "data.batch_size=16",
+    "trainer.max_epochs=1",
+    "data.eval_windows_per_clip=1",
+]
 
 
 def synthetic_motion(frames: int, seed: int, fps: float = 120.0) -> Motion:
@@ -56,8 +64,9 @@ def synthetic_motion(frames: int, seed: int, fps: float = 120.0) -> Motion:
             positions[:, j] = np.concatenate([0.5 * np.sin(0.4 * t), 0.9 + 0.02 * np.sin(3 * t), 0.3 * t], axis=1)
         else:
             positions[:, j] = positions[:, p] + offsets[j] + wobble
-    return Motion(positions, CMU31.joint_names, fps, parents=CMU31.parents, layout_name="cmu31",
-                  name=f"synthetic{seed}")
+    return Motion(
+        positions, CMU31.joint_names, fps, parents=CMU31.parents, layout_name="cmu31", name=f"synthetic{seed}"
+    )
 
 
 def with_missing(motion: Motion, missing: np.ndarray) -> Motion:
@@ -96,28 +105,28 @@ def _track(T=30, J=3, seed=0):
     t = torch.arange(T, dtype=torch.float64).view(1, T, 1, 1)
     a = torch.as_tensor(rng.normal(size=(1, 1, J, 3)))
     b = torch.as_tensor(rng.normal(size=(1, 1, J, 3)))
-    return a, b, a + b * t                                                # a linear trajectory [1, T, J, 3]
+    return a, b, a + b * t  # a linear trajectory [1, T, J, 3]
 
 
 def test_cubic_fill_reproduces_a_linear_trajectory_inside_gaps():
     _, _, x = _track()
     observed = torch.ones(1, 30, 3, dtype=torch.bool)
-    observed[0, 2:9, 0] = False                       # gaps whose ends have an observed neighbour outside them
+    observed[0, 2:9, 0] = False  # gaps whose ends have an observed neighbour outside them
     observed[0, 12:27, 1] = False
     observed[0, 5:6, 2] = False
     garbage = torch.where(observed.unsqueeze(-1), x, torch.full_like(x, 123.0))
     out = cubic_fill(garbage, observed)
     torch.testing.assert_close(out, x, atol=1e-5, rtol=0)
-    assert torch.equal(out[observed], x[observed])     # observed entries untouched, bit for bit
+    assert torch.equal(out[observed], x[observed])  # observed entries untouched, bit for bit
 
 
 def test_cubic_fill_ends_hold_the_nearest_observation_without_extrapolation_and_unobserved_joint_is_zero():
     _, _, x = _track(T=20, J=3, seed=1)
     x = x.float()
     observed = torch.ones(1, 20, 3, dtype=torch.bool)
-    observed[0, :5, 0] = False                        # leading gap
-    observed[0, 14:, 0] = False                       # trailing gap
-    observed[0, :, 1] = False                         # never observed
+    observed[0, :5, 0] = False  # leading gap
+    observed[0, 14:, 0] = False  # trailing gap
+    observed[0, :, 1] = False  # never observed
     out = cubic_fill(torch.where(observed.unsqueeze(-1), x, torch.full_like(x, -7.0)), observed, extrapolate=0)
     assert torch.equal(out[0, :5, 0], x[0, 5, 0].expand(5, 3))
     assert torch.equal(out[0, 14:, 0], x[0, 13, 0].expand(6, 3))
@@ -129,10 +138,10 @@ def test_cubic_fill_ends_hold_the_nearest_observation_without_extrapolation_and_
 def test_cubic_fill_continues_the_last_observed_step_at_the_ends_then_holds():
     _, _, x = _track(T=30, J=1, seed=2)
     observed = torch.ones(1, 30, 1, dtype=torch.bool)
-    observed[0, :10, 0] = False                       # 10 frames before the first observation
-    observed[0, 22:, 0] = False                       # 8 after the last
+    observed[0, :10, 0] = False  # 10 frames before the first observation
+    observed[0, 22:, 0] = False  # 8 after the last
     out = cubic_fill(torch.where(observed.unsqueeze(-1), x, torch.zeros_like(x)), observed, extrapolate=4)
-    torch.testing.assert_close(out[0, 6:10, 0], x[0, 6:10, 0], atol=1e-9, rtol=0)        # 4 frames continued
+    torch.testing.assert_close(out[0, 6:10, 0], x[0, 6:10, 0], atol=1e-9, rtol=0)  # 4 frames continued
     torch.testing.assert_close(out[0, :6, 0], x[0, 6, 0].expand(6, 3), atol=1e-9, rtol=0)  # then held
     torch.testing.assert_close(out[0, 22:26, 0], x[0, 22:26, 0], atol=1e-9, rtol=0)
     torch.testing.assert_close(out[0, 26:, 0], x[0, 25, 0].expand(4, 3), atol=1e-9, rtol=0)
@@ -171,7 +180,7 @@ def _pose_batch(T=12, seed=0):
     rng = np.random.default_rng(seed)
     observed = torch.from_numpy(rng.random((2, T, CMU31.num_joints)) > 0.25)
     observed[0, :, 0] = True
-    observed[1, :, 0] = False                                              # batch 1: root missing in every frame
+    observed[1, :, 0] = False  # batch 1: root missing in every frame
     return x, observed
 
 
@@ -192,7 +201,7 @@ def test_pose_normalizer_is_invariant_to_heading_translation_and_scale(angle):
     x, observed = _pose_batch(seed=3)
     norm = _normalizer()
     c, s = math.cos(angle), math.sin(angle)
-    rotation = torch.tensor([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])      # about the up (y) axis
+    rotation = torch.tensor([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])  # about the up (y) axis
     moved = 1.7 * x @ rotation.T + torch.tensor([2.0, -0.5, 3.0])
 
     def normalised(p):
@@ -228,17 +237,41 @@ def test_pose_normalizer_statistics_ignore_missing_entries():
 
 # ------------------------------------------------------------------------------------------------ networks
 NETWORKS = {
-    "bigru": lambda: refine_bigru(joint_names=CMU31.joint_names, parents=CMU31.parents, hips=HIPS, hidden=16,
-                                  layers=2),
-    "transformer-frames": lambda: refine_transformer(joint_names=CMU31.joint_names, parents=CMU31.parents, hips=HIPS,
-                                                     tokens="frames", dim=16, layers=1, heads=2, ff=32),
-    "transformer-joints": lambda: refine_transformer(joint_names=CMU31.joint_names, parents=CMU31.parents, hips=HIPS,
-                                                     tokens="joints", dim=16, layers=1, heads=2, ff=32),
-    "bigru-pose-frame": lambda: refine_bigru(joint_names=CMU31.joint_names, parents=CMU31.parents, hips=HIPS,
-                                             hidden=16, layers=2, pose_frame=True),
+    "bigru": lambda: refine_bigru(joint_names=CMU31.joint_names, parents=CMU31.parents, hips=HIPS, hidden=16, layers=2),
+    "transformer-frames": lambda: refine_transformer(
+        joint_names=CMU31.joint_names,
+        parents=CMU31.parents,
+        hips=HIPS,
+        tokens="frames",
+        dim=16,
+        layers=1,
+        heads=2,
+        ff=32,
+    ),
+    "transformer-joints": lambda: refine_transformer(
+        joint_names=CMU31.joint_names,
+        parents=CMU31.parents,
+        hips=HIPS,
+        tokens="joints",
+        dim=16,
+        layers=1,
+        heads=2,
+        ff=32,
+    ),
+    "bigru-pose-frame": lambda: refine_bigru(
+        joint_names=CMU31.joint_names, parents=CMU31.parents, hips=HIPS, hidden=16, layers=2, pose_frame=True
+    ),
     "transformer-frames-pose-frame": lambda: refine_transformer(
-        joint_names=CMU31.joint_names, parents=CMU31.parents, hips=HIPS, tokens="frames", dim=16, layers=1, heads=2,
-        ff=32, pose_frame=True),
+        joint_names=CMU31.joint_names,
+        parents=CMU31.parents,
+        hips=HIPS,
+        tokens="frames",
+        dim=16,
+        layers=1,
+        heads=2,
+        ff=32,
+        pose_frame=True,
+    ),
 }
 
 
@@ -246,8 +279,8 @@ def _take(T: int, seed: int = 0):
     x = torch.stack([torch.from_numpy(synthetic_motion(T, seed + b).positions) for b in range(2)])
     rng = np.random.default_rng(seed)
     missing = torch.from_numpy(rng.random((2, T, CMU31.num_joints)) < 0.2)
-    missing[:, T // 4: T // 2, 5] = True               # a gap
-    missing[1, :, 9] = True                            # a joint missing throughout
+    missing[:, T // 4 : T // 2, 5] = True  # a gap
+    missing[1, :, 9] = True  # a joint missing throughout
     missing[:, 0, 0] = False
     return x, missing
 
@@ -270,10 +303,10 @@ def test_untrained_network_is_the_first_guess(name, T):
     assert out.shape == x.shape and out.dtype == torch.float32
     assert torch.isfinite(out).all()
     torch.testing.assert_close(out[observed], x[observed], atol=1e-5, rtol=0)
-    seen = observed.any(dim=1, keepdim=True).expand_as(observed)               # joint observed in the window
+    seen = observed.any(dim=1, keepdim=True).expand_as(observed)  # joint observed in the window
     torch.testing.assert_close(out[seen], cubic[seen], atol=1e-5, rtol=0)
     never = ~seen
-    assert never[1, :, 9].all() and seen[1, :, 8].all()                        # joint 9 (rfoot), parent 8
+    assert never[1, :, 9].all() and seen[1, :, 8].all()  # joint 9 (rfoot), parent 8
     torch.testing.assert_close(out[1, :, 9], out[1, :, 8], atol=1e-5, rtol=0)
 
 
@@ -281,7 +314,7 @@ def test_untrained_network_is_the_first_guess(name, T):
 def test_missing_entry_values_do_not_change_the_output(name):
     torch.manual_seed(1)
     net = NETWORKS[name]().eval()
-    with torch.no_grad():                              # a network that does correct: a non-zero last layer
+    with torch.no_grad():  # a network that does correct: a non-zero last layer
         torch.nn.init.normal_(net.out.weight, std=0.05)
         torch.nn.init.normal_(net.out.bias, std=0.05)
     x, missing = _take(24, seed=5)
@@ -298,12 +331,12 @@ def test_missing_entry_values_do_not_change_the_output(name):
 def _turned_per_frame(T: int, seed: int = 0) -> torch.Tensor:
     """``guess [1, 3, T, J]``: one pose, every frame turned about the up (y) axis through its root by
     its own angle and moved along a path."""
-    pose = torch.from_numpy(synthetic_motion(1, seed).positions[0]).float()                 # [J, 3]
+    pose = torch.from_numpy(synthetic_motion(1, seed).positions[0]).float()  # [J, 3]
     pose = pose - pose[0]
     angles = torch.linspace(-2.5, 2.5, T)
     c, s = torch.cos(angles).view(T, 1), torch.sin(angles).view(T, 1)
     x, y, z = pose[:, 0], pose[:, 1], pose[:, 2]
-    turned = torch.stack([c * x + s * z, y.expand(T, -1), -s * x + c * z], dim=0)           # [3, T, J]
+    turned = torch.stack([c * x + s * z, y.expand(T, -1), -s * x + c * z], dim=0)  # [3, T, J]
     path = torch.stack([torch.linspace(0, 3, T), torch.zeros(T), torch.linspace(1, -1, T)]).unsqueeze(-1)
     return (turned + path).unsqueeze(0)
 
@@ -314,11 +347,11 @@ def test_body_frame_reads_every_frame_alike_whichever_way_it_faces():
     net = NETWORKS["transformer-frames-pose-frame"]()
     guess = _turned_per_frame(20)
     root, cos, sin = net.body_frame(guess)
-    body = net.normalizer.turn_cf(guess - root, cos, sin)                                  # [1,3,T,J]
+    body = net.normalizer.turn_cf(guess - root, cos, sin)  # [1,3,T,J]
     torch.testing.assert_close(body, body[:, :, :1].expand_as(body), atol=1e-5, rtol=0)
-    assert body[0, :, 0, 0].abs().max() < 1e-6                                         # the root at the origin
+    assert body[0, :, 0, 0].abs().max() < 1e-6  # the root at the origin
     hip_line = body[0, :, 0, HIPS[1]] - body[0, :, 0, HIPS[0]]
-    assert hip_line[0] > 0.05 and hip_line[2].abs() < 1e-5                             # along x, left -> right
+    assert hip_line[0] > 0.05 and hip_line[2].abs() < 1e-5  # along x, left -> right
     # the window-frame guess itself differs from frame to frame (the test would pass on a no-op otherwise)
     assert (guess - guess[:, :, :1]).abs().max() > 0.5
 
@@ -332,8 +365,8 @@ def test_pose_frame_correction_is_turned_back_per_frame(monkeypatch):
     step = torch.zeros(1, 3, T, J)
     step[:, 0] = 1.0
     monkeypatch.setattr(net, "correction", lambda g, o, body=None: step)
-    moved = net.corrected(guess, torch.ones(1, T, J, dtype=torch.bool)) - guess              # [1,3,T,J]
-    line = guess[0, :, :, HIPS[1]] - guess[0, :, :, HIPS[0]]                               # [3,T]
+    moved = net.corrected(guess, torch.ones(1, T, J, dtype=torch.bool)) - guess  # [1,3,T,J]
+    line = guess[0, :, :, HIPS[1]] - guess[0, :, :, HIPS[0]]  # [3,T]
     line[1] = 0.0
     expected = line / line.norm(dim=0, keepdim=True)
     torch.testing.assert_close(moved[0, :, :, 4], expected, atol=1e-5, rtol=0)
@@ -355,7 +388,7 @@ def test_pose_frame_transformer_exports_with_parity(tmp_path):
 # ------------------------------------------------------------------------------------------------ corruption
 def _check_corruption(clean: Motion, result):
     moved = result.motion
-    assert (~moved.missing).any()                                            # something stays observed
+    assert (~moved.missing).any()  # something stays observed
     assert not (result.removed & clean.missing).any()
     assert moved.missing[result.removed].all() and np.isnan(moved.positions[result.removed]).all()
     assert not (result.removed & result.perturbed).any()
@@ -379,8 +412,9 @@ def test_training_corruption_contract_and_protocol_coverage():
 
 def test_training_corruption_keeps_an_observation_on_tiny_windows():
     t = np.arange(8)[:, None]
-    positions = np.stack([np.concatenate([0.01 * t, t * 0, t * 0], 1),
-                          np.concatenate([0.3 + 0.01 * t, t * 0, t * 0], 1)], axis=1)
+    positions = np.stack(
+        [np.concatenate([0.01 * t, t * 0, t * 0], 1), np.concatenate([0.3 + 0.01 * t, t * 0, t * 0], 1)], axis=1
+    )
     clean = Motion(positions, ("a", "b"), 120.0, parents=(-1, 0))
     rng = np.random.default_rng(1)
     for _ in range(150):
@@ -408,7 +442,7 @@ def test_window_starts_cover_every_frame(frames, window, overlap):
     covered = np.zeros(frames, int)
     for s in starts:
         assert 0 <= s and s + length <= frames
-        covered[s:s + length] += 1
+        covered[s : s + length] += 1
     assert covered.min() >= 1
     assert starts[0] == 0 and starts[-1] + length == frames
     assert all(b > a for a, b in itertools.pairwise(starts))
@@ -436,7 +470,7 @@ def test_refine_windows_blend_of_an_identity_predictor_is_the_input(frames):
         return p
 
     out = refine_windows(identity, positions, missing, 32, 8)
-    assert len(calls) == 1                                                 # every window in one batch
+    assert len(calls) == 1  # every window in one batch
     n = len(window_starts(frames, 32, 8))
     assert calls[0] == ((n, min(frames, 32), 4, 3), np.float32, (n, min(frames, 32), 4), bool)
     np.testing.assert_allclose(out, positions.astype(np.float64), rtol=0, atol=1e-12)
@@ -448,8 +482,8 @@ def test_refine_windows_blends_neighbours_continuously():
     index = lambda p, m: np.broadcast_to(np.arange(len(p), dtype=np.float32)[:, None, None, None], p.shape)
     out = refine_windows(index, np.zeros((frames, 1, 3), np.float32), np.zeros((frames, 1), bool), window, overlap)
     value = out[:, 0, 0]
-    assert np.all(np.diff(value) >= 0)                                     # a ramp from one window to the next
-    for i, s in enumerate(starts):                                         # frames only window i weighs fully
+    assert np.all(np.diff(value) >= 0)  # a ramp from one window to the next
+    for i, s in enumerate(starts):  # frames only window i weighs fully
         others = [(o, o + window) for k, o in enumerate(starts) if k != i]
         alone = [t for t in range(s, s + window) if not any(a <= t < b for a, b in others)]
         assert np.all(value[alone] == i)
@@ -457,11 +491,11 @@ def test_refine_windows_blends_neighbours_continuously():
 
 def test_empty_frames_kept():
     missing = np.zeros((80, 3), bool)
-    missing[:4] = True                 # leading
-    missing[10:15] = True              # interior, 5 frames: filled
-    missing[20:40] = True              # interior, 20 frames: kept
-    missing[50:70, 1] = True           # partly observed frames: never kept
-    missing[77:] = True                # trailing
+    missing[:4] = True  # leading
+    missing[10:15] = True  # interior, 5 frames: filled
+    missing[20:40] = True  # interior, 20 frames: kept
+    missing[50:70, 1] = True  # partly observed frames: never kept
+    missing[77:] = True  # trailing
     keep = empty_frames_kept(missing, 12)
     expected = np.zeros(80, bool)
     expected[:4] = expected[20:40] = expected[77:] = True
@@ -474,9 +508,16 @@ def test_empty_frames_kept():
 
 # ------------------------------------------------------------------------------------------------ data module
 def _synthetic_datamodule(**kw):
-    args = {"dataset": None, "motions": [synthetic_motion(150, s) for s in range(5)], "window": 32,
-            "windows_per_epoch": 24, "batch_size": 8, "eval_batch_size": 16, "eval_windows_per_clip": 3,
-            "val_fraction": 0.2}
+    args = {
+        "dataset": None,
+        "motions": [synthetic_motion(150, s) for s in range(5)],
+        "window": 32,
+        "windows_per_epoch": 24,
+        "batch_size": 8,
+        "eval_batch_size": 16,
+        "eval_windows_per_clip": 3,
+        "val_fraction": 0.2,
+    }
     return MocapRefinementDataModule(**{**args, **kw})
 
 
@@ -494,7 +535,7 @@ def test_datamodule_batches_from_motions():
     missing, corrupted = batch["missing"], batch["corrupted"]
     assert torch.isfinite(batch["positions"]).all() and torch.isfinite(batch["clean"]).all()
     assert (batch["positions"][missing] == 0).all()
-    assert not (missing & ~corrupted).any()                  # clean clips: every missing entry was removed
+    assert not (missing & ~corrupted).any()  # clean clips: every missing entry was removed
     kept = ~corrupted
     assert torch.equal(batch["positions"][kept], batch["clean"][kept])
     assert missing.any() and (~missing).any()
@@ -530,7 +571,7 @@ def test_training_windows_can_be_mirrored_and_only_training_windows_are():
 
     motions = [synthetic_motion(150, s) for s in range(3)]
     plain, mirrored = (RandomWindows(motions, 32, 12, seed=3, mirror=p) for p in (0.0, 1.0))
-    for i in range(12):                  # the same window is drawn (the mirror draw comes after it), then mirrored
+    for i in range(12):  # the same window is drawn (the mirror draw comes after it), then mirrored
         a, b = plain[i]["clean"].numpy(), mirrored[i]["clean"].numpy()
         window = Motion(a, CMU31.joint_names, 120.0, parents=CMU31.parents)
         assert np.allclose(b, window.mirrored().positions)
@@ -569,8 +610,14 @@ def hdm05_subset(tmp_path_factory):
 
 @needs(HDM05)
 def test_hdm05_held_out_group(hdm05_subset):
-    dm = MocapRefinementDataModule(dataset="hdm05", root=str(hdm05_subset), test_groups=["bd"], window=32,
-                                   eval_windows_per_clip=1, windows_per_epoch=8)
+    dm = MocapRefinementDataModule(
+        dataset="hdm05",
+        root=str(hdm05_subset),
+        test_groups=["bd"],
+        window=32,
+        eval_windows_per_clip=1,
+        windows_per_epoch=8,
+    )
     assert dm.groups == {"train": ["bk", "dg", "mm"], "test": ["bd"]}
     bd_clips = sorted(p.stem for p in (hdm05_subset / "bd").glob("*.amc"))
     assert sorted(m.metadata["group"] for m in dm.test_motions) == ["bd"] * 3
@@ -602,8 +649,8 @@ def test_learned_refiner_fills_gaps_and_keeps_observations(tiny_refiner, gappy):
     assert not out.missing.any() and np.isfinite(out.positions).all()
     assert report["filled"] == int(motion.missing.sum()) and report["unfilled"] == {}
     error = np.linalg.norm(out.positions - clean.positions, axis=-1)[motion.missing]
-    assert error.mean() < 0.15                                      # metres: a plausible fill
-    changed = _changed(motion, out)                                 # observed entries: only the repaired ones move
+    assert error.mean() < 0.15  # metres: a plausible fill
+    changed = _changed(motion, out)  # observed entries: only the repaired ones move
     assert int(changed.sum()) == report["repaired"]
     moved = np.linalg.norm(out.positions - motion.positions, axis=-1)[changed]
     assert (moved > tiny_refiner.repair_threshold).all()
@@ -619,8 +666,8 @@ def test_learned_refiner_fills_gaps_and_keeps_observations(tiny_refiner, gappy):
 def test_learned_refiner_leaves_empty_runs_missing(tiny_refiner, gappy):
     _, motion = gappy
     missing = motion.missing.copy()
-    missing[:10] = True                     # leading run of empty frames: never invented
-    missing[70:75] = True                   # a short interior run: filled
+    missing[:10] = True  # leading run of empty frames: never invented
+    missing[70:75] = True  # a short interior run: filled
     out = tiny_refiner.refine(with_missing(motion, missing))
     assert out.missing[:10].all() and np.isnan(out.positions[:10]).all()
     assert not out.missing[10:].any()
@@ -632,12 +679,15 @@ def test_learned_refiner_refines_another_frame_rate_at_its_own_and_rejects_anoth
 
     slow = synthetic_motion(100, 1, fps=60.0)
     positions = slow.positions.copy()
-    positions[40:52, 5] = np.nan                               # a 0.2 s gap: 24 frames at the network's 120 fps
+    positions[40:52, 5] = np.nan  # a 0.2 s gap: 24 frames at the network's 120 fps
     slow = replace(slow, positions=positions, missing=np.isnan(positions).any(axis=2))
     out = tiny_refiner.refine(slow)
     assert out.fps == 60.0 and out.num_frames == 100 and not out.missing.any()
-    assert out.metadata["refinement"]["resampled"] == {**out.metadata["refinement"]["resampled"], "fps": 60.0,
-                                                       "refined_at_fps": 120.0}
+    assert out.metadata["refinement"]["resampled"] == {
+        **out.metadata["refinement"]["resampled"],
+        "fps": 60.0,
+        "refined_at_fps": 120.0,
+    }
     assert out.metadata["refinement"]["filled"] == 12
     np.testing.assert_array_equal(out.positions[~slow.missing], slow.positions[~slow.missing])
     with pytest.raises(RefinementError, match="z-up.*fitted at 120 fps, y-up"):
@@ -656,10 +706,10 @@ def test_short_gaps_are_interior_runs_up_to_the_length():
     from mocapkit.refinement.learned import short_gaps
 
     missing = np.zeros((12, 3), bool)
-    missing[0:2, 0] = True          # leading: never short
-    missing[4:6, 0] = True          # 2 frames: short for N >= 2
-    missing[3:8, 1] = True          # 5 frames
-    missing[9:, 2] = True           # trailing
+    missing[0:2, 0] = True  # leading: never short
+    missing[4:6, 0] = True  # 2 frames: short for N >= 2
+    missing[3:8, 1] = True  # 5 frames
+    missing[9:, 2] = True  # trailing
     np.testing.assert_array_equal(short_gaps(missing, 2), np.isin(np.arange(12), [4, 5])[:, None] * [1, 0, 0] > 0)
     assert short_gaps(missing, 5)[3:8, 1].all() and not short_gaps(missing, 4)[:, 1].any()
     assert not short_gaps(missing, 100)[:, 2].any() and not short_gaps(missing, 0).any()
@@ -669,7 +719,7 @@ def test_short_gaps_can_be_left_to_the_spline(tiny_refiner, gappy):
     from mocapkit.refinement.gap_filling import SplineInterpolation
     from mocapkit.refinement.learned import SHORT_GAP_FRAMES, SHORT_GAP_POINTS
 
-    _, motion = gappy                                           # gaps of 20 frames (joint 3) and 21 (joint 20)
+    _, motion = gappy  # gaps of 20 frames (joint 3) and 21 (joint 20)
     spline = SplineInterpolation().refine(motion)
     try:
         network = tiny_refiner.set_params(short_gap_frames=0).refine(motion)
@@ -690,18 +740,19 @@ def test_the_short_gap_spline_can_pass_through_the_repaired_samples(tiny_refiner
     )
 
     _, motion = gappy
-    try:    # threshold 0: every observed sample the (tiny) network moves is repaired, i.e. takes its value
+    try:  # threshold 0: every observed sample the (tiny) network moves is repaired, i.e. takes its value
         tiny_refiner.set_params(short_gap_frames=20, repair_threshold=0.0)
         observed = tiny_refiner.set_params(short_gap_points="observed").refine(motion)
         repaired = tiny_refiner.set_params(short_gap_points="repaired").refine(motion)
         with pytest.raises(ValueError, match="short_gap_points must be 'observed' or 'repaired'"):
             tiny_refiner.set_params(short_gap_points="network").refine(motion)
     finally:
-        tiny_refiner.set_params(short_gap_frames=SHORT_GAP_FRAMES, short_gap_points=SHORT_GAP_POINTS,
-                                repair_threshold=0.02)
+        tiny_refiner.set_params(
+            short_gap_frames=SHORT_GAP_FRAMES, short_gap_points=SHORT_GAP_POINTS, repair_threshold=0.02
+        )
     assert repaired.metadata["refinement"]["repaired"] > 0
     gap = np.zeros(motion.missing.shape, bool)
-    gap[40:60, 3] = True                                      # joint 3's 20-frame gap: the spline's
+    gap[40:60, 3] = True  # joint 3's 20-frame gap: the spline's
     # the spline passes through the samples as the contract returns them (the repaired ones at the network's value)
     expected = spline_fill(repaired.positions, motion.missing, gap)
     np.testing.assert_allclose(repaired.positions[40:60, 3], expected[40:60, 3], atol=1e-5)
@@ -715,8 +766,12 @@ def test_learned_refiner_maps_reordered_joints_and_leaves_extra_markers(tiny_ref
     order = list(range(CMU31.num_joints))[::-1]
     extra = np.full((motion.num_frames, 1, 3), 5.0, np.float32)
     extra[3] = np.nan
-    shuffled = Motion(np.concatenate([motion.positions[:, order], extra], axis=1),
-                      [motion.joint_names[j] for j in order] + ["extra_marker"], 120.0, name="shuffled")
+    shuffled = Motion(
+        np.concatenate([motion.positions[:, order], extra], axis=1),
+        [motion.joint_names[j] for j in order] + ["extra_marker"],
+        120.0,
+        name="shuffled",
+    )
     out = tiny_refiner.refine(shuffled)
     direct = tiny_refiner.refine(motion)
     np.testing.assert_array_equal(out.positions[:, :-1], direct.positions[:, order])
@@ -729,16 +784,21 @@ def test_onnx_refiner_matches_learned_refiner(tiny_module, tiny_refiner, gappy, 
     from mocapkit.deploy.refiner_export import export_refiner
 
     path = tmp_path / "tiny.onnx"
-    info = export_refiner(tiny_module.model, path, dict(tiny_module.hparams.skeleton), trace_shape=(2, 12),
-                          check_shape=(3, 40))
+    info = export_refiner(
+        tiny_module.model, path, dict(tiny_module.hparams.skeleton), trace_shape=(2, 12), check_shape=(3, 40)
+    )
     assert info["max_abs_diff"] < 1e-4
     _, motion = gappy
     missing = motion.missing.copy()
     missing[:3] = True
     motion = with_missing(motion, missing)
     onnx = OnnxRefiner(str(path), threads=1).fit()
-    assert (onnx.window_, onnx.overlap_, onnx.fps_, onnx.joint_names_) == \
-        (tiny_refiner.window_, tiny_refiner.overlap_, tiny_refiner.fps_, tiny_refiner.joint_names_)
+    assert (onnx.window_, onnx.overlap_, onnx.fps_, onnx.joint_names_) == (
+        tiny_refiner.window_,
+        tiny_refiner.overlap_,
+        tiny_refiner.fps_,
+        tiny_refiner.joint_names_,
+    )
     a, b = tiny_refiner.refine(motion), onnx.refine(motion)
     assert np.array_equal(a.missing, b.missing)
     filled = motion.missing & ~a.missing
@@ -759,8 +819,13 @@ def test_transformer_exports_with_parity(name, tmp_path):
     with torch.no_grad():
         torch.nn.init.normal_(net.out.weight, std=0.05)
         net.mask_token.normal_(0, 0.5)
-    skeleton = {"joint_names": list(CMU31.joint_names), "parents": list(CMU31.parents), "fps": 120.0,
-                "up_axis": "y", "window": 24}
+    skeleton = {
+        "joint_names": list(CMU31.joint_names),
+        "parents": list(CMU31.parents),
+        "fps": 120.0,
+        "up_axis": "y",
+        "window": 24,
+    }
     info = export_refiner(net, tmp_path / "t.onnx", skeleton, trace_shape=(2, 12), check_shape=(3, 40))
     assert info["exporter"] == "dynamo" and info["max_abs_diff"] < 1e-4
     assert [c["shape"][:2] for c in info["checks"]] == [[3, 40], [1, 20]]
@@ -771,16 +836,17 @@ def test_encoder_layer_for_export_computes_what_the_layer_computes(shape):
     """The export path of the transformer's layers (one projection, the scale on the queries, 2-D projections)
     is the pre-norm, batch-first nn.TransformerEncoderLayer in eval mode, with and without PyTorch's fused path."""
     torch.manual_seed(0)
-    layer = torch.nn.TransformerEncoderLayer(16, 4, 32, 0.1, activation="gelu", batch_first=True,
-                                             norm_first=True).eval()
-    for p in layer.parameters():                                    # weights away from their initial symmetry
+    layer = torch.nn.TransformerEncoderLayer(
+        16, 4, 32, 0.1, activation="gelu", batch_first=True, norm_first=True
+    ).eval()
+    for p in layer.parameters():  # weights away from their initial symmetry
         p.data.add_(0.1 * torch.randn_like(p))
     h = torch.randn(*shape)
     with torch.no_grad():
-        fused = layer(h)                                            # PyTorch's fast path (no grad, eval)
+        fused = layer(h)  # PyTorch's fast path (no grad, eval)
         mine = encoder_layer_for_export(layer, h)
     torch.testing.assert_close(mine, fused, atol=2e-5, rtol=1e-5)
-    torch.testing.assert_close(mine.detach(), layer(h).detach(), atol=2e-5, rtol=1e-5)   # the plain path
+    torch.testing.assert_close(mine.detach(), layer(h).detach(), atol=2e-5, rtol=1e-5)  # the plain path
 
 
 def test_first_guess_of_an_unobserved_chain_is_its_nearest_observed_ancestor():
@@ -796,19 +862,20 @@ def test_first_guess_of_an_unobserved_chain_is_its_nearest_observed_ancestor():
     observed[:, 0] = True
     observed[0, :, [foot, knee]] = False
     observed[1] = False
-    observed[1, :, foot] = True                                                # only the foot is seen in window 1
+    observed[1, :, foot] = True  # only the foot is seen in window 1
     guess = net.first_guess(x, observed)
     cubic = cubic_fill(x, observed)
     torch.testing.assert_close(guess[0, :, foot], cubic[0, :, hip], rtol=0, atol=0)
     torch.testing.assert_close(guess[0, :, knee], cubic[0, :, hip], rtol=0, atol=0)
     seen = observed[0].any(dim=0)
     torch.testing.assert_close(guess[0][:, seen], cubic[0][:, seen], rtol=0, atol=0)
+
     def below_foot(j):
         while j >= 0 and j != foot:
             j = parents[j]
         return j == foot
 
-    for j in range(len(parents)):                       # the foot's descendants start at the foot, the rest at 0
+    for j in range(len(parents)):  # the foot's descendants start at the foot, the rest at 0
         expected = x[1, :, foot] if below_foot(j) else torch.zeros_like(x[1, :, foot])
         torch.testing.assert_close(guess[1, :, j], expected, rtol=0, atol=0)
-    assert any(below_foot(j) and j != foot for j in range(len(parents)))       # the rule is exercised both ways
+    assert any(below_foot(j) and j != foot for j in range(len(parents)))  # the rule is exercised both ways

@@ -4,6 +4,7 @@ Exact checks on planted corruption of smooth synthetic trajectories (which sampl
 bit-identical, what the report counts), the comparison runner's fold logic through the wrapper, and
 ``mocapkit refine --screen-outliers`` on a real C3D take with a planted spike.
 """
+
 from __future__ import annotations
 
 import re
@@ -13,18 +14,18 @@ import numpy as np
 import pytest
 from sklearn.base import clone
 
-from mocapkit.refinement.gap_filling import PchipInterpolation
 from mocapkit.cli import main
 from mocapkit.motion.container import Motion
 from mocapkit.refinement.base import MotionRefiner
+from mocapkit.refinement.gap_filling import PchipInterpolation
 from mocapkit.refinement.screening import (
     SCREEN_HALF_WINDOW,
     SCREEN_THRESHOLD,
     MedianScreen,
     median_outliers,
 )
-from tests.shared_data import SHARED, needs
 from tests.refinement.test_refine_cli import spiky_walk
+from tests.shared_data import SHARED, needs
 
 WALK = SHARED / "samples" / "c3d" / "Walking_Hybrid_1_1.c3d"
 
@@ -33,11 +34,11 @@ def smooth_motion(frames: int = 240, joints: int = 4, fps: float = 120.0) -> Mot
     """Joints on slow circles and a steady walk forward (0.8 m/s), in metres: nothing a median should flag."""
     t = np.arange(frames)[:, None] / fps
     phase = np.arange(joints)[None, :]
-    positions = np.stack([0.8 * t + 0.2 * np.cos(2.0 * t + phase),
-                          1.0 + 0.1 * np.sin(3.0 * t + phase),
-                          0.2 * np.sin(2.0 * t + phase)], axis=-1).astype(np.float32)
-    return Motion(positions=positions, joint_names=tuple(f"j{i}" for i in range(joints)), fps=fps,
-                  name="smooth")
+    positions = np.stack(
+        [0.8 * t + 0.2 * np.cos(2.0 * t + phase), 1.0 + 0.1 * np.sin(3.0 * t + phase), 0.2 * np.sin(2.0 * t + phase)],
+        axis=-1,
+    ).astype(np.float32)
+    return Motion(positions=positions, joint_names=tuple(f"j{i}" for i in range(joints)), fps=fps, name="smooth")
 
 
 def with_noise(motion: Motion, rng, fraction: float = 0.2, sigma: float = 0.02):
@@ -64,19 +65,19 @@ def test_smooth_motion_is_never_flagged_and_planted_noise_is():
     assert not median_outliers(clean.positions, clean.missing, threshold=0.002).any()
     noisy, hit = with_noise(clean, np.random.default_rng(0))
     flags = median_outliers(noisy.positions, noisy.missing, half_window=3, threshold=0.01)
-    assert flags.sum() >= 0.97 * hit.sum()                  # nearly every perturbed sample (all ≥ 1.5 cm off)
+    assert flags.sum() >= 0.97 * hit.sum()  # nearly every perturbed sample (all ≥ 1.5 cm off)
     # a clean sample may be flagged when noisy neighbours pull its median (2 of 7 noisy: the median moves by a
     # frame's motion, 7 mm here): rarely, and it is refilled from its neighbours
     assert (flags & ~hit).sum() < 0.05 * (~hit).sum()
-    assert not flags[[0, -1]].any()                         # a joint's first and last samples are never judged
+    assert not flags[[0, -1]].any()  # a joint's first and last samples are never judged
 
 
 def test_windows_skip_missing_samples_and_do_not_reach_across_long_gaps():
     clean = smooth_motion()
     positions, missing = clean.positions.copy(), clean.missing.copy()
-    missing[::2, 0] = True                                  # every other frame of joint 0 missing
+    missing[::2, 0] = True  # every other frame of joint 0 missing
     positions[missing] = np.nan
-    positions[101, 0] += [0.03, 0.0, 0.0]                   # an observed spike among them
+    positions[101, 0] += [0.03, 0.0, 0.0]  # an observed spike among them
     assert np.array_equal(np.argwhere(median_outliers(positions, missing, 3, 0.01)), [[101, 0]])
     # a sample right after a 60-frame gap: every window spans more than 4·half_window frames, so it is not judged
     positions, missing = clean.positions.copy(), clean.missing.copy()
@@ -102,7 +103,7 @@ def test_screened_pchip_repairs_noise_and_keeps_every_other_sample():
     clean = smooth_motion()
     noisy, hit = with_noise(clean, np.random.default_rng(1))
     missing = noisy.missing.copy()
-    missing[50:60, 2] = True                                # and a gap to fill
+    missing[50:60, 2] = True  # and a gap to fill
     positions = noisy.positions.copy()
     positions[missing] = np.nan
     noisy = Motion(positions=positions, joint_names=noisy.joint_names, fps=noisy.fps, name="noisy")
@@ -116,12 +117,12 @@ def test_screened_pchip_repairs_noise_and_keeps_every_other_sample():
     assert report["filled"] == int(missing.sum()) and report["method"] == "MedianScreen(PchipInterpolation)"
     assert not screened.missing.any()
     kept = ~missing & ~flags
-    assert np.array_equal(screened.positions[kept], noisy.positions[kept])          # bit-identical
+    assert np.array_equal(screened.positions[kept], noisy.positions[kept])  # bit-identical
 
     def rms(m, where):
         return float(np.sqrt(np.mean(np.sum((m.positions[where] - clean.positions[where]) ** 2, axis=-1))))
 
-    assert rms(screened, hit) < 0.25 * rms(plain, hit)      # most of the noise is gone (plain PCHIP keeps it all)
+    assert rms(screened, hit) < 0.25 * rms(plain, hit)  # most of the noise is gone (plain PCHIP keeps it all)
     assert rms(screened, missing) < rms(plain, missing)
 
 
@@ -151,7 +152,7 @@ def test_fit_clones_and_requires_fit_follows_the_refiner():
     clean = smooth_motion()
     fitted = clone(screen).fit([clean])
     assert fitted.refiner_ is not screen.refiner and fitted.refiner_.joint_names_ == clean.joint_names
-    assert "refiner__extrapolate" in screen.get_params(deep=True)      # the runner's fit cache key sees inside
+    assert "refiner__extrapolate" in screen.get_params(deep=True)  # the runner's fit cache key sees inside
 
 
 @needs(WALK)
@@ -166,9 +167,9 @@ def test_cli_screen_outliers_pulls_a_spike_back(tmp_path, capsys):
     printed = capsys.readouterr().out
     assert "MedianScreen(PchipInterpolation)" in printed and "repaired" in printed
     after = ezc3d.c3d(str(screened))["data"]["points"][:3]
-    assert abs(after[0, marker, frame] - before[0, marker, frame]) > 250.0   # back near the trajectory
+    assert abs(after[0, marker, frame] - before[0, marker, frame]) > 250.0  # back near the trajectory
     neighbours = before[:, marker, [frame - 1, frame + 1]].mean(axis=1)
-    assert np.linalg.norm(after[:, marker, frame] - neighbours) < 20.0          # mm
+    assert np.linalg.norm(after[:, marker, frame] - neighbours) < 20.0  # mm
     assert main(["refine", str(spiky), str(tmp_path / "x.c3d"), "--method", "pchip", "--screen-outliers", "0"]) == 2
     assert "--screen-outliers" in capsys.readouterr().err
 
@@ -187,9 +188,9 @@ def test_the_hampel_rule_spares_fast_motion_and_still_flags_noise():
     missing = np.zeros((120, 2), bool)
     fixed = median_outliers(noisy, missing, 2, 0.005)
     hampel = median_outliers(noisy, missing, 2, 0.005, n_sigmas=3.0)
-    assert fixed[:, 0].mean() > 0.2                     # the fixed distance flags a fifth of the fast joint's samples
-    assert not hampel[:, 0].any()                       # its own spread raises the bar there
-    assert np.array_equal(hampel[:, 1], hit[:, 1])      # and the noise on the still joint is still found, exactly
+    assert fixed[:, 0].mean() > 0.2  # the fixed distance flags a fifth of the fast joint's samples
+    assert not hampel[:, 0].any()  # its own spread raises the bar there
+    assert np.array_equal(hampel[:, 1], hit[:, 1])  # and the noise on the still joint is still found, exactly
 
 
 DASH = SHARED / "data" / "bandai_motion_1" / "data" / "dataset-1_dash_proud_001.bvh"
@@ -211,5 +212,7 @@ def test_cli_reports_what_the_screen_hid_and_warns_at_low_frame_rates(tmp_path, 
     assert share > 2.0
     assert re.search(r"^warning: the screen hid .* chosen at 120 fps, and at 30 fps", printed, re.MULTILINE), printed
     # a threshold raised for the rate quiets it
-    assert main(["refine", str(DASH), str(tmp_path / "dash2.npz"), "--method", "pchip", "--screen-outliers", "0.08"]) == 0
+    assert (
+        main(["refine", str(DASH), str(tmp_path / "dash2.npz"), "--method", "pchip", "--screen-outliers", "0.08"]) == 0
+    )
     assert "warning:" not in capsys.readouterr().out

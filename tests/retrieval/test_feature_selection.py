@@ -1,8 +1,11 @@
 """AMFS, Laplacian Score, SPEC and UDFS (mocapkit.retrieval.feature_selection) and FeatureRetrieval, their retrieval method."""
+
 import numpy as np
 import pytest
 from sklearn.exceptions import NotFittedError
 
+from mocapkit.motion.container import Motion
+from mocapkit.motion.layouts import LANDMARK_NAMES, LANDMARKS, LAYOUTS
 from mocapkit.retrieval.feature_selection import (
     AMFS,
     SPEC,
@@ -12,8 +15,6 @@ from mocapkit.retrieval.feature_selection import (
     laplacian_quadratic_diag,
     local_regression_laplacians,
 )
-from mocapkit.motion.layouts import LANDMARK_NAMES, LANDMARKS, LAYOUTS
-from mocapkit.motion.container import Motion
 from mocapkit.retrieval.selected_features import FeatureRetrieval
 from tests.shared_data import SHARED, needs
 
@@ -33,18 +34,19 @@ def two_view_toy(N=120, seed=0):
 
 # --------------------------------------------------------------------------- the building blocks
 
+
 def test_push_through_laplacian_equals_the_direct_form():
     rng = np.random.default_rng(1)
     X = rng.normal(size=(30, 7))
     nbrs = _knn(X, 5)
-    assert (nbrs == np.arange(30)[:, None]).any(1).all()              # every neighbourhood holds its point
+    assert (nbrs == np.arange(30)[:, None]).any(1).all()  # every neighbourhood holds its point
     L = local_regression_laplacians(X, nbrs, mu=0.3)
     H = np.eye(5) - 1 / 5
     for i in (0, 13, 29):
-        Xi = X[nbrs[i]].T                                                # d × k, the spec's column notation
+        Xi = X[nbrs[i]].T  # d × k, the spec's column notation
         direct = H - H @ Xi.T @ np.linalg.inv(Xi @ H @ Xi.T + 0.3 * np.eye(7)) @ Xi @ H
         assert np.allclose(L[i], direct, atol=1e-10)
-    assert np.allclose(L @ np.ones(5), 0.0, atol=1e-10)               # L_i 1 = 0
+    assert np.allclose(L @ np.ones(5), 0.0, atol=1e-10)  # L_i 1 = 0
     # diag(Xᵀ L X) without the N×N Laplacian equals the dense computation
     Y = rng.normal(size=(30, 11))
     dense = np.zeros((30, 30))
@@ -55,11 +57,12 @@ def test_push_through_laplacian_equals_the_direct_form():
 
 # --------------------------------------------------------------------------- AMFS
 
+
 def test_amfs_objective_decreases_alphas_on_simplex_and_structure_is_selected():
     views, structured = two_view_toy()
     amfs = AMFS(n_features=14, r=4.0, mu=0.1, n_neighbors=10, random_state=0).fit(views)
     obj = amfs.objective_
-    assert len(obj) >= 3 and np.all(np.diff(obj) <= 1e-12 * obj[0])     # non-increasing, W and α steps
+    assert len(obj) >= 3 and np.all(np.diff(obj) <= 1e-12 * obj[0])  # non-increasing, W and α steps
     assert obj[-1] < obj[0]
     assert np.isclose(amfs.alphas_.sum(), 1.0) and (amfs.alphas_ >= 0).all() and amfs.alphas_.shape == (2,)
     assert amfs.selected_.dtype == np.int64 and len(set(amfs.selected_)) == 14
@@ -67,13 +70,13 @@ def test_amfs_objective_decreases_alphas_on_simplex_and_structure_is_selected():
     assert [s.indices(54)[:2] for s in amfs.view_slices_] == [(0, 32), (32, 54)]
     Y = amfs.transform(views)
     assert Y.shape == (120, 14)
-    assert np.allclose(Y.mean(0), 0, atol=1e-10) and np.allclose(Y.std(0), 1)   # standardised features
+    assert np.allclose(Y.mean(0), 0, atol=1e-10) and np.allclose(Y.std(0), 1)  # standardised features
     assert amfs.n_iter_ <= amfs.max_iter
 
 
 def test_amfs_objective_decreases_without_standardisation_and_several_seeds():
     views, _ = two_view_toy(seed=3)
-    views = [views[0] * np.linspace(0.2, 3, 32), views[1]]              # unequal scales: B_ii differ
+    views = [views[0] * np.linspace(0.2, 3, 32), views[1]]  # unequal scales: B_ii differ
     for seed in range(3):
         amfs = AMFS(n_features=10, standardize=False, random_state=seed).fit(views)
         assert np.all(np.diff(amfs.objective_) <= 1e-12 * amfs.objective_[0])
@@ -93,27 +96,29 @@ def test_amfs_checks():
     amfs = AMFS(5).fit(views)
     with pytest.raises(ValueError, match="widths"):
         amfs.transform([views[0], views[1][:, :3]])
-    assert AMFS(5).fit(views[0]).transform(views[0]).shape == (40, 5)   # one 2-D array is one view
+    assert AMFS(5).fit(views[0]).transform(views[0]).shape == (40, 5)  # one 2-D array is one view
     # the thesis's printed sort order runs too (for comparison), the objective is then not minimised
     assert AMFS(5, order="descending", max_iter=3).fit(views).selected_.shape == (5,)
 
 
 # --------------------------------------------------------------------------- Laplacian Score
 
+
 def test_laplacian_score_selects_the_structured_features():
     views, structured = two_view_toy()
     ls = LaplacianScore(n_features=14, n_neighbors=5).fit(views)
     assert ls.selected_.dtype == np.int64
     assert len(set(ls.selected_) & set(structured)) >= 12
-    assert np.all(np.diff(ls.scores_[ls.selected_]) >= 0)              # smallest first
+    assert np.all(np.diff(ls.scores_[ls.selected_]) >= 0)  # smallest first
     assert ls.transform(views).shape == (120, 14)
     const = [np.c_[views[0], np.ones(120)], views[1]]
-    assert np.isinf(LaplacianScore(5).fit(const).scores_[32])            # a constant feature is never chosen
+    assert np.isinf(LaplacianScore(5).fit(const).scores_[32])  # a constant feature is never chosen
     with pytest.raises(NotFittedError):
         LaplacianScore(5).transform(views)
 
 
 # --------------------------------------------------------------------------- SPEC and UDFS
+
 
 @pytest.mark.parametrize("ranking", ["phi1", "phi2", "phi3"])
 def test_spec_selects_the_structured_features(ranking):
@@ -155,8 +160,8 @@ def test_udfs_selects_the_structured_features_and_its_objective_falls():
     views, structured = two_view_toy()
     udfs = UDFS(n_features=14, n_components=3, gamma=0.1, n_neighbors=5).fit(views)
     assert len(set(udfs.selected_) & set(structured)) >= 12
-    assert np.all(np.diff(udfs.scores_[udfs.selected_]) <= 0)          # largest ‖w^i‖ first
-    assert np.allclose(udfs.W_.T @ udfs.W_, np.eye(3), atol=1e-8)       # WᵀW = I
+    assert np.all(np.diff(udfs.scores_[udfs.selected_]) <= 0)  # largest ‖w^i‖ first
+    assert np.allclose(udfs.W_.T @ udfs.W_, np.eye(3), atol=1e-8)  # WᵀW = I
     assert udfs.objective_[-1] <= udfs.objective_[0] + 1e-9
     assert 1 <= udfs.n_iter_ <= udfs.max_iter
     with pytest.raises(ValueError, match="mu must"):
@@ -173,11 +178,12 @@ def test_udfs_matrix_is_the_sum_of_local_regressions():
     nbrs = _knn(X, 4)
     H = np.eye(4) - 1 / 4
     M = sum(X[nb].T @ H @ np.linalg.inv(H @ X[nb] @ X[nb].T @ H + 0.5 * np.eye(4)) @ H @ X[nb] for nb in nbrs)
-    W = np.linalg.eigh(M + np.eye(6))[1][:, :2]                          # first iteration: D_W = I
-    assert np.allclose(np.abs(W.T @ udfs.W_), np.eye(2), atol=1e-6)   # the same eigenvectors, up to sign
+    W = np.linalg.eigh(M + np.eye(6))[1][:, :2]  # first iteration: D_W = I
+    assert np.allclose(np.abs(W.T @ udfs.W_), np.eye(2), atol=1e-6)  # the same eigenvectors, up to sign
 
 
 # --------------------------------------------------------------------------- FeatureRetrieval
+
 
 def _motion(seq_landmarks: np.ndarray, name: str) -> Motion:
     """An msr20 Motion whose landmarks are ``seq_landmarks`` [T, 20, 3]."""
@@ -186,16 +192,21 @@ def _motion(seq_landmarks: np.ndarray, name: str) -> Motion:
     pos = np.zeros((len(seq_landmarks), len(layout.joint_names), 3), np.float32)
     for k, landmark in enumerate(LANDMARK_NAMES):
         pos[:, layout.joint_names.index(table[landmark])] = seq_landmarks[:, k]
-    return Motion(positions=pos, joint_names=layout.joint_names, fps=30.0, parents=layout.parents,
-                  layout_name="msr20", name=name)
+    return Motion(
+        positions=pos, joint_names=layout.joint_names, fps=30.0, parents=layout.parents, layout_name="msr20", name=name
+    )
 
 
 def synthetic_motions(n_per_class=4, seed=0):
     """Three classes of 1.5 s motions: wave the right hand, wave the left hand, kick with the left foot."""
     from tests.retrieval.test_retrieval_features import standing_pose
+
     rng = np.random.default_rng(seed)
-    moving = {0: ("r_elbow", "r_wrist", "r_hand"), 1: ("l_elbow", "l_wrist", "l_hand"),
-              2: ("l_knee", "l_ankle", "l_foot")}
+    moving = {
+        0: ("r_elbow", "r_wrist", "r_hand"),
+        1: ("l_elbow", "l_wrist", "l_hand"),
+        2: ("l_knee", "l_ankle", "l_foot"),
+    }
     motions, labels = [], []
     for c, joints in moving.items():
         for i in range(n_per_class):
@@ -210,11 +221,17 @@ def synthetic_motions(n_per_class=4, seed=0):
     return motions, np.array(labels)
 
 
-@pytest.mark.parametrize("params", [{"selector": "amfs", "n_features": 60},
-                                    {"selector": "laplacian", "n_features": 60, "views": ("gpf", "hod")},
-                                    {"selector": "spec", "n_features": 60},
-                                    {"selector": "udfs", "n_features": 20, "views": ("gpf",)},
-                                    {"views": ("hod",)}, {"views": "gpf"}])
+@pytest.mark.parametrize(
+    "params",
+    [
+        {"selector": "amfs", "n_features": 60},
+        {"selector": "laplacian", "n_features": 60, "views": ("gpf", "hod")},
+        {"selector": "spec", "n_features": 60},
+        {"selector": "udfs", "n_features": 20, "views": ("gpf",)},
+        {"views": ("hod",)},
+        {"views": "gpf"},
+    ],
+)
 def test_feature_retrieval_state_round_trip(tmp_path, params):
     motions, labels = synthetic_motions()
     params = dict(n_words=8, **params)
@@ -223,7 +240,7 @@ def test_feature_retrieval_state_round_trip(tmp_path, params):
     assert d.shape == (12, 12) and d.dtype == np.float64
     assert np.allclose(np.diag(d), 0.0, atol=1e-3)
     off = d + np.diag(np.full(12, np.inf))
-    assert (labels[off.argmin(1)] == labels).mean() >= 0.9              # easy classes: nearest is the same class
+    assert (labels[off.argmin(1)] == labels).mean() >= 0.9  # easy classes: nearest is the same class
     state = method._state()
     assert all(isinstance(v, np.ndarray) and v.dtype != object for v in state.values())
     np.savez(tmp_path / "state.npz", **state)
@@ -248,7 +265,7 @@ def test_feature_retrieval_checks():
         FeatureRetrieval(views=("hod", "bones")).fit(motions)
     with pytest.raises(ValueError, match="selector"):
         FeatureRetrieval(selector="mcfs").fit(motions)
-    m = FeatureRetrieval(views=("hod",), selector="amfs", n_features=10 ** 6).fit(motions)   # capped at D
+    m = FeatureRetrieval(views=("hod",), selector="amfs", n_features=10**6).fit(motions)  # capped at D
     assert len(m.selected_) == 19 * 3 * 8 * 7
     assert FeatureRetrieval().get_params()["fps"] == 30.0 and FeatureRetrieval().heading == "frame"
 

@@ -1,4 +1,5 @@
 """Retrieval: the normalised landmark skeleton, the metrics, DTW, the index / search commands, the benchmark."""
+
 from __future__ import annotations
 
 import json
@@ -8,50 +9,94 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from tests.shared_data import SHARED, needs, synthetic_hdm05_folder
 
 from mocapkit.cli import main as cli
-from mocapkit.motion.layouts import LANDMARK_NAMES, find_landmarks
 from mocapkit.motion.container import Motion
-from mocapkit.retrieval.metrics import retrieval_metrics, tp_ratio
+from mocapkit.motion.layouts import LANDMARK_NAMES, find_landmarks
 from mocapkit.retrieval import (
     MotionIndex,
-    RetrievalInputError,
+    RetrievalIndexError,
+    SkeletonInputError,
     build_index,
     normalised_landmarks,
     search_index,
 )
 from mocapkit.retrieval.dtw import DTWRetrieval
+from mocapkit.retrieval.metrics import retrieval_metrics, tp_ratio
+from tests.shared_data import SHARED, needs, synthetic_hdm05_folder
 
 HDM05 = SHARED / "data" / "hdm05_cuts11"
-BANDAI_JOINTS = ("joint_Root", "Hips", "Spine", "Chest", "Neck", "Head", "Shoulder_L", "UpperArm_L", "LowerArm_L",
-                 "Hand_L", "Shoulder_R", "UpperArm_R", "LowerArm_R", "Hand_R", "UpperLeg_L", "LowerLeg_L", "Foot_L",
-                 "Toes_L", "UpperLeg_R", "LowerLeg_R", "Foot_R", "Toes_R")
+BANDAI_JOINTS = (
+    "joint_Root",
+    "Hips",
+    "Spine",
+    "Chest",
+    "Neck",
+    "Head",
+    "Shoulder_L",
+    "UpperArm_L",
+    "LowerArm_L",
+    "Hand_L",
+    "Shoulder_R",
+    "UpperArm_R",
+    "LowerArm_R",
+    "Hand_R",
+    "UpperLeg_L",
+    "LowerLeg_L",
+    "Foot_L",
+    "Toes_L",
+    "UpperLeg_R",
+    "LowerLeg_R",
+    "Foot_R",
+    "Toes_R",
+)
 
 
 @pytest.fixture(scope="module")
 def hdm05_folder(tmp_path_factory) -> Path:
     """A synthetic HDM05-format folder: 3 classes × 2 actors × 3 takes, 120 fps."""
-    return synthetic_hdm05_folder(tmp_path_factory, ("walk2StepsLstart", "hopBothLegs1hops", "squat1Reps"),
-                                  clips_per_actor=3, max_frames=240)
+    return synthetic_hdm05_folder(
+        tmp_path_factory, ("walk2StepsLstart", "hopBothLegs1hops", "squat1Reps"), clips_per_actor=3, max_frames=240
+    )
 
 
 def _walker(frames: int = 90, fps: float = 30.0, seed: int = 0) -> Motion:
     """A Bandai-rig skeleton (BVH joint names) swinging its limbs, 1 m pelvis height, metres."""
     rng = np.random.default_rng(seed)
-    offsets = {"joint_Root": (0, 0, 0), "Hips": (0, 1.0, 0), "Spine": (0, 0.1, 0), "Chest": (0, 0.2, 0),
-               "Neck": (0, 0.25, 0), "Head": (0, 0.15, 0), "Shoulder_L": (0.05, 0.2, 0), "UpperArm_L": (0.12, 0, 0),
-               "LowerArm_L": (0.28, 0, 0), "Hand_L": (0.25, 0, 0), "Shoulder_R": (-0.05, 0.2, 0),
-               "UpperArm_R": (-0.12, 0, 0), "LowerArm_R": (-0.28, 0, 0), "Hand_R": (-0.25, 0, 0),
-               "UpperLeg_L": (0.1, -0.05, 0), "LowerLeg_L": (0, -0.42, 0), "Foot_L": (0, -0.41, 0),
-               "Toes_L": (0, -0.05, 0.12), "UpperLeg_R": (-0.1, -0.05, 0), "LowerLeg_R": (0, -0.42, 0),
-               "Foot_R": (0, -0.41, 0), "Toes_R": (0, -0.05, 0.12)}
+    offsets = {
+        "joint_Root": (0, 0, 0),
+        "Hips": (0, 1.0, 0),
+        "Spine": (0, 0.1, 0),
+        "Chest": (0, 0.2, 0),
+        "Neck": (0, 0.25, 0),
+        "Head": (0, 0.15, 0),
+        "Shoulder_L": (0.05, 0.2, 0),
+        "UpperArm_L": (0.12, 0, 0),
+        "LowerArm_L": (0.28, 0, 0),
+        "Hand_L": (0.25, 0, 0),
+        "Shoulder_R": (-0.05, 0.2, 0),
+        "UpperArm_R": (-0.12, 0, 0),
+        "LowerArm_R": (-0.28, 0, 0),
+        "Hand_R": (-0.25, 0, 0),
+        "UpperLeg_L": (0.1, -0.05, 0),
+        "LowerLeg_L": (0, -0.42, 0),
+        "Foot_L": (0, -0.41, 0),
+        "Toes_L": (0, -0.05, 0.12),
+        "UpperLeg_R": (-0.1, -0.05, 0),
+        "LowerLeg_R": (0, -0.42, 0),
+        "Foot_R": (0, -0.41, 0),
+        "Toes_R": (0, -0.05, 0.12),
+    }
     parents = (-1, 0, 1, 2, 3, 4, 3, 6, 7, 8, 3, 10, 11, 12, 1, 14, 15, 16, 1, 18, 19, 20)
     t = np.arange(frames) / fps
     positions = np.zeros((frames, len(BANDAI_JOINTS), 3))
     for j, (name, parent) in enumerate(zip(BANDAI_JOINTS, parents)):
         offset = np.array(offsets[name], dtype=float)
-        swing = 0.1 * np.sin(2 * np.pi * t + j)[:, None] * np.array([0, 0, 1.0]) if name.startswith(("Lower", "Hand", "Foot")) else 0
+        swing = (
+            0.1 * np.sin(2 * np.pi * t + j)[:, None] * np.array([0, 0, 1.0])
+            if name.startswith(("Lower", "Hand", "Foot"))
+            else 0
+        )
         positions[:, j] = (positions[:, parent] if parent >= 0 else 0) + offset + swing
     positions += rng.normal(scale=0.002, size=positions.shape)
     return Motion(positions, BANDAI_JOINTS, fps, parents=parents, name="walker")
@@ -76,22 +121,23 @@ def test_normalisation_removes_translation_heading_and_size():
     assert np.allclose(base[:, 0], 0)
     l_hip, r_hip = LANDMARK_NAMES.index("l_hip"), LANDMARK_NAMES.index("r_hip")
     assert (base[:, l_hip, 0] > 0).all() and (base[:, r_hip, 0] < 0).all()
-    assert np.allclose(np.linalg.norm(base[:, LANDMARK_NAMES.index("l_knee")] - base[:, l_hip], axis=-1), 0.42,
-                       atol=1e-5)
+    assert np.allclose(
+        np.linalg.norm(base[:, LANDMARK_NAMES.index("l_knee")] - base[:, l_hip], axis=-1), 0.42, atol=1e-5
+    )
 
 
 def test_normalisation_fills_gaps_and_names_bad_input():
     motion = _walker()
     positions = motion.positions.copy()
-    positions[10:20, 9] = np.nan            # the left hand lost for 10 frames
+    positions[10:20, 9] = np.nan  # the left hand lost for 10 frames
     gappy = normalised_landmarks(replace(motion, positions=positions, missing=None))
     assert np.isfinite(gappy).all()
-    with pytest.raises(RetrievalInputError, match="walker.*frames"):
+    with pytest.raises(SkeletonInputError, match="walker.*frames"):
         normalised_landmarks(replace(motion, positions=motion.positions[:1], missing=None))
-    with pytest.raises(RetrievalInputError, match="walker: no landmark is observed"):
+    with pytest.raises(SkeletonInputError, match="walker: no landmark is observed"):
         normalised_landmarks(replace(motion, positions=np.full_like(motion.positions, np.nan), missing=None))
     markers = Motion(np.zeros((20, 4, 3)), ["M1", "M2", "M3", "M4"], 100.0, source="markers.c3d")
-    with pytest.raises(RetrievalInputError, match="markers.c3d.*landmarks"):
+    with pytest.raises(SkeletonInputError, match="markers.c3d.*landmarks"):
         normalised_landmarks(markers)
 
 
@@ -109,7 +155,7 @@ def test_metrics_on_a_hand_made_ranking():
 
 def test_tp_ratio_counts_the_top_lists_agreement():
     labels = np.array(["A", "A", "A", "B", "B"])
-    pos = np.array([0.0, 0.1, 5.0, 0.2, 0.3])           # clip 2 is an A far from the others
+    pos = np.array([0.0, 0.1, 5.0, 0.2, 0.3])  # clip 2 is an A far from the others
     d = np.abs(pos[:, None] - pos[None, :])
     out = tp_ratio(d, labels, [0], k=2)
     # query 0: mixed top-2 = {1, 3}; own class top-2 = {1, 2}: one shared of 2
@@ -120,7 +166,7 @@ def test_tp_ratio_counts_the_top_lists_agreement():
 def test_dtw_finds_the_time_warped_copy():
     a, b = _walker(seed=1), _walker(frames=60, seed=2)
     slow = replace(a, positions=np.repeat(a.positions, 2, axis=0)[::1][:150], missing=None, name="slow")
-    other = replace(b, positions=b.positions[:, ::-1].copy(), missing=None)    # joints scrambled: a different pose
+    other = replace(b, positions=b.positions[:, ::-1].copy(), missing=None)  # joints scrambled: a different pose
     method = DTWRetrieval().fit([other, slow])
     assert method.search([a], k=1)[0][0, 0] == 1
     restored = DTWRetrieval()
@@ -144,7 +190,7 @@ def test_mutual_proximity_demotes_a_hub():
     np.fill_diagonal(database, 0.0)
     query = np.array([[0.95, 1.0, 3.0, 3.0, 3.0]])
     mean, std = database_statistics(database, reference_indices(n, 512))
-    assert mean[0] == pytest.approx(0.95) and mean[1] == pytest.approx((0.8 + 3 + 3 + 3) / 4)   # itself left out
+    assert mean[0] == pytest.approx(0.95) and mean[1] == pytest.approx((0.8 + 3 + 3 + 3) / 4)  # itself left out
     assert np.argmin(query[0]) == 0
     mp = mutual_proximity(query, mean, std)
     assert np.argmin(mp[0]) == 1 and (mp >= 0).all()
@@ -190,15 +236,59 @@ def test_index_and_search_cli(hdm05_folder, tmp_path, capsys):
     results = json.loads(capsys.readouterr().out)
     assert results[0]["query"] == str(query)
     hits = results[0]["results"]
-    assert len(hits) == 3 and all(str(query.resolve()) != h["path"] for h in hits)        # itself left out
+    assert len(hits) == 3 and all(str(query.resolve()) != h["path"] for h in hits)  # itself left out
     assert [h["distance"] for h in hits] == sorted(h["distance"] for h in hits)
     assert all("squat1Reps" in Path(h["path"]).name for h in hits)
     assert cli(["search", "--index", str(out), str(query), "-k", "0", "--json"]) == 0
-    assert len(json.loads(capsys.readouterr().out)[0]["results"]) == 17                   # all but itself
+    assert len(json.loads(capsys.readouterr().out)[0]["results"]) == 17  # all but itself
     # a refused method names both
     assert cli(["search", "--index", str(out), str(query), "--method", "tsr_stpm"]) == 2
     err = capsys.readouterr().err
     assert "dtw_positions" in err and "tsr_stpm" in err
+
+
+def test_index_takes_the_folder_positionally_and_set_overrides(hdm05_folder, tmp_path, capsys):
+    out = tmp_path / "index"
+    assert (
+        cli(
+            [
+                "index",
+                str(hdm05_folder),
+                "--out",
+                str(out),
+                "--method",
+                "dtw_positions",
+                "--set",
+                "window=0.2",
+                "--set",
+                "features=[positions,relational]",
+            ]
+        )
+        == 0
+    )
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["params"]["window"] == 0.2 and manifest["params"]["features"] == ["positions", "relational"]
+    assert manifest["target"] == "mocapkit.retrieval.dtw.DTWRetrieval"
+    assert MotionIndex.load(out).method.window == 0.2  # reloaded with its parameters
+    capsys.readouterr()
+    assert cli(["index", str(hdm05_folder), "--out", str(tmp_path / "x"), "--set", "nope=1"]) == 2
+    err = capsys.readouterr().err
+    assert "no parameter 'nope'" in err and "dtw_mutual_proximity" in err and "hubness" in err  # the default
+    assert cli(["index", str(hdm05_folder), "--src", str(hdm05_folder), "--out", str(tmp_path / "y")]) == 2
+    assert "give SRC once" in capsys.readouterr().err
+
+
+def test_a_saved_index_only_rebuilds_registry_classes(hdm05_folder, tmp_path):
+    out = tmp_path / "index"
+    build_index(hdm05_folder, out, method="dtw_positions", quiet=True)
+    manifest = json.loads((out / "manifest.json").read_text())
+    manifest["target"] = "pathlib.Path.touch"  # never read back
+    (out / "manifest.json").write_text(json.dumps(manifest))
+    assert type(MotionIndex.load(out).method).__name__ == "DTWRetrieval"
+    manifest["method"] = "os.system"
+    (out / "manifest.json").write_text(json.dumps(manifest))
+    with pytest.raises(RetrievalIndexError, match="unknown retrieval method 'os.system'"):
+        MotionIndex.load(out)
 
 
 def test_index_bad_files_empty_folders_and_foreign_skeletons(hdm05_folder, tmp_path):
@@ -218,22 +308,21 @@ def test_index_bad_files_empty_folders_and_foreign_skeletons(hdm05_folder, tmp_p
     markers = Motion(np.zeros((40, 3, 3)), ["LFHD", "RFHD", "C7"], 120.0, name="markers")
     with pytest.raises(ValueError, match="markers.*lacks the landmarks"):
         loaded.search([("markers", markers)])
-    short = Motion(np.zeros((1, len(BANDAI_JOINTS), 3)), BANDAI_JOINTS, 30.0,
-                   parents=_walker().parents, name="short")
-    with pytest.raises(RetrievalInputError, match="short.*at least"):
+    short = Motion(np.zeros((1, len(BANDAI_JOINTS), 3)), BANDAI_JOINTS, 30.0, parents=_walker().parents, name="short")
+    with pytest.raises(SkeletonInputError, match="short.*at least"):
         loaded.search([("short", short)])
     with pytest.raises(ValueError, match="not an index folder"):
         search_index(tmp_path / "empty", ["x.amc"])
 
 
 def test_index_round_trip_gives_the_same_ranking(hdm05_folder, tmp_path):
-    index = build_index(hdm05_folder, tmp_path / "idx", quiet=True)         # the recommended default
+    index = build_index(hdm05_folder, tmp_path / "idx", quiet=True)  # the recommended default
     assert index.method_name == "dtw_mutual_proximity"
     query = min((hdm05_folder / "mm").glob("*.amc"))
     before = index.search([str(query)], k=0)
     after = search_index(tmp_path / "idx", [str(query)], k=0)
     assert before == after
-    motion_class = query.name.split("_")[2]                                    # HDM_<actor>_<class>_<nnn>_120.amc
+    motion_class = query.name.split("_")[2]  # HDM_<actor>_<class>_<nnn>_120.amc
     assert [Path(h["path"]).name.split("_")[2] for h in before[0]["results"][:3]] == [motion_class] * 3
 
 
@@ -251,7 +340,7 @@ def test_cross_performer_benchmark_on_real_hdm05():
     assert m["n_queries"] == 48 and m["p@1"] > 0.7 and m["map"] > 0.5
     for fold, scores in result["detail"]["folds"].items():
         nearest_actors = {name.split("_")[1] for name in scores["nearest"]}
-        assert fold not in nearest_actors                 # never its own performer
+        assert fold not in nearest_actors  # never its own performer
     tp = bench.evaluate_estimator(DTWRetrieval(), bench.split("zhou_tp20", 0))["metrics"]["tp_ratio"]
     assert 0.5 < tp <= 1.0
 
@@ -271,6 +360,6 @@ def test_dtw_distances_in_query_blocks_equal_one_call(monkeypatch):
     np.testing.assert_array_equal(blocked, whole)
     from dtaidistance import dtw_ndim
 
-    window = int(np.ceil(0.5 * max(len(s) for s in queries + database)))          # the band of the longest clip
+    window = int(np.ceil(0.5 * max(len(s) for s in queries + database)))  # the band of the longest clip
     expected = dtw_ndim.distance(queries[6], database[2], window=window) / np.sqrt(len(queries[6]) + len(database[2]))
     assert blocked[6, 2] == pytest.approx(expected)

@@ -1,4 +1,5 @@
 """Motion features of mocapkit.retrieval.features: relational features, HOD, pose descriptors, GPF bag of words."""
+
 import numpy as np
 import pytest
 from sklearn.exceptions import NotFittedError
@@ -20,10 +21,18 @@ def standing_pose() -> np.ndarray:
     """[20, 3] a template-sized upright body, pelvis at the origin, y up, facing +z, left side at +x."""
     p = {"pelvis": (0, 0, 0), "spine": (0, 0.2, 0), "neck": (0, 0.5, 0), "head": (0, 0.7, 0)}
     for s, x in (("l", 1.0), ("r", -1.0)):
-        p.update({f"{s}_shoulder": (0.18 * x, 0.5, 0), f"{s}_elbow": (0.2 * x, 0.22, 0),
-                  f"{s}_wrist": (0.2 * x, -0.03, 0.02), f"{s}_hand": (0.2 * x, -0.11, 0.03),
-                  f"{s}_hip": (0.1 * x, -0.02, 0), f"{s}_knee": (0.1 * x, -0.44, 0.01),
-                  f"{s}_ankle": (0.1 * x, -0.85, 0), f"{s}_foot": (0.1 * x, -0.88, 0.13)})
+        p.update(
+            {
+                f"{s}_shoulder": (0.18 * x, 0.5, 0),
+                f"{s}_elbow": (0.2 * x, 0.22, 0),
+                f"{s}_wrist": (0.2 * x, -0.03, 0.02),
+                f"{s}_hand": (0.2 * x, -0.11, 0.03),
+                f"{s}_hip": (0.1 * x, -0.02, 0),
+                f"{s}_knee": (0.1 * x, -0.44, 0.01),
+                f"{s}_ankle": (0.1 * x, -0.85, 0),
+                f"{s}_foot": (0.1 * x, -0.88, 0.13),
+            }
+        )
     return np.array([p[name] for name in LANDMARK_NAMES], dtype=np.float64)
 
 
@@ -50,6 +59,7 @@ def raise_right_hand(pose: np.ndarray) -> np.ndarray:
 
 # --------------------------------------------------------------------------- relational features
 
+
 def test_relational_features_shape_and_values():
     seq = moving_sequence()
     f = relational_features(seq)
@@ -58,7 +68,7 @@ def test_relational_features_shape_and_values():
     assert set(np.unique(f)) <= {0.0, 1.0}
     soft = relational_features(seq, soft=True)
     assert soft.shape == f.shape and np.all((soft > 0) & (soft < 1))
-    assert np.array_equal(soft > 0.5, f > 0.5)                     # the soft version agrees on the side
+    assert np.array_equal(soft > 0.5, f > 0.5)  # the soft version agrees on the side
 
 
 def test_relational_features_flip_when_the_right_hand_is_raised():
@@ -78,11 +88,12 @@ def test_relational_features_flip_when_the_right_hand_is_raised():
 def test_relational_features_do_not_depend_on_heading():
     seq = moving_sequence().astype(np.float64)
     c, s = np.cos(0.7), np.sin(0.7)
-    R = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])                 # a turn about the vertical
+    R = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])  # a turn about the vertical
     assert np.array_equal(relational_features(seq), relational_features(seq @ R.T))
 
 
 # --------------------------------------------------------------------------- HOD
+
 
 def test_hod_shape_normalisation_and_translation_invariance():
     seq = moving_sequence(T=37)
@@ -91,16 +102,16 @@ def test_hod_shape_normalisation_and_translation_invariance():
     hist = h.reshape(19, 3, 7, 8)
     sums = hist.sum(-1)
     assert np.all(np.isclose(sums, 1.0, atol=1e-5) | (sums == 0))
-    assert np.isclose(sums[J["l_hand"] - 1], 1.0, atol=1e-5).all()   # a moving landmark: every segment filled
-    assert (sums[J["head"] - 1] == 0).all()                          # a still one: zeros
+    assert np.isclose(sums[J["l_hand"] - 1], 1.0, atol=1e-5).all()  # a moving landmark: every segment filled
+    assert (sums[J["head"] - 1] == 0).all()  # a still one: zeros
     assert np.allclose(hod(seq + np.array([1.5, -0.2, 3.0], np.float32)), h, atol=1e-5)
     assert hod(seq, bins=4, levels=2).shape == (19 * 3 * 4 * 3,)
-    assert not hod(seq[:1]).any()                                    # one frame: no displacement
+    assert not hod(seq[:1]).any()  # one frame: no displacement
 
 
 def test_hod_bins_the_direction_of_motion():
     seq = np.repeat(standing_pose()[None], 9, axis=0)
-    seq[:, J["r_hand"], 0] += np.linspace(0, 0.4, 9)                 # r_hand moves along +x only
+    seq[:, J["r_hand"], 0] += np.linspace(0, 0.4, 9)  # r_hand moves along +x only
     hist = hod(seq).reshape(19, 3, 7, 8)[J["r_hand"] - 1]
     # xy and xz planes: angle 0 → the bin starting at 0 (index 4 of 8 over [−π, π)); yz: no displacement
     assert hist[0, 0, 4] == pytest.approx(1.0) and hist[1, 0, 4] == pytest.approx(1.0)
@@ -109,15 +120,16 @@ def test_hod_bins_the_direction_of_motion():
 
 # --------------------------------------------------------------------------- pose descriptors and GPF
 
+
 def test_pose_descriptors():
     seq = moving_sequence()
     d = pose_descriptors(seq, fps=30.0)
     assert d.dtype == np.float32 and d.shape == (len(seq), 104) and np.isfinite(d).all()
     assert np.allclose(pose_descriptors(seq + np.float32(2.0)), d, atol=1e-4)
     still = pose_descriptors(np.repeat(standing_pose()[None], 4, axis=0))
-    assert np.allclose(still[:, -27:], 0.0)                          # velocities of a still body
+    assert np.allclose(still[:, -27:], 0.0)  # velocities of a still body
     fast = pose_descriptors(seq, fps=60.0)
-    assert np.allclose(fast[:, -27:], 2 * d[:, -27:], atol=1e-4)     # velocities scale with fps
+    assert np.allclose(fast[:, -27:], 2 * d[:, -27:], atol=1e-4)  # velocities scale with fps
     assert pose_descriptors(seq[:1]).shape == (1, 104)
 
 
@@ -139,7 +151,7 @@ def test_gpf_bag_of_words():
     assert np.allclose(np.linalg.norm(codes, axis=1), 1.0, atol=1e-5)
     assert bow.codebook_.shape == (16, 104)
     again = GPFBagOfWords(n_words=16, random_state=0).fit(seqs).transform(seqs)
-    assert np.array_equal(codes, again)                              # seeded
+    assert np.array_equal(codes, again)  # seeded
     mean = GPFBagOfWords(n_words=16, pooling="mean").fit(seqs).transform(seqs[:2])
     assert np.allclose(np.linalg.norm(mean, axis=1), 1.0, atol=1e-5)
     with pytest.raises(ValueError, match="pooling"):

@@ -1,5 +1,6 @@
 """TSR + STPM retrieval (Zhou 2014 ch. 3) and its K-SVD dictionary: the TSR pairs, the pyramid partition, the
 sparse kernel against a dense brute force, K-SVD/OMP, the state round trip, short queries, real HDM05."""
+
 from __future__ import annotations
 
 import io
@@ -9,10 +10,10 @@ import numpy as np
 import pytest
 from sklearn.linear_model import orthogonal_mp_gram
 
-from mocapkit.retrieval.ksvd import KSVD, batch_omp, codes_to_dense
-from mocapkit.motion.layouts import MSR20
 from mocapkit.motion.container import Motion
-from mocapkit.motion.geometry import RetrievalInputError
+from mocapkit.motion.geometry import SkeletonInputError
+from mocapkit.motion.layouts import MSR20
+from mocapkit.retrieval.ksvd import KSVD, batch_omp, codes_to_dense
 from mocapkit.retrieval.tsr_stpm import (
     TSRSTPMRetrieval,
     n_cubes,
@@ -29,11 +30,11 @@ HDM05 = SHARED / "data" / "hdm05_cuts11"
 
 # --------------------------------------------------------------------------- TSR and the partition
 def test_tsr_pairs_follow_the_toy_example():
-    i, j = tsr_pairs(7, 2)                                   # t = 7, σ = 2 → (1,3), (3,5), (5,7) 1-based
+    i, j = tsr_pairs(7, 2)  # t = 7, σ = 2 → (1,3), (3,5), (5,7) 1-based
     assert list(zip(i + 1, j + 1)) == [(1, 3), (3, 5), (5, 7)]
-    i, j = tsr_pairs(8, 2)                                   # 1 + 3σ = 7 < 8: a 4th slice, partner = last frame
+    i, j = tsr_pairs(8, 2)  # 1 + 3σ = 7 < 8: a 4th slice, partner = last frame
     assert list(zip(i + 1, j + 1)) == [(1, 3), (3, 5), (5, 7), (7, 8)]
-    i, j = tsr_pairs(8, 7)                                   # σ + 1 frames: exactly one slice
+    i, j = tsr_pairs(8, 7)  # σ + 1 frames: exactly one slice
     assert list(zip(i, j)) == [(0, 7)]
     assert len(tsr_pairs(1, 3)[0]) == 0
     with pytest.raises(ValueError):
@@ -42,8 +43,8 @@ def test_tsr_pairs_follow_the_toy_example():
 
 @pytest.mark.parametrize("level", [0, 1, 2, 3])
 def test_cubes_per_level_tile_the_tsr(level):
-    assert n_cubes(level) == 2 ** level * (level + 1) ** 2 == [1, 8, 36, 128][level]
-    n_slices, q = 11, 10                                     # uneven: 10 atoms in 3 blocks, 11 slices in 4 segments
+    assert n_cubes(level) == 2**level * (level + 1) ** 2 == [1, 8, 36, 128][level]
+    n_slices, q = 11, 10  # uneven: 10 atoms in 3 blocks, 11 slices in 4 segments
     cubes = stpm_cubes(n_slices, q, level)
     assert len(cubes) == n_cubes(level)
     cover = np.zeros((n_slices, q, q), dtype=int)
@@ -60,7 +61,7 @@ def test_cubes_per_level_tile_the_tsr(level):
 def _random_codes(rng, n_frames, q, m):
     indices = np.stack([rng.choice(q, m, replace=False) for _ in range(n_frames)])
     coefs = rng.normal(size=(n_frames, m))
-    stopped = rng.random(n_frames) < 0.3                      # OMP rows that stopped early: zero, repeated slot
+    stopped = rng.random(n_frames) < 0.3  # OMP rows that stopped early: zero, repeated slot
     coefs[stopped, -1] = 0.0
     indices[stopped, -1] = indices[stopped, 0]
     return indices, coefs
@@ -73,19 +74,19 @@ def _dense_pyramid(indices, coefs, q, sigma, n_levels, block_norm, whole_segment
     out = []
     for level in range(n_levels):
         cubes = stpm_cubes(len(S), q, level)
-        if whole_segments:                                   # one q × q cube per temporal segment
+        if whole_segments:  # one q × q cube per temporal segment
             cubes = [(t, slice(0, q), slice(0, q)) for t, r, c in cubes if r.start == 0 and c.start == 0]
         for t, r, c in cubes:
             Z = S[t, r, c].max(axis=0) if t.stop > t.start else np.zeros((r.stop - r.start, c.stop - c.start))
             if block_norm != "none":
-                norm = Z.sum() if block_norm == "l1" else np.sqrt((Z ** 2).sum())
+                norm = Z.sum() if block_norm == "l1" else np.sqrt((Z**2).sum())
                 Z = Z / norm if norm > 0 else Z
             out.append((level, Z))
     return out
 
 
 def _dense_kernel(pa, pb):
-    return sum(2.0 ** -la * np.minimum(za, zb).sum() for (la, za), (_, zb) in zip(pa, pb))
+    return sum(2.0**-la * np.minimum(za, zb).sum() for (la, za), (_, zb) in zip(pa, pb))
 
 
 @pytest.mark.parametrize("block_norm", ["none", "l1", "l2"])
@@ -93,7 +94,7 @@ def _dense_kernel(pa, pb):
 def test_sparse_kernel_equals_dense_brute_force(block_norm, n_levels):
     rng = np.random.default_rng(n_levels)
     q, m, sigma = 10, 3, 3
-    clips = [_random_codes(rng, n, q, m) for n in (30, 4, 17, 9, 41)]   # 4 frames: 1 slice < 2^l segments
+    clips = [_random_codes(rng, n, q, m) for n in (30, 4, 17, 9, 41)]  # 4 frames: 1 slice < 2^l segments
     pyr = pyramids_from_codes(clips, q, sigma, n_levels, block_norm)
     assert pyr.n_clips == len(clips) and pyr.matrix.shape == (len(clips) * rows_per_clip(n_levels), q * q)
     K = stpm_kernel(pyr, pyr)
@@ -148,7 +149,7 @@ def test_ksvd_learns_unit_atoms_and_reduces_the_error():
     for row in codes:
         row[rng.choice(50, 3, replace=False)] = rng.normal(size=3)
     Y = codes @ true
-    Y += rng.normal(size=Y.shape) * np.sqrt(np.mean(Y ** 2)) * 0.1
+    Y += rng.normal(size=Y.shape) * np.sqrt(np.mean(Y**2)) * 0.1
     model = KSVD(n_atoms=50, n_nonzero=3, max_iter=20, random_state=0).fit(Y)
     assert model.components_.shape == (50, 20)
     np.testing.assert_allclose(np.linalg.norm(model.components_, axis=1), 1.0, atol=1e-12)
@@ -173,30 +174,46 @@ def test_ksvd_learns_unit_atoms_and_reduces_the_error():
 def _motion(kind: int, frames: int = 48, fps: float = 30.0, seed: int = 0, source: str | None = None) -> Motion:
     """An MSR-20 skeleton doing one of three motions (arm swing, squat, kick), a little noise."""
     rng = np.random.default_rng(seed)
-    rest = {"HipCenter": (0, 1.0, 0), "Spine": (0, 1.2, 0), "ShoulderCenter": (0, 1.45, 0), "Head": (0, 1.65, 0),
-            "ShoulderLeft": (0.18, 1.42, 0), "ElbowLeft": (0.2, 1.15, 0), "WristLeft": (0.2, 0.9, 0),
-            "HandLeft": (0.2, 0.82, 0), "ShoulderRight": (-0.18, 1.42, 0), "ElbowRight": (-0.2, 1.15, 0),
-            "WristRight": (-0.2, 0.9, 0), "HandRight": (-0.2, 0.82, 0), "HipLeft": (0.1, 0.95, 0),
-            "KneeLeft": (0.1, 0.52, 0), "AnkleLeft": (0.1, 0.1, 0), "FootLeft": (0.1, 0.02, 0.12),
-            "HipRight": (-0.1, 0.95, 0), "KneeRight": (-0.1, 0.52, 0), "AnkleRight": (-0.1, 0.1, 0),
-            "FootRight": (-0.1, 0.02, 0.12)}
+    rest = {
+        "HipCenter": (0, 1.0, 0),
+        "Spine": (0, 1.2, 0),
+        "ShoulderCenter": (0, 1.45, 0),
+        "Head": (0, 1.65, 0),
+        "ShoulderLeft": (0.18, 1.42, 0),
+        "ElbowLeft": (0.2, 1.15, 0),
+        "WristLeft": (0.2, 0.9, 0),
+        "HandLeft": (0.2, 0.82, 0),
+        "ShoulderRight": (-0.18, 1.42, 0),
+        "ElbowRight": (-0.2, 1.15, 0),
+        "WristRight": (-0.2, 0.9, 0),
+        "HandRight": (-0.2, 0.82, 0),
+        "HipLeft": (0.1, 0.95, 0),
+        "KneeLeft": (0.1, 0.52, 0),
+        "AnkleLeft": (0.1, 0.1, 0),
+        "FootLeft": (0.1, 0.02, 0.12),
+        "HipRight": (-0.1, 0.95, 0),
+        "KneeRight": (-0.1, 0.52, 0),
+        "AnkleRight": (-0.1, 0.1, 0),
+        "FootRight": (-0.1, 0.02, 0.12),
+    }
     t = np.arange(frames) / fps
     phase = np.sin(2 * np.pi * (0.8 + 0.1 * rng.random()) * t)[:, None]
     P = np.repeat(np.array([rest[n] for n in MSR20.joint_names], dtype=float)[None], frames, axis=0)
     names = list(MSR20.joint_names)
-    if kind == 0:                                             # both arms swing forward
+    if kind == 0:  # both arms swing forward
         for n in ("ElbowLeft", "WristLeft", "HandLeft", "ElbowRight", "WristRight", "HandRight"):
             P[:, names.index(n)] += 0.4 * phase * np.array([0, 0.3, 1.0])
-    elif kind == 1:                                           # squat: everything above the knees goes down
+    elif kind == 1:  # squat: everything above the knees goes down
         for n in names:
             if not n.startswith(("Knee", "Ankle", "Foot")):
                 P[:, names.index(n)] -= 0.3 * np.abs(phase) * np.array([0, 1.0, 0])
-    else:                                                     # left kick
+    else:  # left kick
         for n in ("KneeLeft", "AnkleLeft", "FootLeft"):
             P[:, names.index(n)] += 0.5 * np.abs(phase) * np.array([0, 0.5, 1.0])
     P += rng.normal(scale=0.005, size=P.shape)
-    return Motion(P, MSR20.joint_names, fps, parents=MSR20.parents, layout_name="msr20", name=f"k{kind}_{seed}",
-                  source=source)
+    return Motion(
+        P, MSR20.joint_names, fps, parents=MSR20.parents, layout_name="msr20", name=f"k{kind}_{seed}", source=source
+    )
 
 
 SMALL = {"n_atoms": 24, "n_nonzero": 4, "sigma": 2, "ksvd_iter": 3, "fps": 30.0, "max_dictionary_frames": None}
@@ -244,7 +261,7 @@ def test_block_norm_and_levels_variants_run(fitted):
 def test_short_query_is_refused_naming_the_file(fitted):
     method, _, _ = fitted
     assert TSRSTPMRetrieval.min_frames == 8 and method.min_frames == SMALL["sigma"] + 1
-    with pytest.raises(RetrievalInputError, match="tiny_query.bvh"):
+    with pytest.raises(SkeletonInputError, match="tiny_query.bvh"):
         method.distances([_motion(0, frames=SMALL["sigma"], source="tiny_query.bvh")])
     assert method.distances([_motion(0, frames=SMALL["sigma"] + 1)]).shape == (1, 12)
     # σ counts frames at the method's fps: a 10 Hz query of 2 frames is 6 frames at 30 Hz

@@ -1,5 +1,6 @@
 """scripts/selection/select_on_training_subjects.py: every fold trains on the other training subjects and scores the held-out
 one; the benchmark's test subjects appear nowhere; runs already scored are reused."""
+
 import importlib.util
 import json
 import subprocess
@@ -24,7 +25,7 @@ def test_folds_hold_out_each_training_subject_and_reuse_scored_runs(tmp_path, mo
     def fake_run(cmd, check, stdout, stderr):
         calls.append(cmd)
         args = dict(a.split("=", 1) for a in cmd if "=" in a)
-        if cmd[3] == "eval":                       # write what `mocapkit eval` writes
+        if cmd[3] == "eval":  # write what `mocapkit eval` writes
             run_dir = Path(args["ckpt_path"]).parent
             held_out = int(run_dir.name.rsplit("_s", 1)[1])
             (run_dir / "eval").mkdir(parents=True)
@@ -32,8 +33,18 @@ def test_folds_hold_out_each_training_subject_and_reuse_scored_runs(tmp_path, mo
         return subprocess.CompletedProcess(cmd, 0)
 
     monkeypatch.setattr(script.subprocess, "run", fake_run)
-    argv = ["--out", str(tmp_path), "--subjects", "1", "3", "5", "--candidate", "a=", "--candidate",
-            "b=data.augment.scale=0.1 trainer.max_epochs=2"]
+    argv = [
+        "--out",
+        str(tmp_path),
+        "--subjects",
+        "1",
+        "3",
+        "5",
+        "--candidate",
+        "a=",
+        "--candidate",
+        "b=data.augment.scale=0.1 trainer.max_epochs=2",
+    ]
     script.main(argv)
     trains = [c for c in calls if c[3] == "train"]
     assert len(trains) == 6 and len([c for c in calls if c[3] == "eval"]) == 6
@@ -46,12 +57,14 @@ def test_folds_hold_out_each_training_subject_and_reuse_scored_runs(tmp_path, mo
     table = json.loads((tmp_path / "selection.json").read_text())["candidates"]
     assert table["a"]["per_subject"]["5"]["top1"] == pytest.approx(0.5)
     assert table["b"]["mean_top1"] == pytest.approx(0.3) and table["b"]["wrong"] == 9 + 7 + 5
-    assert "| b | `data.augment.scale=0.1 trainer.max_epochs=2` | 10.0 % | 30.0 % | 50.0 % | 30.0 % | 21 |" in \
-        (tmp_path / "selection.md").read_text()
+    assert (
+        "| b | `data.augment.scale=0.1 trainer.max_epochs=2` | 10.0 % | 30.0 % | 50.0 % | 30.0 % | 21 |"
+        in (tmp_path / "selection.md").read_text()
+    )
     calls.clear()
-    script.main(argv)                              # every fold already scored: nothing runs again
+    script.main(argv)  # every fold already scored: nothing runs again
     assert calls == []
-    with pytest.raises(SystemExit, match="data.augment.scale=0.2"):   # the same name under other overrides
+    with pytest.raises(SystemExit, match="data.augment.scale=0.2"):  # the same name under other overrides
         script.main([*argv[:-1], "b=data.augment.scale=0.2 trainer.max_epochs=2"])
 
 
@@ -68,7 +81,7 @@ def test_outer_folds_never_see_their_test_performer_and_pick_the_fewest_wrong(tm
         if cmd[3] == "train":
             run_dir = Path(args["output_root"]) / args["experiment"] / args["run_name"]
             run_dir.mkdir(parents=True)
-            if "data.val_fraction" not in args:           # the recipe validates: it writes best.ckpt
+            if "data.val_fraction" not in args:  # the recipe validates: it writes best.ckpt
                 (run_dir / "best.ckpt").write_text("")
         else:
             run_dir = Path(args["ckpt_path"]).parent
@@ -79,12 +92,36 @@ def test_outer_folds_never_see_their_test_performer_and_pick_the_fewest_wrong(tm
         return subprocess.CompletedProcess(cmd, 0)
 
     monkeypatch.setattr(script.subprocess, "run", fake_run)
-    script.main(["--out", str(tmp_path), "--outer", "--subjects", "bd", "bk", "dg", "mm", "--seeds", "0", "1",
-                 "--split-keys", "data.train_actors", "data.test_actors", "--checkpoint", "auto",
-                 "--experiment", "hdm05_gcn", "--candidate", "recipe=",
-                 "--candidate", "ens=experiment=other data.val_fraction=0", "--common", "trainer.accelerator=cpu"])
+    script.main(
+        [
+            "--out",
+            str(tmp_path),
+            "--outer",
+            "--subjects",
+            "bd",
+            "bk",
+            "dg",
+            "mm",
+            "--seeds",
+            "0",
+            "1",
+            "--split-keys",
+            "data.train_actors",
+            "data.test_actors",
+            "--checkpoint",
+            "auto",
+            "--experiment",
+            "hdm05_gcn",
+            "--candidate",
+            "recipe=",
+            "--candidate",
+            "ens=experiment=other data.val_fraction=0",
+            "--common",
+            "trainer.accelerator=cpu",
+        ]
+    )
     trains = [dict(a.split("=", 1) for a in c if "=" in a) for c in calls if c[3] == "train"]
-    assert len(trains) == 4 * 3 * 2 * 2                    # outer folds × inner folds × candidates × seeds
+    assert len(trains) == 4 * 3 * 2 * 2  # outer folds × inner folds × candidates × seeds
     for args in trains:
         outer = Path(args["output_root"]).name.removeprefix("outer_")
         train, held_out = args["data.train_actors"].strip("[]").split(","), args["data.test_actors"].strip("[]")
@@ -98,7 +135,7 @@ def test_outer_folds_never_see_their_test_performer_and_pick_the_fewest_wrong(tm
         assert selection["subjects"] == [s for s in ["bd", "bk", "dg", "mm"] if s != outer]
         assert (selection["candidates"]["recipe"]["wrong"], selection["candidates"]["ens"]["wrong"]) == wrong_counts
         assert selection["chosen"] == chosen
-    tie = json.loads((tmp_path / "outer_bk" / "selection.json").read_text())   # 4 against 4: the first listed
+    tie = json.loads((tmp_path / "outer_bk" / "selection.json").read_text())  # 4 against 4: the first listed
     assert tie["candidates"]["recipe"]["wrong"] == tie["candidates"]["ens"]["wrong"] and tie["chosen"] == "recipe"
 
 

@@ -1,5 +1,6 @@
 """Footskate cleanup (mocapkit.synthesis.footskate) on a synthetic HDM05-style skeleton: a body that glides over
 the floor with its feet planted, floating a few centimetres above it."""
+
 import numpy as np
 import pytest
 
@@ -9,7 +10,7 @@ from mocapkit.synthesis.footskate import cleanup_footskate, detect_contacts, roo
 
 FPS = 120.0
 T = 60
-SPEED = 1.0   # m/s along +x
+SPEED = 1.0  # m/s along +x
 FLOAT = 0.05  # m above the floor
 
 
@@ -37,7 +38,7 @@ def _gliding(skeleton, lift_left: float = 0.0):
     values["root"][:, 0] = SPEED * np.arange(T) / FPS / unit
     values["root"][:, 1] = FLOAT / unit
     if lift_left:
-        values["lfemur"][:, skeleton.bone("lfemur").dof.index("rx")] = -100.0   # thigh raised, foot held high
+        values["lfemur"][:, skeleton.bone("lfemur").dof.index("rx")] = -100.0  # thigh raised, foot held high
     return values, floor
 
 
@@ -88,7 +89,7 @@ def test_a_foot_held_still_high_up_is_no_contact(skeleton):
     assert detect_contacts(right, FPS, floor).all()
     out, report = cleanup_footskate(values, skeleton, FPS, floor=floor)
     assert not report.contacts["lfemur"].any() and report.contacts["rfemur"].all()
-    np.testing.assert_array_equal(out["lfemur"], values["lfemur"])   # the lifted leg is not pinned
+    np.testing.assert_array_equal(out["lfemur"], values["lfemur"])  # the lifted leg is not pinned
     # the planted right foot alone sets the root's correction
     assert report.sliding_after < 0.01
 
@@ -159,4 +160,4 @@ def test_stance_root_correction_leaves_a_still_stance_between_swings_alone():
     ramped = root_shift([ankle], [contact], floor=0.0, blend_frames=6, ramps=True)
     stance = root_shift([ankle], [contact], floor=0.0, blend_frames=6, ramps=False)
     np.testing.assert_allclose(stance, 0.0, atol=1e-12)
-    assert np.abs(ramped[:, 0]).max() > 0.05                    # the swing's steps taken out of the root's travel
+    assert np.abs(ramped[:, 0]).max() > 0.05  # the swing's steps taken out of the root's travel

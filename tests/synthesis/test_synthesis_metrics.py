@@ -2,6 +2,7 @@
 benchmark (mocapkit/synthesis/benchmark.py) end to end through the comparison runner on real HDM05 hops,
 and its CMU form (takes cut into windows, a held-out take).
 """
+
 from __future__ import annotations
 
 import json
@@ -9,8 +10,8 @@ import json
 import numpy as np
 import pytest
 
-from mocapkit.motion.container import Motion
 from mocapkit.evaluation.compare import ComparisonError, compose, run_comparison
+from mocapkit.motion.container import Motion
 from mocapkit.synthesis.metrics import (
     BONE_DRIFT_RESOLUTION_MM,
     PROXY_RESOLUTION,
@@ -91,29 +92,29 @@ def test_foot_skating_of_fixed_and_sliding_feet():
     fixed = body(np.full(T, 1.7), fps=fps)
     assert foot_skating(fixed) == pytest.approx(0.0, abs=1e-6)
     feet = np.zeros((T, 2, 3))
-    feet[:, 0, 0] = -0.1 + 0.5 * np.arange(T) / fps          # both feet slide along x at 0.5 m/s on the ground
+    feet[:, 0, 0] = -0.1 + 0.5 * np.arange(T) / fps  # both feet slide along x at 0.5 m/s on the ground
     feet[:, 1, 0] = 0.1 + 0.5 * np.arange(T) / fps
     assert foot_skating(body(np.full(T, 1.7), fps=fps, feet=feet)) == pytest.approx(50.0, rel=1e-4)  # cm/s
     lifted = feet.copy()
-    lifted[:, :, 1] = np.linspace(0.0, 1.0, T)[:, None]       # rising 2 m/s: never a contact
+    lifted[:, :, 1] = np.linspace(0.0, 1.0, T)[:, None]  # rising 2 m/s: never a contact
     assert np.isnan(foot_skating(body(np.full(T, 1.7), fps=fps, feet=lifted)))
 
 
 def test_jerk_of_constant_acceleration_is_zero_and_of_a_sine_its_derivative():
     fps = 30.0
     t = np.arange(60) / fps
-    const = body(1.0 + 0.3 * t - 0.5 * 2.0 * t ** 2, fps=fps)
+    const = body(1.0 + 0.3 * t - 0.5 * 2.0 * t**2, fps=fps)
     A, w = 0.1, 2 * np.pi * 2.0
     wave = body(1.5 + A * np.sin(w * t), fps=fps)
     assert mean_jerk(const) < 0.05
     # only the head moves: mean over 6 joints of |A w³ cos| ≈ A w³ (2/π) / 6 (finite differences: within 15 %)
-    assert mean_jerk(wave) == pytest.approx(A * w ** 3 * 2 / np.pi / len(JOINTS), rel=0.15)
+    assert mean_jerk(wave) == pytest.approx(A * w**3 * 2 / np.pi / len(JOINTS), rel=0.15)
 
 
 def test_bone_length_drift_detects_a_stretched_bone():
     steady = body(np.full(20, 1.7))
     assert bone_length_drift(steady) == pytest.approx(0.0, abs=1e-6)
-    heights = np.linspace(1.6, 1.8, 20)                          # the hips → head bone stretches from 0.6 to 0.8 m
+    heights = np.linspace(1.6, 1.8, 20)  # the hips → head bone stretches from 0.6 to 0.8 m
     expected = np.std(heights - 1.0) * 1000 / (len(JOINTS) - 1)
     assert bone_length_drift(body(heights)) == pytest.approx(expected, rel=1e-4)
 
@@ -124,7 +125,7 @@ def test_feature_distance_reference_spread():
     odd = [body(1.0 + 0.5 * np.sin(np.linspace(0, 30, 40)))]
     scores = feature_distances(real[:1] + odd, real[1:])
     assert scores.real.shape == (4,) and scores.variants.shape == (2,)
-    assert scores.variants[1] > scores.real.max()                 # far outside the real clips' spread
+    assert scores.variants[1] > scores.real.max()  # far outside the real clips' spread
     summary = scores.summary()
     assert summary["within_real"] == pytest.approx(0.5)
     with pytest.raises(ValueError, match="two real clips"):
@@ -147,7 +148,7 @@ def test_clip_naturalness_is_per_clip_and_naturalness_its_mean():
     planted = np.zeros((T, 2, 3))
     planted[:, 1, 0] = 0.2
     sliding = planted.copy()
-    sliding[:, :, 2] = 0.03 * np.arange(T)[:, None]                     # both feet slide 3 cm a frame: 0.3 m/s
+    sliding[:, :, 2] = 0.03 * np.arange(T)[:, None]  # both feet slide 3 cm a frame: 0.3 m/s
     clips = [body(np.full(T, 1.7), fps, planted), body(np.full(T, 1.7), fps, sliding)]
     table = clip_naturalness(clips)
     assert table["foot_skating_cms"] == pytest.approx([0.0, 30.0])
@@ -159,30 +160,57 @@ def test_clip_naturalness_is_per_clip_and_naturalness_its_mean():
 def test_config_composes_with_every_method():
     cfg = compose(["synthesis_hdm05", "benchmark.root=/nonexistent"])
     assert set(cfg.methods) == {"slfm", "lau", "perlin", "cvae", "cvae_varied", "copy"}
-    assert cfg.methods.cvae_varied.estimator.noise_scale == "auto" and "noise_scale" not in cfg.methods.cvae.estimator
+    assert cfg.methods.cvae_varied.params.noise_scale == "auto" and cfg.methods.cvae.estimator.noise_scale == 1.0
+    assert "params" not in cfg.methods.cvae  # the registry's cvae (configs/synthesis/method/cvae.yaml) as is
     assert list(cfg.protocols) == list(cfg.benchmark.protocols)
 
 
 @needs(HDM05)
 def test_benchmark_runs_end_to_end(tmp_path):
-    cfg = {"name": "synthesis_test", "out": str(tmp_path),
-           "benchmark": {"_target_": "mocapkit.synthesis.benchmark.SynthesisBenchmark", "root": str(HDM05),
-                         "protocols": ["hopBothLegs1hops"], "n_train": 4, "n_variants": 3},
-           "protocols": ["hopBothLegs1hops"], "seeds": [0],
-           "methods": {"copy": {"label": "copy", "estimator": {"_target_": "mocapkit.synthesis.perlin.CopyTrainingClips"}},
-                       "perlin": {"label": "perlin", "estimator": {
-                           "_target_": "mocapkit.synthesis.perlin.PerlinNoiseSynthesizer", "amplitude": 1.0}}}}
+    cfg = {
+        "name": "synthesis_test",
+        "out": str(tmp_path),
+        "benchmark": {
+            "_target_": "mocapkit.synthesis.benchmark.SynthesisBenchmark",
+            "root": str(HDM05),
+            "protocols": ["hopBothLegs1hops"],
+            "n_train": 4,
+            "n_variants": 3,
+        },
+        "protocols": ["hopBothLegs1hops"],
+        "seeds": [0],
+        "methods": {
+            "copy": {"label": "copy", "estimator": {"_target_": "mocapkit.synthesis.perlin.CopyTrainingClips"}},
+            "perlin": {
+                "label": "perlin",
+                "estimator": {"_target_": "mocapkit.synthesis.perlin.PerlinNoiseSynthesizer", "amplitude": 1.0},
+            },
+        },
+    }
     run_comparison(cfg)
     saved = json.loads((tmp_path / "results.json").read_text())
     assert {(c["method"], c["protocol"], c["seed"]) for c in saved["cells"]} == {
-        ("copy", "hopBothLegs1hops", 0), ("perlin", "hopBothLegs1hops", 0)}
+        ("copy", "hopBothLegs1hops", 0),
+        ("perlin", "hopBothLegs1hops", 0),
+    }
     split = saved["splits"]["hopBothLegs1hops"]["0"]
     assert split["n_train"] == 4 and split["n_test"] == 33 - 4
     for cell in saved["cells"]:
         m = cell["metrics"]
-        for key in ("v_variants", "v_train", "v_heldout", "v_ratio", "foot_skating_cms", "jerk", "bone_drift_mm",
-                    "real_jerk", "feature_distance", "feature_distance_real", "fit_seconds",
-                    "sample_seconds_per_second"):
+        for key in (
+            "v_variants",
+            "v_train",
+            "v_heldout",
+            "v_ratio",
+            "foot_skating_cms",
+            "jerk",
+            "bone_drift_mm",
+            "real_jerk",
+            "feature_distance",
+            "feature_distance_real",
+            "fit_seconds",
+            "sample_seconds_per_second",
+        ):
             assert np.isfinite(m[key]), key
         assert m["v_ratio"] == pytest.approx(m["v_variants"] / m["v_train"])
         # every proxy within the real spread: the share recomputed from the per-clip values saved beside it
@@ -194,7 +222,7 @@ def test_benchmark_runs_end_to_end(tmp_path):
         assert m["within_real_all"] <= min(m["within_real"], m["within_real_skating"], m["within_real_jerk"])
         assert m["real_jerk_max"] == pytest.approx(max(d["real_proxies"]["jerk"]))
     copy, perlin = (next(c for c in saved["cells"] if c["method"] == k) for k in ("copy", "perlin"))
-    assert copy["metrics"]["v_train"] == perlin["metrics"]["v_train"]       # one reference per split
+    assert copy["metrics"]["v_train"] == perlin["metrics"]["v_train"]  # one reference per split
     assert (tmp_path / "variation.png").is_file()
     assert "Variation and naturalness" in (tmp_path / "results.md").read_text()
 
@@ -214,10 +242,17 @@ def test_cmu_walks_are_cut_into_windows_and_a_held_out_take_is_the_reference():
     cfg = compose(["synthesis_cmu"])
     assert cfg.benchmark.dataset == "cmu"
     assert set(cfg.methods) == {"slfm", "lau", "perlin", "cvae", "cvae_varied", "copy"}
-    bench = SynthesisBenchmark(str(CMU), ["walk_uneven"], n_train=10, n_variants=2, dataset="cmu",
-                               types={"walk_uneven": ["03_01", "03_02", "03_03", "03_04"]}, window_seconds=2.0,
-                               heldout_takes=["03_04"])
-    frames = {"03_01": 432, "03_02": 365, "03_03": 4563, "03_04": 4722}          # 120 fps takes
+    bench = SynthesisBenchmark(
+        str(CMU),
+        ["walk_uneven"],
+        n_train=10,
+        n_variants=2,
+        dataset="cmu",
+        types={"walk_uneven": ["03_01", "03_02", "03_03", "03_04"]},
+        window_seconds=2.0,
+        heldout_takes=["03_04"],
+    )
+    frames = {"03_01": 432, "03_02": 365, "03_03": 4563, "03_04": 4722}  # 120 fps takes
     assert len(bench.motions) == sum(n // 240 for n in frames.values()) == 40
     assert all(m.num_frames == 240 for m in bench.motions)
     assert bench.describe()["frames_left_out"] == {take: n % 240 for take, n in frames.items()}
@@ -226,7 +261,7 @@ def test_cmu_walks_are_cut_into_windows_and_a_held_out_take_is_the_reference():
         train_takes = {bench.clips[i]["take"] for i in split.train}
         assert len(split.train) == 10 and "03_04" not in train_takes
         assert {bench.clips[i]["take"] for i in split.test} == {"03_04"} and len(split.test) == 4722 // 240
-    assert list(splits[0].train) != list(splits[1].train)                     # the seed draws the windows
+    assert list(splits[0].train) != list(splits[1].train)  # the seed draws the windows
     # a window is the take's frames, on the take's skeleton
     take = next(m for m, c in zip(bench.motions, bench.clips) if c["name"] == "03_03[240:480]")
     from mocapkit.datasets.formats.asf_amc import read_amc
@@ -234,9 +269,15 @@ def test_cmu_walks_are_cut_into_windows_and_a_held_out_take_is_the_reference():
     np.testing.assert_allclose(take.positions, read_amc(CMU / "03_03.amc").positions[240:480], atol=1e-9)
     with pytest.raises(ComparisonError, match="not found"):
         SynthesisBenchmark(str(CMU), ["walk"], dataset="cmu", types={"walk": ["03_09"]})
-    with pytest.raises(ComparisonError, match="to draw from"):          # one take of 3.6 s: too few windows
-        SynthesisBenchmark(str(CMU), ["walk"], dataset="cmu", types={"walk": ["03_01", "03_04"]},
-                           window_seconds=2.0, heldout_takes=["03_04"])
+    with pytest.raises(ComparisonError, match="to draw from"):  # one take of 3.6 s: too few windows
+        SynthesisBenchmark(
+            str(CMU),
+            ["walk"],
+            dataset="cmu",
+            types={"walk": ["03_01", "03_04"]},
+            window_seconds=2.0,
+            heldout_takes=["03_04"],
+        )
     with pytest.raises(ComparisonError, match="ASF/AMC"):
         SynthesisBenchmark(str(CMU), ["walk"], dataset="msr")
 
@@ -246,9 +287,19 @@ def test_bandai_bvh_takes_are_synthesis_clips_on_one_rest_pose(tmp_path):
     """Bandai's BVH takes, converted to ASF/AMC on one T-pose rest, go through the same benchmark and runner."""
     from mocapkit.synthesis.benchmark import SynthesisBenchmark
 
-    cfg = compose(["synthesis_bandai", f"out={tmp_path}", f"benchmark.root={BANDAI}", "protocols=[bow]",
-                   "benchmark.protocols=[bow]", "benchmark.n_train=4", "benchmark.n_variants=3", "seeds=[0]",
-                   "only=[perlin,copy]"])
+    cfg = compose(
+        [
+            "synthesis_bandai",
+            f"out={tmp_path}",
+            f"benchmark.root={BANDAI}",
+            "protocols=[bow]",
+            "benchmark.protocols=[bow]",
+            "benchmark.n_train=4",
+            "benchmark.n_variants=3",
+            "seeds=[0]",
+            "only=[perlin,copy]",
+        ]
+    )
     run_comparison(cfg)
     cells = {c["method"]: c for c in json.loads((tmp_path / "results.json").read_text())["cells"]}
     assert set(cells) == {"perlin", "copy"}

@@ -1,4 +1,5 @@
 """The exp-map / relative-root representation of Zhou 2014 ch. 4 (mocapkit.synthesis.representation)."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -22,8 +23,11 @@ from mocapkit.synthesis.representation import (
 from tests.shared_data import SHARED, needs
 
 HDM05 = SHARED / "data" / "hdm05_cuts11"
-CLIPS = [HDM05 / "bd" / "HDM_bd_hopBothLegs1hops_001_120.amc", HDM05 / "bk" / "HDM_bk_squat1Reps_021_120.amc",
-         HDM05 / "bd" / "HDM_bd_jogLeftCircle4StepsRstart_001_120.amc"]
+CLIPS = [
+    HDM05 / "bd" / "HDM_bd_hopBothLegs1hops_001_120.amc",
+    HDM05 / "bk" / "HDM_bk_squat1Reps_021_120.amc",
+    HDM05 / "bd" / "HDM_bd_jogLeftCircle4StepsRstart_001_120.amc",
+]
 
 
 @pytest.fixture(scope="module")
@@ -43,8 +47,7 @@ def test_round_trip_reproduces_joint_positions(clips):
         assert error.max() < 1e-3, f"{clip.name}: {error.max() * 1000:.3f} mm"
         flat = features.flat()
         assert flat.shape == (len(clip.positions), ROOT_FEATURES + 3 * len(features.bones))
-        np.testing.assert_allclose(decode(flat, clip.metadata["asf"], start_xz, start_yaw)["lfemur"],
-                                   values["lfemur"])
+        np.testing.assert_allclose(decode(flat, clip.metadata["asf"], start_xz, start_yaw)["lfemur"], values["lfemur"])
 
 
 @needs(HDM05)
@@ -56,8 +59,9 @@ def test_features_shapes_and_relative_root(clips):
     assert features.joints.shape == (len(clip.positions), len(layout.bones) - 1, 3)
     np.testing.assert_array_equal(features.root[0, :3], 0.0)
     # moving and turning the whole clip leaves every feature unchanged
-    moved = amc_motion(clip.metadata["asf"], decode(features, clip.metadata["asf"], start_xz=(40.0, -25.0),
-                                                     start_yaw=2.0))
+    moved = amc_motion(
+        clip.metadata["asf"], decode(features, clip.metadata["asf"], start_xz=(40.0, -25.0), start_yaw=2.0)
+    )
     np.testing.assert_allclose(encode(moved).flat(), features.flat(), atol=1e-9)
     assert np.linalg.norm(moved.positions[0, 0] - clip.positions[0, 0]) > 1.0
 
@@ -127,8 +131,9 @@ def test_bad_inputs(clips):
 
     one_legged = copy.deepcopy(skeleton)
     one_legged.hierarchy["root"] = [b for b in one_legged.hierarchy["root"] if b != "lhipjoint"]
-    one_legged.bones = [b for b in one_legged.bones if b.name not in ("lhipjoint", "lfemur", "ltibia", "lfoot",
-                                                                         "ltoes")]
+    one_legged.bones = [
+        b for b in one_legged.bones if b.name not in ("lhipjoint", "lfemur", "ltibia", "lfoot", "ltoes")
+    ]
     for b in ("lhipjoint", "lfemur", "ltibia", "lfoot"):
         one_legged.hierarchy.pop(b, None)
     with pytest.raises(SynthesisInputError, match="LL"):

@@ -1,5 +1,6 @@
 """The SLFM (linear model of coregionalisation) and the Zhou 2014 ch. 4 synthesiser (mocapkit.synthesis.slfm),
 the ``synthesize`` library function and ``mocapkit synthesize``."""
+
 from __future__ import annotations
 
 import copy
@@ -24,15 +25,21 @@ from mocapkit.synthesis.slfm import (
 from tests.shared_data import SHARED, needs
 
 HDM05 = SHARED / "data" / "hdm05_cuts11"
-HOPS = [HDM05 / actor / f"HDM_{actor}_hopBothLegs1hops_{n:03d}_120.amc"
-        for actor, n in (("bd", 1), ("bd", 2), ("bk", 13), ("dg", 22), ("mm", 31))]
+HOPS = [
+    HDM05 / actor / f"HDM_{actor}_hopBothLegs1hops_{n:03d}_120.amc"
+    for actor, n in (("bd", 1), ("bd", 2), ("bk", 13), ("dg", 22), ("mm", 31))
+]
 TINY = {"frame_stride": 8, "n_fit": 24, "n_inducing": 10, "max_iter": 2}
 
 
 def _params(D: int = 3, seed: int = 0) -> SLFMParams:
     rng = np.random.default_rng(seed)
-    return SLFMParams(lengthscale=rng.uniform(0.5, 2.0, D), bias=rng.uniform(0.0, 0.3, D),
-                      mixing=rng.normal(size=(D, D)), noise=rng.uniform(0.01, 0.1, D))
+    return SLFMParams(
+        lengthscale=rng.uniform(0.5, 2.0, D),
+        bias=rng.uniform(0.0, 0.3, D),
+        mixing=rng.normal(size=(D, D)),
+        noise=rng.uniform(0.01, 0.1, D),
+    )
 
 
 def test_full_cross_covariance_is_sum_of_kronecker_products():
@@ -41,8 +48,12 @@ def test_full_cross_covariance_is_sum_of_kronecker_products():
     X1, X2 = rng.normal(size=(5, 2)), rng.normal(size=(4, 2))
     expected = np.zeros((15, 12))
     for p in range(3):
-        K = np.array([[np.exp(-np.sum((a - b) ** 2) / (2 * params.lengthscale[p] ** 2)) + params.bias[p]
-                       for b in X2] for a in X1])
+        K = np.array(
+            [
+                [np.exp(-np.sum((a - b) ** 2) / (2 * params.lengthscale[p] ** 2)) + params.bias[p] for b in X2]
+                for a in X1
+            ]
+        )
         expected += np.kron(np.outer(params.mixing[:, p], params.mixing[:, p]), K)
     np.testing.assert_allclose(slfm_covariance(params, X1, X2), expected, rtol=1e-12)
 
@@ -95,12 +106,14 @@ def test_hyperparameter_fit_and_stacked_prediction():
     X = rng.normal(size=(40, 3))
     Y = np.stack([np.sin(X[:, 0]) + 0.5 * X[:, 1], np.cos(X[:, 1]), np.zeros(40) + 2.0], axis=1)
     Y[:, :2] += 0.01 * rng.standard_normal((40, 2))
-    params = fit_slfm_hyperparameters((X - X.mean(0)) / X.std(0), (Y[:, :2] - Y[:, :2].mean(0)) / Y[:, :2].std(0),
-                                      max_iter=15)
+    params = fit_slfm_hyperparameters(
+        (X - X.mean(0)) / X.std(0), (Y[:, :2] - Y[:, :2].mean(0)) / Y[:, :2].std(0), max_iter=15
+    )
     assert np.all(np.isfinite(params.mixing)) and np.all(params.noise >= 1e-4) and np.all(params.noise < 0.5)
     a = SLFMRegressor(n_fit=30, n_inducing=20, max_iter=5).fit(X, Y, np.random.default_rng(0))
-    b = SLFMRegressor(n_fit=30, n_inducing=12, max_iter=5, mean_function="zero").fit(X[:, :2], Y[:, :2],
-                                                                                       np.random.default_rng(1))
+    b = SLFMRegressor(n_fit=30, n_inducing=12, max_iter=5, mean_function="zero").fit(
+        X[:, :2], Y[:, :2], np.random.default_rng(1)
+    )
     mean_a, cov_a = a.predict(X[:5], noise=True)
     assert np.allclose(mean_a[:, 2], 2.0) and np.allclose(cov_a[:, 2], 0.0)  # a constant output is not modelled
     assert np.abs(mean_a[:, :2] - Y[:5, :2]).max() < 0.2
@@ -142,10 +155,12 @@ def test_variants_are_new_finite_motions_in_range(hops, fitted, tmp_path):
     write_amc(path, variants[0])
     again = read_amc(path, asf=skeleton)
     np.testing.assert_allclose(again.positions, variants[0].positions, atol=1e-5)
+
     # different from each other and from every training clip (root-relative joint positions)
     def pose(m, n=60):
         p = m.positions[:n].astype(float)
         return p - p[:, :1]
+
     for i in range(3):
         for j in range(i + 1, 3):
             assert np.abs(pose(variants[i]) - pose(variants[j])).mean() > 0.005
@@ -184,8 +199,9 @@ def test_correlated_noise_gives_smoother_variants_than_independent_draws(fitted)
     from mocapkit.synthesis.metrics import mean_jerk
 
     def jerk(rho):
-        model = copy.deepcopy(fitted).set_params(noise_correlation=rho, footskate_cleanup=False,
-                                                   smoothing_seconds=0.0)      # the draws alone
+        model = copy.deepcopy(fitted).set_params(
+            noise_correlation=rho, footskate_cleanup=False, smoothing_seconds=0.0
+        )  # the draws alone
         return np.mean([mean_jerk(v) for v in model.sample(4, n_frames=60, seed=3)])
 
     assert jerk(0.9) < 0.8 * jerk(0.0)
@@ -215,8 +231,7 @@ def test_bad_training_sets(hops):
     with pytest.raises(SynthesisInputError, match="at least 2"):
         SLFMSynthesizer(**TINY).fit(hops[:1])
     skeleton = hops[0].metadata["asf"]
-    short = amc_motion(skeleton, {b: v[:3] for b, v in hops[1].metadata["amc_values"].items()},
-                       source="short_clip.amc")
+    short = amc_motion(skeleton, {b: v[:3] for b, v in hops[1].metadata["amc_values"].items()}, source="short_clip.amc")
     with pytest.raises(SynthesisInputError, match="short_clip.amc has 3 frames"):
         SLFMSynthesizer(**TINY).fit([hops[0], short])
     other = copy.deepcopy(skeleton)
@@ -232,8 +247,26 @@ def test_bad_training_sets(hops):
 def test_cli_end_to_end(tmp_path, capsys):
     out = tmp_path / "variants"
     settings = [f"--set={k}={v}" for k, v in TINY.items()]
-    code = main(["synthesize", str(HDM05 / "bd"), "--type", "hopBothLegs1hops", "--max-clips", "3", "--out", str(out),
-                 "--variants", "2", "--frames", "30", "--seed", "3", "--quiet", *settings])
+    code = main(
+        [
+            "synthesize",
+            str(HDM05 / "bd"),
+            "--type",
+            "hopBothLegs1hops",
+            "--max-clips",
+            "3",
+            "--out",
+            str(out),
+            "--variants",
+            "2",
+            "--frames",
+            "30",
+            "--seed",
+            "3",
+            "--quiet",
+            *settings,
+        ]
+    )
     assert code == 0, capsys.readouterr().err
     report = json.loads((out / "report.json").read_text())
     assert len(report["training_clips"]) == 3 and report["variants"] == ["variant_000.amc", "variant_001.amc"]
@@ -284,7 +317,9 @@ def test_clip_segment_is_the_frames_of_the_clip(hops):
 @needs(HDM05)
 def test_fit_cuts_training_clips_at_angle_flips_and_says_so(hops):
     squat = read_amc(DEEP_SQUAT)
-    with pytest.warns(UserWarning, match=r"HDM_dg_squat1Reps_025_120.amc: joint-angle flips \(.*lfemur 180° at frame 83"):
+    with pytest.warns(
+        UserWarning, match=r"HDM_dg_squat1Reps_025_120.amc: joint-angle flips \(.*lfemur 180° at frame 83"
+    ):
         model = SLFMSynthesizer(**TINY, footskate_cleanup=False).fit([squat, hops[0]])
     assert ("lfemur", 83) in {(bone, frame) for _, frame, bone, _ in model.angle_flips_}
     assert all(label.endswith("HDM_dg_squat1Reps_025_120.amc") for label, *_ in model.unused_pieces_)
@@ -351,9 +386,11 @@ def test_cross_partition_gives_the_limbs_the_roots_pose_and_step(hops):
     for node in ("ltibia", "rhumerus"):
         before, after = inputs(literal, node), inputs(coupled, node)
         for back in (1, 2):
-            assert not before[("flat", back)] & root_pose and after[("flat", back)] == before[("flat", back)] | root_pose
+            assert (
+                not before[("flat", back)] & root_pose and after[("flat", back)] == before[("flat", back)] | root_pose
+            )
             assert after[("dynamic", back)] == before[("dynamic", back)] | root_step
-    assert inputs(literal, "lowerback") == inputs(coupled, "lowerback")   # TH holds the root already
+    assert inputs(literal, "lowerback") == inputs(coupled, "lowerback")  # TH holds the root already
     with pytest.raises(ValueError, match="cross_partition must be True or False, got 'false'"):
         SLFMSynthesizer(**TINY, cross_partition="false").fit(hops[:2])
     with pytest.raises(ValueError, match="footskate_root must be one of"):

@@ -5,6 +5,7 @@ the second process. The test checks that the run finishes, writes its checkpoint
 logged ``val/acc`` is synchronised: it must equal the accuracy over the *whole* validation set
 recomputed from the checkpoint of that epoch, not the accuracy of one process's half.
 """
+
 import os
 import subprocess
 import sys
@@ -19,9 +20,12 @@ from omegaconf import OmegaConf
 from mocapkit.cli import main
 from mocapkit.recognition.module import ActionRecognitionModule
 
-pytestmark = [pytest.mark.slow,
-              pytest.mark.skipif(not (dist.is_available() and dist.is_gloo_available()),
-                                 reason="torch.distributed with gloo is not available")]
+pytestmark = [
+    pytest.mark.slow,
+    pytest.mark.skipif(
+        not (dist.is_available() and dist.is_gloo_available()), reason="torch.distributed with gloo is not available"
+    ),
+]
 
 REPO = Path(__file__).resolve().parents[2]
 # 4 subjects x 4 classes x 3 cameras: X-Sub trains on subjects 1, 2, 4 and validates on one of them,
@@ -42,12 +46,28 @@ def test_ddp_training_logs_a_synchronised_val_acc(tmp_path):
     assert main(["synth", "ntu", "--out", str(tmp_path / "synth"), *TINY]) == 0
     assert main(["prepare", "ntu", "--src", str(tmp_path / "synth"), "--out", str(tmp_path / "cache"), "--quiet"]) == 0
     runs = tmp_path / "runs"
-    command = [sys.executable, "-m", "mocapkit", "train", f"data.root={tmp_path / 'cache'}",
-               "trainer.accelerator=cpu", "trainer.devices=2", "trainer.strategy=ddp", "trainer.max_epochs=2",
-               f"output_root={runs}", "run_name=ddp", "experiment=ntu_energy_vgg", "model.energy.size=32",
-               "data.batch_size=8", "trainer.enable_progress_bar=false"]
-    env = {**os.environ, "OMP_NUM_THREADS": "1",
-           "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")]))}
+    command = [
+        sys.executable,
+        "-m",
+        "mocapkit",
+        "train",
+        f"data.root={tmp_path / 'cache'}",
+        "trainer.accelerator=cpu",
+        "trainer.devices=2",
+        "trainer.strategy=ddp",
+        "trainer.max_epochs=2",
+        f"output_root={runs}",
+        "run_name=ddp",
+        "experiment=ntu_energy_vgg",
+        "model.energy.size=32",
+        "data.batch_size=8",
+        "trainer.enable_progress_bar=false",
+    ]
+    env = {
+        **os.environ,
+        "OMP_NUM_THREADS": "1",
+        "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")])),
+    }
     proc = subprocess.run(command, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300, check=False)
     assert proc.returncode == 0, f"exit {proc.returncode}\n{proc.stdout[-3000:]}\n{proc.stderr[-5000:]}"
 
@@ -75,8 +95,10 @@ def test_ddp_training_logs_a_synchronised_val_acc(tmp_path):
         epoch = torch.load(path, map_location="cpu", weights_only=False)["epoch"]
         hits = _val_accuracy(path, batch)
         whole, rank0, rank1 = float(hits.mean()), float(hits[0::2].mean()), float(hits[1::2].mean())
-        print(f"{path.name}: epoch {epoch}, logged val/acc {logged[epoch]:.6f}, whole set {whole:.6f}, "
-              f"rank 0 half {rank0:.6f}, rank 1 half {rank1:.6f}")
+        print(
+            f"{path.name}: epoch {epoch}, logged val/acc {logged[epoch]:.6f}, whole set {whole:.6f}, "
+            f"rank 0 half {rank0:.6f}, rank 1 half {rank1:.6f}"
+        )
         assert logged[epoch] == pytest.approx(whole, abs=1e-6), (path.name, logged, whole, rank0, rank1)
         halves_differ |= rank0 != whole or rank1 != whole
     assert torch.load(run_dir / "last.ckpt", map_location="cpu", weights_only=False)["epoch"] == 1

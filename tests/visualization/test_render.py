@@ -1,4 +1,5 @@
 """Rendering: GIF frame counts, strip size, non-empty drawings, markers, several people, errors."""
+
 import shutil
 import sys
 import types
@@ -7,8 +8,8 @@ import numpy as np
 import pytest
 from PIL import Image, ImageChops
 
-from mocapkit.motion.layouts import NTU25
 from mocapkit.motion.container import Motion
+from mocapkit.motion.layouts import NTU25
 from mocapkit.visualization.render import (
     RenderError,
     as_motions,
@@ -32,8 +33,13 @@ def walker(frames: int = 40, fps: float = 120.0, shift: float = 0.0) -> Motion:
     swing = 0.3 * np.sin(2 * np.pi * 1.5 * t)
     pos[:, 3] = pos[:, 0] + np.stack([swing, np.full_like(t, -0.9), np.full_like(t, 0.1)], axis=1)
     pos[:, 4] = pos[:, 0] + np.stack([-swing, np.full_like(t, -0.9), np.full_like(t, -0.1)], axis=1)
-    return Motion(positions=pos, joint_names=("pelvis", "chest", "head", "lfoot", "rfoot"),
-                  parents=(-1, 0, 1, 0, 0), fps=fps, name="walker")
+    return Motion(
+        positions=pos,
+        joint_names=("pelvis", "chest", "head", "lfoot", "rfoot"),
+        parents=(-1, 0, 1, 0, 0),
+        fps=fps,
+        name="walker",
+    )
 
 
 def ink(image: Image.Image) -> int:
@@ -52,9 +58,9 @@ def gif_frames(path) -> list[Image.Image]:
 
 
 def test_frame_indices_rules():
-    assert list(frame_indices(40, 120.0)) == list(range(0, 40, 8))            # default: at most 15 fps
+    assert list(frame_indices(40, 120.0)) == list(range(0, 40, 8))  # default: at most 15 fps
     assert list(frame_indices(40, 120.0, step=10)) == [0, 10, 20, 30]
-    assert list(frame_indices(10, 10.0)) == list(range(10))                   # slow clips keep every frame
+    assert list(frame_indices(10, 10.0)) == list(range(10))  # slow clips keep every frame
     assert len(frame_indices(994, 120.0, fps=12)) == 100
     with pytest.raises(ValueError):
         frame_indices(10, 30.0, step=0)
@@ -67,8 +73,8 @@ def test_gif_has_expected_frames_and_is_drawn(tmp_path, view):
     frames = gif_frames(out)
     assert len(frames) == len(frame_indices(m.num_frames, m.fps, step=8)) == 5
     assert frames[0].size == (120, 120)
-    assert all(ink(f) > 30 for f in frames)                           # the skeleton is drawn in every frame
-    assert ImageChops.difference(frames[0], frames[2]).getbbox() is not None   # and it moves
+    assert all(ink(f) > 30 for f in frames)  # the skeleton is drawn in every frame
+    assert ImageChops.difference(frames[0], frames[2]).getbbox() is not None  # and it moves
     assert Image.open(out).info.get("duration") == pytest.approx(1000 / 15, abs=10)  # 120 Hz / 8 (GIF: 10 ms units)
 
 
@@ -77,14 +83,14 @@ def test_strip_png_size_and_content(tmp_path):
     im = Image.open(out)
     assert im.size == (4 * 120, 120)
     quarter = im.width // 4
-    for k in range(4):   # every panel has its skeleton
+    for k in range(4):  # every panel has its skeleton
         assert ink(im.crop((k * quarter, 0, (k + 1) * quarter, im.height))) > 20
 
 
 def test_markers_without_hierarchy_and_missing_values(tmp_path):
     m = walker()
     pos = m.positions.copy()
-    pos[5:, 2] = np.nan                                              # a marker lost after frame 5
+    pos[5:, 2] = np.nan  # a marker lost after frame 5
     markers = Motion(positions=pos, joint_names=m.joint_names, fps=m.fps, up_axis="y")
     out = render_strip(markers, tmp_path / "m.png", n=3, view="front", panel_size=1.0, dpi=60)
     assert Image.open(out).size == (180, 60) and ink(Image.open(out)) > 5
@@ -92,14 +98,15 @@ def test_markers_without_hierarchy_and_missing_values(tmp_path):
 
 def test_several_people_and_z_up(tmp_path):
     a, b = walker(), walker(shift=1.0)
-    z_up = Motion(positions=b.positions[..., [0, 2, 1]], joint_names=b.joint_names, parents=b.parents,
-                  fps=b.fps, up_axis="z")
+    z_up = Motion(
+        positions=b.positions[..., [0, 2, 1]], joint_names=b.joint_names, parents=b.parents, fps=b.fps, up_axis="z"
+    )
     assert len(as_motions([a, b])) == 2
     out = render_strip([a, b], tmp_path / "two.png", n=2, view="front", panel_size=1.5, dpi=60)
     rgb = np.asarray(Image.open(out).convert("RGB")).astype(int)
     blue = ((rgb[..., 2] - rgb[..., 0]) > 60).sum()
     red = ((rgb[..., 0] - rgb[..., 2]) > 60).sum()
-    assert blue > 10 and red > 10                                   # one colour per person
+    assert blue > 10 and red > 10  # one colour per person
     render_strip(z_up, tmp_path / "z.png", n=2, panel_size=1.0, dpi=60)
     with pytest.raises(ValueError, match="frame rates"):
         as_motions([a, walker(fps=30.0)])
@@ -111,7 +118,7 @@ def test_ntu_sequence_tracks_become_people():
         layout = NTU25
         positions = np.random.default_rng(0).normal(size=(2, 6, 25, 3)).astype(np.float32)
 
-    Seq.positions[1, 3:] = 0.0                                     # body 2 leaves after frame 3
+    Seq.positions[1, 3:] = 0.0  # body 2 leaves after frame 3
     people = as_motions(Seq())
     assert len(people) == 2 and people[0].parents == NTU25.parents
     assert people[1].missing[3:].all() and not people[1].missing[:3].any()
@@ -164,7 +171,7 @@ def test_real_two_person_ntu_through_read_motion(tmp_path):
     out = render_file(NTU_TWO_PEOPLE, tmp_path / "ntu.png", strip=True, n=3, view="front", panel_size=1.5, dpi=60)
     rgb = np.asarray(Image.open(out).convert("RGB")).astype(int)
     assert ((rgb[..., 2] - rgb[..., 0]) > 60).sum() > 10
-    if len(people) > 1:                                            # handshake: the second person in red
+    if len(people) > 1:  # handshake: the second person in red
         assert ((rgb[..., 0] - rgb[..., 2]) > 60).sum() > 10
 
 

@@ -14,6 +14,7 @@ A cache folder holds::
 
 :func:`write_gei_cache` writes one, :class:`GEICache` reads it.
 """
+
 from __future__ import annotations
 
 import os
@@ -64,11 +65,20 @@ def write_gei_cache(out: str | os.PathLike, geis: np.ndarray, index: dict[str, n
             raise ValueError(f"index[{key!r}] has {len(index[key])} entries for {len(geis)} GEIs")
     (out / META_FILE).unlink(missing_ok=True)  # unfinished until meta.json is rewritten
     save_npy_atomic(out / GEIS_FILE, geis)
-    save_npz_atomic(out / INDEX_FILE, names=np.asarray(index["names"], dtype=str),
-                    **{k: np.asarray(index[k], dtype=np.int64) for k in INDEX_KEYS if k != "names"})
-    full_meta = {"format": CACHE_FORMAT, "version": CACHE_VERSION, "num_geis": int(len(geis)),
-                 "height": int(geis.shape[1]), "width": int(geis.shape[2]), **meta,
-                 "integrity": integrity_record(out, GEIS_FILE, len(geis))}
+    save_npz_atomic(
+        out / INDEX_FILE,
+        names=np.asarray(index["names"], dtype=str),
+        **{k: np.asarray(index[k], dtype=np.int64) for k in INDEX_KEYS if k != "names"},
+    )
+    full_meta = {
+        "format": CACHE_FORMAT,
+        "version": CACHE_VERSION,
+        "num_geis": int(len(geis)),
+        "height": int(geis.shape[1]),
+        "width": int(geis.shape[2]),
+        **meta,
+        "integrity": integrity_record(out, GEIS_FILE, len(geis)),
+    }
     write_meta(out, full_meta, indent=2)
     return out
 
@@ -101,8 +111,10 @@ class GEICache(PreparedCache):
             raise CacheIntegrityError(path, f"GEIs of {shape}, meta.json says height x width {expected}")
 
     def __repr__(self) -> str:
-        return (f"GEICache({str(self.root)!r}: {len(self)} GEIs of {self.height}x{self.width}, "
-                f"{len(np.unique(self.subjects))} subjects, per {self.meta.get('per')})")
+        return (
+            f"GEICache({str(self.root)!r}: {len(self)} GEIs of {self.height}x{self.width}, "
+            f"{len(np.unique(self.subjects))} subjects, per {self.meta.get('per')})"
+        )
 
     all_geis = property(PreparedCache._array, doc="Read-only memmap, uint8 ``[N, H, W]`` (divide by 255 for [0, 1]).")
 

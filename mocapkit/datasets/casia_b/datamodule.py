@@ -23,6 +23,7 @@ drawn with the run ``seed``, never from the test side. The GEIs are read into me
 (about 0.8 GB for all of CASIA-B at 124×124 with 4 cycles per sequence, a quarter of float32) and
 scaled to [0, 1] per sample.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -67,8 +68,9 @@ class GEIShift:
             return gei
         out = torch.zeros_like(gei)
         h, w = gei.shape[-2:]
-        out[..., max(dy, 0): h + min(dy, 0), max(dx, 0): w + min(dx, 0)] = \
-            gei[..., max(-dy, 0): h + min(-dy, 0), max(-dx, 0): w + min(-dx, 0)]
+        out[..., max(dy, 0) : h + min(dy, 0), max(dx, 0) : w + min(dx, 0)] = gei[
+            ..., max(-dy, 0) : h + min(-dy, 0), max(-dx, 0) : w + min(-dx, 0)
+        ]
         return out
 
 
@@ -79,8 +81,14 @@ class GEIDataset(Dataset):
     ``view``, ``condition``, ``sequence``, ``index``; :func:`gei_collate` stacks them into a batch.
     """
 
-    def __init__(self, geis: np.ndarray, indices: np.ndarray, subject_labels: np.ndarray, cache: GEICache,
-                 augment: GEIShift | None = None):
+    def __init__(
+        self,
+        geis: np.ndarray,
+        indices: np.ndarray,
+        subject_labels: np.ndarray,
+        cache: GEICache,
+        augment: GEIShift | None = None,
+    ):
         self.indices = np.asarray(indices, dtype=np.int64)
         if len(geis) != len(self.indices):
             raise ValueError(f"{len(geis)} GEIs for {len(self.indices)} indices")
@@ -100,9 +108,15 @@ class GEIDataset(Dataset):
         gei = self.geis[k].unsqueeze(0).to(torch.float32) / 255.0
         if self.augment is not None:
             gei = self.augment(gei)
-        return {"gei": gei, "subject": self.subject_labels[k], "subject_id": self.subject_ids[k],
-                "view": self.views[k], "condition": self.conditions[k], "sequence": self.sequences[k],
-                "index": int(self.indices[k])}
+        return {
+            "gei": gei,
+            "subject": self.subject_labels[k],
+            "subject_id": self.subject_ids[k],
+            "view": self.views[k],
+            "condition": self.conditions[k],
+            "sequence": self.sequences[k],
+            "index": int(self.indices[k]),
+        }
 
 
 class SubjectBatchSampler(Sampler[list[int]]):
@@ -123,11 +137,14 @@ class SubjectBatchSampler(Sampler[list[int]]):
         labels = np.asarray(labels, dtype=np.int64)
         subjects = np.unique(labels)
         if subjects_per_batch < 2 or batch_size % subjects_per_batch or batch_size // subjects_per_batch < 2:
-            raise ValueError(f"data.subjects_per_batch={subjects_per_batch} must be at least 2 and divide "
-                             f"data.batch_size={batch_size} into at least 2 GEIs per subject")
+            raise ValueError(
+                f"data.subjects_per_batch={subjects_per_batch} must be at least 2 and divide "
+                f"data.batch_size={batch_size} into at least 2 GEIs per subject"
+            )
         if len(subjects) < subjects_per_batch:
-            raise ValueError(f"data.subjects_per_batch={subjects_per_batch}: the training part has only "
-                             f"{len(subjects)} subjects")
+            raise ValueError(
+                f"data.subjects_per_batch={subjects_per_batch}: the training part has only {len(subjects)} subjects"
+            )
         self.members = [torch.from_numpy(np.flatnonzero(labels == s)) for s in subjects]
         self.batch_size, self.subjects_per_batch = int(batch_size), int(subjects_per_batch)
         self.per_subject = self.batch_size // self.subjects_per_batch
@@ -139,10 +156,10 @@ class SubjectBatchSampler(Sampler[list[int]]):
     def __iter__(self):
         for _ in range(self.batches):
             batch = []
-            for s in torch.randperm(len(self.members))[:self.subjects_per_batch].tolist():
+            for s in torch.randperm(len(self.members))[: self.subjects_per_batch].tolist():
                 members = self.members[s]
                 if len(members) >= self.per_subject:
-                    picked = members[torch.randperm(len(members))[:self.per_subject]]
+                    picked = members[torch.randperm(len(members))[: self.per_subject]]
                 else:
                     picked = members[torch.randint(len(members), (self.per_subject,))]
                 batch += picked.tolist()
@@ -151,14 +168,15 @@ class SubjectBatchSampler(Sampler[list[int]]):
 
 def gei_collate(items: list[dict]) -> dict:
     """Stack :class:`GEIDataset` items into the batch dict of the module docstring (plural keys)."""
-    return {"geis": torch.stack([it["gei"] for it in items]),
-            "subjects": torch.stack([it["subject"] for it in items]),
-            "subject_ids": torch.stack([it["subject_id"] for it in items]),
-            "views": torch.stack([it["view"] for it in items]),
-            "conditions": torch.stack([it["condition"] for it in items]),
-            "sequences": torch.stack([it["sequence"] for it in items]),
-            "indices": torch.tensor([it["index"] for it in items], dtype=torch.int64)}
-
+    return {
+        "geis": torch.stack([it["gei"] for it in items]),
+        "subjects": torch.stack([it["subject"] for it in items]),
+        "subject_ids": torch.stack([it["subject_id"] for it in items]),
+        "views": torch.stack([it["view"] for it in items]),
+        "conditions": torch.stack([it["condition"] for it in items]),
+        "sequences": torch.stack([it["sequence"] for it in items]),
+        "indices": torch.tensor([it["index"] for it in items], dtype=torch.int64),
+    }
 
 
 class GaitDataModule(SplitDataModule):
@@ -186,18 +204,29 @@ class GaitDataModule(SplitDataModule):
 
     collate_fn = staticmethod(gei_collate)
 
-    def __init__(self, root: str, protocol: str = "closed_set", holdout_seed: int = 0,
-                 num_train_subjects: int | None = None, val_fraction: float = 0.1, batch_size: int = 32,
-                 eval_batch_size: int | None = 128, num_workers: int = 0, augment: dict | None = None, seed: int = 0,
-                 subjects_per_batch: int | None = None):
+    def __init__(
+        self,
+        root: str,
+        protocol: str = "closed_set",
+        holdout_seed: int = 0,
+        num_train_subjects: int | None = None,
+        val_fraction: float = 0.1,
+        batch_size: int = 32,
+        eval_batch_size: int | None = 128,
+        num_workers: int = 0,
+        augment: dict | None = None,
+        seed: int = 0,
+        subjects_per_batch: int | None = None,
+    ):
         super().__init__()
         if root is None:
             raise ValueError("data.root is not set: give the GEI cache folder written by `mocapkit prepare casia-b`")
         if protocol not in PROTOCOLS:
             raise ValueError(f"data.protocol={protocol!r} is unknown; choose one of {', '.join(PROTOCOLS)}")
         if protocol != "cross_subject" and num_train_subjects is not None:
-            raise ValueError(f"data.num_train_subjects={num_train_subjects} is only used by protocol=cross_subject, "
-                             f"not {protocol!r}")
+            raise ValueError(
+                f"data.num_train_subjects={num_train_subjects} is only used by protocol=cross_subject, not {protocol!r}"
+            )
         self.root = Path(root)
         self.protocol = protocol
         self.holdout_seed, self.seed = int(holdout_seed), int(seed)
@@ -207,8 +236,10 @@ class GaitDataModule(SplitDataModule):
         self.subjects_per_batch = None if subjects_per_batch is None else int(subjects_per_batch)
         unknown = sorted(set(augment or {}) - {"shift", "shift_y"})
         if unknown:
-            raise ValueError(f"data.augment: unknown keys {unknown}; GEIs take only shift and shift_y "
-                             "(no flip: mirroring changes the view)")
+            raise ValueError(
+                f"data.augment: unknown keys {unknown}; GEIs take only shift and shift_y "
+                "(no flip: mirroring changes the view)"
+            )
         self.augment = GEIShift(**augment) if augment else None
         self.cache = GEICache(self.root)
         if len(self.cache) == 0:
@@ -217,15 +248,18 @@ class GaitDataModule(SplitDataModule):
         bad_views = sorted(set(np.unique(self.cache.views).tolist()) - set(VIEWS))
         bad_conditions = sorted(set(np.unique(self.cache.conditions).tolist()) - set(range(len(CONDITIONS))))
         if bad_views or bad_conditions or self.cache.subjects.min() < 1:
-            raise ValueError(f"{self.root}: index.npz holds views {bad_views} (expected {list(VIEWS)}), conditions "
-                             f"{bad_conditions} (expected 0..{len(CONDITIONS) - 1}) or subject IDs < 1")
+            raise ValueError(
+                f"{self.root}: index.npz holds views {bad_views} (expected {list(VIEWS)}), conditions "
+                f"{bad_conditions} (expected 0..{len(CONDITIONS) - 1}) or subject IDs < 1"
+            )
         subjects = self.cache.subjects.astype(np.int64)
         ids = np.unique(subjects)
 
         # the one split code of every gait method, learned or classical (mocapkit.evaluation.compare uses it too)
         train, self.test_idx, self.train_subjects, self.test_subjects = protocol_split(
-            self.cache, protocol, holdout_seed=self.holdout_seed, num_train_subjects=num_train_subjects)
-        self.label_subjects = np.asarray(self.train_subjects, dtype=np.int64)   # the subject label space
+            self.cache, protocol, holdout_seed=self.holdout_seed, num_train_subjects=num_train_subjects
+        )
+        self.label_subjects = np.asarray(self.train_subjects, dtype=np.int64)  # the subject label space
 
         lookup = np.full(int(ids.max()) + 1, -1, dtype=np.int64)
         lookup[self.label_subjects] = np.arange(len(self.label_subjects))
@@ -234,8 +268,10 @@ class GaitDataModule(SplitDataModule):
         self.train_idx, self.val_idx = sequence_validation_split(train, keys, val_fraction, self.seed)
         self.test_idx = np.asarray(self.test_idx, dtype=np.int64)
         if len(self.train_idx) == 0:
-            raise ValueError(f"{self.root}: protocol={protocol} leaves no training GEIs {self.sample_counts()}; "
-                             "the cache needs more than one sequence per (subject, view, condition) for closed_set")
+            raise ValueError(
+                f"{self.root}: protocol={protocol} leaves no training GEIs {self.sample_counts()}; "
+                "the cache needs more than one sequence per (subject, view, condition) for closed_set"
+            )
         self._datasets: dict[str, GEIDataset] = {}
 
     # ------------------------------------------------------------------ label spaces
@@ -267,8 +303,13 @@ class GaitDataModule(SplitDataModule):
 
     def label_spaces(self) -> dict:
         """What the gait LightningModule needs from the data: label-space sizes, subject names, GEI size."""
-        return {"num_subjects": self.num_subjects, "num_views": self.num_views, "num_conditions": self.num_conditions,
-                "subject_names": self.subject_names, "input_size": [self.height, self.width]}
+        return {
+            "num_subjects": self.num_subjects,
+            "num_views": self.num_views,
+            "num_conditions": self.num_conditions,
+            "subject_names": self.subject_names,
+            "input_size": [self.height, self.width],
+        }
 
     # ------------------------------------------------------------------ reports
 
@@ -277,11 +318,20 @@ class GaitDataModule(SplitDataModule):
         if self.protocol == "closed_set":
             split = f"casia-b closed_set (holdout seed {self.holdout_seed})"
         else:
-            split = f"casia-b cross_subject ({len(self.train_subjects)} train / {len(self.test_subjects)} test subjects)"
-        return {"split": split, "protocol": self.protocol, "data_root": str(self.root),
-                "per": self.cache.meta.get("per"), "gei_size": [self.height, self.width],
-                **self.split_description(self.cache.subjects),
-                "label_space": self.subject_names, "views": list(VIEWS), "conditions": list(CONDITIONS)}
+            split = (
+                f"casia-b cross_subject ({len(self.train_subjects)} train / {len(self.test_subjects)} test subjects)"
+            )
+        return {
+            "split": split,
+            "protocol": self.protocol,
+            "data_root": str(self.root),
+            "per": self.cache.meta.get("per"),
+            "gei_size": [self.height, self.width],
+            **self.split_description(self.cache.subjects),
+            "label_space": self.subject_names,
+            "views": list(VIEWS),
+            "conditions": list(CONDITIONS),
+        }
 
     # ------------------------------------------------------------------ loaders
 
@@ -289,9 +339,10 @@ class GaitDataModule(SplitDataModule):
         """The ``"train"``, ``"val"`` or ``"test"`` part (augmentation only on train), read into memory once."""
         if part not in self._datasets:
             indices = {"train": self.train_idx, "val": self.val_idx, "test": self.test_idx}[part]
-            geis = np.asarray(self.cache.all_geis[indices], dtype=np.uint8)   # fancy indexing copies out of the memmap
-            self._datasets[part] = GEIDataset(geis, indices, self.subject_labels, self.cache,
-                                              self.augment if part == "train" else None)
+            geis = np.asarray(self.cache.all_geis[indices], dtype=np.uint8)  # fancy indexing copies out of the memmap
+            self._datasets[part] = GEIDataset(
+                geis, indices, self.subject_labels, self.cache, self.augment if part == "train" else None
+            )
         return self._datasets[part]
 
     def train_dataloader(self) -> DataLoader:
@@ -299,12 +350,19 @@ class GaitDataModule(SplitDataModule):
         if self.subjects_per_batch is None:
             return super().train_dataloader()
         if self.trainer is not None and self.trainer.world_size > 1:
-            raise ValueError(f"data.subjects_per_batch={self.subjects_per_batch} draws its batches in one process; "
-                             f"with {self.trainer.world_size} processes every one would train on the same batches: "
-                             "use data.subjects_per_batch=null under DDP")
+            raise ValueError(
+                f"data.subjects_per_batch={self.subjects_per_batch} draws its batches in one process; "
+                f"with {self.trainer.world_size} processes every one would train on the same batches: "
+                "use data.subjects_per_batch=null under DDP"
+            )
         sampler = SubjectBatchSampler(self.subject_labels[self.train_idx], self.batch_size, self.subjects_per_batch)
-        return DataLoader(self.dataset("train"), batch_sampler=sampler, num_workers=self.num_workers,
-                          collate_fn=self.collate_fn, persistent_workers=self.num_workers > 0)
+        return DataLoader(
+            self.dataset("train"),
+            batch_sampler=sampler,
+            num_workers=self.num_workers,
+            collate_fn=self.collate_fn,
+            persistent_workers=self.num_workers > 0,
+        )
 
     def predict_dataloader(self) -> DataLoader:
         """The test part (what ``trainer.predict`` embeds for the gallery/probe evaluation)."""

@@ -32,6 +32,7 @@ column, then 10 columns cut from each side); ``(124, 124)`` is the thesis networ
 input (silhouette 124 px high, centred in 124 columns). Any ``(height, width)`` works: the
 window is always ``width`` columns centred on the median column.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -86,8 +87,9 @@ def _box_taps(starts: np.ndarray, scales: np.ndarray, n_out: int, n_in: int) -> 
     return np.clip(index, 0, n_in - 1), weight.astype(np.float32)
 
 
-def normalize_silhouettes(frames: np.ndarray, height: int = 64, width: int | None = 44,
-                          min_foreground: float = 0.001, chunk: int = 128) -> tuple[np.ndarray, np.ndarray]:
+def normalize_silhouettes(
+    frames: np.ndarray, height: int = 64, width: int | None = 44, min_foreground: float = 0.001, chunk: int = 128
+) -> tuple[np.ndarray, np.ndarray]:
     """Crop, scale and centre binary silhouettes (OpenGait's pretreatment).
 
     Args:
@@ -118,7 +120,7 @@ def normalize_silhouettes(frames: np.ndarray, height: int = 64, width: int | Non
         raise ValueError(f"min_foreground must be a fraction in [0, 1), got {min_foreground}")
     _, rows, cols = frames.shape
     scale_to_unit = 1.0 if frames.dtype == np.bool_ else 1.0 / 255.0
-    narrow = np.uint16 if rows * 255 < 2 ** 16 else np.uint32  # exact, and faster than summing in float
+    narrow = np.uint16 if rows * 255 < 2**16 else np.uint32  # exact, and faster than summing in float
     col_mass = frames.sum(axis=1, dtype=narrow).astype(np.float64) * scale_to_unit  # [T, W]
     mass = col_mass.sum(axis=1)
     kept = np.flatnonzero((mass > 0) & (mass >= min_foreground * rows * cols)).astype(np.int64)
@@ -186,9 +188,9 @@ def lag_correlation(signal: np.ndarray, max_lag: int) -> np.ndarray:
     csum, csq = np.concatenate([[0.0], np.cumsum(x)]), np.concatenate([[0.0], np.cumsum(x * x)])
     head_sum, head_sq = csum[count], csq[count]  # x[0 : n - k]
     tail_sum, tail_sq = csum[n] - csum[lags], csq[n] - csq[lags]  # x[k : n]
-    cross = np.correlate(x, x, mode="full")[n - 1:n + max_lag]  # Σ x[t] x[t + k]
+    cross = np.correlate(x, x, mode="full")[n - 1 : n + max_lag]  # Σ x[t] x[t + k]
     cov = cross - head_sum * tail_sum / count
-    var = (head_sq - head_sum ** 2 / count) * (tail_sq - tail_sum ** 2 / count)
+    var = (head_sq - head_sum**2 / count) * (tail_sq - tail_sum**2 / count)
     scale = np.sqrt(np.clip(var, 0.0, None))
     tiny = 1e-12 * max(1.0, float(np.abs(x).max()) ** 2) * count
     return np.where(scale > tiny, cov / np.where(scale > tiny, scale, 1.0), 0.0)
@@ -224,8 +226,14 @@ def _parabolic_peak(r: np.ndarray, k: int) -> float:
     return k + (0.5 * (r[k - 1] - r[k + 1]) / curvature if curvature < 0 else 0.0)
 
 
-def period_from_signal(signal: np.ndarray, min_cycle: int = 18, max_cycle: int = 34, min_correlation: float = 0.2,
-                       smooth: int = 5, min_overlap: int = 4) -> int | None:
+def period_from_signal(
+    signal: np.ndarray,
+    min_cycle: int = 18,
+    max_cycle: int = 34,
+    min_correlation: float = 0.2,
+    smooth: int = 5,
+    min_overlap: int = 4,
+) -> int | None:
     """The gait cycle in frames from a per-frame leg signal sampled once per frame.
 
     1. Median-filter the signal over ``smooth`` frames (removes single-frame segmentation
@@ -264,9 +272,16 @@ def period_from_signal(signal: np.ndarray, min_cycle: int = 18, max_cycle: int =
     return None if best is None else round(float(_parabolic_peak(r, best)))
 
 
-def gait_period(aligned: np.ndarray, kept: np.ndarray | None = None, complete: np.ndarray | None = None,
-                lower_fraction: float = 0.25, min_cycle: int = 18, max_cycle: int = 34,
-                min_correlation: float = 0.2, smooth: int = 5) -> int | None:
+def gait_period(
+    aligned: np.ndarray,
+    kept: np.ndarray | None = None,
+    complete: np.ndarray | None = None,
+    lower_fraction: float = 0.25,
+    min_cycle: int = 18,
+    max_cycle: int = 34,
+    min_correlation: float = 0.2,
+    smooth: int = 5,
+) -> int | None:
     """Gait cycle length in frames (two steps) of aligned silhouettes ``[T, h, w]``, or None if none is found.
 
     Args:
@@ -293,8 +308,13 @@ def gait_period(aligned: np.ndarray, kept: np.ndarray | None = None, complete: n
     if len(times) < 2:
         return None
     clock = np.arange(times[0], times[-1] + 1)
-    return period_from_signal(np.interp(clock, times, signal), min_cycle=min_cycle, max_cycle=max_cycle,
-                              min_correlation=min_correlation, smooth=smooth)
+    return period_from_signal(
+        np.interp(clock, times, signal),
+        min_cycle=min_cycle,
+        max_cycle=max_cycle,
+        min_correlation=min_correlation,
+        smooth=smooth,
+    )
 
 
 # --------------------------------------------------------------------------- GEIs
@@ -328,10 +348,19 @@ def _touches_sides(frames: np.ndarray) -> np.ndarray:
     return (frames[:, :, 0] > 0).any(axis=1) | (frames[:, :, -1] > 0).any(axis=1)
 
 
-def gait_energy_images(frames: np.ndarray, size: tuple[int, int] = OPENGAIT_SIZE, per: str = "cycle",
-                       min_foreground: float = 0.001, min_frames: int = 1, period: int | None = None,
-                       fallback_period: int | None = None, lower_fraction: float = 0.25, min_cycle: int = 18,
-                       max_cycle: int = 34, min_correlation: float = 0.2) -> tuple[np.ndarray, GEIInfo]:
+def gait_energy_images(
+    frames: np.ndarray,
+    size: tuple[int, int] = OPENGAIT_SIZE,
+    per: str = "cycle",
+    min_foreground: float = 0.001,
+    min_frames: int = 1,
+    period: int | None = None,
+    fallback_period: int | None = None,
+    lower_fraction: float = 0.25,
+    min_cycle: int = 18,
+    max_cycle: int = 34,
+    min_correlation: float = 0.2,
+) -> tuple[np.ndarray, GEIInfo]:
     """GEIs of one silhouette sequence.
 
     Args:
@@ -362,8 +391,10 @@ def gait_energy_images(frames: np.ndarray, size: tuple[int, int] = OPENGAIT_SIZE
     total = len(frames)
     if per == "sequence":
         if len(kept) < max(1, min_frames):
-            raise GaitSequenceError(f"{len(kept)} non-empty silhouettes of {total} frames, need at least "
-                                    f"{max(1, min_frames)}", reason="no_frames")
+            raise GaitSequenceError(
+                f"{len(kept)} non-empty silhouettes of {total} frames, need at least {max(1, min_frames)}",
+                reason="no_frames",
+            )
         spans = np.array([[kept[0], kept[-1] + 1]], dtype=np.int64)
         info = GEIInfo(per, period, kept, spans, np.array([len(kept)], dtype=np.int64))
         return aligned.mean(axis=0, keepdims=True), info
@@ -372,28 +403,43 @@ def gait_energy_images(frames: np.ndarray, size: tuple[int, int] = OPENGAIT_SIZE
         raise GaitSequenceError(f"no non-empty silhouette in {total} frames", reason="no_frames")
     detected = period is None
     if period is None:
-        period = gait_period(aligned, kept, complete=~_touches_sides(frames[kept]), lower_fraction=lower_fraction,
-                             min_cycle=min_cycle, max_cycle=max_cycle, min_correlation=min_correlation)
+        period = gait_period(
+            aligned,
+            kept,
+            complete=~_touches_sides(frames[kept]),
+            lower_fraction=lower_fraction,
+            min_cycle=min_cycle,
+            max_cycle=max_cycle,
+            min_correlation=min_correlation,
+        )
         if period is None and fallback_period is not None:
             period, detected = int(fallback_period), False
         if period is None:
-            raise GaitSequenceError(f"no gait period found in {len(kept)} non-empty silhouettes of {total} frames "
-                                    f"(the lower-body width has no autocorrelation peak for cycles of "
-                                    f"{min_cycle}-{max_cycle} frames)", reason="no_period")
+            raise GaitSequenceError(
+                f"no gait period found in {len(kept)} non-empty silhouettes of {total} frames "
+                f"(the lower-body width has no autocorrelation peak for cycles of "
+                f"{min_cycle}-{max_cycle} frames)",
+                reason="no_period",
+            )
     if period < 1:
         raise ValueError(f"period must be >= 1, got {period}")
     first, stop = int(kept[0]), int(kept[-1]) + 1
     cycles = (stop - first) // period
     if cycles == 0:
-        raise GaitSequenceError(f"{stop - first} frames from the first to the last non-empty silhouette are "
-                                f"shorter than one gait cycle of {period} frames", reason="too_short")
+        raise GaitSequenceError(
+            f"{stop - first} frames from the first to the last non-empty silhouette are "
+            f"shorter than one gait cycle of {period} frames",
+            reason="too_short",
+        )
     starts = first + np.arange(cycles, dtype=np.int64) * period
     spans = np.stack([starts, starts + period], axis=1)
     lo, hi = np.searchsorted(kept, spans[:, 0]), np.searchsorted(kept, spans[:, 1])
     counts = hi - lo
     enough = counts >= max(min_frames, (period + 1) // 2)
     if not enough.any():
-        raise GaitSequenceError(f"no gait cycle of {period} frames holds {max(min_frames, (period + 1) // 2)} "
-                                f"non-empty silhouettes", reason="no_frames")
+        raise GaitSequenceError(
+            f"no gait cycle of {period} frames holds {max(min_frames, (period + 1) // 2)} non-empty silhouettes",
+            reason="no_frames",
+        )
     geis = np.stack([aligned[a:b].mean(axis=0) for a, b in zip(lo[enough], hi[enough])])
     return geis, GEIInfo(per, period, kept, spans[enough], counts[enough].astype(np.int64), detected)

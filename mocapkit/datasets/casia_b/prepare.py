@@ -22,6 +22,7 @@ strict behaviour: such a sequence is bad, it raises, or is skipped as ``no_perio
 Memory: workers send back each sequence's GEIs as uint8; the cache is assembled in the
 main process (full CASIA-B at 124×124 with ~3 cycles per sequence: ~40k GEIs, ~0.6 GB).
 """
+
 from __future__ import annotations
 
 import os
@@ -115,40 +116,68 @@ class GEIPrepareReport(PrepareReportBase):
         }
 
     def to_dict(self) -> dict:
-        return {"out": self.out, "source": self.source, "per": self.per, "size": list(self.size),
-                "totals": self.totals(), "skipped": self.skipped, "listing_problems": self.listing_problems,
-                "missing": self.missing, "fallback_period": self.fallback_period,
-                "whole_sequence": self.whole_sequence}
+        return {
+            "out": self.out,
+            "source": self.source,
+            "per": self.per,
+            "size": list(self.size),
+            "totals": self.totals(),
+            "skipped": self.skipped,
+            "listing_problems": self.listing_problems,
+            "missing": self.missing,
+            "fallback_period": self.fallback_period,
+            "whole_sequence": self.whole_sequence,
+        }
 
     def summary(self) -> str:
         """One paragraph for the console."""
         height, width = self.size
         skipped = ", ".join(f"{self.count(r)} {r}" for r in SKIP_REASONS if self.count(r))
-        return (f"{self.geis_written} GEIs ({height}x{width}, per {self.per}) from {self.sequences_written} of "
-                f"{self.sequences_found} sequences in {self.seconds:.1f} s -> {self.out}\n"
-                f"skipped {len(self.skipped)} sequences{f' ({skipped})' if skipped else ''}; "
-                f"{len(self.listing_problems)} listing problems; {len(self.missing)} expected sequences missing; "
-                f"{len(self.whole_sequence)} without a detectable period, one GEI over the whole sequence; "
-                f"{len(self.fallback_period)} with the fallback period; details in {Path(self.out) / REPORT_TXT}")
+        return (
+            f"{self.geis_written} GEIs ({height}x{width}, per {self.per}) from {self.sequences_written} of "
+            f"{self.sequences_found} sequences in {self.seconds:.1f} s -> {self.out}\n"
+            f"skipped {len(self.skipped)} sequences{f' ({skipped})' if skipped else ''}; "
+            f"{len(self.listing_problems)} listing problems; {len(self.missing)} expected sequences missing; "
+            f"{len(self.whole_sequence)} without a detectable period, one GEI over the whole sequence; "
+            f"{len(self.fallback_period)} with the fallback period; details in {Path(self.out) / REPORT_TXT}"
+        )
 
     def _text_title(self) -> list[str]:
-        return [f"CASIA-B GEI preparation report for {self.out}", f"source: {self.source}",
-                f"GEI size {self.size[0]}x{self.size[1]}, one per {self.per}"]
+        return [
+            f"CASIA-B GEI preparation report for {self.out}",
+            f"source: {self.source}",
+            f"GEI size {self.size[0]}x{self.size[1]}, one per {self.per}",
+        ]
 
     def _text_sections(self) -> list[tuple[str, int, list[str]]]:
-        listed = (("Listing problems", self.listing_problems),
-                  ("Missing sequences, subject/condition-nn/view", self.missing),
-                  ("One GEI per sequence (no period detected)", self.whole_sequence),
-                  ("Sequences with the fallback period, no period detected", self.fallback_period))
-        return [("Skipped sequences", len(self.skipped),
-                 [f"  [{s['reason']}] {s['sequence']}: {s['message']}" for s in self.skipped]),
-                *((heading, len(items), [f"  {item}" for item in items]) for heading, items in listed)]
+        listed = (
+            ("Listing problems", self.listing_problems),
+            ("Missing sequences, subject/condition-nn/view", self.missing),
+            ("One GEI per sequence (no period detected)", self.whole_sequence),
+            ("Sequences with the fallback period, no period detected", self.fallback_period),
+        )
+        return [
+            (
+                "Skipped sequences",
+                len(self.skipped),
+                [f"  [{s['reason']}] {s['sequence']}: {s['message']}" for s in self.skipped],
+            ),
+            *((heading, len(items), [f"  {item}" for item in items]) for heading, items in listed),
+        ]
 
 
-def prepare_casia_b(src: str | os.PathLike, out: str | os.PathLike, size: tuple[int, int] = OPENGAIT_SIZE,
-                    per: str = "cycle", skip_bad: bool = False, workers: int = 1,
-                    subjects: list[int] | None = None, fallback_period: int | None = None,
-                    no_period: str | None = None, progress: bool = True) -> GEIPrepareReport:
+def prepare_casia_b(
+    src: str | os.PathLike,
+    out: str | os.PathLike,
+    size: tuple[int, int] = OPENGAIT_SIZE,
+    per: str = "cycle",
+    skip_bad: bool = False,
+    workers: int = 1,
+    subjects: list[int] | None = None,
+    fallback_period: int | None = None,
+    no_period: str | None = None,
+    progress: bool = True,
+) -> GEIPrepareReport:
     """Build the GEIs of every sequence under ``src`` into a cache in ``out``.
 
     Args:
@@ -195,29 +224,48 @@ def prepare_casia_b(src: str | os.PathLike, out: str | os.PathLike, size: tuple[
         raise FileNotFoundError(f"CASIA-B source folder {src} does not exist or is not a folder")
 
     listing = list_casia_b(src, subjects=subjects)  # raises when there is no sequence at all
-    report = GEIPrepareReport(out=str(out), source=str(src.resolve()), per=per, size=size,
-                              sequences_found=len(listing.sequences), listing_problems=list(listing.problems),
-                              missing=list(listing.missing()))
+    report = GEIPrepareReport(
+        out=str(out),
+        source=str(src.resolve()),
+        per=per,
+        size=size,
+        sequences_found=len(listing.sequences),
+        listing_problems=list(listing.problems),
+        missing=list(listing.missing()),
+    )
 
     rows: dict[str, list] = {key: [] for key in INDEX_KEYS}
     blocks: list[np.ndarray] = []
     jobs = [(seq, size, per, no_period, fallback_period) for seq in listing.sequences]
-    with parallel_map(_build_one, jobs, workers, max_chunksize=8, desc="building GEIs", unit="seq",
-                      progress=progress) as results:
+    with parallel_map(
+        _build_one, jobs, workers, max_chunksize=8, desc="building GEIs", unit="seq", progress=progress
+    ) as results:
         for seq, result in zip(listing.sequences, results):
             if "error" in result:
                 if not skip_bad:
                     raise result["error"]
-                report.skipped.append({"sequence": seq.key.name, "folder": str(seq.folder),
-                                       "reason": result["reason"], "message": str(result["error"])})
+                report.skipped.append(
+                    {
+                        "sequence": seq.key.name,
+                        "folder": str(seq.folder),
+                        "reason": result["reason"],
+                        "message": str(result["error"]),
+                    }
+                )
                 continue
             geis, frames = result["geis"], result["frames"]
             key = seq.key
             blocks.append(geis)
             for cycle, count in enumerate(frames):
-                for name, value in (("names", key.name), ("subjects", key.subject),
-                                    ("conditions", key.condition_label), ("sequences", key.sequence),
-                                    ("views", key.view), ("cycles", cycle), ("frames", count)):
+                for name, value in (
+                    ("names", key.name),
+                    ("subjects", key.subject),
+                    ("conditions", key.condition_label),
+                    ("sequences", key.sequence),
+                    ("views", key.view),
+                    ("cycles", cycle),
+                    ("frames", count),
+                ):
                     rows[name].append(value)
             report.sequences_written += 1
             report.geis_written += len(geis)
@@ -233,15 +281,22 @@ def prepare_casia_b(src: str | os.PathLike, out: str | os.PathLike, size: tuple[
     report.seconds = time.perf_counter() - started
     report.write(out)
     if not blocks:
-        raise RuntimeError(f"no GEI could be built from the {len(jobs)} sequences under {src}; "
-                           f"see {out / REPORT_TXT}")
+        raise RuntimeError(f"no GEI could be built from the {len(jobs)} sequences under {src}; see {out / REPORT_TXT}")
     index = {key: np.asarray(values, dtype=np.int64) for key, values in rows.items() if key != "names"}
     index["names"] = np.asarray(rows["names"], dtype=str)
-    meta = {"per": per, "size": list(size), "source": report.source,
-            "options": {"skip_bad": skip_bad, "workers": workers, "fallback_period": fallback_period,
-                        "no_period": no_period,
-                        "subjects": None if subjects is None else sorted(int(s) for s in subjects)},
-            "counts": report.totals()}
+    meta = {
+        "per": per,
+        "size": list(size),
+        "source": report.source,
+        "options": {
+            "skip_bad": skip_bad,
+            "workers": workers,
+            "fallback_period": fallback_period,
+            "no_period": no_period,
+            "subjects": None if subjects is None else sorted(int(s) for s in subjects),
+        },
+        "counts": report.totals(),
+    }
     write_gei_cache(out, np.concatenate(blocks), index, meta)
     report.seconds = time.perf_counter() - started
     report.write(out)  # with the final time
@@ -262,8 +317,9 @@ def _no_period_policy(no_period: str | None, fallback_period: int | None) -> str
     if no_period == "fallback" and fallback_period is None:
         raise ValueError("no_period='fallback' needs fallback_period (frames per cycle)")
     if no_period != "fallback" and fallback_period is not None:
-        raise ValueError(f"fallback_period={fallback_period} contradicts no_period={no_period!r}: "
-                         "give one or the other")
+        raise ValueError(
+            f"fallback_period={fallback_period} contradicts no_period={no_period!r}: give one or the other"
+        )
     if fallback_period is not None and int(fallback_period) < 1:
         raise ValueError(f"fallback_period must be >= 1 frame, got {fallback_period}")
     return no_period
@@ -278,8 +334,9 @@ def _build_one(job) -> dict:
             raise GaitSequenceError("empty view folder (no PNG frames)", reason="no_frames")
         frames = read_sequence(seq)
         try:
-            geis, info = gait_energy_images(frames, size=size, per=per,
-                                            fallback_period=fallback_period if no_period == "fallback" else None)
+            geis, info = gait_energy_images(
+                frames, size=size, per=per, fallback_period=fallback_period if no_period == "fallback" else None
+            )
         except GaitSequenceError as exc:
             if exc.reason != "no_period" or no_period != "sequence":
                 raise
@@ -290,8 +347,14 @@ def _build_one(job) -> dict:
     except GaitSequenceError as exc:
         return {"error": GaitSequenceError(f"{seq.folder}: {exc}", exc.reason), "reason": exc.reason}
     except Exception as exc:  # anything else one sequence raises must not stop the batch: reported as unreadable
-        return {"error": SilhouetteFormatError(seq.folder, None, f"{type(exc).__name__}: {exc}"),
-                "reason": "unreadable"}
-    return {"geis": np.round(geis * 255).astype(np.uint8), "frames": info.frames_per_gei.tolist(),
-            "frames_read": len(frames), "fallback": per == "cycle" and not whole and not info.period_detected,
-            "whole_sequence": whole}
+        return {
+            "error": SilhouetteFormatError(seq.folder, None, f"{type(exc).__name__}: {exc}"),
+            "reason": "unreadable",
+        }
+    return {
+        "geis": np.round(geis * 255).astype(np.uint8),
+        "frames": info.frames_per_gei.tolist(),
+        "frames_read": len(frames),
+        "fallback": per == "cycle" and not whole and not info.period_detected,
+        "whole_sequence": whole,
+    }

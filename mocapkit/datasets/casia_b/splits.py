@@ -13,6 +13,7 @@ Cross subject (OpenGait's CASIA-B protocol, Yu et al. 2006 "LT" split)
     ``cl-01/02``; rank-1 is computed per (probe view, gallery view) with identical
     views excluded (:mod:`mocapkit.gait.metrics`).
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple
@@ -29,8 +30,9 @@ GALLERY: dict[str, tuple[int, ...]] = {"nm": (1, 2, 3, 4)}
 PROBES: dict[str, tuple[int, ...]] = {"nm": (5, 6), "bg": (1, 2), "cl": (1, 2)}
 
 
-def closed_set_split(subjects: np.ndarray, conditions: np.ndarray, sequences: np.ndarray, views: np.ndarray,
-                     seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+def closed_set_split(
+    subjects: np.ndarray, conditions: np.ndarray, sequences: np.ndarray, views: np.ndarray, seed: int = 0
+) -> tuple[np.ndarray, np.ndarray]:
     """The thesis's hold-out: per (subject, view), one random sequence of each condition goes to test.
 
     Args:
@@ -42,8 +44,9 @@ def closed_set_split(subjects: np.ndarray, conditions: np.ndarray, sequences: np
         with a single sequence keeps it for testing (so every combination is tested); the caller
         reports the resulting counts.
     """
-    subjects, conditions, sequences, views = (np.asarray(a, dtype=np.int64)
-                                              for a in (subjects, conditions, sequences, views))
+    subjects, conditions, sequences, views = (
+        np.asarray(a, dtype=np.int64) for a in (subjects, conditions, sequences, views)
+    )
     rng = np.random.default_rng(seed)
     test = np.zeros(len(subjects), dtype=bool)
     groups = np.unique(np.stack([subjects, views, conditions], axis=1), axis=0)
@@ -66,22 +69,27 @@ def cross_subject_subjects(available: np.ndarray, num_train: int | None = None) 
     """
     ids = np.unique(np.asarray(available, dtype=np.int64))
     if num_train is None:
-        num_train = STANDARD_TRAIN_SUBJECTS if len(ids) == NUM_SUBJECTS else \
-            int(round(STANDARD_TRAIN_SUBJECTS / NUM_SUBJECTS * len(ids)))
+        num_train = (
+            STANDARD_TRAIN_SUBJECTS
+            if len(ids) == NUM_SUBJECTS
+            else int(round(STANDARD_TRAIN_SUBJECTS / NUM_SUBJECTS * len(ids)))
+        )
         num_train = min(max(num_train, 1), len(ids) - 2)
     if not 1 <= num_train <= len(ids) - 2:
-        raise ValueError(f"num_train_subjects={num_train}: needs 1 ≤ n ≤ {len(ids) - 2} "
-                         f"({len(ids)} subjects available; testing needs at least 2)")
+        raise ValueError(
+            f"num_train_subjects={num_train}: needs 1 ≤ n ≤ {len(ids) - 2} "
+            f"({len(ids)} subjects available; testing needs at least 2)"
+        )
     return ids[:num_train], ids[num_train:]
 
 
 class ProtocolSplit(NamedTuple):
     """The two sides of a CASIA-B protocol (see :func:`protocol_split`)."""
 
-    train_idx: np.ndarray       #: int64 [n_train], sorted GEI indices of the training side (validation included)
-    test_idx: np.ndarray        #: int64 [n_test], sorted GEI indices of the test side
+    train_idx: np.ndarray  #: int64 [n_train], sorted GEI indices of the training side (validation included)
+    test_idx: np.ndarray  #: int64 [n_test], sorted GEI indices of the test side
     train_subjects: np.ndarray  #: int64, sorted subject IDs with training GEIs (the label space)
-    test_subjects: np.ndarray   #: int64, sorted subject IDs with test GEIs
+    test_subjects: np.ndarray  #: int64, sorted subject IDs with test GEIs
 
 
 def protocol_split(cache, protocol: str, holdout_seed: int = 0, num_train_subjects: int | None = None) -> ProtocolSplit:
@@ -107,8 +115,9 @@ def protocol_split(cache, protocol: str, holdout_seed: int = 0, num_train_subjec
     if protocol not in PROTOCOLS:
         raise ValueError(f"data.protocol={protocol!r} is unknown; choose one of {', '.join(PROTOCOLS)}")
     if protocol != "cross_subject" and num_train_subjects is not None:
-        raise ValueError(f"data.num_train_subjects={num_train_subjects} is only used by protocol=cross_subject, "
-                         f"not {protocol!r}")
+        raise ValueError(
+            f"data.num_train_subjects={num_train_subjects} is only used by protocol=cross_subject, not {protocol!r}"
+        )
     subjects = np.asarray(cache.subjects, dtype=np.int64)
     ids = np.unique(subjects)
     if protocol == "closed_set":
@@ -117,11 +126,17 @@ def protocol_split(cache, protocol: str, holdout_seed: int = 0, num_train_subjec
         train, test = closed_set_split(subjects, cache.conditions, cache.sequences, cache.views, seed=holdout_seed)
         return ProtocolSplit(train, test, ids, ids)
     if len(ids) < 3:
-        raise ValueError(f"{root}: protocol=cross_subject needs at least 3 subjects (1 to train, 2 to test), "
-                         f"the cache has {len(ids)}")
+        raise ValueError(
+            f"{root}: protocol=cross_subject needs at least 3 subjects (1 to train, 2 to test), "
+            f"the cache has {len(ids)}"
+        )
     train_subjects, test_subjects = cross_subject_subjects(subjects, num_train_subjects)
-    return ProtocolSplit(np.flatnonzero(np.isin(subjects, train_subjects)),
-                         np.flatnonzero(np.isin(subjects, test_subjects)), train_subjects, test_subjects)
+    return ProtocolSplit(
+        np.flatnonzero(np.isin(subjects, train_subjects)),
+        np.flatnonzero(np.isin(subjects, test_subjects)),
+        train_subjects,
+        test_subjects,
+    )
 
 
 def gallery_probe_masks(conditions: np.ndarray, sequences: np.ndarray) -> tuple[np.ndarray, dict[str, np.ndarray]]:
@@ -138,8 +153,9 @@ def gallery_probe_masks(conditions: np.ndarray, sequences: np.ndarray) -> tuple[
     return mask(GALLERY, "nm"), {name: mask(PROBES, name) for name in PROBES}
 
 
-def sequence_validation_split(train_idx: np.ndarray, sequence_keys: np.ndarray, val_fraction: float,
-                              seed: int) -> tuple[np.ndarray, np.ndarray]:
+def sequence_validation_split(
+    train_idx: np.ndarray, sequence_keys: np.ndarray, val_fraction: float, seed: int
+) -> tuple[np.ndarray, np.ndarray]:
     """Hold out ``round(val_fraction · n)`` of the ``n`` training sequences (all their GEIs) for validation.
 
     Args:

@@ -54,6 +54,7 @@ to float precision):
 Unsupported: translation/length dofs (``tx ty tz l``) on non-root bones, which
 CMU and HDM05 never use (an :class:`AsfFormatError` names the line).
 """
+
 from __future__ import annotations
 
 import math
@@ -67,9 +68,9 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from mocapkit.datasets.formats.errors import MotionFormatError
-from mocapkit.motion.layouts import CMU31
-from mocapkit.motion.container import Motion
 from mocapkit.datasets.formats.safe_io import read_file_bytes
+from mocapkit.motion.container import Motion
+from mocapkit.motion.layouts import CMU31
 
 INCH = 0.0254
 DEFAULT_FPS = 120.0
@@ -290,10 +291,22 @@ def parse_asf_text(text: str, source: str | os.PathLike = "<memory>") -> AsfSkel
             raise AsfFormatError(source, b["limits_line"], "limits need (min max) pairs")
         pairs = [(limits[i], limits[i + 1]) for i in range(0, len(limits), 2)]
         if dof and pairs and len(pairs) != len(dof):
-            raise AsfFormatError(source, b["limits_line"], f"bone {b['name']}: {len(pairs)} limit pairs for {len(dof)} dofs")
-        skel.bones.append(AsfBone(id=int(b.get("id", len(skel.bones) + 1)), name=b["name"], direction=b["direction"],
-                                  length=b["length"], axis=b.get("axis", np.zeros(3)), axis_order=b.get("axis_order", "XYZ"),
-                                  dof=dof, limits=pairs, extra=b.get("extra", {})))
+            raise AsfFormatError(
+                source, b["limits_line"], f"bone {b['name']}: {len(pairs)} limit pairs for {len(dof)} dofs"
+            )
+        skel.bones.append(
+            AsfBone(
+                id=int(b.get("id", len(skel.bones) + 1)),
+                name=b["name"],
+                direction=b["direction"],
+                length=b["length"],
+                axis=b.get("axis", np.zeros(3)),
+                axis_order=b.get("axis_order", "XYZ"),
+                dof=dof,
+                limits=pairs,
+                extra=b.get("extra", {}),
+            )
+        )
 
     for i, raw in enumerate(lines):
         ln = i + 1
@@ -489,13 +502,23 @@ def write_asf(path: str | os.PathLike, skel: AsfSkeleton, newline: str = "\n") -
     if skel.documentation:
         out.append(":documentation")
         out.extend(f"  {ln}" if ln else "" for ln in skel.documentation.split("\n"))
-    out += [":root", "   order " + " ".join(skel.root_order), f"   axis {skel.root_axis}",
-            "   position " + " ".join(g(v) for v in skel.root_position),
-            "   orientation " + " ".join(g(v) for v in skel.root_orientation), ":bonedata"]
+    out += [
+        ":root",
+        "   order " + " ".join(skel.root_order),
+        f"   axis {skel.root_axis}",
+        "   position " + " ".join(g(v) for v in skel.root_position),
+        "   orientation " + " ".join(g(v) for v in skel.root_orientation),
+        ":bonedata",
+    ]
     for b in skel.bones:
-        out += ["  begin", f"     id {b.id}", f"     name {b.name}",
-                "     direction " + " ".join(g(v) for v in b.direction), f"     length {g(b.length)}",
-                "     axis " + " ".join(g(v) for v in b.axis) + f"  {b.axis_order}"]
+        out += [
+            "  begin",
+            f"     id {b.id}",
+            f"     name {b.name}",
+            "     direction " + " ".join(g(v) for v in b.direction),
+            f"     length {g(b.length)}",
+            "     axis " + " ".join(g(v) for v in b.axis) + f"  {b.axis_order}",
+        ]
         if b.dof:
             out.append("    dof " + " ".join(b.dof))
             if b.limits:
@@ -550,8 +573,9 @@ def _topological(parents: tuple[int, ...]) -> list[int]:
     return order
 
 
-def forward_kinematics(skel: AsfSkeleton, values: dict[str, np.ndarray], unit_scale: float | None = None,
-                       angle_unit: str = "deg") -> tuple[np.ndarray, np.ndarray]:
+def forward_kinematics(
+    skel: AsfSkeleton, values: dict[str, np.ndarray], unit_scale: float | None = None, angle_unit: str = "deg"
+) -> tuple[np.ndarray, np.ndarray]:
     """Joint positions and local rotations from per-bone AMC values (module docstring for the convention).
 
     Args:
@@ -633,7 +657,9 @@ def find_asf(amc_path: str | os.PathLike) -> Path:
     amc_path = Path(amc_path)
     folder = amc_path.parent
     stem = amc_path.stem
-    candidates = sorted(p for p in folder.iterdir() if p.suffix.lower() == ".asf" and p.is_file()) if folder.is_dir() else []
+    candidates = (
+        sorted(p for p in folder.iterdir() if p.suffix.lower() == ".asf" and p.is_file()) if folder.is_dir() else []
+    )
     if not candidates:
         raise FileNotFoundError(f"{amc_path}: no .asf skeleton beside it in {folder}; pass asf= explicitly")
     for p in candidates:
@@ -648,12 +674,17 @@ def find_asf(amc_path: str | os.PathLike) -> Path:
         return named[0]
     if len(candidates) == 1:
         return candidates[0]
-    raise ValueError(f"{amc_path}: cannot tell which skeleton it uses among {[p.name for p in candidates]}; "
-                     f"pass asf= explicitly")
+    raise ValueError(
+        f"{amc_path}: cannot tell which skeleton it uses among {[p.name for p in candidates]}; pass asf= explicitly"
+    )
 
 
-def read_amc(path: str | os.PathLike, asf: AsfSkeleton | str | os.PathLike | None = None, fps: float = DEFAULT_FPS,
-             unit_scale: float | None = None) -> Motion:
+def read_amc(
+    path: str | os.PathLike,
+    asf: AsfSkeleton | str | os.PathLike | None = None,
+    fps: float = DEFAULT_FPS,
+    unit_scale: float | None = None,
+) -> Motion:
     """Read an AMC motion and run forward kinematics over its ASF skeleton.
 
     Args:
@@ -687,24 +718,57 @@ def read_amc(path: str | os.PathLike, asf: AsfSkeleton | str | os.PathLike | Non
         skel = read_asf(asf_path)
     text = _read_text(path, AmcFormatError)
     parsed = parse_amc_text(text, skel, source=path)
-    return amc_motion(skel, parsed["values"], fps=fps, unit_scale=unit_scale, angle_unit=parsed["angle_unit"],
-                      name=path.stem, source=str(path),
-                      metadata={"amc_bone_order": parsed["bone_order"], "amc_frame_numbers": parsed["frame_numbers"],
-                                "amc_header": parsed["header"], "asf_path": None if asf_path is None else str(asf_path)})
+    return amc_motion(
+        skel,
+        parsed["values"],
+        fps=fps,
+        unit_scale=unit_scale,
+        angle_unit=parsed["angle_unit"],
+        name=path.stem,
+        source=str(path),
+        metadata={
+            "amc_bone_order": parsed["bone_order"],
+            "amc_frame_numbers": parsed["frame_numbers"],
+            "amc_header": parsed["header"],
+            "asf_path": None if asf_path is None else str(asf_path),
+        },
+    )
 
 
-def amc_motion(skel: AsfSkeleton, values: dict[str, np.ndarray], fps: float = DEFAULT_FPS, unit_scale: float | None = None,
-               angle_unit: str = "deg", name: str = "", source: str | None = None, metadata: dict | None = None) -> Motion:
+def amc_motion(
+    skel: AsfSkeleton,
+    values: dict[str, np.ndarray],
+    fps: float = DEFAULT_FPS,
+    unit_scale: float | None = None,
+    angle_unit: str = "deg",
+    name: str = "",
+    source: str | None = None,
+    metadata: dict | None = None,
+) -> Motion:
     """A :class:`Motion` from per-bone AMC values (what :func:`read_amc` returns, without a file)."""
     positions, local = forward_kinematics(skel, values, unit_scale=unit_scale, angle_unit=angle_unit)
-    meta = {"amc_values": {k: np.asarray(v, dtype=np.float64) for k, v in values.items()},
-            "amc_angle_unit": angle_unit, "amc_bone_order": tuple(skel.amc_bones), "asf": skel}
+    meta = {
+        "amc_values": {k: np.asarray(v, dtype=np.float64) for k, v in values.items()},
+        "amc_angle_unit": angle_unit,
+        "amc_bone_order": tuple(skel.amc_bones),
+        "asf": skel,
+    }
     meta.update(metadata or {})
     scale = skel.metres_per_unit if unit_scale is None else unit_scale
     units = skel.source_units if unit_scale is None else f"{scale:g} m per unit"
-    return Motion(positions=positions.astype(np.float32), joint_names=skel.joint_names, parents=skel.parents, fps=fps,
-                  rotations=local.astype(np.float32), source_units=units, up_axis="y", name=name, source=source,
-                  layout_name=skel.layout_name, metadata=meta)
+    return Motion(
+        positions=positions.astype(np.float32),
+        joint_names=skel.joint_names,
+        parents=skel.parents,
+        fps=fps,
+        rotations=local.astype(np.float32),
+        source_units=units,
+        up_axis="y",
+        name=name,
+        source=source,
+        layout_name=skel.layout_name,
+        metadata=meta,
+    )
 
 
 def parse_amc_text(text: str, skel: AsfSkeleton, source: str | os.PathLike = "<memory>") -> dict:
@@ -754,10 +818,14 @@ def parse_amc_text(text: str, skel: AsfSkeleton, source: str | os.PathLike = "<m
         nonlocal bone_order
         if len(current) != nexp:
             missing = [b for b in expected if b not in current]
-            raise AmcFormatError(source, at_line,
-                                 f"frame {frame_numbers[-1]} (started at line {frame_line}) is truncated: "
-                                 f"{len(current)} of {nexp} bone lines, missing {missing[:4]}"
-                                 f"{' ...' if len(missing) > 4 else ''}", frame=len(frame_numbers))
+            raise AmcFormatError(
+                source,
+                at_line,
+                f"frame {frame_numbers[-1]} (started at line {frame_line}) is truncated: "
+                f"{len(current)} of {nexp} bone lines, missing {missing[:4]}"
+                f"{' ...' if len(missing) > 4 else ''}",
+                frame=len(frame_numbers),
+            )
         if bone_order is None:
             bone_order = list(current)
 
@@ -776,8 +844,9 @@ def parse_amc_text(text: str, skel: AsfSkeleton, source: str | os.PathLike = "<m
                 if frame_numbers:
                     close_frame(ln)
                 if len(first.lstrip("+-")) > 18:  # beyond int64: no real frame number
-                    raise AmcFormatError(source, ln, f"frame number {first[:24]}... is out of range",
-                                         frame=len(frame_numbers) + 1)
+                    raise AmcFormatError(
+                        source, ln, f"frame number {first[:24]}... is out of range", frame=len(frame_numbers) + 1
+                    )
                 frame_numbers.append(int(first))
                 current = []
                 frame_line = ln
@@ -787,16 +856,20 @@ def parse_amc_text(text: str, skel: AsfSkeleton, source: str | os.PathLike = "<m
         name = first
         if name not in ndof:
             if name in all_bones:
-                raise AmcFormatError(source, ln, f"bone {name!r} has no dof in the ASF but has a line here",
-                                     frame=len(frame_numbers))
+                raise AmcFormatError(
+                    source, ln, f"bone {name!r} has no dof in the ASF but has a line here", frame=len(frame_numbers)
+                )
             if _is_number(name):
-                raise AmcFormatError(source, ln, f"expected a bone line or a frame number, found {s[:40]!r}",
-                                     frame=len(frame_numbers))
-            raise AmcFormatError(source, ln, f"unknown bone {name!r} (not in {skel.source or 'the ASF'})",
-                                 frame=len(frame_numbers))
+                raise AmcFormatError(
+                    source, ln, f"expected a bone line or a frame number, found {s[:40]!r}", frame=len(frame_numbers)
+                )
+            raise AmcFormatError(
+                source, ln, f"unknown bone {name!r} (not in {skel.source or 'the ASF'})", frame=len(frame_numbers)
+            )
         if name in current:
-            raise AmcFormatError(source, ln, f"bone {name!r} appears twice in frame {frame_numbers[-1]}",
-                                 frame=len(frame_numbers))
+            raise AmcFormatError(
+                source, ln, f"bone {name!r} appears twice in frame {frame_numbers[-1]}", frame=len(frame_numbers)
+            )
         current.append(name)
         rows[name].append(rest)
         row_lines[name].append(ln)
@@ -817,27 +890,44 @@ def parse_amc_text(text: str, skel: AsfSkeleton, source: str | os.PathLike = "<m
             for t, (r, ln) in enumerate(zip(rows[b], row_lines[b])):
                 tok = r.split()
                 if len(tok) != k:
-                    raise AmcFormatError(source, ln, f"bone {b!r} needs {k} values ({' '.join(skel.dof_of(b))}), "
-                                         f"found {len(tok)}", frame=t + 1)
+                    raise AmcFormatError(
+                        source,
+                        ln,
+                        f"bone {b!r} needs {k} values ({' '.join(skel.dof_of(b))}), found {len(tok)}",
+                        frame=t + 1,
+                    )
                 for v in tok:
                     try:
                         float(v)
                     except ValueError:
-                        raise AmcFormatError(source, ln, f"non-numeric value {v!r} for bone {b!r}", frame=t + 1) from None
+                        raise AmcFormatError(
+                            source, ln, f"non-numeric value {v!r} for bone {b!r}", frame=t + 1
+                        ) from None
             raise AmcFormatError(source, None, f"unparseable values for bone {b!r}")  # pragma: no cover
         if not np.isfinite(arr).all():
             t = int(np.argwhere(~np.isfinite(arr).all(axis=1))[0, 0])
             raise AmcFormatError(source, row_lines[b][t], f"non-finite value for bone {b!r}", frame=t + 1)
         values[b] = arr
-    return {"values": values, "angle_unit": angle_unit, "bone_order": tuple(bone_order or expected),
-            "frame_numbers": np.asarray(frame_numbers, dtype=np.int64), "header": header}
+    return {
+        "values": values,
+        "angle_unit": angle_unit,
+        "bone_order": tuple(bone_order or expected),
+        "frame_numbers": np.asarray(frame_numbers, dtype=np.int64),
+        "header": header,
+    }
 
 
 # --------------------------------------------------------------------------- AMC writing
 
 
-def write_amc(path: str | os.PathLike, motion_or_angles: Motion | dict[str, np.ndarray], asf: AsfSkeleton | str | os.PathLike | None = None,
-              angle_unit: str | None = None, newline: str = "\n", digits: int = 10) -> None:
+def write_amc(
+    path: str | os.PathLike,
+    motion_or_angles: Motion | dict[str, np.ndarray],
+    asf: AsfSkeleton | str | os.PathLike | None = None,
+    angle_unit: str | None = None,
+    newline: str = "\n",
+    digits: int = 10,
+) -> None:
     """Write an AMC file.
 
     Args:
@@ -861,8 +951,10 @@ def write_amc(path: str | os.PathLike, motion_or_angles: Motion | dict[str, np.n
     if isinstance(motion_or_angles, Motion):
         meta = motion_or_angles.metadata
         if "amc_values" not in meta:
-            raise ValueError(f"{motion_or_angles.source or motion_or_angles.name}: the Motion has no "
-                             f"metadata['amc_values'] (only motions read from AMC or built by amc_motion have them)")
+            raise ValueError(
+                f"{motion_or_angles.source or motion_or_angles.name}: the Motion has no "
+                f"metadata['amc_values'] (only motions read from AMC or built by amc_motion have them)"
+            )
         values = meta["amc_values"]
         angle_unit = angle_unit or meta.get("amc_angle_unit", "deg")
         order = meta.get("amc_bone_order")

@@ -66,6 +66,7 @@ Raw channel values stay available (``metadata["channels"]``, float64 ``[frames,
 channels]`` in file units and degrees, and the :class:`BvhSkeleton` in
 ``metadata["bvh"]``) so that :func:`write_bvh` writes them back exactly.
 """
+
 from __future__ import annotations
 
 import io
@@ -78,8 +79,8 @@ from pathlib import Path
 import numpy as np
 
 from mocapkit.datasets.formats.errors import MotionFormatError
-from mocapkit.motion.container import Motion
 from mocapkit.datasets.formats.safe_io import read_file_bytes
+from mocapkit.motion.container import Motion
 
 #: Metres per file unit for the named units accepted by ``read_bvh(units=...)``.
 UNITS: dict[str, float] = {
@@ -158,8 +159,13 @@ class BvhSkeleton:
 # --------------------------------------------------------------------------- reading
 
 
-def read_bvh(path: str | os.PathLike, scale: float | None = None, units: str | None = None,
-             end_sites: bool = False, position_mode: str = "replace") -> Motion:
+def read_bvh(
+    path: str | os.PathLike,
+    scale: float | None = None,
+    units: str | None = None,
+    end_sites: bool = False,
+    position_mode: str = "replace",
+) -> Motion:
     """Read a ``.bvh`` file as a :class:`Motion` in metres (see the module docstring for the conventions).
 
     Args:
@@ -185,12 +191,17 @@ def read_bvh(path: str | os.PathLike, scale: float | None = None, units: str | N
     """
     path = Path(path)
     data = read_file_bytes(path, lambda p, message: BvhFormatError(p, None, message))
-    return parse_bvh_text(data, source=path, scale=scale, units=units, end_sites=end_sites,
-                          position_mode=position_mode)
+    return parse_bvh_text(data, source=path, scale=scale, units=units, end_sites=end_sites, position_mode=position_mode)
 
 
-def parse_bvh_text(text: bytes | str, source: str | os.PathLike = "<memory>", scale: float | None = None,
-                   units: str | None = None, end_sites: bool = False, position_mode: str = "replace") -> Motion:
+def parse_bvh_text(
+    text: bytes | str,
+    source: str | os.PathLike = "<memory>",
+    scale: float | None = None,
+    units: str | None = None,
+    end_sites: bool = False,
+    position_mode: str = "replace",
+) -> Motion:
     """Parse the content of a ``.bvh`` file (see :func:`read_bvh`)."""
     if isinstance(text, str):
         text = text.encode()
@@ -202,14 +213,32 @@ def parse_bvh_text(text: bytes | str, source: str | os.PathLike = "<memory>", sc
 
     rest_size = skeleton.rest_size()
     scale, label, inferred = _decide_scale(scale, units, rest_size)
-    return bvh_motion(skeleton, values, frame_time, scale, name=Path(str(source)).stem, source=str(source),
-                      end_sites=end_sites, position_mode=position_mode, source_units=label,
-                      units_inferred=inferred)
+    return bvh_motion(
+        skeleton,
+        values,
+        frame_time,
+        scale,
+        name=Path(str(source)).stem,
+        source=str(source),
+        end_sites=end_sites,
+        position_mode=position_mode,
+        source_units=label,
+        units_inferred=inferred,
+    )
 
 
-def bvh_motion(skeleton: BvhSkeleton, values: np.ndarray, frame_time: float, scale: float, name: str = "",
-               source: str | None = None, end_sites: bool = False, position_mode: str = "replace",
-               source_units: str | None = None, units_inferred: bool = False) -> Motion:
+def bvh_motion(
+    skeleton: BvhSkeleton,
+    values: np.ndarray,
+    frame_time: float,
+    scale: float,
+    name: str = "",
+    source: str | None = None,
+    end_sites: bool = False,
+    position_mode: str = "replace",
+    source_units: str | None = None,
+    units_inferred: bool = False,
+) -> Motion:
     """The :class:`Motion` of a hierarchy and its raw channel values (float64 ``[frames, channels]``, degrees and
     file units), what :func:`read_bvh` returns for the file they would make; ``scale`` is metres per file unit."""
     positions, rotations, glob = _fk(skeleton, values, position_mode)
@@ -221,12 +250,26 @@ def bvh_motion(skeleton: BvhSkeleton, values: np.ndarray, frame_time: float, sca
         names += [f"{skeleton.joint_names[p]}/End Site" for p, _ in skeleton.end_sites]
         parents += [p for p, _ in skeleton.end_sites]
     return Motion(
-        positions=(positions * scale).astype(np.float32), joint_names=tuple(names), parents=tuple(parents),
-        rotations=rotations.astype(np.float32), fps=1.0 / frame_time,
-        source_units=source_units or f"{scale:g} m per unit", up_axis="y", name=name, source=source,
-        metadata={"format": "bvh", "bvh": skeleton, "channels": values, "frame_time": frame_time,
-                  "scale": scale, "units_inferred": units_inferred, "rest_size": skeleton.rest_size(),
-                  "end_sites": bool(end_sites and skeleton.end_sites), "position_mode": position_mode},
+        positions=(positions * scale).astype(np.float32),
+        joint_names=tuple(names),
+        parents=tuple(parents),
+        rotations=rotations.astype(np.float32),
+        fps=1.0 / frame_time,
+        source_units=source_units or f"{scale:g} m per unit",
+        up_axis="y",
+        name=name,
+        source=source,
+        metadata={
+            "format": "bvh",
+            "bvh": skeleton,
+            "channels": values,
+            "frame_time": frame_time,
+            "scale": scale,
+            "units_inferred": units_inferred,
+            "rest_size": skeleton.rest_size(),
+            "end_sites": bool(end_sites and skeleton.end_sites),
+            "position_mode": position_mode,
+        },
     )
 
 
@@ -403,8 +446,9 @@ def _parse_hierarchy(lines: list[bytes], source) -> tuple[BvhSkeleton, int]:
             for _ in range(count):
                 if i >= n or tokens[i][0] != "word" or tokens[i][1].lower() not in _CHANNEL_BY_LOWER:
                     got = tokens[i][1] if i < n else "end of hierarchy"
-                    raise BvhFormatError(source, tokens[i][2] if i < n else line,
-                                         f"expected one of {count} channel names, found {got!r}")
+                    raise BvhFormatError(
+                        source, tokens[i][2] if i < n else line, f"expected one of {count} channel names, found {got!r}"
+                    )
                 chans.append(_CHANNEL_BY_LOWER[tokens[i][1].lower()])
                 i += 1
             if len(set(chans)) != len(chans):
@@ -415,13 +459,17 @@ def _parse_hierarchy(lines: list[bytes], source) -> tuple[BvhSkeleton, int]:
     if pending is not None:
         raise BvhFormatError(source, motion_line + 1, f"{pending[0]} has no body before MOTION")
     if stack:
-        raise BvhFormatError(source, motion_line + 1, f"{len(stack)} unclosed '{{' before MOTION "
-                                                      f"(opened at line {stack[-1][2]})")
+        raise BvhFormatError(
+            source, motion_line + 1, f"{len(stack)} unclosed '{{' before MOTION (opened at line {stack[-1][2]})"
+        )
     if roots == 0:
         raise BvhFormatError(source, motion_line + 1, "no ROOT in the hierarchy")
     skeleton = BvhSkeleton(
-        joint_names=tuple(names), parents=tuple(parents), offsets=np.array(offsets, dtype=np.float64).reshape(-1, 3),
-        channels=tuple(channels), end_sites=tuple((p, off) for p, off in ends),
+        joint_names=tuple(names),
+        parents=tuple(parents),
+        offsets=np.array(offsets, dtype=np.float64).reshape(-1, 3),
+        channels=tuple(channels),
+        end_sites=tuple((p, off) for p, off in ends),
     )
     return skeleton, motion_line
 
@@ -459,8 +507,11 @@ def _parse_motion(lines: list[bytes], motion_line: int, num_channels: int, sourc
         after = data_idx[-1] + 2 if data_idx else first + 1
         raise BvhFormatError(source, after, f"file ends after {len(data_idx)} of {num_frames} frames (truncated)")
     if len(data_idx) > num_frames:
-        raise BvhFormatError(source, data_idx[num_frames] + 1,
-                             f"more data lines than 'Frames: {num_frames}' (line is frame {num_frames + 1})")
+        raise BvhFormatError(
+            source,
+            data_idx[num_frames] + 1,
+            f"more data lines than 'Frames: {num_frames}' (line is frame {num_frames + 1})",
+        )
     if num_frames == 0:
         return np.zeros((0, num_channels)), frame_time, data_idx
     if num_channels == 0:
@@ -480,8 +531,9 @@ def _raise_bad_data_line(lines, indices, width, source):
     for k in indices:
         tok = lines[k].split()
         if len(tok) != width:
-            raise BvhFormatError(source, k + 1, f"data line has {len(tok)} values, expected {width} "
-                                                f"(the declared channels)")
+            raise BvhFormatError(
+                source, k + 1, f"data line has {len(tok)} values, expected {width} (the declared channels)"
+            )
         for v in tok:
             try:
                 x = float(v)
@@ -527,7 +579,7 @@ def _local_joint_major(skeleton: BvhSkeleton, values: np.ndarray, position_mode:
     rot[:] = np.eye(3)
     trans = np.empty((J, F, 3))
     trans[:] = skeleton.offsets[:, None, :]
-    columns = np.ascontiguousarray(values.T)                                  # [C, F]
+    columns = np.ascontiguousarray(values.T)  # [C, F]
     # Group joints by channel signature so that each distinct order is one batched product.
     groups: dict[tuple[str, ...], list[int]] = {}
     for j, chans in enumerate(skeleton.channels):
@@ -537,12 +589,12 @@ def _local_joint_major(skeleton: BvhSkeleton, values: np.ndarray, position_mode:
         if not chans:
             continue
         joints_arr = np.asarray(joints)
-        cols = starts[joints_arr][:, None] + np.arange(len(chans))[None, :]   # [G, C]
-        block = columns[cols]                                                 # [G, C, F]
+        cols = starts[joints_arr][:, None] + np.arange(len(chans))[None, :]  # [G, C]
+        block = columns[cols]  # [G, C, F]
         r = None
         for c, ch in enumerate(chans):
             if ch.endswith("rotation"):
-                m = axis_rotations(ch[0], block[:, c])                         # [G, F, 3, 3]
+                m = axis_rotations(ch[0], block[:, c])  # [G, F, 3, 3]
                 r = m if r is None else r @ m
             else:
                 axis = "XYZ".index(ch[0])
@@ -591,8 +643,9 @@ ROOT_CHANNELS = ("Xposition", "Yposition", "Zposition", "Zrotation", "Yrotation"
 JOINT_CHANNELS = ("Zrotation", "Yrotation", "Xrotation")
 
 
-def write_bvh(path: str | os.PathLike, motion: Motion, scale: float | None = None, newline: str = "\n",
-              tolerance: float = 1e-5) -> None:
+def write_bvh(
+    path: str | os.PathLike, motion: Motion, scale: float | None = None, newline: str = "\n", tolerance: float = 1e-5
+) -> None:
     """Write ``motion`` as a ``.bvh`` file that :func:`read_bvh` reads back to the same positions.
 
     Two sources for the hierarchy and channels, tried in order:
@@ -645,8 +698,9 @@ def write_bvh(path: str | os.PathLike, motion: Motion, scale: float | None = Non
         for c in children.get(j, []):
             emit(c, depth + 1)
         for off in ends.get(j, []):
-            out.extend([f"{tab}\tEnd Site", f"{tab}\t{{", f"{tab}\t\tOFFSET {' '.join(num(v) for v in off)}",
-                        f"{tab}\t}}"])
+            out.extend(
+                [f"{tab}\tEnd Site", f"{tab}\t{{", f"{tab}\t\tOFFSET {' '.join(num(v) for v in off)}", f"{tab}\t}}"]
+            )
         out.append(f"{tab}}}")
 
     for root in children.get(-1, []):
@@ -659,16 +713,18 @@ def write_bvh(path: str | os.PathLike, motion: Motion, scale: float | None = Non
 def _writer_source(motion: Motion, tolerance: float) -> tuple[BvhSkeleton, np.ndarray, float]:
     """(skeleton, raw values [F, C], metres per unit) to write for ``motion``."""
     if motion.parents is None:
-        raise ValueError(f"{motion.source or motion.name}: a BVH needs a joint hierarchy (parents); "
-                         "marker sets cannot be written")
+        raise ValueError(
+            f"{motion.source or motion.name}: a BVH needs a joint hierarchy (parents); marker sets cannot be written"
+        )
     if motion.missing is not None and motion.missing.any():
         raise ValueError(f"{motion.source or motion.name}: a BVH cannot hold missing (NaN) positions")
     skeleton = motion.metadata.get("bvh")
     values = motion.metadata.get("channels")
     if isinstance(skeleton, BvhSkeleton) and values is not None and len(values) == motion.num_frames:
         n_end = len(skeleton.end_sites) if motion.metadata.get("end_sites") else 0
-        expected_names = skeleton.joint_names + tuple(f"{skeleton.joint_names[p]}/End Site"
-                                                      for p, _ in skeleton.end_sites[:n_end])
+        expected_names = skeleton.joint_names + tuple(
+            f"{skeleton.joint_names[p]}/End Site" for p, _ in skeleton.end_sites[:n_end]
+        )
         if motion.joint_names == expected_names:
             s = float(motion.metadata.get("scale", 1.0))
             mode = motion.metadata.get("position_mode", "replace")
@@ -701,8 +757,10 @@ def _depth_first(skeleton: BvhSkeleton, values: np.ndarray) -> tuple[BvhSkeleton
     reordered = BvhSkeleton(
         joint_names=tuple(skeleton.joint_names[j] for j in order),
         parents=tuple(new_of[skeleton.parents[j]] if skeleton.parents[j] >= 0 else -1 for j in order),
-        offsets=skeleton.offsets[order], channels=tuple(skeleton.channels[j] for j in order),
-        end_sites=tuple((new_of[p], off) for p, off in skeleton.end_sites))
+        offsets=skeleton.offsets[order],
+        channels=tuple(skeleton.channels[j] for j in order),
+        end_sites=tuple((new_of[p], off) for p, off in skeleton.end_sites),
+    )
     return reordered, values[:, cols]
 
 
@@ -724,8 +782,13 @@ def _rescale(skeleton: BvhSkeleton, values: np.ndarray, factor: float) -> tuple[
         for c, ch in enumerate(chans):
             if ch.endswith("position"):
                 values[:, starts[j] + c] *= factor
-    return BvhSkeleton(skeleton.joint_names, skeleton.parents, skeleton.offsets * factor, skeleton.channels,
-                       tuple((p, off * factor) for p, off in skeleton.end_sites)), values
+    return BvhSkeleton(
+        skeleton.joint_names,
+        skeleton.parents,
+        skeleton.offsets * factor,
+        skeleton.channels,
+        tuple((p, off * factor) for p, off in skeleton.end_sites),
+    ), values
 
 
 def _from_rotations(motion: Motion, tolerance: float) -> tuple[BvhSkeleton, np.ndarray, float]:
@@ -733,8 +796,9 @@ def _from_rotations(motion: Motion, tolerance: float) -> tuple[BvhSkeleton, np.n
 
     label = motion.source or motion.name or "motion"
     if motion.rotations is None:
-        raise ValueError(f"{label}: writing a BVH needs local joint rotations (Motion.rotations) "
-                         "or the BVH it was read from")
+        raise ValueError(
+            f"{label}: writing a BVH needs local joint rotations (Motion.rotations) or the BVH it was read from"
+        )
     parents = motion.parents
     if any(p >= j for j, p in enumerate(parents)):
         raise ValueError(f"{label}: joints must be ordered parents first to be written as a BVH")
@@ -742,7 +806,7 @@ def _from_rotations(motion: Motion, tolerance: float) -> tuple[BvhSkeleton, np.n
     rot = motion.rotations.astype(np.float64)
     pos = motion.positions.astype(np.float64)
     glob = np.empty_like(rot)
-    local = pos.copy()                       # [F, J, 3] translation of each joint in its parent's frame
+    local = pos.copy()  # [F, J, 3] translation of each joint in its parent's frame
     for j, p in enumerate(parents):
         glob[:, j] = rot[:, j] if p < 0 else glob[:, p] @ rot[:, j]
         if p >= 0:
@@ -752,8 +816,10 @@ def _from_rotations(motion: Motion, tolerance: float) -> tuple[BvhSkeleton, np.n
     moving = [parents[j] < 0 or np.abs(local[:, j] - offsets[j]).max(initial=0.0) > tolerance / 4 for j in range(J)]
     # Leaf joints named "<joint>/End Site" (read_bvh(end_sites=True)) go back to End Sites.
     has_child = {p for p in parents if p >= 0}
-    is_end = [j not in has_child and p >= 0 and not moving[j] and motion.joint_names[j].endswith("/End Site")
-              for j, p in enumerate(parents)]
+    is_end = [
+        j not in has_child and p >= 0 and not moving[j] and motion.joint_names[j].endswith("/End Site")
+        for j, p in enumerate(parents)
+    ]
     keep = [j for j in range(J) if not is_end[j]]
     new_of = {old: new for new, old in enumerate(keep)}
     end_sites = tuple((new_of[parents[j]], offsets[j]) for j in range(J) if is_end[j])
@@ -763,9 +829,13 @@ def _from_rotations(motion: Motion, tolerance: float) -> tuple[BvhSkeleton, np.n
         euler = Rotation.from_matrix(rot[:, j]).as_euler("ZYX", degrees=True)  # intrinsic: Rz @ Ry @ Rx
         columns.append(np.concatenate([local[:, j], euler], axis=1) if moving[j] else euler)
     values = np.concatenate(columns, axis=1) if columns else np.zeros((F, 0))
-    skeleton = BvhSkeleton(tuple(motion.joint_names[j] for j in keep),
-                           tuple(new_of[parents[j]] if parents[j] >= 0 else -1 for j in keep),
-                           offsets[keep], channels, end_sites)
+    skeleton = BvhSkeleton(
+        tuple(motion.joint_names[j] for j in keep),
+        tuple(new_of[parents[j]] if parents[j] >= 0 else -1 for j in keep),
+        offsets[keep],
+        channels,
+        end_sites,
+    )
     check, _, glob_check = _fk(skeleton, values, "replace")
     if end_sites:
         ends = _end_site_positions(skeleton, check, glob_check)
@@ -775,6 +845,8 @@ def _from_rotations(motion: Motion, tolerance: float) -> tuple[BvhSkeleton, np.n
         check = full
     err = np.abs(check - pos).max(initial=0.0)
     if err > tolerance:
-        raise ValueError(f"{label}: its rotations do not reproduce its positions by BVH forward kinematics "
-                         f"(error {err:.3g} m > {tolerance:g} m); is it a BVH-convention rotation set?")
+        raise ValueError(
+            f"{label}: its rotations do not reproduce its positions by BVH forward kinematics "
+            f"(error {err:.3g} m > {tolerance:g} m); is it a BVH-convention rotation set?"
+        )
     return skeleton, values, 1.0

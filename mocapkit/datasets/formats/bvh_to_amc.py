@@ -36,6 +36,7 @@ Units: the ASF is in CMU/HDM05 length units (``length 0.45``: one unit = 0.0254/
 translations read like HDM05's. The result is checked: the ASF's forward kinematics must give the BVH's joint
 positions to within :data:`TOLERANCE_M`.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -46,8 +47,9 @@ from scipy.spatial.transform import Rotation
 from mocapkit.datasets.formats.asf_amc import INCH, AsfBone, AsfSkeleton, amc_motion
 from mocapkit.datasets.formats.bvh import BvhSkeleton, local_transforms
 from mocapkit.datasets.formats.errors import MotionFormatError
-from mocapkit.motion.layouts import find_landmarks
 from mocapkit.motion.container import Motion
+from mocapkit.motion.geometry import hip_line_heading, lateral_line
+from mocapkit.motion.layouts import find_landmarks
 
 #: The ASF length multiplier of the result (CMU and HDM05's: one unit = 1/0.45 inch).
 LENGTH_MULTIPLIER = 0.45
@@ -102,8 +104,9 @@ def _globals(motion: Motion) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """float64 global rotations ``[F, J, 3, 3]``, positions ``[F, J, 3]`` (file units) and local translations
     ``[F, J, 3]`` (file units) of a BVH motion, recomputed from its raw channels."""
     skeleton = _bvh_of(motion)
-    local, trans = local_transforms(skeleton, motion.metadata["channels"], motion.metadata.get("position_mode",
-                                                                                                 "replace"))
+    local, trans = local_transforms(
+        skeleton, motion.metadata["channels"], motion.metadata.get("position_mode", "replace")
+    )
     glob = np.empty_like(local)
     pos = np.empty_like(trans)
     for j, p in enumerate(skeleton.parents):
@@ -130,18 +133,25 @@ def _branch_root(skeleton: BvhSkeleton, label: str) -> int:
 
 def _facing_yaw(positions: np.ndarray, joint_names, label: str) -> np.ndarray:
     """``H`` ``[3, 3]``: the rotation about ``+y`` that turns a posture (``[J, 3]``, y up) to face ``+z``, its left
-    side ``+x``, from its left and right hips and shoulders (:func:`~mocapkit.motion.layouts.find_landmarks`)."""
+    side ``+x``, from the sum of its hip and shoulder lines (:func:`~mocapkit.motion.layouts.find_landmarks`;
+    :func:`~mocapkit.motion.geometry.hip_line_heading`)."""
     marks = find_landmarks(joint_names)
     pairs = [(marks[f"l_{p}"], marks[f"r_{p}"]) for p in ("hip", "shoulder") if f"l_{p}" in marks and f"r_{p}" in marks]
     if not pairs:
-        raise BvhConversionError(label, None, "cannot tell the rig's left from its right: no left/right hip or "
-                                 "shoulder joints found by name (Left/Right, _L/_R or L_/R_ marks)")
-    across = sum(positions[left] - positions[right] for left, right in pairs)
-    forward = np.cross(across, [0.0, 1.0, 0.0])
-    if np.hypot(forward[0], forward[2]) < 1e-9:
-        raise BvhConversionError(label, None, "the reference posture's left-right axis is vertical; pick another "
-                                 "reference frame")
-    return Rotation.from_rotvec([0.0, -np.arctan2(forward[0], forward[2]), 0.0]).as_matrix()
+        raise BvhConversionError(
+            label,
+            None,
+            "cannot tell the rig's left from its right: no left/right hip or "
+            "shoulder joints found by name (Left/Right, _L/_R or L_/R_ marks)",
+        )
+    left, right = [p[0] for p in pairs], [p[1] for p in pairs]
+    line = lateral_line(positions, left, right)
+    if np.hypot(line[2], line[0]) < 1e-9:
+        raise BvhConversionError(
+            label, None, "the reference posture's left-right axis is vertical; pick another reference frame"
+        )
+    yaw = hip_line_heading(positions, left, right, up="y", along="-x")  # the posture's yaw (facing +z: 0)
+    return Rotation.from_rotvec([0.0, -yaw, 0.0]).as_matrix()
 
 
 def _limb_sides(skeleton: BvhSkeleton, label: str) -> dict[int, str]:
@@ -149,21 +159,29 @@ def _limb_sides(skeleton: BvhSkeleton, label: str) -> dict[int, str]:
     whose end landmark (wrist, else elbow; ankle, else knee) its subtree holds, or, holding none, its parent's
     (hands, toes)."""
     marks = find_landmarks(skeleton.joint_names)
-    ends = {"left_arm": ("l_wrist", "l_elbow"), "right_arm": ("r_wrist", "r_elbow"),
-            "left_leg": ("l_ankle", "l_knee"), "right_leg": ("r_ankle", "r_knee")}
+    ends = {
+        "left_arm": ("l_wrist", "l_elbow"),
+        "right_arm": ("r_wrist", "r_elbow"),
+        "left_leg": ("l_ankle", "l_knee"),
+        "right_leg": ("r_ankle", "r_knee"),
+    }
     ends = {limb: next((marks[m] for m in names if m in marks), None) for limb, names in ends.items()}
     missing = [limb for limb, joint in ends.items() if joint is None]
     if missing:
-        raise BvhConversionError(label, None, f"no {', '.join(missing)} found by joint name (elbow/wrist, knee/ankle "
-                                 "with Left/Right, _L/_R or L_/R_ marks); the rest pose needs both arms and legs")
+        raise BvhConversionError(
+            label,
+            None,
+            f"no {', '.join(missing)} found by joint name (elbow/wrist, knee/ankle "
+            "with Left/Right, _L/_R or L_/R_ marks); the rest pose needs both arms and legs",
+        )
     J = skeleton.num_joints
-    inside = np.eye(J, dtype=bool)                   # inside[a, b]: b in the subtree of a
+    inside = np.eye(J, dtype=bool)  # inside[a, b]: b in the subtree of a
     for j in range(J - 1, -1, -1):
         p = skeleton.parents[j]
         if p >= 0:
             inside[p] |= inside[j]
     side = {}
-    for j in range(J):                               # parents first
+    for j in range(J):  # parents first
         holds = [limb for limb, end in ends.items() if inside[j, end]]
         parent = side.get(skeleton.parents[j], "torso")
         side[j] = holds[0] if len(holds) == 1 else parent if not holds else "torso"
@@ -171,8 +189,14 @@ def _limb_sides(skeleton: BvhSkeleton, label: str) -> dict[int, str]:
 
 
 #: The rest direction of a bone by the part it belongs to (y up, facing +z, left +x): a T-pose.
-REST_DIRECTIONS = {"torso": (0.0, 1.0, 0.0), "left_arm": (1.0, 0.0, 0.0), "right_arm": (-1.0, 0.0, 0.0),
-                   "left_leg": (0.0, -1.0, 0.0), "right_leg": (0.0, -1.0, 0.0), "foot": (0.0, 0.0, 1.0)}
+REST_DIRECTIONS = {
+    "torso": (0.0, 1.0, 0.0),
+    "left_arm": (1.0, 0.0, 0.0),
+    "right_arm": (-1.0, 0.0, 0.0),
+    "left_leg": (0.0, -1.0, 0.0),
+    "right_leg": (0.0, -1.0, 0.0),
+    "foot": (0.0, 0.0, 1.0),
+}
 
 
 def _swing(vector: np.ndarray, target: np.ndarray) -> np.ndarray:
@@ -216,8 +240,12 @@ def bvh_rig(reference: Motion, frame: int = 0) -> BvhRig:
     ankles = {marks.get("l_ankle"), marks.get("r_ankle")} - {None}
     # a limb is straightened from its shoulder or hip joint down (the parent of its elbow or knee; of its end's
     # parent without one); the clavicle and pelvis segments above keep the reference posture's directions
-    middles = {"left_arm": ("l_elbow", "l_wrist"), "right_arm": ("r_elbow", "r_wrist"),
-               "left_leg": ("l_knee", "l_ankle"), "right_leg": ("r_knee", "r_ankle")}
+    middles = {
+        "left_arm": ("l_elbow", "l_wrist"),
+        "right_arm": ("r_elbow", "r_wrist"),
+        "left_leg": ("l_knee", "l_ankle"),
+        "right_leg": ("r_knee", "r_ankle"),
+    }
     upper = {}
     for limb, (middle, end) in middles.items():
         joint = marks[middle] if middle in marks else skeleton.parents[marks[end]]
@@ -233,12 +261,19 @@ def bvh_rig(reference: Motion, frame: int = 0) -> BvhRig:
         below_ankle = side[j].endswith("leg") and any(a in ankles for a in _ancestors(skeleton, c))
         target = np.asarray(REST_DIRECTIONS["foot" if below_ankle else side[j]])
         rest[j] = _swing(rest[j] @ trans[frame, c], target) @ rest[j]
-    local, _ = local_transforms(skeleton, reference.metadata["channels"][[frame]],
-                                reference.metadata.get("position_mode", "replace"))
-    return BvhRig(joint_names=tuple(skeleton.joint_names), root=root, rest_rotations=rest,
-                  reference=f"{label} frame {frame % reference.num_frames}", skeleton=skeleton,
-                  translations=trans.mean(axis=0), pose=(local[0], trans[frame]),
-                  scale=float(reference.metadata["scale"]))
+    local, _ = local_transforms(
+        skeleton, reference.metadata["channels"][[frame]], reference.metadata.get("position_mode", "replace")
+    )
+    return BvhRig(
+        joint_names=tuple(skeleton.joint_names),
+        root=root,
+        rest_rotations=rest,
+        reference=f"{label} frame {frame % reference.num_frames}",
+        skeleton=skeleton,
+        translations=trans.mean(axis=0),
+        pose=(local[0], trans[frame]),
+        scale=float(reference.metadata["scale"]),
+    )
 
 
 def _subtree(parents, root: int) -> list[int]:
@@ -289,10 +324,14 @@ def bvh_to_amc(motion: Motion, rig: BvhRig | None = None) -> Motion:
     label = _label(motion)
     rig = bvh_rig(motion) if rig is None else rig
     if tuple(skeleton.joint_names) != rig.joint_names:
-        raise BvhConversionError(label, None, f"its joints differ from the rig's ({rig.reference}): "
-                                 f"{sorted(set(skeleton.joint_names) ^ set(rig.joint_names))[:6]}")
+        raise BvhConversionError(
+            label,
+            None,
+            f"its joints differ from the rig's ({rig.reference}): "
+            f"{sorted(set(skeleton.joint_names) ^ set(rig.joint_names))[:6]}",
+        )
     metres_per_file_unit = float(motion.metadata["scale"])
-    asf_unit = INCH / LENGTH_MULTIPLIER                       # metres per ASF length unit
+    asf_unit = INCH / LENGTH_MULTIPLIER  # metres per ASF length unit
     glob, pos, trans = _globals(motion)
     root = rig.root
     parents = skeleton.parents
@@ -302,12 +341,16 @@ def bvh_to_amc(motion: Motion, rig: BvhRig | None = None) -> Motion:
     for j in sorted(below - {root}):
         if wander[j] > limit:
             frame = int(np.abs(trans[:, j] - trans[0, j]).max(axis=1).argmax())
-            raise BvhConversionError(label, None, f"joint {skeleton.joint_names[j]!r} moves against its parent "
-                                     f"(its translation changes by {wander[j]:.4g} file units by frame {frame + 1}); an "
-                                     "ASF bone has a fixed length")
+            raise BvhConversionError(
+                label,
+                None,
+                f"joint {skeleton.joint_names[j]!r} moves against its parent "
+                f"(its translation changes by {wander[j]:.4g} file units by frame {frame + 1}); an "
+                "ASF bone has a fixed length",
+            )
     rest = rig.rest_rotations
-    g_new = glob @ np.swapaxes(rest, -1, -2)[None]            # G'_j = G_j A_jᵀ, [F, J, 3, 3]
-    offsets = trans.mean(axis=0)                              # fixed bones: their mean translation (file units)
+    g_new = glob @ np.swapaxes(rest, -1, -2)[None]  # G'_j = G_j A_jᵀ, [F, J, 3, 3]
+    offsets = trans.mean(axis=0)  # fixed bones: their mean translation (file units)
 
     bones, hierarchy, values = [], {"root": []}, {}
     name_of = {j: ("root" if j == root else skeleton.joint_names[j]) for j in below}
@@ -316,9 +359,16 @@ def bvh_to_amc(motion: Motion, rig: BvhRig | None = None) -> Motion:
         length = float(np.linalg.norm(vector))
         direction = vector / length if length > 0 else np.array([0.0, 1.0, 0.0])
         dof = ("rx", "ry", "rz") if rotation is not None else ()
-        bones.append(AsfBone(id=len(bones) + 1, name=name, direction=direction,
-                             length=length * metres_per_file_unit / asf_unit, dof=dof,
-                             limits=[(-np.inf, np.inf)] * len(dof)))
+        bones.append(
+            AsfBone(
+                id=len(bones) + 1,
+                name=name,
+                direction=direction,
+                length=length * metres_per_file_unit / asf_unit,
+                dof=dof,
+                limits=[(-np.inf, np.inf)] * len(dof),
+            )
+        )
         hierarchy.setdefault(name_of[parent_joint], []).append(name)
         if rotation is not None:
             values[name] = _euler_degrees(rotation)
@@ -327,20 +377,33 @@ def bvh_to_amc(motion: Motion, rig: BvhRig | None = None) -> Motion:
         p = parents[c]
         local = None if p == root else np.swapaxes(g_new[:, parents[p]], -1, -2) @ g_new[:, p]
         add_bone(skeleton.joint_names[c], p, rest[p] @ offsets[c], local)
-    values["root"] = np.concatenate([pos[:, root] * metres_per_file_unit / asf_unit,
-                                     _euler_degrees(g_new[:, root])], axis=1)
-    asf = AsfSkeleton(name=motion.name or "bvh", units={"mass": 1.0, "length": LENGTH_MULTIPLIER, "angle": "deg"},
-                      documentation=f"converted from {label} by mocapkit.datasets.formats.bvh_to_amc; rest pose: "
-                                    f"{rig.reference}",
-                      bones=bones, hierarchy={k: v for k, v in hierarchy.items() if v}, source=None)
+    values["root"] = np.concatenate(
+        [pos[:, root] * metres_per_file_unit / asf_unit, _euler_degrees(g_new[:, root])], axis=1
+    )
+    asf = AsfSkeleton(
+        name=motion.name or "bvh",
+        units={"mass": 1.0, "length": LENGTH_MULTIPLIER, "angle": "deg"},
+        documentation=f"converted from {label} by mocapkit.datasets.formats.bvh_to_amc; rest pose: {rig.reference}",
+        bones=bones,
+        hierarchy={k: v for k, v in hierarchy.items() if v},
+        source=None,
+    )
     dropped = tuple(skeleton.joint_names[j] for j in range(len(parents)) if j not in below)
-    out = amc_motion(asf, values, fps=motion.fps, angle_unit="deg", name=motion.name, source=motion.source,
-                     metadata={"asf_path": None, "bvh_rig": rig, "bvh_dropped_joints": dropped})
-    kept = sorted(below)                                      # the ASF's joints, in order: root, then the bones
+    out = amc_motion(
+        asf,
+        values,
+        fps=motion.fps,
+        angle_unit="deg",
+        name=motion.name,
+        source=motion.source,
+        metadata={"asf_path": None, "bvh_rig": rig, "bvh_dropped_joints": dropped},
+    )
+    kept = sorted(below)  # the ASF's joints, in order: root, then the bones
     error = float(np.abs(out.positions.astype(np.float64) - pos[:, kept] * metres_per_file_unit).max(initial=0.0))
     if error > TOLERANCE_M:
-        raise BvhConversionError(label, None, f"the ASF/AMC conversion misplaces joints by {error:.3g} m "
-                                 f"(> {TOLERANCE_M:g} m)")
+        raise BvhConversionError(
+            label, None, f"the ASF/AMC conversion misplaces joints by {error:.3g} m (> {TOLERANCE_M:g} m)"
+        )
     return out
 
 
@@ -379,17 +442,18 @@ def amc_to_bvh(motion: Motion, rig: BvhRig) -> Motion:
     asf = motion.metadata.get("asf")
     if asf is None or "amc_values" not in motion.metadata or tuple(asf.joint_names) != names:
         raise BvhConversionError(label, None, f"not an AMC motion on the ASF skeleton of the rig ({rig.reference})")
-    positions, local_asf = forward_kinematics(asf, motion.metadata["amc_values"],
-                                              angle_unit=motion.metadata.get("amc_angle_unit", "deg"))
+    positions, local_asf = forward_kinematics(
+        asf, motion.metadata["amc_values"], angle_unit=motion.metadata.get("amc_angle_unit", "deg")
+    )
     F = len(positions)
     world_asf = np.empty_like(local_asf)
     for k, p in enumerate(asf.parents):
         world_asf[:, k] = local_asf[:, k] if p < 0 else world_asf[:, p] @ local_asf[:, k]
-    index = {j: k for k, j in enumerate(below)}               # BVH joint → ASF joint
+    index = {j: k for k, j in enumerate(below)}  # BVH joint → ASF joint
     ref_local, ref_trans = rig.pose
     glob = np.empty((F, len(parents), 3, 3))
-    for j, p in enumerate(parents):                           # parents first
-        if j not in index:                                    # above the ASF root: the reference frame's pose
+    for j, p in enumerate(parents):  # parents first
+        if j not in index:  # above the ASF root: the reference frame's pose
             glob[:, j] = ref_local[j] if p < 0 else glob[:, p] @ ref_local[j]
             continue
         children = [c for c, q in enumerate(parents) if q == j and c in index]
@@ -397,13 +461,13 @@ def amc_to_bvh(motion: Motion, rig: BvhRig) -> Motion:
             primed = world_asf[:, 0]
         elif children:
             primed = world_asf[:, index[children[0]]]
-        else:                                                 # a leaf: G'_j = G'_p
+        else:  # a leaf: G'_j = G'_p
             primed = glob[:, p] @ rig.rest_rotations[p].T
         glob[:, j] = primed @ rig.rest_rotations[j]
     primary = {j: next((c for c, q in enumerate(parents) if q == j), None) for j in index}
     moves_itself = {j: {"Xposition", "Yposition", "Zposition"} <= set(skeleton.channels[j]) for j in index}
     trans = np.tile(rig.translations, (F, 1, 1))
-    world = np.zeros((F, len(parents), 3))                    # file units
+    world = np.zeros((F, len(parents), 3))  # file units
     for j, p in enumerate(parents):
         if j not in index:
             trans[:, j] = ref_trans[j]
@@ -413,8 +477,9 @@ def amc_to_bvh(motion: Motion, rig: BvhRig) -> Motion:
             trans[:, j] = np.einsum("...ba,...b->...a", g_parent, positions[:, 0] / rig.scale - above)
         elif j in index and p in index and primary[p] != j and moves_itself[j]:
             # a sibling whose copy of the parent's rotation was sampled apart: its position channels place it
-            trans[:, j] = np.einsum("fba,fb->fa", glob[:, p], (positions[:, index[j]] - positions[:, index[p]])
-                                    / rig.scale)
+            trans[:, j] = np.einsum(
+                "fba,fb->fa", glob[:, p], (positions[:, index[j]] - positions[:, index[p]]) / rig.scale
+            )
         if p >= 0:
             world[:, j] = world[:, p] + np.einsum("fab,fb->fa", glob[:, p], trans[:, j])
         else:
@@ -425,10 +490,21 @@ def amc_to_bvh(motion: Motion, rig: BvhRig) -> Motion:
         chans = skeleton.channels[j]
         rotations = [c for c in chans if c.endswith("rotation")]
         if len(rotations) not in (0, 3):
-            raise BvhConversionError(label, None, f"joint {skeleton.joint_names[j]!r} has {len(rotations)} rotation "
-                                     "channel(s); only joints with three or none can be written")
-        euler = (np.unwrap(Rotation.from_matrix(local).as_euler("".join(c[0] for c in rotations), degrees=True),
-                           period=360.0, axis=0) if rotations else np.zeros((F, 0)))
+            raise BvhConversionError(
+                label,
+                None,
+                f"joint {skeleton.joint_names[j]!r} has {len(rotations)} rotation "
+                "channel(s); only joints with three or none can be written",
+            )
+        euler = (
+            np.unwrap(
+                Rotation.from_matrix(local).as_euler("".join(c[0] for c in rotations), degrees=True),
+                period=360.0,
+                axis=0,
+            )
+            if rotations
+            else np.zeros((F, 0))
+        )
         column, r = [], 0
         for c in chans:
             if c.endswith("rotation"):
@@ -442,8 +518,12 @@ def amc_to_bvh(motion: Motion, rig: BvhRig) -> Motion:
     out = bvh_motion(skeleton, values, frame_time, rig.scale, name=motion.name, source=motion.source)
     error = float(np.abs(out.positions[:, below].astype(np.float64) - positions).max(initial=0.0))
     if error > TOLERANCE_M:
-        raise BvhConversionError(label, None, f"writing it in the rig of {rig.reference} misplaces joints by "
-                                 f"{error:.3g} m (> {TOLERANCE_M:g} m): bone lengths other than the reference "
-                                 "clip's, or children of one joint moved apart (their copies of its rotation "
-                                 "sampled apart) with no position channels to hold them")
+        raise BvhConversionError(
+            label,
+            None,
+            f"writing it in the rig of {rig.reference} misplaces joints by "
+            f"{error:.3g} m (> {TOLERANCE_M:g} m): bone lengths other than the reference "
+            "clip's, or children of one joint moved apart (their copies of its rotation "
+            "sampled apart) with no position channels to hold them",
+        )
     return out

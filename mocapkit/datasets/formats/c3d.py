@@ -41,6 +41,7 @@ inside the section), POINT:USED / SCALE / RATE / DATA_START and ANALOG:USED / RA
 the header, and frames x (points x 4 + analog samples) x element size within the file.
 Errors name the file and the byte offset and parameter at fault.
 """
+
 from __future__ import annotations
 
 import math
@@ -52,9 +53,9 @@ from pathlib import Path
 import numpy as np
 
 from mocapkit.datasets.formats.errors import MotionFormatError
-from mocapkit.motion.layouts import LAYOUTS
-from mocapkit.motion.container import AXES, Motion, all_coordinates
 from mocapkit.datasets.formats.safe_io import regular_file_size
+from mocapkit.motion.container import AXES, Motion, all_coordinates
+from mocapkit.motion.layouts import LAYOUTS
 
 #: Metres per unit for the POINT:UNITS values understood.
 UNIT_SCALE = {"mm": 1e-3, "cm": 1e-2, "dm": 1e-1, "m": 1.0}
@@ -75,8 +76,13 @@ class C3DFormatError(MotionFormatError):
 # --------------------------------------------------------------------------- reading
 
 
-def read_c3d(path: str | os.PathLike, labels: list[str] | None = None, strip_prefix: bool = True,
-             up_axis: str | None = None, zero_as_missing: bool = True) -> Motion:
+def read_c3d(
+    path: str | os.PathLike,
+    labels: list[str] | None = None,
+    strip_prefix: bool = True,
+    up_axis: str | None = None,
+    zero_as_missing: bool = True,
+) -> Motion:
     """Read the marker trajectories of a C3D file (see the module docstring).
 
     Args:
@@ -97,23 +103,29 @@ def read_c3d(path: str | os.PathLike, labels: list[str] | None = None, strip_pre
     try:
         c3d = ezc3d.c3d(str(path))
     except Exception as exc:  # ezc3d raises OSError / RuntimeError / ValueError with its own words
-        raise C3DFormatError(path, f"ezc3d cannot read it ({type(exc).__name__}: {exc}) although the header and "
-                                   f"the {layout.records} parameter records "
-                                   f"(bytes {layout.section_start}-{layout.section_end - 1}) are well formed") from exc
+        raise C3DFormatError(
+            path,
+            f"ezc3d cannot read it ({type(exc).__name__}: {exc}) although the header and "
+            f"the {layout.records} parameter records "
+            f"(bytes {layout.section_start}-{layout.section_end - 1}) are well formed",
+        ) from exc
     head = layout.head
     params = c3d["parameters"]
     point = params.get("POINT")
     if point is None:
         raise C3DFormatError(path, "no POINT parameter group")
-    data = c3d["data"]["points"]                       # [4, markers, frames], file units
+    data = c3d["data"]["points"]  # [4, markers, frames], file units
     n_markers, n_frames = int(data.shape[1]), int(data.shape[2])
 
     processor = _processor(path, head)
     expected = _expected_frames(head, params, processor)
     if expected is not None and n_frames < expected:
-        raise C3DFormatError(path, f"truncated: the header announces {expected} frames but the data "
-                                   f"ends after {n_frames} (this frame is incomplete or absent)",
-                              frame=n_frames + 1)
+        raise C3DFormatError(
+            path,
+            f"truncated: the header announces {expected} frames but the data "
+            f"ends after {n_frames} (this frame is incomplete or absent)",
+            frame=n_frames + 1,
+        )
 
     # ---- units and rate
     units_raw = _first(point, "UNITS")
@@ -129,7 +141,7 @@ def read_c3d(path: str | os.PathLike, labels: list[str] | None = None, strip_pre
     names, prefixes = _strip(full) if strip_prefix else (list(full), {})
 
     # ---- positions and gaps
-    xyz = np.ascontiguousarray(np.transpose(data[:3], (2, 1, 0)), dtype=np.float64)   # [frames, markers, 3]
+    xyz = np.ascontiguousarray(np.transpose(data[:3], (2, 1, 0)), dtype=np.float64)  # [frames, markers, 3]
     invalid = ~all_coordinates(np.isfinite(xyz))
     residuals = c3d["data"].get("meta_points", {}).get("residuals")
     if residuals is not None and np.shape(residuals)[1:] == (n_markers, n_frames):
@@ -138,9 +150,12 @@ def read_c3d(path: str | os.PathLike, labels: list[str] | None = None, strip_pre
         damaged = invalid & (np.asarray(residuals[0]).T >= 0)
         if damaged.any():
             frame, marker = np.argwhere(damaged)[0]
-            raise C3DFormatError(path, f"non-finite coordinates of marker {full[marker]!r} marked valid (residual "
-                                       f">= 0) in {int(damaged.sum())} samples, the first at frame {frame + 1}",
-                                 frame=int(frame) + 1)
+            raise C3DFormatError(
+                path,
+                f"non-finite coordinates of marker {full[marker]!r} marked valid (residual "
+                f">= 0) in {int(damaged.sum())} samples, the first at frame {frame + 1}",
+                frame=int(frame) + 1,
+            )
     zero = all_coordinates(xyz == 0.0) & ~invalid if zero_as_missing else np.zeros_like(invalid)
     missing = invalid | zero
     positions = (xyz * UNIT_SCALE[units]).astype(np.float32)
@@ -170,8 +185,11 @@ def read_c3d(path: str | os.PathLike, labels: list[str] | None = None, strip_pre
         "storage": "float" if scale < 0 else "integer",
         "processor": processor,
         "up_axis_from": up_from,
-        "gaps": {"invalid_residual": int(invalid.sum()), "zero_coordinates": int(zero.sum()),
-                 "total": int(missing.sum())},
+        "gaps": {
+            "invalid_residual": int(invalid.sum()),
+            "zero_coordinates": int(zero.sum()),
+            "total": int(missing.sum()),
+        },
         "analog": _analog_summary(params, c3d),
         "events": _events(params, c3d["header"]),
     }
@@ -180,9 +198,19 @@ def read_c3d(path: str | os.PathLike, labels: list[str] | None = None, strip_pre
         metadata["subject"] = subjects[0].rstrip(":")
 
     layout_name, parents = known_layout(names)
-    motion = Motion(positions=positions, joint_names=tuple(names), fps=fps, parents=parents, missing=missing,
-                    source_units=units, up_axis=up, name=path.stem, source=str(path), layout_name=layout_name,
-                    metadata=metadata)
+    motion = Motion(
+        positions=positions,
+        joint_names=tuple(names),
+        fps=fps,
+        parents=parents,
+        missing=missing,
+        source_units=units,
+        up_axis=up,
+        name=path.stem,
+        source=str(path),
+        layout_name=layout_name,
+        metadata=metadata,
+    )
     if labels is not None:
         motion = motion.select([_find_label(path, names, full, label) for label in labels])
     return motion
@@ -199,8 +227,10 @@ def known_layout(names) -> tuple[str | None, tuple[int, ...] | None]:
         if len(layout.joint_names) != len(names) or set(layout.joint_names) != set(names):
             continue
         where = {name: i for i, name in enumerate(names)}
-        parents = tuple(-1 if p < 0 else where[layout.joint_names[p]]
-                        for p in (layout.parents[layout.index(name)] for name in names))
+        parents = tuple(
+            -1 if p < 0 else where[layout.joint_names[p]]
+            for p in (layout.parents[layout.index(name)] for name in names)
+        )
         return layout.name, parents
     return None, None
 
@@ -225,8 +255,10 @@ def _expected_frames(head: bytes, params, processor: str) -> int | None:
     trial = params.get("TRIAL", {})
     if "ACTUAL_START_FIELD" in trial and "ACTUAL_END_FIELD" in trial:
         try:
-            s, e = (np.asarray(trial[k]["value"], dtype=np.int64).ravel() & 0xFFFF
-                    for k in ("ACTUAL_START_FIELD", "ACTUAL_END_FIELD"))
+            s, e = (
+                np.asarray(trial[k]["value"], dtype=np.int64).ravel() & 0xFFFF
+                for k in ("ACTUAL_START_FIELD", "ACTUAL_END_FIELD")
+            )
             start = int(s[0]) + (int(s[1]) << 16 if len(s) > 1 else 0)
             end = int(e[0]) + (int(e[1]) << 16 if len(e) > 1 else 0)
             if end >= start > 0:
@@ -276,7 +308,7 @@ def _strip(full: list[str]) -> tuple[list[str], dict[str, str]]:
             prefixes[tail] = head + ":"
         else:
             names.append(label)
-    if len(set(names)) < len(set(full)):   # several subjects with the same markers: keep the prefixes
+    if len(set(names)) < len(set(full)):  # several subjects with the same markers: keep the prefixes
         return list(full), {}
     return names, prefixes
 
@@ -315,12 +347,16 @@ def _events(params, header) -> list[dict]:
         out = []
         for i in range(int(used)):
             if i < len(labels) and i < len(times):
-                out.append({"label": labels[i], "context": contexts[i] if i < len(contexts) else "",
-                            "time": float(times[i])})
+                out.append(
+                    {"label": labels[i], "context": contexts[i] if i < len(contexts) else "", "time": float(times[i])}
+                )
         return out
     events = header.get("events", {})
-    return [{"label": str(lab).strip(), "context": "", "time": float(t)}
-            for lab, t in zip(events.get("events_label", ()), events.get("events_time", ())) if str(lab).strip()]
+    return [
+        {"label": str(lab).strip(), "context": "", "time": float(t)}
+        for lab, t in zip(events.get("events_label", ()), events.get("events_time", ()))
+        if str(lab).strip()
+    ]
 
 
 # --------------------------------------------------------------------------- validation before ezc3d
@@ -347,7 +383,7 @@ class C3DLayout:
     section_start: int
     section_end: int
     records: int
-    params: dict = field(default_factory=dict)   # (GROUP, PARAM) -> (type, dims, data bytes, record offset)
+    params: dict = field(default_factory=dict)  # (GROUP, PARAM) -> (type, dims, data bytes, record offset)
     frames: int = 0
     points: int = 0
     analog_per_frame: int = 0
@@ -384,8 +420,11 @@ def validate_c3d(path: str | os.PathLike) -> C3DLayout:
             fh.seek(start)
             section_head = fh.read(4)
             if len(section_head) < 4:
-                raise C3DFormatError(path, f"ezc3d cannot read it: the parameter section starts at byte {start}, "
-                                           f"beyond the end of the {size}-byte file")
+                raise C3DFormatError(
+                    path,
+                    f"ezc3d cannot read it: the parameter section starts at byte {start}, "
+                    f"beyond the end of the {size}-byte file",
+                )
             n_blocks, proc_byte = section_head[2], section_head[3]
             end = start + n_blocks * 512
             fh.seek(start)
@@ -393,13 +432,17 @@ def validate_c3d(path: str | os.PathLike) -> C3DLayout:
     except OSError as exc:
         raise C3DFormatError(path, f"cannot read file ({exc.strerror or exc})") from exc
     if proc_byte not in _PROCESSORS:
-        raise C3DFormatError(path, f"byte {start + 3}: processor type {proc_byte}, expected 84 (Intel), "
-                                   "85 (DEC) or 86 (MIPS)")
+        raise C3DFormatError(
+            path, f"byte {start + 3}: processor type {proc_byte}, expected 84 (Intel), 85 (DEC) or 86 (MIPS)"
+        )
     if n_blocks < 1:
         raise C3DFormatError(path, f"byte {start + 2}: the parameter section has {n_blocks} blocks")
     if len(section) < n_blocks * 512:
-        raise C3DFormatError(path, f"ezc3d cannot read it: the parameter section (byte {start}, {n_blocks} blocks "
-                                   f"of 512) extends past the end of the {size}-byte file")
+        raise C3DFormatError(
+            path,
+            f"ezc3d cannot read it: the parameter section (byte {start}, {n_blocks} blocks "
+            f"of 512) extends past the end of the {size}-byte file",
+        )
     processor = _PROCESSORS[proc_byte]
     layout = C3DLayout(head=head, size=size, processor=processor, section_start=start, section_end=end, records=0)
     _walk_parameters(path, section, start, layout)
@@ -411,12 +454,15 @@ def _walk_parameters(path: Path, section: bytes, base: int, layout: C3DLayout) -
     """Every group and parameter record of ``section`` (which starts at file byte ``base``)."""
     big = layout.processor == "mips"
     groups: dict[int, str] = {}
-    params: list[tuple[int, str, int, int, tuple, bytes]] = []   # (group id, name, offset, type, dims, data)
+    params: list[tuple[int, str, int, int, tuple, bytes]] = []  # (group id, name, offset, type, dims, data)
     pos, limit = 4, len(section)
     while True:
         if pos + 2 > limit:
-            raise C3DFormatError(path, f"byte {base + pos}: the parameter records run past the end of the parameter "
-                                       f"section (byte {base + limit}) without a terminating record")
+            raise C3DFormatError(
+                path,
+                f"byte {base + pos}: the parameter records run past the end of the parameter "
+                f"section (byte {base + limit}) without a terminating record",
+            )
         n_name = struct.unpack_from("b", section, pos)[0]
         if n_name == 0:
             break
@@ -426,9 +472,10 @@ def _walk_parameters(path: Path, section: bytes, base: int, layout: C3DLayout) -
             raise C3DFormatError(path, f"{where}: parameter record with group id 0")
         name_end = pos + 2 + abs(n_name)
         if name_end + 2 > limit:
-            raise C3DFormatError(path, f"{where}: record name of {abs(n_name)} characters runs past the end of the "
-                                       f"parameter section")
-        name = section[pos + 2:name_end].decode("latin-1").strip().upper()
+            raise C3DFormatError(
+                path, f"{where}: record name of {abs(n_name)} characters runs past the end of the parameter section"
+            )
+        name = section[pos + 2 : name_end].decode("latin-1").strip().upper()
         offset_at = name_end
         offset = struct.unpack_from(">H" if big else "<H", section, offset_at)[0]
         what = f"group {name}" if gid < 0 else f"parameter {groups.get(gid, f'(group id {gid})')}:{name}"
@@ -442,24 +489,32 @@ def _walk_parameters(path: Path, section: bytes, base: int, layout: C3DLayout) -
                 raise C3DFormatError(path, f"{where}: {what} runs past the end of the parameter section")
             ptype, n_dims = struct.unpack_from("bB", section, cursor)
             if ptype not in _PARAM_TYPES:
-                raise C3DFormatError(path, f"byte {base + cursor}: {what} has data type {ptype}, expected -1 (char), "
-                                           "1 (byte), 2 (int16) or 4 (float)")
+                raise C3DFormatError(
+                    path,
+                    f"byte {base + cursor}: {what} has data type {ptype}, expected -1 (char), "
+                    "1 (byte), 2 (int16) or 4 (float)",
+                )
             if n_dims > 7:
                 raise C3DFormatError(path, f"byte {base + cursor + 1}: {what} has {n_dims} dimensions (at most 7)")
             cursor += 2
             if cursor + n_dims > limit:
-                raise C3DFormatError(path, f"{where}: the dimensions of {what} run past the end of the parameter section")
-            dims = tuple(section[cursor:cursor + n_dims])
+                raise C3DFormatError(
+                    path, f"{where}: the dimensions of {what} run past the end of the parameter section"
+                )
+            dims = tuple(section[cursor : cursor + n_dims])
             cursor += n_dims
             count = 1
             for d in dims:
                 count *= d
             n_bytes = count * _PARAM_TYPES[ptype]
             if cursor + n_bytes > limit:
-                raise C3DFormatError(path, f"byte {base + cursor}: {what} with dimensions {list(dims)} x "
-                                           f"{_PARAM_TYPES[ptype]} bytes ({n_bytes} bytes) runs past the end of the "
-                                           f"parameter section (byte {base + limit})")
-            params.append((gid, name, base + pos, ptype, dims, section[cursor:cursor + n_bytes]))
+                raise C3DFormatError(
+                    path,
+                    f"byte {base + cursor}: {what} with dimensions {list(dims)} x "
+                    f"{_PARAM_TYPES[ptype]} bytes ({n_bytes} bytes) runs past the end of the "
+                    f"parameter section (byte {base + limit})",
+                )
+            params.append((gid, name, base + pos, ptype, dims, section[cursor : cursor + n_bytes]))
             cursor += n_bytes
         if cursor + 1 > limit:
             raise C3DFormatError(path, f"{where}: {what} runs past the end of the parameter section")
@@ -472,13 +527,17 @@ def _walk_parameters(path: Path, section: bytes, base: int, layout: C3DLayout) -
             break
         nxt = offset_at + offset
         if nxt != cursor:
-            raise C3DFormatError(path, f"byte {base + offset_at}: {what}: the offset to the next record ({offset}) "
-                                       f"points to byte {base + nxt}, but the record ends at byte {base + cursor}")
+            raise C3DFormatError(
+                path,
+                f"byte {base + offset_at}: {what}: the offset to the next record ({offset}) "
+                f"points to byte {base + nxt}, but the record ends at byte {base + cursor}",
+            )
         pos = nxt
     for gid, name, at, ptype, dims, data in params:
         if gid not in groups:
-            raise C3DFormatError(path, f"byte {at}: parameter {name!r} belongs to group id {gid}, which no group "
-                                       "record declares")
+            raise C3DFormatError(
+                path, f"byte {at}: parameter {name!r} belongs to group id {gid}, which no group record declares"
+            )
         layout.params[(groups[gid], name)] = (ptype, dims, data, at)
 
 
@@ -495,13 +554,13 @@ def _param_numbers(path: Path, layout: C3DLayout, group: str, name: str) -> list
         return [float(b) for b in data]
     if ptype == 2:
         return [float(v) for v in struct.unpack((">" if big else "<") + f"{len(data) // 2}h", data)]
-    return [_float(data[k:k + 4], layout.processor) for k in range(0, len(data), 4)]
+    return [_float(data[k : k + 4], layout.processor) for k in range(0, len(data), 4)]
 
 
 def _float(raw: bytes, processor: str) -> float:
     if processor == "mips":
         return struct.unpack(">f", raw)[0]
-    if processor == "dec":   # VAX F-float: swapped 16-bit words, exponent bias 2 higher
+    if processor == "dec":  # VAX F-float: swapped 16-bit words, exponent bias 2 higher
         return struct.unpack("<f", raw[2:4] + raw[0:2])[0] / 4.0
     return struct.unpack("<f", raw)[0]
 
@@ -509,7 +568,7 @@ def _float(raw: bytes, processor: str) -> float:
 def _check_sizes(path: Path, layout: C3DLayout) -> None:
     """Header and POINT/ANALOG parameters against each other and the file length."""
     head, big, proc = layout.head, layout.processor == "mips", layout.processor
-    words = struct.unpack((">" if big else "<") + "256H", head)   # 1-based word k is words[k - 1]
+    words = struct.unpack((">" if big else "<") + "256H", head)  # 1-based word k is words[k - 1]
     h_points, h_analog, h_first, h_last = words[1], words[2], words[3], words[4]
     h_scale = _float(head[12:16], proc)
     h_data_start = words[8]
@@ -526,7 +585,7 @@ def _check_sizes(path: Path, layout: C3DLayout) -> None:
     if ("POINT", "USED") not in layout.params and h_points:
         raise C3DFormatError(path, f"no POINT:USED parameter although the header announces {h_points} points")
     used = one("POINT", "USED")
-    points = h_points if used is None else int(used) & 0xFFFF   # > 32767 points are stored as unsigned words
+    points = h_points if used is None else int(used) & 0xFFFF  # > 32767 points are stored as unsigned words
     if points != h_points:
         raise C3DFormatError(path, f"{at('POINT', 'USED')}: {points} points, but header word 2 says {h_points}")
     scale = one("POINT", "SCALE")
@@ -547,30 +606,44 @@ def _check_sizes(path: Path, layout: C3DLayout) -> None:
     analog = h_analog
     if channels:
         if h_analog % channels:
-            raise C3DFormatError(path, f"{at('ANALOG', 'USED')}: {channels} channels, but header word 3 announces "
-                                       f"{h_analog} analog samples per frame, not a multiple of it")
+            raise C3DFormatError(
+                path,
+                f"{at('ANALOG', 'USED')}: {channels} channels, but header word 3 announces "
+                f"{h_analog} analog samples per frame, not a multiple of it",
+            )
         ratio = h_analog // channels
         if a_rate is not None and rate > 0:
             expected_ratio = a_rate / rate
             if expected_ratio > MAX_ANALOG_RATIO:
-                raise C3DFormatError(path, f"{at('ANALOG', 'RATE')}: {expected_ratio:g} analog samples per point "
-                                           f"frame (more than {MAX_ANALOG_RATIO})")
+                raise C3DFormatError(
+                    path,
+                    f"{at('ANALOG', 'RATE')}: {expected_ratio:g} analog samples per point "
+                    f"frame (more than {MAX_ANALOG_RATIO})",
+                )
             if ratio and abs(expected_ratio - ratio) > 0.5 + 1e-6 * ratio:
-                raise C3DFormatError(path, f"{at('ANALOG', 'RATE')}: ANALOG:RATE / POINT:RATE = {expected_ratio:g}, "
-                                           f"but the header stores {ratio} samples per channel and frame")
+                raise C3DFormatError(
+                    path,
+                    f"{at('ANALOG', 'RATE')}: ANALOG:RATE / POINT:RATE = {expected_ratio:g}, "
+                    f"but the header stores {ratio} samples per channel and frame",
+                )
     elif h_analog and a_used is not None:
-        raise C3DFormatError(path, f"{at('ANALOG', 'USED')}: 0 channels, but header word 3 announces {h_analog} "
-                                   "analog samples per frame")
+        raise C3DFormatError(
+            path, f"{at('ANALOG', 'USED')}: 0 channels, but header word 3 announces {h_analog} analog samples per frame"
+        )
 
     ds = one("POINT", "DATA_START")
     data_start = h_data_start if ds is None else int(ds) & 0xFFFF
     if data_start != h_data_start:
-        raise C3DFormatError(path, f"{at('POINT', 'DATA_START')}: block {data_start}, but header word 9 says "
-                                   f"{h_data_start}")
+        raise C3DFormatError(
+            path, f"{at('POINT', 'DATA_START')}: block {data_start}, but header word 9 says {h_data_start}"
+        )
     first_free = layout.section_end // 512 + 1
     if data_start < first_free:
-        raise C3DFormatError(path, f"header word 9: the data starts in block {data_start}, inside the header or the "
-                                   f"parameter section (which ends before block {first_free})")
+        raise C3DFormatError(
+            path,
+            f"header word 9: the data starts in block {data_start}, inside the header or the "
+            f"parameter section (which ends before block {first_free})",
+        )
     frames = h_last - h_first + 1 if h_last >= h_first else 0
     if h_last < h_first and not (h_last == 0 and h_first in (0, 1)):
         raise C3DFormatError(path, f"header words 4-5: last frame {h_last} before first frame {h_first}")
@@ -593,11 +666,14 @@ def _check_sizes(path: Path, layout: C3DLayout) -> None:
     available = max(layout.size - begin, 0)
     if frame_bytes and frames * frame_bytes > available:
         complete = available // frame_bytes
-        raise C3DFormatError(path, f"truncated: the header announces {frames} frames but the data ends after "
-                                   f"{complete} (this frame is incomplete or absent): {frames} frames x "
-                                   f"({points} points x 4 + {analog} analog samples) x {element} bytes from byte "
-                                   f"{begin} need {begin + frames * frame_bytes} bytes, the file has {layout.size}",
-                             frame=complete + 1)
+        raise C3DFormatError(
+            path,
+            f"truncated: the header announces {frames} frames but the data ends after "
+            f"{complete} (this frame is incomplete or absent): {frames} frames x "
+            f"({points} points x 4 + {analog} analog samples) x {element} bytes from byte "
+            f"{begin} need {begin + frames * frame_bytes} bytes, the file has {layout.size}",
+            frame=complete + 1,
+        )
     layout.frames, layout.points, layout.analog_per_frame = frames, points, analog
     layout.element_size, layout.data_start = element, data_start
 
@@ -651,5 +727,5 @@ def write_c3d(path: str | os.PathLike, motion: Motion, units: str = "mm", restor
 
     from mocapkit.io_atomic import atomic_path
 
-    with atomic_path(path, suffix=".c3d") as tmp:         # ezc3d appends ".c3d" to other names
+    with atomic_path(path, suffix=".c3d") as tmp:  # ezc3d appends ".c3d" to other names
         c3d.write(str(tmp))

@@ -22,6 +22,7 @@ Real CASIA-B quirks the reader tolerates: ``Thumbs.db`` and other non-PNG files
 shape as long as the stem ends with a number, a few gray (JPEG-like) pixels near
 the edges (thresholded at 128), all-black frames (kept: the GEI builder drops them).
 """
+
 from __future__ import annotations
 
 import os
@@ -100,8 +101,10 @@ def parse_sequence_folder(relative: str | os.PathLike) -> GaitSequenceKey:
 # --------------------------------------------------------------------------- listing
 
 #: The layout, as said in error messages.
-EXPECTED_LAYOUT = ("<root>/<subject>/<condition>-<nn>/<view>/<frame>.png, e.g. 001/nm-01/090/001-nm-01-090-045.png "
-                   f"(conditions {CONDITIONS}, views 000..180 in steps of 18)")
+EXPECTED_LAYOUT = (
+    "<root>/<subject>/<condition>-<nn>/<view>/<frame>.png, e.g. 001/nm-01/090/001-nm-01-090-045.png "
+    f"(conditions {CONDITIONS}, views 000..180 in steps of 18)"
+)
 #: Root-level files that document a data set (README.txt, a config .json) rather than break its layout.
 _ROOT_DOC_SUFFIXES = (".txt", ".md", ".json")
 _TRAILING_INT = re.compile(r"(\d+)\D*$")
@@ -150,8 +153,9 @@ class CasiaBListing:
     problems: list[str] = field(default_factory=list)
     subjects: tuple[int, ...] | None = None
 
-    def missing(self, expected_conditions: dict[str, int] = SEQUENCES_PER_CONDITION,
-                views: Iterable[int] = VIEWS) -> list[str]:
+    def missing(
+        self, expected_conditions: dict[str, int] = SEQUENCES_PER_CONDITION, views: Iterable[int] = VIEWS
+    ) -> list[str]:
         """Every expected ``"<subject>/<condition>-<nn>/<view>"`` with no view folder, sorted.
 
         Expected: for each subject found (or asked for), ``nn`` = 1..``expected_conditions[c]`` of each
@@ -285,14 +289,19 @@ def read_silhouette(path: str | os.PathLike) -> np.ndarray:
     from PIL import Image, UnidentifiedImageError
 
     frame = frame_number(path)
-    data = read_file_bytes(path, lambda p, msg: SilhouetteFormatError(p, None, msg, frame=frame),
-                           max_bytes=MAX_SILHOUETTE_BYTES)
+    data = read_file_bytes(
+        path, lambda p, msg: SilhouetteFormatError(p, None, msg, frame=frame), max_bytes=MAX_SILHOUETTE_BYTES
+    )
     try:
         with Image.open(io.BytesIO(data)) as image:
             if image.width * image.height > MAX_SILHOUETTE_PIXELS:
-                raise SilhouetteFormatError(path, None, f"{image.width}x{image.height} pixels: more than the "
-                                                        f"{MAX_SILHOUETTE_PIXELS} a silhouette frame may have",
-                                            frame=frame)
+                raise SilhouetteFormatError(
+                    path,
+                    None,
+                    f"{image.width}x{image.height} pixels: more than the "
+                    f"{MAX_SILHOUETTE_PIXELS} a silhouette frame may have",
+                    frame=frame,
+                )
             image.load()
             if image.mode in ("I;16", "I;16B", "I;16L", "I"):
                 pixels = np.asarray(image, dtype=np.int64)
@@ -303,16 +312,26 @@ def read_silhouette(path: str | os.PathLike) -> np.ndarray:
                 raise SilhouetteFormatError(path, None, f"unsupported image mode {image.mode!r}", frame=frame)
     except SilhouetteFormatError:
         raise
-    except (OSError, SyntaxError, ValueError, UnidentifiedImageError, Image.DecompressionBombError,
-            MemoryError) as exc:  # MemoryError: a damaged chunk length asking PIL for gigabytes
-        raise SilhouetteFormatError(path, None, f"unreadable image: {type(exc).__name__} {exc}",
-                                    frame=frame) from None
+    except (
+        OSError,
+        SyntaxError,
+        ValueError,
+        UnidentifiedImageError,
+        Image.DecompressionBombError,
+        MemoryError,
+    ) as exc:  # MemoryError: a damaged chunk length asking PIL for gigabytes
+        raise SilhouetteFormatError(path, None, f"unreadable image: {type(exc).__name__} {exc}", frame=frame) from None
     if pixels.ndim != 2 or pixels.size == 0:
         raise SilhouetteFormatError(path, None, f"not a 2-D image (shape {pixels.shape})", frame=frame)
     gray = np.count_nonzero((pixels > GRAY_LOW) & (pixels < GRAY_HIGH)) / pixels.size
     if gray > MAX_GRAY_FRACTION:
-        raise SilhouetteFormatError(path, None, f"not a binary silhouette: {100 * gray:.1f}% gray pixels "
-                                                f"(values strictly between {GRAY_LOW} and {GRAY_HIGH})", frame=frame)
+        raise SilhouetteFormatError(
+            path,
+            None,
+            f"not a binary silhouette: {100 * gray:.1f}% gray pixels "
+            f"(values strictly between {GRAY_LOW} and {GRAY_HIGH})",
+            frame=frame,
+        )
     return np.where(pixels >= THRESHOLD, np.uint8(255), np.uint8(0))
 
 
@@ -335,8 +354,11 @@ def read_sequence(sequence: GaitSequence) -> np.ndarray:
         mask = read_silhouette(path)
         if mask.shape != first.shape:
             raise SilhouetteFormatError(
-                path, None, f"frame size {mask.shape[1]}x{mask.shape[0]} (WxH) differs from the sequence's first "
-                            f"frame {sequence.frames[0].name} ({first.shape[1]}x{first.shape[0]})",
-                frame=frame_number(path))
+                path,
+                None,
+                f"frame size {mask.shape[1]}x{mask.shape[0]} (WxH) differs from the sequence's first "
+                f"frame {sequence.frames[0].name} ({first.shape[1]}x{first.shape[0]})",
+                frame=frame_number(path),
+            )
         out[t] = mask
     return out

@@ -4,6 +4,7 @@ Each format has its own subclass (``SkeletonFormatError``, ``AsfFormatError``,
 ``AmcFormatError``, ``BvhFormatError``, ``C3DFormatError``, ``MSRFormatError``),
 so callers can catch one format or, with :class:`MotionFormatError`, all of them.
 """
+
 from __future__ import annotations
 
 import os

@@ -23,6 +23,7 @@ motion (``select_main_bodies``), on the ``ntu25`` layout at 30 fps, missing in t
 where that body is not tracked; the other kept bodies are in
 ``metadata["other_bodies"]`` (float32 ``[frames, 25, 3]`` arrays, NaN where absent).
 """
+
 from __future__ import annotations
 
 import importlib
@@ -38,8 +39,12 @@ FORMATS: dict[str, tuple[str, str, str, str | None]] = {
     "amc": ("ASF/AMC motion (.amc with its .asf)", "mocapkit.datasets.formats.asf_amc", "read_amc", "write_amc"),
     "bvh": ("BVH (.bvh)", "mocapkit.datasets.formats.bvh", "read_bvh", "write_bvh"),
     "c3d": ("C3D markers (.c3d)", "mocapkit.datasets.formats.c3d", "read_c3d", "write_c3d"),
-    "msr": ("MSR Action3D skeleton text (*_skeleton3D.txt, *_skeleton.txt)", "mocapkit.datasets.formats.msr_action3d",
-            "read_msr_skeleton", None),
+    "msr": (
+        "MSR Action3D skeleton text (*_skeleton3D.txt, *_skeleton.txt)",
+        "mocapkit.datasets.formats.msr_action3d",
+        "read_msr_skeleton",
+        None,
+    ),
     "ntu": ("NTU RGB+D skeleton (.skeleton)", "mocapkit.datasets.formats.motion_io", "_read_ntu", "_write_ntu"),
 }
 
@@ -99,8 +104,10 @@ def expand_motion_paths(paths, what: str = "input", empty_error: type[Exception]
         if path.is_dir():
             found = find_motion_files(path)
             if not found:
-                raise empty_error(f"{what} {path}: no motion files in this folder (looked for .c3d, .amc, .bvh, "
-                                  f".skeleton, MSR *_skeleton3D.txt)")
+                raise empty_error(
+                    f"{what} {path}: no motion files in this folder (looked for .c3d, .amc, .bvh, "
+                    f".skeleton, MSR *_skeleton3D.txt)"
+                )
             files += found
         elif path.is_file():
             files.append(path)
@@ -151,14 +158,18 @@ def _load(fmt: str, which: int, doing: str):
         module = importlib.import_module(module_name)
     except ImportError as exc:
         missing = getattr(exc, "name", None)
-        what = (f"{module_name} is not available" if missing == module_name
-                else f"{module_name} could not be imported ({exc})")
+        what = (
+            f"{module_name} is not available"
+            if missing == module_name
+            else f"{module_name} could not be imported ({exc})"
+        )
         raise FormatUnavailableError(f"{doing} {description} needs {module_name}.{function}, but {what}") from exc
     try:
         return getattr(module, function)
     except AttributeError:
-        raise FormatUnavailableError(f"{doing} {description} needs {module_name}.{function}, "
-                                     f"which {module_name} does not define") from None
+        raise FormatUnavailableError(
+            f"{doing} {description} needs {module_name}.{function}, which {module_name} does not define"
+        ) from None
 
 
 # --------------------------------------------------------------------------- NTU
@@ -170,19 +181,19 @@ def _read_ntu(path: str | os.PathLike, max_bodies: int = 2, **selection_options)
     ``selection_options`` go to ``select_main_bodies`` (``denoise_spread``, ``min_frames``,
     ``denoise_flicker``, ...); its defaults are those of ``mocapkit prepare ntu``.
     """
-    from mocapkit.motion.layouts import NTU25
     from mocapkit.datasets.formats.ntu_skeleton import read_skeleton, select_main_bodies
+    from mocapkit.motion.layouts import NTU25
 
     seq = read_skeleton(path)
     selection = select_main_bodies(seq, max_bodies=max_bodies, **selection_options)
     bodies = []
     for track in selection.kept:
-        body = seq.positions[track].copy()                       # [T, 25, 3], zeros where absent
+        body = seq.positions[track].copy()  # [T, 25, 3], zeros where absent
         body[~seq.present[track]] = np.nan
         bodies.append(body)
     if bodies:
         main = bodies[0]
-    else:                                                        # no tracked body at all: everything missing
+    else:  # no tracked body at all: everything missing
         main = np.full((seq.num_frames, len(NTU25.joint_names), 3), np.nan, dtype=np.float32)
     metadata = {
         "format": "ntu",
@@ -197,9 +208,18 @@ def _read_ntu(path: str | os.PathLike, max_bodies: int = 2, **selection_options)
         metadata["label"] = seq.sample.label
     except ValueError:
         pass
-    return Motion(positions=main, joint_names=NTU25.joint_names, parents=NTU25.parents, fps=NTU_FPS,
-                  source_units="m", up_axis="y", name=seq.name, source=str(path), layout_name=NTU25.name,
-                  metadata=metadata)
+    return Motion(
+        positions=main,
+        joint_names=NTU25.joint_names,
+        parents=NTU25.parents,
+        fps=NTU_FPS,
+        source_units="m",
+        up_axis="y",
+        name=seq.name,
+        source=str(path),
+        layout_name=NTU25.name,
+        metadata=metadata,
+    )
 
 
 def _write_ntu(path: str | os.PathLike, motion: Motion, body_ids: list[int] | None = None) -> None:
@@ -209,18 +229,20 @@ def _write_ntu(path: str | os.PathLike, motion: Motion, body_ids: list[int] | No
     joints within a written frame become zeros (the file has no per-joint gap marker).
     Only positions survive: depth/colour pixels are re-projected and orientations are identity.
     """
-    from mocapkit.motion.layouts import NTU25
     from mocapkit.datasets.formats.ntu_skeleton import (
         sequence_from_positions,
         write_skeleton,
     )
+    from mocapkit.motion.layouts import NTU25
 
     if tuple(motion.joint_names) != NTU25.joint_names:
-        raise ValueError(f"{motion.source or motion.name}: only motions on the ntu25 layout can be written as "
-                         f".skeleton (map_layout(NTU25) first)")
+        raise ValueError(
+            f"{motion.source or motion.name}: only motions on the ntu25 layout can be written as "
+            f".skeleton (map_layout(NTU25) first)"
+        )
     bodies = [motion.positions] + [np.asarray(b, dtype=np.float32) for b in motion.metadata.get("other_bodies", [])]
-    stacked = np.stack(bodies)                                   # [B, T, 25, 3]
-    present = ~any_coordinate(np.isnan(stacked)).all(axis=2)     # [B, T]
+    stacked = np.stack(bodies)  # [B, T, 25, 3]
+    present = ~any_coordinate(np.isnan(stacked)).all(axis=2)  # [B, T]
     stacked = np.nan_to_num(stacked, nan=0.0)
     if body_ids is None:
         ids = list(motion.metadata.get("body_ids", []))

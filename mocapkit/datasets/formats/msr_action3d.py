@@ -28,6 +28,7 @@ the second joint of each pair is the right one, as :data:`MSR20` has it.
 The data set (:class:`~mocapkit.datasets.msr_action3d.dataset.MSRAction3D`) and its protocols
 (:mod:`mocapkit.datasets.msr_action3d.splits`) live in :mod:`mocapkit.datasets.msr_action3d`.
 """
+
 from __future__ import annotations
 
 import re
@@ -37,9 +38,9 @@ from pathlib import Path
 import numpy as np
 
 from mocapkit.datasets.formats.errors import MotionFormatError
-from mocapkit.motion.layouts import MSR20
-from mocapkit.motion.container import Motion, all_coordinates
 from mocapkit.datasets.formats.safe_io import read_file_bytes
+from mocapkit.motion.container import Motion, all_coordinates
+from mocapkit.motion.layouts import MSR20
 
 JOINTS_PER_FRAME = 20
 FPS = 15.0
@@ -99,9 +100,12 @@ def _parse_rows(path: Path, text: str) -> np.ndarray:
         complete = len(rows) // JOINTS_PER_FRAME
         first_of_partial = numbers[complete * JOINTS_PER_FRAME]
         raise MSRFormatError(
-            path, first_of_partial, f"frame {complete + 1} is incomplete: the file has {len(rows)} rows, "
+            path,
+            first_of_partial,
+            f"frame {complete + 1} is incomplete: the file has {len(rows)} rows, "
             f"not a multiple of {JOINTS_PER_FRAME} (the last {len(rows) % JOINTS_PER_FRAME} rows, from line "
-            f"{first_of_partial} on, are left over)")
+            f"{first_of_partial} on, are left over)",
+        )
     values = np.asarray(rows, dtype=np.float64)
     bad = ~np.isfinite(values).all(axis=1)
     if bad.any():
@@ -110,8 +114,12 @@ def _parse_rows(path: Path, text: str) -> np.ndarray:
     big = (np.abs(values) > np.finfo(np.float32).max).any(axis=1)
     if big.any():
         row = int(np.argmax(big))
-        raise MSRFormatError(path, numbers[row], f"value {values[row][np.abs(values[row]) > np.finfo(np.float32).max][0]:g} "
-                                                 "is beyond the float32 range (about 3.4e38)")
+        raise MSRFormatError(
+            path,
+            numbers[row],
+            f"value {values[row][np.abs(values[row]) > np.finfo(np.float32).max][0]:g} "
+            "is beyond the float32 range (about 3.4e38)",
+        )
     return values.astype(np.float32)
 
 
@@ -148,8 +156,12 @@ def read_msr_skeleton(path: str | Path, kind: str = "auto") -> Motion:
     confidence = frames[..., 3]
     missing = all_coordinates(coords == 0)
     all_zero = bool((frames == 0).all())
-    metadata = {"confidence": confidence, "all_zero": all_zero, "coordinates": kind,
-                "missing_frames": int(missing.all(axis=1).sum())}
+    metadata = {
+        "confidence": confidence,
+        "all_zero": all_zero,
+        "coordinates": kind,
+        "missing_frames": int(missing.all(axis=1).sum()),
+    }
     if sample is not None:
         metadata.update(action=sample.action, subject=sample.subject, take=sample.take)
     if kind == "real3d":
@@ -158,6 +170,16 @@ def read_msr_skeleton(path: str | Path, kind: str = "auto") -> Motion:
         units, up = "u, v: pixels of the 320x240 depth image (v grows downwards); d: depth, units undocumented", "y"
         metadata["v_down"] = True
     positions = np.where(missing[..., None], np.float32(np.nan), coords)
-    return Motion(positions=positions, joint_names=MSR20.joint_names, parents=MSR20.parents, fps=FPS,
-                  missing=missing, source_units=units, up_axis=up, name=sample.stem if sample else path.stem,
-                  source=str(path), layout_name=MSR20.name, metadata=metadata)
+    return Motion(
+        positions=positions,
+        joint_names=MSR20.joint_names,
+        parents=MSR20.parents,
+        fps=FPS,
+        missing=missing,
+        source_units=units,
+        up_axis=up,
+        name=sample.stem if sample else path.stem,
+        source=str(path),
+        layout_name=MSR20.name,
+        metadata=metadata,
+    )

@@ -31,6 +31,7 @@ few frames, then non-human "bodies" by their spread, then rank by motion) plus a
 flicker rule of ours (drop tracks that come and go or jump), and says why for every
 track.
 """
+
 from __future__ import annotations
 
 import io
@@ -42,8 +43,8 @@ from pathlib import Path
 import numpy as np
 
 from mocapkit.datasets.formats.errors import MotionFormatError
-from mocapkit.motion.layouts import NTU25
 from mocapkit.datasets.formats.safe_io import read_file_bytes
+from mocapkit.motion.layouts import NTU25
 
 NUM_JOINTS = 25
 JOINT_FIELDS = 12
@@ -51,8 +52,16 @@ BODY_FIELDS = 10
 
 #: Names of the 10 per-body values, in file order (``isResticted`` spelt as in the SDK dump).
 BODY_INFO_FIELDS = (
-    "body_id", "clipped_edges", "hand_left_confidence", "hand_left_state",
-    "hand_right_confidence", "hand_right_state", "is_restricted", "lean_x", "lean_y", "tracking_state",
+    "body_id",
+    "clipped_edges",
+    "hand_left_confidence",
+    "hand_left_state",
+    "hand_right_confidence",
+    "hand_right_state",
+    "is_restricted",
+    "lean_x",
+    "lean_y",
+    "tracking_state",
 )
 
 #: Floor and factor of :func:`track_memory_limit`.
@@ -90,8 +99,7 @@ class NTUSampleName:
         return self.action - 1
 
     def __str__(self) -> str:
-        return (f"S{self.setup:03d}C{self.camera:03d}P{self.subject:03d}"
-                f"R{self.replication:03d}A{self.action:03d}")
+        return f"S{self.setup:03d}C{self.camera:03d}P{self.subject:03d}R{self.replication:03d}A{self.action:03d}"
 
 
 def parse_ntu_name(name: str | os.PathLike) -> NTUSampleName:
@@ -159,8 +167,9 @@ class SkeletonSequence:
     depth_xy = _joint_values(3, 5, "float32 ``[B, T, 25, 2]`` pixel positions in the 512×424 depth frame.")
     color_xy = _joint_values(5, 7, "float32 ``[B, T, 25, 2]`` pixel positions in the 1920×1080 colour frame.")
     orientation = _joint_values(7, 11, "float32 ``[B, T, 25, 4]`` joint orientation quaternions ``(w, x, y, z)``.")
-    joint_tracking_state = _joint_values(11, None, "int8 ``[B, T, 25]``: 0 not tracked, 1 inferred, 2 tracked.",
-                                         dtype=np.int8)
+    joint_tracking_state = _joint_values(
+        11, None, "int8 ``[B, T, 25]``: 0 not tracked, 1 inferred, 2 tracked.", dtype=np.int8
+    )
 
     @property
     def sample(self) -> NTUSampleName:
@@ -193,7 +202,9 @@ def read_skeleton(path: str | os.PathLike) -> SkeletonSequence:
     return parse_skeleton_text(text, name=path.name, source=path)
 
 
-def parse_skeleton_text(text: bytes | str, name: str = "<memory>", source: str | os.PathLike | None = None) -> SkeletonSequence:
+def parse_skeleton_text(
+    text: bytes | str, name: str = "<memory>", source: str | os.PathLike | None = None
+) -> SkeletonSequence:
     """Parse the content of a ``.skeleton`` file (see :func:`read_skeleton`).
 
     The fast path splits the text into lines once, walks only the count lines in
@@ -223,12 +234,16 @@ def parse_skeleton_text(text: bytes | str, name: str = "<memory>", source: str |
         i += 1
         for s in range(nb):
             if i + 1 >= n_lines:
-                raise SkeletonFormatError(source, min(i + 1, n_lines) + 1, f"file ends inside body {s + 1} of frame {t + 1}")
+                raise SkeletonFormatError(
+                    source, min(i + 1, n_lines) + 1, f"file ends inside body {s + 1} of frame {t + 1}"
+                )
             nj = _parse_count(lines, i + 1, source, "joint count")
             if nj != NUM_JOINTS:
                 raise SkeletonFormatError(source, i + 2, f"joint count is {nj}, expected {NUM_JOINTS}")
             if i + 2 + NUM_JOINTS > n_lines:
-                raise SkeletonFormatError(source, n_lines + 1, f"file ends inside the joints of body {s + 1} of frame {t + 1}")
+                raise SkeletonFormatError(
+                    source, n_lines + 1, f"file ends inside the joints of body {s + 1} of frame {t + 1}"
+                )
             entries.append((t, s, i))
             i += 2 + NUM_JOINTS
     trailing = [k for k in range(i, n_lines) if lines[k].strip()]
@@ -240,19 +255,26 @@ def parse_skeleton_text(text: bytes | str, name: str = "<memory>", source: str |
     joint_lines = [lines[e[2] + 2 + j] for e in entries for j in range(NUM_JOINTS)]
     joint_values = _to_floats(joint_lines, JOINT_FIELDS)
     if joint_values is None:
-        _raise_bad_line(lines, [e[2] + 2 + j for e in entries for j in range(NUM_JOINTS)], JOINT_FIELDS, source, "joint")
+        _raise_bad_line(
+            lines, [e[2] + 2 + j for e in entries for j in range(NUM_JOINTS)], JOINT_FIELDS, source, "joint"
+        )
     bad_rows = np.flatnonzero((~np.isfinite(joint_values)).any(axis=1))
     if len(bad_rows):
         k = int(bad_rows[0])
         e = entries[k // NUM_JOINTS]
-        raise SkeletonFormatError(source, e[2] + 3 + k % NUM_JOINTS,
-                                  f"non-finite joint value (NaN or infinite) in joint {k % NUM_JOINTS + 1} of body "
-                                  f"{e[1] + 1} of frame {e[0] + 1}")
+        raise SkeletonFormatError(
+            source,
+            e[2] + 3 + k % NUM_JOINTS,
+            f"non-finite joint value (NaN or infinite) in joint {k % NUM_JOINTS + 1} of body "
+            f"{e[1] + 1} of frame {e[0] + 1}",
+        )
     info_tokens = [ln.split() for ln in body_lines]
     bad = [k for k, tok in enumerate(info_tokens) if len(tok) != BODY_FIELDS]
     if bad:
         k = bad[0]
-        raise SkeletonFormatError(source, entries[k][2] + 1, f"body line has {len(info_tokens[k])} values, expected {BODY_FIELDS}")
+        raise SkeletonFormatError(
+            source, entries[k][2] + 1, f"body line has {len(info_tokens[k])} values, expected {BODY_FIELDS}"
+        )
     try:
         ids = [int(tok[0]) for tok in info_tokens]
         info_values = np.array([tok[1:] for tok in info_tokens], dtype=np.float64).reshape(n_entries, BODY_FIELDS - 1)
@@ -261,8 +283,12 @@ def parse_skeleton_text(text: bytes | str, name: str = "<memory>", source: str |
     bad_rows = np.flatnonzero((~np.isfinite(info_values)).any(axis=1))
     if len(bad_rows):
         k = int(bad_rows[0])
-        raise SkeletonFormatError(source, entries[k][2] + 1, f"non-finite value (NaN or infinite) in the body line "
-                                                             f"of body {entries[k][1] + 1} of frame {entries[k][0] + 1}")
+        raise SkeletonFormatError(
+            source,
+            entries[k][2] + 1,
+            f"non-finite value (NaN or infinite) in the body line "
+            f"of body {entries[k][1] + 1} of frame {entries[k][0] + 1}",
+        )
 
     # Group by body ID, in order of first appearance.
     track_of: dict[int, int] = {}
@@ -272,10 +298,14 @@ def parse_skeleton_text(text: bytes | str, name: str = "<memory>", source: str |
     needed = n_tracks * num_frames * _BYTES_PER_TRACK_FRAME
     limit = track_memory_limit(len(text))
     if needed > limit:
-        raise SkeletonFormatError(source, None, f"{n_tracks} distinct body IDs over {num_frames} frames would need "
-                                                f"{needed / 2**20:.0f} MiB of track arrays, more than the "
-                                                f"{limit / 2**20:.0f} MiB allowed for a {len(text)}-byte file "
-                                                "(max(64 MiB, 32 x file size)); the body IDs are damaged")
+        raise SkeletonFormatError(
+            source,
+            None,
+            f"{n_tracks} distinct body IDs over {num_frames} frames would need "
+            f"{needed / 2**20:.0f} MiB of track arrays, more than the "
+            f"{limit / 2**20:.0f} MiB allowed for a {len(text)}-byte file "
+            "(max(64 MiB, 32 x file size)); the body IDs are damaged",
+        )
     joints = np.zeros((n_tracks, num_frames, NUM_JOINTS, JOINT_FIELDS), dtype=np.float64)
     body_info = np.zeros((n_tracks, num_frames, BODY_FIELDS - 1), dtype=np.float64)
     slot = np.full((n_tracks, num_frames), -1, dtype=np.int16)
@@ -285,7 +315,9 @@ def parse_skeleton_text(text: bytes | str, name: str = "<memory>", source: str |
         sl = np.fromiter((e[1] for e in entries), dtype=np.int16, count=n_entries)
         if np.any(slot[tr, fr] >= 0) or len(set(zip(tr.tolist(), fr.tolist()))) != n_entries:
             dup = _first_duplicate(tr, fr)
-            raise SkeletonFormatError(source, entries[dup][2] + 1, f"body ID {ids[dup]} appears twice in frame {entries[dup][0] + 1}")
+            raise SkeletonFormatError(
+                source, entries[dup][2] + 1, f"body ID {ids[dup]} appears twice in frame {entries[dup][0] + 1}"
+            )
         joints[tr, fr] = joint_values.reshape(n_entries, NUM_JOINTS, JOINT_FIELDS)
         body_info[tr, fr] = info_values
         slot[tr, fr] = sl
@@ -323,7 +355,9 @@ def _raise_bad_line(lines, indices, width, source, what):
             try:
                 float(v)
             except ValueError:
-                raise SkeletonFormatError(source, k + 1, f"non-numeric {what} value {v.decode(errors='replace')!r}") from None
+                raise SkeletonFormatError(
+                    source, k + 1, f"non-numeric {what} value {v.decode(errors='replace')!r}"
+                ) from None
     raise SkeletonFormatError(source, None, f"unparseable {what} lines")  # pragma: no cover - defensive
 
 
@@ -334,7 +368,9 @@ def _raise_bad_body_line(lines, indices, source):
             int(tok[0])
             [float(v) for v in tok[1:]]
         except ValueError:
-            raise SkeletonFormatError(source, k + 1, f"non-numeric body line {lines[k].decode(errors='replace')[:60]!r}") from None
+            raise SkeletonFormatError(
+                source, k + 1, f"non-numeric body line {lines[k].decode(errors='replace')[:60]!r}"
+            ) from None
     raise SkeletonFormatError(source, None, "unparseable body lines")  # pragma: no cover - defensive
 
 
@@ -378,7 +414,7 @@ def write_skeleton(path: str | os.PathLike, seq: SkeletonSequence, newline: str 
         for _ in range(counts[t]):
             out.append(f"{seq.body_ids[rows_b[k]]} " + info_fmt % tuple(info[k]))
             out.append(str(NUM_JOINTS))
-            out.extend(joint_text[k * NUM_JOINTS:(k + 1) * NUM_JOINTS])
+            out.extend(joint_text[k * NUM_JOINTS : (k + 1) * NUM_JOINTS])
             k += 1
     Path(path).write_text(newline.join(out) + newline, encoding="ascii", newline="")
 
@@ -389,8 +425,9 @@ def _format_rows(values: np.ndarray, fmt: str) -> list[str]:
     return [fmt % tuple(r) for r in values.tolist()]
 
 
-def sequence_from_positions(name: str, positions: np.ndarray, body_ids: list[int] | None = None,
-                            present: np.ndarray | None = None) -> SkeletonSequence:
+def sequence_from_positions(
+    name: str, positions: np.ndarray, body_ids: list[int] | None = None, present: np.ndarray | None = None
+) -> SkeletonSequence:
     """Build a :class:`SkeletonSequence` from 3-D positions alone (e.g. for synthetic data).
 
     Args:
@@ -412,7 +449,7 @@ def sequence_from_positions(name: str, positions: np.ndarray, body_ids: list[int
     joints = np.zeros((B, T, NUM_JOINTS, JOINT_FIELDS))
     joints[..., 0:3] = positions
     z = np.maximum(positions[..., 2], 0.1)
-    joints[..., 3] = 256.0 + 365.0 * positions[..., 0] / z   # depth camera, ~365 px focal length
+    joints[..., 3] = 256.0 + 365.0 * positions[..., 0] / z  # depth camera, ~365 px focal length
     joints[..., 4] = 212.0 - 365.0 * positions[..., 1] / z
     joints[..., 5] = 960.0 + 1060.0 * positions[..., 0] / z  # colour camera, ~1060 px focal length
     joints[..., 6] = 540.0 - 1060.0 * positions[..., 1] / z
@@ -511,10 +548,10 @@ def track_steadiness(positions: np.ndarray, present: np.ndarray) -> tuple[np.nda
     """
     B = len(positions)
     observed = present.any(axis=0)
-    seen = present[:, observed]                                    # [B, T_obs]
+    seen = present[:, observed]  # [B, T_obs]
     coverage = np.ones(B)
     step = np.zeros(B)
-    centre = positions.mean(axis=2)                                # [B, T, 3]
+    centre = positions.mean(axis=2)  # [B, T, 3]
     for b in range(B):
         idx = np.flatnonzero(seen[b])
         if len(idx):
@@ -526,10 +563,16 @@ def track_steadiness(positions: np.ndarray, present: np.ndarray) -> tuple[np.nda
     return coverage, step
 
 
-def select_main_bodies(seq: SkeletonSequence, max_bodies: int = 2, denoise_spread: bool = True,
-                       spread_threshold: float = SPREAD_THRESHOLD, min_frames: int = MIN_BODY_FRAMES,
-                       denoise_flicker: bool = True, min_span_coverage: float = MIN_SPAN_COVERAGE,
-                       max_median_step: float = MAX_MEDIAN_STEP_M) -> BodySelection:
+def select_main_bodies(
+    seq: SkeletonSequence,
+    max_bodies: int = 2,
+    denoise_spread: bool = True,
+    spread_threshold: float = SPREAD_THRESHOLD,
+    min_frames: int = MIN_BODY_FRAMES,
+    denoise_flicker: bool = True,
+    min_span_coverage: float = MIN_SPAN_COVERAGE,
+    max_median_step: float = MAX_MEDIAN_STEP_M,
+) -> BodySelection:
     """Reduce a file's tracks to its (at most) ``max_bodies`` actors, body 0 first; report every decision.
 
     The rules run in this order, each on the tracks the previous ones left (*candidates*); the
@@ -589,8 +632,9 @@ def select_main_bodies(seq: SkeletonSequence, max_bodies: int = 2, denoise_sprea
         for b in candidates:
             if counts[b] < min_frames:
                 rules[b] = "rescued_short"
-                kept_reasons[b] = [(f"present in only {counts[b]} frames (< {min_frames}), but no track of "
-                                    "the file is longer")]
+                kept_reasons[b] = [
+                    (f"present in only {counts[b]} frames (< {min_frames}), but no track of the file is longer")
+                ]
 
     # 2. spread
     if denoise_spread and len(candidates) > 1:
@@ -600,11 +644,14 @@ def select_main_bodies(seq: SkeletonSequence, max_bodies: int = 2, denoise_sprea
             best = min(candidates, key=lambda b: (noise[b], -counts[b], b))
             wide.remove(best)
             rules[best] = "rescued_spread"
-            kept_reasons.setdefault(best, []).append(f"wider than tall in {noise[best]:.0%} of its frames, like "
-                                                     "every other track: the least wide is kept")
+            kept_reasons.setdefault(best, []).append(
+                f"wider than tall in {noise[best]:.0%} of its frames, like every other track: the least wide is kept"
+            )
         for b in wide:
-            dropped[b], rules[b] = (f"spread denoising: wider than tall in {noise[b]:.0%} of its frames "
-                                    f"(>= {spread_threshold:.3%})"), "spread"
+            dropped[b], rules[b] = (
+                (f"spread denoising: wider than tall in {noise[b]:.0%} of its frames (>= {spread_threshold:.3%})"),
+                "spread",
+            )
         candidates = [b for b in candidates if b not in wide]
 
     # 3. flicker and jumps
@@ -613,16 +660,24 @@ def select_main_bodies(seq: SkeletonSequence, max_bodies: int = 2, denoise_sprea
         unsteady = {}
         for b in candidates:
             if coverage[b] < min_span_coverage:
-                unsteady[b] = ("flicker", (f"flickering: present in {coverage[b]:.0%} of the observed frames "
-                                           f"of its span (< {min_span_coverage:.0%})"))
+                unsteady[b] = (
+                    "flicker",
+                    (
+                        f"flickering: present in {coverage[b]:.0%} of the observed frames "
+                        f"of its span (< {min_span_coverage:.0%})"
+                    ),
+                )
             elif step[b] > max_median_step:
-                unsteady[b] = ("jump", (f"jumping: its centre moves {step[b]:.2f} m a frame (median; "
-                                        f"> {max_median_step:g} m)"))
+                unsteady[b] = (
+                    "jump",
+                    (f"jumping: its centre moves {step[b]:.2f} m a frame (median; > {max_median_step:g} m)"),
+                )
         if len(unsteady) == len(candidates):  # every candidate is unsteady: keep the steadiest
             best = min(candidates, key=lambda b: (-coverage[b], step[b], -counts[b], b))
             rules[best] = "rescued_flicker"
-            kept_reasons.setdefault(best, []).append(f"{unsteady.pop(best)[1]}, like every other track: "
-                                                     "the steadiest is kept")
+            kept_reasons.setdefault(best, []).append(
+                f"{unsteady.pop(best)[1]}, like every other track: the steadiest is kept"
+            )
         for b, (rule, reason) in unsteady.items():
             dropped[b], rules[b] = reason, rule
         candidates = [b for b in candidates if b not in unsteady]
@@ -636,8 +691,7 @@ def select_main_bodies(seq: SkeletonSequence, max_bodies: int = 2, denoise_sprea
     reasons = {}
     for rank, b in enumerate(kept):
         if len(candidates) == 1:
-            why = ("the only track" if seq.num_bodies == 1
-                   else f"the only track left by the rules (of {seq.num_bodies})")
+            why = "the only track" if seq.num_bodies == 1 else f"the only track left by the rules (of {seq.num_bodies})"
         else:
             why = f"motion {motion[b]:.4g}, rank {rank + 1} of {len(candidates)} candidates"
         if b in kept_reasons:  # rescued by a rule: the rule code stays rescued_*

@@ -14,6 +14,7 @@ Every reader in :mod:`mocapkit.datasets.formats` reads its file through :func:`r
 The error raised is the reader's own format error (``error(path, message)``), so callers that
 catch :class:`~mocapkit.datasets.formats.errors.MotionFormatError` see these too.
 """
+
 from __future__ import annotations
 
 import os
@@ -24,12 +25,18 @@ from pathlib import Path
 #: The most bytes a reader reads from one file (1 GiB; ``$MOCAPKIT_MAX_FILE_BYTES`` overrides it).
 MAX_FILE_BYTES = int(os.environ.get("MOCAPKIT_MAX_FILE_BYTES", str(1 << 30)))
 
-_KINDS = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO (named pipe)"), (stat.S_ISCHR, "a character device"),
-          (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"))
+_KINDS = (
+    (stat.S_ISDIR, "a directory"),
+    (stat.S_ISFIFO, "a FIFO (named pipe)"),
+    (stat.S_ISCHR, "a character device"),
+    (stat.S_ISBLK, "a block device"),
+    (stat.S_ISSOCK, "a socket"),
+)
 
 
-def regular_file_size(path: str | os.PathLike, error: Callable[[Path, str], Exception],
-                      max_bytes: int | None = None) -> int:
+def regular_file_size(
+    path: str | os.PathLike, error: Callable[[Path, str], Exception], max_bytes: int | None = None
+) -> int:
     """The size of ``path`` after checking it is a regular file (links followed) of at most ``max_bytes``.
 
     Raises ``error(path, message)`` for a missing or unreadable file, a special file
@@ -48,13 +55,17 @@ def regular_file_size(path: str | os.PathLike, error: Callable[[Path, str], Exce
             target = f" (a link to {os.path.realpath(path)})"
         raise error(path, f"refusing to read {kind}{target}: motion files must be regular files")
     if st.st_size > limit:
-        raise error(path, f"file is {st.st_size} bytes, more than the {limit}-byte limit for one motion file "
-                          "(MOCAPKIT_MAX_FILE_BYTES)")
+        raise error(
+            path,
+            f"file is {st.st_size} bytes, more than the {limit}-byte limit for one motion file "
+            "(MOCAPKIT_MAX_FILE_BYTES)",
+        )
     return int(st.st_size)
 
 
-def read_file_bytes(path: str | os.PathLike, error: Callable[[Path, str], Exception],
-                    max_bytes: int | None = None) -> bytes:
+def read_file_bytes(
+    path: str | os.PathLike, error: Callable[[Path, str], Exception], max_bytes: int | None = None
+) -> bytes:
     """The whole content of a regular file of at most ``max_bytes`` (see :func:`regular_file_size`).
 
     Reads at most the checked size plus one byte, so a file that grows meanwhile (or a

@@ -21,6 +21,7 @@ Batches (as every skeleton data module, :mod:`mocapkit.datasets.datamodule`)::
     indices    int64   [B]               clip index in the sorted listing
     subjects   int64   [B]               performer index (sorted performer names, ``performers``)
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -29,15 +30,15 @@ import numpy as np
 import torch
 
 from mocapkit.datasets.datamodule import SkeletonDataModule
-from mocapkit.motion.layouts import CMU31
-from mocapkit.datasets.mocap.hdm05_classes import merge_25, merge_65
 from mocapkit.datasets.mocap.folders import (
     MocapFolderError,
     held_out_groups,
     list_clips,
     read_clips,
 )
+from mocapkit.datasets.mocap.hdm05_classes import merge_25, merge_65
 from mocapkit.datasets.splits import validation_split
+from mocapkit.motion.layouts import CMU31
 
 #: ``labels=``: how a file's class name becomes a label.
 LABEL_SETS = {"file": lambda name: name, "65": merge_65, "25": merge_25}
@@ -64,14 +65,28 @@ class HDM05ActionDataModule(SkeletonDataModule):
             joints, or performers that the folder does not have.
     """
 
-    def __init__(self, root: str, test_actors=None, train_actors=None, labels: str = "file", fps: float = 30.0,
-                 val_fraction: float = 0.15, val_by_subject: bool = False, batch_size: int = 16,
-                 eval_batch_size: int | None = None, num_workers: int = 0, max_frames: int = 32,
-                 augment: dict | None = None, layout: str = "cmu31", seed: int = 0):
+    def __init__(
+        self,
+        root: str,
+        test_actors=None,
+        train_actors=None,
+        labels: str = "file",
+        fps: float = 30.0,
+        val_fraction: float = 0.15,
+        val_by_subject: bool = False,
+        batch_size: int = 16,
+        eval_batch_size: int | None = None,
+        num_workers: int = 0,
+        max_frames: int = 32,
+        augment: dict | None = None,
+        layout: str = "cmu31",
+        seed: int = 0,
+    ):
         super().__init__()
         if root is None:
-            raise MocapFolderError("data.root is not set: give a folder of HDM05 clips, e.g. "
-                                   "data.root=../shared/data/hdm05_cuts11")
+            raise MocapFolderError(
+                "data.root is not set: give a folder of HDM05 clips, e.g. data.root=../shared/data/hdm05_cuts11"
+            )
         if layout != "cmu31":
             raise ValueError(f"HDM05 skeletons use the cmu31 layout, got data.layout={layout!r}")
         if labels not in LABEL_SETS:
@@ -80,8 +95,9 @@ class HDM05ActionDataModule(SkeletonDataModule):
         self._set_loading(batch_size, eval_batch_size, num_workers, max_frames, augment)
         self.clips = list_clips("hdm05", self.root)
         self.performers = sorted({c["group"] for c in self.clips})
-        self.train_actors, self.test_actors = held_out_groups(self.performers, test_actors, train_actors,
-                                                              "hdm05", self.root)
+        self.train_actors, self.test_actors = held_out_groups(
+            self.performers, test_actors, train_actors, "hdm05", self.root
+        )
         names = [LABEL_SETS[labels](c["class"]) for c in self.clips]
         self._class_names = sorted(set(names))
         lookup = {name: k for k, name in enumerate(self._class_names)}
@@ -90,10 +106,12 @@ class HDM05ActionDataModule(SkeletonDataModule):
         actor_of = np.array([c["group"] for c in self.clips])
         train = np.flatnonzero(np.isin(actor_of, self.train_actors))
         self.test_idx = np.flatnonzero(np.isin(actor_of, self.test_actors))
-        self.train_idx, self.val_idx = validation_split(train, self.subjects, val_fraction=val_fraction, seed=seed,
-                                                        by_subject=val_by_subject)
-        self.sequences = [self._positions(m, c["path"]) for m, c in zip(read_clips(self.clips, fps=self.fps),
-                                                                            self.clips)]
+        self.train_idx, self.val_idx = validation_split(
+            train, self.subjects, val_fraction=val_fraction, seed=seed, by_subject=val_by_subject
+        )
+        self.sequences = [
+            self._positions(m, c["path"]) for m, c in zip(read_clips(self.clips, fps=self.fps), self.clips)
+        ]
 
     @staticmethod
     def _positions(motion, path) -> torch.Tensor:
@@ -114,7 +132,13 @@ class HDM05ActionDataModule(SkeletonDataModule):
 
     def describe(self) -> dict:
         """The fold for reports: performers on each side, the label set, counts."""
-        return {"split": f"hdm05_test_{'+'.join(self.test_actors)}", "data_root": str(self.root),
-                "labels": self.labels_from, "fps": self.fps, "performers": self.performers,
-                "train_actors": self.train_actors, "test_actors": self.test_actors,
-                **self.split_description(np.asarray(self.performers)[self.subjects])}
+        return {
+            "split": f"hdm05_test_{'+'.join(self.test_actors)}",
+            "data_root": str(self.root),
+            "labels": self.labels_from,
+            "fps": self.fps,
+            "performers": self.performers,
+            "train_actors": self.train_actors,
+            "test_actors": self.test_actors,
+            **self.split_description(np.asarray(self.performers)[self.subjects]),
+        }

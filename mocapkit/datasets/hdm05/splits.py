@@ -1,4 +1,5 @@
 """HDM05 cross-actor splits: leave one actor out, or train on k actors (int64 index arrays into the clips given)."""
+
 from __future__ import annotations
 
 import itertools

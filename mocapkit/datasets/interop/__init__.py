@@ -4,6 +4,7 @@
             (:func:`~mocapkit.datasets.interop.pyskl.export_pyskl`,
             :func:`~mocapkit.datasets.interop.pyskl.import_pyskl`; ``mocapkit pyskl export|import``)
 """
+
 from mocapkit.datasets.interop.pyskl import (
     PysklFormatError,
     PysklImportReport,

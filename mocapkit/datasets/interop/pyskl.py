@@ -57,6 +57,7 @@ whose ``find_class`` gives numpy's array reconstruction (``_reconstruct``, ``_fr
 ``_codecs.encode`` (protocol-2 pickles, as mmcv writes them, store bytes that way) and refuses
 anything else with :class:`PysklFormatError` naming the global.
 """
+
 from __future__ import annotations
 
 import codecs
@@ -86,8 +87,16 @@ from mocapkit.datasets.ntu.splits import NTU60_MAX_SETUP, SPLITS, split_indices
 from mocapkit.datasets.prepare_report import PrepareReportBase
 from mocapkit.io_atomic import atomic_open, atomic_write_text
 
-__all__ = ["PYSKL_SPLITS", "PYSKL_SPLIT_FILE", "PysklFormatError", "PysklImportReport", "RestrictedUnpickler",
-           "export_pyskl", "import_pyskl", "load_pyskl"]
+__all__ = [
+    "PYSKL_SPLITS",
+    "PYSKL_SPLIT_FILE",
+    "PysklFormatError",
+    "PysklImportReport",
+    "RestrictedUnpickler",
+    "export_pyskl",
+    "import_pyskl",
+    "load_pyskl",
+]
 
 #: pyskl's split names -> mocapkit protocols, per benchmark (as in pyskl's ``ntu60_3danno.pkl`` / ``ntu120_3danno.pkl``).
 PYSKL_SPLITS: dict[str, dict[str, str]] = {
@@ -113,9 +122,9 @@ class PysklFormatError(MotionFormatError):
 
 # --------------------------------------------------------------------------- safe loading
 
-_RECONSTRUCT = np.empty(0).__reduce__()[0]          # numpy.(_)core.multiarray._reconstruct
-_SCALAR = np.float32(0).__reduce__()[0]             # numpy.(_)core.multiarray.scalar
-_FROMBUFFER = np.empty(1).__reduce_ex__(5)[0]       # numpy.(_)core.numeric._frombuffer (protocol 5)
+_RECONSTRUCT = np.empty(0).__reduce__()[0]  # numpy.(_)core.multiarray._reconstruct
+_SCALAR = np.float32(0).__reduce__()[0]  # numpy.(_)core.multiarray.scalar
+_FROMBUFFER = np.empty(1).__reduce_ex__(5)[0]  # numpy.(_)core.numeric._frombuffer (protocol 5)
 
 #: ``(module, name)`` -> object: everything a pickle of dicts, lists, str, numbers and numpy arrays names,
 #: under the module names numpy 1.x and 2.x and Python 2-era protocols use.
@@ -147,9 +156,12 @@ class RestrictedUnpickler(pickle.Unpickler):
         try:
             return _ALLOWED_GLOBALS[(module, name)]
         except KeyError:
-            raise PysklFormatError(self.path, f"refused to load the global {module}.{name}: a pyskl pickle holds "
-                                              "only dicts, lists, strings, numbers and numpy arrays, and loading "
-                                              "anything else could run code") from None
+            raise PysklFormatError(
+                self.path,
+                f"refused to load the global {module}.{name}: a pyskl pickle holds "
+                "only dicts, lists, strings, numbers and numpy arrays, and loading "
+                "anything else could run code",
+            ) from None
 
     def persistent_load(self, pid):
         raise PysklFormatError(self.path, "refused a persistent ID: not a plain pyskl pickle")
@@ -218,21 +230,25 @@ def _resolve_splits(splits: str | Mapping[str, str] | None, cache: NTUCache) -> 
         splits = "ntu120" if ntu120 else "ntu60"
     if isinstance(splits, str):
         if splits not in PYSKL_SPLITS:
-            raise ValueError(f"splits={splits!r}: expected one of {', '.join(PYSKL_SPLITS)}, "
-                             "or a mapping {pyskl name: mocapkit split}")
+            raise ValueError(
+                f"splits={splits!r}: expected one of {', '.join(PYSKL_SPLITS)}, "
+                "or a mapping {pyskl name: mocapkit split}"
+            )
         return dict(PYSKL_SPLITS[splits])
     mapping = dict(splits)
     for name, protocol in mapping.items():
         if not isinstance(name, str) or not name:
             raise ValueError(f"splits: pyskl split names must be non-empty strings, got {name!r}")
         if protocol not in SPLITS or protocol == "custom":
-            raise ValueError(f"splits[{name!r}] = {protocol!r}: expected one of "
-                             f"{', '.join(s for s in SPLITS if s != 'custom')}")
+            raise ValueError(
+                f"splits[{name!r}] = {protocol!r}: expected one of {', '.join(s for s in SPLITS if s != 'custom')}"
+            )
     return mapping
 
 
-def export_pyskl(cache_root: str | os.PathLike, out_pkl: str | os.PathLike,
-                 splits: str | Mapping[str, str] | None = None) -> dict:
+def export_pyskl(
+    cache_root: str | os.PathLike, out_pkl: str | os.PathLike, splits: str | Mapping[str, str] | None = None
+) -> dict:
     """Write the NTU cache at ``cache_root`` as a pyskl annotation pickle ``out_pkl`` (atomically).
 
     Args:
@@ -267,15 +283,23 @@ def export_pyskl(cache_root: str | os.PathLike, out_pkl: str | os.PathLike,
             present = np.flatnonzero(block.reshape(len(block), -1).any(axis=1))
             m = int(present[-1]) + 1 if len(present) else 1
             persons[m] = persons.get(m, 0) + 1
-            yield {"frame_dir": name, "label": int(cache.labels[i]),
-                   "keypoint": np.ascontiguousarray(block[:m], dtype=np.float32),
-                   "total_frames": int(block.shape[1])}
+            yield {
+                "frame_dir": name,
+                "label": int(cache.labels[i]),
+                "keypoint": np.ascontiguousarray(block[:m], dtype=np.float32),
+                "total_frames": int(block.shape[1]),
+            }
 
     with atomic_open(out_pkl, "wb") as f:
         _PysklPickler(f).dump({"split": split, "annotations": _Stream(annotations)})
-    return {"out": str(out_pkl), "num_samples": len(names), "total_frames": int(cache.lengths.sum()),
-            "protocols": protocols, "split": {k: len(v) for k, v in split.items()},
-            "persons": dict(sorted(persons.items()))}
+    return {
+        "out": str(out_pkl),
+        "num_samples": len(names),
+        "total_frames": int(cache.lengths.sum()),
+        "protocols": protocols,
+        "split": {k: len(v) for k, v in split.items()},
+        "persons": dict(sorted(persons.items())),
+    }
 
 
 # --------------------------------------------------------------------------- import
@@ -311,35 +335,65 @@ class PysklImportReport(PrepareReportBase):
     seconds: float = 0.0
 
     def totals(self) -> dict:
-        totals = {"annotations_found": self.annotations_found, "samples_written": self.samples_written,
-                  "total_frames": self.total_frames, "skipped": len(self.skipped)}
+        totals = {
+            "annotations_found": self.annotations_found,
+            "samples_written": self.samples_written,
+            "total_frames": self.total_frames,
+            "skipped": len(self.skipped),
+        }
         for reason in sorted({s["reason"] for s in self.skipped}):
             totals[f"skipped_{reason}"] = self.count(reason)
         totals["seconds"] = round(self.seconds, 3)
         return totals
 
     def to_dict(self) -> dict:
-        return {"out": self.out, "pickle": self.pickle, "totals": self.totals(), "skipped": self.skipped,
-                "ignored_keys": self.ignored_keys, "persons": {str(k): v for k, v in self.persons.items()},
-                "pyskl_split": self.pyskl_split}
+        return {
+            "out": self.out,
+            "pickle": self.pickle,
+            "totals": self.totals(),
+            "skipped": self.skipped,
+            "ignored_keys": self.ignored_keys,
+            "persons": {str(k): v for k, v in self.persons.items()},
+            "pyskl_split": self.pyskl_split,
+        }
 
     def _text_title(self) -> list[str]:
         return [f"pyskl import report for {self.out}", f"from {self.pickle}"]
 
     def _text_sections(self) -> list[tuple[str, int, list[str]]]:
         agrees = self.pyskl_split.get("agrees_with", {})
-        return [("Skipped annotations", len(self.skipped),
-                 [f"  [{s['reason']}] annotations[{s['index']}] ({s['frame_dir']}): {s['message']}"
-                  for s in self.skipped]),
-                ("Annotation keys not kept", len(self.ignored_keys),
-                 [f"  {k}: in {n} annotations" for k, n in self.ignored_keys.items()]),
-                ("Persons per sample (M)", len(self.persons),
-                 [f"  M={m}: {n} samples" for m, n in sorted(self.persons.items())]),
-                (f"pyskl split lists (in {PYSKL_SPLIT_FILE})", len(self.pyskl_split.get("lists", {})),
-                 [f"  {k}: {v['count']} names, {len(v['not_imported'])} not imported"
-                  for k, v in self.pyskl_split.get("lists", {}).items()]
-                 + [f"  {k} equals mocapkit's {', '.join(v) if v else 'no protocol'} on the imported samples"
-                    for k, v in agrees.items()])]
+        return [
+            (
+                "Skipped annotations",
+                len(self.skipped),
+                [
+                    f"  [{s['reason']}] annotations[{s['index']}] ({s['frame_dir']}): {s['message']}"
+                    for s in self.skipped
+                ],
+            ),
+            (
+                "Annotation keys not kept",
+                len(self.ignored_keys),
+                [f"  {k}: in {n} annotations" for k, n in self.ignored_keys.items()],
+            ),
+            (
+                "Persons per sample (M)",
+                len(self.persons),
+                [f"  M={m}: {n} samples" for m, n in sorted(self.persons.items())],
+            ),
+            (
+                f"pyskl split lists (in {PYSKL_SPLIT_FILE})",
+                len(self.pyskl_split.get("lists", {})),
+                [
+                    f"  {k}: {v['count']} names, {len(v['not_imported'])} not imported"
+                    for k, v in self.pyskl_split.get("lists", {}).items()
+                ]
+                + [
+                    f"  {k} equals mocapkit's {', '.join(v) if v else 'no protocol'} on the imported samples"
+                    for k, v in agrees.items()
+                ],
+            ),
+        ]
 
 
 class _BadItem(Exception):
@@ -358,8 +412,11 @@ def _check_annotation(item, max_bodies: int) -> tuple[str, np.ndarray]:
         raise _BadItem("not_a_dict", f"expected a dict, found {type(item).__name__}")
     absent = [k for k in ANNOTATION_KEYS if k not in item]
     if absent:
-        raise _BadItem("missing_key", f"missing key{'s' if len(absent) > 1 else ''} {', '.join(absent)} "
-                                      f"(an annotation holds {', '.join(ANNOTATION_KEYS)})")
+        raise _BadItem(
+            "missing_key",
+            f"missing key{'s' if len(absent) > 1 else ''} {', '.join(absent)} "
+            f"(an annotation holds {', '.join(ANNOTATION_KEYS)})",
+        )
     name = item["frame_dir"]
     try:
         ok = isinstance(name, str) and str(parse_ntu_name(name)) == name
@@ -369,8 +426,10 @@ def _check_annotation(item, max_bodies: int) -> tuple[str, np.ndarray]:
         raise _BadItem("bad_name", f"frame_dir {name!r} is not an NTU sample name SsssCcccPpppRrrrAaaa")
     label, action = item["label"], parse_ntu_name(name).action
     if not _is_int(label) or int(label) != action - 1:
-        raise _BadItem("bad_label", f"label {label!r} does not match the action A{action:03d} of the name "
-                                    f"(expected {action - 1}, 0-based)")
+        raise _BadItem(
+            "bad_label",
+            f"label {label!r} does not match the action A{action:03d} of the name (expected {action - 1}, 0-based)",
+        )
     keypoint = item["keypoint"]
     if not isinstance(keypoint, np.ndarray):
         raise _BadItem("bad_keypoint", f"keypoint is a {type(keypoint).__name__}, expected a numpy array")
@@ -378,18 +437,27 @@ def _check_annotation(item, max_bodies: int) -> tuple[str, np.ndarray]:
         raise _BadItem("bad_keypoint", f"keypoint has shape {list(keypoint.shape)}, expected 4 axes [M, T, V, C]")
     m, t, v, c = keypoint.shape
     if c == 2:
-        raise _BadItem("bad_keypoint", f"keypoint has C=2 (shape {list(keypoint.shape)}): a 2D pickle; "
-                                       "only 3D pickles (C=3, x y z in metres) are supported")
+        raise _BadItem(
+            "bad_keypoint",
+            f"keypoint has C=2 (shape {list(keypoint.shape)}): a 2D pickle; "
+            "only 3D pickles (C=3, x y z in metres) are supported",
+        )
     if c != 3 or v != NUM_JOINTS:
-        raise _BadItem("bad_keypoint", f"keypoint has shape {list(keypoint.shape)}, expected [M, T, {NUM_JOINTS}, 3] "
-                                       f"(V={NUM_JOINTS} NTU joints, C=3)")
+        raise _BadItem(
+            "bad_keypoint",
+            f"keypoint has shape {list(keypoint.shape)}, expected [M, T, {NUM_JOINTS}, 3] "
+            f"(V={NUM_JOINTS} NTU joints, C=3)",
+        )
     if keypoint.dtype.kind != "f":
         raise _BadItem("bad_keypoint", f"keypoint has dtype {keypoint.dtype}, expected floats")
     if m == 0:
         raise _BadItem("bad_keypoint", "keypoint has M=0 persons; an empty sample is one body of zeros")
     if m > max_bodies:
-        raise _BadItem("too_many_bodies", f"keypoint has M={m} persons, more than max_bodies={max_bodies} "
-                                          "(pyskl keeps 2; import with a larger max_bodies to keep them all)")
+        raise _BadItem(
+            "too_many_bodies",
+            f"keypoint has M={m} persons, more than max_bodies={max_bodies} "
+            "(pyskl keeps 2; import with a larger max_bodies to keep them all)",
+        )
     total = item["total_frames"]
     if not _is_int(total) or int(total) != t:
         raise _BadItem("bad_total_frames", f"total_frames {total!r} differs from the {t} frames of keypoint")
@@ -413,13 +481,14 @@ def _split_summary(split: Mapping, rows: Mapping[str, list]) -> dict:
     """``meta["pyskl_split"]`` without the file record: per list its count and the names not imported,
     per pyskl protocol the mocapkit protocols that give the same train / val names on the imported samples."""
     imported = set(rows["names"])
-    lists = {key: {"count": len(names), "not_imported": sorted(set(names) - imported)}
-             for key, names in split.items()}
+    lists = {key: {"count": len(names), "not_imported": sorted(set(names) - imported)} for key, names in split.items()}
     data = {k: np.asarray(rows[k], dtype=np.int64) for k in ("subjects", "cameras", "setups")}
     names = np.asarray(rows["names"])
     agrees: dict[str, list[str]] = {}
-    prefixes = sorted({k[:-len("_train")] for k in split if k.endswith("_train")}
-                      & {k[:-len("_val")] for k in split if k.endswith("_val")})
+    prefixes = sorted(
+        {k[: -len("_train")] for k in split if k.endswith("_train")}
+        & {k[: -len("_val")] for k in split if k.endswith("_val")}
+    )
     for prefix in prefixes:
         train, val = set(split[f"{prefix}_train"]) & imported, set(split[f"{prefix}_val"]) & imported
         agrees[prefix] = []
@@ -430,8 +499,13 @@ def _split_summary(split: Mapping, rows: Mapping[str, list]) -> dict:
     return {"lists": lists, "agrees_with": agrees}
 
 
-def import_pyskl(pkl: str | os.PathLike, out_cache: str | os.PathLike, skip_bad: bool = False, max_bodies: int = 2,
-                 class_names: Sequence[str] | str | os.PathLike | None = None) -> PysklImportReport:
+def import_pyskl(
+    pkl: str | os.PathLike,
+    out_cache: str | os.PathLike,
+    skip_bad: bool = False,
+    max_bodies: int = 2,
+    class_names: Sequence[str] | str | os.PathLike | None = None,
+) -> PysklImportReport:
     """Write the pyskl 3D annotation pickle ``pkl`` as an NTU cache in ``out_cache`` (see the module docstring).
 
     Args:
@@ -462,8 +536,11 @@ def import_pyskl(pkl: str | os.PathLike, out_cache: str | os.PathLike, skip_bad:
         raise PysklFormatError(pkl, f"expected a dict with 'split' and 'annotations', found {type(data).__name__}")
     absent = [k for k in ("split", "annotations") if k not in data]
     if absent:
-        raise PysklFormatError(pkl, f"missing top-level key{'s' if len(absent) > 1 else ''} {', '.join(absent)} "
-                                    f"(found {', '.join(map(repr, data)) or 'none'})")
+        raise PysklFormatError(
+            pkl,
+            f"missing top-level key{'s' if len(absent) > 1 else ''} {', '.join(absent)} "
+            f"(found {', '.join(map(repr, data)) or 'none'})",
+        )
     for key in data:
         if key not in ("split", "annotations"):
             report.ignored_keys[f"(top level) {key}"] = 1
@@ -492,16 +569,23 @@ def import_pyskl(pkl: str | os.PathLike, out_cache: str | os.PathLike, skip_bad:
             message = f"annotations[{i}] (frame_dir {frame_dir!r}): {bad}"
             if not skip_bad:
                 raise PysklFormatError(pkl, message) from None
-            report.skipped.append({"index": i, "frame_dir": frame_dir if isinstance(frame_dir, str) else None,
-                                   "reason": bad.reason, "message": str(bad)})
+            report.skipped.append(
+                {
+                    "index": i,
+                    "frame_dir": frame_dir if isinstance(frame_dir, str) else None,
+                    "reason": bad.reason,
+                    "message": str(bad),
+                }
+            )
             continue
         good[name] = keypoint
         for key in item:
             if key not in ANNOTATION_KEYS:
                 report.ignored_keys[str(key)] = report.ignored_keys.get(str(key), 0) + 1
     if not good:
-        raise PysklFormatError(pkl, f"none of the {len(annotations)} annotations can be imported "
-                                    f"(first: {report.skipped[0]['message']})")
+        raise PysklFormatError(
+            pkl, f"none of the {len(annotations)} annotations can be imported (first: {report.skipped[0]['message']})"
+        )
 
     top = max(parse_ntu_name(name).label for name in good)
     if class_names is not None and top >= len(class_names):
@@ -516,18 +600,26 @@ def import_pyskl(pkl: str | os.PathLike, out_cache: str | os.PathLike, skip_bad:
     rows: dict[str, list] = {k: [] for k in INDEX_KEYS}
     positions_path = out / POSITIONS_FILE
     try:
-        positions = np.lib.format.open_memmap(positions_path, mode="w+", dtype=np.float32,
-                                              shape=(total, max_bodies, NUM_JOINTS, 3))
+        positions = np.lib.format.open_memmap(
+            positions_path, mode="w+", dtype=np.float32, shape=(total, max_bodies, NUM_JOINTS, 3)
+        )
         cursor = 0
         for name in order:
             keypoint = good[name]  # [M, T, 25, 3]
             m, length = keypoint.shape[:2]
-            positions[cursor:cursor + length, :m] = keypoint.transpose(1, 0, 2, 3)
+            positions[cursor : cursor + length, :m] = keypoint.transpose(1, 0, 2, 3)
             report.persons[m] = report.persons.get(m, 0) + 1
             sample = parse_ntu_name(name)
-            for key, value in (("names", name), ("offsets", cursor), ("lengths", length), ("labels", sample.label),
-                               ("subjects", sample.subject), ("cameras", sample.camera), ("setups", sample.setup),
-                               ("replications", sample.replication)):
+            for key, value in (
+                ("names", name),
+                ("offsets", cursor),
+                ("lengths", length),
+                ("labels", sample.label),
+                ("subjects", sample.subject),
+                ("cameras", sample.camera),
+                ("setups", sample.setup),
+                ("replications", sample.replication),
+            ):
                 rows[key].append(value)
             cursor += length
         positions.flush()
@@ -539,13 +631,23 @@ def import_pyskl(pkl: str | os.PathLike, out_cache: str | os.PathLike, skip_bad:
 
     split_plain = {str(k): list(v) for k, v in split.items()}
     atomic_write_text(out / PYSKL_SPLIT_FILE, json.dumps(split_plain, indent=1) + "\n")
-    report.pyskl_split = {"file": PYSKL_SPLIT_FILE, "sha256": sha256_of(out / PYSKL_SPLIT_FILE),
-                          **_split_summary(split_plain, rows)}
+    report.pyskl_split = {
+        "file": PYSKL_SPLIT_FILE,
+        "sha256": sha256_of(out / PYSKL_SPLIT_FILE),
+        **_split_summary(split_plain, rows),
+    }
     report.samples_written = len(order)
     report.total_frames = total
     report.seconds = time.perf_counter() - started
     report.write(out)
-    write_index_and_meta(out, rows, source=str(pkl.resolve()), max_bodies=max_bodies, class_names=class_names,
-                         options={"imported_from": "pyskl", "max_bodies": max_bodies, "skip_bad": skip_bad},
-                         totals=report.totals(), extra={"pyskl_split": report.pyskl_split})
+    write_index_and_meta(
+        out,
+        rows,
+        source=str(pkl.resolve()),
+        max_bodies=max_bodies,
+        class_names=class_names,
+        options={"imported_from": "pyskl", "max_bodies": max_bodies, "skip_bad": skip_bad},
+        totals=report.totals(),
+        extra={"pyskl_split": report.pyskl_split},
+    )
     return report

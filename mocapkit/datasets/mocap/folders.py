@@ -14,6 +14,7 @@ dataset    files under ``root``                                        group (th
 The layout of ``../shared/data`` (and its SOURCES.md) is what these patterns follow; HDM05 and CMU share the
 31-joint ASF skeleton (``cmu31``), Bandai has its own 22-joint BVH skeleton.
 """
+
 from __future__ import annotations
 
 import re
@@ -22,9 +23,11 @@ from pathlib import Path
 
 DATASETS = ("hdm05", "cmu", "bandai")
 #: How each data set's files are found and grouped (see the module docstring).
-FILE_PATTERNS = {"hdm05": "HDM_<actor>_<class>_<nnn>_<fps>.amc or <class>_<actor>_<nnn>.amc, with HDM_<actor>.asf",
-                 "cmu": "NN_MM.amc with NN.asf beside it",
-                 "bandai": "dataset-1_<content>_<style>_<nnn>.bvh"}
+FILE_PATTERNS = {
+    "hdm05": "HDM_<actor>_<class>_<nnn>_<fps>.amc or <class>_<actor>_<nnn>.amc, with HDM_<actor>.asf",
+    "cmu": "NN_MM.amc with NN.asf beside it",
+    "bandai": "dataset-1_<content>_<style>_<nnn>.bvh",
+}
 
 
 class MocapFolderError(ValueError):
@@ -84,19 +87,23 @@ def read_clips(clips: list[dict], fps: float | None = None, progress: bool = Fal
             raise MocapFolderError(f"cannot read {clip['path']}: {exc}") from exc
         if fps is not None:
             motion = motion.resample(float(fps))
-        motion = replace(motion, rotations=None, metadata={**motion.metadata, "group": clip["group"],
-                                                             "class": clip["class"]})
+        motion = replace(
+            motion, rotations=None, metadata={**motion.metadata, "group": clip["group"], "class": clip["class"]}
+        )
         if motions and motion.joint_names != motions[0].joint_names:
-            raise MocapFolderError(f"{clip['path']} has joints {list(motion.joint_names)[:5]}..., not those of "
-                                   f"{clips[0]['path']}; one skeleton layout per data set")
+            raise MocapFolderError(
+                f"{clip['path']} has joints {list(motion.joint_names)[:5]}..., not those of "
+                f"{clips[0]['path']}; one skeleton layout per data set"
+            )
         motions.append(motion)
         if progress and (n % 50 == 0 or n == len(clips)):
             print(f"[mocapkit] read {n}/{len(clips)} clips", flush=True)
     return motions
 
 
-def held_out_groups(groups, test_groups=None, train_groups=None, dataset: str = "", root=None
-                    ) -> tuple[list[str], list[str]]:
+def held_out_groups(
+    groups, test_groups=None, train_groups=None, dataset: str = "", root=None
+) -> tuple[list[str], list[str]]:
     """``(train, test)`` groups of a fold: ``test_groups`` (one group or a list; None: the first of ``groups``) and
     ``train_groups`` (None: every other group), checked against ``groups`` (the data's groups, sorted).
 
@@ -110,8 +117,10 @@ def held_out_groups(groups, test_groups=None, train_groups=None, dataset: str = 
         test = [str(g) for g in ([test_groups] if isinstance(test_groups, (str, int)) else test_groups)]
     unknown = [g for g in [*test, *(train_groups or [])] if str(g) not in groups]
     if unknown:
-        raise MocapFolderError(f"data.test_groups / data.train_groups: {unknown} are not groups of {dataset} under "
-                               f"{root} (groups: {groups})")
+        raise MocapFolderError(
+            f"data.test_groups / data.train_groups: {unknown} are not groups of {dataset} under "
+            f"{root} (groups: {groups})"
+        )
     train = [str(g) for g in train_groups] if train_groups else [g for g in groups if g not in test]
     overlap = sorted(set(train) & set(test))
     if overlap:

@@ -25,6 +25,7 @@ the data file follows and the tests check:
 Label indices are 0-based, in the order of first appearance in the (alphabetical)
 130-class list. Splits return int64 index arrays into the list of clips given.
 """
+
 from __future__ import annotations
 
 import os
@@ -106,9 +107,9 @@ def parse_clip_name(name: str | os.PathLike, strict: bool = True) -> HDM05ClipNa
 
 def merge_65(cls: str) -> str:
     """The 65-class name of a 130-class name (module docstring for the rule), e.g. ``punchLFront2Reps`` → ``punchLFront``."""
-    s = re.sub(r"\d+(Reps|hops|Steps)", "", cls)                       # repetition / hop / step counts
-    s = re.sub(r"\d*[LR](Hand|elbow)?[Ss]tart$", "", s)                # which hand/elbow/foot starts
-    s = re.sub(r"Start(Air|Floor)", "", s)                             # start pose of on-place jog/run
+    s = re.sub(r"\d+(Reps|hops|Steps)", "", cls)  # repetition / hop / step counts
+    s = re.sub(r"\d*[LR](Hand|elbow)?[Ss]tart$", "", s)  # which hand/elbow/foot starts
+    s = re.sub(r"Start(Air|Floor)", "", s)  # start pose of on-place jog/run
     s = re.sub(r"^(throw(?:Sitting|Standing))(?:High|Low)R$", r"\1R", s)  # height of the two throws
     return s
 

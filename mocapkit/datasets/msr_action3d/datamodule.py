@@ -10,6 +10,7 @@ The same contract as :class:`~mocapkit.datasets.ntu.datamodule.NTUDataModule`: b
 
 Missing joints and frames are zeros (every model here treats zeros as absent).
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -42,16 +43,31 @@ class MSRAction3DDataModule(SkeletonDataModule):
         layout: the skeleton layout of the batches; always ``msr20`` (configs read it as ``data.layout``).
     """
 
-    def __init__(self, root: str, split: str = "cross_subject", subset: str | None = None,
-                 train_subjects: list[int] | None = None, test_subjects: list[int] | None = None,
-                 split_seed: int = 0, val_fraction: float = 0.2, val_by_subject: bool = True,
-                 batch_size: int = 32, eval_batch_size: int | None = None, num_workers: int = 0,
-                 max_frames: int = 128, augment: dict | None = None, drop_missing_frames: bool = False,
-                 layout: str = "msr20", seed: int = 0):
+    def __init__(
+        self,
+        root: str,
+        split: str = "cross_subject",
+        subset: str | None = None,
+        train_subjects: list[int] | None = None,
+        test_subjects: list[int] | None = None,
+        split_seed: int = 0,
+        val_fraction: float = 0.2,
+        val_by_subject: bool = True,
+        batch_size: int = 32,
+        eval_batch_size: int | None = None,
+        num_workers: int = 0,
+        max_frames: int = 128,
+        augment: dict | None = None,
+        drop_missing_frames: bool = False,
+        layout: str = "msr20",
+        seed: int = 0,
+    ):
         super().__init__()
         if root is None:
-            raise ValueError("data.root is not set: give the MSR Action3D skeleton folder, "
-                             "e.g. data.root=../shared/data/msr_action3d")
+            raise ValueError(
+                "data.root is not set: give the MSR Action3D skeleton folder, "
+                "e.g. data.root=../shared/data/msr_action3d"
+            )
         if layout != "msr20":
             raise ValueError(f"MSR Action3D skeletons use the msr20 layout, got data.layout={layout!r}")
         self.root = Path(root)
@@ -64,16 +80,19 @@ class MSRAction3DDataModule(SkeletonDataModule):
         self.actions = subset_actions(subset)
         lookup = {a: k for k, a in enumerate(self.actions)}
         self.labels = np.array([lookup.get(int(a), -1) for a in self.data.actions], dtype=np.int64)
-        train, test = msr_split_indices(self.data, split, subset=subset, train_subjects=train_subjects,
-                                        test_subjects=test_subjects, seed=split_seed)
-        self.train_idx, self.val_idx = validation_split(train, self.data.subjects, val_fraction=val_fraction,
-                                                        seed=seed, by_subject=val_by_subject)
+        train, test = msr_split_indices(
+            self.data, split, subset=subset, train_subjects=train_subjects, test_subjects=test_subjects, seed=split_seed
+        )
+        self.train_idx, self.val_idx = validation_split(
+            train, self.data.subjects, val_fraction=val_fraction, seed=seed, by_subject=val_by_subject
+        )
         self.test_idx = test
         self.subjects = np.asarray(self.data.subjects, dtype=np.int64)
         used = np.concatenate([self.train_idx, self.val_idx, self.test_idx])
-        self.sequences = {int(i): torch.from_numpy(np.ascontiguousarray(self.data.positions(int(i),
-                                                                                           drop_missing_frames)))
-                          for i in used}
+        self.sequences = {
+            int(i): torch.from_numpy(np.ascontiguousarray(self.data.positions(int(i), drop_missing_frames)))
+            for i in used
+        }
 
     @property
     def num_classes(self) -> int:
@@ -86,6 +105,11 @@ class MSRAction3DDataModule(SkeletonDataModule):
     def describe(self) -> dict:
         """The protocol for reports: split, subset, subjects on each side, sample counts, exclusions."""
         subjects = self.data.subjects
-        return {"split": self.split if not self.subset else f"{self.subset}_{self.split}",
-                "subset": self.subset, "actions": list(self.actions), "data_root": str(self.root),
-                "excluded": dict(self.data.excluded), **self.split_description(subjects)}
+        return {
+            "split": self.split if not self.subset else f"{self.subset}_{self.split}",
+            "subset": self.subset,
+            "actions": list(self.actions),
+            "data_root": str(self.root),
+            "excluded": dict(self.data.excluded),
+            **self.split_description(subjects),
+        }

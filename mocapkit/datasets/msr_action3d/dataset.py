@@ -3,6 +3,7 @@
 The file format is read by :func:`mocapkit.datasets.formats.msr_action3d.read_msr_skeleton`; the
 evaluation protocols are in :mod:`mocapkit.datasets.msr_action3d.splits`.
 """
+
 from __future__ import annotations
 
 import logging
@@ -10,16 +11,33 @@ from pathlib import Path
 
 import numpy as np
 
-from mocapkit.motion.container import Motion
 from mocapkit.datasets.formats.msr_action3d import MSRFormatError, MSRSampleName, parse_msr_name, read_msr_skeleton
+from mocapkit.motion.container import Motion
 
 log = logging.getLogger(__name__)
 
 #: The 20 actions in file order (a01 ... a20), as named by Li et al. 2010.
 ACTION_NAMES: tuple[str, ...] = (
-    "high arm wave", "horizontal arm wave", "hammer", "hand catch", "forward punch", "high throw",
-    "draw x", "draw tick", "draw circle", "hand clap", "two hand wave", "side-boxing", "bend",
-    "forward kick", "side kick", "jogging", "tennis swing", "tennis serve", "golf swing", "pick up & throw",
+    "high arm wave",
+    "horizontal arm wave",
+    "hammer",
+    "hand catch",
+    "forward punch",
+    "high throw",
+    "draw x",
+    "draw tick",
+    "draw circle",
+    "hand clap",
+    "two hand wave",
+    "side-boxing",
+    "bend",
+    "forward kick",
+    "side kick",
+    "jogging",
+    "tennis swing",
+    "tennis serve",
+    "golf swing",
+    "pick up & throw",
 )
 
 #: The three 8-action subsets (1-based action IDs) of Li, Zhang & Liu, "Action recognition based on
@@ -32,6 +50,7 @@ ACTION_SUBSETS: dict[str, tuple[int, ...]] = {
     "AS2": (1, 4, 7, 8, 9, 11, 12, 14),
     "AS3": (6, 14, 15, 16, 17, 18, 19, 20),
 }
+
 
 class MSRAction3D:
     """All skeleton files of an MSR Action3D folder, read into memory once.
@@ -107,8 +126,11 @@ class MSRAction3D:
 
     def summary(self) -> dict:
         """Counts for reports: files listed, kept, excluded (with reasons), frames, per subject and action."""
-        return {"listed": self.listed, "kept": len(self), "excluded": dict(self.excluded),
-                "frames": int(sum(m.num_frames for m in self.motions)),
-                "per_subject": {int(s): int((self.subjects == s).sum()) for s in np.unique(self.subjects)},
-                "per_action": {int(a): int((self.actions == a).sum()) for a in np.unique(self.actions)}}
-
+        return {
+            "listed": self.listed,
+            "kept": len(self),
+            "excluded": dict(self.excluded),
+            "frames": int(sum(m.num_frames for m in self.motions)),
+            "per_subject": {int(s): int((self.subjects == s).sum()) for s in np.unique(self.subjects)},
+            "per_action": {int(a): int((self.actions == a).sum()) for a in np.unique(self.actions)},
+        }

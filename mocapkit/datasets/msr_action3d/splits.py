@@ -8,6 +8,7 @@ Protocols (Li, Zhang & Liu 2010; Wang et al. 2012):
 * ``subset``: ``AS1`` / ``AS2`` / ``AS3``, the 8-action subsets of Li et al. 2010
   (:data:`ACTION_SUBSETS`), combined with either split.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -21,9 +22,16 @@ CROSS_SUBJECT_TEST: tuple[int, ...] = (2, 4, 6, 8, 10)
 
 MSR_SPLITS = ("cross_subject", "random_half")
 
-def msr_split_indices(data, split: str = "cross_subject", subset: str | None = None,
-                      train_subjects=None, test_subjects=None, seed: int = 0,
-                      train_fraction: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
+
+def msr_split_indices(
+    data,
+    split: str = "cross_subject",
+    subset: str | None = None,
+    train_subjects=None,
+    test_subjects=None,
+    seed: int = 0,
+    train_fraction: float = 0.5,
+) -> tuple[np.ndarray, np.ndarray]:
     """Sample indices ``(train_idx, test_idx)`` of an MSR Action3D protocol (sorted int64).
 
     Args:
@@ -38,9 +46,12 @@ def msr_split_indices(data, split: str = "cross_subject", subset: str | None = N
     actions, subjects = _ints(data, "actions"), _ints(data, "subjects")
     in_subset = np.isin(actions, subset_actions(subset)) if subset else np.ones(len(actions), dtype=bool)
     if split == "cross_subject":
-        train, test = subject_masks(subjects, CROSS_SUBJECT_TRAIN if train_subjects is None else train_subjects,
-                                    CROSS_SUBJECT_TEST if test_subjects is None else test_subjects,
-                                    label="cross_subject")
+        train, test = subject_masks(
+            subjects,
+            CROSS_SUBJECT_TRAIN if train_subjects is None else train_subjects,
+            CROSS_SUBJECT_TEST if test_subjects is None else test_subjects,
+            label="cross_subject",
+        )
         train, test = in_subset & train, in_subset & test
         return np.flatnonzero(train), np.flatnonzero(test)
     if train_subjects is not None or test_subjects is not None:
@@ -49,7 +60,7 @@ def msr_split_indices(data, split: str = "cross_subject", subset: str | None = N
         raise ValueError(f"train_fraction must be between 0 and 1 (exclusive), got {train_fraction}")
     rng = np.random.default_rng(seed)
     train = []
-    for action in np.unique(actions[in_subset]):      # sorted, so the draw depends on the seed only
+    for action in np.unique(actions[in_subset]):  # sorted, so the draw depends on the seed only
         members = np.flatnonzero(in_subset & (actions == action))
         n_train = min(max(round(train_fraction * len(members)), 1), len(members) - 1)
         train.extend(rng.choice(members, size=n_train, replace=False).tolist())

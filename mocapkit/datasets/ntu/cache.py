@@ -6,6 +6,7 @@ full NTU-120 cache is instant and costs no RAM. An :class:`NTUCache` pickles
 without its memmap (cheap to send to DataLoader workers) and reopens it on first
 use in each process.
 """
+
 from __future__ import annotations
 
 import os
@@ -46,20 +47,27 @@ class NTUCache(PreparedCache):
         bad = np.flatnonzero((offsets < 0) | (lengths < 0) | (offsets + lengths > rows))
         if len(bad):
             i = int(bad[0])
-            raise CacheIntegrityError(self.root / POSITIONS_FILE,
-                                      f"{len(bad)} samples point outside its {rows} rows, e.g. {self.names[i]} "
-                                      f"(rows {offsets[i]}..{offsets[i] + lengths[i] - 1}): the file lost rows or "
-                                      "does not belong to this index.npz")
+            raise CacheIntegrityError(
+                self.root / POSITIONS_FILE,
+                f"{len(bad)} samples point outside its {rows} rows, e.g. {self.names[i]} "
+                f"(rows {offsets[i]}..{offsets[i] + lengths[i] - 1}): the file lost rows or "
+                "does not belong to this index.npz",
+            )
         total = self.meta.get("total_frames")
         if isinstance(total, int) and total != rows:
-            raise CacheIntegrityError(self.root / POSITIONS_FILE, f"{rows} rows, meta.json says total_frames is {total}")
+            raise CacheIntegrityError(
+                self.root / POSITIONS_FILE, f"{rows} rows, meta.json says total_frames is {total}"
+            )
 
     def __repr__(self) -> str:
-        return (f"NTUCache({str(self.root)!r}: {len(self)} samples, {int(self.lengths.sum())} frames, "
-                f"{self.num_classes} classes, max_bodies={self.max_bodies})")
+        return (
+            f"NTUCache({str(self.root)!r}: {len(self)} samples, {int(self.lengths.sum())} frames, "
+            f"{self.num_classes} classes, max_bodies={self.max_bodies})"
+        )
 
-    all_positions = property(PreparedCache._array,
-                             doc="The read-only memmap, float32 ``[total_frames, max_bodies, 25, 3]`` metres.")
+    all_positions = property(
+        PreparedCache._array, doc="The read-only memmap, float32 ``[total_frames, max_bodies, 25, 3]`` metres."
+    )
 
     def positions(self, i: int) -> np.ndarray:
         """Joint positions of sample ``i``: a float32 copy ``[max_bodies, T_i, 25, 3]`` in metres.
@@ -70,11 +78,13 @@ class NTUCache(PreparedCache):
         if not -len(self) <= i < len(self):
             raise IndexError(f"sample index {i} out of range for a cache of {len(self)} samples")
         start, length = int(self.offsets[i]), int(self.lengths[i])
-        block = np.ascontiguousarray(self.all_positions[start:start + length].transpose(1, 0, 2, 3))
+        block = np.ascontiguousarray(self.all_positions[start : start + length].transpose(1, 0, 2, 3))
         if np.isnan(block).any():  # [M, T, 25, 3]
             t = int(np.flatnonzero(np.isnan(block).any(axis=(0, 2, 3)))[0])
-            raise CacheIntegrityError(self.root / POSITIONS_FILE, f"sample {self.names[i]} holds NaN (row {start + t}, "
-                                                                  f"frame {t} of the sample)")
+            raise CacheIntegrityError(
+                self.root / POSITIONS_FILE,
+                f"sample {self.names[i]} holds NaN (row {start + t}, frame {t} of the sample)",
+            )
         return block
 
     def index_of(self, name: str) -> int:

@@ -4,6 +4,7 @@ Batches are the dicts of :mod:`mocapkit.datasets.datamodule`
 (``skeletons`` ``[B, 2, T, 25, 3]`` zero-padded, ``labels``, ``lengths``,
 ``indices``, ``subjects``).
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -14,17 +15,18 @@ from torch.utils.data import Dataset
 
 from mocapkit.datasets.augment import SkeletonAugment
 from mocapkit.datasets.datamodule import SkeletonDataModule
-from mocapkit.motion.frames import uniform_frame_indices
 from mocapkit.datasets.ntu.cache import NTUCache
 from mocapkit.datasets.ntu.splits import split_indices
 from mocapkit.datasets.splits import validation_split
+from mocapkit.motion.frames import uniform_frame_indices
 
 
 class SkeletonDataset(Dataset):
     """Samples ``indices`` of an :class:`NTUCache`, at most ``max_frames`` frames each."""
 
-    def __init__(self, cache: NTUCache, indices: np.ndarray, max_frames: int = 300,
-                 augment: SkeletonAugment | None = None):
+    def __init__(
+        self, cache: NTUCache, indices: np.ndarray, max_frames: int = 300, augment: SkeletonAugment | None = None
+    ):
         self.cache = cache
         self.indices = np.asarray(indices, dtype=np.int64)
         self.max_frames = int(max_frames)
@@ -40,8 +42,12 @@ class SkeletonDataset(Dataset):
         skeleton = torch.from_numpy(np.ascontiguousarray(positions, dtype=np.float32))
         if self.augment is not None:
             skeleton = self.augment(skeleton)
-        return {"skeleton": skeleton, "label": int(self.cache.labels[i]), "index": i,
-                "subject": int(self.cache.subjects[i])}
+        return {
+            "skeleton": skeleton,
+            "label": int(self.cache.labels[i]),
+            "index": i,
+            "subject": int(self.cache.subjects[i]),
+        }
 
 
 class NTUDataModule(SkeletonDataModule):
@@ -57,10 +63,21 @@ class NTUDataModule(SkeletonDataModule):
         augment: keyword arguments of :class:`SkeletonAugment` for the training set (None = off).
     """
 
-    def __init__(self, root: str, split: str = "ntu60_xsub", train_subjects: list[int] | None = None,
-                 test_subjects: list[int] | None = None, val_fraction: float = 0.2, val_by_subject: bool = True,
-                 batch_size: int = 32, eval_batch_size: int | None = None, num_workers: int = 0,
-                 max_frames: int = 300, augment: dict | None = None, seed: int = 0):
+    def __init__(
+        self,
+        root: str,
+        split: str = "ntu60_xsub",
+        train_subjects: list[int] | None = None,
+        test_subjects: list[int] | None = None,
+        val_fraction: float = 0.2,
+        val_by_subject: bool = True,
+        batch_size: int = 32,
+        eval_batch_size: int | None = None,
+        num_workers: int = 0,
+        max_frames: int = 300,
+        augment: dict | None = None,
+        seed: int = 0,
+    ):
         super().__init__()
         if root is None:
             raise ValueError("data.root is not set: give a prepared cache folder, e.g. data.root=data/ntu_cache")
@@ -73,10 +90,12 @@ class NTUDataModule(SkeletonDataModule):
         self._set_loading(batch_size, eval_batch_size, num_workers, max_frames, augment)
         self.seed = seed
         self.cache = NTUCache(self.root)
-        train, test = split_indices(self.cache, split, train_subjects=self.train_subjects,
-                                    test_subjects=self.test_subjects)
-        self.train_idx, self.val_idx = validation_split(train, self.cache.subjects, val_fraction=val_fraction,
-                                                        seed=seed, by_subject=val_by_subject)
+        train, test = split_indices(
+            self.cache, split, train_subjects=self.train_subjects, test_subjects=self.test_subjects
+        )
+        self.train_idx, self.val_idx = validation_split(
+            train, self.cache.subjects, val_fraction=val_fraction, seed=seed, by_subject=val_by_subject
+        )
         self.test_idx = test
 
     @property

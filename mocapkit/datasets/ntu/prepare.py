@@ -39,6 +39,7 @@ then parse one file at a time and send back only the selected bodies, which
 the main process writes into the memmap. Peak memory is a few files' worth,
 whatever the number of files (full NTU-120: 114,480 files, ~5 GB on disk).
 """
+
 from __future__ import annotations
 
 import os
@@ -143,24 +144,36 @@ class PrepareReport(PrepareReportBase):
         }
 
     def to_dict(self) -> dict:
-        return {"out": self.out, "totals": self.totals(), "skipped": self.skipped,
-                "bodies": self.bodies, "empty_samples": self.empty_samples}
+        return {
+            "out": self.out,
+            "totals": self.totals(),
+            "skipped": self.skipped,
+            "bodies": self.bodies,
+            "empty_samples": self.empty_samples,
+        }
 
     def summary(self) -> str:
         """A few lines for the console: counts per reason and where the details are."""
         rules = self.rule_counts()
-        skipped = ", ".join(f"{self.count(r)} {r}" for r in ("missing_list", "malformed", "bad_name", "duplicate_name")
-                            if self.count(r))
+        skipped = ", ".join(
+            f"{self.count(r)} {r}" for r in ("missing_list", "malformed", "bad_name", "duplicate_name") if self.count(r)
+        )
         dropped = ", ".join(f"{rules[r]} {_RULE_WORDS[r]}" for r in DROP_RULES if rules[r]) or "none"
         rescued = ", ".join(f"{rules[r]} {_RULE_WORDS[r]}" for r in KEEP_RULES if r.startswith("rescued") and rules[r])
-        lines = [(f"{self.samples_written} samples ({self.total_frames} frames) from {self.files_found} files in "
-                  f"{self.seconds:.1f} s -> {self.out}"),
-                 f"skipped {len(self.skipped)} files{f' ({skipped})' if skipped else ''}",
-                 f"body selection: tracks dropped in {len(self.dropped_bodies)} samples: {dropped}"]
+        lines = [
+            (
+                f"{self.samples_written} samples ({self.total_frames} frames) from {self.files_found} files in "
+                f"{self.seconds:.1f} s -> {self.out}"
+            ),
+            f"skipped {len(self.skipped)} files{f' ({skipped})' if skipped else ''}",
+            f"body selection: tracks dropped in {len(self.dropped_bodies)} samples: {dropped}",
+        ]
         if rescued:
             lines.append(f"kept although a rule would drop them (every track of the sample failed it): {rescued}")
-        lines.append(f"{len(self.empty_samples)} samples with no body (all zeros); "
-                     f"every decision in {Path(self.out) / REPORT_TXT} and {REPORT_JSON}")
+        lines.append(
+            f"{len(self.empty_samples)} samples with no body (all zeros); "
+            f"every decision in {Path(self.out) / REPORT_TXT} and {REPORT_JSON}"
+        )
         return "\n".join(lines)
 
     def _text_title(self) -> list[str]:
@@ -176,28 +189,49 @@ class PrepareReport(PrepareReportBase):
             listed.append(f"  {d['name']} ({d['tracks']} tracks):")
             listed += [f"      body {k}: {x['body_id']} [{x['rule']}] {x['reason']}" for k, x in enumerate(kept)]
             listed += [f"      dropped {x['body_id']} [{x['rule']}] {x['reason']}" for x in dropped]
-        heading = (f"Body selection (the {single} samples whose only track is body 0 are not listed); "
-                   "samples listed")
-        return [("Skipped files", len(self.skipped),
-                 [f"  [{s['reason']}] {s['file']}: {s['message']}" for s in self.skipped]),
-                (heading, len(self.bodies) - single, listed),
-                ("Samples with no body kept, stored as zeros", len(self.empty_samples),
-                 [f"  {name}" for name in self.empty_samples])]
+        heading = f"Body selection (the {single} samples whose only track is body 0 are not listed); samples listed"
+        return [
+            (
+                "Skipped files",
+                len(self.skipped),
+                [f"  [{s['reason']}] {s['file']}: {s['message']}" for s in self.skipped],
+            ),
+            (heading, len(self.bodies) - single, listed),
+            (
+                "Samples with no body kept, stored as zeros",
+                len(self.empty_samples),
+                [f"  {name}" for name in self.empty_samples],
+            ),
+        ]
 
 
 #: How :meth:`PrepareReport.summary` names each rule code.
 _RULE_WORDS = {
-    "short": "seen in too few frames", "spread": "wider than tall (spread)", "flicker": "flickering",
-    "jump": "jumping", "less_motion": "beyond the kept bodies (less motion)",
-    "most_motion": "ranked by motion", "only_candidate": "only candidate",
-    "rescued_short": "short", "rescued_spread": "wide", "rescued_flicker": "flickering or jumping",
+    "short": "seen in too few frames",
+    "spread": "wider than tall (spread)",
+    "flicker": "flickering",
+    "jump": "jumping",
+    "less_motion": "beyond the kept bodies (less motion)",
+    "most_motion": "ranked by motion",
+    "only_candidate": "only candidate",
+    "rescued_short": "short",
+    "rescued_spread": "wide",
+    "rescued_flicker": "flickering or jumping",
 }
 
 
-def prepare_ntu(src: str | os.PathLike, out: str | os.PathLike, workers: int = 1, skip_bad: bool = False,
-                missing_list: str | os.PathLike | Iterable[str] | None = None, max_bodies: int = 2,
-                denoise_spread: bool = True, min_body_frames: int = MIN_BODY_FRAMES, denoise_flicker: bool = True,
-                progress: bool = True) -> PrepareReport:
+def prepare_ntu(
+    src: str | os.PathLike,
+    out: str | os.PathLike,
+    workers: int = 1,
+    skip_bad: bool = False,
+    missing_list: str | os.PathLike | Iterable[str] | None = None,
+    max_bodies: int = 2,
+    denoise_spread: bool = True,
+    min_body_frames: int = MIN_BODY_FRAMES,
+    denoise_flicker: bool = True,
+    progress: bool = True,
+) -> PrepareReport:
     """Parse every ``.skeleton`` file under ``src`` (recursively) into a cache in ``out``.
 
     Args:
@@ -236,13 +270,24 @@ def prepare_ntu(src: str | os.PathLike, out: str | os.PathLike, workers: int = 1
     report.files_found = len(files)
     files = _check_names(files, skip_bad, report)
     missing = _load_missing(missing_list)
-    missing_source = (str(missing_list) if isinstance(missing_list, (str, os.PathLike))
-                      else None if missing_list is None else f"{len(missing)} names given by the caller")
+    missing_source = (
+        str(missing_list)
+        if isinstance(missing_list, (str, os.PathLike))
+        else None
+        if missing_list is None
+        else f"{len(missing)} names given by the caller"
+    )
     kept_files = []
     for path in files:
         if path.stem in missing:
-            report.skipped.append({"file": str(path), "name": path.stem, "reason": "missing_list",
-                                   "message": "listed as a sample with missing skeletons"})
+            report.skipped.append(
+                {
+                    "file": str(path),
+                    "name": path.stem,
+                    "reason": "missing_list",
+                    "message": "listed as a sample with missing skeletons",
+                }
+            )
         else:
             kept_files.append(path)
     files = kept_files
@@ -259,24 +304,31 @@ def prepare_ntu(src: str | os.PathLike, out: str | os.PathLike, workers: int = 1
     expected = np.array([_frame_count_or_zero(p) for p in heads], dtype=np.int64)
     capacity = int(expected.sum())
     positions_path = out / POSITIONS_FILE
-    positions = np.lib.format.open_memmap(positions_path, mode="w+", dtype=np.float32,
-                                          shape=(capacity, max_bodies, NUM_JOINTS, 3))
-    options = {"max_bodies": max_bodies, "denoise_spread": denoise_spread, "min_body_frames": min_body_frames,
-               "denoise_flicker": denoise_flicker}
+    positions = np.lib.format.open_memmap(
+        positions_path, mode="w+", dtype=np.float32, shape=(capacity, max_bodies, NUM_JOINTS, 3)
+    )
+    options = {
+        "max_bodies": max_bodies,
+        "denoise_spread": denoise_spread,
+        "min_body_frames": min_body_frames,
+        "denoise_flicker": denoise_flicker,
+    }
     jobs = [(str(p), options) for p in files]
     rows: dict[str, list] = {k: [] for k in INDEX_KEYS}
     cursor = 0
     nan_rows = 0
     try:
-        with parallel_map(_parse_one, jobs, workers, max_chunksize=16, desc="parsing .skeleton", unit="file",
-                          progress=progress) as results:
+        with parallel_map(
+            _parse_one, jobs, workers, max_chunksize=16, desc="parsing .skeleton", unit="file", progress=progress
+        ) as results:
             for path, frames, result in zip(files, expected, results):
                 if "error" in result:
                     error = result["error"]
                     if not skip_bad:
                         raise error
-                    report.skipped.append({"file": str(path), "name": path.stem, "reason": "malformed",
-                                           "message": str(error)})
+                    report.skipped.append(
+                        {"file": str(path), "name": path.stem, "reason": "malformed", "message": str(error)}
+                    )
                     continue
                 block = result["positions"]  # [max_bodies, T, 25, 3]
                 length = block.shape[1]
@@ -286,17 +338,29 @@ def prepare_ntu(src: str | os.PathLike, out: str | os.PathLike, workers: int = 1
                     capacity = cursor + length + int(expected.sum()) // 4
                     _resize_rows(positions_path, capacity)
                     positions = np.lib.format.open_memmap(positions_path, mode="r+")
-                positions[cursor:cursor + length] = block.transpose(1, 0, 2, 3)
+                positions[cursor : cursor + length] = block.transpose(1, 0, 2, 3)
                 nan_rows += int(np.isnan(block).any(axis=(0, 2, 3)).sum())
                 sample = parse_ntu_name(path.stem)
-                for key, value in (("names", path.stem), ("offsets", cursor), ("lengths", length),
-                                   ("labels", sample.label), ("subjects", sample.subject),
-                                   ("cameras", sample.camera), ("setups", sample.setup),
-                                   ("replications", sample.replication)):
+                for key, value in (
+                    ("names", path.stem),
+                    ("offsets", cursor),
+                    ("lengths", length),
+                    ("labels", sample.label),
+                    ("subjects", sample.subject),
+                    ("cameras", sample.camera),
+                    ("setups", sample.setup),
+                    ("replications", sample.replication),
+                ):
                     rows[key].append(value)
                 cursor += length
-                report.bodies.append({"name": path.stem, "tracks": result["tracks"], "kept": result["kept"],
-                                      "dropped": result["dropped"]})
+                report.bodies.append(
+                    {
+                        "name": path.stem,
+                        "tracks": result["tracks"],
+                        "kept": result["kept"],
+                        "dropped": result["dropped"],
+                    }
+                )
                 if not result["kept"]:
                     report.empty_samples.append(path.stem)
         positions.flush()
@@ -312,15 +376,31 @@ def prepare_ntu(src: str | os.PathLike, out: str | os.PathLike, workers: int = 1
     report.total_frames = cursor
     report.seconds = time.perf_counter() - started
     report.write(out)
-    write_index_and_meta(out, rows, source=str(src.resolve()), max_bodies=max_bodies, class_names=class_names,
-                         options={**options, "skip_bad": skip_bad, "workers": workers, "missing_list": missing_source},
-                         totals=report.totals(), nan_rows=nan_rows)
+    write_index_and_meta(
+        out,
+        rows,
+        source=str(src.resolve()),
+        max_bodies=max_bodies,
+        class_names=class_names,
+        options={**options, "skip_bad": skip_bad, "workers": workers, "missing_list": missing_source},
+        totals=report.totals(),
+        nan_rows=nan_rows,
+    )
     return report
 
 
-def write_index_and_meta(out: str | os.PathLike, rows: Mapping[str, Sequence], *, source: str, max_bodies: int,
-                         class_names: list[str] | None, options: dict, totals: dict, nan_rows: int = 0,
-                         extra: Mapping | None = None) -> dict:
+def write_index_and_meta(
+    out: str | os.PathLike,
+    rows: Mapping[str, Sequence],
+    *,
+    source: str,
+    max_bodies: int,
+    class_names: list[str] | None,
+    options: dict,
+    totals: dict,
+    nan_rows: int = 0,
+    extra: Mapping | None = None,
+) -> dict:
     """Finish an NTU cache whose ``positions.npy`` is written: ``index.npz``, then ``meta.json`` (last).
 
     The one place that lays out ``index.npz`` and ``meta.json``; :func:`prepare_ntu` and
@@ -398,8 +478,9 @@ def _check_names(files: list[Path], skip_bad: bool, report: PrepareReport) -> li
             message = f"{path}: sample {path.stem} already read from {good[path.stem]}"
             if not skip_bad:
                 raise ValueError(message)
-            report.skipped.append({"file": str(path), "name": path.stem, "reason": "duplicate_name",
-                                   "message": message})
+            report.skipped.append(
+                {"file": str(path), "name": path.stem, "reason": "duplicate_name", "message": message}
+            )
         else:
             good[path.stem] = path
     return list(good.values())
@@ -472,9 +553,13 @@ def _parse_one(job: tuple[str, dict]) -> dict:
     path, options = job
     try:
         seq = read_skeleton(path)
-        selection = select_main_bodies(seq, max_bodies=options["max_bodies"], denoise_spread=options["denoise_spread"],
-                                       min_frames=options["min_body_frames"],
-                                       denoise_flicker=options["denoise_flicker"])
+        selection = select_main_bodies(
+            seq,
+            max_bodies=options["max_bodies"],
+            denoise_spread=options["denoise_spread"],
+            min_frames=options["min_body_frames"],
+            denoise_flicker=options["denoise_flicker"],
+        )
     except MotionFormatError as exc:
         return {"error": exc}
     except Exception as exc:  # noqa: BLE001 - one bad file must not end the batch (see --skip-bad)
@@ -482,10 +567,14 @@ def _parse_one(job: tuple[str, dict]) -> dict:
     return {
         "positions": selection.positions,
         "tracks": seq.num_bodies,
-        "kept": [{"body_id": seq.body_ids[b], "rule": selection.rules[b], "reason": selection.kept_reasons[b]}
-                 for b in selection.kept],
-        "dropped": [{"body_id": seq.body_ids[b], "rule": selection.rules[b], "reason": reason}
-                    for b, reason in sorted(selection.dropped.items())],
+        "kept": [
+            {"body_id": seq.body_ids[b], "rule": selection.rules[b], "reason": selection.kept_reasons[b]}
+            for b in selection.kept
+        ],
+        "dropped": [
+            {"body_id": seq.body_ids[b], "rule": selection.rules[b], "reason": reason}
+            for b, reason in sorted(selection.dropped.items())
+        ],
     }
 
 
@@ -497,6 +586,6 @@ def _resize_rows(path: Path, rows: int) -> None:
         step = 65536
         keep = min(rows, len(old))
         for start in range(0, keep, step):
-            new[start:start + step] = old[start:min(start + step, keep)]
+            new[start : start + step] = old[start : min(start + step, keep)]
         new.flush()
         del new, old

@@ -16,6 +16,7 @@ Protocol facts (Shahroudy et al. 2016; Liu et al. 2019 for NTU-120):
 * ``ntu120_xset``: even setup IDs train, odd setup IDs test.
 * ``custom``: explicit ``train_subjects`` and ``test_subjects``; samples of other subjects are unused.
 """
+
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
@@ -25,12 +26,81 @@ import numpy as np
 from mocapkit.datasets.splits import subject_masks
 
 NTU60_XSUB_TRAIN_SUBJECTS: tuple[int, ...] = (
-    1, 2, 4, 5, 8, 9, 13, 14, 15, 16, 17, 18, 19, 25, 27, 28, 31, 34, 35, 38,
+    1,
+    2,
+    4,
+    5,
+    8,
+    9,
+    13,
+    14,
+    15,
+    16,
+    17,
+    18,
+    19,
+    25,
+    27,
+    28,
+    31,
+    34,
+    35,
+    38,
 )
 NTU120_XSUB_TRAIN_SUBJECTS: tuple[int, ...] = (
-    1, 2, 4, 5, 8, 9, 13, 14, 15, 16, 17, 18, 19, 25, 27, 28, 31, 34, 35, 38,
-    45, 46, 47, 49, 50, 52, 53, 54, 55, 56, 57, 58, 59, 70, 74, 78, 80, 81, 82, 83,
-    84, 85, 86, 89, 91, 92, 93, 94, 95, 97, 98, 100, 103,
+    1,
+    2,
+    4,
+    5,
+    8,
+    9,
+    13,
+    14,
+    15,
+    16,
+    17,
+    18,
+    19,
+    25,
+    27,
+    28,
+    31,
+    34,
+    35,
+    38,
+    45,
+    46,
+    47,
+    49,
+    50,
+    52,
+    53,
+    54,
+    55,
+    56,
+    57,
+    58,
+    59,
+    70,
+    74,
+    78,
+    80,
+    81,
+    82,
+    83,
+    84,
+    85,
+    86,
+    89,
+    91,
+    92,
+    93,
+    94,
+    95,
+    97,
+    98,
+    100,
+    103,
 )
 NTU_XVIEW_TRAIN_CAMERAS: tuple[int, ...] = (2, 3)
 NTU_XVIEW_TEST_CAMERAS: tuple[int, ...] = (1,)
@@ -40,8 +110,9 @@ NTU60_MAX_SETUP = 17
 SPLITS = ("ntu60_xsub", "ntu60_xview", "ntu120_xsub", "ntu120_xset", "custom")
 
 
-def split_indices(data, split: str, train_subjects: Iterable[int] | None = None,
-                  test_subjects: Iterable[int] | None = None) -> tuple[np.ndarray, np.ndarray]:
+def split_indices(
+    data, split: str, train_subjects: Iterable[int] | None = None, test_subjects: Iterable[int] | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Sample indices ``(train_idx, test_idx)`` of one protocol, sorted int64 arrays.
 
     Args:
@@ -79,9 +150,9 @@ def split_indices(data, split: str, train_subjects: Iterable[int] | None = None,
     return np.flatnonzero(train), np.flatnonzero(test)
 
 
-
-def split_summary(data, splits: Iterable[str] = ("ntu60_xsub", "ntu60_xview", "ntu120_xsub", "ntu120_xset"),
-                  **custom) -> dict[str, dict[str, int]]:
+def split_summary(
+    data, splits: Iterable[str] = ("ntu60_xsub", "ntu60_xview", "ntu120_xsub", "ntu120_xset"), **custom
+) -> dict[str, dict[str, int]]:
     """Sample counts per split: ``{split: {"train": n, "test": n, "unused": n}}``.
 
     ``unused`` counts samples in neither part (e.g. NTU-120-only setups under an

@@ -31,6 +31,7 @@ The map, from one sequence ``<subject>/<condition>-<nn>/<view>`` to its PNGs:
 Every random draw comes from a numpy ``SeedSequence`` keyed by the seed and the sequence's
 fields, so the PNGs are byte-identical for any ``workers`` and any subset of the views.
 """
+
 from __future__ import annotations
 
 import json
@@ -135,8 +136,9 @@ class CasiaBSynthConfig(SynthConfig):
 
     @property
     def noise(self) -> SegmentationNoise:
-        return SegmentationNoise(self.hole_rate, self.edge_noise, self.shadow_prob, self.empty_frame_prob,
-                                 self.partial_frame_prob)
+        return SegmentationNoise(
+            self.hole_rate, self.edge_noise, self.shadow_prob, self.empty_frame_prob, self.partial_frame_prob
+        )
 
     def validate(self) -> None:
         """Raise ``ValueError`` naming the first bad field."""
@@ -145,17 +147,26 @@ class CasiaBSynthConfig(SynthConfig):
         check.integer("frames", 1, 10000)
         check.integer("height", 16, 1024, " pixels")
         check.distinct("views", lambda v: v in VIEWS, f"must be a non-empty tuple of distinct values from {VIEWS}")
-        check.require(bool(self.conditions) and set(self.conditions) <= set(CONDITIONS) and all(
-            isinstance(n, (int, np.integer)) and 1 <= n <= 99 for n in self.conditions.values()),
-            "conditions", f"must map conditions from {CONDITIONS} to counts in 1..99")
+        check.require(
+            bool(self.conditions)
+            and set(self.conditions) <= set(CONDITIONS)
+            and all(isinstance(n, (int, np.integer)) and 1 <= n <= 99 for n in self.conditions.values()),
+            "conditions",
+            f"must map conditions from {CONDITIONS} to counts in 1..99",
+        )
         check.seed()
         self.noise.validate()
 
     def sequence_keys(self) -> list[GaitSequenceKey]:
         """Every sequence the configuration describes, sorted."""
-        return sorted(GaitSequenceKey(s, c, n, v) for s in range(1, self.num_subjects + 1)
-                      for c in CONDITIONS if c in self.conditions for n in range(1, self.conditions[c] + 1)
-                      for v in self.views)
+        return sorted(
+            GaitSequenceKey(s, c, n, v)
+            for s in range(1, self.num_subjects + 1)
+            for c in CONDITIONS
+            if c in self.conditions
+            for n in range(1, self.conditions[c] + 1)
+            for v in self.views
+        )
 
 
 # --------------------------------------------------------------------------- subjects and walks
@@ -219,11 +230,26 @@ def draw_subject(seed: int, subject: int) -> SubjectParams:
     rng = _rng(seed, _SUBJECT, subject)
     u = rng.uniform
     return SubjectParams(
-        height=u(1.55, 1.92), leg_ratio=u(0.46, 0.54), thigh_share=u(0.48, 0.56), arm_ratio=u(0.40, 0.46),
-        shoulder_ratio=u(0.20, 0.26), hip_ratio=u(0.09, 0.12), girth=u(0.8, 1.3), limb_thickness=u(0.8, 1.25),
-        head_size=u(0.88, 1.15), stride_ratio=u(0.68, 0.86), period=u(23.0, 30.0), arm_swing=u(8.0, 40.0),
-        elbow_bend=u(8.0, 35.0), knee_peak=u(48.0, 68.0), lean=u(-2.0, 9.0), sway=u(0.0, 0.035),
-        bag_style=int(rng.integers(len(BAG_STYLES))), bag_side=int(rng.choice([-1, 1])), coat_length=u(0.35, 0.9))
+        height=u(1.55, 1.92),
+        leg_ratio=u(0.46, 0.54),
+        thigh_share=u(0.48, 0.56),
+        arm_ratio=u(0.40, 0.46),
+        shoulder_ratio=u(0.20, 0.26),
+        hip_ratio=u(0.09, 0.12),
+        girth=u(0.8, 1.3),
+        limb_thickness=u(0.8, 1.25),
+        head_size=u(0.88, 1.15),
+        stride_ratio=u(0.68, 0.86),
+        period=u(23.0, 30.0),
+        arm_swing=u(8.0, 40.0),
+        elbow_bend=u(8.0, 35.0),
+        knee_peak=u(48.0, 68.0),
+        lean=u(-2.0, 9.0),
+        sway=u(0.0, 0.035),
+        bag_style=int(rng.integers(len(BAG_STYLES))),
+        bag_side=int(rng.choice([-1, 1])),
+        coat_length=u(0.35, 0.9),
+    )
 
 
 @dataclass(frozen=True)
@@ -249,9 +275,14 @@ class WalkVariation:
 
 def draw_walk(rng: np.random.Generator) -> WalkVariation:
     """Small random per-walk variation."""
-    return WalkVariation(speed=float(rng.uniform(0.95, 1.05)), phase=float(rng.uniform(0, 2 * np.pi)),
-                         start=float(rng.uniform(-0.3, 0.3)), lateral=float(rng.uniform(-0.2, 0.2)),
-                         arm_scale=float(rng.uniform(0.85, 1.15)), lean=float(rng.normal(0.0, 1.0)))
+    return WalkVariation(
+        speed=float(rng.uniform(0.95, 1.05)),
+        phase=float(rng.uniform(0, 2 * np.pi)),
+        start=float(rng.uniform(-0.3, 0.3)),
+        lateral=float(rng.uniform(-0.2, 0.2)),
+        arm_scale=float(rng.uniform(0.85, 1.15)),
+        lean=float(rng.normal(0.0, 1.0)),
+    )
 
 
 # --------------------------------------------------------------------------- body
@@ -281,8 +312,9 @@ def _direction(pitch: np.ndarray) -> np.ndarray:
     return np.stack([np.sin(pitch), np.zeros_like(pitch), -np.cos(pitch)], axis=-1)
 
 
-def body_capsules(subject: SubjectParams, condition: str, frames: int, walk: WalkVariation = WalkVariation(),
-                  fps: float = FPS) -> Capsules:
+def body_capsules(
+    subject: SubjectParams, condition: str, frames: int, walk: WalkVariation = WalkVariation(), fps: float = FPS
+) -> Capsules:
     """Pose the subject's capsule body for ``frames`` frames of walking along +x.
 
     Joint angle curves over the gait phase ``phi`` (one cycle = two steps; left leg half a cycle
@@ -312,7 +344,7 @@ def body_capsules(subject: SubjectParams, condition: str, frames: int, walk: Wal
 
     # legs, relative to the pelvis centre at height 0; right leg phase phi, left leg phi + pi
     hip_half = 0.5 * s.hip_ratio * h
-    yaw = np.radians(4.0) * np.cos(phi)                         # pelvis rotation, right hip forward at phi = 0
+    yaw = np.radians(4.0) * np.cos(phi)  # pelvis rotation, right hip forward at phi = 0
     parts_a, parts_b, radii = [], [], []
 
     def add(a, b, ra, rb):
@@ -325,8 +357,11 @@ def body_capsules(subject: SubjectParams, condition: str, frames: int, walk: Wal
         sign = -1.0 if side == "r" else 1.0
         p = phi + offset
         hip_flex = hip_amp * np.cos(p) + np.radians(4.0)
-        knee_flex = np.radians(4.0 + (s.knee_peak - 4.0) * ((1 + np.cos(p - 1.45 * np.pi)) / 2) ** 4
-                               + 12.0 * ((1 + np.cos(p - 0.15 * np.pi)) / 2) ** 8)
+        knee_flex = np.radians(
+            4.0
+            + (s.knee_peak - 4.0) * ((1 + np.cos(p - 1.45 * np.pi)) / 2) ** 4
+            + 12.0 * ((1 + np.cos(p - 0.15 * np.pi)) / 2) ** 8
+        )
         ankle_pitch = np.radians(8.0) * np.sin(p)
         hip = np.stack([-sign * hip_half * np.sin(yaw), sign * hip_half * np.cos(yaw), np.zeros_like(p)], axis=-1)
         knee = hip + thigh * _direction(hip_flex)
@@ -340,36 +375,57 @@ def body_capsules(subject: SubjectParams, condition: str, frames: int, walk: Wal
         add(heel, toe, 0.034 * thick, 0.026 * thick)
     foot_radius = 0.034 * thick
     lowest = np.minimum.reduce([np.minimum(j["heel"][:, 2], j["toe"][:, 2]) for j in joints.values()]) - foot_radius
-    pelvis = np.stack([walk.start + speed * (t - (frames - 1) / 2) / fps,
-                       walk.lateral + s.sway * np.sin(phi),
-                       -lowest], axis=-1)
+    pelvis = np.stack(
+        [walk.start + speed * (t - (frames - 1) / 2) / fps, walk.lateral + s.sway * np.sin(phi), -lowest], axis=-1
+    )
 
     # trunk: two side-by-side tapered capsules (wide from the front, thinner from the side)
     lean = np.radians(s.lean + walk.lean + 1.5 * np.sin(2 * phi))
-    up = np.stack([np.sin(lean), np.zeros_like(lean), np.cos(lean)], axis=-1)   # leaning forward: towards +x
+    up = np.stack([np.sin(lean), np.zeros_like(lean), np.cos(lean)], axis=-1)  # leaning forward: towards +x
     girth = s.girth * (1.3 if coat else 1.0)
     depth_r = 0.1 * girth * h / 1.75
     half_w = 0.06 * girth * h / 1.75
     neck = up * torso_len
     lateral = np.array([0.0, 1.0, 0.0])
     for sign in (-1.0, 1.0):
-        add(sign * half_w * lateral, neck - 0.05 * h * up + sign * half_w * lateral,
-            depth_r * 0.95, depth_r * (1.05 if coat else 1.0))
-    add(-hip_half * lateral + 0.02 * h * up, hip_half * lateral + 0.02 * h * up, 0.085 * girth * h / 1.75,
-        0.085 * girth * h / 1.75)
+        add(
+            sign * half_w * lateral,
+            neck - 0.05 * h * up + sign * half_w * lateral,
+            depth_r * 0.95,
+            depth_r * (1.05 if coat else 1.0),
+        )
+    add(
+        -hip_half * lateral + 0.02 * h * up,
+        hip_half * lateral + 0.02 * h * up,
+        0.085 * girth * h / 1.75,
+        0.085 * girth * h / 1.75,
+    )
     shoulder_half = 0.5 * s.shoulder_ratio * h
     shoulder_yaw = -0.6 * yaw
     shoulders = {}
     for side in ("r", "l"):
         sign = -1.0 if side == "r" else 1.0
-        shoulders[side] = neck - 0.04 * h * up + np.stack(
-            [-sign * shoulder_half * np.sin(shoulder_yaw), sign * shoulder_half * np.cos(shoulder_yaw),
-             np.zeros_like(phi)], axis=-1)
+        shoulders[side] = (
+            neck
+            - 0.04 * h * up
+            + np.stack(
+                [
+                    -sign * shoulder_half * np.sin(shoulder_yaw),
+                    sign * shoulder_half * np.cos(shoulder_yaw),
+                    np.zeros_like(phi),
+                ],
+                axis=-1,
+            )
+        )
     add(shoulders["r"], shoulders["l"], 0.05 * girth * h / 1.75, 0.05 * girth * h / 1.75)
     head_centre = neck + neck_len * up + np.array([0.012 * h, 0.0, head_r * 0.9])
-    add(neck, neck + neck_len * up, 0.045 * h / 1.75 * s.girth ** 0.5, 0.042 * h / 1.75 * s.girth ** 0.5)
-    add(head_centre - np.array([0.0, 0.0, 0.25 * head_r]), head_centre + np.array([0.0, 0.0, 0.2 * head_r]),
-        head_r * 0.92, head_r * 0.85)
+    add(neck, neck + neck_len * up, 0.045 * h / 1.75 * s.girth**0.5, 0.042 * h / 1.75 * s.girth**0.5)
+    add(
+        head_centre - np.array([0.0, 0.0, 0.25 * head_r]),
+        head_centre + np.array([0.0, 0.0, 0.2 * head_r]),
+        head_r * 0.92,
+        head_r * 0.85,
+    )
 
     # arms swing against the same-side leg; the bag hand swings less
     bag = condition == "bg"
@@ -395,22 +451,23 @@ def body_capsules(subject: SubjectParams, condition: str, frames: int, walk: Wal
         hem_down = 0.05 * h + thigh * s.coat_length
         knees_x = 0.5 * (joints["r"]["knee"][:, 0] + joints["l"]["knee"][:, 0])
         hem = np.stack([0.6 * s.coat_length * knees_x, np.zeros_like(phi), np.full_like(phi, -hem_down)], axis=-1)
-        flare = 0.17 * h / 1.75 * s.girth ** 0.5 + 0.05 * s.coat_length
+        flare = 0.17 * h / 1.75 * s.girth**0.5 + 0.05 * s.coat_length
         add(0.15 * torso_len * up, hem, depth_r * 1.1, flare)
     if bag:
         style = BAG_STYLES[s.bag_style]
         side_y = np.array([0.0, s.bag_side, 0.0])
-        if style == "shoulder bag":       # a box hanging at the hip, outside the trunk
+        if style == "shoulder bag":  # a box hanging at the hip, outside the trunk
             centre = side_y * (half_w + depth_r + 0.1) + np.array([0.03, 0.0, -0.04])
             centre = centre + 0.04 * np.sin(phi)[:, None] * np.array([1.0, 0.0, 0.0])
             for dx in (-0.09, 0.09):
                 add(centre + [dx, 0.0, -0.07], centre + [dx, 0.0, 0.07], 0.075, 0.075)
-        elif style == "backpack":         # a box behind the upper trunk
+        elif style == "backpack":  # a box behind the upper trunk
             centre = 0.62 * torso_len * up - (depth_r + 0.09) * np.stack(
-                [np.cos(lean), np.zeros_like(lean), -np.sin(lean)], axis=-1)
+                [np.cos(lean), np.zeros_like(lean), -np.sin(lean)], axis=-1
+            )
             for dy in (-0.1, 0.1):
                 add(centre + [0.0, dy, -0.15], centre + [0.0, dy, 0.15], 0.1, 0.09)
-        else:                             # a bag hanging from one hand
+        else:  # a bag hanging from one hand
             hand = hands[hand_bag_side]
             add(hand + [0.0, 0.0, -0.08], hand + [0.0, 0.0, -0.22], 0.09, 0.11)
 
@@ -454,8 +511,9 @@ def project(points: np.ndarray, scale: np.ndarray, view: float, height: int, wid
     return np.stack([width / 2 + s * u, height / 2 - s * up], axis=-1)
 
 
-def project_capsules(capsules: Capsules, view: float, height: int, width: int
-                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def project_capsules(
+    capsules: Capsules, view: float, height: int, width: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Weak-perspective projection of capsules.
 
     Returns:
@@ -470,8 +528,9 @@ def project_capsules(capsules: Capsules, view: float, height: int, width: int
     return a, b, scale[:, None] * capsules.ra, scale[:, None] * capsules.rb, scale
 
 
-def _window_indices(lo: np.ndarray, hi: np.ndarray, height: int, width: int
-                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+def _window_indices(
+    lo: np.ndarray, hi: np.ndarray, height: int, width: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """Flat indices of one common-size window per frame covering the boxes ``lo..hi`` (int ``[T, 2]``, x y).
 
     Windows are clipped to the image and shifted back inside where they would stick out.
@@ -491,8 +550,9 @@ def _window_indices(lo: np.ndarray, hi: np.ndarray, height: int, width: int
     return index, x0, y0
 
 
-def rasterize_capsules(a: np.ndarray, b: np.ndarray, ra: np.ndarray, rb: np.ndarray, height: int,
-                       width: int) -> np.ndarray:
+def rasterize_capsules(
+    a: np.ndarray, b: np.ndarray, ra: np.ndarray, rb: np.ndarray, height: int, width: int
+) -> np.ndarray:
     """Signed inside-depth field of the union of 2-D tapered capsules, vectorised over frames and pixels.
 
     For each pixel centre ``p`` and capsule ``i``: ``u`` = projection parameter of ``p`` on the
@@ -517,18 +577,22 @@ def rasterize_capsules(a: np.ndarray, b: np.ndarray, ra: np.ndarray, rb: np.ndar
     for i in range(N):
         ai, bi, rai, rbi = a[:, i], b[:, i], ra[:, i, None, None], rb[:, i, None, None]
         reach = np.maximum(ra[:, i], rb[:, i])[:, None] + margin
-        window = _window_indices(np.floor(np.minimum(ai, bi) - reach).astype(np.int64),
-                                 np.ceil(np.maximum(ai, bi) + reach).astype(np.int64), height, width)
+        window = _window_indices(
+            np.floor(np.minimum(ai, bi) - reach).astype(np.int64),
+            np.ceil(np.maximum(ai, bi) + reach).astype(np.int64),
+            height,
+            width,
+        )
         if window is None:
             continue
         index, x0, y0 = window
         win_h, win_w = index.shape[1:]
-        px = (x0[:, None] + np.arange(win_w, dtype=np.float32) + 0.5 - ai[:, 0:1])[:, None, :]   # [T, 1, w]
-        py = (y0[:, None] + np.arange(win_h, dtype=np.float32) + 0.5 - ai[:, 1:2])[:, :, None]   # [T, h, 1]
+        px = (x0[:, None] + np.arange(win_w, dtype=np.float32) + 0.5 - ai[:, 0:1])[:, None, :]  # [T, 1, w]
+        py = (y0[:, None] + np.arange(win_h, dtype=np.float32) + 0.5 - ai[:, 1:2])[:, :, None]  # [T, h, 1]
         ab = bi - ai
         abx, aby = ab[:, 0, None, None], ab[:, 1, None, None]
         len2 = np.maximum(abx * abx + aby * aby, 1e-12)
-        u = np.clip((px * abx + py * aby) / len2, 0.0, 1.0)                                        # [T, h, w]
+        u = np.clip((px * abx + py * aby) / len2, 0.0, 1.0)  # [T, h, w]
         inside = rai + u * (rbi - rai) - np.sqrt((px - u * abx) ** 2 + (py - u * aby) ** 2)
         flat[index] = np.maximum(flat[index], inside)
     return out
@@ -537,8 +601,13 @@ def rasterize_capsules(a: np.ndarray, b: np.ndarray, ra: np.ndarray, rb: np.ndar
 # --------------------------------------------------------------------------- segmentation noise
 
 
-def apply_segmentation_noise(field: np.ndarray, noise: SegmentationNoise | None, rng: np.random.Generator,
-                             shadow_anchor: np.ndarray | None = None, scale: np.ndarray | None = None) -> np.ndarray:
+def apply_segmentation_noise(
+    field: np.ndarray,
+    noise: SegmentationNoise | None,
+    rng: np.random.Generator,
+    shadow_anchor: np.ndarray | None = None,
+    scale: np.ndarray | None = None,
+) -> np.ndarray:
     """Threshold a signed field ``[T, H, W]`` (pixels, > 0 inside) into a noisy binary silhouette.
 
     In order: smooth noise of std ``edge_noise`` pixels is added to the field (ragged edges);
@@ -567,22 +636,22 @@ def apply_segmentation_noise(field: np.ndarray, noise: SegmentationNoise | None,
         ys = np.arange(H, dtype=np.float32) + 0.5
         du = (xs[None, None, :] - cx[:, None, None]) / half_len[:, None, None]
         dv = (ys[None, :, None] - cy[:, None, None]) / half_thick[:, None, None]
-        field = np.maximum(field, (half_thick[:, None, None] * (1 - np.sqrt(du ** 2 + dv ** 2))).astype(np.float32))
+        field = np.maximum(field, (half_thick[:, None, None] * (1 - np.sqrt(du**2 + dv**2))).astype(np.float32))
     # edges and holes only matter near the body: work in one window per frame around field > floor
     near = field > -FIELD_FLOOR_PX + 1e-3
     rows, cols = near.any(axis=2), near.any(axis=1)
     lo = np.stack([cols.argmax(axis=1), rows.argmax(axis=1)], axis=1)
     hi = np.stack([W - cols[:, ::-1].argmax(axis=1), H - rows[:, ::-1].argmax(axis=1)], axis=1)
-    hi[~rows.any(axis=1)] = lo[~rows.any(axis=1)]             # frames with nothing near the body
+    hi[~rows.any(axis=1)] = lo[~rows.any(axis=1)]  # frames with nothing near the body
     window = _window_indices(lo, hi, H, W)
     mask = np.zeros((T, H, W), dtype=bool)
     if window is not None:
         index = window[0]
-        local = field.reshape(-1)[index]                       # [T, h, w]
+        local = field.reshape(-1)[index]  # [T, h, w]
         if noise.edge_noise > 0:
             white = rng.standard_normal(local.shape, dtype=np.float32)
             smooth = ndimage.gaussian_filter(white, sigma=(0, 1.0, 1.0), mode="wrap")
-            local += noise.edge_noise / 0.2821 * smooth        # 0.2821 = std of white noise smoothed with sigma 1 (2-D)
+            local += noise.edge_noise / 0.2821 * smooth  # 0.2821 = std of white noise smoothed with sigma 1 (2-D)
         inside = local > 0
         if noise.hole_rate > 0:
             seeds = (rng.random(inside.shape, dtype=np.float32) < noise.hole_rate) & inside
@@ -597,7 +666,7 @@ def apply_segmentation_noise(field: np.ndarray, noise: SegmentationNoise | None,
         if len(rows) == 0:
             continue
         if rng.random() < 0.5:
-            mask[t, (rows[0] + rows[-1]) // 2:] = False          # lower half missing
+            mask[t, (rows[0] + rows[-1]) // 2 :] = False  # lower half missing
         else:
             cut = int(rng.integers(cols[0], cols[-1] + 1))
             if rng.random() < 0.5:
@@ -610,9 +679,16 @@ def apply_segmentation_noise(field: np.ndarray, noise: SegmentationNoise | None,
 # --------------------------------------------------------------------------- one walk
 
 
-def render_walk(subject_params: SubjectParams, view: float, condition: str, frames: int, height: int,
-                rng: np.random.Generator, walk: WalkVariation | None = None,
-                noise: SegmentationNoise | None = SegmentationNoise()) -> np.ndarray:
+def render_walk(
+    subject_params: SubjectParams,
+    view: float,
+    condition: str,
+    frames: int,
+    height: int,
+    rng: np.random.Generator,
+    walk: WalkVariation | None = None,
+    noise: SegmentationNoise | None = SegmentationNoise(),
+) -> np.ndarray:
     """Render one walk as CASIA-B-like binary silhouettes.
 
     Args:
@@ -633,9 +709,16 @@ def render_walk(subject_params: SubjectParams, view: float, condition: str, fram
     return render_views(subject_params, [view], condition, frames, height, [rng], walk, noise)[0]
 
 
-def render_views(subject_params: SubjectParams, views, condition: str, frames: int, height: int, rngs,
-                 walk: WalkVariation = WalkVariation(), noise: SegmentationNoise | None = SegmentationNoise()
-                 ) -> list[np.ndarray]:
+def render_views(
+    subject_params: SubjectParams,
+    views,
+    condition: str,
+    frames: int,
+    height: int,
+    rngs,
+    walk: WalkVariation = WalkVariation(),
+    noise: SegmentationNoise | None = SegmentationNoise(),
+) -> list[np.ndarray]:
     """One walk seen by several cameras at once (CASIA-B films each walk with all 11).
 
     The body is posed once, all views are rasterised in one call, and each view gets its own
@@ -690,8 +773,9 @@ def _write_walk(job) -> list[str]:
     return folders
 
 
-def synthesize_casia_b(out: str | os.PathLike, config: CasiaBSynthConfig | None = None, progress: bool = True,
-                       workers: int = 1) -> list[Path]:
+def synthesize_casia_b(
+    out: str | os.PathLike, config: CasiaBSynthConfig | None = None, progress: bool = True, workers: int = 1
+) -> list[Path]:
     """Write the synthetic data set in CASIA-B's layout.
 
     Writes ``out/<subject>/<condition>-<nn>/<view>/<SSS-cc-nn-VVV-FFF>.png`` (8-bit gray, 0 / 255,
@@ -715,9 +799,23 @@ def synthesize_casia_b(out: str | os.PathLike, config: CasiaBSynthConfig | None 
     (out / "README.txt").write_text(
         "SYNTHETIC data in the CASIA-B silhouette layout, written by mocapkit.datasets.synthetic.casia_b.\n"
         "These are rendered capsule-body walkers, not recordings of people; do not report results on them\n"
-        "as CASIA-B results.\n\nconfig:\n" + json.dumps(config.to_dict(), indent=2) + "\n", encoding="utf-8")
-    jobs = [(str(out), config, s, c, n) for s in range(1, config.num_subjects + 1)
-            for c in CONDITIONS if c in config.conditions for n in range(1, config.conditions[c] + 1)]
-    write_all(_write_walk, jobs, workers, total=len(jobs) * len(config.views), desc="synthesizing CASIA-B",
-              unit="seq", progress=progress)
+        "as CASIA-B results.\n\nconfig:\n" + json.dumps(config.to_dict(), indent=2) + "\n",
+        encoding="utf-8",
+    )
+    jobs = [
+        (str(out), config, s, c, n)
+        for s in range(1, config.num_subjects + 1)
+        for c in CONDITIONS
+        if c in config.conditions
+        for n in range(1, config.conditions[c] + 1)
+    ]
+    write_all(
+        _write_walk,
+        jobs,
+        workers,
+        total=len(jobs) * len(config.views),
+        desc="synthesizing CASIA-B",
+        unit="seq",
+        progress=progress,
+    )
     return [out / key.name for key in config.sequence_keys()]

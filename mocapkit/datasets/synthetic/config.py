@@ -4,6 +4,7 @@
 :class:`~mocapkit.datasets.synthetic.casia_b.CasiaBSynthConfig` derive from :class:`SynthConfig`
 and validate with a :class:`FieldCheck`.
 """
+
 from __future__ import annotations
 
 from collections.abc import Callable
@@ -46,14 +47,16 @@ class FieldCheck:
     def integer(self, name: str, low: int, high: int, unit: str = "") -> None:
         """An integer (Python or numpy) in ``low..high`` (``unit`` ends the message, e.g. ``" pixels"``)."""
         value = getattr(self.config, name)
-        self.require(isinstance(value, (int, np.integer)) and low <= value <= high, name,
-                     f"must be an integer in {low}..{high}{unit}")
+        self.require(
+            isinstance(value, (int, np.integer)) and low <= value <= high,
+            name,
+            f"must be an integer in {low}..{high}{unit}",
+        )
 
     def distinct(self, name: str, allowed: Callable[[Any], bool], why: str) -> None:
         """A non-empty collection of distinct values, each ``allowed``."""
         values = getattr(self.config, name)
-        self.require(bool(values) and len(set(values)) == len(values) and all(allowed(v) for v in values),
-                     name, why)
+        self.require(bool(values) and len(set(values)) == len(values) and all(allowed(v) for v in values), name, why)
 
     def seed(self, name: str = "seed") -> None:
         """A non-negative integer."""

@@ -28,6 +28,7 @@ flexion ``f`` and abduction ``a`` (``+`` left, ``-`` right; ``f = 0`` hangs down
 and ``rz = ±abduction``; tibia ``rx`` = knee flexion; lowerback ``rx`` = forward bend;
 root ``ry`` = heading (yaw).
 """
+
 from __future__ import annotations
 
 import re
@@ -49,13 +50,30 @@ from mocapkit.datasets.mocap.hdm05_classes import ACTORS, class_names, merge_25_
 #: Default classes: several variants per stem, so that the 130 → 65 → 25 merges all
 #: collapse something (counts, L/R limb, L/R start, front/side, circle vs straight).
 DEFAULT_CLASSES = (
-    "punchLFront1Reps", "punchLFront2Reps", "punchRFront1Reps", "punchRSide1Reps",
-    "kickLFront1Reps", "kickRFront2Reps", "kickRSide1Reps",
-    "walk2StepsLstart", "walk2StepsRstart", "walk4StepsRstart", "walkLeftCircle4StepsRstart",
-    "hopBothLegs1hops", "hopLLeg2hops", "hopRLeg1hops",
-    "jumpingJack1Reps", "jumpingJack3Reps", "squat1Reps", "squat3Reps",
-    "clap1Reps", "clapAboveHead1Reps", "rotateArmsLForward1Reps", "rotateArmsBothBackward1Reps",
-    "elbowToKnee1RepsLelbowStart", "elbowToKnee1RepsRelbowStart",
+    "punchLFront1Reps",
+    "punchLFront2Reps",
+    "punchRFront1Reps",
+    "punchRSide1Reps",
+    "kickLFront1Reps",
+    "kickRFront2Reps",
+    "kickRSide1Reps",
+    "walk2StepsLstart",
+    "walk2StepsRstart",
+    "walk4StepsRstart",
+    "walkLeftCircle4StepsRstart",
+    "hopBothLegs1hops",
+    "hopLLeg2hops",
+    "hopRLeg1hops",
+    "jumpingJack1Reps",
+    "jumpingJack3Reps",
+    "squat1Reps",
+    "squat3Reps",
+    "clap1Reps",
+    "clapAboveHead1Reps",
+    "rotateArmsLForward1Reps",
+    "rotateArmsBothBackward1Reps",
+    "elbowToKnee1RepsLelbowStart",
+    "elbowToKnee1RepsRelbowStart",
 )
 
 UNIT = 0.0254 / 0.45  #: metres per ASF length unit of the written skeletons (CMU/HDM05 convention)
@@ -109,13 +127,13 @@ class HDM05SynthConfig:
 class ActorStyle:
     """Body proportions and movement style of one synthetic actor."""
 
-    height: float      #: approximate standing height (m)
-    legs: float        #: leg-length factor
-    arms: float        #: arm-length factor
-    amplitude: float   #: joint-angle amplitude factor
-    tempo: float       #: speed factor (>1 = faster)
-    lean: float        #: forward trunk lean (deg)
-    arm_carry: float   #: elbow flexion while idle (deg)
+    height: float  #: approximate standing height (m)
+    legs: float  #: leg-length factor
+    arms: float  #: arm-length factor
+    amplitude: float  #: joint-angle amplitude factor
+    tempo: float  #: speed factor (>1 = faster)
+    lean: float  #: forward trunk lean (deg)
+    arm_carry: float  #: elbow flexion while idle (deg)
 
 
 ACTOR_STYLES = {
@@ -154,13 +172,28 @@ _LEFT_ARM = (
 )
 _HIERARCHY = {
     "root": ["lhipjoint", "rhipjoint", "lowerback"],
-    "lhipjoint": ["lfemur"], "lfemur": ["ltibia"], "ltibia": ["lfoot"], "lfoot": ["ltoes"],
-    "rhipjoint": ["rfemur"], "rfemur": ["rtibia"], "rtibia": ["rfoot"], "rfoot": ["rtoes"],
-    "lowerback": ["upperback"], "upperback": ["thorax"], "thorax": ["lowerneck", "lclavicle", "rclavicle"],
-    "lowerneck": ["upperneck"], "upperneck": ["head"],
-    "lclavicle": ["lhumerus"], "lhumerus": ["lradius"], "lradius": ["lwrist"], "lwrist": ["lhand", "lthumb"],
+    "lhipjoint": ["lfemur"],
+    "lfemur": ["ltibia"],
+    "ltibia": ["lfoot"],
+    "lfoot": ["ltoes"],
+    "rhipjoint": ["rfemur"],
+    "rfemur": ["rtibia"],
+    "rtibia": ["rfoot"],
+    "rfoot": ["rtoes"],
+    "lowerback": ["upperback"],
+    "upperback": ["thorax"],
+    "thorax": ["lowerneck", "lclavicle", "rclavicle"],
+    "lowerneck": ["upperneck"],
+    "upperneck": ["head"],
+    "lclavicle": ["lhumerus"],
+    "lhumerus": ["lradius"],
+    "lradius": ["lwrist"],
+    "lwrist": ["lhand", "lthumb"],
     "lhand": ["lfingers"],
-    "rclavicle": ["rhumerus"], "rhumerus": ["rradius"], "rradius": ["rwrist"], "rwrist": ["rhand", "rthumb"],
+    "rclavicle": ["rhumerus"],
+    "rhumerus": ["rradius"],
+    "rradius": ["rwrist"],
+    "rwrist": ["rhand", "rthumb"],
     "rhand": ["rfingers"],
 }
 _TEMPLATE_HEIGHT = 1.76
@@ -179,8 +212,18 @@ def actor_skeleton(actor: str, style: ActorStyle | None = None) -> AsfSkeleton:
             d[0] = -d[0]
             ax[1:] = -ax[1:]
         limits = [(-180.0, 180.0)] * len(dof)
-        bones.append(AsfBone(id=len(bones) + 1, name=name, direction=d / np.linalg.norm(d), length=round(length * s * factor, 5),
-                             axis=ax, axis_order="XYZ", dof=tuple(dof), limits=limits))
+        bones.append(
+            AsfBone(
+                id=len(bones) + 1,
+                name=name,
+                direction=d / np.linalg.norm(d),
+                length=round(length * s * factor, 5),
+                axis=ax,
+                axis_order="XYZ",
+                dof=tuple(dof),
+                limits=limits,
+            )
+        )
 
     for side, mirror in (("l", False), ("r", True)):
         for name, d, ln, ax, dof in _LEFT:
@@ -190,9 +233,14 @@ def actor_skeleton(actor: str, style: ActorStyle | None = None) -> AsfSkeleton:
     for side, mirror in (("l", False), ("r", True)):
         for name, d, ln, ax, dof in _LEFT_ARM:
             add(side + name, d, ln, ax, dof, style.arms if name != "clavicle" else 1.0, mirror)
-    return AsfSkeleton(name=f"HDM_{actor}_synthetic", version="1.10", units={"mass": 1.0, "length": 0.45, "angle": "deg"},
-                       documentation=f"synthetic HDM05-style skeleton of actor {actor} (mocapkit)",
-                       bones=bones, hierarchy={k: list(v) for k, v in _HIERARCHY.items()})
+    return AsfSkeleton(
+        name=f"HDM_{actor}_synthetic",
+        version="1.10",
+        units={"mass": 1.0, "length": 0.45, "angle": "deg"},
+        documentation=f"synthetic HDM05-style skeleton of actor {actor} (mocapkit)",
+        bones=bones,
+        hierarchy={k: list(v) for k, v in _HIERARCHY.items()},
+    )
 
 
 # --------------------------------------------------------------------------- motion primitives
@@ -248,24 +296,42 @@ def _parse(cls: str) -> dict:
     count = re.search(r"(\d+)(Reps|hops|Steps)", cls)
     n = int(count.group(1)) if count else 1
     start = re.search(r"([LR])(?:Hand|elbow)?[Ss]tart$", cls)
-    limb = "both"                                         # the acting limb: an L/R right after a lower-case letter
+    limb = "both"  # the acting limb: an L/R right after a lower-case letter
     if "Both" not in c65:
         side = re.search(r"(?<=[a-z])([LR])(?=[A-Z]|$)", c65)
         limb = side.group(1).lower() if side else "both"
-    return {"stem": merge_25_stem(cls), "c65": c65, "count": n, "start": (start.group(1).lower() if start else "l"),
-            "limb": limb}
+    return {
+        "stem": merge_25_stem(cls),
+        "c65": c65,
+        "count": n,
+        "start": (start.group(1).lower() if start else "l"),
+        "limb": limb,
+    }
 
 
-_PERIOD = {"walk": 1.1, "jog": 0.75, "run": 0.65, "sneak": 1.6, "shuffle": 1.2, "hop": 0.65, "kick": 1.3,
-           "punch": 0.9, "squat": 1.8, "jumping": 1.1, "clap": 0.55, "rotate": 1.1, "elbow": 1.6}
+_PERIOD = {
+    "walk": 1.1,
+    "jog": 0.75,
+    "run": 0.65,
+    "sneak": 1.6,
+    "shuffle": 1.2,
+    "hop": 0.65,
+    "kick": 1.3,
+    "punch": 0.9,
+    "squat": 1.8,
+    "jumping": 1.1,
+    "clap": 0.55,
+    "rotate": 1.1,
+    "elbow": 1.6,
+}
 
 
 def _smooth_noise(rng: np.random.Generator, T: int, width: int, sd: float) -> np.ndarray:
     """[T] zero-mean noise smoothed over ~``width`` frames with standard deviation ~``sd``."""
     raw = rng.standard_normal(T + 2 * width)
     kernel = np.hanning(2 * width + 1)
-    kernel /= np.sqrt((kernel ** 2).sum())
-    return np.convolve(raw, kernel, mode="same")[width:width + T] * sd
+    kernel /= np.sqrt((kernel**2).sum())
+    return np.convolve(raw, kernel, mode="same")[width : width + T] * sd
 
 
 def _clip(cls: str, skel: AsfSkeleton, style: ActorStyle, rng: np.random.Generator, cfg: HDM05SynthConfig) -> dict:
@@ -275,17 +341,17 @@ def _clip(cls: str, skel: AsfSkeleton, style: ActorStyle, rng: np.random.Generat
     tempo = style.tempo * (1.0 + cfg.variation * rng.uniform(-1, 1))
     period = _PERIOD.get(stem, 1.2) / tempo
     locomotion = stem in ("walk", "jog", "run", "sneak", "shuffle")
-    cycles = n / 2.0 if locomotion else float(n)         # a gait cycle is two steps
+    cycles = n / 2.0 if locomotion else float(n)  # a gait cycle is two steps
     if locomotion and n == 1:
         cycles = 1.0
     pre, post = rng.uniform(0.15, 0.4), rng.uniform(0.15, 0.4)
     active = cycles * period
     T = int(min(cfg.max_frames, max(24, round((pre + active + post) * cfg.fps))))
     t = np.arange(T) / cfg.fps
-    u = np.clip((t - pre) / period, 0.0, cycles)          # cycle phase, 0 … cycles
+    u = np.clip((t - pre) / period, 0.0, cycles)  # cycle phase, 0 … cycles
     on = ((t >= pre) & (t <= pre + active)).astype(float)
     env = np.clip(np.minimum((t - pre) / 0.25, (pre + active - t) / 0.25), 0.0, 1.0) ** 2
-    pulse = np.sin(np.pi * (u % 1.0)) ** 2 * on           # one bump per cycle
+    pulse = np.sin(np.pi * (u % 1.0)) ** 2 * on  # one bump per cycle
     P = _Pose(skel, T)
     first, second = ("l", "r") if info["start"] == "l" else ("r", "l")
     limb = info["limb"]
@@ -296,13 +362,13 @@ def _clip(cls: str, skel: AsfSkeleton, style: ActorStyle, rng: np.random.Generat
         P.shoulder(s, 8.0, 6.0)
         P.elbow(s, style.arm_carry)
     P.bend(style.lean)
-    lift = 0.0 * t                                        # airborne height (m); feet are put on the floor otherwise
-    forward = 0.0 * t                                      # distance travelled along the heading (m)
+    lift = 0.0 * t  # airborne height (m); feet are put on the floor otherwise
+    forward = 0.0 * t  # distance travelled along the heading (m)
     lateral = 0.0 * t
-    yaw = 0.0 * t                                          # heading change (deg)
+    yaw = 0.0 * t  # heading change (deg)
 
     if locomotion:
-        theta = np.pi * u * 2.0                           # gait cycle angle
+        theta = np.pi * u * 2.0  # gait cycle angle
         big = {"walk": 1.0, "jog": 1.4, "run": 1.6, "sneak": 0.8, "shuffle": 0.5}[stem] * amp
         swing = np.sin(theta) * env
         for s, sgn in ((first, 1.0), (second, -1.0)):
@@ -363,7 +429,7 @@ def _clip(cls: str, skel: AsfSkeleton, style: ActorStyle, rng: np.random.Generat
             P.elbow(s, 90.0 * env)
     elif stem == "punch":
         front = "Front" in c65
-        for s in "lr":                                    # guard
+        for s in "lr":  # guard
             P.shoulder(s, 45.0 * env, 10.0 * env)
             P.elbow(s, 100.0 * env)
         for s in sides:
@@ -389,7 +455,7 @@ def _clip(cls: str, skel: AsfSkeleton, style: ActorStyle, rng: np.random.Generat
         lift = 0.08 * np.abs(np.sin(2 * np.pi * u)) * on
     elif stem == "clap":
         high = "AboveHead" in c65
-        raise_deg = (160.0 if high else 75.0) * env     # arm elevation (degrees), not the root's lift
+        raise_deg = (160.0 if high else 75.0) * env  # arm elevation (degrees), not the root's lift
         beat = np.sin(np.pi * (u % 1.0)) ** 2 * on
         for s in "lr":
             P.shoulder(s, raise_deg, 25.0 * (1 - beat) * env, twist=0.0)
@@ -402,7 +468,7 @@ def _clip(cls: str, skel: AsfSkeleton, style: ActorStyle, rng: np.random.Generat
             P.shoulder(s, angle * on + 0.0, 10.0 * env)
             P.elbow(s, -style.arm_carry * env)
     elif stem == "elbow":
-        for k in range(int(np.ceil(cycles * 2))):       # alternate sides each half cycle
+        for k in range(int(np.ceil(cycles * 2))):  # alternate sides each half cycle
             s_elbow = first if k % 2 == 0 else second
             s_knee = "r" if s_elbow == "l" else "l"
             half = ((u * 2 >= k) & (u * 2 < k + 1)).astype(float) * on
@@ -415,10 +481,15 @@ def _clip(cls: str, skel: AsfSkeleton, style: ActorStyle, rng: np.random.Generat
         for s in "lr":
             P.shoulder(s, 0.0, 60.0 * env)
             P.elbow(s, 100.0 * env)
-    else:                                                 # any other class: a stem-seeded periodic pattern
+    else:  # any other class: a stem-seeded periodic pattern
         srng = np.random.default_rng(zlib.crc32(c65.encode()))
-        movable = [(b.name, d) for b in skel.bones if b.dof for d in b.dof
-                   if b.name[1:] in ("femur", "tibia", "humerus", "radius") or b.name == "lowerback"]
+        movable = [
+            (b.name, d)
+            for b in skel.bones
+            if b.dof
+            for d in b.dof
+            if b.name[1:] in ("femur", "tibia", "humerus", "radius") or b.name == "lowerback"
+        ]
         for i in srng.choice(len(movable), size=6, replace=False):
             bone, dof = movable[i]
             P.add(bone, dof, srng.uniform(15, 50) * amp * np.sin(2 * np.pi * u + srng.uniform(0, 2 * np.pi)) * env)
@@ -488,6 +559,7 @@ def synthesize_hdm05(out_dir: str | Path, config: HDM05SynthConfig | None = None
     if progress:
         try:
             from tqdm import tqdm
+
             iterator = tqdm(jobs, desc="synth hdm05", unit="clip")
         except ImportError:  # pragma: no cover
             pass

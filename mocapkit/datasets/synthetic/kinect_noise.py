@@ -49,46 +49,14 @@ g. ``swaps``: left/right confusions of the legs (knee, ankle, foot) and optional
 Everything random is drawn from one seed (a fixed stream per component, so switching one component off leaves the
 others' noise unchanged); every component off returns the input exactly (all joints TRACKED).
 
-Calibration (``scripts/selection/calibrate_kinect_noise.py``): the thesis reports raw Kinect errors of 12.5–14.5 cm against
-mocap on its occlusion-heavy motions (digest §4.6, Table 5.2). The defaults were tuned by hand, component by
-component, so that the raw error of the default config over all 232 HDM05 cuts (``../shared/data/hdm05_cuts11``,
-30 fps, world frame, all 20 joints, frame-weighted mean, :func:`mocapkit.kinect.metrics.joint_error_cm`) falls
-inside that range, with occlusion and inference the largest part of it and hands and feet the worst joints; the
-geometric parts (capsule radii, coverage threshold, camera) were set first by checking which joints each HDM05
-class hides, then the magnitudes. ``python scripts/selection/calibrate_kinect_noise.py --seed 0`` (232 files, 14,288 frames, 84 s) measured:
-
-- overall raw error **13.90 cm** (seeds 1 and 2: 13.80, 13.63 cm); median clip 10.9 cm;
-- states: TRACKED 80.0 %, INFERRED 16.0 %, NOT_TRACKED 4.0 %; error 9.1 cm on TRACKED entries and 32.9 cm on the
-  others, which carry 47 % of the total error;
-- worst joints: HandLeft 17.4, FootLeft 17.1, FootRight 17.0, HandRight 16.1, AnkleLeft 15.2 cm; best
-  ShoulderRight 9.4 cm;
-- per class: lieDownFloor 22.4 cm (48 % not tracked), depositFloorR 15.5, ... grabHighR 9.7 cm;
-- ablation (overall error with one component off → its drop): occlusion 8.90 (−5.00), surface_bias 11.59
-  (−2.31), jitter 12.58 (−1.32), joint_offsets 12.76 (−1.14), swaps 13.23 (−0.67), bone_jitter 13.82 (−0.08),
-  depth_noise 13.84 (−0.06); alone: occlusion 5.81, surface_bias 5.25, jitter 3.83, joint_offsets 3.01, depth_noise
-  1.25, bone_jitter 1.15, swaps 0.99 cm.
-
-Second calibration, on steadiness (preset ``"msr_steadiness"``, :meth:`KinectNoiseConfig.preset`): the defaults
-above match the raw *mean* error only, and make a far less steady skeleton than a real Kinect. MSR Action3D's 566
-usable Real3D files (``../shared/data/msr_action3d``, 15 fps, the only real Kinect skeletons here) have a mean
-bone-length sd of 0.41 cm and jitter of 3.53 cm (:mod:`mocapkit.kinect.metrics`, per clip, mean over clips); the
-default simulator, taken at 15 fps (every second frame) over all 232 HDM05 cuts, gives 4.95 and 11.19 cm (3.45 and
-8.28 with occlusion and swaps off, the tracked-joint regime of MSR's mostly unoccluded actions; clean mocap: 0.07 and
-2.71). The preset keeps occlusion, inference, swaps and the systematic biases, cuts the frame-to-frame sensor noise
-(jitter, its speed term, depth noise, bone-length noise) to a tenth, which brings the tracked regime to 0.73 and 2.87
-cm, and widens the surface radii by 15 % to keep the raw error in the thesis's range: ``python
-scripts/selection/calibrate_kinect_noise.py --preset msr_steadiness --no-ablation --seed 0`` measured **13.09 cm** overall
-(TRACKED 8.61 cm, others 30.96 cm; the same 80.0 / 16.0 / 4.0 % states) and 2.47 / 5.47 cm steadiness with every
-component on. Two caveats: MSR's actions are not HDM05's, so jitter (which includes the motion's own acceleration)
-is compared loosely and bone-length sd (0 for rigid mocap) is the firmer target; and MSR's skeletons come from an
-early Kinect pipeline (Li et al. 2010), not from the SDK v1.8 of the thesis.
-
-The errors are learnable in part, as the reconstruction needs: a nearest-neighbour or extra-trees regressor of the
-offset from the yaw-normalised, pelvis-centred simulated pose, trained on three HDM05 actors, brings the held-out
-actor's raw error from 13.7 to 9.7 cm (mm) and from 12.9 to 8.6 cm (bd); a constant mean offset gives 11.6 / 10.4.
-HDM05 is not occlusion-heavy in the thesis's sense (its Tai Chi, crossing arms, bending); the calibration puts
-HDM05 as a whole at the thesis's level, so lighter classes sit lower (grabHighR 9.7 cm) and floor work higher.
+Calibrations (``scripts/selection/calibrate_kinect_noise.py``), named by :meth:`KinectNoiseConfig.preset`:
+``"mean_error"`` (the default config) puts the raw error over all 232 HDM05 cuts inside the thesis's 12.5–14.5 cm
+(Table 5.2, digest §4.6), with occlusion and inference the largest part of it; ``"msr_steadiness"`` keeps that
+error but cuts the frame-to-frame sensor noise to a tenth, so that tracked joints are about as steady as MSR
+Action3D's real skeletons. What each calibration measured (per joint, per class, per component) and the rule it
+was tuned by: docs/decisions.md#kinect-simulator-calibration and docs/decisions.md#steady-simulator-preset.
 """
+
 from __future__ import annotations
 
 import math
@@ -102,25 +70,49 @@ from pathlib import Path
 import numpy as np
 from scipy.signal import lfilter
 
-from mocapkit.motion.layouts import LANDMARK_NAMES, LANDMARK_PARENTS
 from mocapkit.motion.container import Motion
 from mocapkit.motion.frames import true_runs
-from mocapkit.motion.geometry import landmark_positions, to_y_up
+from mocapkit.motion.geometry import direction_yaw, facing_direction, landmark_positions, to_y_up
+from mocapkit.motion.layouts import LANDMARK_NAMES, LANDMARK_PARENTS
 
 #: Kinect SDK joint tracking states (``NUI_SKELETON_POSITION_TRACKING_STATE``).
 TRACKED, INFERRED, NOT_TRACKED = 2, 1, 0
 #: The Kinect v1 joint names, in the order of the simulated arrays (digest §1.6).
 KINECT20_NAMES: tuple[str, ...] = (
-    "HipCenter", "Spine", "ShoulderCenter", "Head",
-    "ShoulderLeft", "ElbowLeft", "WristLeft", "HandLeft", "ShoulderRight", "ElbowRight", "WristRight", "HandRight",
-    "HipLeft", "KneeLeft", "AnkleLeft", "FootLeft", "HipRight", "KneeRight", "AnkleRight", "FootRight",
+    "HipCenter",
+    "Spine",
+    "ShoulderCenter",
+    "Head",
+    "ShoulderLeft",
+    "ElbowLeft",
+    "WristLeft",
+    "HandLeft",
+    "ShoulderRight",
+    "ElbowRight",
+    "WristRight",
+    "HandRight",
+    "HipLeft",
+    "KneeLeft",
+    "AnkleLeft",
+    "FootLeft",
+    "HipRight",
+    "KneeRight",
+    "AnkleRight",
+    "FootRight",
 )
 NUM_JOINTS = len(LANDMARK_NAMES)
 #: Named calibrations of :meth:`KinectNoiseConfig.preset` (the first is the default config).
 NOISE_PRESETS: tuple[str, ...] = ("mean_error", "msr_steadiness")
 #: The error components :class:`KinectNoiseConfig` switches (b–g of the module docstring).
-COMPONENTS: tuple[str, ...] = ("surface_bias", "joint_offsets", "occlusion", "depth_noise", "jitter", "bone_jitter",
-                               "swaps")
+COMPONENTS: tuple[str, ...] = (
+    "surface_bias",
+    "joint_offsets",
+    "occlusion",
+    "depth_noise",
+    "jitter",
+    "bone_jitter",
+    "swaps",
+)
 
 _INDEX = {name: k for k, name in enumerate(LANDMARK_NAMES)}
 #: Body part of each landmark (left and right share one value in the config tables).
@@ -129,8 +121,9 @@ _PART = tuple(name[2:] if name[:2] in ("l_", "r_") else name for name in LANDMAR
 _SIDE = np.array([1.0 if n.startswith("l_") else -1.0 if n.startswith("r_") else 0.0 for n in LANDMARK_NAMES])
 _LEG_PAIRS = tuple((_INDEX[f"l_{p}"], _INDEX[f"r_{p}"]) for p in ("knee", "ankle", "foot"))
 _ARM_PAIRS = tuple((_INDEX[f"l_{p}"], _INDEX[f"r_{p}"]) for p in ("elbow", "wrist", "hand"))
-_ALL_PAIRS = tuple((_INDEX[f"l_{p}"], _INDEX[f"r_{p}"])
-                   for p in ("shoulder", "elbow", "wrist", "hand", "hip", "knee", "ankle", "foot"))
+_ALL_PAIRS = tuple(
+    (_INDEX[f"l_{p}"], _INDEX[f"r_{p}"]) for p in ("shoulder", "elbow", "wrist", "hand", "hip", "knee", "ankle", "foot")
+)
 #: Limb joints (elbows, wrists, hands, knees, ankles, feet): the ones that touching another body part hides.
 _LIMB_JOINT = np.array([part in ("elbow", "wrist", "hand", "knee", "ankle", "foot") for part in _PART])
 _PELVIS, _NECK, _L_HIP, _R_HIP = _INDEX["pelvis"], _INDEX["neck"], _INDEX["l_hip"], _INDEX["r_hip"]
@@ -139,12 +132,23 @@ _PARENTS = np.array(LANDMARK_PARENTS)
 
 #: Body capsules for self-occlusion: name → (landmark, landmark); radii are in the config.
 CAPSULES: dict[str, tuple[str, str]] = {
-    "torso": ("pelvis", "spine"), "upper_torso": ("spine", "neck"), "chest": ("l_shoulder", "r_shoulder"),
-    "pelvis": ("l_hip", "r_hip"), "head": ("neck", "head"),
-    "l_upper_arm": ("l_shoulder", "l_elbow"), "l_forearm": ("l_elbow", "l_wrist"), "l_hand": ("l_wrist", "l_hand"),
-    "r_upper_arm": ("r_shoulder", "r_elbow"), "r_forearm": ("r_elbow", "r_wrist"), "r_hand": ("r_wrist", "r_hand"),
-    "l_thigh": ("l_hip", "l_knee"), "l_shin": ("l_knee", "l_ankle"), "l_foot": ("l_ankle", "l_foot"),
-    "r_thigh": ("r_hip", "r_knee"), "r_shin": ("r_knee", "r_ankle"), "r_foot": ("r_ankle", "r_foot"),
+    "torso": ("pelvis", "spine"),
+    "upper_torso": ("spine", "neck"),
+    "chest": ("l_shoulder", "r_shoulder"),
+    "pelvis": ("l_hip", "r_hip"),
+    "head": ("neck", "head"),
+    "l_upper_arm": ("l_shoulder", "l_elbow"),
+    "l_forearm": ("l_elbow", "l_wrist"),
+    "l_hand": ("l_wrist", "l_hand"),
+    "r_upper_arm": ("r_shoulder", "r_elbow"),
+    "r_forearm": ("r_elbow", "r_wrist"),
+    "r_hand": ("r_wrist", "r_hand"),
+    "l_thigh": ("l_hip", "l_knee"),
+    "l_shin": ("l_knee", "l_ankle"),
+    "l_foot": ("l_ankle", "l_foot"),
+    "r_thigh": ("r_hip", "r_knee"),
+    "r_shin": ("r_knee", "r_ankle"),
+    "r_foot": ("r_ankle", "r_foot"),
 }
 _CAP_A = np.array([_INDEX[a] for a, _ in CAPSULES.values()])
 _CAP_B = np.array([_INDEX[b] for _, b in CAPSULES.values()])
@@ -152,8 +156,13 @@ _TRUNK = ("torso", "upper_torso", "chest", "pelvis")
 #: [joints, capsules]: capsules that never hide the joint: those with the joint as an end, and the solid a joint sits
 #: in (HipCenter: trunk and thigh tops; Spine: trunk; ShoulderCenter: trunk and head; hips: lower trunk).
 _CAP_IGNORED = (np.arange(NUM_JOINTS)[:, None] == _CAP_A[None]) | (np.arange(NUM_JOINTS)[:, None] == _CAP_B[None])
-for _joint, _names in (("pelvis", _TRUNK + ("l_thigh", "r_thigh")), ("spine", _TRUNK), ("neck", _TRUNK + ("head",)),
-                       ("l_hip", ("torso", "pelvis")), ("r_hip", ("torso", "pelvis"))):
+for _joint, _names in (
+    ("pelvis", _TRUNK + ("l_thigh", "r_thigh")),
+    ("spine", _TRUNK),
+    ("neck", _TRUNK + ("head",)),
+    ("l_hip", ("torso", "pelvis")),
+    ("r_hip", ("torso", "pelvis")),
+):
     _CAP_IGNORED[_INDEX[_joint], [list(CAPSULES).index(name) for name in _names]] = True
 
 _BODY_PARTS = ("pelvis", "spine", "neck", "head", "shoulder", "elbow", "wrist", "hand", "hip", "knee", "ankle", "foot")
@@ -161,42 +170,97 @@ _BODY_PARTS = ("pelvis", "spine", "neck", "head", "shoulder", "elbow", "wrist", 
 
 def _default_surface_radius() -> dict[str, float]:
     # metres between the joint centre and the body surface the depth camera sees
-    return {"pelvis": 0.08, "spine": 0.08, "neck": 0.08, "head": 0.06, "shoulder": 0.05, "elbow": 0.045,
-            "wrist": 0.04, "hand": 0.04, "hip": 0.06, "knee": 0.055, "ankle": 0.045, "foot": 0.04}
+    return {
+        "pelvis": 0.08,
+        "spine": 0.08,
+        "neck": 0.08,
+        "head": 0.06,
+        "shoulder": 0.05,
+        "elbow": 0.045,
+        "wrist": 0.04,
+        "hand": 0.04,
+        "hip": 0.06,
+        "knee": 0.055,
+        "ankle": 0.045,
+        "foot": 0.04,
+    }
 
 
 def _default_joint_offset() -> dict[str, tuple[float, float, float]]:
     # metres, (outward from the midline, up along the torso, forward), in the per-frame torso frame
-    return {"pelvis": (0.0, 0.04, 0.0), "spine": (0.0, -0.03, 0.01), "neck": (0.0, -0.05, 0.01),
-            "head": (0.0, 0.04, 0.01), "shoulder": (0.02, 0.01, 0.0), "elbow": (0.0, -0.01, 0.0),
-            "wrist": (0.0, 0.0, 0.01), "hand": (0.01, 0.0, 0.03), "hip": (0.03, 0.05, 0.01), "knee": (0.0, 0.0, 0.01),
-            "ankle": (0.0, 0.03, 0.01), "foot": (0.0, 0.02, 0.04)}
+    return {
+        "pelvis": (0.0, 0.04, 0.0),
+        "spine": (0.0, -0.03, 0.01),
+        "neck": (0.0, -0.05, 0.01),
+        "head": (0.0, 0.04, 0.01),
+        "shoulder": (0.02, 0.01, 0.0),
+        "elbow": (0.0, -0.01, 0.0),
+        "wrist": (0.0, 0.0, 0.01),
+        "hand": (0.01, 0.0, 0.03),
+        "hip": (0.03, 0.05, 0.01),
+        "knee": (0.0, 0.0, 0.01),
+        "ankle": (0.0, 0.03, 0.01),
+        "foot": (0.0, 0.02, 0.04),
+    }
 
 
 def _default_capsule_radius() -> dict[str, float]:
     # metres
     radius = {"torso": 0.13, "upper_torso": 0.10, "chest": 0.07, "pelvis": 0.09, "head": 0.09}
     for side in ("l_", "r_"):
-        radius.update({f"{side}upper_arm": 0.05, f"{side}forearm": 0.04, f"{side}hand": 0.045,
-                       f"{side}thigh": 0.075, f"{side}shin": 0.055, f"{side}foot": 0.045})
+        radius.update(
+            {
+                f"{side}upper_arm": 0.05,
+                f"{side}forearm": 0.04,
+                f"{side}hand": 0.045,
+                f"{side}thigh": 0.075,
+                f"{side}shin": 0.055,
+                f"{side}foot": 0.045,
+            }
+        )
     return radius
 
 
 def _default_visible_radius() -> dict[str, float]:
     # metres, radius of the body part around the joint that the tracker needs to see
-    return {"pelvis": 0.12, "spine": 0.12, "neck": 0.10, "head": 0.09, "shoulder": 0.06, "elbow": 0.05,
-            "wrist": 0.04, "hand": 0.05, "hip": 0.08, "knee": 0.06, "ankle": 0.05, "foot": 0.05}
+    return {
+        "pelvis": 0.12,
+        "spine": 0.12,
+        "neck": 0.10,
+        "head": 0.09,
+        "shoulder": 0.06,
+        "elbow": 0.05,
+        "wrist": 0.04,
+        "hand": 0.05,
+        "hip": 0.08,
+        "knee": 0.06,
+        "ankle": 0.05,
+        "foot": 0.05,
+    }
 
 
 def _default_jitter_sigma() -> dict[str, float]:
     # metres, standard deviation of the low-pass jitter of a tracked joint
-    return {"pelvis": 0.006, "spine": 0.006, "neck": 0.007, "head": 0.008, "shoulder": 0.010, "elbow": 0.015,
-            "wrist": 0.022, "hand": 0.030, "hip": 0.008, "knee": 0.015, "ankle": 0.022, "foot": 0.030}
+    return {
+        "pelvis": 0.006,
+        "spine": 0.006,
+        "neck": 0.007,
+        "head": 0.008,
+        "shoulder": 0.010,
+        "elbow": 0.015,
+        "wrist": 0.022,
+        "hand": 0.030,
+        "hip": 0.008,
+        "knee": 0.015,
+        "ankle": 0.022,
+        "foot": 0.030,
+    }
 
 
 @dataclass(frozen=True)
 class KinectNoiseConfig:
-    """Parameters of :func:`simulate_kinect`; the defaults are the calibrated Kinect v1 level (module docstring).
+    """Parameters of :func:`simulate_kinect`; the defaults are the calibrated Kinect v1 level
+    (docs/decisions.md#kinect-simulator-calibration).
 
     Per-joint tables are keyed by body part (``pelvis``, ``spine``, ``neck``, ``head``, ``shoulder``, ``elbow``,
     ``wrist``, ``hand``, ``hip``, ``knee``, ``ankle``, ``foot``); left and right share a value.
@@ -211,56 +275,62 @@ class KinectNoiseConfig:
     bone_jitter: bool = True
     swaps: bool = True
     # --- a. virtual camera
-    camera_height_m: float = 0.8                                  # m above the clip's floor (lowest ankle/foot)
-    camera_distance_m: tuple[float, float] = (2.0, 3.5)          # m, horizontal, drawn uniformly per clip
-    facing_yaw_deg: tuple[float, float] = (-45.0, 45.0)          # degrees, subject's mean facing vs. the camera
-    min_subject_distance_m: float = 1.5                           # m, pelvis never nearer (camera steps back)
-    max_camera_distance_m: float = 4.5                            # m, how far the camera may step back
-    max_out_of_view_share: float = 0.02                           # share of joint entries out of view before it does
-    field_of_view_deg: tuple[float, float] = (57.0, 43.0)        # degrees, horizontal and vertical (Kinect v1)
+    camera_height_m: float = 0.8  # m above the clip's floor (lowest ankle/foot)
+    camera_distance_m: tuple[float, float] = (2.0, 3.5)  # m, horizontal, drawn uniformly per clip
+    facing_yaw_deg: tuple[float, float] = (-45.0, 45.0)  # degrees, subject's mean facing vs. the camera
+    min_subject_distance_m: float = 1.5  # m, pelvis never nearer (camera steps back)
+    max_camera_distance_m: float = 4.5  # m, how far the camera may step back
+    max_out_of_view_share: float = 0.02  # share of joint entries out of view before it does
+    field_of_view_deg: tuple[float, float] = (57.0, 43.0)  # degrees, horizontal and vertical (Kinect v1)
     # --- b. surface bias
-    surface_radius_m: dict[str, float] = field(default_factory=_default_surface_radius)   # m, per body part
+    surface_radius_m: dict[str, float] = field(default_factory=_default_surface_radius)  # m, per body part
     # --- c. joint-definition offsets
     joint_offset_m: dict[str, tuple[float, float, float]] = field(default_factory=_default_joint_offset)  # m
     # --- d. self-occlusion and inference
     capsule_radius_m: dict[str, float] = field(default_factory=_default_capsule_radius)  # m, per CAPSULES name
     visible_radius_m: dict[str, float] = field(default_factory=_default_visible_radius)  # m, per body part
-    hidden_coverage: float = 0.4             # 0..1, share of a joint's visible disc (of 7 samples) that occluders
+    hidden_coverage: float = 0.4  # 0..1, share of a joint's visible disc (of 7 samples) that occluders
     #                                          must cover to hide it
-    contact_margin_m: float = 0.03           # m; a limb joint nearer than this to another body part's surface is
+    contact_margin_m: float = 0.03  # m; a limb joint nearer than this to another body part's surface is
     #                                          INFERRED too (depth segmentation merges touching parts)
-    snap_weight: float = 0.6                 # 0..1, share of the occluder-surface snap in an inferred position
-    inferred_drift_m: float = 0.08           # m, σ per axis of an inferred joint's drift (low-pass noise)
+    snap_weight: float = 0.6  # 0..1, share of the occluder-surface snap in an inferred position
+    inferred_drift_m: float = 0.08  # m, σ per axis of an inferred joint's drift (low-pass noise)
     inferred_drift_time_constant_s: float = 1.0  # s, the drift's low-pass and fade-in time from the occlusion start
-    upright_limit_deg: float | None = 60.0   # degrees of trunk tilt from vertical beyond which the limbs are
+    upright_limit_deg: float | None = 60.0  # degrees of trunk tilt from vertical beyond which the limbs are
     #                                          INFERRED (the tracker is trained on upright people); None: never
-    not_tracked_after_s: float = 0.5         # s of continuous occlusion before NOT_TRACKED may start
-    not_tracked_probability: float = 0.4     # chance that such a long occlusion turns NOT_TRACKED
+    not_tracked_after_s: float = 0.5  # s of continuous occlusion before NOT_TRACKED may start
+    not_tracked_probability: float = 0.4  # chance that such a long occlusion turns NOT_TRACKED
     # --- e. depth noise and jitter
-    depth_sigma_at_1m_m: float = 0.002       # m at 1 m depth; σ = this · depth², along the camera ray, white
+    depth_sigma_at_1m_m: float = 0.002  # m at 1 m depth; σ = this · depth², along the camera ray, white
     jitter_sigma_m: dict[str, float] = field(default_factory=_default_jitter_sigma)  # m, per body part
-    jitter_time_constant_s: float = 0.1      # s, first-order low-pass of the jitter
-    speed_jitter_s: float = 0.01             # s; extra jitter σ (m) = this · joint speed (m/s): blur and tracking lag
-    inferred_jitter_factor: float = 3.0      # jitter multiplier on INFERRED / NOT_TRACKED joints
+    jitter_time_constant_s: float = 0.1  # s, first-order low-pass of the jitter
+    speed_jitter_s: float = 0.01  # s; extra jitter σ (m) = this · joint speed (m/s): blur and tracking lag
+    inferred_jitter_factor: float = 3.0  # jitter multiplier on INFERRED / NOT_TRACKED joints
     # --- f. bone-length jitter
-    bone_length_sigma: float = 0.03          # relative (1 = 100 %) standard deviation of every bone length
+    bone_length_sigma: float = 0.03  # relative (1 = 100 %) standard deviation of every bone length
     bone_length_time_constant_s: float = 0.3  # s, low-pass of the bone-length noise
     # --- g. left/right swaps
-    leg_swap_rate_facing_hz: float = 0.1     # 1/s, leg swaps started per second when facing the camera
-    leg_swap_rate_side_hz: float = 1.5       # 1/s, ... when side-on (interpolated by sin² of the angle)
-    arm_swap_rate_facing_hz: float = 0.0     # 1/s, arm swaps (off by default)
-    arm_swap_rate_side_hz: float = 0.0       # 1/s
+    leg_swap_rate_facing_hz: float = 0.1  # 1/s, leg swaps started per second when facing the camera
+    leg_swap_rate_side_hz: float = 1.5  # 1/s, ... when side-on (interpolated by sin² of the angle)
+    arm_swap_rate_facing_hz: float = 0.0  # 1/s, arm swaps (off by default)
+    arm_swap_rate_side_hz: float = 0.0  # 1/s
     swap_duration_s: tuple[float, float] = (0.1, 0.5)  # s, length of one swap run, drawn uniformly
     back_facing_mirror_deg: float | None = 120.0  # degrees between facing and camera beyond which all l/r mirror
 
     def __post_init__(self) -> None:
-        for name, table in (("surface_radius_m", self.surface_radius_m), ("joint_offset_m", self.joint_offset_m),
-                            ("visible_radius_m", self.visible_radius_m), ("jitter_sigma_m", self.jitter_sigma_m)):
+        for name, table in (
+            ("surface_radius_m", self.surface_radius_m),
+            ("joint_offset_m", self.joint_offset_m),
+            ("visible_radius_m", self.visible_radius_m),
+            ("jitter_sigma_m", self.jitter_sigma_m),
+        ):
             missing = set(_BODY_PARTS) - set(table)
             unknown = set(table) - set(_BODY_PARTS)
             if missing or unknown:
-                raise ValueError(f"KinectNoiseConfig.{name}: missing {sorted(missing)}, unknown {sorted(unknown)}; "
-                                 f"keys are {_BODY_PARTS}")
+                raise ValueError(
+                    f"KinectNoiseConfig.{name}: missing {sorted(missing)}, unknown {sorted(unknown)}; "
+                    f"keys are {_BODY_PARTS}"
+                )
         if set(self.capsule_radius_m) != set(CAPSULES):
             raise ValueError(f"KinectNoiseConfig.capsule_radius_m must have the keys {sorted(CAPSULES)}")
         for name in ("camera_distance_m", "facing_yaw_deg", "swap_duration_s"):
@@ -310,13 +380,18 @@ class KinectNoiseConfig:
         f = float(factor)
         if f < 0:
             raise ValueError(f"scale factor must be non-negative, got {factor}")
-        return replace(self, jitter_sigma_m={k: v * f for k, v in self.jitter_sigma_m.items()},
-                       speed_jitter_s=self.speed_jitter_s * f, depth_sigma_at_1m_m=self.depth_sigma_at_1m_m * f,
-                       bone_length_sigma=self.bone_length_sigma * f)
+        return replace(
+            self,
+            jitter_sigma_m={k: v * f for k, v in self.jitter_sigma_m.items()},
+            speed_jitter_s=self.speed_jitter_s * f,
+            depth_sigma_at_1m_m=self.depth_sigma_at_1m_m * f,
+            bone_length_sigma=self.bone_length_sigma * f,
+        )
 
     @classmethod
     def preset(cls, name: str) -> KinectNoiseConfig:
-        """A named calibration (:data:`NOISE_PRESETS`; the module docstring gives how each was measured):
+        """A named calibration (:data:`NOISE_PRESETS`; how each was measured:
+        docs/decisions.md#kinect-simulator-calibration):
 
         - ``"mean_error"``: the defaults, calibrated on the raw error only (12.5–14.5 cm on HDM05);
         - ``"msr_steadiness"``: the same raw-error level, with the frame-to-frame sensor noise (jitter, depth and
@@ -364,13 +439,15 @@ def kinect20_from_motion(motion: Motion, fps: float | None = 30.0) -> np.ndarray
         raise KinectInputError(f"{label}: no frames")
     try:
         positions, observed = landmark_positions(motion)
-    except ValueError as exc:  # RetrievalInputError names the file already
+    except ValueError as exc:  # SkeletonInputError names the file already
         raise KinectInputError(str(exc) if label in str(exc) else f"{label}: {exc}") from exc
     if not observed.all():
         unseen = [LANDMARK_NAMES[k] for k in np.flatnonzero(~observed.all(axis=0))]
         frames = int((~observed).any(axis=1).sum())
-        raise KinectInputError(f"{label}: landmarks {unseen} are missing or unobserved in {frames} of "
-                               f"{motion.num_frames} frames; the Kinect simulator needs every landmark in every frame")
+        raise KinectInputError(
+            f"{label}: landmarks {unseen} are missing or unobserved in {frames} of "
+            f"{motion.num_frames} frames; the Kinect simulator needs every landmark in every frame"
+        )
     if not np.isfinite(positions).all():
         raise KinectInputError(f"{label}: non-finite landmark positions")
     return to_y_up(positions, motion.up_axis).astype(np.float32)
@@ -409,13 +486,6 @@ def _torso_frames(clean: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray
     return right, up, np.cross(up, right)
 
 
-def _horizontal_facing(clean: np.ndarray) -> np.ndarray:
-    """Per-frame horizontal facing direction ``[T, 3]`` (unit, y = 0) from the hip line."""
-    hips = clean[:, _R_HIP] - clean[:, _L_HIP]
-    facing = np.stack([hips[:, 2], np.zeros(len(hips)), -hips[:, 0]], axis=-1)  # y × hips, horizontal
-    return _unit(facing)
-
-
 @dataclass(frozen=True)
 class VirtualCamera:
     """A pinhole depth camera in the world frame (metres, y up).
@@ -450,8 +520,9 @@ class VirtualCamera:
         return (z > 0.05) & (np.abs(c[..., 0]) <= z * half_w) & (np.abs(c[..., 1]) <= z * half_h)
 
 
-def place_camera(positions: np.ndarray, config: KinectNoiseConfig | None = None,
-                 seed: int | np.random.SeedSequence | None = 0) -> VirtualCamera:
+def place_camera(
+    positions: np.ndarray, config: KinectNoiseConfig | None = None, seed: int | np.random.SeedSequence | None = 0
+) -> VirtualCamera:
     """The per-clip :class:`VirtualCamera` for clean Kinect-20 ``positions`` ``[T, 20, 3]`` (m, y up): distance and
     facing yaw drawn from ``config``'s ranges, stepping back until the pelvis stays far enough and in view. It is the
     camera ``simulate_kinect(positions, config, seed)`` uses for the same int or SeedSequence ``seed``."""
@@ -468,8 +539,8 @@ def _camera(clean: np.ndarray, cfg: KinectNoiseConfig, distance: float, yaw: flo
     centre = clean[:, _PELVIS].mean(axis=0)
     floor = clean[:, _FEET, 1].min()
     look_at = np.array([centre[0], 0.5 * (floor + np.percentile(clean[..., 1].max(axis=1), 95)), centre[2]])
-    mean_facing = _horizontal_facing(clean).mean(axis=0)
-    heading = math.atan2(mean_facing[0], mean_facing[2]) if np.linalg.norm(mean_facing) > 1e-6 else 0.0
+    mean_facing = facing_direction(clean, _L_HIP, _R_HIP).mean(axis=0)
+    heading = float(direction_yaw(mean_facing)) if np.linalg.norm(mean_facing) > 1e-6 else 0.0
     direction = np.array([math.sin(heading + yaw), 0.0, math.cos(heading + yaw)])  # subject → camera
     pelvis = clean[:, _PELVIS]
     half_width = math.tan(math.radians(cfg.field_of_view_deg[0]) / 2)
@@ -486,8 +557,9 @@ def _camera(clean: np.ndarray, cfg: KinectNoiseConfig, distance: float, yaw: flo
         distance = min(distance + 0.1, cfg.max_camera_distance_m)
 
 
-def _segment_closest(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.ndarray,
-                     eps: float = 1e-12) -> tuple[np.ndarray, np.ndarray]:
+def _segment_closest(
+    p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.ndarray, eps: float = 1e-12
+) -> tuple[np.ndarray, np.ndarray]:
     """Closest points of segments ``p1q1`` and ``p2q2`` (broadcast ``[..., 3]``): ``(s, t)`` parameters in [0, 1]
     along each (Ericson, Real-Time Collision Detection §5.1.9)."""
     d1, d2, r = q1 - p1, q2 - p2, p1 - p2
@@ -519,12 +591,14 @@ def _point_segment_distance(point: np.ndarray, a: np.ndarray, b: np.ndarray) -> 
 
 #: Sample points of a joint's visible disc, in units of its radius: the centre and a ring of six at 0.7
 #: (about equal areas), ``[S, 2]``.
-_DISC_SAMPLES = np.concatenate([[[0.0, 0.0]], 0.7 * np.stack([np.cos(np.arange(6) * np.pi / 3),
-                                                              np.sin(np.arange(6) * np.pi / 3)], axis=-1)])
+_DISC_SAMPLES = np.concatenate(
+    [[[0.0, 0.0]], 0.7 * np.stack([np.cos(np.arange(6) * np.pi / 3), np.sin(np.arange(6) * np.pi / 3)], axis=-1)]
+)
 
 
-def self_occlusion(positions: np.ndarray, camera: VirtualCamera, config: KinectNoiseConfig | None = None,
-                   chunk_frames: int = 128) -> tuple[np.ndarray, np.ndarray]:
+def self_occlusion(
+    positions: np.ndarray, camera: VirtualCamera, config: KinectNoiseConfig | None = None, chunk_frames: int = 128
+) -> tuple[np.ndarray, np.ndarray]:
     """Which joints the depth camera cannot see, and where the view ray meets the occluder.
 
     Each joint's body part is a disc of ``visible_radius_m`` facing the camera at the joint's visible surface (the
@@ -548,13 +622,13 @@ def self_occlusion(positions: np.ndarray, camera: VirtualCamera, config: KinectN
     cfg = config or KinectNoiseConfig()
     clean = _check_positions(positions)
     cam = np.asarray(camera.position, float)
-    radius = np.array([cfg.capsule_radius_m[name] for name in CAPSULES])               # [C]
+    radius = np.array([cfg.capsule_radius_m[name] for name in CAPSULES])  # [C]
     surface_radius = cfg.per_joint("surface_radius_m")
     visible_radius = cfg.per_joint("visible_radius_m")
     hidden = np.zeros(clean.shape[:2], dtype=bool)
     hit_distance = np.full(clean.shape[:2], np.inf)
     for lo in range(0, len(clean), chunk_frames):
-        p = clean[lo:lo + chunk_frames]                                                # [t, J, 3]
+        p = clean[lo : lo + chunk_frames]  # [t, J, 3]
         ray_length = np.linalg.norm(p - cam, axis=-1)
         ray_dir = (p - cam) / np.maximum(ray_length, 1e-9)[..., None]
         across = np.cross(ray_dir, [0.0, 1.0, 0.0])
@@ -562,25 +636,27 @@ def self_occlusion(positions: np.ndarray, camera: VirtualCamera, config: KinectN
         across = _unit(across)
         upward = np.cross(across, ray_dir)
         surface = p - ray_dir * np.minimum(surface_radius, 0.5 * ray_length)[..., None]
-        offsets = visible_radius[:, None, None] * (_DISC_SAMPLES[None, None, :, :1] * across[:, :, None]
-                                                   + _DISC_SAMPLES[None, None, :, 1:] * upward[:, :, None])
-        samples = surface[:, :, None] + offsets                                        # [t, J, S, 3]
-        cap_a = p[:, _CAP_A][:, None, None]                                            # [t, 1, 1, C, 3]
+        offsets = visible_radius[:, None, None] * (
+            _DISC_SAMPLES[None, None, :, :1] * across[:, :, None]
+            + _DISC_SAMPLES[None, None, :, 1:] * upward[:, :, None]
+        )
+        samples = surface[:, :, None] + offsets  # [t, J, S, 3]
+        cap_a = p[:, _CAP_A][:, None, None]  # [t, 1, 1, C, 3]
         cap_b = p[:, _CAP_B][:, None, None]
-        ends = samples[..., None, :]                                                   # [t, J, S, 1, 3]
-        s, t = _segment_closest(cam, ends, cap_a, cap_b)                              # [t, J, S, C]
+        ends = samples[..., None, :]  # [t, J, S, 1, 3]
+        s, t = _segment_closest(cam, ends, cap_a, cap_b)  # [t, J, S, C]
         on_ray = cam + (ends - cam) * s[..., None]
         gap = np.linalg.norm(on_ray - (cap_a + (cap_b - cap_a) * t[..., None]), axis=-1)
         contains = _point_segment_distance(p[:, :, None], p[:, None, _CAP_A], p[:, None, _CAP_B]) < radius
-        candidate = (~contains & ~_CAP_IGNORED[None])[:, :, None, :]                   # [t, J, 1, C]
-        blocked = candidate & (gap < radius)                                           # [t, J, S, C]
-        covered = blocked.any(axis=-1)                                                 # [t, J, S]
+        candidate = (~contains & ~_CAP_IGNORED[None])[:, :, None, :]  # [t, J, 1, C]
+        blocked = candidate & (gap < radius)  # [t, J, S, C]
+        covered = blocked.any(axis=-1)  # [t, J, S]
         clearance = _point_segment_distance(p[:, :, None], p[:, None, _CAP_A], p[:, None, _CAP_B]) - radius
         touching = (candidate[:, :, 0] & (clearance < cfg.contact_margin_m)).any(axis=-1) & _LIMB_JOINT
-        hidden[lo:lo + len(p)] = (covered.mean(axis=-1) >= cfg.hidden_coverage - 1e-9) | touching
+        hidden[lo : lo + len(p)] = (covered.mean(axis=-1) >= cfg.hidden_coverage - 1e-9) | touching
         along = s * np.linalg.norm(ends - cam, axis=-1)
-        entry = np.maximum(along - np.sqrt(np.maximum(radius ** 2 - gap ** 2, 0.0)), 0.0)
-        hit_distance[lo:lo + len(p)] = np.where(blocked, entry, np.inf).min(axis=(-1, -2))
+        entry = np.maximum(along - np.sqrt(np.maximum(radius**2 - gap**2, 0.0)), 0.0)
+        hit_distance[lo : lo + len(p)] = np.where(blocked, entry, np.inf).min(axis=(-1, -2))
     hidden |= ~camera.in_view(clean)
     return hidden, hit_distance
 
@@ -591,7 +667,7 @@ def self_occlusion(positions: np.ndarray, camera: VirtualCamera, config: KinectN
 def _component_streams(seed: int | np.random.Generator | np.random.SeedSequence | None) -> list[np.random.Generator]:
     """One independent generator per random part (camera, occlusion, swaps, bones, depth, jitter)."""
     if isinstance(seed, np.random.Generator):
-        seed = int(seed.integers(2 ** 63))
+        seed = int(seed.integers(2**63))
     sequence = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
     return [np.random.default_rng(child) for child in sequence.spawn(6)]
 
@@ -606,13 +682,21 @@ def _lowpass_noise(rng: np.random.Generator, shape: tuple[int, ...], fps: float,
     return lfilter([b], [1.0, -a], white, axis=0, zi=(1.0 - b) * white[:1])[0]
 
 
-def _infer_hidden(est: np.ndarray, hidden: np.ndarray, hit_distance: np.ndarray, clean: np.ndarray,
-                  camera: VirtualCamera, cfg: KinectNoiseConfig, fps: float,
-                  rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+def _infer_hidden(
+    est: np.ndarray,
+    hidden: np.ndarray,
+    hit_distance: np.ndarray,
+    clean: np.ndarray,
+    camera: VirtualCamera,
+    cfg: KinectNoiseConfig,
+    fps: float,
+    rng: np.random.Generator,
+) -> tuple[np.ndarray, np.ndarray]:
     """Replace hidden joints of ``est`` by the Kinect's guess; states INFERRED / NOT_TRACKED (module docstring d)."""
     T = len(est)
-    drift_noise = cfg.inferred_drift_m * _lowpass_noise(rng, (T, NUM_JOINTS, 3), fps,
-                                                        cfg.inferred_drift_time_constant_s)
+    drift_noise = cfg.inferred_drift_m * _lowpass_noise(
+        rng, (T, NUM_JOINTS, 3), fps, cfg.inferred_drift_time_constant_s
+    )
     run_draws = rng.random((T, NUM_JOINTS))
     state = np.where(hidden, INFERRED, TRACKED).astype(np.int8)
     if not hidden.any():
@@ -622,7 +706,7 @@ def _infer_hidden(est: np.ndarray, hidden: np.ndarray, hit_distance: np.ndarray,
     ray_dir = _unit(clean - cam)
     frames = np.arange(T)
     after = max(int(np.rint(cfg.not_tracked_after_s * fps)), 1)
-    for j in range(NUM_JOINTS):          # parents come first, so a hidden parent is already replaced
+    for j in range(NUM_JOINTS):  # parents come first, so a hidden parent is already replaced
         h = hidden[:, j]
         if not h.any():
             continue
@@ -642,30 +726,38 @@ def _infer_hidden(est: np.ndarray, hidden: np.ndarray, hit_distance: np.ndarray,
         out[h, j] = guess[h]
         for start, stop in true_runs(h):
             if stop - start > after and run_draws[start, j] < cfg.not_tracked_probability:
-                state[start + after:stop, j] = NOT_TRACKED
+                state[start + after : stop, j] = NOT_TRACKED
     return out, state
 
 
-def _swap_runs(rate_hz: np.ndarray, fps: float, duration_s: tuple[float, float], draws: np.ndarray,
-               lengths_s: np.ndarray) -> np.ndarray:
+def _swap_runs(
+    rate_hz: np.ndarray, fps: float, duration_s: tuple[float, float], draws: np.ndarray, lengths_s: np.ndarray
+) -> np.ndarray:
     """bool ``[T]``: frames inside a swap run; runs start with probability ``1 − exp(−rate/fps)`` per frame."""
     start = draws < -np.expm1(-rate_hz / fps)
     swapped = np.zeros(len(rate_hz), dtype=bool)
     for t in np.flatnonzero(start):
-        swapped[t:t + max(int(np.rint(lengths_s[t] * fps)), 1)] = True
+        swapped[t : t + max(int(np.rint(lengths_s[t] * fps)), 1)] = True
     return swapped
 
 
-def _swap_sides(est: np.ndarray, state: np.ndarray, clean: np.ndarray, camera: VirtualCamera,
-                cfg: KinectNoiseConfig, fps: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+def _swap_sides(
+    est: np.ndarray,
+    state: np.ndarray,
+    clean: np.ndarray,
+    camera: VirtualCamera,
+    cfg: KinectNoiseConfig,
+    fps: float,
+    rng: np.random.Generator,
+) -> tuple[np.ndarray, np.ndarray]:
     """Left/right confusions (module docstring g)."""
     T = len(est)
     draws = rng.random((T, 2))
     lengths = rng.uniform(*cfg.swap_duration_s, size=(T, 2))
     to_camera = np.asarray(camera.position, float) - clean[:, _PELVIS]
     to_camera[:, 1] = 0.0
-    cos_angle = (_horizontal_facing(clean) * _unit(to_camera)).sum(-1).clip(-1.0, 1.0)
-    side_on = 1.0 - cos_angle ** 2                                                    # sin² of the angle
+    cos_angle = (facing_direction(clean, _L_HIP, _R_HIP) * _unit(to_camera)).sum(-1).clip(-1.0, 1.0)
+    side_on = 1.0 - cos_angle**2  # sin² of the angle
     leg_rate = cfg.leg_swap_rate_facing_hz + (cfg.leg_swap_rate_side_hz - cfg.leg_swap_rate_facing_hz) * side_on
     arm_rate = cfg.arm_swap_rate_facing_hz + (cfg.arm_swap_rate_side_hz - cfg.arm_swap_rate_facing_hz) * side_on
     legs = _swap_runs(leg_rate, fps, cfg.swap_duration_s, draws[:, 0], lengths[:, 0])
@@ -673,7 +765,7 @@ def _swap_sides(est: np.ndarray, state: np.ndarray, clean: np.ndarray, camera: V
     mirrored = np.zeros(T, dtype=bool)
     if cfg.back_facing_mirror_deg is not None:
         mirrored = np.degrees(np.arccos(cos_angle)) > cfg.back_facing_mirror_deg
-    swap = np.zeros((T, NUM_JOINTS), dtype=bool)            # swap[t, left joint] flips the pair
+    swap = np.zeros((T, NUM_JOINTS), dtype=bool)  # swap[t, left joint] flips the pair
     for left, _ in _LEG_PAIRS:
         swap[:, left] ^= legs
     for left, _ in _ARM_PAIRS:
@@ -690,8 +782,9 @@ def _swap_sides(est: np.ndarray, state: np.ndarray, clean: np.ndarray, camera: V
 
 def _jitter_bone_lengths(est: np.ndarray, cfg: KinectNoiseConfig, fps: float, rng: np.random.Generator) -> np.ndarray:
     """Every bone length times ``1 + σ·n(t)`` (low-pass n), children carried along (module docstring f)."""
-    scale = 1.0 + cfg.bone_length_sigma * _lowpass_noise(rng, (len(est), NUM_JOINTS), fps,
-                                                         cfg.bone_length_time_constant_s)
+    scale = 1.0 + cfg.bone_length_sigma * _lowpass_noise(
+        rng, (len(est), NUM_JOINTS), fps, cfg.bone_length_time_constant_s
+    )
     out = est.copy()
     for j, parent in enumerate(LANDMARK_PARENTS):
         if parent >= 0:
@@ -699,9 +792,13 @@ def _jitter_bone_lengths(est: np.ndarray, cfg: KinectNoiseConfig, fps: float, rn
     return out
 
 
-def simulate_kinect(positions: np.ndarray, config: KinectNoiseConfig | None = None,
-                    seed: int | np.random.Generator | np.random.SeedSequence | None = 0, fps: float = 30.0,
-                    camera: VirtualCamera | None = None) -> tuple[np.ndarray, np.ndarray]:
+def simulate_kinect(
+    positions: np.ndarray,
+    config: KinectNoiseConfig | None = None,
+    seed: int | np.random.Generator | np.random.SeedSequence | None = 0,
+    fps: float = 30.0,
+    camera: VirtualCamera | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """Kinect v1 view of clean Kinect-20 landmarks (module docstring a–g).
 
     Args:
@@ -728,16 +825,19 @@ def simulate_kinect(positions: np.ndarray, config: KinectNoiseConfig | None = No
     state = np.full((T, NUM_JOINTS), TRACKED, dtype=np.int8)
     if cfg.joint_offsets:
         right, up, forward = _torso_frames(clean)
-        offset = cfg.per_joint("joint_offset_m")                                      # [J, 3]
-        outward = offset[:, 0] * np.where(_SIDE == 0, 0.0, -_SIDE)                    # left joints: −right
-        est += (outward[None, :, None] * right[:, None] + offset[None, :, 1, None] * up[:, None]
-                + offset[None, :, 2, None] * forward[:, None])
+        offset = cfg.per_joint("joint_offset_m")  # [J, 3]
+        outward = offset[:, 0] * np.where(_SIDE == 0, 0.0, -_SIDE)  # left joints: −right
+        est += (
+            outward[None, :, None] * right[:, None]
+            + offset[None, :, 1, None] * up[:, None]
+            + offset[None, :, 2, None] * forward[:, None]
+        )
     if cfg.surface_bias:
         est += cfg.per_joint("surface_radius_m")[None, :, None] * _unit(camera.position - est)
     if cfg.occlusion:
         hidden, hit_distance = self_occlusion(clean, camera, cfg)
         if cfg.upright_limit_deg is not None:
-            tilt = np.degrees(np.arccos(np.clip(_torso_frames(clean)[1][:, 1], -1.0, 1.0)))     # [T]
+            tilt = np.degrees(np.arccos(np.clip(_torso_frames(clean)[1][:, 1], -1.0, 1.0)))  # [T]
             hidden |= (tilt > cfg.upright_limit_deg)[:, None] & _LIMB_JOINT[None]
         est, state = _infer_hidden(est, hidden, hit_distance, clean, camera, cfg, fps, occlusion_rng)
     if cfg.swaps:
@@ -747,7 +847,7 @@ def simulate_kinect(positions: np.ndarray, config: KinectNoiseConfig | None = No
     if cfg.depth_noise and cfg.depth_sigma_at_1m_m > 0:
         depth = camera.to_camera(est)[..., 2]
         ray = _unit(est - camera.position)
-        est = est + (cfg.depth_sigma_at_1m_m * depth ** 2 * depth_rng.standard_normal((T, NUM_JOINTS)))[..., None] * ray
+        est = est + (cfg.depth_sigma_at_1m_m * depth**2 * depth_rng.standard_normal((T, NUM_JOINTS)))[..., None] * ray
     if cfg.jitter:
         sigma = cfg.per_joint("jitter_sigma_m")[None, :] * np.where(state == TRACKED, 1.0, cfg.inferred_jitter_factor)
         if T > 1 and cfg.speed_jitter_s > 0:
@@ -779,9 +879,14 @@ class KinectPair:
         return iter((self.clean, self.noisy, self.state))
 
 
-def simulate_pairs(paths: Iterable[str | os.PathLike], config: KinectNoiseConfig | None = None, seed: int = 0,
-                   fps: float = 30.0, skip_bad: bool = False,
-                   progress: bool | None = None) -> tuple[list[KinectPair], list[tuple[Path, str]]]:
+def simulate_pairs(
+    paths: Iterable[str | os.PathLike],
+    config: KinectNoiseConfig | None = None,
+    seed: int = 0,
+    fps: float = 30.0,
+    skip_bad: bool = False,
+    progress: bool | None = None,
+) -> tuple[list[KinectPair], list[tuple[Path, str]]]:
     """(mocap, simulated Kinect) pairs of motion files: read, :func:`kinect20_from_motion`, :func:`simulate_kinect`
     with :func:`file_seed`.
 
@@ -805,6 +910,7 @@ def simulate_pairs(paths: Iterable[str | os.PathLike], config: KinectNoiseConfig
     iterator: Sequence[Path] = paths
     if progress if progress is not None else len(paths) > 20:
         from tqdm import tqdm
+
         iterator = tqdm(paths, desc="kinect noise", unit="file")
     pairs: list[KinectPair] = []
     skipped: list[tuple[Path, str]] = []
@@ -824,7 +930,20 @@ def simulate_pairs(paths: Iterable[str | os.PathLike], config: KinectNoiseConfig
 
 
 __all__ = [
-    "CAPSULES", "COMPONENTS", "INFERRED", "KINECT20_NAMES", "NOT_TRACKED", "TRACKED", "KinectInputError",
-    "KinectNoiseConfig", "KinectPair", "VirtualCamera", "file_seed", "kinect20_from_motion",
-    "place_camera", "self_occlusion", "simulate_kinect", "simulate_pairs",
+    "CAPSULES",
+    "COMPONENTS",
+    "INFERRED",
+    "KINECT20_NAMES",
+    "NOT_TRACKED",
+    "TRACKED",
+    "KinectInputError",
+    "KinectNoiseConfig",
+    "KinectPair",
+    "VirtualCamera",
+    "file_seed",
+    "kinect20_from_motion",
+    "place_camera",
+    "self_occlusion",
+    "simulate_kinect",
+    "simulate_pairs",
 ]

@@ -30,6 +30,7 @@ at the child lets branching joints (SpineBase, SpineShoulder, the hands) turn
 each branch independently. Each ``L[c] = Rz(z) @ Rx(x) @ Ry(y)``: twist about
 the bone axis first, then flexion (about x), then abduction (about z).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -70,30 +71,39 @@ class BodyProportions:
     is then close to the requested height.
     """
 
-    pelvis_width: float = 0.17      # HipLeft ↔ HipRight
-    hip_drop: float = 0.06          # SpineBase → hip joints, downward
-    lower_spine: float = 0.25       # SpineBase → SpineMid
-    upper_spine: float = 0.24       # SpineMid → SpineShoulder
-    neck: float = 0.08              # SpineShoulder → Neck
-    head: float = 0.12              # Neck → Head (Kinect's Head joint is mid-head)
-    shoulder_width: float = 0.36    # ShoulderLeft ↔ ShoulderRight
+    pelvis_width: float = 0.17  # HipLeft ↔ HipRight
+    hip_drop: float = 0.06  # SpineBase → hip joints, downward
+    lower_spine: float = 0.25  # SpineBase → SpineMid
+    upper_spine: float = 0.24  # SpineMid → SpineShoulder
+    neck: float = 0.08  # SpineShoulder → Neck
+    head: float = 0.12  # Neck → Head (Kinect's Head joint is mid-head)
+    shoulder_width: float = 0.36  # ShoulderLeft ↔ ShoulderRight
     upper_arm: float = 0.28
     forearm: float = 0.25
-    hand: float = 0.08              # Wrist → Hand
-    hand_tip: float = 0.07          # Hand → HandTip
+    hand: float = 0.08  # Wrist → Hand
+    hand_tip: float = 0.07  # Hand → HandTip
     thigh: float = 0.42
     shin: float = 0.40
-    ankle_height: float = 0.07      # Ankle above the floor
-    foot: float = 0.13              # Ankle → Foot (forward)
+    ankle_height: float = 0.07  # Ankle above the floor
+    foot: float = 0.13  # Ankle → Foot (forward)
 
     @property
     def height(self) -> float:
         """Standing height, floor to top of head (top of head ≈ Head joint + 0.09 m), metres."""
-        return (self.ankle_height + self.shin + self.thigh + self.hip_drop + self.lower_spine
-                + self.upper_spine + self.neck + self.head + 0.09)
+        return (
+            self.ankle_height
+            + self.shin
+            + self.thigh
+            + self.hip_drop
+            + self.lower_spine
+            + self.upper_spine
+            + self.neck
+            + self.head
+            + 0.09
+        )
 
     @classmethod
-    def from_height(cls, height: float, limb_ratios: np.ndarray | None = None) -> "BodyProportions":
+    def from_height(cls, height: float, limb_ratios: np.ndarray | None = None) -> BodyProportions:
         """Average adult proportions scaled to ``height`` metres.
 
         Args:
@@ -106,11 +116,21 @@ class BodyProportions:
         base = cls()
         arms, legs, torso, width = (float(v) for v in r)
         shaped = cls(
-            pelvis_width=base.pelvis_width * width, hip_drop=base.hip_drop,
-            lower_spine=base.lower_spine * torso, upper_spine=base.upper_spine * torso,
-            neck=base.neck, head=base.head, shoulder_width=base.shoulder_width * width,
-            upper_arm=base.upper_arm * arms, forearm=base.forearm * arms, hand=base.hand, hand_tip=base.hand_tip,
-            thigh=base.thigh * legs, shin=base.shin * legs, ankle_height=base.ankle_height, foot=base.foot,
+            pelvis_width=base.pelvis_width * width,
+            hip_drop=base.hip_drop,
+            lower_spine=base.lower_spine * torso,
+            upper_spine=base.upper_spine * torso,
+            neck=base.neck,
+            head=base.head,
+            shoulder_width=base.shoulder_width * width,
+            upper_arm=base.upper_arm * arms,
+            forearm=base.forearm * arms,
+            hand=base.hand,
+            hand_tip=base.hand_tip,
+            thigh=base.thigh * legs,
+            shin=base.shin * legs,
+            ankle_height=base.ankle_height,
+            foot=base.foot,
         )
         s = height / shaped.height
         return cls(**{k: v * s for k, v in shaped.__dict__.items()})
@@ -156,24 +176,26 @@ ROOT_DOFS = ("root_fwd", "root_side", "root_up", "root_yaw")
 #: shoulder twist = external rotation (lifts a bent forearm of an abducted arm).
 DOFS: dict[str, tuple[int, int, float]] = {
     "spine_bend": (J["SpineMid"], 0, -1.0),
-    "spine_side": (J["SpineMid"], 2, 1.0),       # lean to the person's right
-    "spine_twist": (J["SpineMid"], 1, 1.0),      # upper body turns left
+    "spine_side": (J["SpineMid"], 2, 1.0),  # lean to the person's right
+    "spine_twist": (J["SpineMid"], 1, 1.0),  # upper body turns left
     "chest_bend": (J["SpineShoulder"], 0, -1.0),
     "head_nod": (J["Head"], 0, -1.0),
 }
 for _s, _side in (("l", "Left"), ("r", "Right")):
-    DOFS.update({
-        f"{_s}_clavicle": (J["Shoulder" + _side], 2, 1.0),      # shrug: shoulder up (abduct the collar bone)
-        f"{_s}_shoulder_flex": (J["Elbow" + _side], 0, 1.0),
-        f"{_s}_shoulder_abd": (J["Elbow" + _side], 2, 1.0),
-        f"{_s}_shoulder_twist": (J["Elbow" + _side], 1, -1.0),
-        f"{_s}_elbow": (J["Wrist" + _side], 0, 1.0),
-        f"{_s}_wrist": (J["Hand" + _side], 0, 1.0),
-        f"{_s}_hip_flex": (J["Knee" + _side], 0, 1.0),
-        f"{_s}_hip_abd": (J["Knee" + _side], 2, 1.0),
-        f"{_s}_knee": (J["Ankle" + _side], 0, -1.0),
-        f"{_s}_ankle": (J["Foot" + _side], 0, -1.0),           # plantar flexion: toes down
-    })
+    DOFS.update(
+        {
+            f"{_s}_clavicle": (J["Shoulder" + _side], 2, 1.0),  # shrug: shoulder up (abduct the collar bone)
+            f"{_s}_shoulder_flex": (J["Elbow" + _side], 0, 1.0),
+            f"{_s}_shoulder_abd": (J["Elbow" + _side], 2, 1.0),
+            f"{_s}_shoulder_twist": (J["Elbow" + _side], 1, -1.0),
+            f"{_s}_elbow": (J["Wrist" + _side], 0, 1.0),
+            f"{_s}_wrist": (J["Hand" + _side], 0, 1.0),
+            f"{_s}_hip_flex": (J["Knee" + _side], 0, 1.0),
+            f"{_s}_hip_abd": (J["Knee" + _side], 2, 1.0),
+            f"{_s}_knee": (J["Ankle" + _side], 0, -1.0),
+            f"{_s}_ankle": (J["Foot" + _side], 0, -1.0),  # plantar flexion: toes down
+        }
+    )
 
 DOF_NAMES: tuple[str, ...] = ROOT_DOFS + tuple(DOFS)
 
@@ -227,8 +249,9 @@ def euler_to_matrix(euler: np.ndarray) -> np.ndarray:
     return rot_z(euler[..., 2]) @ rot_x(euler[..., 0]) @ rot_y(euler[..., 1])
 
 
-def forward_kinematics(offsets: np.ndarray, local_rot: np.ndarray, root_rot: np.ndarray | None = None,
-                       root_pos: np.ndarray | None = None) -> np.ndarray:
+def forward_kinematics(
+    offsets: np.ndarray, local_rot: np.ndarray, root_rot: np.ndarray | None = None, root_pos: np.ndarray | None = None
+) -> np.ndarray:
     """Joint positions from local rotations, composed down the NTU25 tree.
 
     Args:

@@ -30,6 +30,7 @@ regression on root-centred, time-pooled joint statistics; see
 ``scripts/selection/calibrate_synth_ntu.py``) reaches roughly 55–85 % on held-out subjects
 (chance is ``1 / num_classes``); ``difficulty`` scales all the human variation at once.
 """
+
 from __future__ import annotations
 
 import json
@@ -39,16 +40,16 @@ from pathlib import Path
 
 import numpy as np
 
-from mocapkit.datasets.parallel import write_all
-from mocapkit.datasets.synthetic import kinematics as kin
-from mocapkit.datasets.synthetic.config import FieldCheck, SynthConfig
-from mocapkit.datasets.synthetic.kinematics import DOF_NAMES, J
 from mocapkit.datasets.formats.ntu_skeleton import (
     NTUSampleName,
     SkeletonSequence,
     sequence_from_positions,
     write_skeleton,
 )
+from mocapkit.datasets.parallel import write_all
+from mocapkit.datasets.synthetic import kinematics as kin
+from mocapkit.datasets.synthetic.config import FieldCheck, SynthConfig
+from mocapkit.datasets.synthetic.kinematics import DOF_NAMES, J
 
 FPS = 30.0
 _DOF = {name: k for k, name in enumerate(DOF_NAMES)}
@@ -130,19 +131,32 @@ class NTUSynthConfig(SynthConfig):
         check.integer("num_classes", 1, len(ACTIONS))
         check.integer("num_subjects", 1, 999)
         for name in ("setups", "replications"):
-            check.distinct(name, lambda v: isinstance(v, (int, np.integer)) and 1 <= v <= 999,
-                           "must be a non-empty tuple of distinct integers in 1..999")
-        check.distinct("cameras", lambda v: v in (1, 2, 3),
-                       "must be a non-empty tuple of distinct values from (1, 2, 3)")
+            check.distinct(
+                name,
+                lambda v: isinstance(v, (int, np.integer)) and 1 <= v <= 999,
+                "must be a non-empty tuple of distinct integers in 1..999",
+            )
+        check.distinct(
+            "cameras", lambda v: v in (1, 2, 3), "must be a non-empty tuple of distinct values from (1, 2, 3)"
+        )
         check.seed()
-        check.non_negative("style_noise", "sample_noise", "tempo_spread", "amplitude_spread", "difficulty", "jitter_m",
-                           "facing_spread_deg")
+        check.non_negative(
+            "style_noise",
+            "sample_noise",
+            "tempo_spread",
+            "amplitude_spread",
+            "difficulty",
+            "jitter_m",
+            "facing_spread_deg",
+        )
         check.probability("drop_frame_prob", "extra_body_prob")
-        check.require(self.drop_frame_prob <= 0.5, "drop_frame_prob",
-                      "must be at most 0.5 (the body must be seen in most frames)")
+        check.require(
+            self.drop_frame_prob <= 0.5, "drop_frame_prob", "must be at most 0.5 (the body must be seen in most frames)"
+        )
         lo, hi = self.height_range_m if len(self.height_range_m) == 2 else (0, -1)
-        check.require(1.0 <= lo <= hi <= 2.3, "height_range_m",
-                      "must be (low, high) with 1.0 <= low <= high <= 2.3 metres")
+        check.require(
+            1.0 <= lo <= hi <= 2.3, "height_range_m", "must be (low, high) with 1.0 <= low <= high <= 2.3 metres"
+        )
         check.require(0.1 <= self.length_scale <= 5.0, "length_scale", "must be in [0.1, 5]")
 
 
@@ -202,107 +216,288 @@ _WAVE_UP = dict(r_shoulder_abd=85, r_shoulder_twist=80, r_elbow=85)
 _SALUTE = dict(r_shoulder_abd=55, r_shoulder_flex=35, r_shoulder_twist=65, r_elbow=140, r_wrist=10)
 _CLAP_OPEN = _both(shoulder_flex=50, shoulder_abd=10, elbow=80, shoulder_twist=-5)
 _CLAP_SHUT = _both(shoulder_flex=50, shoulder_abd=10, elbow=80, shoulder_twist=-32)
-_PUNCH = {**_both(shoulder_flex=40, elbow=110, shoulder_abd=10), "r_shoulder_flex": 85, "r_elbow": 5,
-          "r_shoulder_abd": -5, "spine_twist": 18}
+_PUNCH = {
+    **_both(shoulder_flex=40, elbow=110, shoulder_abd=10),
+    "r_shoulder_flex": 85,
+    "r_elbow": 5,
+    "r_shoulder_abd": -5,
+    "spine_twist": 18,
+}
 _REACH = dict(r_shoulder_flex=45, r_elbow=35, r_shoulder_abd=-28, spine_twist=8)
 _HUG = _both(shoulder_flex=80, shoulder_abd=35, shoulder_twist=-30, elbow=70)
 
 
 def _actions() -> tuple[ActionSpec, ...]:
     up = _both(shoulder_flex=170, elbow=5)
-    walk_a = {**_both(knee=10), "r_hip_flex": 18, "l_hip_flex": -8, "l_knee": 25, "l_shoulder_flex": 15,
-              "r_shoulder_flex": -10}
-    walk_b = {**_both(knee=10), "l_hip_flex": 18, "r_hip_flex": -8, "r_knee": 25, "r_shoulder_flex": 15,
-              "l_shoulder_flex": -10}
+    walk_a = {
+        **_both(knee=10),
+        "r_hip_flex": 18,
+        "l_hip_flex": -8,
+        "l_knee": 25,
+        "l_shoulder_flex": 15,
+        "r_shoulder_flex": -10,
+    }
+    walk_b = {
+        **_both(knee=10),
+        "l_hip_flex": 18,
+        "r_hip_flex": -8,
+        "r_knee": 25,
+        "r_shoulder_flex": 15,
+        "l_shoulder_flex": -10,
+    }
     return (
-        ActionSpec("wave right hand", 75, (
-            (0.0, REST), (0.2, _WAVE_UP),
-            *_oscillate(0.28, 0.72, 5, {**_WAVE_UP, "r_elbow": 55}, {**_WAVE_UP, "r_elbow": 115}),
-            (0.82, _WAVE_UP), (1.0, REST))),
-        ActionSpec("both arms up", 60, (
-            (0.0, REST), (0.35, {**up, "spine_bend": -8}), (0.6, {**up, "spine_bend": -8, "head_nod": -10}),
-            (1.0, REST))),
-        ActionSpec("clap", 70, (
-            (0.0, REST), (0.18, _CLAP_OPEN), *_oscillate(0.26, 0.78, 6, _CLAP_SHUT, _CLAP_OPEN), (1.0, REST))),
-        ActionSpec("punch forward", 50, (
-            (0.0, REST), (0.25, _GUARD), (0.42, _PUNCH), (0.55, _GUARD), (0.72, _GUARD), (1.0, REST))),
-        ActionSpec("point forward", 60, (
-            (0.0, REST), (0.3, dict(r_shoulder_flex=80, r_elbow=8, r_shoulder_abd=-5, spine_twist=5)),
-            (0.7, dict(r_shoulder_flex=84, r_elbow=5, r_shoulder_abd=-8, spine_twist=6)), (1.0, REST))),
-        ActionSpec("kick forward", 55, (
-            (0.0, REST), (0.3, {**_both(shoulder_abd=20), "r_hip_flex": 45, "r_knee": 80, "spine_bend": -5}),
-            (0.48, {**_both(shoulder_abd=25), "r_hip_flex": 75, "r_knee": 5, "r_ankle": 20, "spine_bend": -12}),
-            (0.66, {**_both(shoulder_abd=20), "r_hip_flex": 40, "r_knee": 80}), (1.0, REST)), plant="left"),
-        ActionSpec("squat down", 80, (
-            (0.0, REST), (0.35, _SQUAT), (0.65, {**_SQUAT, "spine_bend": 22}), (1.0, REST))),
-        ActionSpec("sit down", 70, (
-            (0.0, REST), (0.25, {**_both(hip_flex=45, knee=50, shoulder_flex=30), "spine_bend": 30}),
-            (0.55, {**_SEATED, "spine_bend": 18}), (1.0, _SEATED))),
-        ActionSpec("stand up", 70, (
-            (0.0, _SEATED), (0.3, {**_SEATED, "spine_bend": 35}),
-            (0.6, {**_both(hip_flex=30, knee=35, shoulder_flex=20), "spine_bend": 20}), (1.0, REST))),
-        ActionSpec("handshake", 75, (
-            (0.0, REST), (0.3, {**_REACH, "root_fwd": 0.25}),
-            *_oscillate(0.38, 0.66, 5, {**_REACH, "root_fwd": 0.25, "r_shoulder_flex": 48},
-                        {**_REACH, "root_fwd": 0.25, "r_shoulder_flex": 33}),
-            (0.75, {**_REACH, "root_fwd": 0.25}), (1.0, REST)),
+        ActionSpec(
+            "wave right hand",
+            75,
+            (
+                (0.0, REST),
+                (0.2, _WAVE_UP),
+                *_oscillate(0.28, 0.72, 5, {**_WAVE_UP, "r_elbow": 55}, {**_WAVE_UP, "r_elbow": 115}),
+                (0.82, _WAVE_UP),
+                (1.0, REST),
+            ),
+        ),
+        ActionSpec(
+            "both arms up",
+            60,
+            (
+                (0.0, REST),
+                (0.35, {**up, "spine_bend": -8}),
+                (0.6, {**up, "spine_bend": -8, "head_nod": -10}),
+                (1.0, REST),
+            ),
+        ),
+        ActionSpec(
+            "clap",
+            70,
+            ((0.0, REST), (0.18, _CLAP_OPEN), *_oscillate(0.26, 0.78, 6, _CLAP_SHUT, _CLAP_OPEN), (1.0, REST)),
+        ),
+        ActionSpec(
+            "punch forward",
+            50,
+            ((0.0, REST), (0.25, _GUARD), (0.42, _PUNCH), (0.55, _GUARD), (0.72, _GUARD), (1.0, REST)),
+        ),
+        ActionSpec(
+            "point forward",
+            60,
+            (
+                (0.0, REST),
+                (0.3, dict(r_shoulder_flex=80, r_elbow=8, r_shoulder_abd=-5, spine_twist=5)),
+                (0.7, dict(r_shoulder_flex=84, r_elbow=5, r_shoulder_abd=-8, spine_twist=6)),
+                (1.0, REST),
+            ),
+        ),
+        ActionSpec(
+            "kick forward",
+            55,
+            (
+                (0.0, REST),
+                (0.3, {**_both(shoulder_abd=20), "r_hip_flex": 45, "r_knee": 80, "spine_bend": -5}),
+                (0.48, {**_both(shoulder_abd=25), "r_hip_flex": 75, "r_knee": 5, "r_ankle": 20, "spine_bend": -12}),
+                (0.66, {**_both(shoulder_abd=20), "r_hip_flex": 40, "r_knee": 80}),
+                (1.0, REST),
+            ),
+            plant="left",
+        ),
+        ActionSpec("squat down", 80, ((0.0, REST), (0.35, _SQUAT), (0.65, {**_SQUAT, "spine_bend": 22}), (1.0, REST))),
+        ActionSpec(
+            "sit down",
+            70,
+            (
+                (0.0, REST),
+                (0.25, {**_both(hip_flex=45, knee=50, shoulder_flex=30), "spine_bend": 30}),
+                (0.55, {**_SEATED, "spine_bend": 18}),
+                (1.0, _SEATED),
+            ),
+        ),
+        ActionSpec(
+            "stand up",
+            70,
+            (
+                (0.0, _SEATED),
+                (0.3, {**_SEATED, "spine_bend": 35}),
+                (0.6, {**_both(hip_flex=30, knee=35, shoulder_flex=20), "spine_bend": 20}),
+                (1.0, REST),
+            ),
+        ),
+        ActionSpec(
+            "handshake",
+            75,
+            (
+                (0.0, REST),
+                (0.3, {**_REACH, "root_fwd": 0.25}),
+                *_oscillate(
+                    0.38,
+                    0.66,
+                    5,
+                    {**_REACH, "root_fwd": 0.25, "r_shoulder_flex": 48},
+                    {**_REACH, "root_fwd": 0.25, "r_shoulder_flex": 33},
+                ),
+                (0.75, {**_REACH, "root_fwd": 0.25}),
+                (1.0, REST),
+            ),
             partner=(
-            (0.0, REST), (0.32, {**_REACH, "root_fwd": 0.25}),
-            *_oscillate(0.38, 0.66, 5, {**_REACH, "root_fwd": 0.25, "r_shoulder_flex": 48},
-                        {**_REACH, "root_fwd": 0.25, "r_shoulder_flex": 33}),
-            (0.75, {**_REACH, "root_fwd": 0.25}), (1.0, REST))),
-        ActionSpec("push other person", 55, (
-            (0.0, REST), (0.3, {**_both(shoulder_flex=70, elbow=80), "root_fwd": 0.15}),
-            (0.45, {**_both(shoulder_flex=80, elbow=10), "root_fwd": 0.35, "spine_bend": 12}),
-            (0.65, {**_both(shoulder_flex=40, elbow=30), "root_fwd": 0.35}), (1.0, {"root_fwd": 0.25})),
+                (0.0, REST),
+                (0.32, {**_REACH, "root_fwd": 0.25}),
+                *_oscillate(
+                    0.38,
+                    0.66,
+                    5,
+                    {**_REACH, "root_fwd": 0.25, "r_shoulder_flex": 48},
+                    {**_REACH, "root_fwd": 0.25, "r_shoulder_flex": 33},
+                ),
+                (0.75, {**_REACH, "root_fwd": 0.25}),
+                (1.0, REST),
+            ),
+        ),
+        ActionSpec(
+            "push other person",
+            55,
+            (
+                (0.0, REST),
+                (0.3, {**_both(shoulder_flex=70, elbow=80), "root_fwd": 0.15}),
+                (0.45, {**_both(shoulder_flex=80, elbow=10), "root_fwd": 0.35, "spine_bend": 12}),
+                (0.65, {**_both(shoulder_flex=40, elbow=30), "root_fwd": 0.35}),
+                (1.0, {"root_fwd": 0.25}),
+            ),
             partner=(
-            (0.0, REST), (0.43, REST),
-            (0.58, {**_both(shoulder_abd=30, shoulder_flex=20), "root_fwd": -0.35, "spine_bend": -15, "head_nod": 15}),
-            (0.75, {**_both(shoulder_abd=10), "root_fwd": -0.45}), (1.0, {"root_fwd": -0.45}))),
-        ActionSpec("hug", 85, (
-            (0.0, REST), (0.3, {**_HUG, "root_fwd": 0.35, "spine_bend": 8}),
-            (0.7, {**_HUG, "root_fwd": 0.35, "spine_bend": 10, "r_shoulder_abd": 30}),
-            (1.0, REST)),
+                (0.0, REST),
+                (0.43, REST),
+                (
+                    0.58,
+                    {**_both(shoulder_abd=30, shoulder_flex=20), "root_fwd": -0.35, "spine_bend": -15, "head_nod": 15},
+                ),
+                (0.75, {**_both(shoulder_abd=10), "root_fwd": -0.45}),
+                (1.0, {"root_fwd": -0.45}),
+            ),
+        ),
+        ActionSpec(
+            "hug",
+            85,
+            (
+                (0.0, REST),
+                (0.3, {**_HUG, "root_fwd": 0.35, "spine_bend": 8}),
+                (0.7, {**_HUG, "root_fwd": 0.35, "spine_bend": 10, "r_shoulder_abd": 30}),
+                (1.0, REST),
+            ),
             partner=(
-            (0.0, REST), (0.32, {**_HUG, "root_fwd": 0.35, "spine_bend": 8}),
-            (0.7, {**_HUG, "root_fwd": 0.35, "spine_bend": 10}), (1.0, REST))),
+                (0.0, REST),
+                (0.32, {**_HUG, "root_fwd": 0.35, "spine_bend": 8}),
+                (0.7, {**_HUG, "root_fwd": 0.35, "spine_bend": 10}),
+                (1.0, REST),
+            ),
+        ),
         # ---- beyond the default 12
-        ActionSpec("bow", 60, (
-            (0.0, REST), (0.4, {**_both(shoulder_flex=-5), "spine_bend": 50, "chest_bend": 12, "head_nod": 10}),
-            (0.6, {**_both(shoulder_flex=-5), "spine_bend": 52, "chest_bend": 14, "head_nod": 12}), (1.0, REST))),
-        ActionSpec("jump up", 45, (
-            (0.0, REST), (0.3, {**_both(hip_flex=45, knee=70, ankle=-20, shoulder_flex=-35), "spine_bend": 20}),
-            (0.45, {**_both(shoulder_flex=120, ankle=25), "root_up": 0.25}),
-            (0.62, {**_both(hip_flex=40, knee=60, ankle=-15, shoulder_flex=20), "spine_bend": 15}), (1.0, REST))),
-        ActionSpec("turn around", 80, (
-            (0.0, REST), (0.25, {**walk_a, "root_yaw": 45}), (0.45, {**walk_b, "root_yaw": 95}),
-            (0.65, {**walk_a, "root_yaw": 140}), (0.85, {"root_yaw": 180}), (1.0, {"root_yaw": 180}))),
-        ActionSpec("throw", 55, (
-            (0.0, REST), (0.35, {**_WAVE_UP, "r_elbow": 95, "spine_twist": -25, "spine_bend": -8, "l_shoulder_flex": 40}),
-            (0.52, {"r_shoulder_flex": 110, "r_elbow": 10, "spine_twist": 25, "spine_bend": 15, "l_shoulder_flex": -15}),
-            (0.68, {"r_shoulder_flex": 30, "r_elbow": 20, "spine_twist": 20, "spine_bend": 20}), (1.0, REST)),
-            plant="left"),
-        ActionSpec("punch other person", 50, (
-            (0.0, REST), (0.25, {**_GUARD, "root_fwd": 0.1}), (0.42, {**_PUNCH, "root_fwd": 0.25}),
-            (0.55, {**_GUARD, "root_fwd": 0.2}), (1.0, {"root_fwd": 0.1})),
+        ActionSpec(
+            "bow",
+            60,
+            (
+                (0.0, REST),
+                (0.4, {**_both(shoulder_flex=-5), "spine_bend": 50, "chest_bend": 12, "head_nod": 10}),
+                (0.6, {**_both(shoulder_flex=-5), "spine_bend": 52, "chest_bend": 14, "head_nod": 12}),
+                (1.0, REST),
+            ),
+        ),
+        ActionSpec(
+            "jump up",
+            45,
+            (
+                (0.0, REST),
+                (0.3, {**_both(hip_flex=45, knee=70, ankle=-20, shoulder_flex=-35), "spine_bend": 20}),
+                (0.45, {**_both(shoulder_flex=120, ankle=25), "root_up": 0.25}),
+                (0.62, {**_both(hip_flex=40, knee=60, ankle=-15, shoulder_flex=20), "spine_bend": 15}),
+                (1.0, REST),
+            ),
+        ),
+        ActionSpec(
+            "turn around",
+            80,
+            (
+                (0.0, REST),
+                (0.25, {**walk_a, "root_yaw": 45}),
+                (0.45, {**walk_b, "root_yaw": 95}),
+                (0.65, {**walk_a, "root_yaw": 140}),
+                (0.85, {"root_yaw": 180}),
+                (1.0, {"root_yaw": 180}),
+            ),
+        ),
+        ActionSpec(
+            "throw",
+            55,
+            (
+                (0.0, REST),
+                (0.35, {**_WAVE_UP, "r_elbow": 95, "spine_twist": -25, "spine_bend": -8, "l_shoulder_flex": 40}),
+                (
+                    0.52,
+                    {
+                        "r_shoulder_flex": 110,
+                        "r_elbow": 10,
+                        "spine_twist": 25,
+                        "spine_bend": 15,
+                        "l_shoulder_flex": -15,
+                    },
+                ),
+                (0.68, {"r_shoulder_flex": 30, "r_elbow": 20, "spine_twist": 20, "spine_bend": 20}),
+                (1.0, REST),
+            ),
+            plant="left",
+        ),
+        ActionSpec(
+            "punch other person",
+            50,
+            (
+                (0.0, REST),
+                (0.25, {**_GUARD, "root_fwd": 0.1}),
+                (0.42, {**_PUNCH, "root_fwd": 0.25}),
+                (0.55, {**_GUARD, "root_fwd": 0.2}),
+                (1.0, {"root_fwd": 0.1}),
+            ),
             partner=(
-            (0.0, REST), (0.4, REST), (0.5, {"spine_bend": -20, "head_nod": -20, "root_fwd": -0.12, "spine_twist": 15}),
-            (0.7, {"spine_bend": -5, "root_fwd": -0.18}), (1.0, {"root_fwd": -0.18}))),
-        ActionSpec("salute", 60, (
-            (0.0, REST), (0.3, _SALUTE), (0.7, {**_SALUTE, "head_nod": -5}), (1.0, REST))),
-        ActionSpec("pat on back", 70, (
-            (0.0, REST), (0.3, {"root_fwd": 0.3, "r_shoulder_flex": 70, "r_elbow": 40, "r_shoulder_abd": -20}),
-            *_oscillate(0.38, 0.7, 5, {"root_fwd": 0.3, "r_shoulder_flex": 72, "r_elbow": 25, "r_shoulder_abd": -20},
-                        {"root_fwd": 0.3, "r_shoulder_flex": 70, "r_elbow": 60, "r_shoulder_abd": -20}),
-            (1.0, REST)),
+                (0.0, REST),
+                (0.4, REST),
+                (0.5, {"spine_bend": -20, "head_nod": -20, "root_fwd": -0.12, "spine_twist": 15}),
+                (0.7, {"spine_bend": -5, "root_fwd": -0.18}),
+                (1.0, {"root_fwd": -0.18}),
+            ),
+        ),
+        ActionSpec("salute", 60, ((0.0, REST), (0.3, _SALUTE), (0.7, {**_SALUTE, "head_nod": -5}), (1.0, REST))),
+        ActionSpec(
+            "pat on back",
+            70,
+            (
+                (0.0, REST),
+                (0.3, {"root_fwd": 0.3, "r_shoulder_flex": 70, "r_elbow": 40, "r_shoulder_abd": -20}),
+                *_oscillate(
+                    0.38,
+                    0.7,
+                    5,
+                    {"root_fwd": 0.3, "r_shoulder_flex": 72, "r_elbow": 25, "r_shoulder_abd": -20},
+                    {"root_fwd": 0.3, "r_shoulder_flex": 70, "r_elbow": 60, "r_shoulder_abd": -20},
+                ),
+                (1.0, REST),
+            ),
             partner=(
-            (0.0, REST), (0.35, {"root_yaw": 30, "root_fwd": 0.1}), (0.7, {"root_yaw": 30, "root_fwd": 0.1, "head_nod": 15}),
-            (1.0, REST))),
-        ActionSpec("jumping jacks", 70, (
-            (0.0, REST),
-            *_oscillate(0.15, 0.85, 4, {**_both(shoulder_abd=165, hip_abd=22, elbow=10), "root_up": 0.08},
-                        {**_both(shoulder_abd=15, hip_abd=3), "root_up": 0.0}),
-            (1.0, REST))),
+                (0.0, REST),
+                (0.35, {"root_yaw": 30, "root_fwd": 0.1}),
+                (0.7, {"root_yaw": 30, "root_fwd": 0.1, "head_nod": 15}),
+                (1.0, REST),
+            ),
+        ),
+        ActionSpec(
+            "jumping jacks",
+            70,
+            (
+                (0.0, REST),
+                *_oscillate(
+                    0.15,
+                    0.85,
+                    4,
+                    {**_both(shoulder_abd=165, hip_abd=22, elbow=10), "root_up": 0.08},
+                    {**_both(shoulder_abd=15, hip_abd=3), "root_up": 0.0},
+                ),
+                (1.0, REST),
+            ),
+        ),
     )
 
 
@@ -406,9 +601,15 @@ def _perturb_keyframes(values: np.ndarray, sd: float, rng: np.random.Generator) 
     return out
 
 
-def dof_trajectory(keyframes, style: PersonStyle, personal_rng: np.random.Generator,
-                   sample_rng: np.random.Generator, config: NTUSynthConfig, num_frames: int,
-                   pad: tuple[int, int]) -> np.ndarray:
+def dof_trajectory(
+    keyframes,
+    style: PersonStyle,
+    personal_rng: np.random.Generator,
+    sample_rng: np.random.Generator,
+    config: NTUSynthConfig,
+    num_frames: int,
+    pad: tuple[int, int],
+) -> np.ndarray:
     """DOF values ``[pad0 + num_frames + pad1, DOF]`` (degrees / metres) for one person.
 
     ``personal_rng`` gives the subject's persistent way of doing this action (the
@@ -428,7 +629,7 @@ def dof_trajectory(keyframes, style: PersonStyle, personal_rng: np.random.Genera
     times[1:-1] = np.sort(np.clip(times[1:-1] + shift[1:-1], 0.02, 0.98))
     times[1:-1] += np.arange(1, len(times) - 1) * 1e-4  # strictly increasing even after clipping
     u = np.linspace(0.0, 1.0, num_frames)
-    u = u + style.warp * np.sin(np.pi * u) / np.pi      # monotone for |warp| < 1
+    u = u + style.warp * np.sin(np.pi * u) / np.pi  # monotone for |warp| < 1
     traj = interpolate(times, values, u)
     traj = np.concatenate([np.repeat(traj[:1], pad[0], 0), traj, np.repeat(traj[-1:], pad[1], 0)])
     # Persistent posture and a slow wobble of every joint angle.
@@ -442,8 +643,9 @@ def dof_trajectory(keyframes, style: PersonStyle, personal_rng: np.random.Genera
     return traj
 
 
-def pose_person(traj: np.ndarray, body: kin.BodyProportions, plant: str, facing_deg: float,
-                location_xz: tuple[float, float]) -> np.ndarray:
+def pose_person(
+    traj: np.ndarray, body: kin.BodyProportions, plant: str, facing_deg: float, location_xz: tuple[float, float]
+) -> np.ndarray:
     """DOF trajectory → world positions ``[T, 25, 3]`` metres (floor at ``y = 0``).
 
     Steps: FK in the body frame (root yaw included); shift horizontally so the planted
@@ -514,10 +716,14 @@ def camera_pose(setup: int, camera: int) -> tuple[np.ndarray, np.ndarray]:
 
 def sample_names(config: NTUSynthConfig) -> list[NTUSampleName]:
     """Every sample of ``config``, in file-name order."""
-    return [NTUSampleName(s, c, p, r, a)
-            for s in sorted(config.setups) for c in sorted(config.cameras)
-            for p in range(1, config.num_subjects + 1) for r in sorted(config.replications)
-            for a in range(1, config.num_classes + 1)]
+    return [
+        NTUSampleName(s, c, p, r, a)
+        for s in sorted(config.setups)
+        for c in sorted(config.cameras)
+        for p in range(1, config.num_subjects + 1)
+        for r in sorted(config.replications)
+        for a in range(1, config.num_classes + 1)
+    ]
 
 
 def perform(config: NTUSynthConfig, setup: int, subject: int, replication: int, action: int) -> list[np.ndarray]:
@@ -536,21 +742,25 @@ def perform(config: NTUSynthConfig, setup: int, subject: int, replication: int, 
     facing = (15.0 if replication % 2 else -15.0) + config.facing_spread_deg * rng.standard_normal()
     centre = 0.15 * rng.standard_normal(2)
 
-    traj = dof_trajectory(spec.actor, actor, _rng(config, _SUBJECT_ACTION, subject, action, 0), rng,
-                          config, num_frames, pad)
+    traj = dof_trajectory(
+        spec.actor, actor, _rng(config, _SUBJECT_ACTION, subject, action, 0), rng, config, num_frames, pad
+    )
     if not spec.two_person:
         return [pose_person(traj, actor.body, spec.plant, facing, tuple(centre))]
     # Two people face each other across the scene centre, ~1.15 m apart; the partner is
     # the subject's fixed partner (own body and style).
     partner = person_style(config, _rng(config, _PARTNER, subject))
-    traj_b = dof_trajectory(spec.partner, partner, _rng(config, _SUBJECT_ACTION, subject, action, 1), rng,
-                            config, num_frames, pad)
+    traj_b = dof_trajectory(
+        spec.partner, partner, _rng(config, _SUBJECT_ACTION, subject, action, 1), rng, config, num_frames, pad
+    )
     gap = 0.5 * rng.uniform(1.05, 1.25)
     turn = kin.rot_y(np.deg2rad(facing))
     a_xz = centre + (turn @ np.array([-gap, 0.0, 0.0]))[[0, 2]]
     b_xz = centre + (turn @ np.array([gap, 0.0, 0.0]))[[0, 2]]
-    return [pose_person(traj, actor.body, spec.plant, facing - 90.0, tuple(a_xz)),
-            pose_person(traj_b, partner.body, "both", facing + 90.0, tuple(b_xz))]
+    return [
+        pose_person(traj, actor.body, spec.plant, facing - 90.0, tuple(a_xz)),
+        pose_person(traj_b, partner.body, "both", facing + 90.0, tuple(b_xz)),
+    ]
 
 
 def _chair_blob(T: int, rng: np.random.Generator) -> np.ndarray:
@@ -576,12 +786,13 @@ def _passer_by(T: int, config: NTUSynthConfig, rng: np.random.Generator) -> tupl
         traj[:, _DOF[f"{s}_elbow"]] = 15
     direction = rng.choice([-1.0, 1.0])
     traj[:, _DOF["root_fwd"]] = 1.2 * t
-    world = pose_person(traj, style.body, "both", -direction * 90.0,
-                        (-direction * rng.uniform(0.8, 1.5), rng.uniform(1.2, 1.6)))
+    world = pose_person(
+        traj, style.body, "both", -direction * 90.0, (-direction * rng.uniform(0.8, 1.5), rng.uniform(1.2, 1.6))
+    )
     present = np.zeros(T, dtype=bool)
     length = int(rng.integers(6, 12))
     start = int(rng.integers(0, max(T - length, 1)))
-    present[start:start + length] = True
+    present[start : start + length] = True
     return world, present
 
 
@@ -590,15 +801,16 @@ def _dropped_frames(T: int, prob: float, rng: np.random.Generator) -> np.ndarray
     lost = np.zeros(T, dtype=bool)
     if prob <= 0:
         return lost
-    starts = rng.random(T) < prob / 2.0   # mean burst length is 2
+    starts = rng.random(T) < prob / 2.0  # mean burst length is 2
     lengths = rng.integers(1, 4, T)
     for t in np.flatnonzero(starts):
-        lost[t:t + lengths[t]] = True
+        lost[t : t + lengths[t]] = True
     return lost
 
 
-def synthesize_sample(name: NTUSampleName, config: NTUSynthConfig = NTUSynthConfig(),
-                      performance: list[np.ndarray] | None = None) -> SkeletonSequence:
+def synthesize_sample(
+    name: NTUSampleName, config: NTUSynthConfig = NTUSynthConfig(), performance: list[np.ndarray] | None = None
+) -> SkeletonSequence:
     """Generate one sample as a :class:`SkeletonSequence` (what :func:`synthesize_ntu` writes).
 
     Args:
@@ -618,13 +830,13 @@ def synthesize_sample(name: NTUSampleName, config: NTUSynthConfig = NTUSynthConf
             span = int(rng.uniform(0.75, 1.0) * T)
             start = int(rng.integers(0, T - span + 1))
             extra, extra_present = _chair_blob(T, rng), np.zeros(T, dtype=bool)
-            extra_present[start:start + span] = True
+            extra_present[start : start + span] = True
         else:
             extra, extra_present = _passer_by(T, config, rng)
-        at = int(rng.integers(0, len(tracks) + 1))   # the spurious body is not always listed last
+        at = int(rng.integers(0, len(tracks) + 1))  # the spurious body is not always listed last
         tracks.insert(at, extra)
         present.insert(at, extra_present)
-    positions = (np.stack(tracks) - c) @ R.T            # [B, T, 25, 3] camera space
+    positions = (np.stack(tracks) - c) @ R.T  # [B, T, 25, 3] camera space
     noise_scale = np.full(25, float(config.jitter_m))
     noise_scale[[J["HandTipLeft"], J["ThumbLeft"], J["HandTipRight"], J["ThumbRight"]]] *= 2.0
     positions = positions + rng.standard_normal(positions.shape) * noise_scale[:, None]
@@ -650,8 +862,9 @@ def _write_group(job) -> list[str]:
     return paths
 
 
-def synthesize_ntu(out_dir: str | os.PathLike, config: NTUSynthConfig = NTUSynthConfig(), workers: int = 1,
-                   progress: bool = True) -> list[Path]:
+def synthesize_ntu(
+    out_dir: str | os.PathLike, config: NTUSynthConfig = NTUSynthConfig(), workers: int = 1, progress: bool = True
+) -> list[Path]:
     """Write the synthetic data set to ``out_dir``.
 
     Writes one ``SsssCcccPpppRrrrAaaa.skeleton`` per (setup, camera, subject,
@@ -679,6 +892,7 @@ def synthesize_ntu(out_dir: str | os.PathLike, config: NTUSynthConfig = NTUSynth
         groups.setdefault((n.setup, n.subject, n.replication, n.action), []).append(n)
     jobs = [(str(out), config, names) for names in groups.values()]
     total = sum(len(names) for names in groups.values())
-    write_all(_write_group, jobs, workers, total=total, desc="synthesizing NTU", unit="file", progress=progress,
-              chunksize=4)
+    write_all(
+        _write_group, jobs, workers, total=total, desc="synthesizing NTU", unit="file", progress=progress, chunksize=4
+    )
     return [out / f"{n}.skeleton" for n in sample_names(config)]

@@ -18,6 +18,7 @@ length >= 12 frames and spread denoising, which remove ``synth ntu``'s own chair
 passers-by), the flicker's body ID and kind. :func:`body0_correct` scores a prepared cache's
 ``report.json`` against it. ``scripts/results/ntu_wild_files.py`` is the command-line front end.
 """
+
 from __future__ import annotations
 
 import json
@@ -45,14 +46,20 @@ def real_body_ids(seq: SkeletonSequence) -> list[int]:
 
     Flicker denoising is off here, so the oracle does not depend on the rule it is used to test.
     """
-    sel = select_main_bodies(seq, max_bodies=max(seq.num_bodies, 1), denoise_spread=True, min_frames=12,
-                             denoise_flicker=False)
+    sel = select_main_bodies(
+        seq, max_bodies=max(seq.num_bodies, 1), denoise_spread=True, min_frames=12, denoise_flicker=False
+    )
     return [seq.body_ids[b] for b in sel.kept]
 
 
-def wild_sequence(seq: SkeletonSequence, rng: np.random.Generator, empty_frame_prob: float = 0.05,
-                  flicker_prob: float = 1.0, presence: tuple[float, float] = (0.4, 0.6),
-                  first_prob: float = 0.5) -> tuple[SkeletonSequence, dict]:
+def wild_sequence(
+    seq: SkeletonSequence,
+    rng: np.random.Generator,
+    empty_frame_prob: float = 0.05,
+    flicker_prob: float = 1.0,
+    presence: tuple[float, float] = (0.4, 0.6),
+    first_prob: float = 0.5,
+) -> tuple[SkeletonSequence, dict]:
     """Rewrite one clean sample as an independent generator might have written it.
 
     Args:
@@ -69,16 +76,16 @@ def wild_sequence(seq: SkeletonSequence, rng: np.random.Generator, empty_frame_p
         "flicker_kind", "flicker_first", "empty_frames"}`` (``empty_frames``: frames of ``wild`` without
         any body, the clean file's own included).
     """
-    positions = seq.positions.astype(np.float64)                  # [B, T, 25, 3]
+    positions = seq.positions.astype(np.float64)  # [B, T, 25, 3]
     present = seq.present.copy()
     ids = list(seq.body_ids)
     real = real_body_ids(seq)
     T = seq.num_frames
     info = {"real_body_ids": real, "flicker_body_id": None, "flicker_kind": None, "flicker_first": False}
     if real and rng.random() < flicker_prob:
-        actor = positions[ids.index(real[0])]                        # [T, 25, 3]
+        actor = positions[ids.index(real[0])]  # [T, 25, 3]
         actor_present = present[ids.index(real[0])]
-        anchor = actor[actor_present].reshape(-1, 3).mean(0)         # where the scene is, metres
+        anchor = actor[actor_present].reshape(-1, 3).mean(0)  # where the scene is, metres
         kind = FLICKER_KINDS[int(rng.integers(len(FLICKER_KINDS)))]
         on = rng.random(T) < rng.uniform(*presence)
         if kind == "cloud":  # 25 points in a box of random shape, somewhere new every frame
@@ -108,7 +115,7 @@ def wild_sequence(seq: SkeletonSequence, rng: np.random.Generator, empty_frame_p
         empty[int(rng.integers(T))] = False
     present &= ~empty[None]
     positions[~present] = 0.0
-    keep = present.any(axis=1)                                    # a track emptied entirely is gone
+    keep = present.any(axis=1)  # a track emptied entirely is gone
     wild = sequence_from_positions(seq.name, positions[keep], [i for i, k in zip(ids, keep) if k], present[keep])
     info["empty_frames"] = int((~wild.present.any(axis=0)).sum())  # the clean file's own lost frames too
     info["real_body_ids"] = [i for i in real if i in wild.body_ids]
@@ -168,5 +175,10 @@ def body0_correct(report: dict | str | os.PathLike, manifest: dict | str | os.Pa
         else:
             wrong.append(entry["name"])
             flicker += body0 is not None and body0 == info["flicker_body_id"]
-    return {"samples": samples, "body0_real": real, "body0_flicker": flicker,
-            "rate": real / samples if samples else float("nan"), "wrong": wrong}
+    return {
+        "samples": samples,
+        "body0_real": real,
+        "body0_flicker": flicker,
+        "rate": real / samples if samples else float("nan"),
+        "wrong": wrong,
+    }

@@ -53,12 +53,12 @@ retrieval — is a subclass named by ``benchmark._target_``, with no change to t
     evaluate_learned(report, run_dir, split) -> {"metrics", "detail"}   (learned methods)
     headline(protocol) -> [metric]; markdown(results) -> str; plots(results, out) -> [Path]   (presentation)
 
-Benchmarks here: :class:`~mocapkit.gait.benchmark.GaitBenchmark` (``configs/compare/gait.yaml``,
-``gei_pca_lda.yaml``) and :class:`~mocapkit.recognition.benchmark_msr.MSRActionBenchmark` (``msr3d_nmf.yaml``).
+The benchmarks live in their tasks: ``mocapkit.<task>.benchmark*`` (for example
+:class:`~mocapkit.gait.benchmark.GaitBenchmark` for ``configs/compare/gait.yaml`` and
+:class:`~mocapkit.recognition.benchmark_msr.MSRActionBenchmark` for ``msr3d_recognition.yaml`` and ``msr3d_nmf.yaml``).
 """
-from __future__ import annotations
 
-from pathlib import Path
+from __future__ import annotations
 
 from mocapkit.evaluation.compare.base import (
     Benchmark,
@@ -68,8 +68,17 @@ from mocapkit.evaluation.compare.base import (
 )
 from mocapkit.evaluation.compare.runner import Comparison, compose, main, run_comparison
 
-__all__ = ["Benchmark", "Comparison", "ComparisonError", "Split", "cli_main", "compose",
-           "indices_sha1", "main", "run_comparison"]
+__all__ = [
+    "Benchmark",
+    "Comparison",
+    "ComparisonError",
+    "Split",
+    "cli_main",
+    "compose",
+    "indices_sha1",
+    "main",
+    "run_comparison",
+]
 
 USAGE = """usage: mocapkit compare NAME [key=value ...]
 

@@ -6,6 +6,7 @@ and the metric code that scores a method on it. Subclasses implement :meth:`Benc
 with learned methods also implement :meth:`Benchmark.learned_overrides` and :meth:`Benchmark.evaluate_learned`.
 Everything else is optional presentation (headline metrics, detail sections, plots).
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -41,8 +42,13 @@ class Split:
 
     def describe(self) -> dict:
         """``{"n_train", "n_test", "test_sha1", "test_indices", **info}`` for ``results.json``."""
-        return {"n_train": len(self.train), "n_test": len(self.test), "test_sha1": indices_sha1(self.test),
-                "test_indices": np.asarray(self.test).tolist(), **self.info}
+        return {
+            "n_train": len(self.train),
+            "n_test": len(self.test),
+            "test_sha1": indices_sha1(self.test),
+            "test_indices": np.asarray(self.test).tolist(),
+            **self.info,
+        }
 
 
 def indices_sha1(indices) -> str:

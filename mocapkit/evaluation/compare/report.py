@@ -2,6 +2,7 @@
 
 The benchmark adds its own detail sections (:meth:`Benchmark.markdown`) and plots (:meth:`Benchmark.plots`).
 """
+
 from __future__ import annotations
 
 import math
@@ -34,9 +35,18 @@ def summarise(cells: list[dict], methods: list[str], protocols: list[str]) -> li
                     continue
                 sd = float(np.std(values, ddof=1)) if len(values) > 1 else 0.0
                 metrics[name] = {"mean": float(np.mean(values)), "sd": sd, "n": len(values), "values": values}
-            rows.append({"protocol": protocol, "method": method, "label": chosen[0]["label"],
-                         "kind": chosen[0]["kind"], "n_seeds": len(chosen), "seeds": [c["seed"] for c in chosen],
-                         "time_s": float(np.mean([c["time_s"] for c in chosen])), "metrics": metrics})
+            rows.append(
+                {
+                    "protocol": protocol,
+                    "method": method,
+                    "label": chosen[0]["label"],
+                    "kind": chosen[0]["kind"],
+                    "n_seeds": len(chosen),
+                    "seeds": [c["seed"] for c in chosen],
+                    "time_s": float(np.mean([c["time_s"] for c in chosen])),
+                    "metrics": metrics,
+                }
+            )
     return rows
 
 
@@ -58,24 +68,31 @@ def summary_markdown(results: dict, benchmark: Benchmark) -> str:
         header = ["method", "kind", *metrics, "seeds", "time per cell (s)"]
         lines += [f"### {protocol}", "", "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
         for r in rows:
-            cells = [benchmark.format_metric(m, r["metrics"].get(m, {}).get("mean"), r["metrics"].get(m, {}).get("sd"))
-                     for m in metrics]
-            lines.append(f"| {r['label']} | {r['kind']} | " + " | ".join(cells) +
-                         f" | {r['n_seeds']} | {r['time_s']:.1f} |")
+            cells = [
+                benchmark.format_metric(m, r["metrics"].get(m, {}).get("mean"), r["metrics"].get(m, {}).get("sd"))
+                for m in metrics
+            ]
+            lines.append(
+                f"| {r['label']} | {r['kind']} | " + " | ".join(cells) + f" | {r['n_seeds']} | {r['time_s']:.1f} |"
+            )
         lines.append("")
     return "\n".join(lines)
 
 
 def cells_markdown(results: dict, benchmark: Benchmark) -> str:
     """Every cell: its first headline metric, time, test-set fingerprint and its run folder or parameters."""
-    lines = ["| method | protocol | seed | headline | test samples (sha1) | time (s) | run / parameters |",
-             "|---|---|---|---|---|---|---|"]
+    lines = [
+        "| method | protocol | seed | headline | test samples (sha1) | time (s) | run / parameters |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for c in results["cells"]:
         first = (benchmark.headline(c["protocol"]) or sorted(c["metrics"]))[:1]
         shown = ", ".join(f"{m} {benchmark.format_metric(m, c['metrics'].get(m))}" for m in first)
         where = c.get("run_dir") or (", ".join(f"{k}={v}" for k, v in (c.get("params") or {}).items()) or "defaults")
-        lines.append(f"| {c['label']} | {c['protocol']} | {c['seed']} | {shown} | {c['n_test']} "
-                     f"({c['test_sha1'][:10]}) | {c['time_s']:.1f} | {where} |")
+        lines.append(
+            f"| {c['label']} | {c['protocol']} | {c['seed']} | {shown} | {c['n_test']} "
+            f"({c['test_sha1'][:10]}) | {c['time_s']:.1f} | {where} |"
+        )
     return "\n".join(lines) + "\n"
 
 
@@ -89,19 +106,32 @@ def versions(host: dict) -> str:
 def results_markdown(results: dict, benchmark: Benchmark) -> str:
     """The whole ``results.md``."""
     host = results["machine"]
-    lines = [f"# Comparison `{results['name']}`: {results['benchmark']['title']}", "",
-             (f"Benchmark `{results['benchmark']['target']}`; protocols {', '.join(results['protocols'])}; seeds "
-              f"{results['seeds']}; {len(results['cells'])} cells in {results['elapsed_s'] / 60:.1f} min on "
-              f"{host['processor']} ({host['cpu_count']} CPUs, OMP_NUM_THREADS={host['omp_num_threads']}; "
-              f"{versions(host)}). "
-              "Every method of a (protocol, seed) cell is scored on the same test samples with the same metric "
-              "code (the sha1 column below); learned methods are trained with `mocapkit train` and scored with "
-              "`mocapkit eval`, estimators are fitted on the whole training side."), "",
-             "## Summary: mean ± sd over seeds", "", summary_markdown(results, benchmark)]
+    lines = [
+        f"# Comparison `{results['name']}`: {results['benchmark']['title']}",
+        "",
+        (
+            f"Benchmark `{results['benchmark']['target']}`; protocols {', '.join(results['protocols'])}; seeds "
+            f"{results['seeds']}; {len(results['cells'])} cells in {results['elapsed_s'] / 60:.1f} min on "
+            f"{host['processor']} ({host['cpu_count']} CPUs, OMP_NUM_THREADS={host['omp_num_threads']}; "
+            f"{versions(host)}). "
+            "Every method of a (protocol, seed) cell is scored on the same test samples with the same metric "
+            "code (the sha1 column below); learned methods are trained with `mocapkit train` and scored with "
+            "`mocapkit eval`, estimators are fitted on the whole training side."
+        ),
+        "",
+        "## Summary: mean ± sd over seeds",
+        "",
+        summary_markdown(results, benchmark),
+    ]
     if results.get("selection"):
-        lines += ["## Hyper-parameter selection", "",
-                  f"Coordinate search by {benchmark.selection_cv} on the training side of the first seed's split only.",
-                  "", "| method | protocol | chosen | CV score | tried |", "|---|---|---|---|---|"]
+        lines += [
+            "## Hyper-parameter selection",
+            "",
+            f"Coordinate search by {benchmark.selection_cv} on the training side of the first seed's split only.",
+            "",
+            "| method | protocol | chosen | CV score | tried |",
+            "|---|---|---|---|---|",
+        ]
         for method, per_protocol in results["selection"].items():
             for protocol, entry in per_protocol.items():
                 chosen = ", ".join(f"{k}={v}" for k, v in entry["params"].items())
@@ -136,10 +166,17 @@ def plot_summary(results: dict, benchmark: Benchmark, path: Path) -> Path | None
         metric_names.append(metric)
         by_label = {r["label"]: r["metrics"].get(metric, {}) for r in rows if r["protocol"] == protocol}
         xs = [i for i, label in enumerate(labels) if by_label.get(label, {}).get("mean") is not None]
-        ax.bar([x + p * width for x in xs], [by_label[labels[x]]["mean"] for x in xs], width,
-               yerr=[by_label[labels[x]]["sd"] for x in xs], capsize=3, label=f"{protocol}: {metric}")
-    ax.set_xticks([i + width * (len(protocols) - 1) / 2 for i in range(len(labels))], labels, fontsize=8,
-                  rotation=25, ha="right")
+        ax.bar(
+            [x + p * width for x in xs],
+            [by_label[labels[x]]["mean"] for x in xs],
+            width,
+            yerr=[by_label[labels[x]]["sd"] for x in xs],
+            capsize=3,
+            label=f"{protocol}: {metric}",
+        )
+    ax.set_xticks(
+        [i + width * (len(protocols) - 1) / 2 for i in range(len(labels))], labels, fontsize=8, rotation=25, ha="right"
+    )
     ax.set_ylabel(" / ".join(dict.fromkeys(metric_names)))
     ax.set_title(f"{results['name']}: mean ± sd over seeds {results['seeds']}")
     ax.legend(fontsize=8, frameon=False)

@@ -4,6 +4,7 @@ See :mod:`mocapkit.evaluation.compare` for the configuration schema and the benc
 :func:`main` composes ``configs/compare.yaml`` with ``compare=NAME`` (``configs/compare/NAME.yaml``) and
 Hydra overrides; :func:`run_comparison` runs a composed config.
 """
+
 from __future__ import annotations
 
 import json
@@ -40,11 +41,11 @@ class Method:
 
     key: str
     label: str
-    kind: str                                   # "learned" | "estimator"
-    spec: dict                                  # learned: {experiment, overrides}; estimator: the instantiate spec
+    kind: str  # "learned" | "estimator"
+    spec: dict  # learned: {experiment, overrides}; estimator: the instantiate spec
     params: dict = field(default_factory=dict)  # estimator: set_params after instantiation (nested a__b names)
-    select: dict | None = None                  # estimator: {stages, cv} or {reuse: KEY}
-    reseed: bool = True                         # estimator: set every random_state to the cell's seed
+    select: dict | None = None  # estimator: {stages, cv} or {reuse: KEY}
+    reseed: bool = True  # estimator: set every random_state to the cell's seed
 
 
 def _elapsed(start: float) -> str:
@@ -65,20 +66,28 @@ def _json_default(value):
 def machine() -> dict:
     """Where the numbers were measured (platform, CPUs, versions, thread settings).
 
-    Learned runs do not reproduce to the last sample across package versions (README, *MSR Action3D*: the same
-    seeds moved 2–4 test clips in a fresh environment), so the versions that shape the numbers are recorded.
+    Learned runs do not reproduce to the last sample across package versions (the same seeds moved 2–4 test clips
+    in a fresh environment: docs/results/recognition.md#msr-action3d-cross-subject), so the versions that shape the
+    numbers are recorded.
     """
     import lightning
     import numpy
     import sklearn
     import torch
 
-    return {"platform": platform.platform(), "processor": platform.processor() or platform.machine(),
-            "cpu_count": os.cpu_count(), "python": platform.python_version(), "torch": torch.__version__,
-            "lightning": lightning.__version__, "numpy": numpy.__version__,
-            "sklearn": sklearn.__version__, "torch_threads": torch.get_num_threads(),
-            "omp_num_threads": os.environ.get("OMP_NUM_THREADS"),
-            "cuda": torch.cuda.get_device_name(0) if torch.cuda.is_available() else None}
+    return {
+        "platform": platform.platform(),
+        "processor": platform.processor() or platform.machine(),
+        "cpu_count": os.cpu_count(),
+        "python": platform.python_version(),
+        "torch": torch.__version__,
+        "lightning": lightning.__version__,
+        "numpy": numpy.__version__,
+        "sklearn": sklearn.__version__,
+        "torch_threads": torch.get_num_threads(),
+        "omp_num_threads": os.environ.get("OMP_NUM_THREADS"),
+        "cuda": torch.cuda.get_device_name(0) if torch.cuda.is_available() else None,
+    }
 
 
 # ------------------------------------------------------------------------------------------ config
@@ -108,8 +117,9 @@ def compose(overrides: list[str]) -> DictConfig:
 def parse_methods(methods: dict) -> dict[str, Method]:
     """Validate the ``methods`` table (a plain dict); unknown keys fail naming the method and the key."""
     if not isinstance(methods, dict) or not methods:
-        raise ComparisonError("methods: the comparison lists no methods (methods: {KEY: {learned: ...} | "
-                              "{estimator: ...}})")
+        raise ComparisonError(
+            "methods: the comparison lists no methods (methods: {KEY: {learned: ...} | {estimator: ...}})"
+        )
     parsed = {}
     for key, entry in methods.items():
         if not isinstance(entry, dict):
@@ -119,8 +129,10 @@ def parse_methods(methods: dict) -> dict[str, Method]:
             raise ComparisonError(f"methods.{key}: unknown key(s) {unknown}; a method takes {list(METHOD_KEYS)}")
         kinds = [k for k in ("learned", "estimator") if entry.get(k) is not None]
         if len(kinds) != 1:
-            raise ComparisonError(f"methods.{key}: give exactly one of learned: {{experiment: NAME}} or "
-                                  f"estimator: {{_target_: CLASS, ...}} (got {kinds or 'neither'})")
+            raise ComparisonError(
+                f"methods.{key}: give exactly one of learned: {{experiment: NAME}} or "
+                f"estimator: {{_target_: CLASS, ...}} (got {kinds or 'neither'})"
+            )
         kind = kinds[0]
         spec = entry[kind]
         if kind == "learned":
@@ -131,15 +143,19 @@ def parse_methods(methods: dict) -> dict[str, Method]:
                 raise ComparisonError(f"methods.{key}.learned: unknown key(s) {bad}; it takes {list(LEARNED_KEYS)}")
             for name in ("overrides", "eval_overrides"):
                 if not isinstance(spec.get(name) or [], list):
-                    raise ComparisonError(f"methods.{key}.learned.{name}: expected a list of Hydra overrides, got "
-                                          f"{spec[name]!r}")
+                    raise ComparisonError(
+                        f"methods.{key}.learned.{name}: expected a list of Hydra overrides, got {spec[name]!r}"
+                    )
             if spec.get("checkpoint", "best") not in CHECKPOINTS:
-                raise ComparisonError(f"methods.{key}.learned.checkpoint={spec['checkpoint']!r}: one of "
-                                      f"{list(CHECKPOINTS)}")
+                raise ComparisonError(
+                    f"methods.{key}.learned.checkpoint={spec['checkpoint']!r}: one of {list(CHECKPOINTS)}"
+                )
             for other in ("params", "select"):
                 if entry.get(other):
-                    raise ComparisonError(f"methods.{key}: {other} applies to estimators; give a learned method "
-                                          "Hydra overrides in learned.overrides")
+                    raise ComparisonError(
+                        f"methods.{key}: {other} applies to estimators; give a learned method "
+                        "Hydra overrides in learned.overrides"
+                    )
         elif not isinstance(spec, dict) or "_target_" not in spec:
             raise ComparisonError(f"methods.{key}.estimator: needs _target_: the estimator class")
         select = entry.get("select")
@@ -151,16 +167,25 @@ def parse_methods(methods: dict) -> dict[str, Method]:
                 raise ComparisonError(f"methods.{key}.select: give stages: [{{PARAM: [values]}}, ...] or reuse: KEY")
             for stage in select.get("stages") or []:
                 if not isinstance(stage, dict) or len(stage) != 1 or not isinstance(next(iter(stage.values())), list):
-                    raise ComparisonError(f"methods.{key}.select.stages: every stage is one {{PARAM: [values]}}, "
-                                          f"got {stage!r}")
-        parsed[key] = Method(key=key, label=str(entry.get("label") or key), kind=kind, spec=spec,
-                             params=dict(entry.get("params") or {}), select=select,
-                             reseed=bool(entry.get("reseed", True)))
+                    raise ComparisonError(
+                        f"methods.{key}.select.stages: every stage is one {{PARAM: [values]}}, got {stage!r}"
+                    )
+        parsed[key] = Method(
+            key=key,
+            label=str(entry.get("label") or key),
+            kind=kind,
+            spec=spec,
+            params=dict(entry.get("params") or {}),
+            select=select,
+            reseed=bool(entry.get("reseed", True)),
+        )
     for method in parsed.values():
         reuse = (method.select or {}).get("reuse")
         if reuse is not None and (reuse not in parsed or not (parsed[reuse].select or {}).get("stages")):
-            raise ComparisonError(f"methods.{method.key}.select.reuse={reuse!r}: not a method with select.stages "
-                                  f"(methods: {', '.join(parsed)})")
+            raise ComparisonError(
+                f"methods.{method.key}.select.reuse={reuse!r}: not a method with select.stages "
+                f"(methods: {', '.join(parsed)})"
+            )
     return parsed
 
 
@@ -169,15 +194,18 @@ def instantiate_benchmark(spec) -> Benchmark:
     from hydra.utils import instantiate
 
     if not isinstance(spec, dict) or "_target_" not in spec:
-        raise ComparisonError("benchmark: needs _target_: a Benchmark class, e.g. "
-                              "mocapkit.gait.benchmark.GaitBenchmark")
+        raise ComparisonError(
+            "benchmark: needs _target_: a Benchmark class, e.g. mocapkit.gait.benchmark.GaitBenchmark"
+        )
     try:
         benchmark = instantiate(spec)
     except Exception as exc:
         raise ComparisonError(f"benchmark._target_={spec['_target_']!r}: cannot build it: {exc}") from exc
     if not all(hasattr(benchmark, name) for name in ("split", "data", "evaluate_estimator", "protocols")):
-        raise ComparisonError(f"benchmark._target_={spec['_target_']!r} is not a benchmark (subclass "
-                              "mocapkit.evaluation.compare.base.Benchmark)")
+        raise ComparisonError(
+            f"benchmark._target_={spec['_target_']!r} is not a benchmark (subclass "
+            "mocapkit.evaluation.compare.base.Benchmark)"
+        )
     return benchmark
 
 
@@ -191,8 +219,10 @@ class Comparison:
         if unknown:
             raise ComparisonError(f"unknown compare config key(s) {unknown}; known: {list(CONFIG_KEYS)}")
         if not plain.get("name"):
-            raise ComparisonError("no comparison chosen: run `mocapkit compare NAME` with NAME one of "
-                                  "configs/compare/*.yaml (e.g. gait, gei_pca_lda, msr3d_nmf)")
+            raise ComparisonError(
+                "no comparison chosen: run `mocapkit compare NAME` with NAME one of "
+                "configs/compare/*.yaml (e.g. gait, gei_pca_lda, msr3d_nmf)"
+            )
         self.config = plain
         self.name = str(plain["name"])
         self.out = Path(plain.get("out") or f"checkpoints/compare/{self.name}")
@@ -212,8 +242,9 @@ class Comparison:
         self.protocols = list(plain.get("protocols") or [])
         bad = [p for p in self.protocols if p not in self.benchmark.protocols]
         if bad or not self.protocols:
-            raise ComparisonError(f"protocols={self.protocols}: {type(self.benchmark).__name__} knows "
-                                  f"{list(self.benchmark.protocols)}")
+            raise ComparisonError(
+                f"protocols={self.protocols}: {type(self.benchmark).__name__} knows {list(self.benchmark.protocols)}"
+            )
         self._splits: dict[tuple[str, int], Split] = {}
         #: trained runs by their training overrides (less run_name): learned methods that differ only in
         #: ``eval_overrides`` or ``checkpoint`` are scored on one run → (run_dir, training seconds, config, the
@@ -235,8 +266,9 @@ class Comparison:
         try:
             estimator = instantiate(method.spec)
         except Exception as exc:
-            raise ComparisonError(f"methods.{method.key}.estimator: cannot build {method.spec.get('_target_')!r}: "
-                                  f"{exc}") from exc
+            raise ComparisonError(
+                f"methods.{method.key}.estimator: cannot build {method.spec.get('_target_')!r}: {exc}"
+            ) from exc
         for params in (method.params, extra or {}):
             if params:
                 try:
@@ -273,8 +305,9 @@ class Comparison:
         best = {name: current[name] for name, _ in stages if name in current}
         absent = [name for name, _ in stages if name not in current]
         if absent:
-            raise ComparisonError(f"methods.{method.key}.select: {absent} are not parameters of the estimator "
-                                  f"(nested names: step__param)")
+            raise ComparisonError(
+                f"methods.{method.key}.select: {absent} are not parameters of the estimator (nested names: step__param)"
+            )
         best_score, tried, start = -math.inf, [], time.perf_counter()
         for name, values in stages:
             for value in values:
@@ -287,8 +320,14 @@ class Comparison:
                 print(f"[compare] select {method.key} | {protocol}: {candidate} → CV {score:.4f}", flush=True)
                 if score > best_score:
                     best, best_score = candidate, score
-        memo[protocol] = {"params": best, "cv_score": best_score, "split_seed": seed, "folds": folds,
-                          "tried": tried, "time_s": round(time.perf_counter() - start, 2)}
+        memo[protocol] = {
+            "params": best,
+            "cv_score": best_score,
+            "split_seed": seed,
+            "folds": folds,
+            "tried": tried,
+            "time_s": round(time.perf_counter() - start, 2),
+        }
         return best
 
     def run_estimator(self, method: Method, split: Split) -> dict:
@@ -296,8 +335,14 @@ class Comparison:
         estimator = self.make_estimator(method, split.seed, chosen)
         start = time.perf_counter()
         scores = self.benchmark.evaluate_estimator(estimator, split)
-        return {**scores, "time_s": time.perf_counter() - start, "params": {**method.params, **chosen},
-                "estimator": repr(estimator), "n_test": len(split.test), "test_sha1": indices_sha1(split.test)}
+        return {
+            **scores,
+            "time_s": time.perf_counter() - start,
+            "params": {**method.params, **chosen},
+            "estimator": repr(estimator),
+            "n_test": len(split.test),
+            "test_sha1": indices_sha1(split.test),
+        }
 
     def run_learned(self, method: Method, split: Split) -> dict:
         """Train ``method`` on ``split`` (or reuse the run of an earlier method with the same training
@@ -307,9 +352,14 @@ class Comparison:
         from mocapkit.train.training import train
 
         experiment = method.spec["experiment"]
-        training = [f"experiment={experiment}", *self.benchmark.learned_overrides(split.protocol, split.seed),
-                    f"seed={split.seed}", f"output_root={self.out / 'runs'}",
-                    *[str(o) for o in method.spec.get("overrides") or []], *self.learned_overrides]
+        training = [
+            f"experiment={experiment}",
+            *self.benchmark.learned_overrides(split.protocol, split.seed),
+            f"seed={split.seed}",
+            f"output_root={self.out / 'runs'}",
+            *[str(o) for o in method.spec.get("overrides") or []],
+            *self.learned_overrides,
+        ]
         overrides = [*training, f"run_name={method.key}_{split.protocol}_seed{split.seed}"]
         start = time.perf_counter()
         shared = tuple(training) in self._trained
@@ -325,16 +375,27 @@ class Comparison:
         report = evaluate(checkpoint, [f"eval.out_dir={eval_dir}", *eval_overrides])
         test_idx = self.benchmark.learned_test_indices(run_dir)
         if indices_sha1(test_idx) != indices_sha1(split.test):
-            raise ComparisonError(f"methods.{method.key} under {split.protocol}, seed {split.seed}: the run's data "
-                                  f"module tested {len(test_idx)} samples, the benchmark's split {len(split.test)} "
-                                  f"different ones; the benchmark's learned_overrides must reproduce its split")
+            raise ComparisonError(
+                f"methods.{method.key} under {split.protocol}, seed {split.seed}: the run's data "
+                f"module tested {len(test_idx)} samples, the benchmark's split {len(split.test)} "
+                f"different ones; the benchmark's learned_overrides must reproduce its split"
+            )
         scores = self.benchmark.evaluate_learned(report, run_dir, split)
         trainer = cfg.get("trainer") or {}
-        return {**scores, "time_s": time.perf_counter() - start, "train_seconds": train_seconds,
-                "experiment": experiment, "run_dir": str(run_dir), "shared_run": shared,
-                "checkpoint": checkpoint.name, "overrides": overrides, "eval_overrides": eval_overrides,
-                "max_epochs": trainer.get("max_epochs"), "n_test": len(test_idx),
-                "test_sha1": indices_sha1(test_idx)}
+        return {
+            **scores,
+            "time_s": time.perf_counter() - start,
+            "train_seconds": train_seconds,
+            "experiment": experiment,
+            "run_dir": str(run_dir),
+            "shared_run": shared,
+            "checkpoint": checkpoint.name,
+            "overrides": overrides,
+            "eval_overrides": eval_overrides,
+            "max_epochs": trainer.get("max_epochs"),
+            "n_test": len(test_idx),
+            "test_sha1": indices_sha1(test_idx),
+        }
 
     # -------------------------------------------------------------- the table
     def run(self) -> dict:
@@ -342,25 +403,40 @@ class Comparison:
         self.out.mkdir(parents=True, exist_ok=True)
         start, self.started = time.perf_counter(), time.strftime("%Y-%m-%d %H:%M:%S")
         jobs = [(p, s, k) for p in self.protocols for s in self.seeds for k in self.run_keys]
-        print(f"[compare] {self.name}: {len(self.run_keys)} methods × {len(self.protocols)} protocols × "
-              f"{len(self.seeds)} seeds = {len(jobs)} cells → {self.out}", flush=True)
+        print(
+            f"[compare] {self.name}: {len(self.run_keys)} methods × {len(self.protocols)} protocols × "
+            f"{len(self.seeds)} seeds = {len(jobs)} cells → {self.out}",
+            flush=True,
+        )
         for n, (protocol, seed, key) in enumerate(jobs, 1):
             method = self.methods[key]
             split = self.split(protocol, seed)
             if method.kind == "learned":
-                print(f"[compare] cell {n}/{len(jobs)} {key} | {protocol} | seed {seed}: learned run of "
-                      f"{method.spec['experiment']} (elapsed {_elapsed(start)})", flush=True)
+                print(
+                    f"[compare] cell {n}/{len(jobs)} {key} | {protocol} | seed {seed}: learned run of "
+                    f"{method.spec['experiment']} (elapsed {_elapsed(start)})",
+                    flush=True,
+                )
                 cell = self.run_learned(method, split)
             else:
                 cell = self.run_estimator(method, split)
-            cell = {"method": key, "label": method.label, "kind": method.kind, "protocol": protocol, "seed": seed,
-                    **cell}
+            cell = {
+                "method": key,
+                "label": method.label,
+                "kind": method.kind,
+                "protocol": protocol,
+                "seed": seed,
+                **cell,
+            }
             self.cells.append(cell)
             headline = (self.benchmark.headline(protocol) or sorted(cell["metrics"]))[:1]
             shown = ", ".join(f"{m} {self.benchmark.format_metric(m, cell['metrics'].get(m))}" for m in headline)
-            print(f"[compare] cell {n}/{len(jobs)} {key} | {protocol} | seed {seed}: {shown} "
-                  f"({cell['time_s']:.1f} s; elapsed {_elapsed(start)})", flush=True)
-            self.write_json(time.perf_counter() - start)          # partial results survive a failure
+            print(
+                f"[compare] cell {n}/{len(jobs)} {key} | {protocol} | seed {seed}: {shown} "
+                f"({cell['time_s']:.1f} s; elapsed {_elapsed(start)})",
+                flush=True,
+            )
+            self.write_json(time.perf_counter() - start)  # partial results survive a failure
         results = self.write_json(time.perf_counter() - start)
         from mocapkit.evaluation.compare.report import write_reports
 
@@ -373,13 +449,25 @@ class Comparison:
         from mocapkit.evaluation.compare.report import summarise
 
         splits = {p: {str(s): self.split(p, s).describe() for s in self.seeds} for p in self.protocols}
-        return {"name": self.name, "benchmark": {"target": self.config["benchmark"]["_target_"],
-                                                 "title": self.benchmark.title, **self.benchmark.describe()},
-                "protocols": self.protocols, "seeds": self.seeds, "methods": {
-                    k: {"label": m.label, "kind": m.kind} for k, m in self.methods.items() if k in self.run_keys},
-                "started": getattr(self, "started", None), "elapsed_s": round(elapsed, 1), "machine": machine(),
-                "config": self.config, "splits": splits, "selection": self.selection,
-                "summary": summarise(self.cells, self.run_keys, self.protocols), "cells": self.cells}
+        return {
+            "name": self.name,
+            "benchmark": {
+                "target": self.config["benchmark"]["_target_"],
+                "title": self.benchmark.title,
+                **self.benchmark.describe(),
+            },
+            "protocols": self.protocols,
+            "seeds": self.seeds,
+            "methods": {k: {"label": m.label, "kind": m.kind} for k, m in self.methods.items() if k in self.run_keys},
+            "started": getattr(self, "started", None),
+            "elapsed_s": round(elapsed, 1),
+            "machine": machine(),
+            "config": self.config,
+            "splits": splits,
+            "selection": self.selection,
+            "summary": summarise(self.cells, self.run_keys, self.protocols),
+            "cells": self.cells,
+        }
 
     def write_json(self, elapsed: float) -> dict:
         results = self.results(elapsed)

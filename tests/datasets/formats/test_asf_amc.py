@@ -1,10 +1,10 @@
 """ASF/AMC reading, forward kinematics and writing: real CMU/HDM05 samples, an AMC ↔ C3D
 cross-check on HDM05 take dg 06-03_03, round trips and malformed input."""
+
 from pathlib import Path
 
 import numpy as np
 import pytest
-from tests.shared_data import SHARED, needs
 
 from mocapkit.datasets.formats.asf_amc import (
     AmcFormatError,
@@ -19,6 +19,7 @@ from mocapkit.datasets.formats.asf_amc import (
     write_asf,
 )
 from mocapkit.motion.layouts import CMU31
+from tests.shared_data import SHARED, needs
 
 ASF_AMC = SHARED / "samples" / "asf_amc"
 HDM_AMC = ASF_AMC / "hdm05" / "HDM_dg_06-03_03_120.amc"
@@ -93,8 +94,16 @@ def test_latin1_header_kept():
     m = read_amc(HDM_AMC)
     assert "für Bonn" in m.metadata["amc_header"][0]
     # HDM05 lists bones in its own order, not the ASF's: kept for writing
-    assert m.metadata["amc_bone_order"][:8] == ("root", "lowerback", "upperback", "thorax", "lowerneck",
-                                               "upperneck", "head", "rclavicle")
+    assert m.metadata["amc_bone_order"][:8] == (
+        "root",
+        "lowerback",
+        "upperback",
+        "thorax",
+        "lowerneck",
+        "upperneck",
+        "head",
+        "rclavicle",
+    )
     np.testing.assert_array_equal(m.metadata["amc_frame_numbers"], np.arange(1, 203))
 
 
@@ -108,9 +117,11 @@ def test_fk_matches_explicit_matrices_on_one_frame():
     def rot(axis, deg):
         a = np.deg2rad(deg)
         c, n = np.cos(a), np.sin(a)
-        return {"x": np.array([[1, 0, 0], [0, c, -n], [0, n, c]]),
-                "y": np.array([[c, 0, n], [0, 1, 0], [-n, 0, c]]),
-                "z": np.array([[c, -n, 0], [n, c, 0], [0, 0, 1]])}[axis]
+        return {
+            "x": np.array([[1, 0, 0], [0, c, -n], [0, n, c]]),
+            "y": np.array([[c, 0, n], [0, 1, 0], [-n, 0, c]]),
+            "z": np.array([[c, -n, 0], [n, c, 0], [0, 0, 1]]),
+        }[axis]
 
     def euler(angles, axes):  # fixed axes, first applied first
         R = np.eye(3)
@@ -154,6 +165,7 @@ def test_amc_matches_c3d_markers_hdm05():
     (asserted > 15 cm), so the test can tell the sides apart.
     """
     import ezc3d
+
     m = read_amc(HDM_AMC)
     c3d = ezc3d.c3d(str(HDM_C3D))
     pts = c3d["data"]["points"][:3].transpose(2, 1, 0) / 1000.0  # [frames, markers, 3] metres
@@ -162,11 +174,18 @@ def test_amc_matches_c3d_markers_hdm05():
     assert c3d["header"]["points"]["first_frame"] == 2924  # 2925 1-based
     assert not np.isnan(pts).any()
     pairs = {
-        "head": ("LFHD", "RFHD", "LBHD", "RBHD"), "root": ("LFWT", "RFWT", "LBWT", "RBWT"),
-        "lradius": ("LWRA", "LWRB"), "rradius": ("RWRA", "RWRB"), "lhumerus": ("LELB",), "rhumerus": ("RELB",),
-        "lfemur": ("LKNE",), "rfemur": ("RKNE",), "ltibia": ("LANK",), "rtibia": ("RANK",),
+        "head": ("LFHD", "RFHD", "LBHD", "RBHD"),
+        "root": ("LFWT", "RFWT", "LBWT", "RBWT"),
+        "lradius": ("LWRA", "LWRB"),
+        "rradius": ("RWRA", "RWRB"),
+        "lhumerus": ("LELB",),
+        "rhumerus": ("RELB",),
+        "lfemur": ("LKNE",),
+        "rfemur": ("RKNE",),
+        "ltibia": ("LANK",),
+        "rtibia": ("RANK",),
     }
-    joints = m.positions[:, [m.index(j) for j in pairs]].astype(np.float64)               # [T, K, 3]
+    joints = m.positions[:, [m.index(j) for j in pairs]].astype(np.float64)  # [T, K, 3]
     markers = np.stack([pts[:, [labels.index(x) for x in v]].mean(1) for v in pairs.values()], 1)
 
     def kabsch(a, b):
@@ -180,7 +199,7 @@ def test_amc_matches_c3d_markers_hdm05():
     R, ca, cb, scale = kabsch(joints.reshape(-1, 3), markers.reshape(-1, 3))
     np.testing.assert_allclose(R, [[0, 0, 1], [1, 0, 0], [0, 1, 0]], atol=0.02)  # AMC z→C3D x, x→y, y→z (up)
     assert abs(scale - 1) < 0.02
-    dist = np.linalg.norm((joints - ca) @ R.T + cb - markers, axis=-1)             # [T, K] metres
+    dist = np.linalg.norm((joints - ca) @ R.T + cb - markers, axis=-1)  # [T, K] metres
     assert (dist.mean(0) < 0.10).all(), dict(zip(pairs, dist.mean(0).round(3)))
     assert (dist < 0.13).all()
     assert (dist.mean(1) < 0.07).all()
@@ -297,16 +316,19 @@ def test_good_toy_amc(tmp_path):
     assert m.num_frames == 2 and m.metadata["amc_values"]["leg"].tolist() == [[1, 2], [3, 4]]
 
 
-@pytest.mark.parametrize("text,line,frame,words", [
-    ("1\nroot 0 0 0 0 0 0\n2\nroot 0 0 0 0 0 0\nleg 3 4\n", 5, 1, "truncated"),            # frame 1 lacks 'leg'
-    ("1\nroot 0 0 0 0 0 0\nleg 1 2\n2\nroot 0 0 0 0 0 0\n", 8, 2, "truncated"),            # file ends in frame 2
-    ("1\nroot 0 0 0 0 0 0\nleg 1 x\n", 5, 1, "non-numeric"),
-    ("1\nroot 0 0 0 0 0 0\nleg 1 2 3\n", 5, 1, "needs 2 values"),
-    ("1\nroot 0 0 0 0 0 0\nleg 1 2\narm 1\n", 6, 1, "unknown bone 'arm'"),
-    ("1\nroot 0 0 0 0 0 0\nleg 1 2\nleg 1 2\n", 6, 1, "twice"),
-    ("1\nroot 0 0 0 0 0 0\nhip 1 2\nleg 1 2\n", 5, 1, "no dof"),
-    ("root 0 0 0 0 0 0\n", 3, None, "frame number"),
-])
+@pytest.mark.parametrize(
+    "text,line,frame,words",
+    [
+        ("1\nroot 0 0 0 0 0 0\n2\nroot 0 0 0 0 0 0\nleg 3 4\n", 5, 1, "truncated"),  # frame 1 lacks 'leg'
+        ("1\nroot 0 0 0 0 0 0\nleg 1 2\n2\nroot 0 0 0 0 0 0\n", 8, 2, "truncated"),  # file ends in frame 2
+        ("1\nroot 0 0 0 0 0 0\nleg 1 x\n", 5, 1, "non-numeric"),
+        ("1\nroot 0 0 0 0 0 0\nleg 1 2 3\n", 5, 1, "needs 2 values"),
+        ("1\nroot 0 0 0 0 0 0\nleg 1 2\narm 1\n", 6, 1, "unknown bone 'arm'"),
+        ("1\nroot 0 0 0 0 0 0\nleg 1 2\nleg 1 2\n", 6, 1, "twice"),
+        ("1\nroot 0 0 0 0 0 0\nhip 1 2\nleg 1 2\n", 5, 1, "no dof"),
+        ("root 0 0 0 0 0 0\n", 3, None, "frame number"),
+    ],
+)
 def test_bad_amc_names_file_line_frame(tmp_path, text, line, frame, words):
     path = _write_toy(tmp_path, text)
     with pytest.raises(AmcFormatError) as err:
@@ -326,7 +348,7 @@ def test_truncated_real_amc(tmp_path):
     cut = 4 + 2 * 30 + 29 - 1  # 0-based index of frame 3's last line
     assert lines[cut].startswith(b"ltoes")
     bad = tmp_path / "HDM_dg_cut.amc"
-    bad.write_bytes(b"".join(lines[:cut] + lines[cut + 1:]))
+    bad.write_bytes(b"".join(lines[:cut] + lines[cut + 1 :]))
     with pytest.raises(AmcFormatError) as err:
         read_amc(bad, asf=ASF_AMC / "hdm05" / "HDM_dg.asf")
     assert err.value.frame == 3 and err.value.line == cut + 1 and "HDM_dg_cut.amc" in str(err.value)
@@ -351,13 +373,16 @@ def test_missing_or_ambiguous_asf(tmp_path):
         read_amc(amc, asf=tmp_path / "missing.asf")
 
 
-@pytest.mark.parametrize("edit,words", [
-    (lambda t: t.replace("length 5", "length five"), "non-numeric length"),
-    (lambda t: t.replace("hip leg\n", "hip foot\n"), "unknown bone 'foot'"),
-    (lambda t: t.replace("dof rx rz", "dof rx rz tx"), "unsupported dof"),
-    (lambda t: t.replace(":bonedata", ":bonestuff"), "unknown section"),
-    (lambda t: t.replace("           (-inf inf)\n", ""), "1 limit pairs for 2 dofs"),
-])
+@pytest.mark.parametrize(
+    "edit,words",
+    [
+        (lambda t: t.replace("length 5", "length five"), "non-numeric length"),
+        (lambda t: t.replace("hip leg\n", "hip foot\n"), "unknown bone 'foot'"),
+        (lambda t: t.replace("dof rx rz", "dof rx rz tx"), "unsupported dof"),
+        (lambda t: t.replace(":bonedata", ":bonestuff"), "unknown section"),
+        (lambda t: t.replace("           (-inf inf)\n", ""), "1 limit pairs for 2 dofs"),
+    ],
+)
 def test_bad_asf(tmp_path, edit, words):
     write_asf(tmp_path / "ok.asf", _toy_skeleton())
     text = edit((tmp_path / "ok.asf").read_text())

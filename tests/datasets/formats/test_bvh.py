@@ -1,4 +1,5 @@
 """BVH reading and writing: hand-checked kinematics, units, errors, round trips and the real samples."""
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -132,7 +133,7 @@ def test_units_scale_and_inference():
     assert infer_scale(30.0)[0] == "cmu"
     m = tiny()
     assert m.metadata["units_inferred"] is True
-    assert m.metadata["rest_size"] == pytest.approx(110.0)   # y from 10 (foot) to 120 (head end)
+    assert m.metadata["rest_size"] == pytest.approx(110.0)  # y from 10 (foot) to 120 (head end)
     assert m.source_units == "cm"
     with pytest.raises(ValueError, match="unknown units"):
         tiny(units="furlong")
@@ -193,18 +194,21 @@ def test_non_numeric_and_non_finite_values():
         parse_bvh_text(lines_with([" ".join(bad)]))
 
 
-@pytest.mark.parametrize("edit, message", [
-    (("\t\t\tOFFSET 0 0 10\n", "\t\t\tOFFSET 0 zero 10\n"), "non-numeric OFFSET value"),
-    (("CHANNELS 1 Xrotation", "CHANNELS 1 Wrotation"), "channel names"),
-    (("CHANNELS 1 Xrotation", "CHANNELS 2 Xrotation"), "channel names"),
-    (("JOINT Leg\n\t{\n", "JOINT Leg\n"), "expected '{'"),
-    (("}\r\nMOTION", "MOTION"), "unclosed"),
-    (("\t\tOFFSET 10 -40 0\n", ""), "has no OFFSET"),
-    (("HIERARCHY", "HIERARCHI"), "expected HIERARCHY"),
-    (("Frames:\t3", "Frames: three"), "non-integer frame count"),
-    (("Frame Time:\t0.04", "Frame Time: 0"), "frame time must be positive"),
-    (("\tJOINT Leg", "\tBONE Leg"), "unexpected 'BONE'"),
-])
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (("\t\t\tOFFSET 0 0 10\n", "\t\t\tOFFSET 0 zero 10\n"), "non-numeric OFFSET value"),
+        (("CHANNELS 1 Xrotation", "CHANNELS 1 Wrotation"), "channel names"),
+        (("CHANNELS 1 Xrotation", "CHANNELS 2 Xrotation"), "channel names"),
+        (("JOINT Leg\n\t{\n", "JOINT Leg\n"), "expected '{'"),
+        (("}\r\nMOTION", "MOTION"), "unclosed"),
+        (("\t\tOFFSET 10 -40 0\n", ""), "has no OFFSET"),
+        (("HIERARCHY", "HIERARCHI"), "expected HIERARCHY"),
+        (("Frames:\t3", "Frames: three"), "non-integer frame count"),
+        (("Frame Time:\t0.04", "Frame Time: 0"), "frame time must be positive"),
+        (("\tJOINT Leg", "\tBONE Leg"), "unexpected 'BONE'"),
+    ],
+)
 def test_malformed_hierarchy_names_file_and_line(edit, message):
     old, new = edit
     assert old in TINY
@@ -237,7 +241,7 @@ def test_write_read_round_trip_keeps_everything(tmp_path):
 
 
 def test_write_from_rotations_after_a_view(tmp_path):
-    m = tiny(units="cm").root_centered()       # positions no longer match the raw channels
+    m = tiny(units="cm").root_centered()  # positions no longer match the raw channels
     write_bvh(tmp_path / "c.bvh", m)
     r = read_bvh(tmp_path / "c.bvh", units="m")
     assert r.joint_names == m.joint_names and r.parents == m.parents

@@ -3,6 +3,7 @@
 The synthetic rig imitates Bandai's: a static ``Root`` above ``Hips``, position channels on every joint, and
 joint frames with their own orientation, so that the zero pose lies on its side; the real Bandai files are used
 when ../shared/data is there."""
+
 import json
 from pathlib import Path
 
@@ -20,20 +21,35 @@ from mocapkit.synthesis.synthesize import find_clips, synthesize
 BANDAI = Path(__file__).resolve().parents[4] / "shared" / "data" / "bandai_motion_1" / "data"
 
 # joint, parent, upright T-pose position (cm; y up, facing +z, left +x)
-BODY = [("Root", None, (0, 0, 0)), ("Hips", "Root", (0, 95, 0)), ("Spine", "Hips", (0, 110, 0)),
-        ("Chest", "Spine", (0, 125, 0)), ("Neck", "Chest", (0, 145, 0)), ("Head", "Neck", (0, 155, 0)),
-        ("Shoulder_L", "Chest", (5, 140, 0)), ("UpperArm_L", "Shoulder_L", (18, 140, 0)),
-        ("LowerArm_L", "UpperArm_L", (45, 140, 0)), ("Hand_L", "LowerArm_L", (70, 140, 0)),
-        ("Shoulder_R", "Chest", (-5, 140, 0)), ("UpperArm_R", "Shoulder_R", (-18, 140, 0)),
-        ("LowerArm_R", "UpperArm_R", (-45, 140, 0)), ("Hand_R", "LowerArm_R", (-70, 140, 0)),
-        ("UpperLeg_L", "Hips", (9, 90, 0)), ("LowerLeg_L", "UpperLeg_L", (9, 50, 0)),
-        ("Foot_L", "LowerLeg_L", (9, 8, 0)), ("Toes_L", "Foot_L", (9, 2, 12)),
-        ("UpperLeg_R", "Hips", (-9, 90, 0)), ("LowerLeg_R", "UpperLeg_R", (-9, 50, 0)),
-        ("Foot_R", "LowerLeg_R", (-9, 8, 0)), ("Toes_R", "Foot_R", (-9, 2, 12))]
+BODY = [
+    ("Root", None, (0, 0, 0)),
+    ("Hips", "Root", (0, 95, 0)),
+    ("Spine", "Hips", (0, 110, 0)),
+    ("Chest", "Spine", (0, 125, 0)),
+    ("Neck", "Chest", (0, 145, 0)),
+    ("Head", "Neck", (0, 155, 0)),
+    ("Shoulder_L", "Chest", (5, 140, 0)),
+    ("UpperArm_L", "Shoulder_L", (18, 140, 0)),
+    ("LowerArm_L", "UpperArm_L", (45, 140, 0)),
+    ("Hand_L", "LowerArm_L", (70, 140, 0)),
+    ("Shoulder_R", "Chest", (-5, 140, 0)),
+    ("UpperArm_R", "Shoulder_R", (-18, 140, 0)),
+    ("LowerArm_R", "UpperArm_R", (-45, 140, 0)),
+    ("Hand_R", "LowerArm_R", (-70, 140, 0)),
+    ("UpperLeg_L", "Hips", (9, 90, 0)),
+    ("LowerLeg_L", "UpperLeg_L", (9, 50, 0)),
+    ("Foot_L", "LowerLeg_L", (9, 8, 0)),
+    ("Toes_L", "Foot_L", (9, 2, 12)),
+    ("UpperLeg_R", "Hips", (-9, 90, 0)),
+    ("LowerLeg_R", "UpperLeg_R", (-9, 50, 0)),
+    ("Foot_R", "LowerLeg_R", (-9, 8, 0)),
+    ("Toes_R", "Foot_R", (-9, 2, 12)),
+]
 
 
-def bandai_like_bvh(frames: int = 40, yaw_deg: float = 0.0, seed: int = 0, slide_joint: str | None = None,
-                    rotation_only: bool = False) -> str:
+def bandai_like_bvh(
+    frames: int = 40, yaw_deg: float = 0.0, seed: int = 0, slide_joint: str | None = None, rotation_only: bool = False
+) -> str:
     """BVH text of the body above walking along its facing direction (turned by ``yaw_deg``), with random joint
     orients (the zero pose is not upright) and small random joint motion; ``slide_joint`` gets a moving
     translation; ``rotation_only``: joints below ``Hips`` have rotation channels only (the common BVH)."""
@@ -41,7 +57,7 @@ def bandai_like_bvh(frames: int = 40, yaw_deg: float = 0.0, seed: int = 0, slide
     names = [b[0] for b in BODY]
     parent = [names.index(p) if p else -1 for _, p, _ in BODY]
     rest = np.array([b[2] for b in BODY], dtype=float)
-    orient = Rotation.random(len(BODY), random_state=1).as_matrix()          # joint frames at the T-pose
+    orient = Rotation.random(len(BODY), random_state=1).as_matrix()  # joint frames at the T-pose
     orient[0] = np.eye(3)
     yaw = Rotation.from_euler("y", yaw_deg, degrees=True).as_matrix()
     wiggle = rng.normal(scale=0.15, size=(frames, len(BODY), 3)) * np.linspace(0.3, 1, frames)[:, None, None]
@@ -49,12 +65,12 @@ def bandai_like_bvh(frames: int = 40, yaw_deg: float = 0.0, seed: int = 0, slide
     offsets = [rest[0]] + [orient[p].T @ (rest[j] - rest[p]) for j, p in enumerate(parent) if p >= 0]
     glob = np.zeros((frames, len(BODY), 3, 3))
     for j, p in enumerate(parent):
-        world = yaw @ Rotation.from_rotvec(wiggle[:, j]).as_matrix() @ orient[j]   # [F, 3, 3]
+        world = yaw @ Rotation.from_rotvec(wiggle[:, j]).as_matrix() @ orient[j]  # [F, 3, 3]
         if p < 0:
             world = np.broadcast_to(np.eye(3), world.shape)
         glob[:, j] = world
         local = world if p < 0 else np.swapaxes(glob[:, p], 1, 2) @ world
-        angles = Rotation.from_matrix(local).as_euler("ZXY", degrees=True)           # Bandai's channel order
+        angles = Rotation.from_matrix(local).as_euler("ZXY", degrees=True)  # Bandai's channel order
         position = np.tile(offsets[j], (frames, 1))
         if names[j] == "Hips":
             position = np.tile(rest[j], (frames, 1)) + np.outer(np.arange(frames) * 3.0, yaw @ [0, 0, 1])
@@ -69,8 +85,11 @@ def bandai_like_bvh(frames: int = 40, yaw_deg: float = 0.0, seed: int = 0, slide
         lines.append(f"{pad}{'ROOT' if parent[j] < 0 else 'JOINT'} {names[j]}")
         lines.append(pad + "{")
         lines.append(f"{pad}  OFFSET {' '.join(f'{v:.6f}' for v in offsets[j])}")
-        lines.append(f"{pad}  CHANNELS 3 Zrotation Xrotation Yrotation" if rotation_only and j > 1 else
-                     f"{pad}  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation")
+        lines.append(
+            f"{pad}  CHANNELS 3 Zrotation Xrotation Yrotation"
+            if rotation_only and j > 1
+            else f"{pad}  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation"
+        )
         children = [c for c, p in enumerate(parent) if p == j]
         for c in children:
             block(c)
@@ -94,18 +113,18 @@ def test_conversion_is_exact_and_the_rest_pose_is_an_upright_t_pose():
     motion = _motion(bandai_like_bvh())
     amc = bvh_to_amc(motion)
     kept = [motion.joint_names.index(n) for n in motion.joint_names[1:]]
-    np.testing.assert_allclose(amc.positions, motion.positions[:, kept], atol=1e-5)   # joints named as the BVH's
+    np.testing.assert_allclose(amc.positions, motion.positions[:, kept], atol=1e-5)  # joints named as the BVH's
     assert amc.joint_names[0] == "root" and amc.joint_names[1:] == motion.joint_names[2:]
     assert amc.metadata["bvh_dropped_joints"] == ("Root",)
     skeleton = amc.metadata["asf"]
     rest = dict(zip(skeleton.joint_names, skeleton.rest_positions()))
     up = rest["Head"] - rest["Chest"]
-    assert up[1] > 0.99 * np.linalg.norm(up)                                         # torso straight up
+    assert up[1] > 0.99 * np.linalg.norm(up)  # torso straight up
     assert rest["Hand_L"][0] > rest["UpperArm_L"][0] + 0.4 and rest["Hand_R"][0] < rest["UpperArm_R"][0] - 0.4
     shin = rest["Foot_L"] - rest["LowerLeg_L"]
-    assert shin[1] < -0.99 * np.linalg.norm(shin)                                    # legs straight down
+    assert shin[1] < -0.99 * np.linalg.norm(shin)  # legs straight down
     toes = rest["Toes_R"] - rest["Foot_R"]
-    assert toes[2] > 0.99 * np.linalg.norm(toes)                                     # feet forward (+z)
+    assert toes[2] > 0.99 * np.linalg.norm(toes)  # feet forward (+z)
     # the root's children carry no rotation of their own; the others carry their parent joint's three
     assert skeleton.bone("Spine").dof == () and skeleton.bone("UpperLeg_L").dof == ()
     assert skeleton.bone("LowerLeg_L").dof == ("rx", "ry", "rz")
@@ -117,8 +136,9 @@ def test_conversion_is_exact_and_the_rest_pose_is_an_upright_t_pose():
 def test_a_turned_take_gets_the_same_rest_pose_facing_plus_z():
     ahead = bvh_to_amc(_motion(bandai_like_bvh()))
     turned = bvh_to_amc(_motion(bandai_like_bvh(yaw_deg=120.0)))
-    np.testing.assert_allclose(turned.metadata["asf"].rest_positions(), ahead.metadata["asf"].rest_positions(),
-                               atol=1e-6)
+    np.testing.assert_allclose(
+        turned.metadata["asf"].rest_positions(), ahead.metadata["asf"].rest_positions(), atol=1e-6
+    )
     # the walk goes along the take's facing: the AMC root translation turns with it, the joint angles do not
     for bone in ("LowerLeg_L", "Neck", "Hand_R"):
         np.testing.assert_allclose(turned.metadata["amc_values"][bone], ahead.metadata["amc_values"][bone], atol=1e-6)
@@ -129,8 +149,8 @@ def test_clips_share_one_rig_and_read_back_through_asf_amc(tmp_path):
     clips = as_amc_clips([first, second])
     assert clips[0].metadata["bvh_rig"] is clips[1].metadata["bvh_rig"]
     assert clips[1].metadata["bvh_rig"].reference == "a.bvh frame 0"
-    check_clips(clips)          # one bone hierarchy, the same dofs
-    own = bvh_to_amc(second)    # its own frame 0 as rest: other angles, the same positions
+    check_clips(clips)  # one bone hierarchy, the same dofs
+    own = bvh_to_amc(second)  # its own frame 0 as rest: other angles, the same positions
     assert not np.allclose(own.metadata["amc_values"]["Neck"], clips[1].metadata["amc_values"]["Neck"])
     np.testing.assert_allclose(own.positions, clips[1].positions, atol=1e-5)
     from mocapkit.datasets.formats.asf_amc import write_amc, write_asf
@@ -153,10 +173,12 @@ def test_amc_back_to_the_bvh_rig_is_the_take_itself(tmp_path):
     starts = skeleton.channel_starts
     for j, name in enumerate(skeleton.joint_names):
         if name in ("Head", "Hand_L", "Hand_R", "Toes_L", "Toes_R"):
-            continue                     # leaf rotations move only End Sites: the conversion drops them
-        difference = back.metadata["channels"][:, starts[j]:starts[j] + 6] - take.metadata["channels"][:, starts[j]:
-                                                                                                starts[j] + 6]
-        difference[:, 3:] = (difference[:, 3:] + 180.0) % 360.0 - 180.0     # angles: the same up to 360°
+            continue  # leaf rotations move only End Sites: the conversion drops them
+        difference = (
+            back.metadata["channels"][:, starts[j] : starts[j] + 6]
+            - take.metadata["channels"][:, starts[j] : starts[j] + 6]
+        )
+        difference[:, 3:] = (difference[:, 3:] + 180.0) % 360.0 - 180.0  # angles: the same up to 360°
         np.testing.assert_allclose(difference, 0.0, atol=1e-6)
     write_bvh(tmp_path / "back.bvh", back)
     np.testing.assert_allclose(read_bvh(tmp_path / "back.bvh").positions, take.positions, atol=1e-5)
@@ -188,15 +210,15 @@ def test_synthesize_takes_bvh_clips_and_writes_bvh(tmp_path):
     assert report["format"] == "bvh" and report["bvh_rest_pose"].endswith("walk_0.bvh frame 0")
     assert report["bvh_output_rig"].startswith("the input's")
     variant = read_bvh(tmp_path / "out" / report["variants"][0])
-    take = read_bvh(folder / "walk_0.bvh")              # written in the input's own rig
+    take = read_bvh(folder / "walk_0.bvh")  # written in the input's own rig
     assert variant.num_frames == 30 and variant.joint_names == take.joint_names
     assert variant.metadata["bvh"].channels == take.metadata["bvh"].channels
     np.testing.assert_allclose(variant.metadata["bvh"].offsets, take.metadata["bvh"].offsets, atol=1e-9)
-    windows = synthesize([folder], tmp_path / "windows", n_variants=1, method="perlin", progress=False,
-                         window_seconds=0.5)
+    windows = synthesize(
+        [folder], tmp_path / "windows", n_variants=1, method="perlin", progress=False, window_seconds=0.5
+    )
     assert len(windows["training_clips"]) == 6 and windows["bvh_output_rig"].startswith("the input's")
-    report = synthesize([folder], tmp_path / "amc", n_variants=1, method="perlin", progress=False,
-                        output_format="amc")
+    report = synthesize([folder], tmp_path / "amc", n_variants=1, method="perlin", progress=False, output_format="amc")
     back = read_amc(tmp_path / "amc" / report["variants"][0], asf=tmp_path / "amc" / report["skeleton"])
     assert back.joint_names[1:4] == ("Spine", "Chest", "Neck") and "bvh_output_rig" not in report
     # a rig whose shoulders have no position channels cannot hold shoulders sampled apart from the chest: the
@@ -241,8 +263,9 @@ SAMPLES = Path(__file__).resolve().parents[4] / "shared" / "samples" / "bvh"
 
 
 @pytest.mark.skipif(not SAMPLES.is_dir(), reason="../shared/samples/bvh not present")
-@pytest.mark.parametrize("name", ["cmu_131_01.bvh", "test_freebvh.bvh", "test_mocapbank.bvh",
-                                  "AV_8Walk_Meredith_HVHA_Rep1.bvh"])
+@pytest.mark.parametrize(
+    "name", ["cmu_131_01.bvh", "test_freebvh.bvh", "test_mocapbank.bvh", "AV_8Walk_Meredith_HVHA_Rep1.bvh"]
+)
 def test_rigs_from_the_wild_convert_split_and_come_back(name):
     """CMU-BVH (zero-length hip joints, clavicles), Mixamo (``mixamorig:`` names, eyes beside the head, fingers),
     and two other exporters: exact both ways, and the five partitions found on the T-pose rest."""
@@ -250,9 +273,17 @@ def test_rigs_from_the_wild_convert_split_and_come_back(name):
 
     take = read_bvh(SAMPLES / name)
     amc = bvh_to_amc(take)
-    np.testing.assert_allclose(amc.positions, take.positions[:, [take.joint_names.index(n) for n in
-                                                                 (take.joint_names[amc.metadata["bvh_rig"].root],)
-                                                                 + amc.joint_names[1:]]], atol=1e-4)
+    np.testing.assert_allclose(
+        amc.positions,
+        take.positions[
+            :,
+            [
+                take.joint_names.index(n)
+                for n in (take.joint_names[amc.metadata["bvh_rig"].root],) + amc.joint_names[1:]
+            ],
+        ],
+        atol=1e-4,
+    )
     parts = partitions(amc.metadata["asf"])
     assert all(len(parts[p]) >= 2 for p in ("RA", "LA", "RL", "LL"))
     np.testing.assert_allclose(amc_to_bvh(amc, amc.metadata["bvh_rig"]).positions, take.positions, atol=1e-4)

@@ -1,4 +1,5 @@
 """C3D reading and writing (mocapkit.datasets.formats.c3d), on synthetic files and on every real sample."""
+
 import pickle
 
 import numpy as np
@@ -36,8 +37,14 @@ def _motion(frames=6, markers=3, seed=0, **kw) -> Motion:
     pos = rng.uniform(-2, 2, (frames, markers, 3)).astype(np.float32)
     missing = np.zeros((frames, markers), dtype=bool)
     missing[2, 1] = missing[4, 0] = True
-    defaults = {"positions": pos, "joint_names": [f"M{j}" for j in range(markers)], "fps": 100.0, "missing": missing,
-                    "up_axis": "z", "name": "synthetic"}
+    defaults = {
+        "positions": pos,
+        "joint_names": [f"M{j}" for j in range(markers)],
+        "fps": 100.0,
+        "missing": missing,
+        "up_axis": "z",
+        "name": "synthetic",
+    }
     defaults.update(kw)
     return Motion(**defaults)
 
@@ -155,7 +162,7 @@ def test_real_sample(name):
     # metres: a person's markers span 0.3-2.5 m in every frame where most of them are seen
     full = m.missing.mean(axis=1) < 0.2
     assert full.sum() > frames // 2
-    spread = np.nanmax(m.positions[full], axis=1) - np.nanmin(m.positions[full], axis=1)     # [frames, 3]
+    spread = np.nanmax(m.positions[full], axis=1) - np.nanmin(m.positions[full], axis=1)  # [frames, 3]
     assert 0.3 < spread.max(axis=1).min() and spread.max() < 2.5
     # z is up: a head/pelvis marker is above a foot marker in every frame both are seen
     high, low = (m.positions[:, m.index(n), 2] for n in HIGH_LOW[name])
@@ -178,7 +185,7 @@ def test_hdm05_labels_prefix_and_unlabelled():
 @needs(C3D)
 def test_eb015_padding_labels_analog_and_events():
     m = read_c3d(C3D / "Eb015pi.c3d")
-    assert m.joint_names[-2:] == ("PV3", "pv4")          # LABELS holds 48 names, POINT:USED is 26
+    assert m.joint_names[-2:] == ("PV3", "pv4")  # LABELS holds 48 names, POINT:USED is 26
     analog = m.metadata["analog"]
     assert analog["labels_declared"] == 32 and analog["labels"][:3] == ("FX1", "FY1", "FZ1")
     assert [e["label"] for e in m.metadata["events"]] == ["RIC", "RHS", "RTO"]
@@ -198,12 +205,12 @@ def test_eb015_integer_float_and_dec_storage_agree():
     half_quantum = abs(pi.metadata["point_scale"]) * 1e-3 / 2
     ok = ~pi.missing
     assert np.abs(pi.positions[ok] - pr.positions[ok]).max() < half_quantum
-    assert np.abs(pr.positions[ok] - vr.positions[ok]).max() < 1e-6     # DEC and Intel floats: identical values
+    assert np.abs(pr.positions[ok] - vr.positions[ok]).max() < 1e-6  # DEC and Intel floats: identical values
 
 
 @needs(C3D)
 def test_walking_hybrid_zero_gaps_and_trailing_bytes():
-    m = read_c3d(C3D / "Walking_Hybrid_1_1.c3d")        # 512 bytes after the last data block are ignored
+    m = read_c3d(C3D / "Walking_Hybrid_1_1.c3d")  # 512 bytes after the last data block are ignored
     assert m.metadata["gaps"]["zero_coordinates"] == 3902 and m.metadata["gaps"]["invalid_residual"] == 0
     assert not (m.filled(np.nan) == 0).all(axis=2).any()
 

@@ -1,4 +1,5 @@
 """CASIA-B silhouette layout: listing (natural sort, stray files, empty and missing folders) and the PNG reader."""
+
 import numpy as np
 import pytest
 from PIL import Image
@@ -80,9 +81,9 @@ def test_stray_files_and_unnumbered_pngs_are_reported_not_read(tmp_path):
 
 def test_bad_folder_names_are_problems_and_empty_view_folders_listed(tmp_path):
     _sequence(tmp_path, "002/bg-02/180", [1])
-    (tmp_path / "002" / "bg-02" / "036").mkdir()                    # empty view folder
-    (tmp_path / "002" / "xx-01" / "090").mkdir(parents=True)        # unknown condition
-    (tmp_path / "002" / "nm-01" / "045").mkdir(parents=True)        # not a CASIA-B view
+    (tmp_path / "002" / "bg-02" / "036").mkdir()  # empty view folder
+    (tmp_path / "002" / "xx-01" / "090").mkdir(parents=True)  # unknown condition
+    (tmp_path / "002" / "nm-01" / "045").mkdir(parents=True)  # not a CASIA-B view
     (tmp_path / "subjectA").mkdir()
     listing = list_casia_b(tmp_path)
     assert [s.key.name for s in listing.sequences] == ["002/bg-02/036", "002/bg-02/180"]
@@ -138,18 +139,21 @@ def test_read_modes_gray_1bit_rgb_rgba_and_16bit(tmp_path):
 
 def test_some_edge_gray_is_thresholded_at_128(tmp_path):
     mask = _silhouette(h=40, w=40, box=(5, 5, 35, 35))
-    mask[5, 5:35] = 100        # 30 of 1600 pixels (1.9 %) gray: tolerated, below 128 -> background
-    mask[34, 5:35] = 200       # above 128 -> foreground
+    mask[5, 5:35] = 100  # 30 of 1600 pixels (1.9 %) gray: tolerated, below 128 -> background
+    mask[34, 5:35] = 200  # above 128 -> foreground
     out = read_silhouette(_write(tmp_path / "x-007.png", mask))
     assert set(np.unique(out)) == {0, 255}
     assert (out[5, 5:35] == 0).all() and (out[34, 5:35] == 255).all()
 
 
 def test_gray_image_is_rejected_with_file_and_frame(tmp_path):
-    gray = np.tile(np.linspace(0, 255, 32, dtype=np.uint8), (24, 1))   # a gradient, not a silhouette
+    gray = np.tile(np.linspace(0, 255, 32, dtype=np.uint8), (24, 1))  # a gradient, not a silhouette
     path = _write(tmp_path / "001-nm-01-090-012.png", gray)
-    with pytest.raises(SilhouetteFormatError, match=r"001-nm-01-090-012\.png, frame 12: not a binary silhouette: "
-                                                    r"\d+\.\d% gray pixels") as info:
+    with pytest.raises(
+        SilhouetteFormatError,
+        match=r"001-nm-01-090-012\.png, frame 12: not a binary silhouette: "
+        r"\d+\.\d% gray pixels",
+    ) as info:
         read_silhouette(path)
     assert info.value.frame == 12 and info.value.path == str(path)
 
@@ -157,7 +161,7 @@ def test_gray_image_is_rejected_with_file_and_frame(tmp_path):
 def test_corrupt_png_is_rejected_with_file_and_frame(tmp_path):
     good = _write(tmp_path / "a-003.png", _silhouette())
     bad = tmp_path / "001-nm-01-090-004.png"
-    bad.write_bytes(good.read_bytes()[:60])                              # truncated
+    bad.write_bytes(good.read_bytes()[:60])  # truncated
     with pytest.raises(SilhouetteFormatError, match=r"001-nm-01-090-004\.png, frame 4: unreadable image"):
         read_silhouette(bad)
     junk = tmp_path / "001-nm-01-090-005.png"
@@ -170,7 +174,7 @@ def test_read_sequence_keeps_order_and_empty_frames(tmp_path):
     folder = tmp_path / "001" / "nm-01" / "090"
     for k in (10, 2, 1):
         _write(folder / f"001-nm-01-090-{k:03d}.png", _silhouette(box=(4, k, 20, k + 6)))
-    _write(folder / "001-nm-01-090-011.png", np.zeros((24, 32), np.uint8))     # all-black frame
+    _write(folder / "001-nm-01-090-011.png", np.zeros((24, 32), np.uint8))  # all-black frame
     (seq,) = list_casia_b(tmp_path).sequences
     frames = read_sequence(seq)
     assert frames.shape == (4, 24, 32) and frames.dtype == np.uint8
@@ -184,8 +188,11 @@ def test_read_sequence_frame_size_mismatch_names_the_frame(tmp_path):
     _write(folder / "001-nm-01-090-002.png", _silhouette(24, 32))
     _write(folder / "001-nm-01-090-003.png", _silhouette(30, 32))
     (seq,) = list_casia_b(tmp_path).sequences
-    with pytest.raises(SilhouetteFormatError, match=r"001-nm-01-090-003\.png, frame 3: frame size 32x30 \(WxH\) "
-                                                    r"differs .*001-nm-01-090-001\.png \(32x24\)"):
+    with pytest.raises(
+        SilhouetteFormatError,
+        match=r"001-nm-01-090-003\.png, frame 3: frame size 32x30 \(WxH\) "
+        r"differs .*001-nm-01-090-001\.png \(32x24\)",
+    ):
         read_sequence(seq)
 
 

@@ -1,11 +1,10 @@
 """read_motion / write_motion: format dispatch by file name (mocapkit.datasets.formats.motion_io)."""
+
 import numpy as np
 import pytest
 
 from mocapkit.datasets.formats import motion_io
 from mocapkit.datasets.formats.c3d import C3DFormatError
-from mocapkit.motion.layouts import NTU25
-from mocapkit.motion.container import Motion
 from mocapkit.datasets.formats.motion_io import (
     FormatUnavailableError,
     UnsupportedFormatError,
@@ -18,16 +17,25 @@ from mocapkit.datasets.formats.ntu_skeleton import (
     sequence_from_positions,
     write_skeleton,
 )
+from mocapkit.motion.container import Motion
+from mocapkit.motion.layouts import NTU25
 from tests.shared_data import NTU_SAMPLES, SHARED, needs
 
 SAMPLES = SHARED / "samples"
 
 
-@pytest.mark.parametrize("name, fmt", [
-    ("a.c3d", "c3d"), ("A.C3D", "c3d"), ("x/y.bvh", "bvh"), ("01_01.amc", "amc"),
-    ("S001C001P001R001A001.skeleton", "ntu"), ("a01_s01_e01_skeleton3D.txt", "msr"),
-    ("a01_s01_e01_skeleton.txt", "msr"),
-])
+@pytest.mark.parametrize(
+    "name, fmt",
+    [
+        ("a.c3d", "c3d"),
+        ("A.C3D", "c3d"),
+        ("x/y.bvh", "bvh"),
+        ("01_01.amc", "amc"),
+        ("S001C001P001R001A001.skeleton", "ntu"),
+        ("a01_s01_e01_skeleton3D.txt", "msr"),
+        ("a01_s01_e01_skeleton.txt", "msr"),
+    ],
+)
 def test_motion_format(name, fmt):
     assert motion_format(name) == fmt
 
@@ -44,7 +52,9 @@ def test_asf_alone_gets_a_hint():
 
 
 def test_missing_reader_module_names_the_format(monkeypatch, tmp_path):
-    monkeypatch.setitem(motion_io.FORMATS, "bvh", ("BVH (.bvh)", "mocapkit.datasets.no_such_bvh", "read_bvh", "write_bvh"))
+    monkeypatch.setitem(
+        motion_io.FORMATS, "bvh", ("BVH (.bvh)", "mocapkit.datasets.no_such_bvh", "read_bvh", "write_bvh")
+    )
     with pytest.raises(FormatUnavailableError, match=r"reading BVH \(\.bvh\) needs mocapkit\.datasets\.no_such_bvh"):
         read_motion("clip.bvh")
     with pytest.raises(FormatUnavailableError, match="writing BVH"):
@@ -97,9 +107,9 @@ def _two_body_file(tmp_path):
     rng = np.random.default_rng(0)
     T = 12
     pos = np.zeros((3, T, 25, 3))
-    tall = np.array([0.3, 1.0, 0.3])                              # taller than wide: spread denoising keeps them
-    pos[0] = rng.normal(0, 0.01, (T, 25, 3)) * tall + [0, 0, 3]   # barely moves
-    pos[1] = rng.normal(0, 0.30, (T, 25, 3)) * tall + [1, 0, 3]   # moves most
+    tall = np.array([0.3, 1.0, 0.3])  # taller than wide: spread denoising keeps them
+    pos[0] = rng.normal(0, 0.01, (T, 25, 3)) * tall + [0, 0, 3]  # barely moves
+    pos[1] = rng.normal(0, 0.30, (T, 25, 3)) * tall + [1, 0, 3]  # moves most
     pos[2, 3:9] = rng.normal(0, 0.10, (6, 25, 3)) * tall + [-1, 0, 3]  # medium, only frames 3..8
     present = np.ones((3, T), dtype=bool)
     present[2] = False
@@ -111,11 +121,11 @@ def _two_body_file(tmp_path):
 
 def test_ntu_main_body_and_other_bodies(tmp_path):
     path, pos = _two_body_file(tmp_path)
-    assert read_motion(path).metadata["body_ids"] == [22, 11]         # by default body 33 (6 frames) is too short
+    assert read_motion(path).metadata["body_ids"] == [22, 11]  # by default body 33 (6 frames) is too short
     m = read_motion(path, min_frames=1)
     assert m.joint_names == NTU25.joint_names and m.parents == NTU25.parents and m.layout_name == "ntu25"
     assert m.fps == 30.0 and m.up_axis == "y" and m.name == "S001C001P001R001A050"
-    np.testing.assert_allclose(m.positions, pos[1], atol=1e-6)        # most motion first
+    np.testing.assert_allclose(m.positions, pos[1], atol=1e-6)  # most motion first
     assert not m.missing.any()
     assert m.metadata["body_ids"] == [22, 33] and m.metadata["label"] == 49
     assert list(m.metadata["dropped_tracks"]) == [0]
@@ -158,6 +168,7 @@ def test_ntu_real_samples():
 @needs(SAMPLES / "bvh")
 def test_bvh_dispatch():
     from mocapkit.datasets.formats import bvh
+
     path = SAMPLES / "bvh" / "cmu_131_01.bvh"
     m = read_motion(path)
     assert isinstance(m, Motion) and m.parents is not None
@@ -167,6 +178,7 @@ def test_bvh_dispatch():
 @needs(SAMPLES / "asf_amc")
 def test_amc_dispatch_finds_asf_and_accepts_asf_option():
     from mocapkit.datasets.formats import asf_amc
+
     amc = SAMPLES / "asf_amc" / "cmu_01" / "test.amc"
     m = read_motion(amc)
     assert isinstance(m, Motion) and m.parents is not None
@@ -179,6 +191,7 @@ def test_amc_dispatch_finds_asf_and_accepts_asf_option():
 @pytest.mark.parametrize("name", ["a01_s01_e01_skeleton3D.txt", "a01_s01_e01_skeleton.txt"])
 def test_msr_dispatch(name):
     from mocapkit.datasets.formats import msr_action3d as msr
+
     path = SAMPLES / "msr3d" / name
     m = read_motion(path)
     assert isinstance(m, Motion) and m.num_joints == 20

@@ -1,4 +1,5 @@
 """The NTU ``.skeleton`` reader/writer against real files, an independent parse, and broken files."""
+
 from __future__ import annotations
 
 import tempfile
@@ -66,13 +67,16 @@ def _independent_fields(path: Path, frame: int, body: int, joint: int, bodies_pe
 
 
 @needs_samples
-@pytest.mark.parametrize("name, frame, body, joint", [
-    ("S001C001P001R001A011", 0, 0, 0),
-    ("S001C001P001R001A011", 81, 0, 24),
-    ("S001C003P008R002A058", 0, 1, 11),
-    ("S001C003P008R002A058", 37, 0, 7),
-    ("S004C002P003R001A017", 60, 0, 3),
-])
+@pytest.mark.parametrize(
+    "name, frame, body, joint",
+    [
+        ("S001C001P001R001A011", 0, 0, 0),
+        ("S001C001P001R001A011", 81, 0, 24),
+        ("S001C003P008R002A058", 0, 1, 11),
+        ("S001C003P008R002A058", 37, 0, 7),
+        ("S004C002P003R001A017", 60, 0, 3),
+    ],
+)
 def test_fields_agree_with_an_independent_parse(name, frame, body, joint):
     bodies = EXPECTED[name][1]
     body_tokens, joint_tokens = _independent_fields(sample(name), frame, body, joint, bodies)
@@ -179,8 +183,11 @@ BROKEN = {
     # case: (edit, expected line, words in the message)
     "truncated inside joints": (lambda ls: ls[:40], 41, "ends inside the joints"),
     "truncated before frame": (lambda ls: ls[:29], 30, "ends before frame 2"),
-    "non-numeric joint value": (lambda ls: _break(ls, 10, " ".join(["0.1x"] + ls[9].split()[1:])), 10,
-                                "non-numeric joint value '0.1x'"),
+    "non-numeric joint value": (
+        lambda ls: _break(ls, 10, " ".join(["0.1x"] + ls[9].split()[1:])),
+        10,
+        "non-numeric joint value '0.1x'",
+    ),
     "wrong joint count": (lambda ls: _break(ls, 32, "24"), 32, "joint count is 24"),
     "joint line with 11 values": (lambda ls: _break(ls, 45, _drop_value(ls[44])), 45, "11 values, expected 12"),
     "body line with 9 values": (lambda ls: _break(ls, 31, _drop_value(ls[30])), 31, "9 values, expected 10"),
@@ -258,6 +265,7 @@ def test_select_main_bodies_pads_a_missing_second_body_and_filters_short_tracks(
 
 # --------------------------------------------------------------------------- default rules: length, spread, flicker
 
+
 def person(T: int, x: float = 0.0, sway: float = 0.05, seed: int = 0) -> np.ndarray:
     """A tall, slowly swaying "person" ``[T, 25, 3]``: 25 points in a 0.4 m × 1.7 m × 0.3 m box, 3 m away."""
     rng = np.random.default_rng(seed)
@@ -267,7 +275,9 @@ def person(T: int, x: float = 0.0, sway: float = 0.05, seed: int = 0) -> np.ndar
 
 def wide_blob(T: int) -> np.ndarray:
     """A static chair-like "body", wider than tall."""
-    return np.random.default_rng(9).uniform(-0.5, 0.5, (25, 3)) * [0.7, 0.3, 0.6] + [1.2, 0.4, 3.0] + np.zeros((T, 1, 1))
+    return (
+        np.random.default_rng(9).uniform(-0.5, 0.5, (25, 3)) * [0.7, 0.3, 0.6] + [1.2, 0.4, 3.0] + np.zeros((T, 1, 1))
+    )
 
 
 def rules(seq, **options) -> dict:
@@ -277,15 +287,18 @@ def rules(seq, **options) -> dict:
 
 def test_a_short_clip_still_gives_its_bodies():
     """Tracks shorter than 12 frames are dropped, never the longest of the file."""
-    two = sequence_from_positions("S001C001P001R001A050", np.stack([person(8), person(8, x=1.0, seed=1)]),
-                                  body_ids=[1, 2])
+    two = sequence_from_positions(
+        "S001C001P001R001A050", np.stack([person(8), person(8, x=1.0, seed=1)]), body_ids=[1, 2]
+    )
     assert rules(two) == {1: "rescued_short", 2: "rescued_short"}
     sel = select_main_bodies(two)
     assert len(sel.kept) == 2 and "no track of the file is longer" in sel.kept_reasons[sel.kept[0]]
     positions = np.stack([person(30), person(30, x=1.0, seed=1)])
     positions[1, 11:] = 0.0  # the second track is present in 11 frames: "more than 11" fails
-    assert rules(sequence_from_positions("S001C001P001R001A001", positions, body_ids=[1, 2])) == \
-        {1: "only_candidate", 2: "short"}
+    assert rules(sequence_from_positions("S001C001P001R001A001", positions, body_ids=[1, 2])) == {
+        1: "only_candidate",
+        2: "short",
+    }
 
 
 def test_spread_denoising_is_on_by_default_and_never_empties_a_file():
@@ -295,9 +308,9 @@ def test_spread_denoising_is_on_by_default_and_never_empties_a_file():
     assert "wider than tall in 100% of its frames" in sel.dropped[0]
     assert select_main_bodies(seq, denoise_spread=False).rules[0] in ("most_motion", "less_motion")
     taller = wide_blob(40)
-    taller[:8] *= [1.0, 4.0, 1.0]          # taller than wide in 8 of its 40 frames: wide in 80 % (>= 69.754 %)
+    taller[:8] *= [1.0, 4.0, 1.0]  # taller than wide in 8 of its 40 frames: wide in 80 % (>= 69.754 %)
     blobs = sequence_from_positions("S001C001P001R001A001", np.stack([wide_blob(40), taller]), body_ids=[1, 2])
-    sel = select_main_bodies(blobs)       # every track is wide: the least wide is kept, and says so
+    sel = select_main_bodies(blobs)  # every track is wide: the least wide is kept, and says so
     assert sel.kept == [1] and sel.rules[1] == "rescued_spread" and "least wide" in sel.kept_reasons[1]
 
 
@@ -306,9 +319,9 @@ def test_a_flickering_track_is_dropped_not_ranked_first():
     T = 60
     ghost = person(T, x=0.3, seed=2) + rng.normal(0, 0.6, (T, 1, 3)) * [1, 0.05, 1]  # jumps every frame
     positions = np.stack([ghost, person(T)])
-    positions[0, rng.random(T) < 0.5] = 0.0    # and is there half of the time
+    positions[0, rng.random(T) < 0.5] = 0.0  # and is there half of the time
     seq = sequence_from_positions("S001C001P001R001A001", positions, body_ids=[7, 8])
-    assert select_main_bodies(seq, denoise_flicker=False).kept == [0, 1]      # most "motion": the ghost
+    assert select_main_bodies(seq, denoise_flicker=False).kept == [0, 1]  # most "motion": the ghost
     sel = select_main_bodies(seq)
     assert sel.kept == [1] and sel.rules[0] == "flicker" and "flickering: present in" in sel.dropped[0]
 
@@ -325,7 +338,7 @@ def test_a_track_that_jumps_without_gaps_is_dropped():
 def test_frames_the_sensor_lost_are_not_flicker():
     T = 60
     positions = np.stack([person(T), person(T, x=1.0, seed=1)])
-    positions[:, ::3] = 0.0                    # every third frame has no body at all
+    positions[:, ::3] = 0.0  # every third frame has no body at all
     seq = sequence_from_positions("S001C001P001R001A050", positions, body_ids=[1, 2])
     sel = select_main_bodies(seq)
     assert sorted(sel.kept) == [0, 1] and not sel.dropped
@@ -335,9 +348,9 @@ def test_when_every_track_flickers_the_steadiest_is_kept():
     rng = np.random.default_rng(5)
     T = 60
     positions = np.stack([person(T), person(T, x=1.0, seed=1)])
-    positions[0, rng.random(T) < 0.5] = 0.0    # present in about 50 % and 40 % of the frames, independently
+    positions[0, rng.random(T) < 0.5] = 0.0  # present in about 50 % and 40 % of the frames, independently
     positions[1, rng.random(T) < 0.6] = 0.0
-    positions[:, 0] = person(T)[0]             # both seen in the first frame, so no frame is empty
+    positions[:, 0] = person(T)[0]  # both seen in the first frame, so no frame is empty
     seq = sequence_from_positions("S001C001P001R001A001", positions, body_ids=[1, 2])
     sel = select_main_bodies(seq)
     assert sel.kept == [0] and sel.rules == {0: "rescued_flicker", 1: "flicker"}

@@ -1,9 +1,10 @@
-"""Readers against damaged and hostile inputs (issue 14): crashes, special files, huge allocations, NaN/Inf.
+"""Readers against damaged and hostile inputs: crashes, special files, huge allocations, NaN/Inf.
 
 The C3D cases are real samples with one byte changed in the parameter section; each one
 killed the interpreter (SIGSEGV) inside ezc3d before ``read_c3d`` validated files itself.
 They run in a child process, so a regression fails the test instead of killing pytest.
 """
+
 from __future__ import annotations
 
 import os
@@ -38,13 +39,13 @@ REPO = Path(__file__).resolve().parents[3]
 # (sample, byte offset, new value): each made ezc3d 1.7.2 die with SIGSEGV (found by flipping
 # bytes of the parameter section and keeping the candidates whose child exited on a signal).
 C3D_CRASHES = [
-    ("pc_real.c3d", 525, 255),               # POINT group: offset to the next record
-    ("pc_real.c3d", 547, 255),               # ANALOG group id equal to POINT's
-    ("pc_real.c3d", 640, 0),                 # POINT:DESCRIPTIONS offset to the next record
-    ("HDM_dg_06-03_03_120.c3d", 549, 128),   # TRIAL:ACTUAL_START_FIELD dimension count
-    ("HDM_dg_06-03_03_120.c3d", 583, 255),   # TRIAL:ACTUAL_END_FIELD offset
-    ("HDM_dg_06-03_03_120.c3d", 866, 255),   # POINT:SCALE data type
-    ("HDM_dg_06-03_03_120.c3d", 751, 0),     # LABEL_PREFIXES offset
+    ("pc_real.c3d", 525, 255),  # POINT group: offset to the next record
+    ("pc_real.c3d", 547, 255),  # ANALOG group id equal to POINT's
+    ("pc_real.c3d", 640, 0),  # POINT:DESCRIPTIONS offset to the next record
+    ("HDM_dg_06-03_03_120.c3d", 549, 128),  # TRIAL:ACTUAL_START_FIELD dimension count
+    ("HDM_dg_06-03_03_120.c3d", 583, 255),  # TRIAL:ACTUAL_END_FIELD offset
+    ("HDM_dg_06-03_03_120.c3d", 866, 255),  # POINT:SCALE data type
+    ("HDM_dg_06-03_03_120.c3d", 751, 0),  # LABEL_PREFIXES offset
 ]
 
 _CHILD = textwrap.dedent("""
@@ -73,8 +74,15 @@ def _mutated(tmp_path: Path, sample: str, offset: int, value: int) -> Path:
 def test_one_byte_c3d_damage_is_an_error_not_a_crash(tmp_path, sample, offset, value):
     path = _mutated(tmp_path, sample, offset, value)
     env = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONPATH": str(REPO)}
-    child = subprocess.run([sys.executable, "-c", _CHILD, str(path)], capture_output=True, text=True, timeout=120, check=False,
-                           env=env, cwd=REPO)
+    child = subprocess.run(
+        [sys.executable, "-c", _CHILD, str(path)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+        env=env,
+        cwd=REPO,
+    )
     assert child.returncode == 0, f"child died (exit {child.returncode}): {child.stderr[-2000:]}"
     out = child.stdout.strip()
     assert out.startswith("C3DFormatError:"), out
@@ -107,7 +115,7 @@ def test_c3d_truncated_data_named_before_ezc3d(tmp_path):
 @needs(C3D)
 def test_c3d_point_count_beyond_the_file(tmp_path):
     raw = bytearray((C3D / "pc_real.c3d").read_bytes())
-    raw[2:4] = (5000).to_bytes(2, "little")    # header word 2: 5000 points
+    raw[2:4] = (5000).to_bytes(2, "little")  # header word 2: 5000 points
     path = tmp_path / "many.c3d"
     path.write_bytes(bytes(raw))
     with pytest.raises(C3DFormatError, match=r"many.c3d: .*POINT:USED.*5000"):
@@ -124,11 +132,14 @@ def _dev_zero_link(tmp_path: Path, name: str) -> Path:
 
 
 @pytest.mark.skipif(not os.path.exists("/dev/zero"), reason="needs /dev/zero")
-@pytest.mark.parametrize("name", ["S001C001P001R001A001.skeleton", "walk.bvh", "walk.c3d",
-                                  "a01_s01_e01_skeleton3D.txt"])
+@pytest.mark.parametrize(
+    "name", ["S001C001P001R001A001.skeleton", "walk.bvh", "walk.c3d", "a01_s01_e01_skeleton3D.txt"]
+)
 def test_link_to_dev_zero_is_refused_by_name(tmp_path, name):
     link = _dev_zero_link(tmp_path, name)
-    with pytest.raises(MotionFormatError, match=rf"{name}: refusing to read a character device \(a link to /dev/zero\)"):
+    with pytest.raises(
+        MotionFormatError, match=rf"{name}: refusing to read a character device \(a link to /dev/zero\)"
+    ):
         read_motion(link)
 
 
@@ -144,7 +155,7 @@ def test_fifo_and_directory_refused_without_blocking(tmp_path):
     fifo = tmp_path / "S001C001P001R001A001.skeleton"
     os.mkfifo(fifo)
     with pytest.raises(SkeletonFormatError, match="FIFO"):
-        read_skeleton(fifo)       # opening a FIFO would block forever
+        read_skeleton(fifo)  # opening a FIFO would block forever
     folder = tmp_path / "take.bvh"
     folder.mkdir()
     with pytest.raises(MotionFormatError, match="take.bvh: refusing to read a directory"):
@@ -175,7 +186,7 @@ def _skeleton_text(bodies: int = 1, frames: int = 3, seed: int = 0, tmp: Path | 
 @pytest.mark.parametrize("value", ["nan", "inf", "-inf", "1e309", "NaN"])
 def test_ntu_non_finite_joint_value_names_the_line(tmp_path, value):
     lines = _skeleton_text(tmp=tmp_path).splitlines()
-    fields = lines[10].split()      # line 11: a joint line of frame 1
+    fields = lines[10].split()  # line 11: a joint line of frame 1
     fields[4] = value
     lines[10] = " ".join(fields)
     with pytest.raises(SkeletonFormatError, match=r"x.skeleton, line 11: non-finite joint value"):
@@ -185,8 +196,8 @@ def test_ntu_non_finite_joint_value_names_the_line(tmp_path, value):
 @pytest.mark.parametrize("value", ["nan", "inf", "1e309"])
 def test_ntu_non_finite_body_line_value_names_the_line(tmp_path, value):
     lines = _skeleton_text(tmp=tmp_path).splitlines()
-    fields = lines[2].split()       # line 3: the body line of frame 1
-    fields[7] = value               # lean_x
+    fields = lines[2].split()  # line 3: the body line of frame 1
+    fields[7] = value  # lean_x
     lines[2] = " ".join(fields)
     with pytest.raises(SkeletonFormatError, match=r"x.skeleton, line 3: non-finite value .* body line"):
         parse_skeleton_text("\n".join(lines) + "\n", name="x.skeleton")
@@ -202,7 +213,7 @@ def test_ntu_cr_only_line_ends_read_like_lf(tmp_path):
 def test_ntu_new_body_id_every_frame_is_bounded(tmp_path):
     """A body ID per frame used to allocate tracks x frames x 2.4 KB (GiBs for a MB file)."""
     frames = 800
-    one = _skeleton_text(frames=1, tmp=tmp_path).splitlines()      # "1", "1", body line, "25", 25 joints
+    one = _skeleton_text(frames=1, tmp=tmp_path).splitlines()  # "1", "1", body line, "25", 25 joints
     body = one[2].split()
     out = [str(frames)]
     for t in range(frames):
@@ -261,8 +272,9 @@ def test_asf_non_finite_values_name_the_line(value):
         parse_asf_text(_ASF.format(length=value), source="t.asf")
 
 
-@pytest.mark.parametrize("value,match", [("1e39", "beyond the float32 range"), ("nan", "non-finite"),
-                                         ("inf", "non-finite")])
+@pytest.mark.parametrize(
+    "value,match", [("1e39", "beyond the float32 range"), ("nan", "non-finite"), ("inf", "non-finite")]
+)
 def test_msr_values_beyond_float32_name_the_line(tmp_path, value, match):
     lines = ["0.1 0.2 2.5 1"] * 40
     lines[23] = f"0.1 {value} 2.5 1"
@@ -278,8 +290,7 @@ def test_msr_values_beyond_float32_name_the_line(tmp_path, value, match):
 def test_prepare_ntu_skip_bad_survives_every_bad_file(tmp_path):
     src = tmp_path / "src"
     src.mkdir()
-    good = {"S001C001P001R001A001": 0, "S001C001P001R001A002": 1, "S001C001P001R001A003": 2,
-            "S001C001P001R001A004": 3}
+    good = {"S001C001P001R001A001": 0, "S001C001P001R001A002": 1, "S001C001P001R001A003": 2, "S001C001P001R001A004": 3}
     texts = {name: _skeleton_text(frames=5, seed=seed, tmp=tmp_path) for name, seed in good.items()}
     (src / "S001C001P001R001A001.skeleton").write_text(texts["S001C001P001R001A001"])
     (src / "S001C001P001R001A002.skeleton").write_text(texts["S001C001P001R001A002"].replace("\n", "\r"))  # CR only
@@ -294,11 +305,11 @@ def test_prepare_ntu_skip_bad_survives_every_bad_file(tmp_path):
     fields[7] = "inf"
     inf_body[2] = " ".join(fields)
     (src / "S002C001P001R001A002.skeleton").write_text("\n".join(inf_body) + "\n")
-    (src / "S002C001P001R001A003.skeleton").mkdir()                            # a directory
+    (src / "S002C001P001R001A003.skeleton").mkdir()  # a directory
     if os.path.exists("/dev/zero"):
-        (src / "S002C001P001R001A004.skeleton").symlink_to("/dev/zero")       # a device
+        (src / "S002C001P001R001A004.skeleton").symlink_to("/dev/zero")  # a device
     if hasattr(os, "mkfifo"):
-        os.mkfifo(src / "S002C001P001R001A005.skeleton")                       # a FIFO
+        os.mkfifo(src / "S002C001P001R001A005.skeleton")  # a FIFO
 
     report = prepare_ntu(src, tmp_path / "out", skip_bad=True, progress=False)
     assert report.samples_written == 4
@@ -312,6 +323,7 @@ def test_prepare_ntu_skip_bad_survives_every_bad_file(tmp_path):
     if hasattr(os, "mkfifo"):
         assert "FIFO" in messages["S002C001P001R001A005"]
     from mocapkit.datasets.ntu.cache import NTUCache
+
     cache = NTUCache(tmp_path / "out")
     assert list(cache.lengths) == [5, 5, 5, 5]
     cache.verify()
