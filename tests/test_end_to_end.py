@@ -154,3 +154,10 @@ def test_same_seed_deterministic_runs_give_identical_weights(workspace):
     a, b = (s["state_dict"] for s in states)
     assert a.keys() == b.keys()
     assert all(torch.equal(a[k], b[k]) for k in a)
+
+
+def test_a_run_without_logger_trains_with_the_default_callbacks(workspace):
+    """logger=none keeps the default callbacks working (the learning-rate monitor, which needs a logger, is left out)."""
+    assert main(train_overrides(workspace, "run_name=nolog", "trainer.max_epochs=1", "logger=none")) == 0
+    run = workspace / "runs" / "ntu_energy_vgg" / "nolog"
+    assert (run / "last.ckpt").is_file() and not (run / "tensorboard").exists()

@@ -25,7 +25,7 @@ import lightning as L
 from hydra.core.hydra_config import HydraConfig
 from hydra.errors import InstantiationException
 from hydra.utils import instantiate
-from lightning.pytorch.callbacks import ModelCheckpoint
+from lightning.pytorch.callbacks import LearningRateMonitor, ModelCheckpoint
 from omegaconf import DictConfig, OmegaConf, open_dict
 
 from mocapkit.train.config import (
@@ -129,6 +129,8 @@ def train(cfg: DictConfig) -> Path:
         callbacks = [c for c in callbacks if not (isinstance(c, ModelCheckpoint) and c.monitor)]
         print("[mocapkit] data.val_fraction=0: no validation part; the checkpoint is last.ckpt (no best.ckpt)")
     loggers = [build(node) for node in (cfg.get("logger") or {}).values() if node]
+    if not loggers:  # logger=none: the learning-rate monitor has nowhere to log (Lightning would refuse the run)
+        callbacks = [c for c in callbacks if not isinstance(c, LearningRateMonitor)]
     plugins = [*(cfg.trainer.get("plugins") or []), AtomicCheckpointIO()]
     extra = {} if validate else {"limit_val_batches": 0, "num_sanity_val_steps": 0}
     trainer = build_trainer(
