@@ -51,6 +51,17 @@ def test_cli_reference_is_generated_from_the_parser(site):
         assert f"mocapkit {name}</code>" in html, name
 
 
+def test_each_guide_lists_every_registered_method(site):
+    """The guides' method tables come from the registry: every configs/<task>/method/NAME.yaml is on its guide."""
+    from mocapkit.train.registry import TASKS, method_names
+
+    for task in TASKS:
+        html = _html_of(f"guide/{task}.md", site).read_text()
+        assert "<!-- methods:" not in html, task  # the marker was replaced
+        for name in method_names(task):
+            assert f"<code>{name}</code>" in html, (task, name)
+
+
 def test_readme_is_short():
     lines = README.read_text().splitlines()
     assert len(lines) <= 200, f"README.md has {len(lines)} lines; the details belong in docs/"
