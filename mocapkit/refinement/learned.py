@@ -379,11 +379,6 @@ class OnnxRefiner(_WindowedRefiner):
         self._set_skeleton(json.loads(meta["mocapkit_skeleton"]))
         return self
 
-    def refine(self, motion: Motion) -> Motion:
-        if not hasattr(self, "session_"):
-            self.fit()
-        return super().refine(motion)
-
     def _predict(self, positions: np.ndarray, missing: np.ndarray) -> np.ndarray:
         return self.session_.run(
             ["refined"], {"positions": positions.astype(np.float32), "missing": missing.astype(bool)}

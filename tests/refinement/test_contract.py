@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 from omegaconf import OmegaConf
 
@@ -29,6 +31,41 @@ def clips(tmp_path_factory):
     return synthetic_clips(tmp_path_factory.mktemp("clips"))
 
 
+@pytest.fixture(scope="module")
+def trained_files(tmp_path_factory) -> dict[str, str]:
+    """The files the learned entries need, from a tiny BiGRU run at the clips' 30 fps: ``checkpoint`` (best.ckpt)
+    and ``path`` (its ONNX export)."""
+    from mocapkit.train.config import compose_config
+    from mocapkit.train.training import train
+    from tests.shared_data import synthetic_hdm05_folder
+
+    folder = synthetic_hdm05_folder(tmp_path_factory, ("hopBothLegs1hops", "squat1Reps"), max_frames=160)
+    overrides = [
+        "experiment=refine_bigru",
+        f"data.root={folder}",
+        "data.test_groups=[mm]",
+        "data.fps=30",
+        f"output_root={tmp_path_factory.mktemp('runs')}",
+        "run_name=tiny",
+        "model.hidden=8",
+        "model.layers=1",
+        "data.window=32",
+        "data.windows_per_epoch=64",
+        "data.batch_size=16",
+        "data.eval_windows_per_clip=1",
+        "trainer.max_epochs=1",
+        "logger=none",
+        "trainer.enable_progress_bar=false",
+    ]
+    run = Path(train(compose_config(overrides)))
+    from mocapkit.deploy.refiner_export import export_refiner
+    from mocapkit.refinement.learned import LearnedRefiner
+
+    refiner = LearnedRefiner(checkpoint=str(run / "best.ckpt")).fit()
+    export_refiner(refiner.module_.model, run / "model.onnx", refiner.skeleton_)
+    return {"checkpoint": str(run / "best.ckpt"), "path": str(run / "model.onnx")}
+
+
 def _required(name: str) -> list[str]:
     node = OmegaConf.to_container(method_config(TASK, name))
     return [key for key, value in node.items() if value == "???"]
@@ -41,10 +78,12 @@ def test_parameters(name):
 
 
 @pytest.mark.parametrize("name", method_names(TASK))
-def test_contract(name, clips):
+def test_contract(name, clips, request):
     required = _required(name)
-    if required:  # a trained network (checkpoint / ONNX file): its own tests train one (test_refine_learned_cli)
+    overrides = list(FAST.get(name, []))
+    if required:  # a trained network: refused without its file (named), then checked with a tiny run's
         with pytest.raises(ConfigError, match=required[0]):
             build_method(TASK, name)
-        pytest.skip(f"{name} needs a trained model file ({', '.join(required)})")
-    check_refiner(build_method(TASK, name, FAST.get(name, [])), clips[1:], clips[0])
+        files = request.getfixturevalue("trained_files")
+        overrides += [f"{key}={files[key]}" for key in required]
+    check_refiner(build_method(TASK, name, overrides), clips[1:], clips[0])

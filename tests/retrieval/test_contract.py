@@ -4,6 +4,8 @@ method gets these tests by adding its config file."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 from omegaconf import OmegaConf
 
@@ -33,6 +35,36 @@ def clips(tmp_path_factory):
     return synthetic_clips(tmp_path_factory.mktemp("clips"))
 
 
+@pytest.fixture(scope="module")
+def trained_files(tmp_path_factory) -> dict[str, str]:
+    """The file the learned entries need, from a tiny supervised-contrastive encoder run: ``checkpoint``."""
+    from mocapkit.train.config import compose_config
+    from mocapkit.train.training import train
+    from tests.shared_data import synthetic_hdm05_folder
+
+    folder = synthetic_hdm05_folder(
+        tmp_path_factory, ("hopBothLegs1hops", "squat1Reps"), clips_per_actor=3, max_frames=90
+    )
+    overrides = [
+        "experiment=retrieval_supcon",
+        f"data.root={folder}",
+        "data.test_groups=[mm]",
+        f"output_root={tmp_path_factory.mktemp('runs')}",
+        "run_name=tiny",
+        "model.channels=[16,16]",
+        "model.strides=[2,1]",
+        "model.hidden=16",
+        "model.embedding_dim=8",
+        "data.frames=16",
+        "data.batch_size=8",
+        "trainer.max_epochs=1",
+        "logger=none",
+        "trainer.enable_progress_bar=false",
+        "data.val_fraction=0.3",
+    ]
+    return {"checkpoint": str(Path(train(compose_config(overrides))) / "best.ckpt")}
+
+
 def _required(name: str) -> list[str]:
     node = OmegaConf.to_container(method_config(TASK, name))
     return [key for key, value in node.items() if value == "???"]
@@ -45,10 +77,12 @@ def test_parameters(name):
 
 
 @pytest.mark.parametrize("name", method_names(TASK))
-def test_contract(name, clips):
+def test_contract(name, clips, request):
     required = _required(name)
-    if required:  # a trained encoder: test_retrieval_embedding.py trains one and indexes with it
+    overrides = list(FAST.get(name, []))
+    if required:  # a trained encoder: refused without its file (named), then checked with a tiny run's
         with pytest.raises(ConfigError, match=required[0]):
             build_method(TASK, name)
-        pytest.skip(f"{name} needs a trained model file ({', '.join(required)})")
-    check_retrieval_method(build_method(TASK, name, FAST.get(name, [])), clips, clips[::3])
+        files = request.getfixturevalue("trained_files")
+        overrides += [f"{key}={files[key]}" for key in required]
+    check_retrieval_method(build_method(TASK, name, overrides), clips, clips[::3])
