@@ -148,6 +148,36 @@ def _raises(exceptions, call, what: str) -> Exception:
 # ------------------------------------------------------------------------------------------ training runs
 
 
+def registered_names(task: str) -> tuple[list[str], list[str]]:
+    """``(estimators, networks)``: the registry names of ``task`` built by ``build_method``, and those naming a
+    ``mocapkit train`` experiment."""
+    from mocapkit.train.registry import method_names
+
+    names = method_names(task)
+    networks = [name for name in names if training_run_experiment(task, name)]
+    return [name for name in names if name not in networks], networks
+
+
+def required_parameters(task: str, name: str) -> list[str]:
+    """The parameters the entry leaves required (``???``: the file of a trained network)."""
+    from omegaconf import OmegaConf
+
+    from mocapkit.train.registry import method_config
+
+    node = OmegaConf.to_container(method_config(task, name))
+    return [key for key, value in node.items() if value == "???"]
+
+
+def check_registered_parameters(task: str, name: str, overrides: Sequence[str] = ()) -> None:
+    """:func:`check_parameters` on the entry built with ``overrides``, against its composed config."""
+    from omegaconf import OmegaConf
+
+    from mocapkit.train.registry import build_method, method_config
+
+    config = OmegaConf.to_container(method_config(task, name, overrides))
+    check_parameters(build_method(task, name, overrides), config)
+
+
 def training_run_experiment(task: str, name: str) -> str | None:
     """The experiment a registry entry names when the method is a network trained by ``mocapkit train`` (else None)."""
     from omegaconf import OmegaConf

@@ -6,17 +6,16 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from omegaconf import OmegaConf
 
 from mocapkit.testing.estimator_checks import (
-    check_parameters,
+    check_registered_parameters,
     check_sequence_classifier,
     check_training_run_entry,
     kinect_pairs,
+    registered_names,
     synthetic_clips,
-    training_run_experiment,
 )
-from mocapkit.train.registry import build_method, method_config, method_names
+from mocapkit.train.registry import build_method
 
 TASK = "clustering"
 #: Small settings that keep a pipeline fast on 8 short sequences (every other parameter is the config's).
@@ -37,8 +36,7 @@ def sequences(tmp_path_factory):
 
 
 #: The estimators of the registry, and the networks (entries naming a `mocapkit train` experiment).
-ESTIMATORS = [name for name in method_names(TASK) if not training_run_experiment(TASK, name)]
-NETWORKS = [name for name in method_names(TASK) if training_run_experiment(TASK, name)]
+ESTIMATORS, NETWORKS = registered_names(TASK)
 
 
 @pytest.mark.parametrize("name", NETWORKS)
@@ -49,7 +47,7 @@ def test_training_run_entry(name):
 @pytest.mark.parametrize("name", ESTIMATORS)
 def test_parameters(name):
     overrides = FAST.get(name, [])
-    check_parameters(build_method(TASK, name, overrides), OmegaConf.to_container(method_config(TASK, name, overrides)))
+    check_registered_parameters(TASK, name, overrides)
 
 
 @pytest.mark.parametrize("name", ESTIMATORS)

@@ -6,15 +6,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from omegaconf import OmegaConf
 
 from mocapkit.testing.estimator_checks import (
     check_gait_classifier,
-    check_parameters,
+    check_registered_parameters,
     check_training_run_entry,
-    training_run_experiment,
+    registered_names,
 )
-from mocapkit.train.registry import build_method, method_config, method_names
+from mocapkit.train.registry import build_method
 
 TASK = "gait"
 FAST: dict[str, list[str]] = {}  # small settings per method name, where one is slow on 30 GEIs
@@ -31,8 +30,7 @@ def geis():
 
 
 #: The estimators of the registry, and the networks (entries naming a `mocapkit train` experiment).
-ESTIMATORS = [name for name in method_names(TASK) if not training_run_experiment(TASK, name)]
-NETWORKS = [name for name in method_names(TASK) if training_run_experiment(TASK, name)]
+ESTIMATORS, NETWORKS = registered_names(TASK)
 
 
 @pytest.mark.parametrize("name", NETWORKS)
@@ -43,7 +41,7 @@ def test_training_run_entry(name):
 @pytest.mark.parametrize("name", ESTIMATORS)
 def test_parameters(name):
     overrides = FAST.get(name, [])
-    check_parameters(build_method(TASK, name, overrides), OmegaConf.to_container(method_config(TASK, name, overrides)))
+    check_registered_parameters(TASK, name, overrides)
 
 
 @pytest.mark.parametrize("name", ESTIMATORS)

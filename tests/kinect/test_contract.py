@@ -5,10 +5,14 @@ file."""
 from __future__ import annotations
 
 import pytest
-from omegaconf import OmegaConf
 
-from mocapkit.testing.estimator_checks import check_kinect_corrector, check_parameters, kinect_pairs, synthetic_clips
-from mocapkit.train.registry import build_method, method_config, method_names
+from mocapkit.testing.estimator_checks import (
+    check_kinect_corrector,
+    check_registered_parameters,
+    kinect_pairs,
+    synthetic_clips,
+)
+from mocapkit.train.registry import build_method, method_names
 
 TASK = "kinect"
 #: Small settings that keep a method fast on 7 simulated clips (every other parameter is the config's).
@@ -31,7 +35,7 @@ def pairs(tmp_path_factory):
 @pytest.mark.parametrize("name", method_names(TASK))
 def test_parameters(name):
     overrides = FAST.get(name, [])
-    check_parameters(build_method(TASK, name, overrides), OmegaConf.to_container(method_config(TASK, name, overrides)))
+    check_registered_parameters(TASK, name, overrides)
 
 
 @pytest.mark.parametrize("name", method_names(TASK))

@@ -7,11 +7,15 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from omegaconf import OmegaConf
 
-from mocapkit.testing.estimator_checks import check_parameters, check_retrieval_method, synthetic_clips
+from mocapkit.testing.estimator_checks import (
+    check_registered_parameters,
+    check_retrieval_method,
+    required_parameters,
+    synthetic_clips,
+)
 from mocapkit.train.errors import ConfigError
-from mocapkit.train.registry import build_method, method_config, method_names
+from mocapkit.train.registry import build_method, method_names
 
 TASK = "retrieval"
 #: Small settings that keep a method fast on a database of 8 short clips (every other parameter is the config's).
@@ -65,20 +69,15 @@ def trained_files(tmp_path_factory) -> dict[str, str]:
     return {"checkpoint": str(Path(train(compose_config(overrides))) / "best.ckpt")}
 
 
-def _required(name: str) -> list[str]:
-    node = OmegaConf.to_container(method_config(TASK, name))
-    return [key for key, value in node.items() if value == "???"]
-
-
 @pytest.mark.parametrize("name", method_names(TASK))
 def test_parameters(name):
-    overrides = [f"{key}=model.file" for key in _required(name)] + FAST.get(name, [])
-    check_parameters(build_method(TASK, name, overrides), OmegaConf.to_container(method_config(TASK, name, overrides)))
+    overrides = [f"{key}=model.file" for key in required_parameters(TASK, name)] + FAST.get(name, [])
+    check_registered_parameters(TASK, name, overrides)
 
 
 @pytest.mark.parametrize("name", method_names(TASK))
 def test_contract(name, clips, request):
-    required = _required(name)
+    required = required_parameters(TASK, name)
     overrides = list(FAST.get(name, []))
     if required:  # a trained encoder: refused without its file (named), then checked with a tiny run's
         with pytest.raises(ConfigError, match=required[0]):

@@ -4,10 +4,13 @@
 from __future__ import annotations
 
 import pytest
-from omegaconf import OmegaConf
 
-from mocapkit.testing.estimator_checks import check_parameters, check_synthesizer, synthetic_clips
-from mocapkit.train.registry import build_method, method_config, method_names
+from mocapkit.testing.estimator_checks import (
+    check_registered_parameters,
+    check_synthesizer,
+    synthetic_clips,
+)
+from mocapkit.train.registry import build_method, method_names
 
 TASK = "synthesis"
 #: Small settings that keep a method fast on 4 clips of 60 frames (every other parameter is the config's).
@@ -25,7 +28,7 @@ def clips(tmp_path_factory):
 @pytest.mark.parametrize("name", method_names(TASK))
 def test_parameters(name):
     overrides = FAST.get(name, [])
-    check_parameters(build_method(TASK, name, overrides), OmegaConf.to_container(method_config(TASK, name, overrides)))
+    check_registered_parameters(TASK, name, overrides)
 
 
 @pytest.mark.parametrize("name", method_names(TASK))
