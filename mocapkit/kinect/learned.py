@@ -19,7 +19,7 @@ training pair (:func:`kinect_windows`), the simulated Kinect as input and the mo
 corrupted, so the loss is the mean joint error of the output plus the module's bone-length and velocity terms. A
 pair shorter than the window is one window padded at its end with its last frame; the padded frames are marked
 missing and not corrupted, so only their bone and velocity terms see them. The Lightning ``Trainer`` is the one
-``mocapkit train`` builds (:func:`~mocapkit.train.training.build_trainer`: ``configs/trainer/default.yaml``, its
+``mocapkit train`` builds (:func:`~mocapkit.train.training.build_estimator_trainer`: ``configs/trainer/default.yaml``, its
 ``accelerator: auto`` included), with the estimator's ``trainer`` parameter on top
 (``trainer={"accelerator": "gpu", "precision": "bf16-mixed"}``).
 
@@ -64,16 +64,6 @@ MODEL_FORMAT = "mocapkit-kinect-corrector-1"
 ARCHITECTURES = {
     "bigru": "mocapkit.models.refiners.refine_bigru",
     "transformer": "mocapkit.models.refiners.refine_transformer",
-}
-
-#: The Trainer arguments ``fit`` sets over ``configs/trainer/default.yaml`` (the ``trainer`` parameter goes on top):
-#: ``max_steps`` counts the steps, so epochs are unbounded; nothing is written and nothing printed.
-ESTIMATOR_TRAINER = {
-    "max_epochs": -1,
-    "logger": False,
-    "enable_checkpointing": False,
-    "enable_progress_bar": False,
-    "enable_model_summary": False,
 }
 
 #: The keys of a batch of windows (:func:`window_loader`), in the order of its dataset's tensors.
@@ -183,11 +173,9 @@ class LearnedKinectCorrector(_ClipCorrector, BaseEstimator):
             raise ValueError(  # noqa: TRY004 (a bad parameter value, as every check here)
                 f"LearnedKinectCorrector: untracked_as_missing must be True or False, got {self.untracked_as_missing!r}"
             )
-        if self.trainer is not None and not isinstance(self.trainer, Mapping):
-            raise ValueError(
-                f"LearnedKinectCorrector: trainer must be a dict of Lightning Trainer arguments or None, "
-                f"got {type(self.trainer).__name__}"
-            )
+        from mocapkit.train.training import check_trainer_parameter
+
+        check_trainer_parameter(self.trainer, "LearnedKinectCorrector")
 
     def _module(self, bone_lengths: list[float]):
         """A fresh :class:`~mocapkit.train.refine_module.MotionRefinementModule` of this corrector's network on the
@@ -205,7 +193,7 @@ class LearnedKinectCorrector(_ClipCorrector, BaseEstimator):
         used with ``untracked_as_missing``)."""
         import lightning as L
 
-        from mocapkit.train.training import build_trainer
+        from mocapkit.train.training import build_estimator_trainer
 
         self._check_params()
         kinect, mocap = _check_pairs(kinect_clips, mocap_clips)
@@ -220,15 +208,7 @@ class LearnedKinectCorrector(_ClipCorrector, BaseEstimator):
             def on_train_batch_end(self, trainer, pl_module, outputs, batch, batch_idx):
                 curve.append(float(outputs["loss"]) if isinstance(outputs, dict) else float(outputs))
 
-        overrides = dict(self.trainer or {})
-        trainer = build_trainer(
-            **{
-                **ESTIMATOR_TRAINER,
-                "max_steps": int(self.steps),
-                **overrides,
-                "callbacks": [_Record(), *overrides.get("callbacks", [])],
-            }
-        )
+        trainer = build_estimator_trainer(self.steps, self.trainer, callbacks=[_Record()])
         start = time.perf_counter()
         trainer.fit(module, train_dataloaders=window_loader(windows, int(self.batch_size), shuffle=True))
         self.train_seconds_ = time.perf_counter() - start
@@ -622,7 +602,6 @@ def correct_in_windows(
 
 __all__ = [
     "ARCHITECTURES",
-    "ESTIMATOR_TRAINER",
     "MODEL_FORMAT",
     "LearnedKinectCorrector",
     "OnnxKinectCorrector",

@@ -12,7 +12,7 @@ decoder ``p(x_t | z, x_{t−1}, x_{t−2})``), trained by :class:`~mocapkit.synt
 for ``steps`` optimiser steps of ``batch_size`` frame triples (Adam, learning rate ``lr``; :func:`frame_loader`), no
 logger, no checkpoint written, seeded by ``random_state`` (``lightning.seed_everything``). ``loss_curve_`` keeps the
 loss of every step. The Lightning ``Trainer`` is the one ``mocapkit train`` builds
-(:func:`~mocapkit.train.training.build_trainer`: ``configs/trainer/default.yaml``, its ``accelerator: auto``
+(:func:`~mocapkit.train.training.build_estimator_trainer`: ``configs/trainer/default.yaml``, its ``accelerator: auto``
 included), with the estimator's ``trainer`` parameter on top (``trainer={"accelerator": "gpu"}``).
 
 **Runs.** ``mocapkit train experiment=synthesis_cvae data.root=DIR data.motion_type=TYPE`` trains the same network on
@@ -139,15 +139,11 @@ class CVAESynthesizer(MotionSynthesizer):
     def _fit_clips(self, clips: list[Motion]) -> None:
         import lightning as L
 
-        from mocapkit.train.training import build_trainer
+        from mocapkit.train.training import build_estimator_trainer, check_trainer_parameter
 
         if self.fps is not None and not float(self.fps) > 0:
             raise ValueError(f"CVAESynthesizer: fps={self.fps!r} must be positive (or None)")
-        if self.trainer is not None and not isinstance(self.trainer, Mapping):
-            raise ValueError(
-                f"CVAESynthesizer: trainer must be a dict of Lightning Trainer arguments or None, got "
-                f"{type(self.trainer).__name__}"
-            )
+        check_trainer_parameter(self.trainer, "CVAESynthesizer")
         self._check_noise_scale()
         self.model_fps_ = self.fps_ if self.fps is None else float(self.fps)
         data = training_frames(clips, self.model_fps_, self.max_turn_speed, what="CVAESynthesizer.fit")
@@ -166,7 +162,7 @@ class CVAESynthesizer(MotionSynthesizer):
                 beta=self.beta,
                 condition_noise=self.condition_noise,
             )
-            trainer = build_trainer(**{**ESTIMATOR_TRAINER, "max_steps": int(self.steps), **dict(self.trainer or {})})
+            trainer = build_estimator_trainer(self.steps, self.trainer)
             start = time.perf_counter()
             trainer.fit(module, train_dataloaders=loader)
             self.train_seconds_ = time.perf_counter() - start
@@ -252,17 +248,6 @@ class CVAESynthesizer(MotionSynthesizer):
             matrix = np.concatenate([values[bone] for bone in self.layout_.bones], axis=1)
             out.append(dof_values(time_warp(matrix, n_frames, angles, kind="cubic"), self.layout_))
         return out
-
-
-#: The Trainer arguments ``fit`` sets over ``configs/trainer/default.yaml`` (the ``trainer`` parameter goes on top):
-#: ``max_steps`` counts the steps, so epochs are unbounded; nothing is written and nothing printed.
-ESTIMATOR_TRAINER = {
-    "max_epochs": -1,
-    "logger": False,
-    "enable_checkpointing": False,
-    "enable_progress_bar": False,
-    "enable_model_summary": False,
-}
 
 
 @dataclass
@@ -390,4 +375,4 @@ def vae_module(
     )
 
 
-__all__ = ["ESTIMATOR_TRAINER", "CVAESynthesizer", "TrainingFrames", "frame_loader", "training_frames", "vae_module"]
+__all__ = ["CVAESynthesizer", "TrainingFrames", "frame_loader", "training_frames", "vae_module"]

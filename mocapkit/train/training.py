@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import sys
 import warnings
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import hydra
@@ -77,6 +78,35 @@ def build_trainer(trainer: DictConfig | None = None, **arguments) -> L.Trainer:
     if trainer is None:
         trainer = compose_config(config_name="trainer/default").trainer
     return build(trainer, **arguments)
+
+
+#: The Trainer arguments a learned estimator's ``fit`` sets over ``configs/trainer/default.yaml`` (its ``trainer``
+#: parameter goes on top): ``max_steps`` counts the steps, so epochs are unbounded; nothing is written or printed.
+ESTIMATOR_TRAINER = {
+    "max_epochs": -1,
+    "logger": False,
+    "enable_checkpointing": False,
+    "enable_progress_bar": False,
+    "enable_model_summary": False,
+}
+
+
+def check_trainer_parameter(trainer, owner: str) -> None:
+    """A learned estimator's ``trainer`` parameter is a dict of Lightning Trainer arguments or None."""
+    if trainer is not None and not isinstance(trainer, Mapping):
+        raise ValueError(
+            f"{owner}: trainer must be a dict of Lightning Trainer arguments or None, got {type(trainer).__name__}"
+        )
+
+
+def build_estimator_trainer(max_steps: int, trainer: Mapping | None = None, callbacks: Sequence = ()) -> L.Trainer:
+    """The Trainer of a learned estimator's ``fit``: ``configs/trainer/default.yaml``, then :data:`ESTIMATOR_TRAINER`
+    and ``max_steps``, then the estimator's ``trainer`` parameter; ``callbacks`` come before the parameter's own."""
+    overrides = dict(trainer or {})
+    arguments = {**ESTIMATOR_TRAINER, "max_steps": int(max_steps), **overrides}
+    if callbacks:
+        arguments["callbacks"] = [*callbacks, *overrides.get("callbacks", [])]
+    return build_trainer(**arguments)
 
 
 def resume_config(resume: str | Path, overrides: list[str]) -> DictConfig:
