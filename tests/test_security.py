@@ -279,11 +279,11 @@ def test_predict_refuses_a_checkpoint_and_never_imports_torch(run_dir, workspace
     ],
 )
 def test_refine_refuses_a_target_override(tmp_path, capsys, setting):
-    from mocapkit.refinement.apply import build_refiner
     from mocapkit.train.config import ConfigError
+    from mocapkit.train.registry import build_method
 
     with pytest.raises(ConfigError, match="_target_"):
-        build_refiner("linear", [setting])
+        build_method("refinement", "linear", [setting])
     src = tmp_path / "in.npz"
     rc = main(["refine", str(src), str(tmp_path / "out.npz"), "--method", "linear", "--set", setting])
     err = capsys.readouterr().err

@@ -3,7 +3,7 @@
 
 The refiners are the registry's refinement methods (:mod:`mocapkit.train.registry`):
 ``configs/refinement/method/<NAME>.yaml`` = ``{_target_: the MotionRefiner class, its parameters with their
-defaults}`` (``mocapkit methods refinement`` lists them); :func:`build_refiner` builds one with the ``--set``
+defaults}`` (``mocapkit methods refinement`` lists them); :func:`~mocapkit.train.registry.build_method` builds one with the ``--set``
 overrides (Hydra's grammar on that node: ``--set extrapolate=hold``, ``--set outlier_threshold=null``). The
 benchmark builds its refiners from the same files.
 
@@ -90,26 +90,6 @@ class RefineError(ValueError):
 
 
 # --------------------------------------------------------------------------- the methods (the registry)
-
-
-def refiner_names() -> list[str]:
-    """The method names: the files ``configs/refinement/method/<NAME>.yaml`` (:mod:`mocapkit.train.registry`)."""
-    from mocapkit.train.registry import method_names
-
-    return method_names("refinement")
-
-
-def build_refiner(method: str, overrides: Sequence[str] = ()) -> MotionRefiner:
-    """The refiner ``configs/refinement/method/<method>.yaml`` with the ``--set`` Hydra ``overrides`` (unfitted).
-
-    Raises:
-        ConfigError: an unknown method (the message lists the names), an unknown key (named, with the method's
-            parameters), a bad value, a required parameter left unset, or a ``_target_`` that is not a mocapkit
-            MotionRefiner class (:func:`mocapkit.train.registry.build_method`).
-    """
-    from mocapkit.train.registry import build_method
-
-    return build_method("refinement", method, overrides)
 
 
 def trained_model_kind(method: str | os.PathLike | None) -> str | None:
@@ -402,7 +382,9 @@ def refine_file(
         refiner = build_learned_refiner(model, overrides, onnx=kind == "onnx", fit=False)
         method = str(model)
     else:
-        refiner = build_refiner(method, overrides)
+        from mocapkit.train.registry import build_method
+
+        refiner = build_method("refinement", method, overrides)
     filling = refiner  # the method itself (the screen, when asked, stands in front of it)
     if screen_outliers is not None:
         from mocapkit.refinement.screening import (

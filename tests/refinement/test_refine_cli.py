@@ -21,10 +21,11 @@ import yaml
 from mocapkit.cli import main
 from mocapkit.datasets.formats.c3d import read_c3d, write_c3d
 from mocapkit.motion.container import Motion
-from mocapkit.refinement.apply import build_refiner, refine_motion, refiner_names
+from mocapkit.refinement.apply import refine_motion
 from mocapkit.refinement.base import RefinementError
 from mocapkit.refinement.gap_filling import LinearInterpolation, PchipInterpolation
 from mocapkit.train.config import CONFIG_DIR
+from mocapkit.train.registry import build_method, method_names
 from tests.shared_data import SHARED, needs
 
 C3D = SHARED / "samples" / "c3d"
@@ -71,7 +72,7 @@ def error_line(err: str) -> str:
 
 
 def test_configs_are_the_registry():
-    assert refiner_names() == NAMES
+    assert method_names("refinement") == NAMES
     primary = yaml.safe_load((CONFIG_DIR / "refinement" / "method.yaml").read_text())
     assert primary["defaults"][0] == {"method": "linear"}
     for name in NAMES:
@@ -79,7 +80,7 @@ def test_configs_are_the_registry():
         assert node["_target_"].startswith("mocapkit.refinement."), name
         extra = [f"{key}=model.file" for key, value in node.items() if value == "???"]
         assert bool(extra) == (name in TRAINED), name
-        refiner = build_refiner(name, extra)
+        refiner = build_method("refinement", name, extra)
         signature = inspect.signature(type(refiner).__init__).parameters
         for key, value in node.items():
             if key != "_target_" and value != "???":
@@ -91,9 +92,12 @@ def test_configs_are_the_registry():
 
 
 def test_set_overrides_and_their_errors(capsys):
-    assert build_refiner("pca", ["min_cum_sv=0.95"]).min_cum_sv == 0.95
-    assert build_refiner("linear", ["extrapolate=hold"]).extrapolate == "hold"
-    assert build_refiner("lrmf", ["outlier_threshold=null", "rank=4"]).get_params()["outlier_threshold"] is None
+    assert build_method("refinement", "pca", ["min_cum_sv=0.95"]).min_cum_sv == 0.95
+    assert build_method("refinement", "linear", ["extrapolate=hold"]).extrapolate == "hold"
+    assert (
+        build_method("refinement", "lrmf", ["outlier_threshold=null", "rank=4"]).get_params()["outlier_threshold"]
+        is None
+    )
     rc, _, err = refine(capsys, "in.c3d", "out.c3d", "--method", "pca", "--set", "no_such_key=1")
     line = error_line(err)
     assert rc == 2 and "no_such_key" in line and "min_cum_sv" in line
@@ -261,7 +265,7 @@ def test_amc_with_a_gap_to_npz_and_c3d(tmp_path, capsys, monkeypatch):
 @needs(C3D)
 def test_data_driven_method_needs_train_and_checks_layout(tmp_path, capsys, monkeypatch):
     # No in-tree stable refiner requires training (lrmf does not): make linear one for the duration of the test.
-    assert not build_refiner("lrmf").requires_fit
+    assert not build_method("refinement", "lrmf").requires_fit
     monkeypatch.setattr(LinearInterpolation, "requires_fit", True)
     out = tmp_path / "out.c3d"
     rc, _, err = refine(capsys, EB_REAL, out, "--method", "linear")
