@@ -5,7 +5,9 @@
 
 - ``positions``: float32 ``[frames, joints, 3]`` in **metres**; NaN where missing;
 - ``missing``: bool ``[frames, joints]``, True where the file has no valid value
-  (C3D gaps, MSR all-zero frames); always consistent with the NaNs;
+  (C3D gaps, MSR all-zero frames); always consistent with the NaNs. One rule for arrays: a
+  joint with any non-finite coordinate (NaN or Inf) when the Motion is built is missing, and
+  its position becomes NaN;
 - ``joint_names`` and ``parents`` (``-1`` for the root; ``None`` for marker sets
   with no hierarchy, such as C3D);
 - ``rotations``: optional float32 ``[frames, joints, 3, 3]`` local joint rotations
@@ -85,7 +87,7 @@ class Motion:
             raise ValueError(f"{self._label()}: frame rate must be positive, got {self.fps}")
         if self.up_axis not in AXES:
             raise ValueError(f"{self._label()}: up_axis must be x, y or z, got {self.up_axis!r}")
-        nan = any_coordinate(np.isnan(self.positions))
+        nan = any_coordinate(~np.isfinite(self.positions))  # NaN or Inf: not observed
         if self.missing is None:
             self.missing = nan
         else:

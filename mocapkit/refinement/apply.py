@@ -23,26 +23,16 @@ at the network's and brought back (:mod:`mocapkit.refinement.base`; the report s
 file as the method.
 
 **C3D in, C3D out** (the everyday case: a Vicon or Qualisys export with gaps). The file is not re-encoded from
-the Motion. The source is opened with ``ezc3d`` and only the samples the refiner changed (filled gaps, and the
-observed samples a robust method repaired as outliers) are overwritten: coordinates converted back to the file's
-``POINT:UNITS`` at the same marker index (``read_c3d`` keeps the file's marker order; a ``Subject:`` prefix it
-strips changes names, not indices), residual 0 (valid: in C3D a zero residual marks a computed, not measured,
-point) and an empty camera mask. Everything else is kept:
-
-- *float storage* (``POINT:SCALE < 0``, what current systems write): ezc3d's C++ writer writes the modified file.
-  Every other sample comes back bit-identical (coordinates, residuals, camera masks), and so do the labels
-  (``LABELS`` padded beyond ``POINT:USED`` too), rate, units, analog data, events and every parameter, except
-  that ezc3d adds an ``EZC3D`` parameter group (its version), recomputes ``POINT:DATA_START``, and writes
-  Intel byte order (a DEC or MIPS file comes back as Intel floats with the same values).
-- *integer storage* (``POINT:SCALE > 0``, e.g. ``Eb015pi.c3d``): ezc3d cannot write it faithfully. It always
-  writes float storage, so every observed coordinate (read as ``int16 · scale`` in double precision) is rounded
-  to float32 (up to 1e-4 mm on Eb015pi) and the camera masks of invalid samples are cleared. Such files are
-  therefore patched in place instead: a byte copy of the source in which only the 4 int16 words of each changed
-  sample are rewritten (coordinates ``round(value / scale)``, residual word 0). Filled values are quantised to
-  the file's scale (0.083 mm on Eb015pi); a value outside int16 range is an error naming marker and frame.
-
-Either way the written file is read back with ezc3d and checked (every unchanged sample identical to the
-source, every changed sample valid and at its value) before it replaces the output path.
+the Motion: :func:`~mocapkit.datasets.formats.c3d.patch_samples` writes a byte copy of the source in which only the
+samples the refiner changed (filled gaps, and the observed samples a robust method repaired as outliers) are
+overwritten, in the file's own storage (float or integer, Intel, DEC or MIPS): coordinates converted back to the
+file's ``POINT:UNITS`` at the same marker index (``read_c3d`` keeps the file's marker order; a ``Subject:`` prefix
+it strips changes names, not indices), residual 0 (valid: in C3D a zero residual marks a computed, not measured,
+point) and an empty camera mask. Every other byte is kept: header, parameters, labels, analog data, events, and
+every other sample bit-identical. In integer storage (``POINT:SCALE > 0``, e.g. ``Eb015pi.c3d``) filled values are
+quantised to the file's scale (0.083 mm on Eb015pi); a value outside int16 range is an error naming marker and
+frame. The written copy is decoded and checked (only the changed samples' bytes differ, each reads back valid at
+its value) before it replaces the output path.
 
 Samples the refiner could not fill (leading/trailing gaps for the interpolations, a marker missing in every
 frame) are left as they were in the source (invalid, or the all-zero coordinates some writers use for gaps,
@@ -65,14 +55,13 @@ from __future__ import annotations
 import dataclasses
 import inspect
 import os
-import struct
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from mocapkit.io_atomic import atomic_open, atomic_path
+from mocapkit.io_atomic import atomic_open
 from mocapkit.motion.container import Motion, any_coordinate
 from mocapkit.motion.frames import true_runs
 from mocapkit.refinement.base import MotionRefiner
@@ -172,6 +161,8 @@ class RefineReport:
     refined_at_fps: float | None = None  # the rate a fixed-rate refiner worked at, when not the take's
     screened: tuple[int, int] | None = None  # --screen-outliers: (samples the screen hid, observed samples)
     warning: str = ""
+    #: C3D samples whose coordinates were not finite although their residual said valid (read as gaps)
+    nan_gaps: int = 0
 
     @property
     def filled(self) -> int:
@@ -198,6 +189,11 @@ class RefineReport:
             lines.append(
                 f"median screen: hid {hidden} of {observed} observed samples "
                 f"({100 * hidden / max(observed, 1):.2f} %) and refilled them with the method"
+            )
+        if self.nan_gaps:
+            lines.append(
+                f"{self.nan_gaps} samples were NaN with a valid residual: read as gaps (how ezc3d and many "
+                f"tools write a gap) and filled like the others"
             )
         if self.warning:
             lines.append(f"warning: {self.warning}")
@@ -462,6 +458,7 @@ def refine_file(
         hint=hint,
         screened=screened,
         warning=warning,
+        nan_gaps=int(motion.metadata.get("gaps", {}).get("nan_coordinates", 0)),
         refined_at_fps=refined.metadata.get("refinement", {}).get("resampled", {}).get("refined_at_fps"),
     )
 
@@ -487,111 +484,16 @@ def patch_c3d(src: Path, out: Path, motion: Motion, refined: Motion, changed: np
     """Write ``src`` to ``out`` with only the ``changed`` samples replaced by ``refined`` (module docstring).
 
     ``motion`` is ``read_c3d(src)``: its marker ``j`` is the file's point ``j``. Returns a short description of
-    the write (float storage through ezc3d, or integer storage patched in place).
+    the write (:func:`~mocapkit.datasets.formats.c3d.patch_samples`).
     """
-    import ezc3d
+    from mocapkit.datasets.formats.c3d import UNIT_SCALE, patch_samples
 
-    from mocapkit.datasets.formats.c3d import UNIT_SCALE
-
-    source = ezc3d.c3d(str(src))
-    points = source["data"]["points"]
-    if points.shape[1] != motion.num_joints or points.shape[2] != motion.num_frames:
-        raise RefineError(
-            f"{src}: ezc3d sees {points.shape[1]} markers x {points.shape[2]} frames, the motion "
-            f"{motion.num_joints} x {motion.num_frames}; cannot map the samples back"
-        )
     units = str(motion.source_units).strip().lower()
     frames, joints = np.nonzero(changed)  # [n] each
     values = refined.positions[frames, joints].astype(np.float64) / UNIT_SCALE[units]  # [n, 3] file units
     if not np.isfinite(values).all():
         raise RefineError(f"{src}: the refiner returned non-finite values for samples it reports as filled")
-    scale = float(np.asarray(source["parameters"]["POINT"]["SCALE"]["value"]).ravel()[0])
-    with atomic_path(out, suffix=".c3d") as tmp:  # ezc3d appends ".c3d" to other names
-        if scale > 0:
-            mode = _patch_integer(src, tmp, source, motion, frames, joints, values, scale)
-        else:
-            data = source.c3d_swig.data()
-            for f, j, (x, y, z) in zip(frames.tolist(), joints.tolist(), values.tolist()):
-                point = data.frame(f).points().point(j)
-                point.x(x)
-                point.y(y)
-                point.z(z)
-                point.residual(0.0)
-                point.cameraMask([False] * 7)
-            source.c3d_swig.write(str(tmp))
-            mode = "C3D rewritten by ezc3d; only the changed samples differ"
-        _verify(src, tmp, frames, joints, values, abs(scale))
-    return mode
-
-
-def _patch_integer(
-    src: Path,
-    dst: Path,
-    source,
-    motion: Motion,
-    frames: np.ndarray,
-    joints: np.ndarray,
-    values: np.ndarray,
-    scale: float,
-) -> str:
-    """Integer storage: a byte copy of ``src`` with the 4 int16 words of each changed sample rewritten."""
-    raw = bytearray(src.read_bytes())
-    processor = motion.metadata.get("processor", "intel")
-    endian = ">" if processor == "mips" else "<"
-    n_points, n_frames = source["data"]["points"].shape[1:]
-    analogs = source["data"]["analogs"]
-    per_frame = analogs.shape[1] * (analogs.shape[2] // n_frames) if n_frames else 0
-    header_points, header_analog = struct.unpack(endian + "2H", bytes(raw[2:6]))
-    if header_points != n_points or header_analog != per_frame:
-        raise RefineError(
-            f"{src}: integer storage and the header's {header_points} markers / {header_analog} "
-            f"analog samples per frame disagree with the data ({n_points} / {per_frame}); "
-            f"cannot patch it safely"
-        )
-    start = int(np.asarray(source["parameters"]["POINT"]["DATA_START"]["value"]).ravel()[0])
-    frame_bytes = 2 * (4 * n_points + per_frame)
-    if (start - 1) * 512 + n_frames * frame_bytes > len(raw):
-        raise RefineError(f"{src}: the data section is shorter than POINT:DATA_START and the frame size imply")
-    words = np.rint(values / scale)
-    bad = np.abs(words) > 32767
-    if bad.any():
-        k = int(np.argmax(bad.any(axis=1)))
-        raise RefineError(
-            f"{src}: filled value of marker {motion.joint_names[joints[k]]!r} at frame {frames[k]} "
-            f"is outside the int16 range of this integer-storage file (POINT:SCALE {scale:g})"
-        )
-    for f, j, (x, y, z) in zip(frames.tolist(), joints.tolist(), words.astype(int).tolist()):
-        offset = (start - 1) * 512 + f * frame_bytes + j * 8
-        raw[offset : offset + 8] = struct.pack(endian + "4h", x, y, z, 0)
-    dst.write_bytes(bytes(raw))
-    return (
-        f"integer storage (POINT:SCALE {scale:g}) patched in place, filled values quantised to it; "
-        f"ezc3d would rewrite it as float storage"
-    )
-
-
-def _verify(src: Path, written: Path, frames: np.ndarray, joints: np.ndarray, values: np.ndarray, scale: float) -> None:
-    """Read both files with ezc3d: unchanged samples identical, changed ones valid and at ``values``."""
-    import ezc3d
-
-    a, b = ezc3d.c3d(str(src)), ezc3d.c3d(str(written))
-    pa, pb = a["data"]["points"][:3], b["data"]["points"][:3]
-    ra, rb = a["data"]["meta_points"]["residuals"][0], b["data"]["meta_points"]["residuals"][0]
-    if pa.shape != pb.shape:
-        raise RefineError(f"{written}: written with {pb.shape[1:]} markers x frames, the source has {pa.shape[1:]}")
-    keep = np.ones(pa.shape[1:], bool)
-    keep[joints, frames] = False
-    same = np.array_equal(pa[:, keep], pb[:, keep], equal_nan=True) and np.array_equal(ra[keep], rb[keep])
-    got = pb[:, joints, frames].T
-    ok = (
-        np.isfinite(got).all()
-        and (rb[joints, frames] >= 0).all()
-        and np.allclose(got, values, rtol=1e-6, atol=max(scale, 1e-6))
-    )
-    if not (same and ok):
-        raise RefineError(
-            f"{src}: the C3D written for it did not read back as intended "
-            f"({'unchanged samples differ' if not same else 'filled samples differ'}); nothing written"
-        )
-    if not np.array_equal(a["data"]["analogs"], b["data"]["analogs"], equal_nan=True):
-        raise RefineError(f"{src}: the analog data of the written C3D differ from the source; nothing written")
+    try:
+        return patch_samples(src, out, frames, joints, values)
+    except ValueError as exc:
+        raise RefineError(str(exc)) from exc

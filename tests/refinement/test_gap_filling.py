@@ -159,9 +159,14 @@ def test_clear_errors_and_reports(refiner):
     with pytest.raises(RefinementError, match="every entry is missing"):
         refiner.refine(with_missing(clean, np.ones(clean.missing.shape, bool)))
     inf = clean.positions.copy()
-    inf[7, 2, 1] = np.inf
+    inf[7, 2, 1] = np.inf  # an array input: a non-finite coordinate is a gap, filled like any other
+    gapped = Motion(positions=inf, joint_names=clean.joint_names, fps=clean.fps)
+    assert gapped.missing[7, 2] and gapped.missing.sum() == 1
+    assert np.isfinite(refiner.refine(gapped).positions[7, 2]).all()
+    written_later = Motion(positions=clean.positions.copy(), joint_names=clean.joint_names, fps=clean.fps)
+    written_later.positions[7, 2, 1] = np.inf  # into an observed entry after the Motion was built
     with pytest.raises(RefinementError, match=r"non-finite value at frame 7 of marker 'm2'"):
-        refiner.refine(Motion(positions=inf, joint_names=clean.joint_names, fps=clean.fps))
+        refiner.refine(written_later)
     mask = np.zeros(clean.missing.shape, bool)
     mask[:, 4] = True  # marker m4 missing in every frame
     mask[40:50, 1] = True

@@ -96,70 +96,46 @@ def read_c3d(
     Raises:
         C3DFormatError: unreadable, truncated or not a C3D file, or unusable parameters.
     """
-    import ezc3d
-
     path = Path(path)
     layout = validate_c3d(path)
-    try:
-        c3d = ezc3d.c3d(str(path))
-    except Exception as exc:  # ezc3d raises OSError / RuntimeError / ValueError with its own words
-        raise C3DFormatError(
-            path,
-            f"ezc3d cannot read it ({type(exc).__name__}: {exc}) although the header and "
-            f"the {layout.records} parameter records "
-            f"(bytes {layout.section_start}-{layout.section_end - 1}) are well formed",
-        ) from exc
-    head = layout.head
-    params = c3d["parameters"]
+    params = decode_parameters(path, layout)
     point = params.get("POINT")
     if point is None:
         raise C3DFormatError(path, "no POINT parameter group")
-    data = c3d["data"]["points"]  # [4, markers, frames], file units
-    n_markers, n_frames = int(data.shape[1]), int(data.shape[2])
-
-    processor = _processor(path, head)
-    expected = _expected_frames(head, params, processor)
-    if expected is not None and n_frames < expected:
+    if layout.points == 0 or layout.frames == 0:
         raise C3DFormatError(
-            path,
-            f"truncated: the header announces {expected} frames but the data "
-            f"ends after {n_frames} (this frame is incomplete or absent)",
-            frame=n_frames + 1,
+            path, f"no marker data: {layout.points} points x {layout.frames} frames (an analog-only file?)"
         )
+    xyz, word4 = read_point_words(path, layout)  # [frames, markers, 3] file units, [frames, markers]
 
     # ---- units and rate
     units_raw = _first(point, "UNITS")
     units = (units_raw or "mm").strip().lower()
     if units not in UNIT_SCALE:
         raise C3DFormatError(path, f"unknown POINT:UNITS {units_raw!r}; expected one of {sorted(UNIT_SCALE)}")
-    fps = float(_first(point, "RATE") or c3d["header"]["points"]["frame_rate"] or 0.0)
-    if not fps > 0:
+    fps = float(_first(point, "RATE") or layout.header_rate or 0.0)
+    if not (math.isfinite(fps) and fps > 0):
         raise C3DFormatError(path, "POINT:RATE (and the header frame rate) is not positive")
 
     # ---- labels
-    full = _labels(point, n_markers)
+    full = _labels(point, layout.points)
     names, prefixes = _strip(full) if strip_prefix else (list(full), {})
 
-    # ---- positions and gaps
-    xyz = np.ascontiguousarray(np.transpose(data[:3], (2, 1, 0)), dtype=np.float64)  # [frames, markers, 3]
-    invalid = ~all_coordinates(np.isfinite(xyz))
-    residuals = c3d["data"].get("meta_points", {}).get("residuals")
-    if residuals is not None and np.shape(residuals)[1:] == (n_markers, n_frames):
-        # ezc3d returns NaN for a negative (invalid) residual; a non-finite coordinate whose residual says
-        # "valid" is damaged data, not a gap: refuse it rather than turning it into one silently
-        damaged = invalid & (np.asarray(residuals[0]).T >= 0)
-        if damaged.any():
-            frame, marker = np.argwhere(damaged)[0]
-            raise C3DFormatError(
-                path,
-                f"non-finite coordinates of marker {full[marker]!r} marked valid (residual "
-                f">= 0) in {int(damaged.sum())} samples, the first at frame {frame + 1}",
-                frame=int(frame) + 1,
-            )
-    zero = all_coordinates(xyz == 0.0) & ~invalid if zero_as_missing else np.zeros_like(invalid)
-    missing = invalid | zero
+    # ---- gaps: one rule (docs: robustness.md#c3d-gaps). A negative residual word means "not observed"; so does a
+    # non-finite coordinate whatever its residual (ezc3d and many tools write gaps as NaN with residual 0), and,
+    # unless zero_as_missing=False, a sample exactly at (0, 0, 0) (what some writers store for a gap).
+    invalid = word4 < 0
+    nan_valid = ~invalid & ~all_coordinates(np.isfinite(xyz))
+    invalid_or_nan = invalid | nan_valid
+    zero = all_coordinates(xyz == 0.0) & ~invalid_or_nan if zero_as_missing else np.zeros_like(invalid)
+    missing = invalid_or_nan | zero
     positions = (xyz * UNIT_SCALE[units]).astype(np.float32)
     positions[missing] = np.nan
+    if not np.isfinite(positions[~missing]).all():  # finite in file units, overflowing float32 in metres
+        frame, marker = np.argwhere(~all_coordinates(np.isfinite(positions)) & ~missing)[0]
+        raise C3DFormatError(
+            path, f"marker {full[marker]!r} at frame {frame + 1}: coordinates too large for float32", frame=frame + 1
+        )
 
     # ---- up axis
     screen = _first(point, "Y_SCREEN")
@@ -173,25 +149,26 @@ def read_c3d(
     else:
         up, up_from = "z", "default (lab convention)"
 
-    scale = float(_first(point, "SCALE") or -1.0)
-    first0 = int(c3d["header"]["points"]["first_frame"])
+    scale = layout.point_scale
     metadata = {
         "format": "c3d",
-        "first_frame": first0 + 1,
+        "first_frame": layout.first_frame,
         "labels": tuple(full),
         "label_prefixes": prefixes,
-        "descriptions": tuple(_strings(point, "DESCRIPTIONS")[:n_markers]),
+        "descriptions": tuple(_strings(point, "DESCRIPTIONS")[: layout.points]),
         "point_scale": scale,
-        "storage": "float" if scale < 0 else "integer",
-        "processor": processor,
+        "storage": "float" if layout.element_size == 4 else "integer",
+        "processor": layout.processor,
         "up_axis_from": up_from,
         "gaps": {
             "invalid_residual": int(invalid.sum()),
+            "nan_coordinates": int(nan_valid.sum()),
             "zero_coordinates": int(zero.sum()),
             "total": int(missing.sum()),
         },
-        "analog": _analog_summary(params, c3d),
-        "events": _events(params, c3d["header"]),
+        "nan_gaps_per_marker": {full[j]: int(n) for j, n in enumerate(nan_valid.sum(axis=0)) if n},
+        "analog": _analog_summary(params, layout, fps),
+        "events": _events(params, layout),
     }
     subjects = sorted(set(prefixes.values()))
     if len(subjects) == 1:
@@ -235,64 +212,28 @@ def known_layout(names) -> tuple[str | None, tuple[int, ...] | None]:
     return None, None
 
 
-def _processor(path: Path, head: bytes) -> str:
-    """The processor type byte of the parameter section (84 Intel, 85 DEC, 86 MIPS)."""
-    try:
-        with open(path, "rb") as fh:
-            fh.seek((head[0] - 1) * 512 + 3)
-            byte = fh.read(1)
-        return _PROCESSORS.get(byte[0], f"unknown ({byte[0]})") if byte else "unknown"
-    except OSError:
-        return "unknown"
-
-
-def _expected_frames(head: bytes, params, processor: str) -> int | None:
-    """Frame count announced by the raw file (ezc3d rewrites its copy to what it could read).
-
-    TRIAL:ACTUAL_START_FIELD / ACTUAL_END_FIELD (two 16-bit words each, for long trials)
-    win over the 16-bit header fields; None when neither is usable.
-    """
-    trial = params.get("TRIAL", {})
-    if "ACTUAL_START_FIELD" in trial and "ACTUAL_END_FIELD" in trial:
-        try:
-            s, e = (
-                np.asarray(trial[k]["value"], dtype=np.int64).ravel() & 0xFFFF
-                for k in ("ACTUAL_START_FIELD", "ACTUAL_END_FIELD")
-            )
-            start = int(s[0]) + (int(s[1]) << 16 if len(s) > 1 else 0)
-            end = int(e[0]) + (int(e[1]) << 16 if len(e) > 1 else 0)
-            if end >= start > 0:
-                return end - start + 1
-        except (KeyError, IndexError, TypeError, ValueError):
-            pass
-    first, last = struct.unpack((">" if processor == "mips" else "<") + "2H", head[6:10])
-    return last - first + 1 if last >= first else None
-
-
-def _first(group, name):
-    """First value of a parameter, or None."""
-    if name not in group:
+def _first(group: dict, name: str):
+    """First value of a decoded parameter (a string, or a number), or None."""
+    value = group.get(name)
+    if value is None:
         return None
-    value = group[name]["value"]
-    if isinstance(value, str):
-        return value
-    if len(value) == 0:
-        return None
-    return value[0] if isinstance(value, list) else np.asarray(value).ravel()[0]
+    if isinstance(value, list):
+        return value[0] if value else None
+    return value.ravel()[0] if value.size else None
 
 
-def _strings(group, name) -> list[str]:
+def _strings(group: dict, name: str) -> list[str]:
     """A string parameter and its continuations (``NAME2``, ``NAME3``...), stripped."""
     out: list[str] = []
     key, k = name, 2
     while key in group:
-        value = group[key]["value"]
-        out.extend([str(v).strip() for v in (value if isinstance(value, (list, tuple)) else [value])])
+        value = group[key]
+        out.extend(value if isinstance(value, list) else [str(v) for v in value.ravel()])
         key, k = f"{name}{k}", k + 1
     return out
 
 
-def _labels(point, n_markers: int) -> list[str]:
+def _labels(point: dict, n_markers: int) -> list[str]:
     labels = _strings(point, "LABELS")[:n_markers]
     labels += [""] * (n_markers - len(labels))
     return [lab if lab else f"unnamed_{i}" for i, lab in enumerate(labels)]
@@ -320,13 +261,15 @@ def _find_label(path: Path, names: list[str], full: list[str], label: str) -> in
     raise KeyError(f"{path}: no marker labelled {label!r}; the file has {', '.join(names)}")
 
 
-def _analog_summary(params, c3d) -> dict:
+def _analog_summary(params: dict, layout: C3DLayout, point_rate: float) -> dict:
+    """Rate, channel count, labels and units of the analog data (never loaded into ``positions``)."""
     analog = params.get("ANALOG", {})
-    channels = int(c3d["data"]["analogs"].shape[1])
+    channels = layout.analog_channels
     labels = _strings(analog, "LABELS")
     rate = _first(analog, "RATE")
+    per_channel = layout.analog_per_frame // channels if channels else 0
     return {
-        "rate": float(rate) if rate is not None else float(c3d["header"]["analogs"]["frame_rate"]),
+        "rate": float(rate) if rate is not None else float(point_rate * per_channel),
         "channels": channels,
         "labels": tuple(labels[:channels]),
         "units": tuple(_strings(analog, "UNITS")[:channels]),
@@ -334,29 +277,120 @@ def _analog_summary(params, c3d) -> dict:
     }
 
 
-def _events(params, header) -> list[dict]:
-    """Events from the EVENT group when it has any, else from the header's event block."""
+def _events(params: dict, layout: C3DLayout) -> list[dict]:
+    """Events from the EVENT group when it has any, else from the header's event block (18 slots)."""
     group = params.get("EVENT", {})
     used = _first(group, "USED")
     if used:
         labels = _strings(group, "LABELS")
         contexts = _strings(group, "CONTEXTS")
-        times = np.asarray(group.get("TIMES", {}).get("value", []), dtype=np.float64)
+        times = np.asarray(group.get("TIMES", np.zeros(0)), dtype=np.float64)
         if times.ndim == 2 and times.shape[0] == 2:
             times = times[0] * 60.0 + times[1]
+        times = times.ravel()
         out = []
-        for i in range(int(used)):
+        for i in range(int(used) & 0xFFFF):
             if i < len(labels) and i < len(times):
                 out.append(
                     {"label": labels[i], "context": contexts[i] if i < len(contexts) else "", "time": float(times[i])}
                 )
         return out
-    events = header.get("events", {})
-    return [
-        {"label": str(lab).strip(), "context": "", "time": float(t)}
-        for lab, t in zip(events.get("events_label", ()), events.get("events_time", ()))
-        if str(lab).strip()
-    ]
+    head = layout.head
+    times = _floats(head[304:376], layout.processor)  # header words 153-188: 18 event times (s)
+    labels = [head[396 + 4 * k : 400 + 4 * k].decode("latin-1").strip(" \x00") for k in range(18)]  # words 199-234
+    return [{"label": label, "context": "", "time": float(t)} for label, t in zip(labels, times.tolist()) if label]
+
+
+# --------------------------------------------------------------------------- decoding, in pure Python and NumPy
+#
+# The parameter records and the data section are decoded here, after validate_c3d() has checked every count,
+# offset and size against the section and the file, with nothing but struct and NumPy: no C extension ever sees
+# the bytes of a file, so no file can crash or hang the interpreter (docs: robustness.md#c3d-reader).
+
+
+def _floats(raw: bytes, processor: str) -> np.ndarray:
+    """32-bit floats of ``raw`` in the processor's format (Intel/MIPS IEEE, DEC VAX F-float), as float64."""
+    raw = raw[: len(raw) // 4 * 4]
+    if processor == "mips":
+        return np.frombuffer(raw, ">f4").astype(np.float64)
+    if processor == "dec":  # VAX F-float: the two 16-bit words swapped, exponent bias 2 higher than IEEE
+        words = np.frombuffer(raw, "<u2").reshape(-1, 2)[:, ::-1]
+        return np.ascontiguousarray(words).view("<f4").ravel().astype(np.float64) / 4.0
+    return np.frombuffer(raw, "<f4").astype(np.float64)
+
+
+def _encode_floats(values: np.ndarray, processor: str) -> bytes:
+    """The inverse of :func:`_floats` (float32 bytes in the processor's format)."""
+    values = np.asarray(values, dtype=np.float64).ravel()
+    if processor == "mips":
+        return values.astype(">f4").tobytes()
+    if processor == "dec":
+        words = (values * 4.0).astype("<f4").view("<u2").reshape(-1, 2)[:, ::-1]
+        return np.ascontiguousarray(words).tobytes()
+    return values.astype("<f4").tobytes()
+
+
+def decode_parameters(path: str | os.PathLike, layout: C3DLayout) -> dict[str, dict[str, list[str] | np.ndarray]]:
+    """Every parameter of a validated file: ``{GROUP: {NAME: value}}``.
+
+    Text parameters (type -1) are lists of strings (the first dimension is the string length; trailing blanks and
+    NULs stripped; Latin-1, so no byte can fail to decode); numbers are arrays shaped by the parameter's dimensions
+    in C3D's column-major order (``EVENT:TIMES`` is ``[2, events]``), at least 1-D: int16 for type 2, uint8 for
+    type 1, float64 from the processor's float format for type 4.
+    """
+    big = layout.processor == "mips"
+    out: dict[str, dict[str, list[str] | np.ndarray]] = {}
+    for (group, name), (ptype, dims, data, _at) in layout.params.items():
+        if ptype == -1:
+            text = data.decode("latin-1")
+            if len(dims) <= 1:
+                value: list[str] | np.ndarray = [text.rstrip(" \x00")]
+            else:
+                width = dims[0]
+                value = [text[k : k + width].rstrip(" \x00") for k in range(0, len(text), width)] if width else []
+        else:
+            if ptype == 1:
+                flat = np.frombuffer(data, np.uint8)
+            elif ptype == 2:
+                flat = np.frombuffer(data, ">i2" if big else "<i2")
+            else:
+                flat = _floats(data, layout.processor)
+            value = np.atleast_1d(flat.reshape(dims, order="F") if dims else flat)
+        out.setdefault(group, {})[name] = value
+    return out
+
+
+def read_point_words(path: str | os.PathLike, layout: C3DLayout) -> tuple[np.ndarray, np.ndarray]:
+    """The 3-D point data of a validated file: ``(xyz [frames, points, 3], word4 [frames, points])``, float64.
+
+    ``xyz`` is in the file's ``POINT:UNITS`` (integer storage multiplied by ``POINT:SCALE``); ``word4`` is the
+    fourth word of each sample (residual and camera mask), negative for a sample the system marks invalid. The
+    analog samples interleaved with the points are skipped.
+    """
+    n_words = layout.points * 4 + layout.analog_per_frame
+    count = layout.frames * n_words
+    if layout.element_size == 4:
+        raw = _read_exact(path, layout.data_offset, count * 4)
+        words = _floats(raw, layout.processor).reshape(layout.frames, n_words)
+    else:
+        raw = _read_exact(path, layout.data_offset, count * 2)
+        words = np.frombuffer(raw, ">i2" if layout.processor == "mips" else "<i2").reshape(layout.frames, n_words)
+        words = words.astype(np.float64)
+    points = words[:, : layout.points * 4].reshape(layout.frames, layout.points, 4)
+    xyz = points[..., :3] * (layout.point_scale if layout.element_size == 2 else 1.0)
+    return np.ascontiguousarray(xyz), np.ascontiguousarray(points[..., 3])
+
+
+def _read_exact(path: Path | str, offset: int, n_bytes: int) -> bytes:
+    try:
+        with open(path, "rb") as fh:
+            fh.seek(offset)
+            raw = fh.read(n_bytes)
+    except OSError as exc:
+        raise C3DFormatError(path, f"cannot read file ({exc.strerror or exc})") from exc
+    if len(raw) < n_bytes:  # the file changed since validate_c3d() measured it
+        raise C3DFormatError(path, f"truncated: {n_bytes} bytes of data expected from byte {offset}, {len(raw)} read")
+    return raw
 
 
 # --------------------------------------------------------------------------- validation before ezc3d
@@ -386,9 +420,27 @@ class C3DLayout:
     params: dict = field(default_factory=dict)  # (GROUP, PARAM) -> (type, dims, data bytes, record offset)
     frames: int = 0
     points: int = 0
-    analog_per_frame: int = 0
-    element_size: int = 4
-    data_start: int = 0
+    analog_per_frame: int = 0  # analog samples per point frame (all channels)
+    analog_channels: int = 0
+    element_size: int = 4  # bytes per data word: 4 float storage, 2 integer storage
+    data_start: int = 0  # 1-based 512-byte block
+    point_scale: float = -1.0  # POINT:SCALE (the header's when absent); negative for float storage
+    header_rate: float = 0.0  # frames/s in the header
+    first_frame: int = 1  # header word 4, 1-based as in the file
+
+    @property
+    def data_offset(self) -> int:
+        """Byte offset of the first frame."""
+        return (self.data_start - 1) * 512
+
+    @property
+    def frame_bytes(self) -> int:
+        """Bytes per frame: (points x 4 + analog samples) words."""
+        return (self.points * 4 + self.analog_per_frame) * self.element_size
+
+    def sample_offset(self, frame: int, point: int) -> int:
+        """Byte offset of the 4 words (x, y, z, residual) of ``point`` at ``frame`` (both 0-based)."""
+        return self.data_offset + frame * self.frame_bytes + point * 4 * self.element_size
 
 
 def validate_c3d(path: str | os.PathLike) -> C3DLayout:
@@ -675,7 +727,83 @@ def _check_sizes(path: Path, layout: C3DLayout) -> None:
             frame=complete + 1,
         )
     layout.frames, layout.points, layout.analog_per_frame = frames, points, analog
+    layout.analog_channels = channels if channels else (analog if analog and a_used is None else 0)
     layout.element_size, layout.data_start = element, data_start
+    layout.point_scale = -abs(scale) if element == 4 else scale
+    layout.header_rate, layout.first_frame = h_rate, h_first
+
+
+# --------------------------------------------------------------------------- patching samples in place
+
+
+def patch_samples(
+    src: str | os.PathLike, dst: str | os.PathLike, frames: np.ndarray, points: np.ndarray, values: np.ndarray
+) -> str:
+    """Write a byte copy of ``src`` to ``dst`` in which only the given samples are replaced and marked valid.
+
+    ``frames``, ``points``: ``[n]`` 0-based indices; ``values``: ``[n, 3]`` in the file's ``POINT:UNITS``. Each
+    sample's 4 data words are overwritten in the file's own storage and byte order: x, y, z (integer storage:
+    ``round(value / POINT:SCALE)``, so filled values are quantised to the scale) and a fourth word of 0 (residual
+    0 = a computed, not measured, point; empty camera mask). Every other byte of the file (header, parameters,
+    the other samples, analog data) is kept, so observed samples stay bit-identical. ``dst`` is then decoded and
+    checked: only the bytes of the changed samples differ, and each reads back valid at its value.
+
+    Returns a one-line description of the write. Raises :class:`C3DFormatError` (an unsound ``src``) or
+    ``ValueError`` naming point and frame (a value that integer storage cannot hold).
+    """
+    src, dst = Path(src), Path(dst)
+    layout = validate_c3d(src)
+    frames, points = np.asarray(frames, dtype=np.int64), np.asarray(points, dtype=np.int64)
+    values = np.asarray(values, dtype=np.float64).reshape(-1, 3)
+    if len(frames) and (
+        frames.max() >= layout.frames or points.max() >= layout.points or min(frames.min(), points.min()) < 0
+    ):
+        raise ValueError(f"{src}: sample indices outside its {layout.frames} frames x {layout.points} points")
+    if not np.isfinite(values).all():
+        raise ValueError(f"{src}: non-finite values cannot be written as valid samples")
+    raw = bytearray(_read_exact(src, 0, layout.size))
+    size = 4 * layout.element_size
+    if layout.element_size == 2:
+        words = np.rint(values / layout.point_scale)
+        bad = np.abs(words).max(axis=1, initial=0) > 32767
+        if bad.any():
+            k = int(np.argmax(bad))
+            raise ValueError(
+                f"{src}: the value of point {points[k]} at frame {frames[k] + 1} is outside the int16 range of "
+                f"this integer-storage file (POINT:SCALE {layout.point_scale:g})"
+            )
+        samples = np.concatenate([words, np.zeros((len(words), 1))], axis=1)
+        encoded = samples.astype(">i2" if layout.processor == "mips" else "<i2").tobytes()
+        mode = f"integer storage (POINT:SCALE {layout.point_scale:g}), filled values quantised to it"
+    else:
+        encoded = _encode_floats(np.concatenate([values, np.zeros((len(values), 1))], axis=1), layout.processor)
+        mode = f"float storage ({layout.processor})"
+    offsets = [layout.sample_offset(f, j) for f, j in zip(frames.tolist(), points.tolist())]
+    for k, offset in enumerate(offsets):
+        raw[offset : offset + size] = encoded[k * size : (k + 1) * size]
+    from mocapkit.io_atomic import atomic_path
+
+    with atomic_path(dst) as tmp:
+        tmp.write_bytes(bytes(raw))
+        _check_patch(src, tmp, layout, offsets, frames, points, values)
+    return f"byte copy of the source with {len(offsets)} samples rewritten; {mode}"
+
+
+def _check_patch(src: Path, written: Path, layout: C3DLayout, offsets, frames, points, values) -> None:
+    """Only the changed samples' bytes differ from ``src``, and each decodes valid at its value."""
+    a = np.frombuffer(_read_exact(src, 0, layout.size), np.uint8)
+    b = np.frombuffer(_read_exact(written, 0, layout.size), np.uint8)
+    allowed = np.zeros(layout.size, bool)
+    for offset in offsets:
+        allowed[offset : offset + 4 * layout.element_size] = True
+    if len(a) != len(b) or (a != b)[~allowed].any():
+        raise ValueError(f"{src}: the patched copy differs outside the changed samples; nothing written")
+    xyz, word4 = read_point_words(written, validate_c3d(written))
+    got = xyz[frames, points]
+    tolerance = abs(layout.point_scale) if layout.element_size == 2 else 0.0
+    close = np.allclose(got, values, rtol=1e-6, atol=max(tolerance, 1e-6))
+    if not (np.isfinite(got).all() and (word4[frames, points] >= 0).all() and close):
+        raise ValueError(f"{src}: the patched samples do not read back at their values; nothing written")
 
 
 # --------------------------------------------------------------------------- writing

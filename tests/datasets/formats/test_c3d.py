@@ -101,7 +101,12 @@ def test_zero_coordinates_are_gaps_unless_disabled(tmp_path):
     pos[1, 2] = 0.0
     write_c3d(tmp_path / "z.c3d", Motion(pos, m.joint_names, 100.0, missing=m.missing, up_axis="z"))
     r = read_c3d(tmp_path / "z.c3d")
-    assert r.missing[1, 2] and r.metadata["gaps"] == {"invalid_residual": 2, "zero_coordinates": 1, "total": 3}
+    assert r.missing[1, 2] and r.metadata["gaps"] == {
+        "invalid_residual": 2,
+        "nan_coordinates": 0,
+        "zero_coordinates": 1,
+        "total": 3,
+    }
     kept = read_c3d(tmp_path / "z.c3d", zero_as_missing=False)
     assert not kept.missing[1, 2] and (kept.positions[1, 2] == 0).all()
 
@@ -189,7 +194,7 @@ def test_eb015_padding_labels_analog_and_events():
     analog = m.metadata["analog"]
     assert analog["labels_declared"] == 32 and analog["labels"][:3] == ("FX1", "FY1", "FZ1")
     assert [e["label"] for e in m.metadata["events"]] == ["RIC", "RHS", "RTO"]
-    assert m.metadata["gaps"] == {"invalid_residual": 226, "zero_coordinates": 0, "total": 226}
+    assert m.metadata["gaps"] == {"invalid_residual": 226, "nan_coordinates": 0, "zero_coordinates": 0, "total": 226}
 
 
 @needs(C3D)
