@@ -197,6 +197,17 @@ def plain_read_c3d(path: str | Path) -> np.ndarray:
     return np.array(frames)
 
 
+def ezc3d_read_c3d(path: str | Path) -> np.ndarray:
+    """The compiled ezc3d reader (what ``read_c3d`` used before it decoded files itself), metres; invalid points
+    (negative residual) as NaN, as ezc3d returns them."""
+    import ezc3d
+
+    c3d = ezc3d.c3d(str(path))
+    units = str(c3d["parameters"]["POINT"]["UNITS"]["value"][0]).strip().lower()
+    scale = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}.get(units, 1e-3)
+    return np.transpose(c3d["data"]["points"][:3], (2, 1, 0)) * scale
+
+
 # --------------------------------------------------------------------------- cases
 
 
@@ -267,6 +278,16 @@ CASES: list[Case] = [
         plain_positions=lambda path, ours, plain: np.nan_to_num(_c3d_like_ours(ours, plain), nan=0.0),
         frames=lambda m: m.num_frames,
         atol=1e-4,
+    ),
+    Case(
+        "c3d vs ezc3d",
+        "c3d/*.c3d",
+        "mocapkit.datasets.formats.c3d:read_c3d",
+        ezc3d_read_c3d,
+        ours_positions=lambda m: np.nan_to_num(m.positions, nan=0.0),
+        plain_positions=lambda path, ours, plain: np.nan_to_num(_c3d_like_ours(ours, plain), nan=0.0),
+        frames=lambda m: m.num_frames,
+        atol=1e-6,
     ),
 ]
 

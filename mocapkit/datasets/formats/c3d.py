@@ -1,4 +1,4 @@
-"""C3D marker files (reading and writing) through the maintained ``ezc3d`` library.
+"""C3D marker files: read in pure Python and NumPy, written with the maintained ``ezc3d`` library.
 
 :func:`read_c3d` returns a :class:`~mocapkit.motion.container.Motion` of marker
 trajectories (``parents=None``, unless the labels are the joints of a known layout, see below):
@@ -11,10 +11,10 @@ trajectories (``parents=None``, unless the labels are the joints of a known layo
   when ``strip_prefix`` (the prefixes go to ``metadata["label_prefixes"]``, and
   :func:`write_c3d` puts them back). Unlabelled markers keep their names (``*0``...);
   empty labels within ``POINT:USED`` become ``unnamed_<index>``;
-- gaps are NaN and ``missing``: a negative residual (ezc3d already returns NaN for
-  those) and, unless ``zero_as_missing=False``, coordinates exactly ``(0, 0, 0)``,
-  which some writers use for gaps (Qualisys' Sample26 file stores the residual word as
-  65535.0 rather than -1, so ezc3d sees a valid point at the origin);
+- gaps are NaN and ``missing`` (one rule, docs/robustness.md#c3d-gaps): a negative residual
+  word, a non-finite coordinate whatever the residual, and, unless ``zero_as_missing=False``,
+  coordinates exactly ``(0, 0, 0)``, which some writers use for gaps (Qualisys' Sample26 file
+  stores the residual word as 65535.0 rather than -1, so the sample looks valid at the origin);
 - labels that are exactly the joint names of a layout of
   :data:`~mocapkit.motion.layouts.LAYOUTS` (the same set, in any order: what
   :func:`write_c3d` writes for joint positions, e.g. ``mocapkit refine`` of an AMC to C3D)
@@ -28,18 +28,21 @@ trajectories (``parents=None``, unless the labels are the joints of a known layo
   events and a summary of the analog data (rate, channel count, labels, units), which is
   never loaded into ``positions``.
 
-Damaged files raise :class:`C3DFormatError` naming the file: whatever ezc3d rejects
-(its message is included), and files whose data section is shorter than the frame range
-in their header (ezc3d itself silently returns the frames it could read).
+**No C extension sees the bytes of a file** (docs/robustness.md#c3d-reader): ezc3d trusts the
+file, and one wrong byte in the parameter section can crash it (SIGSEGV) or make it loop.
+:func:`validate_c3d` checks the structure (~0.2-1 ms per file): a regular file, the header, the
+parameter section's block count and processor type, every group/parameter record (name length,
+group id, exact offset to the next record, data type, dimensions x element size and description
+inside the section), POINT:USED / SCALE / RATE / DATA_START and ANALOG:USED / RATE against the
+header, and frames x (points x 4 + analog samples) x element size within the file (a shorter
+file is "truncated", naming the first incomplete frame). :func:`decode_parameters` and
+:func:`read_point_words` then decode parameters and data with struct and NumPy (integer and
+float storage; Intel, DEC and MIPS formats). Errors are :class:`C3DFormatError` naming the file
+and the byte offset and parameter at fault.
 
-ezc3d trusts the file, and one wrong byte in the parameter section can crash it (SIGSEGV)
-or make it loop. :func:`validate_c3d` therefore checks, in pure Python and before ezc3d sees
-the file (~0.2-1 ms per file), that it is a regular file, the header, the parameter
-section's block count and processor type, every group/parameter record (name length, group
-id, exact offset to the next record, data type, dimensions x element size and description
-inside the section), POINT:USED / SCALE / RATE / DATA_START and ANALOG:USED / RATE against
-the header, and frames x (points x 4 + analog samples) x element size within the file.
-Errors name the file and the byte offset and parameter at fault.
+:func:`patch_samples` writes a byte copy of a file with some samples replaced (what
+``mocapkit refine`` does for C3D in, C3D out); :func:`write_c3d` writes a new file from a
+Motion through ezc3d (trusted, in-memory data).
 """
 
 from __future__ import annotations
@@ -121,7 +124,7 @@ def read_c3d(
     full = _labels(point, layout.points)
     names, prefixes = _strip(full) if strip_prefix else (list(full), {})
 
-    # ---- gaps: one rule (docs: robustness.md#c3d-gaps). A negative residual word means "not observed"; so does a
+    # ---- gaps: one rule (docs/robustness.md#c3d-gaps). A negative residual word means "not observed"; so does a
     # non-finite coordinate whatever its residual (ezc3d and many tools write gaps as NaN with residual 0), and,
     # unless zero_as_missing=False, a sample exactly at (0, 0, 0) (what some writers store for a gap).
     invalid = word4 < 0
@@ -305,7 +308,7 @@ def _events(params: dict, layout: C3DLayout) -> list[dict]:
 #
 # The parameter records and the data section are decoded here, after validate_c3d() has checked every count,
 # offset and size against the section and the file, with nothing but struct and NumPy: no C extension ever sees
-# the bytes of a file, so no file can crash or hang the interpreter (docs: robustness.md#c3d-reader).
+# the bytes of a file, so no file can crash or hang the interpreter (docs/robustness.md#c3d-reader).
 
 
 def _floats(raw: bytes, processor: str) -> np.ndarray:
@@ -393,13 +396,12 @@ def _read_exact(path: Path | str, offset: int, n_bytes: int) -> bytes:
     return raw
 
 
-# --------------------------------------------------------------------------- validation before ezc3d
+# --------------------------------------------------------------------------- validation
 #
-# ezc3d trusts the file: a single wrong byte in the parameter section (a name length, a
-# record offset, a dimension, POINT:USED...) can make it read or write out of bounds and kill
-# the interpreter with SIGSEGV, or loop for minutes. validate_c3d() walks the header and every
-# parameter record in pure Python first and checks each count, offset and size against the
-# section and the file, so ezc3d only ever sees files whose structure is sound.
+# A single wrong byte in the parameter section (a name length, a record offset, a dimension,
+# POINT:USED...) would make a trusting decoder read out of bounds or allocate without limit.
+# validate_c3d() walks the header and every parameter record first and checks each count, offset
+# and size against the section and the file, so the decoders below only index inside the file.
 
 #: Bytes per element of the parameter data types (-1 char, 1 byte, 2 int16, 4 float).
 _PARAM_TYPES = {-1: 1, 1: 1, 2: 2, 4: 4}
@@ -474,8 +476,7 @@ def validate_c3d(path: str | os.PathLike) -> C3DLayout:
             if len(section_head) < 4:
                 raise C3DFormatError(
                     path,
-                    f"ezc3d cannot read it: the parameter section starts at byte {start}, "
-                    f"beyond the end of the {size}-byte file",
+                    f"the parameter section starts at byte {start}, beyond the end of the {size}-byte file",
                 )
             n_blocks, proc_byte = section_head[2], section_head[3]
             end = start + n_blocks * 512
@@ -492,7 +493,7 @@ def validate_c3d(path: str | os.PathLike) -> C3DLayout:
     if len(section) < n_blocks * 512:
         raise C3DFormatError(
             path,
-            f"ezc3d cannot read it: the parameter section (byte {start}, {n_blocks} blocks "
+            f"the parameter section (byte {start}, {n_blocks} blocks "
             f"of 512) extends past the end of the {size}-byte file",
         )
     processor = _PROCESSORS[proc_byte]

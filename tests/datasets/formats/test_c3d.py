@@ -140,8 +140,8 @@ def test_truncated_data_and_parameters(tmp_path):
     (tmp_path / "cut.c3d").write_bytes(raw[: len(raw) // 2])
     with pytest.raises(C3DFormatError, match=r"cut.c3d, frame \d+: truncated: the header announces 400 frames"):
         read_c3d(tmp_path / "cut.c3d")
-    (tmp_path / "head.c3d").write_bytes(raw[:700])  # inside the parameter section: ezc3d refuses it
-    with pytest.raises(C3DFormatError, match="head.c3d: ezc3d cannot read it"):
+    (tmp_path / "head.c3d").write_bytes(raw[:700])  # inside the parameter section
+    with pytest.raises(C3DFormatError, match=r"head.c3d: the parameter section \(byte 512, \d+ blocks"):
         read_c3d(tmp_path / "head.c3d")
 
 
