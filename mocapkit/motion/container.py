@@ -95,9 +95,9 @@ class Motion:
             if missing.shape != (frames, joints):
                 raise ValueError(f"{self._label()}: missing must be [{frames}, {joints}], got {list(missing.shape)}")
             self.missing = missing | nan
-            if self.missing.any():
-                self.positions = self.positions.copy()  # never write NaN into the caller's array
-                self.positions[self.missing] = np.nan
+        if self.missing.any():  # a missing joint is NaN in all three coordinates
+            self.positions = self.positions.copy()  # never write NaN into the caller's array
+            self.positions[self.missing] = np.nan
         if self.rotations is not None:
             self.rotations = np.asarray(self.rotations, dtype=np.float32)
             if self.rotations.shape != (frames, joints, 3, 3):

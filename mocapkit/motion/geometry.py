@@ -297,6 +297,19 @@ def to_y_up(positions: np.ndarray, up_axis: str) -> np.ndarray:
     return np.stack([positions[..., 1], positions[..., 0], -positions[..., 2]], axis=-1)  # x-up
 
 
+def turn_up_axis(positions: np.ndarray, up_axis: str, to: str) -> np.ndarray:
+    """``[..., 3]`` positions with ``up_axis`` up turned so that ``to`` is up: :func:`to_y_up`
+    of ``up_axis`` followed by the inverse of ``to``'s, both right-handed. Each output coordinate is one input
+    coordinate, possibly negated (no arithmetic), so turning back gives the same bits and NaN stays in its entry."""
+    if up_axis not in AXES or to not in AXES:
+        raise ValueError(f"up axes must be x, y or z, got {up_axis!r} and {to!r}")
+    # to_y_up is linear: p_y = p @ A[axis]; the turn is p @ A[up_axis] @ A[to].T, a signed permutation
+    turn = to_y_up(np.eye(3), up_axis) @ to_y_up(np.eye(3), to).T
+    source, sign = np.argmax(np.abs(turn), axis=0), turn[np.argmax(np.abs(turn), axis=0), np.arange(3)]
+    positions = np.asarray(positions)
+    return np.stack([positions[..., s] if g > 0 else -positions[..., s] for s, g in zip(source, sign)], axis=-1)
+
+
 def retarget(positions: np.ndarray, lengths: np.ndarray | None = None) -> np.ndarray:
     """Zhou eqs. 3.2–3.3 on landmarks ``[T, 20, 3]``: every bone keeps its direction and takes the template length
     (:data:`TEMPLATE_BONES`), or ``lengths`` (``[T, 20]`` or ``[20]``, m: each landmark's bone to its parent)."""

@@ -159,6 +159,8 @@ class RefineReport:
     write_mode: str = ""  # how the output was written
     hint: str = ""
     refined_at_fps: float | None = None  # the rate a fixed-rate refiner worked at, when not the take's
+    refined_at_up_axis: str | None = None  # the up axis a fixed-frame refiner worked in, when not the take's
+    up_axis: str = "y"  # the take's
     screened: tuple[int, int] | None = None  # --screen-outliers: (samples the screen hid, observed samples)
     warning: str = ""
     #: C3D samples whose coordinates were not finite although their residual said valid (read as gaps)
@@ -183,6 +185,11 @@ class RefineReport:
             lines.append(
                 f"refined at the model's {self.refined_at_fps:g} fps: the take resampled linearly, the gaps "
                 f"filled there and interpolated back to its {self.fps:g} fps frames (observed samples kept)"
+            )
+        if self.refined_at_up_axis is not None:
+            lines.append(
+                f"refined in the model's {self.refined_at_up_axis}-up frame: the {self.up_axis}-up take turned "
+                f"there and back (coordinates only swapped and negated, so observed samples keep their bits)"
             )
         if self.screened is not None:
             hidden, observed = self.screened
@@ -460,6 +467,8 @@ def refine_file(
         warning=warning,
         nan_gaps=int(motion.metadata.get("gaps", {}).get("nan_coordinates", 0)),
         refined_at_fps=refined.metadata.get("refinement", {}).get("resampled", {}).get("refined_at_fps"),
+        refined_at_up_axis=refined.metadata.get("refinement", {}).get("turned", {}).get("refined_at_up_axis"),
+        up_axis=motion.up_axis,
     )
 
 

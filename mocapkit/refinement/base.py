@@ -18,7 +18,11 @@ bases) refines a take at another rate at its own: the take is resampled to the f
 (:meth:`~mocapkit.motion.container.Motion.resample`, linear), refined there, and the result interpolated
 linearly back to the take's own frames, where it fills the missing entries; observed entries come back
 bit-identical (outliers are not repaired on that path) and ``metadata["refinement"]["resampled"]`` records both
-rates. Another up axis is an error naming both.
+rates. A take with another up axis is turned to the fitted one (:func:`~mocapkit.motion.geometry.turn_up_axis`: the right-handed turns of
+:func:`~mocapkit.motion.geometry.to_y_up`, exact because they only permute and negate coordinates), refined there
+(resampled too if its rate differs) and turned back, so observed entries stay bit-identical and repairs are kept;
+``metadata["refinement"]["turned"]`` records both axes. Units need no conversion: a
+:class:`~mocapkit.motion.container.Motion` is in metres whatever its file used (``source_units``).
 
 Subclasses implement :meth:`MotionRefiner._refine_matrix` on the frames × (3·joints) matrix, in
 float64 metres, and set ``requires_fit = True`` when ``fit`` must come first. The shared checks
@@ -35,6 +39,7 @@ from sklearn.base import BaseEstimator
 from sklearn.exceptions import NotFittedError
 
 from mocapkit.motion.container import Motion, all_coordinates
+from mocapkit.motion.geometry import turn_up_axis
 
 
 class RefinementError(ValueError):
@@ -59,7 +64,8 @@ def check_motion(motion: Motion, min_frames: int = 1, what: str = "refine") -> N
 
     Raises:
         RefinementError: fewer than ``min_frames`` frames, no observed entry at all, or NaN / Inf
-            in an entry that is not marked missing (Motion turns NaN into missing; Inf stays).
+            in an entry that is not marked missing (a Motion marks both missing when it is built; this
+            catches values written into ``positions`` afterwards).
     """
     label = motion.source or motion.name or "motion"
     if not isinstance(motion, Motion):
@@ -85,7 +91,7 @@ class MotionRefiner(BaseEstimator):
     #: Fewest frames the method can work on.
     min_frames: int = 2
     #: True when the learned model depends on the frame rate and up axis (window-based data-driven methods):
-    #: ``fit`` then requires one of each (recorded as ``fps_``, ``up_axis_``) and ``refine`` checks them.
+    #: ``fit`` then requires one of each (recorded as ``fps_``, ``up_axis_``) and ``refine`` brings a take to them.
     fixed_sampling: bool = False
 
     def fit(self, motions: Sequence[Motion] | None = None, y=None) -> MotionRefiner:
@@ -130,10 +136,7 @@ class MotionRefiner(BaseEstimator):
                 )
         if self.fixed_sampling and hasattr(self, "fps_"):
             if motion.up_axis != self.up_axis_:
-                raise RefinementError(
-                    f"{motion.source or motion.name}: {motion.fps:g} fps, {motion.up_axis}-up; "
-                    f"{type(self).__name__} was fitted at {self.fps_:g} fps, {self.up_axis_}-up"
-                )
+                return self._refine_turned(motion)
             if float(motion.fps) != self.fps_:
                 return self._refine_resampled(motion)
         X, observed = motion_matrix(motion)
@@ -155,6 +158,27 @@ class MotionRefiner(BaseEstimator):
         }
         return replace(
             motion, positions=positions, missing=still_missing, metadata={**motion.metadata, "refinement": report}
+        )
+
+    def _refine_turned(self, motion: Motion) -> Motion:
+        """Refine ``motion`` turned to the fitted up axis ``up_axis_`` and turn the result back (the module
+        docstring)."""
+        turned = replace(
+            motion,
+            positions=turn_up_axis(motion.positions, motion.up_axis, self.up_axis_),
+            up_axis=self.up_axis_,
+            rotations=None,  # local rotations are not turned; no refiner reads them
+        )
+        done = self.refine(turned)
+        report = {
+            **done.metadata["refinement"],
+            "turned": {"up_axis": motion.up_axis, "refined_at_up_axis": self.up_axis_},
+        }
+        return replace(
+            motion,
+            positions=turn_up_axis(done.positions, self.up_axis_, motion.up_axis),
+            missing=done.missing,
+            metadata={**motion.metadata, "refinement": report},
         )
 
     def _refine_resampled(self, motion: Motion) -> Motion:

@@ -20,7 +20,10 @@ Observed entries come back bit-identical unless the network moves them by more t
 with ``--repair-outliers``).
 
 A motion whose joints are those of the training layout in another order (a C3D whose point labels are the
-joint names, with or without extra markers) is refined on those joints; extra markers come back untouched.
+joint names, with or without extra markers) is refined on those joints; extra markers come back untouched. A take
+in another frame than the run's (``up_axis_``, ``fps_``: a z-up lab C3D given to a model trained on y-up HDM05) is
+turned and resampled to it and back, as every fixed-sampling refiner does
+(:meth:`~mocapkit.refinement.base.MotionRefiner.refine`); positions are metres whatever the file's units.
 """
 
 from __future__ import annotations

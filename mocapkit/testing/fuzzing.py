@@ -1,9 +1,19 @@
 """Fuzzing harness for the motion-file readers: seeded mutators, special files, and an isolated runner.
 
 Nothing here imports mocapkit at module level: the mutators work on bytes, and only the
-worker process (:func:`worker_main`) imports the readers. ``tests/test_fuzz.py`` (bounded)
+worker process (:func:`worker_main`) imports the readers. ``tests/datasets/test_fuzz.py`` (bounded)
 and ``bench/bench_fuzz.py`` (long run) build cases with :func:`make_cases` /
 :func:`make_special_cases` and run them with :func:`run_cases`.
+
+Two campaigns on top (same worker, same outcome classes):
+
+- **C3D, exhaustive** (:func:`c3d_mutants`, :func:`run_c3d_campaign`): every byte of the header and of the
+  parameter section of a real file set to 0x00, 0xFF, byte+1, byte−1 and a random byte, plus random multi-byte
+  mutations and truncations of the data section, streamed through one file per source;
+- **batch commands** (:class:`BatchCampaign`, :func:`run_batch`): ``prepare ntu``, ``prepare casia-b``, ``index``,
+  ``kinect-fix apply`` with ``--skip-bad`` and ``refine --train FOLDER --skip-bad`` run as ``python -m mocapkit`` on
+  a folder of good files plus mutants; every good file must be kept, every file kept or reported by name, every
+  file the reader alone rejects reported, and the process must end with exit code 0.
 
 Outcome classes (:data:`OUTCOMES`) of reading one file:
 
@@ -46,7 +56,8 @@ import threading
 import time
 import zlib
 from collections import Counter
-from dataclasses import asdict, dataclass, field
+from collections.abc import Iterator
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 OUTCOMES = ("ok", "clean_error", "crash", "hang", "memory", "raw_exception", "non_finite")
@@ -527,8 +538,8 @@ def m_c3d_section(data, rng):
             v = rng.choice(_BAD_INT16)
             struct.pack_into(order + "H", b, off, v)
         vals.append((off, v))
-    nonfinite = any(isinstance(v, float) and not math.isfinite(v) for _, v in vals)
-    return bytes(b), f"data section {'float' if is_float else 'int16'} values {vals[:3]}", nonfinite
+    # not flagged: in C3D a sample with a non-finite coordinate is a gap whatever its residual (docs/robustness.md#c3d-gaps)
+    return bytes(b), f"data section {'float' if is_float else 'int16'} values {vals[:3]}", False
 
 
 def m_c3d_truncate(data, rng):
@@ -1015,6 +1026,568 @@ def describe_failures(outcomes: list[Outcome]) -> str:
 def outcome_dict(o: Outcome) -> dict:
     d = asdict(o)
     return d
+
+
+# =========================================================================== C3D exhaustive campaign
+
+#: The values every byte of a C3D header and parameter section is set to (a value equal to the original byte, or to
+#: one already tried at that offset, is skipped: it would read the same file twice).
+BYTE_VALUES = ("0x00", "0xFF", "+1", "-1", "random")
+
+
+@dataclass(frozen=True)
+class C3DMutant:
+    """One mutant of a C3D file, as edits of the original bytes (the campaign writes the original once and patches
+    it in place, so no mutant is ever held whole in memory).
+
+    Attributes:
+        region: ``"header"``, ``"parameters"``, ``"data"`` or ``"truncation"``.
+        description: what was done, with byte offsets (0-based, from the file's start).
+        edits: ``(offset, new bytes)`` pairs.
+        truncate: the file is cut to this many bytes (None: not cut).
+    """
+
+    region: str
+    description: str
+    edits: tuple[tuple[int, bytes], ...] = ()
+    truncate: int | None = None
+
+
+def c3d_sections(data: bytes) -> dict[str, range]:
+    """Byte ranges of a C3D file's ``header`` (the first 512 bytes), ``parameters`` (the blocks the parameter
+    section's own header declares, from the block header byte 1 points to) and ``data`` (from ``POINT:DATA_START``
+    in header word 9 to the end), clamped to the file."""
+    size = len(data)
+    start = max(data[0] - 1, 1) * 512 if size else 512
+    blocks = data[start + 2] if start + 2 < size else 0
+    data_start = max(struct.unpack_from("<H", data, 16)[0] - 1, 0) * 512 if size >= 18 else size
+    if data_start >= size or data_start < start:  # a header that points nowhere useful: after the parameters
+        data_start = min(size, start + blocks * 512)
+    return {
+        "header": range(0, min(512, size)),
+        "parameters": range(min(start, size), min(start + blocks * 512, size)),
+        "data": range(data_start, size),
+    }
+
+
+def c3d_mutants(
+    data: bytes, seed: str = "0", data_mutations: int = 1000, truncations: int = 300
+) -> Iterator[C3DMutant]:
+    """Every mutant of the exhaustive C3D campaign of ``data``, generated lazily, seeded by ``seed``:
+
+    - every byte of the header and of the parameter section set to each of :data:`BYTE_VALUES` (``+1`` / ``-1``
+      wrap around; ``random`` drawn per offset);
+    - ``data_mutations`` random multi-byte mutations of the data section: 2–16 random bytes set to random values,
+      a run of 4–64 random bytes, or 1–8 aligned 4-byte words set to NaN / ±Inf / ±1e38 / a denormal (a float
+      file) or to 0x7FFF / 0x8000 / 0xFFFF pairs (an integer file);
+    - ``truncations`` cuts inside the data section: at random bytes, at frame boundaries (16 bytes × points) and
+      one byte either side of them.
+    """
+    sections = c3d_sections(data)
+    for region in ("header", "parameters"):
+        span = sections[region]
+        for offset in span:
+            original = data[offset]
+            draw = random.Random(f"{seed}:{offset}").randrange(256)
+            values = {"0x00": 0, "0xFF": 255, "+1": (original + 1) % 256, "-1": (original - 1) % 256, "random": draw}
+            tried = {original}
+            for name, value in values.items():
+                if value in tried:
+                    continue
+                tried.add(value)
+                yield C3DMutant(
+                    region,
+                    f"{region} byte {offset} (+{offset - span.start}): {original:#04x} -> {value:#04x} ({name})",
+                    ((offset, bytes([value])),),
+                )
+    span = sections["data"]
+    if len(span) < 8:
+        return
+    rng = random.Random(f"{seed}:data")
+    floats = struct.unpack_from("<f", data, 12)[0] < 0 if len(data) >= 16 else True
+    bad_words = (
+        [struct.pack("<f", v) for v in (math.nan, math.inf, -math.inf, 1e38, -1e38, 1e-45)]
+        if floats
+        else [struct.pack("<HH", a, b) for a in (0x7FFF, 0x8000, 0xFFFF) for b in (0x7FFF, 0x8000, 0)]
+    )
+    for _ in range(data_mutations):
+        how = rng.choice(("bytes", "block", "words"))
+        if how == "bytes":
+            edits = tuple(
+                (rng.randrange(span.start, span.stop), bytes([rng.randrange(256)])) for _ in range(rng.randint(2, 16))
+            )
+            what = f"{len(edits)} random bytes at {sorted(o for o, _ in edits)[:4]}..."
+        elif how == "block":
+            length = rng.randint(4, 64)
+            at = rng.randrange(span.start, max(span.start + 1, span.stop - length))
+            edits = ((at, bytes(rng.randrange(256) for _ in range(length))),)
+            what = f"{length} random bytes from {at}"
+        else:
+            words = (len(span) // 4) or 1
+            edits = tuple(
+                (span.start + 4 * rng.randrange(words), rng.choice(bad_words)) for _ in range(rng.randint(1, 8))
+            )
+            what = (
+                f"{len(edits)} {'float' if floats else 'int16'} words set to odd values at {[o for o, _ in edits][:4]}"
+            )
+        yield C3DMutant("data", f"data: {what}", edits)
+    points = struct.unpack_from("<H", data, 2)[0] if len(data) >= 4 else 0
+    frame = max(16 * points, 1) if floats else max(8 * points, 1)
+    for _ in range(truncations):
+        if rng.random() < 0.5:
+            cut = rng.randrange(span.start, span.stop)
+        else:
+            cut = span.start + frame * rng.randrange(max(len(span) // frame, 1)) + rng.choice((-1, 0, 1))
+        cut = min(max(cut, span.start), len(data) - 1)
+        yield C3DMutant("truncation", f"truncated at byte {cut} of {len(data)} (data from {span.start})", truncate=cut)
+
+
+def count_c3d_mutants(data: bytes, seed: str = "0", data_mutations: int = 1000, truncations: int = 300) -> dict:
+    """Mutants per region of :func:`c3d_mutants` (counted by generating their descriptions only)."""
+    return dict(Counter(m.region for m in c3d_mutants(data, seed, data_mutations, truncations)))
+
+
+#: The columns of the campaign table, in order (``located``: a documented error whose message names the file;
+#: ``unlocated``: one that does not).
+CAMPAIGN_COLUMNS = ("mutants", "ok", "located", "unlocated", "crash", "hang", "memory", "raw_exception", "non_finite")
+
+
+def _column(o: Outcome) -> str:
+    if o.outcome == "clean_error":
+        return "located" if o.names_file else "unlocated"
+    return o.outcome
+
+
+def run_c3d_campaign(
+    files: list[Path],
+    out_dir: Path,
+    seed: str = "0",
+    data_mutations: int = 1000,
+    truncations: int = 300,
+    timeout: float = 10.0,
+    mem_limit: int = 2 << 30,
+    keep_failures: Path | None = None,
+    progress=None,
+    python: str | None = None,
+    every: int = 1,
+) -> tuple[dict[str, Counter], list[Outcome]]:
+    """Read every mutant of :func:`c3d_mutants` of each file with ``read_motion`` in a worker process (per-file
+    ``timeout``, ``RLIMIT_AS`` ``mem_limit``; the worker is restarted after a crash, hang or memory blow-up).
+
+    Each file's mutants are streamed through one path ``out_dir/<stem>/<name>``: the original is written once and
+    each mutant patched in and back out, so disk and memory stay at one file. A mutant that is neither ``ok`` nor a
+    located error is copied to ``keep_failures/<stem>-<n>.c3d`` (when given) with its description. ``every``
+    takes every ``every``-th mutant only (a slice spread over all regions: the tests' CI-sized run).
+
+    Returns:
+        ``({file name: Counter of CAMPAIGN_COLUMNS}, [the failing outcomes])``.
+    """
+    counts: dict[str, Counter] = {}
+    bad: list[Outcome] = []
+    worker = _Worker(mem_limit, python or sys.executable)
+    try:
+        for src in files:
+            data = Path(src).read_bytes()
+            folder = out_dir / Path(src).stem
+            folder.mkdir(parents=True, exist_ok=True)
+            path = folder / Path(src).name
+            path.write_bytes(data)
+            tally = counts.setdefault(Path(src).name, Counter())
+            for n, mutant in enumerate(c3d_mutants(data, f"{seed}:{Path(src).name}", data_mutations, truncations)):
+                if n % every:
+                    continue
+                with open(path, "r+b") as f:
+                    for offset, new in mutant.edits:
+                        f.seek(offset)
+                        f.write(new)
+                    if mutant.truncate is not None:
+                        f.truncate(mutant.truncate)
+                case = Case(
+                    id=f"{Path(src).stem}-{n}",
+                    fmt="c3d",
+                    mutation=f"{Path(src).name}: {mutant.description}",
+                    path=str(path),
+                    kind="motion",
+                    names=[str(path)],
+                )
+                outcome = worker.run(case, timeout)
+                tally["mutants"] += 1
+                tally[_column(outcome)] += 1
+                if not outcome.good:
+                    bad.append(outcome)
+                    if keep_failures is not None:
+                        keep_failures.mkdir(parents=True, exist_ok=True)
+                        kept = keep_failures / f"{Path(src).stem}-{n}.c3d"
+                        shutil.copyfile(path, kept)
+                        kept.with_suffix(".txt").write_text(outcome.line() + "\n")
+                if mutant.truncate is not None:
+                    path.write_bytes(data)
+                else:
+                    with open(path, "r+b") as f:
+                        for offset, new in mutant.edits:
+                            f.seek(offset)
+                            f.write(data[offset : offset + len(new)])
+                if progress is not None:
+                    progress(Path(src).name, tally, outcome)
+    finally:
+        worker.kill()
+    return counts, bad
+
+
+def campaign_table(counts: dict[str, Counter]) -> str:
+    """The campaign's counts per file (and all files) as a Markdown table of :data:`CAMPAIGN_COLUMNS`."""
+    head = "| file | " + " | ".join(CAMPAIGN_COLUMNS) + " |"
+    rows = [head, "|---|" + "---:|" * len(CAMPAIGN_COLUMNS)]
+    total = Counter()
+    for name, c in counts.items():
+        total.update(c)
+        rows.append(f"| {name} | " + " | ".join(f"{c[k]:,}" for k in CAMPAIGN_COLUMNS) + " |")
+    rows.append("| all | " + " | ".join(f"{total[k]:,}" for k in CAMPAIGN_COLUMNS) + " |")
+    return "\n".join(rows)
+
+
+# =========================================================================== batch commands
+
+
+@dataclass
+class BatchCampaign:
+    """One batch command run over a folder of good files plus mutated ones (:func:`run_batch`).
+
+    Attributes:
+        command: what ran, e.g. ``"prepare ntu --skip-bad"``.
+        argv: the ``mocapkit`` arguments.
+        good: the units (files, or CASIA-B sequence names) that must be kept.
+        mutants: the mutated units, each with the fuzz :class:`Case` that made it (its mutation).
+        unreadable: the mutants the reader rejects on its own (they must be reported by name).
+        collect: after the run, ``() -> (kept units, {reported unit: message})`` from the command's report.
+        returncode, stderr, seconds: the run (``returncode`` negative: the signal that ended it).
+        kept, reported: what ``collect`` found.
+        trained: for ``refine --train``, the number of training files it says it used (its report names no
+            file it kept): the count check replaces the per-file one.
+    """
+
+    command: str
+    argv: list[str]
+    good: list[str]
+    mutants: dict[str, Case]
+    unreadable: set[str] = field(default_factory=set)
+    collect: object = None
+    returncode: int | None = None
+    stderr: str = ""
+    seconds: float = 0.0
+    kept: set[str] = field(default_factory=set)
+    reported: dict[str, str] = field(default_factory=dict)
+    trained: int | None = None
+
+    def problems(self) -> list[str]:
+        """Everything that breaks the promise: the command died or failed, a good unit was not kept, a unit was
+        neither kept nor reported (dropped silently), an unreadable mutant was not reported, a report entry that
+        does not name its unit."""
+        out = []
+        if self.returncode != 0:
+            how = f"signal {-self.returncode}" if self.returncode and self.returncode < 0 else "exit code"
+            out.append(f"{self.command}: ended with {how} {self.returncode}: {self.stderr[-400:]}")
+            return out
+        units = [*self.good, *self.mutants]
+        if self.trained is not None:  # refine --train: counts only
+            if self.trained + len(self.reported) != len(units):
+                out.append(
+                    f"{self.command}: {len(units)} files, trained on {self.trained} and reported "
+                    f"{len(self.reported)}: {len(units) - self.trained - len(self.reported)} dropped silently"
+                )
+        for unit in self.good:
+            if unit in self.reported or (self.trained is None and unit not in self.kept):
+                out.append(f"{self.command}: good {unit} not kept ({self.reported.get(unit, 'not reported')})")
+        for unit, case in self.mutants.items():
+            if self.trained is None and unit not in self.kept and unit not in self.reported:
+                out.append(f"{self.command}: {unit} dropped silently ({case.mutation})")
+            if unit in self.unreadable and unit not in self.reported:
+                out.append(f"{self.command}: unreadable {unit} not reported ({case.mutation})")
+        for unit, message in self.reported.items():
+            if Path(unit).name not in message and unit not in message:
+                out.append(f"{self.command}: the report on {unit} does not name it: {message[:200]}")
+        return out
+
+    def summary(self) -> dict:
+        """One row of the batch table: units, good kept, mutants kept / reported, unreadable reported, problems."""
+        return {
+            "command": self.command,
+            "files": len(self.good) + len(self.mutants),
+            "good_kept": sum(
+                u in self.kept or (self.trained is not None and u not in self.reported) for u in self.good
+            ),
+            "good": len(self.good),
+            "mutants_kept": sum(u in self.kept for u in self.mutants)
+            if self.trained is None
+            else sum(u not in self.reported for u in self.mutants),
+            "mutants_reported": sum(u in self.reported for u in self.mutants),
+            "unreadable_reported": sum(u in self.reported for u in self.unreadable),
+            "unreadable": len(self.unreadable),
+            "exit": self.returncode,
+            "problems": len(self.problems()),
+            "seconds": round(self.seconds, 1),
+        }
+
+
+def run_batch(campaign: BatchCampaign, timeout: float = 600.0, python: str | None = None) -> BatchCampaign:
+    """Run ``python -m mocapkit *campaign.argv`` in a child process (one thread per library, ``timeout`` s) and
+    fill in its outcome and what its report kept and reported."""
+    env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1")
+    env["PYTHONPATH"] = os.pathsep.join([str(PACKAGE_ROOT), env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
+    start = time.monotonic()
+    try:
+        proc = subprocess.run(
+            [python or sys.executable, "-m", "mocapkit", *campaign.argv],
+            capture_output=True,
+            text=True,
+            timeout=timeout,
+            env=env,
+            cwd=str(PACKAGE_ROOT),
+        )
+        campaign.returncode, campaign.stderr = proc.returncode, proc.stderr
+        stdout = proc.stdout
+    except subprocess.TimeoutExpired as exc:
+        campaign.returncode, campaign.stderr, stdout = -9, f"hang: no end in {timeout:g} s", str(exc.stdout or "")
+    campaign.seconds = time.monotonic() - start
+    if campaign.returncode == 0:
+        campaign.kept, campaign.reported, campaign.trained = campaign.collect(stdout)
+    return campaign
+
+
+def _unit(path) -> str:
+    return str(Path(path).resolve())
+
+
+def _mutate_into(fmt: str, seeds: list[Path], folder: Path, n: int, seed: int, name) -> dict[str, Case]:
+    """``n`` fuzz mutants of ``seeds`` (:func:`make_cases`) moved into ``folder`` as ``name(i, seed_path)``;
+    AMC mutants are of the AMC only (the folder shares its ASF)."""
+    work = folder.parent / f"{folder.name}-cases"
+    out: dict[str, Case] = {}
+    i = 0
+    while len(out) < n:
+        (case,) = make_cases(fmt, seeds, work, 1, seed=seed, start=i)
+        i += 1
+        if "[ASF]" in case.mutation:
+            continue
+        target = folder / name(len(out), Path(case.seed))
+        shutil.move(case.path, target)
+        case.path, case.names = str(target), [str(target)]
+        out[_unit(target)] = case
+    shutil.rmtree(work, ignore_errors=True)
+    return out
+
+
+def _rejected(cases: dict[str, Case], kind: str) -> set[str]:
+    """The units whose mutant the reader alone does not read (``kind``: how; see :func:`_read`), each read in the
+    worker."""
+    units = list(cases)
+    outcomes = run_cases([replace(cases[u], kind=kind, id=f"unit-{i}") for i, u in enumerate(units)])
+    return {u for u, o in zip(units, outcomes) if o.outcome != "ok"}
+
+
+def batch_prepare_ntu(samples: Path, root: Path, n: int, seed: int = 0) -> BatchCampaign:
+    """``prepare ntu --skip-bad``: the NTU samples plus ``n`` mutants of them (renamed to unused sample names)."""
+    src = root / "ntu-src"
+    src.mkdir(parents=True, exist_ok=True)
+    seeds = sample_files(samples, "ntu")
+    good = []
+    for s in seeds:
+        shutil.copyfile(s, src / s.name)
+        good.append(_unit(src / s.name))
+    mutants = _mutate_into(
+        "ntu", seeds, src, n, seed, lambda i, _: f"S017C003P{i // 60 + 1:03d}R002A{i % 60 + 1:03d}.skeleton"
+    )
+    out = root / "ntu-cache"
+
+    def collect(_stdout):
+        report = json.loads((out / "report.json").read_text())
+        kept = {_unit(src / f"{b['name']}.skeleton") for b in report["bodies"]}
+        kept |= {_unit(src / f"{e['name'] if isinstance(e, dict) else e}.skeleton") for e in report["empty_samples"]}
+        return kept, {_unit(s["file"]): s["message"] for s in report["skipped"]}, None
+
+    return BatchCampaign(
+        "prepare ntu --skip-bad",
+        ["prepare", "ntu", "--src", str(src), "--out", str(out), "--skip-bad", "--quiet"],
+        good,
+        mutants,
+        _rejected(mutants, "ntu"),
+        collect,
+    )
+
+
+def batch_prepare_casia_b(root: Path, n: int, seed: int = 0, good_sequences: int = 3) -> BatchCampaign:
+    """``prepare casia-b --skip-bad``: ``good_sequences`` generated silhouette sequences plus ``n`` copies with one
+    frame mutated (units: sequence names ``SSS/cc-nn/VVV``)."""
+    src = root / "casia-src"
+    frames = make_silhouette_seeds(root / "casia-seeds")
+    good = []
+    for i in range(good_sequences):
+        name = f"{i + 1:03d}/nm-01/090"
+        (src / name).mkdir(parents=True, exist_ok=True)
+        for f in frames:
+            shutil.copyfile(f, src / name / f.name)
+        good.append(name)
+    work = root / "casia-cases"
+    mutants: dict[str, Case] = {}
+    for i, case in enumerate(make_cases("png", frames, work, n, seed=seed)):
+        name = f"{50 + i // 11:03d}/bg-01/{18 * (i % 11):03d}"
+        folder = src / name
+        folder.parent.mkdir(parents=True, exist_ok=True)
+        shutil.move(str(Path(case.path).parent), folder)
+        for f in folder.iterdir():  # frames keep their sequence's own name
+            f.rename(folder / f.name.replace("001-nm-01-090", name.replace("/", "-")))
+        target = folder / Path(case.path).name.replace("001-nm-01-090", name.replace("/", "-"))
+        case.path, case.id, case.kind = str(target), name, "sequence"
+        case.names = [str(folder), *map(str, folder.iterdir())]
+        mutants[name] = case
+    shutil.rmtree(work, ignore_errors=True)
+    out = root / "casia-cache"
+
+    def collect(_stdout):
+        import numpy as np
+
+        report = json.loads((out / "report.json").read_text())
+        with np.load(out / "index.npz", allow_pickle=False) as index:
+            kept = {str(name) for name in index["names"]}
+        return (
+            kept,
+            {s["sequence"]: f"{s['sequence']} ({s['folder']}): {s['message']}" for s in report["skipped"]},
+            None,
+        )
+
+    return BatchCampaign(
+        "prepare casia-b --skip-bad",
+        ["prepare", "casia-b", "--src", str(src), "--out", str(out), "--skip-bad", "--quiet"],
+        good,
+        mutants,
+        _rejected(mutants, "sequence"),
+        collect,
+    )
+
+
+def _msr_folder(samples: Path, root: Path, n: int, seed: int, label: str) -> tuple[Path, list[str], dict[str, Case]]:
+    """MSR Action3D skeleton files (the usable ones: not the all-zero ``a13_s09_e02``) plus ``n`` mutants."""
+    src = root / label
+    src.mkdir(parents=True, exist_ok=True)
+    seeds = [p for p in sample_files(samples, "msr") if p.name.endswith("_skeleton3D.txt") and "a13_s09" not in p.name]
+    good = []
+    for s in seeds:
+        shutil.copyfile(s, src / s.name)
+        good.append(_unit(src / s.name))
+    mutants = _mutate_into(
+        "msr", seeds, src, n, seed, lambda i, s: f"a{i % 20 + 1:02d}_s{i // 20 + 11:02d}_e01_skeleton3D.txt"
+    )
+    return src, good, mutants
+
+
+def batch_index(samples: Path, root: Path, n: int, seed: int = 0) -> BatchCampaign:
+    """``index --skip-bad`` of MSR Action3D files plus ``n`` mutants (the default retrieval method)."""
+    src, good, mutants = _msr_folder(samples, root, n, seed, "index-src")
+    out = root / "index"
+
+    def collect(_stdout):
+        manifest = json.loads((out / "manifest.json").read_text())
+        return (
+            {_unit(f["path"]) for f in manifest["files"]},
+            {_unit(s["path"]): s["why"] for s in manifest["skipped"]},
+            None,
+        )
+
+    return BatchCampaign(
+        "index --skip-bad",
+        ["index", str(src), "--out", str(out), "--skip-bad"],
+        good,
+        mutants,
+        _rejected(mutants, "motion"),
+        collect,
+    )
+
+
+def batch_kinect_fix(samples: Path, root: Path, model: Path, n: int, seed: int = 0) -> BatchCampaign:
+    """``kinect-fix apply --skip-bad`` with ``model`` on MSR Action3D files plus ``n`` mutants."""
+    src, good, mutants = _msr_folder(samples, root, n, seed, "kinect-src")
+    out = root / "kinect-out"
+
+    def collect(_stdout):
+        report = json.loads((out / "report.json").read_text())
+        return {_unit(f["input"]) for f in report["fixed"]}, {_unit(p): why for p, why in report["skipped"]}, None
+
+    return BatchCampaign(
+        "kinect-fix apply --skip-bad",
+        ["kinect-fix", "apply", str(src), "--model", str(model), "--out", str(out), "--skip-bad"],
+        good,
+        mutants,
+        _rejected(mutants, "motion"),
+        collect,
+    )
+
+
+def batch_refine_train(
+    amc_folder: Path, take: Path, root: Path, n: int, seed: int = 0, files: int = 4
+) -> BatchCampaign:
+    """``refine TAKE OUT.npz --method pose-prior --train FOLDER --skip-bad``: ``refine`` reads one take; the folder it
+    reads is the training folder: the ``files`` smallest AMC of one performer (and their ASF) plus ``n`` AMC
+    mutants."""
+    src = root / "refine-train"
+    src.mkdir(parents=True, exist_ok=True)
+    seeds = sorted((p for p in amc_folder.glob("*.amc") if p != take), key=lambda p: (p.stat().st_size, p.name))[:files]
+    asf = _asf_for(seeds[0])
+    shutil.copyfile(asf, src / asf.name)
+    good = []
+    for s in seeds:
+        shutil.copyfile(s, src / s.name)
+        good.append(_unit(src / s.name))
+    mutants = _mutate_into("amc", seeds, src, n, seed, lambda i, s: f"{s.stem[:-4]}_m{i:03d}_120.amc")
+    skipped_line = re.compile(r"^skipped training file (.+?): (.*)$")
+
+    def collect(stdout):
+        trained = re.search(r"trained on (\d+) motion file", stdout)
+        reported = {}
+        for line in stdout.splitlines():
+            m = skipped_line.match(line.strip())
+            if m:
+                reported[_unit(m.group(1))] = m.group(0)
+        return set(), reported, int(trained.group(1)) if trained else 0
+
+    return BatchCampaign(
+        "refine --train FOLDER --skip-bad",
+        ["refine", str(take), str(root / "refined.npz"), "--method", "pose-prior", "--train", str(src), "--skip-bad"],
+        good,
+        mutants,
+        _rejected(mutants, "motion"),
+        collect,
+    )
+
+
+def tiny_kinect_model(path: Path, seed: int = 0) -> Path:
+    """A Zhou GP Kinect reconstructor (the ``kinect-fix`` default) fitted in a second on two random 40-frame
+    Kinect-20 clips and saved to ``path``: for ``kinect-fix apply`` campaigns, where what matters is the files."""
+    import numpy as np
+
+    from mocapkit.kinect.reconstruction import KinectPostureReconstructor
+
+    rng = np.random.default_rng(seed)
+    rest = rng.normal(0.0, 0.3, (1, 20, 3)) + [0.0, 1.0, 3.0]
+    clean = [rest + 0.02 * rng.normal(size=(40, 20, 3)) for _ in range(2)]
+    noisy = [c + 0.01 * rng.normal(size=c.shape) for c in clean]
+    model = KinectPostureReconstructor(n_inducing=8, max_train_frames=80, gp_iterations=1)
+    return model.fit(noisy, clean).save(path)
+
+
+def batch_table(campaigns: list[BatchCampaign]) -> str:
+    """The batch campaigns as a Markdown table (:meth:`BatchCampaign.summary`)."""
+    rows = [
+        "| command | files | good kept | mutants kept | mutants reported | unreadable reported | exit | problems | s |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for c in campaigns:
+        s = c.summary()
+        rows.append(
+            f"| `{s['command']}` | {s['files']} | {s['good_kept']}/{s['good']} | {s['mutants_kept']} | "
+            f"{s['mutants_reported']} | {s['unreadable_reported']}/{s['unreadable']} | {s['exit']} | "
+            f"{s['problems']} | {s['seconds']:.0f} |"
+        )
+    return "\n".join(rows)
 
 
 # =========================================================================== worker (child side)

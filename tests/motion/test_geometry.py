@@ -21,7 +21,9 @@ from mocapkit.motion.geometry import (
     hip_line_heading,
     horizontal_axes,
     lateral_line,
+    to_y_up,
     turn_about_up,
+    turn_up_axis,
 )
 from mocapkit.motion.layouts import LANDMARK_NAMES, MSR20
 
@@ -316,3 +318,18 @@ def test_energy_image_align_lays_body0_hips_along_x():
     left, right = MSR20.joint_names.index("HipLeft"), MSR20.joint_names.index("HipRight")
     np.testing.assert_allclose((out[:, right] - out[:, left])[:, 2], 0, atol=1e-6)
     assert np.all(out[:, right, 0] > out[:, left, 0])
+
+
+@pytest.mark.parametrize("up", ["x", "y", "z"])
+@pytest.mark.parametrize("to", ["x", "y", "z"])
+def test_turn_up_axis_is_an_exact_right_handed_turn(up, to):
+    rng = np.random.default_rng(0)
+    p = rng.normal(size=(7, 5, 3)).astype(np.float32)
+    p[2, 1] = np.nan
+    turned = turn_up_axis(p, up, to)
+    assert np.array_equal(to_y_up(turned, to), to_y_up(p, up), equal_nan=True)  # the same pose, y-up
+    assert np.array_equal(turn_up_axis(turned, to, up), p, equal_nan=True)  # and back, bit for bit
+    rotation = np.stack([turn_up_axis(e, up, to) for e in np.eye(3)])
+    assert np.isclose(np.linalg.det(rotation), 1.0)  # a rotation, not a mirror
+    with pytest.raises(ValueError, match="up axes must be x, y or z"):
+        turn_up_axis(p, "w", to)
