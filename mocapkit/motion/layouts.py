@@ -335,7 +335,8 @@ LANDMARK_NAMES: tuple[str, ...] = (
 LANDMARK_PARENTS: tuple[int, ...] = (-1, 0, 1, 2, 2, 4, 5, 6, 2, 8, 9, 10, 0, 12, 13, 14, 0, 16, 17, 18)
 
 #: Landmark → lower-case joint-name stems of common BVH rigs (Bandai Namco ``UpperArm_L``, Mixamo and CMU-BVH
-#: ``LeftArm`` / ``LeftForeArm`` / ``LeftUpLeg``, ...), first match wins. A BVH joint sits at the *start* of its
+#: ``LeftArm`` / ``LeftForeArm`` / ``LeftUpLeg``, the CMU BVH rig's ``LeftHip`` / ``LeftKnee`` / ``LeftShoulder``
+#: / ``LeftElbow``, ...), first match wins. A BVH joint sits at the *start* of its
 #: bone, so the "upper arm" joint is the shoulder, the "forearm" joint the elbow, the "hand" joint the wrist.
 _RIG_STEMS: dict[str, tuple[str, ...]] = {
     "pelvis": ("hips", "hip", "pelvis", "root", "jointroot"),
@@ -346,7 +347,7 @@ _RIG_STEMS: dict[str, tuple[str, ...]] = {
     "elbow": ("lowerarm", "forearm", "elbow"),
     "wrist": ("hand", "wrist"),
     "hand": ("handend", "hand", "wrist"),
-    "hip": ("upperleg", "upleg", "thigh"),
+    "hip": ("upperleg", "upleg", "thigh", "hip"),  # "hip": CMU BVH's LeftHip (after LHipJoint, the pelvis bone)
     "knee": ("lowerleg", "leg", "shin", "calf", "knee"),
     "ankle": ("foot", "ankle"),
     "foot": ("toes", "toe", "toebase", "toesend", "foot"),

@@ -14,6 +14,11 @@ attributes ending in ``_``, ``NotFittedError`` before ``fit``):
     :meth:`distances`, an embedding method answers from an approximate-nearest-neighbour index.
 ``encode(motions)``
     the method's representation of clips (what ``fit`` stores for the database), for inspection and reuse.
+``add(motions) -> self``
+    append clips to the fitted database without fitting again (``mocapkit index --add``): they are encoded with
+    what ``fit`` learned and take the database indices ``n_database_`` onwards, in order. A method with nothing
+    to learn answers afterwards exactly as if fitted on the union; one that learns from the database (a codebook,
+    a feature selection, a dictionary) keeps what it learned from the clips it was fitted on.
 
 Every method first turns a motion into :func:`~mocapkit.motion.geometry.normalised_landmarks` ``[T, 20, 3]``
 (parameters ``fps`` and ``heading`` of every method). Subclasses implement:
@@ -21,6 +26,9 @@ Every method first turns a motion into :func:`~mocapkit.motion.geometry.normalis
 ``_fit_sequences(sequences, y)``   learn from the database's landmark sequences (default: nothing to learn); it
                                    may return the database's encoding when learning computed it (else None);
 ``_encode_sequences(sequences)``   the representation of sequences;
+``_add_sequences(sequences)``      append new database sequences (default: their encodings as rows of a 2-D
+                                   ``database_`` array; a method whose database is not one raises
+                                   ``NotImplementedError``, and the index refuses ``--add``);
 ``_distances(encoded_queries, encoded_database)``   ``[n_q, n_db]``;
 ``_state() -> dict[str, np.ndarray]`` / ``_set_state(state)``   learned parameters and database encodings as
 plain arrays (no pickles), which :mod:`mocapkit.retrieval.index` writes to ``state.npz`` beside a JSON manifest.
@@ -64,6 +72,18 @@ class RetrievalMethod(BaseEstimator):
         self.n_database_ = len(sequences)
         return self
 
+    def add(self, motions: Sequence[Motion]) -> RetrievalMethod:
+        """Append database clips without fitting again (the module docstring); returns ``self``.
+
+        Raises:
+            NotImplementedError: the method cannot append to its database (fit it on the union instead).
+        """
+        self._check_fitted()
+        sequences = self.sequences(motions, what="added")
+        self._add_sequences(sequences)
+        self.n_database_ += len(sequences)
+        return self
+
     def encode(self, motions: Sequence[Motion]):
         self._check_fitted()
         return self._encode_sequences(self.sequences(motions, what="query"))
@@ -99,6 +119,15 @@ class RetrievalMethod(BaseEstimator):
 
     def _encode_sequences(self, sequences: list[np.ndarray]):
         raise NotImplementedError
+
+    def _add_sequences(self, sequences: list[np.ndarray]) -> None:
+        """Append the encodings of new database sequences (default: rows of a 2-D array ``database_``)."""
+        if not isinstance(self.database_, np.ndarray) or self.database_.ndim != 2:
+            raise NotImplementedError(
+                f"{type(self).__name__} cannot append clips to a fitted database (fit it on all the clips)"
+            )
+        new = np.asarray(self._encode_sequences(sequences), dtype=self.database_.dtype)
+        self.database_ = np.concatenate([self.database_, new], axis=0)
 
     def _distances(self, queries, database) -> np.ndarray:
         raise NotImplementedError

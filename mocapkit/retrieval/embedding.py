@@ -264,6 +264,12 @@ class EmbeddingRetrieval(RetrievalMethod):
     def _distances(self, queries: np.ndarray, database: np.ndarray) -> np.ndarray:
         return 1.0 - np.asarray(queries, np.float64) @ np.asarray(database, np.float64).T
 
+    def _add_sequences(self, sequences: list[np.ndarray]) -> None:
+        """Append the new clips' embeddings and build the FAISS index again over the whole database (the kind
+        ``index`` resolves to for the new size)."""
+        super()._add_sequences(sequences)
+        self._build_index()
+
     def search(self, queries: Sequence[Motion], k: int = 10) -> tuple[np.ndarray, np.ndarray]:
         """The ``k`` nearest database clips of each query from the FAISS index (``k <= 0`` or above the size: all),
         nearest first; distances ``1 − cos`` recomputed exactly, ties by database order within the ``k`` returned."""

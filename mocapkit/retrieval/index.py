@@ -18,8 +18,16 @@ An index is a **folder**::
 Loading an index rebuilds its method from the registry's class of that name with the saved parameters: no class
 name is read from the index.
 
+:meth:`MotionIndex.search_within` (``mocapkit search --within``) finds a query inside the indexed files (long takes):
+segments ``(file, start s, end s, distance)`` by subsequence DTW (:mod:`mocapkit.retrieval.subsequence`).
+:func:`add_to_index` (``mocapkit index --add``) appends the files under another folder, or given one by one, to an
+existing index without fitting it again (:meth:`~mocapkit.retrieval.base.RetrievalMethod.add`): the manifest's
+method and parameters are used, a file already indexed (same resolved path) is skipped with a message, and the
+folder is rewritten in place.
+
 Refusals, each naming both sides: a query method (or model) other than the index's, a query whose skeleton lacks
-landmarks every indexed clip has, a query shorter than the method can encode; an unreadable file fails naming it
+landmarks every indexed clip has, a query shorter than the method can encode, ``--add`` with another method,
+parameters or model than the index's, an index of another format version; an unreadable file fails naming it
 unless ``skip_bad`` (then it is skipped and reported); an empty folder is an error.
 """
 
@@ -38,7 +46,9 @@ from mocapkit.io_atomic import atomic_path, atomic_write_text
 from mocapkit.retrieval.base import file_sha1
 
 FORMAT = "mocapkit-retrieval-index"
-VERSION = 2  # 2: DTW indexes keep one database per feature (and mutual-proximity statistics)
+#: 2: DTW indexes keep one database per feature (and mutual-proximity statistics); 3: and the raw distances to
+#: their reference clips, which ``--add`` extends.
+VERSION = 3
 
 
 class RetrievalIndexError(ValueError):
@@ -242,6 +252,64 @@ class MotionIndex:
             out.append({"query": name, "results": results[:want]})
         return out
 
+    def search_within(self, queries, k: int = 10, method: str | None = None, **options) -> list:
+        """Find each query inside the indexed files (long takes): subsequence DTW with a prefilter on windowed
+        descriptors (:func:`~mocapkit.retrieval.subsequence.search_within`) on the per-frame features the index's
+        DTW method stores, each divided by its scale (:meth:`~mocapkit.retrieval.dtw.DTWRetrieval.scaled_frames`).
+
+        Args:
+            queries: file paths or ``(name, Motion)`` pairs, as :meth:`search`.
+            k: matches per query, over all files (``k <= 0``: every candidate's).
+            method: when given, must be the index's method.
+            options: passed to :func:`~mocapkit.retrieval.subsequence.search_within`.
+
+        Returns:
+            ``[{"query": path, "results": [{"path", "start", "end", "distance"}, ...]}, ...]``, best first;
+            ``start`` / ``end`` in seconds from the start of the file; a query's own file is not searched.
+
+        Raises:
+            RetrievalIndexError: an index whose method keeps no per-frame positions (not a DTW method), another
+                method than the index's.
+        """
+        from mocapkit.retrieval.dtw import DTWRetrieval
+        from mocapkit.retrieval.subsequence import search_within
+
+        if method is not None and method != self.method_name:
+            raise RetrievalIndexError(
+                f"the index was built with --method {self.method_name}; it cannot be queried "
+                f"with --method {method} (build another index with that method)"
+            )
+        estimator = self.method
+        if not isinstance(estimator, DTWRetrieval):
+            raise RetrievalIndexError(
+                f"--within needs an index of a DTW method (dtw_takes for long takes, the default "
+                f"dtw_mutual_proximity, dtw_positions, dtw_plain); this index was built with {self.method_name}"
+            )
+        takes = estimator.scaled_frames(estimator.database_)
+        own = {str(Path(p).resolve()): i for i, p in enumerate(self.paths)}
+        out = []
+        for query in queries:
+            name, motion = query if isinstance(query, tuple) else (str(query), _read(Path(query)))
+            self.check_query(motion, name)
+            features = estimator.scaled_frames(estimator.encode([motion]))[0]
+            skip = own.get(str(Path(name).resolve()))
+            searched = [i for i in range(len(takes)) if i != skip]
+            if not searched:
+                raise RetrievalIndexError(f"query {name}: the index holds no other file to search")
+            found = search_within(features, [takes[i] for i in searched], k=k, **options)
+            fps = float(estimator.fps)
+            results = [
+                {
+                    "path": self.paths[searched[m.take]],
+                    "start": m.start / fps,
+                    "end": m.end / fps,
+                    "distance": m.distance,
+                }
+                for m in found
+            ]
+            out.append({"query": name, "results": results})
+        return out
+
 
 def build_index(
     src: str | os.PathLike,
@@ -263,7 +331,6 @@ def build_index(
         ConfigError: an unknown method, parameter or value.
     """
     from mocapkit.datasets.formats.motion_io import find_motion_files
-    from mocapkit.motion.layouts import find_landmarks
     from mocapkit.train.registry import default_method
 
     src = Path(src)
@@ -278,6 +345,33 @@ def build_index(
             ".skeleton, MSR *_skeleton3D.txt, recursively)"
         )
     _progress(f"indexing {len(paths)} files under {src} with {name}", quiet)
+    motions, files, skipped, landmark_sets = _read_files(paths, estimator, skip_bad, quiet)
+    if not motions:
+        raise RetrievalIndexError(f"--src {src}: none of the {len(paths)} motion files could be indexed")
+    start = time.perf_counter()
+    estimator.fit(motions)
+    _progress(f"fitted {name} on {len(motions)} clips in {time.perf_counter() - start:.1f} s", quiet)
+    common = set.intersection(*landmark_sets)
+    from mocapkit.motion.layouts import LANDMARK_NAMES
+
+    model_sha1 = getattr(estimator, "model_sha1_", None)
+    index = MotionIndex(
+        name, estimator, files, [lm for lm in LANDMARK_NAMES if lm in common], skipped, str(src.resolve()), model_sha1
+    )
+    if out is not None:
+        index.save(out)
+        _progress(f"wrote {out} ({len(files)} clips, {len(skipped)} skipped)", quiet)
+    return index
+
+
+def _read_files(paths: list[Path], estimator, skip_bad: bool, quiet: bool):
+    """Read and check each file for ``estimator``: ``(motions, file entries, skipped entries, landmark sets)``.
+
+    Raises:
+        RetrievalIndexError: a file that cannot be read or used (named), unless ``skip_bad``.
+    """
+    from mocapkit.motion.layouts import find_landmarks
+
     motions, files, skipped, landmark_sets = [], [], [], []
     for n, path in enumerate(paths, 1):
         try:
@@ -305,22 +399,104 @@ def build_index(
         )
         if n % 100 == 0 or n == len(paths):
             _progress(f"read {n}/{len(paths)} files", quiet)
-    if not motions:
-        raise RetrievalIndexError(f"--src {src}: none of the {len(paths)} motion files could be indexed")
-    start = time.perf_counter()
-    estimator.fit(motions)
-    _progress(f"fitted {name} on {len(motions)} clips in {time.perf_counter() - start:.1f} s", quiet)
-    common = set.intersection(*landmark_sets)
+    return motions, files, skipped, landmark_sets
+
+
+def add_to_index(
+    index: str | os.PathLike,
+    src: str | os.PathLike | Sequence[str | os.PathLike],
+    method: str | None = None,
+    overrides: Sequence[str] = (),
+    ckpt: str | os.PathLike | None = None,
+    skip_bad: bool = False,
+    quiet: bool = False,
+) -> tuple[MotionIndex, dict]:
+    """Append the motion files under ``src`` (a folder, searched recursively, or a list of files and folders) to
+    the index folder ``index`` without fitting it again, and rewrite the folder.
+
+    ``method``, ``overrides`` and ``ckpt``, when given, must be the index's method, parameters and model (they are
+    checked, never applied). Files already indexed are skipped with a message.
+
+    Returns:
+        the updated index and ``{"added": [paths], "duplicates": [paths], "skipped": [{"path", "why"}]}``.
+
+    Raises:
+        RetrievalIndexError: another method, parameters or model than the index's; an index of another format
+            version; no motion file under ``src``; a bad file (named) unless ``skip_bad``; a method that cannot
+            append (named, with the way out).
+    """
+    from mocapkit.datasets.formats.motion_io import find_motion_files
     from mocapkit.motion.layouts import LANDMARK_NAMES
 
-    model_sha1 = getattr(estimator, "model_sha1_", None)
-    index = MotionIndex(
-        name, estimator, files, [lm for lm in LANDMARK_NAMES if lm in common], skipped, str(src.resolve()), model_sha1
-    )
-    if out is not None:
-        index.save(out)
-        _progress(f"wrote {out} ({len(files)} clips, {len(skipped)} skipped)", quiet)
-    return index
+    loaded = MotionIndex.load(index)
+    name = loaded.method_name
+    if method is not None and method != name:
+        raise RetrievalIndexError(
+            f"--index {index} was built with --method {name}; files cannot be added with --method {method} "
+            "(leave --method out to use the index's, or build another index)"
+        )
+    if overrides:
+        asked = _jsonable(make_method(name, overrides).get_params(deep=False))
+        have = _jsonable(loaded.method.get_params(deep=False))
+        differ = {k: (have.get(k), v) for k, v in asked.items() if k not in ("checkpoint", "onnx") and have.get(k) != v}
+        if differ:
+            listed = ", ".join(f"{k}: index {a!r}, asked {b!r}" for k, (a, b) in differ.items())
+            raise RetrievalIndexError(
+                f"--index {index} was built with other parameters of {name} ({listed}); --add uses the index's"
+            )
+    if ckpt is not None and file_sha1(ckpt) != loaded.model_sha1:
+        raise RetrievalIndexError(
+            f"--ckpt {ckpt} (SHA-1 {file_sha1(ckpt)[:12]}) is not the model the index {index} was built with "
+            f"(SHA-1 {str(loaded.model_sha1)[:12]})"
+        )
+    sources = [src] if isinstance(src, (str, os.PathLike)) else list(src)
+    paths: list[Path] = []
+    for item in sources:
+        item = Path(item)
+        if item.is_dir():
+            paths += find_motion_files(item)
+        elif item.is_file():
+            paths.append(item)
+        else:
+            raise RetrievalIndexError(f"--add {item}: no such file or folder")
+    if not paths:
+        raise RetrievalIndexError(
+            f"--add {', '.join(str(s) for s in sources)}: no motion files (looked for .amc, .bvh, .c3d, "
+            ".skeleton, MSR *_skeleton3D.txt, recursively)"
+        )
+    indexed = {str(Path(p).resolve()) for p in loaded.paths}
+    fresh, duplicates, seen = [], [], set()
+    for path in paths:
+        key = str(path.resolve())
+        if key in indexed or key in seen:
+            duplicates.append(key)
+            _progress(f"already indexed, skipped: {path}", quiet)
+        else:
+            fresh.append(path)
+            seen.add(key)
+    report = {"added": [], "duplicates": duplicates, "skipped": []}
+    if not fresh:
+        _progress(f"nothing to add: all {len(paths)} files are in the index already", quiet)
+        return loaded, report
+    _progress(f"adding {len(fresh)} files to {index} ({name}, {len(loaded.files)} clips)", quiet)
+    motions, files, skipped, landmark_sets = _read_files(fresh, loaded.method, skip_bad, quiet)
+    report["skipped"] = skipped
+    if motions:
+        start = time.perf_counter()
+        try:
+            loaded.method.add(motions)
+        except NotImplementedError as exc:
+            raise RetrievalIndexError(
+                f"--index {index}: {exc}; build the index again over all the files (mocapkit index --src DIR)"
+            ) from exc
+        _progress(f"added {len(motions)} clips in {time.perf_counter() - start:.1f} s", quiet)
+        common = set(loaded.landmarks).intersection(*landmark_sets)
+        loaded.landmarks = [lm for lm in LANDMARK_NAMES if lm in common]
+        loaded.files = loaded.files + files
+        report["added"] = [f["path"] for f in files]
+    loaded.skipped = loaded.skipped + skipped
+    loaded.save(index)
+    return loaded, report
 
 
 def search_index(

@@ -110,6 +110,33 @@ def test_landmarks_of_a_bvh_rig_and_known_layouts():
     assert find_landmarks(["Hips", "LeftUpLeg", "RightUpLeg", "Head"])["l_hip"] == 1
 
 
+CMU_BVH = SHARED / "samples" / "bvh" / "cmu_131_01.bvh"
+
+
+def test_landmarks_of_the_cmu_bvh_rig():
+    """The CMU BVH rig names its hip joints LeftHip / RightHip (below LHipJoint / RHipJoint, the pelvis bones)."""
+    names = ["Hips", "LHipJoint", "LeftHip", "LeftKnee", "LeftAnkle", "LeftToe", "RHipJoint", "RightHip"]
+    names += ["RightKnee", "RightAnkle", "RightToe", "lowerback", "Chest", "Chest2", "lowerneck", "Neck", "Head"]
+    names += ["LeftCollar", "LeftShoulder", "LeftElbow", "LeftWrist", "RightCollar", "RightShoulder"]
+    names += ["RightElbow", "RightWrist"]
+    found = {lm: names[j] for lm, j in find_landmarks(names).items()}
+    assert set(found) == set(LANDMARK_NAMES)
+    assert (found["l_hip"], found["r_hip"], found["pelvis"]) == ("LeftHip", "RightHip", "Hips")
+    assert (found["l_knee"], found["l_shoulder"], found["r_elbow"]) == ("LeftKnee", "LeftShoulder", "RightElbow")
+
+
+@needs(CMU_BVH)
+def test_a_cmu_bvh_file_is_normalised_facing_forward():
+    from mocapkit.datasets import read_motion
+
+    p = normalised_landmarks(read_motion(CMU_BVH))
+    assert p.shape[1:] == (20, 3) and np.isfinite(p).all()
+    lm = LANDMARK_NAMES.index
+    assert p[:, lm("l_hip"), 0].mean() > 0.03  # the left hip on +x: it faces +z
+    assert (p[:, lm("l_foot"), 2] - p[:, lm("l_ankle"), 2]).mean() > 0.05  # toes ahead of the ankle
+    assert p[:, lm("head"), 1].mean() > 0.4
+
+
 def test_normalisation_removes_translation_heading_and_size():
     motion = _walker()
     base = normalised_landmarks(motion)

@@ -1,0 +1,99 @@
+"""Search inside long takes: subsequence DTW behind a windowed prefilter, and ``mocapkit search --within``."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mocapkit.cli import main as cli
+from mocapkit.retrieval import RetrievalIndexError, build_index
+from mocapkit.retrieval.subsequence import best_subsequence, search_within, segment_iou, window_descriptors
+from tests.shared_data import synthetic_hdm05_folder
+
+
+def _shape(frames: int) -> np.ndarray:
+    """A 3-d curve over one cycle, ``[frames, 3]``: the pattern planted in the takes."""
+    t = np.linspace(0, 2 * np.pi, frames)
+    return np.stack([np.sin(t), np.cos(2 * t), t / 6], axis=1)
+
+
+def _walk(frames: int, seed: int) -> np.ndarray:
+    return np.random.default_rng(seed).normal(scale=0.3, size=(frames, 3)).cumsum(axis=0) * 0.05
+
+
+def test_windows_and_iou():
+    x = np.arange(23, dtype=float)[:, None]
+    starts, desc = window_descriptors(x, 10, 4, 3)
+    assert starts.tolist() == [0, 4, 8, 12, 13]  # the last window flush with the end
+    assert desc.shape == (5, 3) and desc[1].tolist() == [4.0, 8.0, 13.0]
+    assert window_descriptors(x[:5], 10, 4, 3)[0].tolist() == [0]  # shorter than a window: the whole take
+    assert segment_iou((0, 10), (5, 15)) == pytest.approx(5 / 15)
+    assert segment_iou((0, 10), (10, 20)) == 0.0
+
+
+def test_subsequence_dtw_finds_a_time_warped_copy():
+    take = _walk(400, 0)
+    take[150:240] = _shape(90)  # the 60-frame query, played 1.5 times slower
+    start, end, distance = best_subsequence(_shape(60), take, 30, 120)
+    assert abs(start - 150) <= 2 and abs(end - 240) <= 2 and distance < 0.05
+    # the length limits hold: a copy longer than max_length is not returned as one segment
+    found = best_subsequence(_shape(60), take, 30, 70)
+    assert found is None or found[1] - found[0] <= 70
+
+
+def test_search_within_ranks_planted_copies_over_takes():
+    takes = [_walk(3000, 1), _walk(2000, 2), _walk(2500, 3)]
+    truth = [(0, 700, 760), (2, 1900, 1980), (1, 100, 150)]  # same speed, slower, faster
+    for t, s, e in truth:
+        takes[t][s:e] = _shape(e - s)
+    matches = search_within(_shape(60), takes, k=3)
+    assert len(matches) == 3
+    assert [m.distance for m in matches] == sorted(m.distance for m in matches)
+    hits = {
+        (t, s, e) for t, s, e in truth for m in matches if m.take == t and segment_iou((m.start, m.end), (s, e)) >= 0.5
+    }
+    assert hits == set(truth)
+    with pytest.raises(ValueError, match="the query has 3 features per frame, the takes \\[4\\]"):
+        search_within(_shape(60), [np.zeros((100, 4))])
+
+
+@pytest.fixture(scope="module")
+def folder(tmp_path_factory) -> Path:
+    return synthetic_hdm05_folder(
+        tmp_path_factory, ("hopBothLegs1hops", "squat1Reps"), clips_per_actor=2, max_frames=240
+    )
+
+
+def test_search_within_cli(folder, tmp_path, capsys):
+    out = tmp_path / "index"
+    assert cli(["index", str(folder / "bd"), "--out", str(out), "--method", "dtw_takes"]) == 0
+    query = min((folder / "mm").glob("*squat1Reps*.amc"))
+    capsys.readouterr()
+    assert cli(["search", "--index", str(out), str(query), "--within", "-k", "2", "--json"]) == 0
+    results = json.loads(capsys.readouterr().out)
+    hits = results[0]["results"]
+    assert results[0]["query"] == str(query) and 1 <= len(hits) <= 2
+    manifest = json.loads((out / "manifest.json").read_text())
+    duration = {f["path"]: f["frames"] / f["fps"] for f in manifest["files"]}
+    for hit in hits:
+        assert 0.0 <= hit["start"] < hit["end"] <= duration[hit["path"]] + 1e-6
+    assert "squat1Reps" in Path(hits[0]["path"]).name
+    assert [h["distance"] for h in hits] == sorted(h["distance"] for h in hits)
+    # an indexed query's own file is not searched
+    own = min((folder / "bd").glob("*squat1Reps*.amc"))
+    assert cli(["search", "--index", str(out), str(own), "--within", "-k", "0", "--json"]) == 0
+    assert all(h["path"] != str(own.resolve()) for h in json.loads(capsys.readouterr().out)[0]["results"])
+    # plain text: file, seconds
+    assert cli(["search", "--index", str(out), str(query), "--within", "-k", "1"]) == 0
+    assert " s - " in capsys.readouterr().out
+
+
+def test_search_within_needs_a_dtw_index(folder, tmp_path):
+    index = build_index(
+        folder / "bd", tmp_path / "hod", method="hod", overrides=["n_words=8", "n_features=20"], quiet=True
+    )
+    with pytest.raises(RetrievalIndexError, match="--within needs an index of a DTW method.*built with hod"):
+        index.search_within([str(min((folder / "mm").glob("*.amc")))])
