@@ -54,6 +54,12 @@ class KinectReconstructionBenchmark(Benchmark):
         transfer_root: a folder of motion files of another data set (searched recursively), scored as the
             protocol ``transfer_name`` by models trained on all of ``root`` (module docstring); None: none.
         transfer_name: that protocol's (and group's) name.
+        real_inputs: folders or files of real Kinect skeletons (MSR Action3D, NTU ``.skeleton``; no ground truth):
+            every fitted model also corrects them, and the cell reports the real-data proxies before and after
+            (:func:`~mocapkit.kinect.metrics.steadiness_summary`: ``real_bone_sd_not_worse``, ``real_jitter_not_worse``
+            (shares of files), ``real_bone_sd_after`` / ``_before``, ``real_jitter_after`` / ``_before`` (cm, means),
+            ``real_new_swap_events``); None: none.
+        real_max_files: read only this many of them (every k-th in name order, evenly spread); None: all.
     """
 
     title = "Kinect posture reconstruction (simulated Kinect v1 from real mocap, held-out performers)"
@@ -73,6 +79,8 @@ class KinectReconstructionBenchmark(Benchmark):
         noise: str = "mean_error",
         transfer_root: str | None = None,
         transfer_name: str = "transfer",
+        real_inputs: list[str] | None = None,
+        real_max_files: int | None = None,
     ):
         from mocapkit.datasets.formats.motion_io import find_motion_files
         from mocapkit.datasets.synthetic.kinect_noise import KinectNoiseConfig
@@ -121,6 +129,9 @@ class KinectReconstructionBenchmark(Benchmark):
             raise ComparisonError(f"benchmark.protocols: {unknown} are not performer folders of {root} ({groups})")
         self.fps, self.clips_per_group, self.clip_seed = float(fps), clips_per_group, clip_seed
         self.cache_fits = bool(cache_fits)
+        self.real_inputs = [str(p) for p in (real_inputs or [])]
+        self.real_max_files = real_max_files
+        self._real: list | None = None
         self._pairs: dict[int, list] = {}
         self._fits: dict[tuple, tuple[object, float]] = {}
 
@@ -168,7 +179,47 @@ class KinectReconstructionBenchmark(Benchmark):
             "noise": self.noise,
             "transfer_root": None if self.transfer_root is None else str(self.transfer_root),
             "transfer_name": self.transfer_name,
+            "real_inputs": self.real_inputs,
+            "real_max_files": self.real_max_files,
         }
+
+    def real_clips(self) -> list[tuple[str, np.ndarray, np.ndarray, int]]:
+        """``(file, positions [T, 20, 3], state [T, 20], swap lag)`` of every file of ``real_inputs`` (read once;
+        :func:`~mocapkit.kinect.kinect_fix.read_kinect_file`; unreadable or all-zero files are left out)."""
+        if self._real is None:
+            from mocapkit.datasets.formats.motion_io import expand_motion_paths
+            from mocapkit.kinect.kinect_fix import read_kinect_file, swap_lag
+
+            self._real = []
+            for root in self.real_inputs:
+                files = expand_motion_paths([root], "benchmark.real_inputs", empty_error=ComparisonError)
+                if self.real_max_files is not None and len(files) > self.real_max_files:
+                    files = [files[i] for i in np.linspace(0, len(files) - 1, int(self.real_max_files)).astype(int)]
+                for path in files:
+                    try:
+                        raw, state, _, fps = read_kinect_file(path)
+                    except (OSError, ValueError):
+                        continue
+                    self._real.append((str(path), raw, state, swap_lag(fps)))
+        return self._real
+
+    def real_scores(self, fitted) -> dict:
+        """The real-data proxies of ``fitted`` on :meth:`real_clips`, per source folder and pooled: ``{"all":
+        summary, folder: summary}`` (:func:`~mocapkit.kinect.metrics.steadiness_summary`); {} without real inputs."""
+        from mocapkit.kinect.metrics import steadiness, steadiness_summary
+
+        clips = self.real_clips()
+        if not clips:
+            return {}
+        fixed = fitted.predict([c[1] for c in clips], state=[c[2] for c in clips])
+        before = [steadiness(c[1], c[3]) for c in clips]
+        after = [steadiness(f, c[3]) for f, c in zip(fixed, clips)]
+        out = {"all": steadiness_summary(before, after)}
+        for root in self.real_inputs:
+            mine = [k for k, c in enumerate(clips) if c[0].startswith(str(Path(root)))]
+            if mine:
+                out[root] = steadiness_summary([before[k] for k in mine], [after[k] for k in mine])
+        return out
 
     # ------------------------------------------------------------------ scoring
     def _fitted(self, estimator, train: np.ndarray, seed: int) -> tuple[object, float, bool]:
@@ -227,7 +278,17 @@ class KinectReconstructionBenchmark(Benchmark):
             "frames_per_s": scores["frames_per_s"],
             "fit_seconds": fit_seconds,
         }
+        real = self.real_scores(fitted)
+        if real:
+            pooled = real["all"]
+            for key in ("bone_sd_cm", "jitter_cm"):
+                short = key.removesuffix("_cm")
+                metrics[f"real_{short}_not_worse"] = pooled[f"{key}_not_worse"]
+                metrics[f"real_{short}_before"] = pooled[f"{key}_before"]
+                metrics[f"real_{short}_after"] = pooled[f"{key}_after"]
+            metrics["real_new_swap_events"] = pooled["new_swap_events"]
         detail = {
+            "real": real,
             "n_test_frames": scores["n_frames"],
             "fit_cached": cached,
             "per_joint_cm": scores["per_joint_cm"],

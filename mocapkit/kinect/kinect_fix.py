@@ -1,13 +1,15 @@
-"""``mocapkit kinect-fix``: train Zhou 2014 ch. 5's Kinect posture reconstructor on simulated pairs of real mocap,
-then correct real Kinect skeletons with it.
+"""``mocapkit kinect-fix``: train a Kinect posture corrector (Zhou 2014 ch. 5's task) on simulated pairs of real
+mocap, then correct real Kinect skeletons with it.
 
-``train_kinect_model(mocap, out, method="gp")``
+``train_kinect_model(mocap, out, method=None, noise=None)``
     every motion file under ``mocap`` (HDM05/CMU ASF/AMC, BVH, C3D with body landmarks, ...) becomes a (Kinect,
     mocap) pair through the calibrated Kinect v1 simulator
-    (:func:`~mocapkit.datasets.synthetic.kinect_noise.simulate_pairs`, 30 fps); a
-    :class:`~mocapkit.kinect.reconstruction.KinectPostureReconstructor` is fitted on them and saved as one
-    ``.npz`` (:meth:`~mocapkit.kinect.reconstruction.KinectPostureReconstructor.save`), or with
-    ``method="bigru"`` / ``"transformer"`` (the registry's kinect methods, ``configs/kinect/method/NAME.yaml``; ``--set``
+    (:func:`~mocapkit.datasets.synthetic.kinect_noise.simulate_pairs`, 30 fps; :data:`DEFAULT_NOISE`, the
+    ``real_sensor`` calibration, by default); the registry's default method (``configs/kinect/method.yaml``:
+    ``bigru_steady``, docs/decisions.md#kinect-default) is fitted on them and saved. With ``method="gp"`` or
+    ``"zhou_thesis"`` a :class:`~mocapkit.kinect.reconstruction.KinectPostureReconstructor` is saved as one
+    ``.npz`` (:meth:`~mocapkit.kinect.reconstruction.KinectPostureReconstructor.save`), with
+    ``method="bigru"`` / ``"transformer"`` / ``"bigru_steady"`` (the registry's kinect methods, ``configs/kinect/method/NAME.yaml``; ``--set``
     Hydra overrides of their parameters) a learned refiner network retrained as a corrector
     (:class:`~mocapkit.kinect.learned.LearnedKinectCorrector`, one ``torch.save`` file read back with
     ``weights_only=True``).
@@ -19,8 +21,10 @@ then correct real Kinect skeletons with it.
     resampled to the model's 30 fps when it differs (MSR Action3D is 15 fps), read as Kinect-20 joints
     (:func:`kinect_clip`), reconstructed, and written as ``OUT/<name>.c3d`` (MSR-20 joint names, y up, metres
     stored as mm, at the model's rate): ``read_motion`` reads it back and ``mocapkit render`` draws it.
-    ``report.json`` lists every file: frames, filled entries, and without ground truth the steadiness before/after
-    (:func:`~mocapkit.kinect.metrics.bone_length_sd_cm`, :func:`~mocapkit.kinect.metrics.jitter_cm`);
+    ``report.json`` lists every file: frames, filled entries, the joints the sensor did not track (NTU files carry
+    the SDK's states, :func:`ntu_tracking_state`), and without ground truth the real-data proxies before/after
+    (:func:`~mocapkit.kinect.metrics.steadiness`: bone-length sd, jitter, joint-angle violations, swap events),
+    summarised over files (:func:`~mocapkit.kinect.metrics.steadiness_summary`);
     ``--plot N`` draws the first N as before/after strips (raw blue, corrected red).
 
 Wild input: a landmark missing in some frames (MSR's all-zero frames, NTU's lost tracks, C3D gaps) is filled by
@@ -42,10 +46,13 @@ from pathlib import Path
 
 import numpy as np
 
+from mocapkit.datasets.synthetic.kinect_noise import TRACKED
 from mocapkit.motion.container import Motion, all_coordinates
 from mocapkit.motion.layouts import LANDMARK_NAMES, MSR20, find_landmarks
 
 MODEL_FPS = 30.0
+#: The simulator calibration ``train_kinect_model`` trains on without ``noise`` (docs/decisions.md#kinect-default).
+DEFAULT_NOISE = "real_sensor"
 
 
 class KinectFixError(ValueError):
@@ -95,6 +102,46 @@ def kinect_clip(motion: Motion) -> tuple[np.ndarray, np.ndarray, int]:
     return positions, state, int((~observed).sum())
 
 
+def ntu_tracking_state(path: str | os.PathLike, motion: Motion) -> np.ndarray:
+    """The Kinect SDK's own per-joint tracking states of an NTU ``.skeleton`` file's main body (the body
+    ``read_motion`` chose, ``motion.metadata["kept_tracks"][0]``), on the 20 Kinect landmarks: int8 ``[T, 20]``
+    (2 tracked, 1 inferred, 0 not tracked; 0 in the frames without that body)."""
+    from mocapkit.datasets.formats.ntu_skeleton import read_skeleton
+    from mocapkit.motion.layouts import NTU25
+
+    seq = read_skeleton(path)
+    tracks = motion.metadata.get("kept_tracks") or []
+    if not tracks:
+        return np.zeros((seq.num_frames, len(LANDMARK_NAMES)), dtype=np.int8)
+    found = find_landmarks(NTU25.joint_names, NTU25.name)
+    states = seq.joint_tracking_state[tracks[0]]  # [T, 25]
+    out = states[:, [found[name] for name in LANDMARK_NAMES]].astype(np.int8)
+    out[~seq.present[tracks[0]]] = 0
+    return out
+
+
+def read_kinect_file(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray, int, float]:
+    """One real Kinect file as the models see it: resampled to :data:`MODEL_FPS`, the 20 landmarks, gaps filled
+    (:func:`kinect_clip`), and for an NTU ``.skeleton`` the SDK's own tracking states (:func:`ntu_tracking_state`;
+    a filled entry stays NOT_TRACKED). Returns ``(positions [T, 20, 3] m, state [T, 20] int8, filled entries,
+    the file's own frame rate)``; the reader's errors and :class:`KinectFixError` name the file."""
+    from mocapkit.datasets.formats.motion_io import read_motion
+
+    motion = read_motion(path)
+    source_fps = float(motion.fps)
+    resampled = motion.resample(MODEL_FPS)
+    raw, state, filled = kinect_clip(resampled)
+    if motion.metadata.get("format") == "ntu" and resampled.num_frames == motion.num_frames:
+        state = np.minimum(state, ntu_tracking_state(path, motion))
+    return raw, state, filled, source_fps
+
+
+def swap_lag(source_fps: float) -> int:
+    """Frames at :data:`MODEL_FPS` over which a jump of a file recorded at ``source_fps`` is spread (2 for MSR
+    Action3D's 15 fps): the ``lag`` of :func:`~mocapkit.kinect.metrics.swap_events`."""
+    return max(1, round(MODEL_FPS / float(source_fps)))
+
+
 def _as_msr_motion(positions: np.ndarray, fps: float, name: str, source: str) -> Motion:
     """Kinect-20 landmarks ``[T, 20, 3]`` (y up, m) as an MSR-20 Motion (its joint names and parents)."""
     found = find_landmarks(MSR20.joint_names, MSR20.name)
@@ -118,22 +165,22 @@ def train_kinect_model(
     out: str | os.PathLike,
     seed: int = 0,
     skip_bad: bool = False,
-    noise: str = "mean_error",
+    noise: str | None = None,
     method: str | None = None,
     overrides: Sequence[str] = (),
 ) -> dict:
     """Fit a Kinect corrector on simulated pairs of the motion files in ``mocap`` (files or folders, searched
-    recursively) and save it to ``out``: with ``method="gp"``
+    recursively) and save it to ``out``: with ``method="gp"`` or ``"zhou_thesis"``
     :class:`~mocapkit.kinect.reconstruction.KinectPostureReconstructor` (``.npz``), with ``"bigru"`` or
-    ``"transformer"`` :class:`~mocapkit.kinect.learned.LearnedKinectCorrector` (a ``torch.save`` file,
-    ``.pt`` by convention).
+    ``"transformer"`` or ``"bigru_steady"`` (the default) :class:`~mocapkit.kinect.learned.LearnedKinectCorrector`
+    (a ``torch.save`` file, ``.pt`` by convention).
 
     Args:
         seed: the simulation seed and the model's ``random_state``.
-        method: a kinect method of the registry that can be saved (``gp``, ``bigru``, ``transformer``;
-            ``mocapkit methods kinect``); None: the registry's default, ``gp``.
+        method: a kinect method of the registry that can be saved (``bigru_steady``, ``gp``, ``zhou_thesis``, ``bigru``, ``transformer``;
+            ``mocapkit methods kinect``); None: the registry's default (``configs/kinect/method.yaml``).
         noise: the simulator's calibration (:meth:`~mocapkit.datasets.synthetic.kinect_noise.KinectNoiseConfig.preset`:
-            ``mean_error`` or ``msr_steadiness``).
+            ``real_sensor``, ``mean_error`` or ``msr_steadiness``); None: :data:`DEFAULT_NOISE`.
         skip_bad: skip (and report) unreadable or unusable files instead of failing.
         overrides: ``--set`` Hydra overrides of the model's parameters (the GP's ``max_train_frames=5000``,
             ``gp_iterations``, weights, ...; the learned corrector's ``steps``, ``window``, ``network={hidden: 16}``).
@@ -150,6 +197,7 @@ def train_kinect_model(
     from mocapkit.train.registry import build_method, default_method, method_config
 
     method = method or default_method("kinect")
+    noise = DEFAULT_NOISE if noise is None else noise
     try:
         config = KinectNoiseConfig.preset(noise)
     except ValueError as exc:
@@ -159,7 +207,7 @@ def train_kinect_model(
     if not hasattr(model, "save"):
         raise KinectFixError(
             f"--method {method}: {type(model).__name__} has no model file to save; kinect-fix "
-            f"trains the methods that save one (gp, bigru, transformer)"
+            f"trains the methods that save one (bigru_steady, gp, zhou_thesis, bigru, transformer)"
         )
     files = expand_motion_paths(mocap, "--mocap", empty_error=KinectFixError)
     pairs, skipped = simulate_pairs(files, config, seed=seed, fps=MODEL_FPS, skip_bad=skip_bad, progress=True)
@@ -239,19 +287,26 @@ class KinectFixReport:
     fixed: list[dict] = field(default_factory=list)
     skipped: list[list[str]] = field(default_factory=list)
     frames_per_s: float = float("nan")
+    summary: dict = field(default_factory=dict)
 
     def to_text(self) -> str:
         lines = [
             (f"[kinect-fix] corrected {len(self.fixed)} file(s) with {self.model} ({self.frames_per_s:,.0f} frames/s)")
         ]
-        if self.fixed:
-            mean = {
-                k: float(np.mean([f[k] for f in self.fixed]))
-                for k in ("bone_sd_raw_cm", "bone_sd_fixed_cm", "jitter_raw_cm", "jitter_fixed_cm")
-            }
+        if self.summary:
+            s = self.summary
             lines.append(
-                f"  bone-length sd {mean['bone_sd_raw_cm']:.2f} → {mean['bone_sd_fixed_cm']:.2f} cm, "
-                f"jitter {mean['jitter_raw_cm']:.2f} → {mean['jitter_fixed_cm']:.2f} cm (means over files)"
+                "  means over files, before → after (share of files not worse): "
+                + ", ".join(
+                    f"{label} {s[k + '_before']:.2f} → {s[k + '_after']:.2f}{unit} ({100 * s[k + '_not_worse']:.0f} %)"
+                    for k, label, unit in (
+                        ("bone_sd_cm", "bone-length sd", " cm"),
+                        ("jitter_cm", "jitter", " cm"),
+                        ("angle_violations_pct", "joint-angle violations", " %"),
+                        ("swap_events", "swap events", ""),
+                    )
+                )
+                + f"; new swap events {s['new_swap_events']:.0f}"
             )
             filled = [f for f in self.fixed if f["filled_entries"]]
             if filled:
@@ -281,13 +336,9 @@ def fix_kinect_files(
             ``w_temporal``, ``w_reliability``, ``energy_unit=0.1``, ...; the learned corrector's ``inference_window``,
             ``overlap``); a key the model does not have fails naming it and listing the model's parameters.
     """
-    from mocapkit.datasets.formats.motion_io import (
-        expand_motion_paths,
-        read_motion,
-        write_motion,
-    )
+    from mocapkit.datasets.formats.motion_io import expand_motion_paths, write_motion
     from mocapkit.io_atomic import atomic_write_text
-    from mocapkit.kinect.metrics import bone_length_sd_cm, jitter_cm
+    from mocapkit.kinect.metrics import steadiness, steadiness_summary
 
     name = str(model)
     if isinstance(model, (str, os.PathLike)):
@@ -306,9 +357,7 @@ def fix_kinect_files(
     total_frames, total_seconds = 0, 0.0
     for path in files:
         try:
-            motion = read_motion(path)
-            source_fps = motion.fps
-            raw, state, filled = kinect_clip(motion.resample(MODEL_FPS))
+            raw, state, filled, source_fps = read_kinect_file(path)
         except (OSError, ValueError) as exc:
             reason = str(exc) if str(path) in str(exc) else f"{path}: {exc}"
             if not skip_bad:
@@ -321,6 +370,7 @@ def fix_kinect_files(
         total_frames += len(raw)
         target = out_dir / f"{path.stem}.c3d"
         write_motion(target, _as_msr_motion(fixed, MODEL_FPS, path.stem, str(path)))
+        before, after = steadiness(raw, swap_lag(source_fps)), steadiness(fixed, swap_lag(source_fps))
         entry = {
             "input": str(path),
             "output": str(target),
@@ -328,10 +378,13 @@ def fix_kinect_files(
             "fps": MODEL_FPS,
             "source_fps": source_fps,
             "filled_entries": filled,
-            "bone_sd_raw_cm": bone_length_sd_cm(raw),
-            "bone_sd_fixed_cm": bone_length_sd_cm(fixed),
-            "jitter_raw_cm": jitter_cm(raw),
-            "jitter_fixed_cm": jitter_cm(fixed),
+            "untracked_entries": int((state != TRACKED).sum()),
+            "bone_sd_raw_cm": before["bone_sd_cm"],
+            "bone_sd_fixed_cm": after["bone_sd_cm"],
+            "jitter_raw_cm": before["jitter_cm"],
+            "jitter_fixed_cm": after["jitter_cm"],
+            "before": before,
+            "after": after,
         }
         if len(report.fixed) < plot:
             entry["plot"] = str(_plot_before_after(raw, fixed, path, out_dir))
@@ -339,12 +392,15 @@ def fix_kinect_files(
     if not report.fixed and not report.skipped:
         raise KinectFixError(f"input {', '.join(map(str, inputs))}: no motion files")
     report.frames_per_s = total_frames / total_seconds if total_seconds > 0 else float("nan")
+    if report.fixed:
+        report.summary = steadiness_summary([f["before"] for f in report.fixed], [f["after"] for f in report.fixed])
     atomic_write_text(
         out_dir / "report.json",
         json.dumps(
             {
                 "model": report.model,
                 "frames_per_s": report.frames_per_s,
+                "summary": report.summary,
                 "fixed": report.fixed,
                 "skipped": report.skipped,
             },

@@ -55,6 +55,7 @@ from mocapkit.kinect.reconstruction import (
     _check_pairs,
     _check_states,
 )
+from mocapkit.kinect.steady import STEADY_PARAMS, check_steady_params, steady_output
 from mocapkit.motion.frames import refine_windows
 from mocapkit.motion.layouts import LANDMARK_NAMES, LANDMARK_PARENTS
 
@@ -108,6 +109,13 @@ class LearnedKinectCorrector(_ClipCorrector, BaseEstimator):
             as missing, in training and prediction, so it fills them from the tracked joints and frames (the
             refiners' missing mask) instead of correcting their positions; the loss still counts them. False
             (default): the state is not used. Without states every joint counts as tracked.
+        bone_weight, velocity_weight: the training loss's steadiness terms
+            (:class:`~mocapkit.train.refine_module.MotionRefinementModule`): the mean bone-length error and the mean
+            frame-to-frame velocity error against the mocap, beside the joint error (weight 1); 0.1 and 0.5 are the
+            mocap refiners' own. Larger values train a steadier corrector.
+        tracked_correction, smooth_window, rigid_bones: the output options of :mod:`mocapkit.kinect.steady`, applied
+            after the network (the share of the correction a TRACKED joint gets; a zero-lag Savitzky–Golay filter
+            of that many frames, 0 off; every bone at the clip's median length).
         random_state: seeds the initialisation and the batches.
         trainer: Lightning ``Trainer`` arguments over ``configs/trainer/default.yaml`` and the estimator's own
             (``max_steps=steps``, no logger, no checkpoint, no progress bar), e.g. ``{"accelerator": "gpu",
@@ -123,6 +131,8 @@ class LearnedKinectCorrector(_ClipCorrector, BaseEstimator):
 
     trains_network = True  # fit trains a network: "learned" in the method registry (mocapkit.train.registry)
     _fitted = "module_"
+    #: Parameters used only by :meth:`predict`: the comparison benchmark reuses one fit across them.
+    predict_params = ("inference_window", "overlap", *STEADY_PARAMS)
 
     def __init__(
         self,
@@ -135,6 +145,11 @@ class LearnedKinectCorrector(_ClipCorrector, BaseEstimator):
         inference_window: int | None = None,
         overlap: int | None = None,
         untracked_as_missing: bool = False,
+        bone_weight: float = 0.1,
+        velocity_weight: float = 0.5,
+        tracked_correction: float = 1.0,
+        smooth_window: int = 0,
+        rigid_bones: bool = False,
         random_state: int | None = 0,
         trainer: dict | None = None,
     ):
@@ -147,6 +162,11 @@ class LearnedKinectCorrector(_ClipCorrector, BaseEstimator):
         self.inference_window = inference_window
         self.overlap = overlap
         self.untracked_as_missing = untracked_as_missing
+        self.bone_weight = bone_weight
+        self.velocity_weight = velocity_weight
+        self.tracked_correction = tracked_correction
+        self.smooth_window = smooth_window
+        self.rigid_bones = rigid_bones
         self.random_state = random_state
         self.trainer = trainer
 
@@ -165,6 +185,9 @@ class LearnedKinectCorrector(_ClipCorrector, BaseEstimator):
             _check_nonneg(name, getattr(self, name), integer=True, minimum=1)
         _check_nonneg("window", self.window, integer=True, minimum=4)
         _check_nonneg("lr", self.lr)
+        _check_nonneg("bone_weight", self.bone_weight)
+        _check_nonneg("velocity_weight", self.velocity_weight)
+        check_steady_params(self.tracked_correction, self.smooth_window, self.rigid_bones, "LearnedKinectCorrector")
         if self.inference_window is not None:
             _check_nonneg("inference_window", self.inference_window, integer=True, minimum=4)
         if self.overlap is not None:
@@ -186,6 +209,8 @@ class LearnedKinectCorrector(_ClipCorrector, BaseEstimator):
             model={"_target_": ARCHITECTURES[self.architecture], **dict(self.network or {})},
             optimizer={"_target_": "torch.optim.Adam", "_partial_": True, "lr": float(self.lr)},
             skeleton=kinect_skeleton(bone_lengths),
+            bone_weight=float(self.bone_weight),
+            velocity_weight=float(self.velocity_weight),
         )
 
     def fit(self, kinect_clips, mocap_clips, states=None) -> LearnedKinectCorrector:
@@ -261,6 +286,8 @@ class LearnedKinectCorrector(_ClipCorrector, BaseEstimator):
             window=int(skeleton["window"]),
             lr=float(hparams["optimizer"].get("lr", 1e-3)),
             untracked_as_missing=bool(skeleton.get("untracked_as_missing", False)),
+            bone_weight=float(hparams.get("bone_weight", 0.1)),
+            velocity_weight=float(hparams.get("velocity_weight", 0.5)),
         ).set_params(**params)
         corrector._check_params()
         corrector.module_ = module.cpu().eval()
@@ -328,9 +355,10 @@ class LearnedKinectCorrector(_ClipCorrector, BaseEstimator):
             with torch.inference_mode():
                 return self.module_(torch.from_numpy(positions), torch.from_numpy(missing)).numpy()
 
-        return correct_in_windows(
+        corrected = correct_in_windows(
             run, x, state, self.untracked_as_missing, self.window, self.inference_window, self.overlap
         )
+        return steady_output(x, corrected, state, self.tracked_correction, self.smooth_window, self.rigid_bones)
 
     # ------------------------------------------------------------------ export
     def export_onnx(self, path: str | os.PathLike, **check) -> dict:
@@ -352,6 +380,9 @@ class LearnedKinectCorrector(_ClipCorrector, BaseEstimator):
                 "inference_window": self.inference_window,
                 "overlap": self.overlap,
                 "untracked_as_missing": bool(self.untracked_as_missing),
+                "tracked_correction": float(self.tracked_correction),
+                "smooth_window": int(self.smooth_window),
+                "rigid_bones": bool(self.rigid_bones),
             },
         }
         return export_refiner(self.module_.model, path, skeleton, **check)
@@ -418,7 +449,7 @@ class OnnxKinectCorrector(_ClipCorrector, BaseEstimator):
             return self.session_.run(["refined"], {"positions": positions, "missing": missing})[0]
 
         c = self.corrector_
-        return correct_in_windows(
+        corrected = correct_in_windows(
             run,
             x,
             state,
@@ -426,6 +457,14 @@ class OnnxKinectCorrector(_ClipCorrector, BaseEstimator):
             int(c["window"]),
             c["inference_window"] if self.inference_window is None else self.inference_window,
             c["overlap"] if self.overlap is None else self.overlap,
+        )
+        return steady_output(
+            x,
+            corrected,
+            state,
+            float(c.get("tracked_correction", 1.0)),
+            int(c.get("smooth_window", 0)),
+            bool(c.get("rigid_bones", False)),
         )
 
 

@@ -70,6 +70,7 @@ from sklearn.utils import check_random_state
 from sklearn.utils.validation import check_is_fitted
 
 from mocapkit.datasets.cache_files import save_npz_atomic
+from mocapkit.kinect.steady import check_steady_params, steady_output
 from mocapkit.motion.container import all_coordinates
 from mocapkit.motion.geometry import TEMPLATE_BONES, hip_line_heading, retarget, turn_about_up
 from mocapkit.motion.layouts import LANDMARK_NAMES, LANDMARK_PARENTS
@@ -566,7 +567,9 @@ class KinectPostureReconstructor(BaseEstimator):
         rigid_bones: give every output bone the clip's median reconstructed length, keeping the bone directions
             (:func:`~mocapkit.motion.geometry.retarget`; not in the thesis). The energy corrects each joint on
             its own, so its output's bone lengths wobble from frame to frame even on a steady input; this makes the
-            skeleton rigid, as a real body is.
+            skeleton rigid, as a real body is. Applied after ``smooth_window``.
+        tracked_correction, smooth_window: the output options of :mod:`mocapkit.kinect.steady` (the share of the
+            correction a TRACKED joint gets; a zero-lag Savitzky–Golay filter of that many frames, 0 off).
         device: torch device of the GP training (``"cpu"``, ``"cuda"``); prediction runs in numpy.
         random_state: seeds the frame subset and the k-means initialisation of the inducing points.
 
@@ -586,6 +589,8 @@ class KinectPostureReconstructor(BaseEstimator):
         "still_threshold",
         "energy_unit",
         "rigid_bones",
+        "tracked_correction",
+        "smooth_window",
     )
 
     def __init__(
@@ -604,6 +609,8 @@ class KinectPostureReconstructor(BaseEstimator):
         still_threshold: float = 0.01,
         energy_unit: float = 0.01,
         rigid_bones: bool = False,
+        tracked_correction: float = 1.0,
+        smooth_window: int = 0,
         device: str = "cpu",
         random_state: int | None = 0,
     ):
@@ -621,6 +628,8 @@ class KinectPostureReconstructor(BaseEstimator):
         self.still_threshold = still_threshold
         self.energy_unit = energy_unit
         self.rigid_bones = rigid_bones
+        self.tracked_correction = tracked_correction
+        self.smooth_window = smooth_window
         self.device = device
         self.random_state = random_state
 
@@ -632,9 +641,7 @@ class KinectPostureReconstructor(BaseEstimator):
             raise ValueError("at least one of w_spatial, w_temporal, w_reliability must be positive")
         if self.reliability not in COMBINATIONS:
             raise ValueError(f"reliability={self.reliability!r}: expected one of {COMBINATIONS}")
-        if not isinstance(self.rigid_bones, (bool, np.bool_)):
-            # a bad parameter value, a ValueError as every other check here
-            raise ValueError(f"rigid_bones={self.rigid_bones!r}: must be True or False")  # noqa: TRY004
+        check_steady_params(self.tracked_correction, self.smooth_window, self.rigid_bones, "KinectPostureReconstructor")
         _check_nonneg("energy_unit", self.energy_unit)
         if self.energy_unit <= 0:
             raise ValueError(f"energy_unit={self.energy_unit!r}: must be positive (metres per unit)")
@@ -771,9 +778,7 @@ class KinectPostureReconstructor(BaseEstimator):
         for t in range(head, T):  # sequential over frames
             c = 2.0 * out[t - 1] - out[t - 2] - x[t]
             out[t] = x[t] + _safe_ratio(base_num[t] + two_wt * c, base_den[t] + two_wt)
-        if self.rigid_bones:
-            out = retarget(out, np.median(bone_lengths(out), axis=0))
-        return out
+        return steady_output(x, out, state, self.tracked_correction, self.smooth_window, self.rigid_bones)
 
 
 def _safe_ratio(num: np.ndarray, den: np.ndarray) -> np.ndarray:

@@ -273,3 +273,26 @@ def test_bad_files_raise_naming_the_file_or_are_reported(tmp_path):
     gappy[10:20, motion.joint_names.index("lhand")] = np.nan
     with pytest.raises(KinectInputError, match=r"squat1Reps_bd_001.*l_hand.*unobserved"):
         kinect20_from_motion(replace(motion, positions=gappy, missing=None))
+
+
+def test_real_sensor_preset_jitters_white_rarely_swaps_and_never_stops_tracking():
+    from mocapkit.datasets.synthetic.kinect_noise import NOISE_PRESETS, REAL_SENSOR_JITTER_SCALE
+    from mocapkit.kinect.metrics import high_frequency_share, swap_events
+
+    assert "real_sensor" in NOISE_PRESETS
+    default, real = KinectNoiseConfig.preset("mean_error"), KinectNoiseConfig.preset("real_sensor")
+    assert real.jitter_sigma_m["hand"] == pytest.approx(REAL_SENSOR_JITTER_SCALE * default.jitter_sigma_m["hand"])
+    assert real.surface_radius_m == default.surface_radius_m and real.joint_offset_m == default.joint_offset_m
+    clip = moving_clip(seconds=30.0, turns=1.0)
+    side = VirtualCamera(np.array([2.5, 0.8, 0.0]), np.array([0.0, 0.9, 0.0]))
+    noisy_default, _ = simulate_kinect(clip, default, seed=4, camera=side)
+    noisy_real, state_real = simulate_kinect(clip, real, seed=4, camera=side)
+    assert (state_real == NOT_TRACKED).sum() == 0 and (state_real == INFERRED).any()
+    # side-on for 30 s (the worst view): the default swaps the legs many times, the real sensor's calibration
+    # (50 times rarer swaps; the remaining events are inferred joints snapping) a few times
+    assert swap_events(noisy_default) > 10 and swap_events(noisy_real) < 0.25 * swap_events(noisy_default)
+    # white jitter: more of the velocity power above 3 Hz than the same jitter low-passed as the default's
+    calm = {"occlusion": False, "swaps": False}
+    low_passed = simulate_kinect(clip, replace(real, jitter_time_constant_s=0.1, **calm), seed=4)[0]
+    white = simulate_kinect(clip, replace(real, **calm), seed=4)[0]
+    assert high_frequency_share(white, 30.0) > high_frequency_share(low_passed, 30.0) + 0.1

@@ -19,8 +19,10 @@ TASK = "kinect"
 NETWORK = ["steps=3", "window=16", "batch_size=4"]
 FAST = {
     "gp": ["gp_iterations=2", "n_inducing=10", "max_train_frames=200"],
+    "zhou_thesis": ["gp_iterations=2", "n_inducing=10", "max_train_frames=200"],
     "random_forest": ["n_estimators=5"],
     "bigru": [*NETWORK, "network={hidden: 8}"],
+    "bigru_steady": [*NETWORK, "network={hidden: 8}"],
     "transformer": [*NETWORK, "network={dim: 16, layers: 1, ff: 32}"],
 }
 

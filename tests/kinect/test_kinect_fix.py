@@ -33,7 +33,7 @@ def model_path(tmp_path_factory):
         pytest.skip(f"{HDM05} is absent")
     out = tmp_path_factory.mktemp("kinect_model") / "model.npz"
     report = train_kinect_model(
-        sorted((HDM05 / "bd").glob("*.amc"))[:4], out, overrides=[f"{k}={v}" for k, v in TINY.items()]
+        sorted((HDM05 / "bd").glob("*.amc"))[:4], out, method="gp", overrides=[f"{k}={v}" for k, v in TINY.items()]
     )
     assert report["files"] == 4 and report["frames"] > 100 and not report["skipped"]
     return out
@@ -143,9 +143,10 @@ def test_cli_trains_and_applies_and_names_the_bad_file(tmp_path, capsys):
 
     model = tmp_path / "m.npz"
     clips = [str(p) for p in sorted((HDM05 / "dg").glob("*.amc"))[:3]]
-    tiny = ["--set", "gp_iterations=2", "--set", "n_inducing=10", "--set", "max_train_frames=200"]
+    tiny = ["--method", "gp", "--set", "gp_iterations=2", "--set", "n_inducing=10", "--set", "max_train_frames=200"]
     assert main(["kinect-fix", "train", "--mocap", *clips, "--out", str(model), *tiny]) == 0
-    assert "noise mean_error" in (printed := capsys.readouterr().out) and "written to" in printed and model.is_file()
+    # without --noise: the default calibration, real_sensor
+    assert "noise real_sensor" in (printed := capsys.readouterr().out) and "written to" in printed and model.is_file()
     assert (
         main(
             [
