@@ -100,7 +100,7 @@ class EnergyImage(nn.Module):
                 f"invalid energy image geometry: size={size}, extent={extent}, "
                 f"bone_samples={bone_samples}, smoothing={smoothing}"
             )
-        self.layout = get_layout(layout)
+        self.layout = layout = get_layout(layout)  # a name ("msr20" from data.layout) or a layout
         self.size = int(size)
         self.extent = float(extent)
         self.bone_samples = int(bone_samples)
@@ -174,30 +174,28 @@ class EnergyImage(nn.Module):
 
         Each point adds its weight to the nearest pixel (``splat="nearest"``) or
         to its four neighbours with bilinear shares (``splat="bilinear"``);
-        points outside the grid are dropped.
+        points outside the grid are dropped. The histogram has a 2-pixel border, cut off at the end: a point's
+        corner column clamped to ``[-2, size]`` puts every share that falls outside the grid into the border, so
+        no corner needs its own bounds test or clamp: the four corners are the offsets 0, 1, W and W+1 of one index.
         """
         size = self.size
+        wide = size + 4  # the bordered grid's side
         to_pixels = size / (2 * self.extent)
         u = (horizontal + self.extent) * to_pixels - 0.5  # column; pixel centres at integers
         v = (self.extent - vertical) * to_pixels - 0.5  # row 0 is the top
+        hist = torch.zeros(u.shape[0], wide * wide, dtype=u.dtype, device=u.device)
         if self.splat_mode == "nearest":
             u0, v0 = torch.floor(u + 0.5), torch.floor(v + 0.5)
-            corners = [(u0, v0, weight)]
-        else:
-            u0, v0 = torch.floor(u), torch.floor(v)
-            fu, fv = u - u0, v - v0
-            corners = [
-                (u0, v0, weight * (1 - fu) * (1 - fv)),
-                (u0 + 1, v0, weight * fu * (1 - fv)),
-                (u0, v0 + 1, weight * (1 - fu) * fv),
-                (u0 + 1, v0 + 1, weight * fu * fv),
-            ]
-        hist = torch.zeros(u.shape[0], size * size, dtype=u.dtype, device=u.device)
-        for cu, cv, cw in corners:
-            inside = (cu >= 0) & (cu <= size - 1) & (cv >= 0) & (cv <= size - 1)
-            index = (cv.clamp(0, size - 1) * size + cu.clamp(0, size - 1)).long()
-            hist = hist.scatter_add(1, index, cw * inside.to(cw.dtype))
-        return hist.view(-1, size, size)
+            base = ((v0.clamp(-2, size) + 2) * wide + (u0.clamp(-2, size) + 2)).long()
+            return hist.scatter_add_(1, base, weight + torch.zeros_like(u)).view(-1, wide, wide)[:, 2:-2, 2:-2]
+        u0, v0 = torch.floor(u), torch.floor(v)
+        fu, fv = u - u0, v - v0
+        base = ((v0.clamp(-2, size) + 2) * wide + (u0.clamp(-2, size) + 2)).long()
+        hist.scatter_add_(1, base, weight * (1 - fu) * (1 - fv))
+        hist.scatter_add_(1, base + 1, weight * fu * (1 - fv))
+        hist.scatter_add_(1, base + wide, weight * (1 - fu) * fv)
+        hist.scatter_add_(1, base + wide + 1, weight * fu * fv)
+        return hist.view(-1, wide, wide)[:, 2:-2, 2:-2]
 
     def smooth(self, image: torch.Tensor) -> torch.Tensor:
         """Separable Gaussian blur with ``smoothing`` pixels of standard deviation (identity when 0)."""
@@ -223,7 +221,8 @@ class EnergyImage(nn.Module):
             weight = weight * ramp
         weight = weight.unsqueeze(-1).expand(n, m, t, p).reshape(n, -1)  # [N, M*T*P]
         flat = coords.reshape(n, -1, 3)
-        planes = [self.splat(flat[..., a], flat[..., b], weight) for a, b in PLANES.values()]
+        axes = flat.transpose(1, 2).contiguous()  # [N, 3, M*T*P]: each axis contiguous
+        planes = [self.splat(axes[:, a], axes[:, b], weight) for a, b in PLANES.values()]
         image = self.smooth(torch.stack(planes, dim=1))  # [N, 3, H, W]
         peak = image.amax(dim=(2, 3), keepdim=True)
         return image / peak.clamp(min=1e-8)

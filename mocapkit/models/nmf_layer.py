@@ -166,7 +166,14 @@ class NMFLayer(nn.Module):
     # ------------------------------------------------------------------ forward
 
     def forward(self, x: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:
-        """Codes ``[batch, n, k]`` (≥ 0) of ``x [batch, n, d]``; ``mask [batch, n]`` marks real items."""
+        """Codes ``[batch, n, k]`` (≥ 0) of ``x [batch, n, d]``; ``mask [batch, n]`` marks real items.
+
+        Always float32, also inside ``trainer.precision=bf16-mixed``: the multiplicative updates divide by sums
+        of products that bfloat16's 8-bit mantissa would round (autocast is switched off here)."""
+        with torch.autocast(x.device.type, enabled=False):
+            return self._codes(x.float(), mask)
+
+    def _codes(self, x: torch.Tensor, mask: torch.Tensor | None) -> torch.Tensor:
         x, mask, graph = self._prepare(x, mask)
         codes, dictionary = self.initial_codes(x, mask), self.dictionary
         if self.one_step_grad:

@@ -102,8 +102,12 @@ class GraphConv(nn.Module):
 
     def forward(self, x: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:
         """``x`` ``[N, C, T, J]`` (zero at absent frames), ``mask`` ``[N, 1, T, 1]`` (1 = present; None: all)."""
-        n, _, t, j = x.shape
+        n, c, t, j = x.shape
         a = self.adjacency if self.correction is None else self.adjacency + self.correction
+        # graph first in float32 only: under bf16 autocast the einsum form below was as fast or faster on this CPU
+        # (bench/RESULTS.md, Training throughput)
+        if not self.channelwise and c < self.out_channels and not torch.is_autocast_enabled(x.device.type):
+            return self._graph_first(x, a)
         y = self.conv(x).view(n, self.k, self.out_channels, t, j)
         if not self.channelwise:
             return torch.einsum("nkctj,kij->ncti", y, a)
@@ -113,6 +117,24 @@ class GraphConv(nn.Module):
         relation = torch.tanh(u[..., :, None] - v[..., None, :])  # [N, KR, J, J]
         q = self.relation_out(relation).view(n, self.k, self.out_channels, j, j)
         return torch.einsum("nkctj,nkcij->ncti", y, a[None, :, None] + self.alpha * q)
+
+    def _graph_first(self, x: torch.Tensor, a: torch.Tensor) -> torch.Tensor:
+        """The shared-topology product with the graph applied before the channels, for ``C < C'``.
+
+        ``sum_k A_k (W_k x + b_k)`` equals ``sum_k W_k (A_k x) + sum_k b_k (A_k 1)``: the joints of the whole batch
+        go through the three partitions in one matmul ``[N*C*T, J] @ [J, K*J]`` (the joints are the innermost
+        axis, so no copy), then one batched matmul with the ``[C', K*C]`` weights mixes channels and partitions.
+        With fewer input than output channels the ``K``-fold wider intermediate is the smaller one (the first
+        block, 9 → 3 × 64, and each widening block); the output matches the einsum form to float rounding. Used
+        in float32; under autocast the einsum form runs.
+        """
+        n, c, t, j = x.shape
+        k, c_out = self.k, self.out_channels
+        z = (x.reshape(-1, j) @ a.permute(2, 0, 1).reshape(j, k * j)).view(n, c, t, k, j)
+        z = z.permute(0, 3, 1, 2, 4).reshape(n, k * c, t * j)  # [N, (partition, channel), T*J]
+        weight = self.conv.weight.view(k, c_out, c).transpose(0, 1).reshape(c_out, k * c)
+        bias = (self.conv.bias.view(k, c_out, 1) * a.sum(2).unsqueeze(1)).sum(0)  # [C', J]: b through the graph
+        return (torch.matmul(weight, z).view(n, c_out, t, j) + bias.unsqueeze(1)).contiguous()
 
 
 TEMPORAL_UNITS = ("conv", "multiscale")

@@ -157,12 +157,14 @@ class MotionEmbeddingModule(ConfiguredOptimization, StagedSteps, L.LightningModu
             return loss
         z = self.model(batch["landmarks"])
         self._outputs.setdefault(stage, []).append(
-            {"z": z.detach().cpu(), **{k: batch[k].detach().cpu() for k in ("label", "group", "query")}}
+            # float32 whatever the training precision: embeddings are ranked (and ONNX exports them) in float32
+            {"z": z.detach().float().cpu(), **{k: batch[k].detach().cpu() for k in ("label", "group", "query")}}
         )
         return None
 
     def predict_step(self, batch: dict, batch_idx: int) -> dict:
-        return {"embedding": self.model(batch["landmarks"]), **{k: batch[k] for k in ("label", "group", "query")}}
+        embedding = self.model(batch["landmarks"]).float()
+        return {"embedding": embedding, **{k: batch[k] for k in ("label", "group", "query")}}
 
     def _retrieval_epoch_end(self, stage: str) -> None:
         outputs = self._outputs.pop(stage, [])

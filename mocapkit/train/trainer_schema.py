@@ -8,6 +8,10 @@ project's values (CPU, 30 epochs, ...). Keys whose type OmegaConf can hold exact
 ``str``, each possibly null) are typed, so ``trainer.min_epochs=abc`` fails at composition; unions
 (``devices: int | str | list``, ``limit_val_batches: int | float``) are ``Any``, as 1 and 1.0 differ there.
 
+``precision`` takes Lightning's values (``32-true``, ``bf16-mixed``, ``16-mixed``, ...) and ``auto``, this project's
+default: :func:`mocapkit.train.training.build_trainer` resolves it to ``bf16-mixed`` where the device has bfloat16
+arithmetic and ``32-true`` elsewhere (:func:`mocapkit.train.training.auto_precision`).
+
 The arguments the engine sets itself from other keys (:data:`SET_ELSEWHERE`) are left out, so setting
 them under ``trainer`` is an error naming the key to use instead rather than a value silently replaced.
 """

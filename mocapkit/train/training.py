@@ -77,12 +77,49 @@ def build_trainer(trainer: DictConfig | None = None, **arguments) -> L.Trainer:
         )
     if trainer is None:
         trainer = compose_config(config_name="trainer/default").trainer
+    precision = arguments.get("precision", trainer.get("precision"))
+    if str(precision) == "auto":
+        arguments["precision"] = auto_precision(arguments.get("accelerator", trainer.get("accelerator", "auto")))
     return build(trainer, **arguments)
+
+
+def cpu_has_bf16() -> bool:
+    """Whether this CPU multiplies bfloat16 natively: AMX tiles (torch's own probe), or AVX-512 BF16, which torch
+    does not report (``get_cpu_capability()`` says ``AVX512`` either way): ``avx512_bf16`` or ``amx_bf16`` among
+    the flags of ``/proc/cpuinfo``."""
+    import torch
+
+    if torch.cpu._is_amx_tile_supported():
+        return True
+    try:
+        flags = Path("/proc/cpuinfo").read_text()
+    except OSError:  # not Linux: torch's AMX probe alone decides
+        return False
+    return any(flag in flags.split() for flag in ("avx512_bf16", "amx_bf16"))
+
+
+def auto_precision(accelerator: str = "auto") -> str:
+    """``trainer.precision=auto`` resolved: ``bf16-mixed`` where the device the run trains on has bfloat16
+    arithmetic (a CUDA GPU with ``torch.cuda.is_bf16_supported()``; a CPU with AMX or AVX-512 BF16), else
+    ``32-true``. ``accelerator`` is the trainer's (``auto`` picks the GPU when CUDA sees one, as Lightning does).
+    The choice and its accuracy check: docs/decisions.md#bf16-mixed-precision."""
+    import torch
+
+    accelerator = str(accelerator).lower()
+    gpu = accelerator in ("gpu", "cuda") or (accelerator == "auto" and torch.cuda.is_available())
+    if gpu:
+        return "bf16-mixed" if torch.cuda.is_available() and torch.cuda.is_bf16_supported() else "32-true"
+    if accelerator in ("cpu", "auto"):
+        return "bf16-mixed" if cpu_has_bf16() else "32-true"
+    return "32-true"  # mps, tpu, ...: Lightning's float32 default
 
 
 #: The Trainer arguments a learned estimator's ``fit`` sets over ``configs/trainer/default.yaml`` (its ``trainer``
 #: parameter goes on top): ``max_steps`` counts the steps, so epochs are unbounded; nothing is written or printed.
+#: Float32 unless the ``trainer`` parameter asks otherwise (``{"precision": "auto"}`` or ``"bf16-mixed"``): the
+#: estimators' documented results were measured in float32.
 ESTIMATOR_TRAINER = {
+    "precision": "32-true",
     "max_epochs": -1,
     "logger": False,
     "enable_checkpointing": False,

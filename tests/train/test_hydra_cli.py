@@ -19,7 +19,7 @@ from omegaconf import OmegaConf
 from mocapkit.cli import main
 from mocapkit.train.config import CONFIG_DIR, ConfigError, compose_config
 from mocapkit.train.trainer_schema import SET_ELSEWHERE, trainer_keys
-from mocapkit.train.training import build
+from mocapkit.train.training import build_trainer
 from tests.shared_data import tiny_energy_vgg_run
 
 
@@ -107,7 +107,8 @@ def test_documented_trainer_keys_compose_without_plus():
     )
     assert cfg.trainer.max_steps == 5 and cfg.trainer.limit_val_batches == 0.5
     assert cfg.trainer.max_time == "00:00:01:00" and cfg.trainer.devices == "auto" and cfg.trainer.sync_batchnorm
-    trainer = build(cfg.trainer, logger=False, enable_progress_bar=False, enable_checkpointing=False)
+    # build_trainer, as `mocapkit train` does: it resolves precision=auto (the default) before Lightning sees it
+    trainer = build_trainer(cfg.trainer, logger=False, enable_progress_bar=False, enable_checkpointing=False)
     assert isinstance(trainer, lightning.Trainer)
     assert trainer.max_steps == 5 and trainer.limit_val_batches == 0.5
     # fast_dev_run takes a number of batches as well as true / false (its default)

@@ -46,7 +46,7 @@ def test_every_task_registers_methods_with_a_description():
 
 def test_defaults_are_registered_names():
     assert default_method("retrieval") == "dtw_mutual_proximity"
-    assert default_method("synthesis") == "slfm" and default_method("kinect") == "gp"
+    assert default_method("synthesis") == "slfm" and default_method("kinect") == "bigru_steady"
     assert default_method("refinement") == "linear" and default_method("gait") is None
     for task in TASKS:
         assert default_method(task) in (None, *method_names(task))
@@ -113,7 +113,7 @@ def test_methods_command_prints_the_table(capsys):
     assert lines[0].split() == ["task", "name", "learned", "description"]
     rows = {line.split()[1]: line.split() for line in lines[1:-1]}
     assert set(rows) == set(method_names("kinect"))
-    assert rows["gp"][:4] == ["kinect", "gp", "*", "no"]  # the default, marked; needs no trained model
-    assert rows["bigru"][:3] == ["kinect", "bigru", "yes"]  # trains a network in fit
+    assert rows["bigru_steady"][:4] == ["kinect", "bigru_steady", "*", "yes"]  # the default, marked; trains a network
+    assert rows["gp"][:3] == ["kinect", "gp", "no"]  # needs no trained network
     assert main(["methods", "dance"]) == 2
     assert "unknown task 'dance'" in capsys.readouterr().err
