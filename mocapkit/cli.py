@@ -20,7 +20,8 @@
     mocapkit refine IN OUT --method RUN/best.ckpt | --onnx FILE [--set KEY=VALUE ...] [--repair-outliers]
                     [--screen-outliers [METRES]]
     mocapkit index --src DIR --out INDEX [--method NAME] [--set KEY=VALUE ...] [--ckpt PATH] [--skip-bad]
-    mocapkit search --index INDEX QUERY [QUERY ...] [-k K] [--json]
+    mocapkit index --src DIR --out INDEX --add [--skip-bad]      (append to an index without rebuilding it)
+    mocapkit search --index INDEX QUERY [QUERY ...] [-k K] [--json] [--within]
     mocapkit synthesize INPUT [INPUT ...] --out DIR [--type SUBSTRING] [--variants N] [--frames F] [--seed S]
                         [--window SECONDS] [--method NAME] [--no-footskate] [--set KEY=VALUE ...]
                         [--format amc|bvh]                                      (Zhou 2014 ch. 4)
@@ -236,8 +237,24 @@ def cmd_refine(args: argparse.Namespace) -> None:
 
 
 def cmd_index(args: argparse.Namespace) -> None:
-    from mocapkit.retrieval.index import build_index
+    from mocapkit.retrieval.index import add_to_index, build_index
 
+    if args.add:
+        index, report = add_to_index(
+            args.out,
+            _one_of(args, "src_path", "src", "SRC"),
+            method=args.method,
+            overrides=tuple(args.set),
+            ckpt=args.ckpt,
+            skip_bad=args.skip_bad,
+        )
+        print(
+            f"[mocapkit] added {len(report['added'])} files to {args.out} ({len(index.files)} now, "
+            f"{index.method_name})"
+            + (f"; {len(report['duplicates'])} already indexed" if report["duplicates"] else "")
+            + (f"; skipped {len(report['skipped'])} (listed in {args.out}/manifest.json)" if report["skipped"] else "")
+        )
+        return
     index = build_index(
         _one_of(args, "src_path", "src", "SRC"),
         args.out,
@@ -257,6 +274,20 @@ def cmd_search(args: argparse.Namespace) -> None:
 
     from mocapkit.retrieval.index import search_index
 
+    if args.within:
+        from mocapkit.retrieval.index import MotionIndex
+
+        results = MotionIndex.load(args.index).search_within(args.queries, k=args.k, method=args.method)
+        if args.json:
+            print(json.dumps(results, indent=1))
+            return
+        for entry in results:
+            print(entry["query"])
+            for rank, hit in enumerate(entry["results"], 1):
+                print(
+                    f"  {rank:3d}  {hit['distance']:10.4f}  {hit['start']:9.2f} s - {hit['end']:9.2f} s  {hit['path']}"
+                )
+        return
     results = search_index(args.index, args.queries, k=args.k, method=args.method, ckpt=args.ckpt)
     if args.json:
         print(json.dumps(results, indent=1))
@@ -612,6 +643,12 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="skip files that cannot be read or used (each is reported)",
     )
+    index.add_argument(
+        "--add",
+        action="store_true",
+        help="append the files under SRC to the existing index --out without rebuilding it (its method and "
+        "parameters; files already indexed are skipped with a message)",
+    )
     index.set_defaults(func=cmd_index)
 
     search = sub.add_parser("search", help="rank the files of an index for each query motion file")
@@ -623,6 +660,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     search.add_argument("--method", default=None, help="refuse unless the index was built with this method")
     search.add_argument("--ckpt", default=None, help="refuse unless the index was built with this model file")
+    search.add_argument(
+        "--within",
+        action="store_true",
+        help="find the query inside the indexed files (long takes): the k best segments over all files, "
+        'each (file, start s, end s, distance); --json prints {"path", "start", "end", "distance"}',
+    )
     search.set_defaults(func=cmd_search)
 
     synthesize = sub.add_parser(
@@ -713,16 +756,16 @@ def build_parser() -> argparse.ArgumentParser:
     ktrain.add_argument(
         "--method",
         default=None,
-        help="a kinect method (mocapkit methods kinect) that saves a model: gp, Zhou ch. 5's GP "
-        "reconstructor (default); bigru / transformer: the learned refiner networks retrained "
-        "as correctors",
+        help="a kinect method (mocapkit methods kinect) that saves a model; default: the registry's "
+        "default (configs/kinect/method.yaml); gp / zhou_thesis: Zhou ch. 5's GP reconstructor; "
+        "bigru / transformer: the learned refiner networks retrained as correctors",
     )
     ktrain.add_argument("--seed", type=int, default=0, help="simulation and model seed (default 0)")
     ktrain.add_argument(
         "--noise",
-        default="mean_error",
-        help="the Kinect simulator's calibration: mean_error (raw error only, the default) or "
-        "msr_steadiness (as steady as MSR Action3D's real skeletons)",
+        default=None,
+        help="the Kinect simulator's calibration: real_sensor (the default: real Kinect skeletons' "
+        "frame-to-frame statistics), mean_error (raw error only) or msr_steadiness",
     )
     ktrain.add_argument(
         "--set",
