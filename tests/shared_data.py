@@ -71,3 +71,40 @@ def tiny_energy_vgg_run(root: Path) -> Path:
     ]
     assert main(train) == 0
     return root / "runs" / "ntu_energy_vgg" / "r"
+
+
+def tiny_bigru_refiner(motions, folder: Path, window: int, windows_per_epoch: int) -> tuple[Path, Path]:
+    """``(best.ckpt, model.onnx)`` of a BiGRU refiner trained for one short epoch on ``motions`` (8 hidden units),
+    written to ``folder``; its last layer re-drawn so that its corrections are visible."""
+    import lightning
+    import torch
+
+    from mocapkit.deploy.refiner_export import export_refiner
+    from mocapkit.refinement.learned import train_on_motions
+
+    torch.set_num_threads(1)
+    module = train_on_motions(
+        "refine_bigru",
+        motions,
+        [
+            "model.hidden=8",
+            "model.layers=1",
+            f"data.window={window}",
+            f"data.windows_per_epoch={windows_per_epoch}",
+            "data.batch_size=16",
+            "trainer.max_epochs=1",
+            "data.eval_windows_per_clip=1",
+        ],
+    )
+    with torch.no_grad():  # one short epoch leaves the last layer near its zero start: make the corrections visible
+        torch.nn.init.normal_(module.model.out.weight, std=0.05, generator=torch.Generator().manual_seed(0))
+    ckpt = folder / "best.ckpt"
+    checkpoint = {
+        "state_dict": module.state_dict(),
+        "hyper_parameters": dict(module.hparams),
+        "pytorch-lightning_version": lightning.__version__,
+    }
+    torch.save(checkpoint, ckpt)
+    onnx = folder / "model.onnx"
+    export_refiner(module.model, onnx, dict(module.hparams.skeleton), trace_shape=(2, 4), check_shape=(2, 40))
+    return ckpt, onnx

@@ -18,7 +18,7 @@ import pytest
 from mocapkit.motion.container import Motion
 from mocapkit.motion.geometry import turn_up_axis
 from tests.refinement.test_refine_cli import refine
-from tests.shared_data import SHARED, needs
+from tests.shared_data import SHARED, needs, tiny_bigru_refiner
 
 HDM05 = SHARED / "data" / "hdm05_cuts11"
 TRAIN = [HDM05 / "mm" / f"HDM_mm_{name}_120.amc" for name in ("squat1Reps_040", "depositFloorR_019")]
@@ -40,43 +40,9 @@ def _read(path) -> Motion:
 @pytest.fixture(scope="module")
 def trained(tmp_path_factory):
     """``(checkpoint, onnx)`` of a tiny BiGRU refiner trained on y-up HDM05 takes at 120 fps."""
-    import lightning
-    import torch
-
-    from mocapkit.deploy.refiner_export import export_refiner
-    from mocapkit.refinement.learned import train_on_motions
-
-    torch.set_num_threads(1)
     motions = [replace(_read(p), metadata={"group": "mm"}, rotations=None) for p in TRAIN]
     assert {m.up_axis for m in motions} == {"y"} and {m.fps for m in motions} == {120.0}
-    module = train_on_motions(
-        "refine_bigru",
-        motions,
-        [
-            "model.hidden=8",
-            "model.layers=1",
-            f"data.window={WINDOW}",
-            "data.windows_per_epoch=32",
-            "data.batch_size=16",
-            "trainer.max_epochs=1",
-            "data.eval_windows_per_clip=1",
-        ],
-    )
-    with torch.no_grad():  # one short epoch leaves the last layer near its zero start: make the corrections visible
-        torch.nn.init.normal_(module.model.out.weight, std=0.05, generator=torch.Generator().manual_seed(0))
-    folder = tmp_path_factory.mktemp("refiner")
-    ckpt = folder / "best.ckpt"
-    torch.save(
-        {
-            "state_dict": module.state_dict(),
-            "hyper_parameters": dict(module.hparams),
-            "pytorch-lightning_version": lightning.__version__,
-        },
-        ckpt,
-    )
-    onnx = folder / "model.onnx"
-    export_refiner(module.model, onnx, dict(module.hparams.skeleton), trace_shape=(2, 4), check_shape=(2, 40))
-    return ckpt, onnx
+    return tiny_bigru_refiner(motions, tmp_path_factory.mktemp("refiner"), WINDOW, windows_per_epoch=32)
 
 
 @pytest.fixture(scope="module")

@@ -23,7 +23,7 @@ from mocapkit.datasets.formats.c3d import known_layout, read_c3d, write_c3d
 from mocapkit.motion.container import Motion
 from mocapkit.motion.layouts import CMU31, NTU25
 from tests.refinement.test_refine_cli import error_line, refine
-from tests.shared_data import SHARED, needs
+from tests.shared_data import SHARED, needs, tiny_bigru_refiner
 
 AMC = SHARED / "data" / "hdm05_cuts11" / "mm" / "HDM_mm_squat1Reps_040_120.amc"
 REPO = Path(__file__).resolve().parents[2]
@@ -69,42 +69,8 @@ def with_gaps(motion: Motion) -> Motion:
 @pytest.fixture(scope="module")
 def trained(tmp_path_factory):
     """``(checkpoint, onnx)`` of a tiny refiner trained on synthetic CMU31 takes."""
-    import lightning
-    import torch
-
-    from mocapkit.deploy.refiner_export import export_refiner
-    from mocapkit.refinement.learned import train_on_motions
-
-    torch.set_num_threads(1)
-    folder = tmp_path_factory.mktemp("refiner")
     motions = [synthetic_take(seed, 96) for seed in range(4)]
-    module = train_on_motions(
-        "refine_bigru",
-        motions,
-        [
-            "model.hidden=8",
-            "model.layers=1",
-            f"data.window={WINDOW}",
-            "data.windows_per_epoch=64",
-            "data.batch_size=16",
-            "trainer.max_epochs=1",
-            "data.eval_windows_per_clip=1",
-        ],
-    )
-    with torch.no_grad():  # one short epoch leaves the last layer near its zero start: make the corrections visible
-        torch.nn.init.normal_(module.model.out.weight, std=0.05, generator=torch.Generator().manual_seed(0))
-    ckpt = folder / "best.ckpt"
-    torch.save(
-        {
-            "state_dict": module.state_dict(),
-            "hyper_parameters": dict(module.hparams),
-            "pytorch-lightning_version": lightning.__version__,
-        },
-        ckpt,
-    )
-    onnx = folder / "model.onnx"
-    export_refiner(module.model, onnx, dict(module.hparams.skeleton), trace_shape=(2, 4), check_shape=(2, 40))
-    return ckpt, onnx
+    return tiny_bigru_refiner(motions, tmp_path_factory.mktemp("refiner"), WINDOW, windows_per_epoch=64)
 
 
 @pytest.fixture(scope="module")
