@@ -89,7 +89,8 @@ def cpu_has_bf16() -> bool:
     the flags of ``/proc/cpuinfo``."""
     import torch
 
-    if torch.cpu._is_amx_tile_supported():
+    amx_probe = getattr(torch.cpu, "_is_amx_tile_supported", None)  # private: absent from some torch builds
+    if amx_probe is not None and amx_probe():
         return True
     try:
         flags = Path("/proc/cpuinfo").read_text()
