@@ -51,6 +51,17 @@ from mocapkit.motion.container import Motion
 from mocapkit.motion.geometry import SkeletonInputError, normalised_landmarks
 
 
+def motion_list(motions: Motion | Sequence[Motion], what: str = "input") -> list[Motion]:
+    """``motions`` as a non-empty list of :class:`Motion` (one Motion is a list of one); a clear error otherwise."""
+    motions = [motions] if isinstance(motions, Motion) else list(motions)
+    if not motions:
+        raise SkeletonInputError(f"no {what} motions (an empty list or folder)")
+    for motion in motions:
+        if not isinstance(motion, Motion):
+            raise TypeError(f"{what} items must be Motion objects (read_motion), got {type(motion).__name__}")
+    return motions
+
+
 class RetrievalMethod(BaseEstimator):
     """Base class of retrieval methods (see the module docstring). Subclasses set ``fps`` and ``heading``."""
 
@@ -100,17 +111,10 @@ class RetrievalMethod(BaseEstimator):
 
     def sequences(self, motions: Sequence[Motion], what: str = "input") -> list[np.ndarray]:
         """The normalised landmarks ``[T, 20, 3]`` of every motion (checks types and lengths, naming the file)."""
-        if isinstance(motions, Motion):
-            motions = [motions]
-        motions = list(motions)
-        if not motions:
-            raise SkeletonInputError(f"no {what} motions (an empty list or folder)")
-        out = []
-        for motion in motions:
-            if not isinstance(motion, Motion):
-                raise TypeError(f"{what} items must be Motion objects (read_motion), got {type(motion).__name__}")
-            out.append(normalised_landmarks(motion, fps=self.fps, heading=self.heading, min_frames=self.min_frames))
-        return out
+        return [
+            normalised_landmarks(motion, fps=self.fps, heading=self.heading, min_frames=self.min_frames)
+            for motion in motion_list(motions, what)
+        ]
 
     # ------------------------------------------------------------------ for subclasses
     def _fit_sequences(self, sequences: list[np.ndarray], y):

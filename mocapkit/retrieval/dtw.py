@@ -35,9 +35,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from mocapkit.motion.container import Motion
 from mocapkit.motion.geometry import SkeletonInputError
-from mocapkit.retrieval.base import RetrievalMethod, ragged_from_state, ragged_to_state
+from mocapkit.retrieval.base import RetrievalMethod, motion_list, ragged_from_state, ragged_to_state
 from mocapkit.retrieval.hubness import METHODS as HUBNESS_METHODS
 from mocapkit.retrieval.hubness import (
     database_statistics,
@@ -355,18 +354,11 @@ class PlainDTWRetrieval(DTWRetrieval):
 
     def sequences(self, motions, what: str = "input") -> list[np.ndarray]:
         """Root-centred joints ``[T, J, 3]`` of every motion; every one must have the database's ``J`` joints."""
-        if isinstance(motions, Motion):
-            motions = [motions]
-        motions = list(motions)
-        if not motions:
-            raise SkeletonInputError(f"no {what} motions (an empty list or folder)")
         out = []
         joints = None
         if hasattr(self, "database_") and self.database_["positions"]:
             joints = self.database_["positions"][0].shape[1] // 3
-        for motion in motions:
-            if not isinstance(motion, Motion):
-                raise TypeError(f"{what} items must be Motion objects (read_motion), got {type(motion).__name__}")
+        for motion in motion_list(motions, what):
             seq = root_centred_joints(motion, fps=self.fps, min_frames=self.min_frames)
             joints = seq.shape[1] if joints is None else joints
             if seq.shape[1] != joints:
