@@ -50,9 +50,9 @@ def synthetic_hdm05_folder(
 TINY_NTU_SYNTH = "--classes 3 --subjects 4 --setups 1 --replications 1 --cameras 1 --seed 5 --quiet".split()
 
 
-def tiny_energy_vgg_run(root: Path) -> Path:
+def tiny_energy_vgg_run(root: Path, *overrides: str) -> Path:
     """Synthesise and prepare the tiny NTU-format set under ``root``, train the energy-image CNN for one epoch on it
-    (32-pixel images) and return the run folder ``root/runs/ntu_energy_vgg/r``."""
+    (32-pixel images; ``overrides`` on top) and return the run folder ``root/runs/ntu_energy_vgg/r``."""
     from mocapkit.cli import main
 
     assert main(["synth", "ntu", "--out", str(root / "synth"), *TINY_NTU_SYNTH]) == 0
@@ -68,6 +68,7 @@ def tiny_energy_vgg_run(root: Path) -> Path:
         "data.batch_size=8",
         "model.energy.size=32",
         "data.val_by_subject=false",
+        *overrides,
     ]
     assert main(train) == 0
     return root / "runs" / "ntu_energy_vgg" / "r"

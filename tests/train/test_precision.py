@@ -63,25 +63,9 @@ def test_a_bf16_run_exports_a_float32_onnx(tmp_path):
     import onnx
 
     from mocapkit.cli import main
-    from tests.shared_data import TINY_NTU_SYNTH
+    from tests.shared_data import tiny_energy_vgg_run
 
-    assert main(["synth", "ntu", "--out", str(tmp_path / "synth"), *TINY_NTU_SYNTH]) == 0
-    assert main(["prepare", "ntu", "--src", str(tmp_path / "synth"), "--out", str(tmp_path / "cache"), "--quiet"]) == 0
-    train = [
-        "train",
-        "experiment=ntu_energy_vgg",
-        f"data.root={tmp_path / 'cache'}",
-        f"output_root={tmp_path / 'runs'}",
-        "run_name=r",
-        "trainer.max_epochs=1",
-        "trainer.precision=bf16-mixed",
-        "trainer.enable_progress_bar=false",
-        "data.batch_size=8",
-        "model.energy.size=32",
-        "data.val_by_subject=false",
-    ]
-    assert main(train) == 0
-    run = tmp_path / "runs" / "ntu_energy_vgg" / "r"
+    run = tiny_energy_vgg_run(tmp_path, "trainer.precision=bf16-mixed")
     state = torch.load(run / "best.ckpt", weights_only=True)["state_dict"]
     assert {v.dtype for v in state.values() if v.is_floating_point()} == {torch.float32}
     assert main(["export", f"ckpt_path={run / 'best.ckpt'}", f"out={tmp_path / 'm.onnx'}"]) == 0
