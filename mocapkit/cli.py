@@ -3,6 +3,9 @@
     mocapkit synth ntu --out DIR [--classes N] [--subjects S] [--seed K] [--set KEY=VALUE ...]
     mocapkit synth hdm05 --out DIR [--classes NAME ...] [--actors bd bk ...] [--seed K]
     mocapkit synth casia-b --out DIR [--subjects S] [--frames F] [--size H] [--seed K] [--workers N]
+    mocapkit synth depth MOCAP [MOCAP ...] --out DIR [--camera kinect_v1|azure_kinect|FILE.yaml]
+                         [--noise kinect_v1|azure_kinect|none] [--format npz|png] [--seed K] [--fps F]
+                         [--max-frames N] [--skip-bad]      (depth video of mocap, Lou 2012 ch. 3)
     mocapkit render FILE --out anim.gif [--strip]
     mocapkit prepare ntu --src DIR --out DIR [--workers N] [--skip-bad] [--missing-list FILE] [--min-body-frames N]
     mocapkit prepare casia-b --src DIR --out DIR [--size 64x44|124x124] [--per cycle|sequence] [--no-period ...]
@@ -31,6 +34,10 @@
     mocapkit kinect-fix export --model MODEL.pt --out MODEL.onnx                 (a learned corrector as ONNX)
     mocapkit kinect-fix apply INPUT [INPUT ...] --model MODEL --out DIR [--set KEY=VALUE ...] [--plot N]
                         [--skip-bad]                                            (Zhou 2014 ch. 5)
+    mocapkit depth-track DEPTH [DEPTH ...] --out DIR [--prior MOCAP ...] [--method NAME] [--set KEY=VALUE ...]
+                         [--camera PRESET|FILE.yaml] [--fps F] [--performer MOCAP_FILE] [--start sensor|standing]
+                         [--skeleton sensor|template] [--format c3d|bvh] [--pictures N] [--skip-bad]
+                                                          (full-body tracking from depth video, Lou 2012 ch. 3)
 
     mocapkit methods [TASK]                     (the method registry: task, name, learned, description)
 
@@ -104,6 +111,30 @@ def cmd_synth_casia_b(args: argparse.Namespace) -> None:
     }
     folders = synthesize_casia_b(args.out, CasiaBSynthConfig(**values), progress=not args.quiet, workers=args.workers)
     print(f"[mocapkit] wrote {len(folders)} silhouette sequences (CASIA-B layout) to {args.out}")
+
+
+def cmd_synth_depth(args: argparse.Namespace) -> None:
+    from mocapkit.datasets.synthetic.depth import synthesise_depth
+
+    written, skipped = synthesise_depth(
+        args.inputs,
+        args.out,
+        camera=args.camera,
+        noise=args.noise,
+        seed=args.seed,
+        fps=args.fps,
+        format=args.format,
+        max_frames=args.max_frames,
+        skip_bad=args.skip_bad,
+        progress=False if args.quiet else None,
+    )
+    kind = ".npz files" if args.format == "npz" else "PNG folders"
+    print(
+        f"[mocapkit] wrote {len(written)} depth sequences ({kind}, camera {args.camera}, "
+        f"noise {args.noise or 'the camera preset'}) to {args.out}"
+        + "".join(f"\n  {path}" for path in written)
+        + "".join(f"\n  skipped {path}: {reason}" for path, reason in skipped)
+    )
 
 
 def cmd_render(args: argparse.Namespace) -> None:
@@ -364,6 +395,35 @@ def cmd_kinect_fix_apply(args: argparse.Namespace) -> None:
     print(report.to_text())
 
 
+def cmd_depth_track(args: argparse.Namespace) -> None:
+    from mocapkit.depth_tracking.depth_track import track_depth_files
+
+    overrides = list(args.set)
+    given = {item.split("=", 1)[0].strip() for item in overrides}
+    for flag in ("start", "skeleton"):
+        value = getattr(args, flag)
+        if value is None:
+            continue
+        if flag in given:
+            raise ValueError(f"mocapkit depth-track: give {flag} once, as --{flag} or as --set {flag}=..., not both")
+        overrides.append(f"{flag}={value}")
+    report = track_depth_files(
+        args.inputs,
+        args.prior,
+        out=args.out,
+        method=args.method,
+        overrides=tuple(overrides),
+        camera=args.camera,
+        fps=args.fps,
+        performer=args.performer,
+        format=args.format,
+        pictures=args.pictures,
+        skip_bad=args.skip_bad,
+        progress=not args.quiet,
+    )
+    print(report.to_text())
+
+
 def _one_of(args: argparse.Namespace, positional: str, option: str, name: str):
     """The value given positionally or as ``--option`` (the commands take inputs positionally; the older option
     spellings still work): exactly one of them."""
@@ -432,6 +492,32 @@ def build_parser() -> argparse.ArgumentParser:
     casia.add_argument("--workers", type=int, default=1, help="parallel processes (same output)")
     casia.add_argument("--quiet", action="store_true", help="no progress bar")
     casia.set_defaults(func=cmd_synth_casia_b)
+
+    depth = synth_sub.add_parser(
+        "depth", help="depth video (+ colour, part labels, joints) of mocap files, with a depth-sensor noise model"
+    )
+    depth.add_argument(
+        "inputs", nargs="+", metavar="MOCAP", help="mocap files and/or folders (ASF/AMC, BVH, C3D), recursively"
+    )
+    depth.add_argument("--out", required=True, help="output folder: <name>.npz or <name>/ per input")
+    depth.add_argument(
+        "--camera", default="kinect_v1", help="kinect_v1 (320x240, default), azure_kinect (640x576) or a camera.yaml"
+    )
+    depth.add_argument(
+        "--noise",
+        choices=("kinect_v1", "azure_kinect", "none"),
+        default=None,
+        help="depth-sensor noise model (default: the camera's; kinect_v1 for a camera.yaml)",
+    )
+    depth.add_argument(
+        "--format", choices=("npz", "png"), default="npz", help="one .npz per take (default) or a folder of PNGs"
+    )
+    depth.add_argument("--seed", type=int, default=0, help="random seed (the output is a function of it; default 0)")
+    depth.add_argument("--fps", type=float, default=30.0, help="frame rate the motions are resampled to (default 30)")
+    depth.add_argument("--max-frames", dest="max_frames", type=int, help="render at most the first N frames of each")
+    depth.add_argument("--skip-bad", dest="skip_bad", action="store_true", help="skip (and list) unusable files")
+    depth.add_argument("--quiet", action="store_true", help="no progress bar")
+    depth.set_defaults(func=cmd_synth_depth)
 
     render = sub.add_parser("render", help="draw a motion file as an animation (.gif, .mp4) or a PNG strip")
     render.add_argument("file", help="any supported motion file (.skeleton, .amc, .bvh, .c3d, MSR .txt)")
@@ -817,6 +903,75 @@ def build_parser() -> argparse.ArgumentParser:
     )
     kapply.set_defaults(func=cmd_kinect_fix_apply)
 
+    dtrack = sub.add_parser(
+        "depth-track",
+        help="track the 16 body joints in depth videos (Lou 2012 ch. 3: model fitting with a mocap prior); "
+        "writes OUT/<name>.c3d, <name>_frames.png + report.json",
+    )
+    dtrack.add_argument(
+        "inputs",
+        nargs="+",
+        metavar="DEPTH",
+        help="depth sequences: .npz files, folders of 16-bit PNGs (depth/ + camera.yaml, or bare PNGs with "
+        "--camera), and folders of them",
+    )
+    dtrack.add_argument("--out", required=True, help="output folder")
+    dtrack.add_argument(
+        "--prior",
+        nargs="+",
+        default=None,
+        metavar="MOCAP",
+        help="mocap files and/or folders (ASF/AMC, BVH, C3D), recursively: the motion prior's database; "
+        "without it the tracker runs with prior=none",
+    )
+    dtrack.add_argument(
+        "--method", default="lpca_tracker", help="a depth_tracking method (mocapkit methods); default lpca_tracker"
+    )
+    dtrack.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="a parameter of the method, Hydra's grammar, repeatable, e.g. iterations=5, device=cuda, "
+        "use_colour=false, prior_weight=0.01",
+    )
+    dtrack.add_argument(
+        "--camera",
+        default=None,
+        help="the camera for every input: kinect_v1, azure_kinect or a camera.yaml (needed for bare PNG "
+        "folders; overrides a file's own)",
+    )
+    dtrack.add_argument("--fps", type=float, default=None, help="frame rate of every input (overrides the file's)")
+    dtrack.add_argument(
+        "--performer", default=None, metavar="MOCAP_FILE", help="a mocap file of the performer: their bone lengths"
+    )
+    dtrack.add_argument(
+        "--start",
+        choices=("sensor", "standing", "ground_truth"),
+        default=None,
+        help="first frame's pose: from the sensor skeleton (the method's default), standing facing the camera "
+        "(no sensor skeleton needed), or the ground truth (synthetic data)",
+    )
+    dtrack.add_argument(
+        "--skeleton",
+        choices=("sensor", "template", "ground_truth"),
+        default=None,
+        help="bone lengths: from the sensor skeleton (the method's default), a template body (no sensor "
+        "skeleton needed) or the ground truth",
+    )
+    dtrack.add_argument("--format", choices=("c3d", "bvh"), default="c3d", help="output motion format (default c3d)")
+    dtrack.add_argument(
+        "--pictures", type=int, default=4, metavar="N", help="frames in each <name>_frames.png (default 4; 0: none)"
+    )
+    dtrack.add_argument(
+        "--skip-bad",
+        dest="skip_bad",
+        action="store_true",
+        help="skip (and list) unreadable or unusable depth sequences and prior files",
+    )
+    dtrack.add_argument("--quiet", action="store_true", help="no progress bars")
+    dtrack.set_defaults(func=cmd_depth_track)
+
     methods = sub.add_parser(
         "methods",
         help="list the registered methods of every task (or of TASK): name, learned "
@@ -826,7 +981,7 @@ def build_parser() -> argparse.ArgumentParser:
         "task",
         nargs="?",
         default=None,
-        help="recognition, gait, clustering, refinement, retrieval, synthesis or kinect",
+        help="recognition, gait, clustering, refinement, retrieval, synthesis, kinect or depth_tracking",
     )
     methods.set_defaults(func=cmd_methods)
 

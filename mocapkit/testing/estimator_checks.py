@@ -17,6 +17,8 @@ Per task (units: metres, frames; shapes in the docstrings):
 - :func:`check_synthesizer` — :class:`~mocapkit.synthesis.base.MotionSynthesizer`;
 - :func:`check_kinect_corrector` — ``fit(kinect_clips, mocap_clips, states)`` / ``predict(kinect, state)`` (with
   ``save`` / ``load`` where the method has them);
+- :func:`check_depth_estimator` — ``fit(sequences)`` / ``predict(sequence) -> [T, 16, 3]`` on depth video
+  (:mod:`mocapkit.depth_tracking.base`; with ``save`` / ``load`` where the method has them);
 - :func:`check_sequence_classifier` — a scikit-learn classifier of skeleton sequences (recognition, clustering);
 - :func:`check_gait_classifier` — a scikit-learn classifier of GEIs (gait).
 
@@ -25,8 +27,8 @@ Networks trained by ``mocapkit train`` are registry entries that name their expe
 one (its keys are the comparison runner's, its experiment composes, and ``build_method`` refuses it naming the
 command that trains it).
 
-Data helpers: :func:`synthetic_clips` (ASF/AMC clips of :mod:`mocapkit.datasets.synthetic.hdm05`, read back) and
-:func:`kinect_pairs` (their simulated Kinect pairs).
+Data helpers: :func:`synthetic_clips` (ASF/AMC clips of :mod:`mocapkit.datasets.synthetic.hdm05`, read back),
+:func:`kinect_pairs` (their simulated Kinect pairs) and :func:`depth_sequences` (their rendered depth video).
 """
 
 from __future__ import annotations
@@ -81,6 +83,31 @@ def kinect_pairs(paths: Sequence[str | os.PathLike], seed: int = 0) -> list:
     pairs, skipped = simulate_pairs(paths, KinectNoiseConfig.preset("mean_error"), seed=seed, fps=30.0, progress=False)
     assert not skipped, skipped
     return pairs
+
+
+def depth_sequences(
+    folder: str | os.PathLike,
+    clips: int = 3,
+    frames: int = 20,
+    camera: str = "kinect_v1",
+    seed: int = 0,
+) -> list:
+    """``clips`` tiny depth videos (:class:`~mocapkit.datasets.formats.depth_images.DepthSequence`, every field
+    filled, ``frames`` frames at 30 fps) of :func:`synthetic_clips` written into ``folder``, rendered by
+    :func:`~mocapkit.datasets.synthetic.depth.render_depth_sequence`; ``source`` is each clip's file name. In
+    file-name order (class, actor, take): with 3 clips, the last is another action than the first two."""
+    from mocapkit.datasets.synthetic.depth import render_depth_sequence
+    from mocapkit.datasets.synthetic.kinect_noise import kinect20_from_motion
+
+    # 2 classes × 2 actors per take number: as many takes as the clips need
+    motions = synthetic_clips(folder, clips_per_actor=-(-clips // 4), max_frames=frames, seed=seed)[:clips]
+    out = []
+    for k, motion in enumerate(motions):
+        # the generator wrote 30 fps; AMC files carry no rate and read as 120 fps: keep every frame
+        positions = kinect20_from_motion(motion, fps=None)[:frames]
+        source = Path(motion.source or f"clip{k}").name
+        out.append(render_depth_sequence(positions, 30.0, camera=camera, seed=seed + k, source=source))
+    return out
 
 
 # ------------------------------------------------------------------------------------------ every task
@@ -430,6 +457,91 @@ def check_kinect_corrector(corrector, pairs: Sequence, folder: str | os.PathLike
         lambda: corrector.predict(test.noisy[:, :19], state=test.state[:, :19]),
         f"{name}.predict on 19 joints",
     )
+
+
+# ------------------------------------------------------------------------------------------ depth tracking
+
+#: What a depth sequence may carry besides its depth: :func:`check_depth_estimator` takes each away in turn.
+DEPTH_EXTRAS = ("joints", "sensor_joints", "sensor_state", "camera_to_world", "colour", "parts")
+_PER_FRAME = ("depth_mm", "colour", "parts", "joints", "sensor_joints", "sensor_state")
+
+
+def _first_frames(sequence, frames: int, source: str):
+    """``sequence`` cut to its first ``frames`` frames (every per-frame array), renamed ``source``."""
+    from dataclasses import replace
+
+    cut = {key: getattr(sequence, key)[:frames] for key in _PER_FRAME if getattr(sequence, key) is not None}
+    return replace(sequence, source=source, **cut)
+
+
+def _unless_refused(call, source: str, what: str):
+    """``call()``'s result, or None when it raised a ValueError naming ``source``; any other error (or a ValueError
+    not naming the file) fails the check."""
+    try:
+        return call()
+    except ValueError as exc:
+        assert source in str(exc), f"{what}: the ValueError does not name the file {source!r}: {exc}"
+        return None
+
+
+def check_depth_estimator(estimator, sequences: Sequence, folder: str | os.PathLike) -> None:
+    """The depth-tracking contract (:mod:`mocapkit.depth_tracking.base`) on rendered sequences (every field filled;
+    the last one is the test sequence, the others are the training performers').
+
+    - before ``fit``: ``predict`` raises ``NotFittedError``, or (a method that learns nothing) gives what it gives
+      after ``fit``;
+    - ``fit(sequences)`` returns the estimator; ``predict(sequence)`` gives float32 ``[T, 16, 3]``, finite, within
+      0.5 m of the ground truth's :data:`~mocapkit.depth_tracking.base.TRACKED_JOINTS` on average (camera
+      coordinates, metres in, metres out);
+    - ``save(path)`` / ``load(path)`` (where the method has them) round trip to the same predictions;
+    - bad input raises a ``ValueError`` naming the sequence's file: a frame with no depth at all, no frames; and
+      a sequence without one of :data:`DEPTH_EXTRAS` (at ``predict``; ``joints`` at ``fit``) either gives a valid
+      estimate (the method does not need it) or is refused naming the file — never another error.
+    """
+    from mocapkit.depth_tracking.base import TRACKED_JOINTS, joint_error_mm, tracked_joints
+
+    name = _name(estimator)
+    train, test = list(sequences[:-1]), sequences[-1]
+    assert train and test.joints is not None, "check_depth_estimator needs ≥ 2 sequences with ground-truth joints"
+    try:
+        before = estimator.predict(test)
+    except NotFittedError:
+        before = None
+    assert estimator.fit(train) is estimator, f"{name}.fit must return the estimator"
+    out = estimator.predict(test)
+    if before is not None:
+        assert np.allclose(before, out), f"{name}: predicts before fit, but differently after"
+    shape = (test.num_frames, len(TRACKED_JOINTS), 3)
+    assert isinstance(out, np.ndarray) and out.shape == shape, f"{name}: output {getattr(out, 'shape', out)}"
+    assert out.dtype == np.float32 and np.isfinite(out).all(), (
+        f"{name}: output {out.dtype}, finite {np.isfinite(out).all()}"
+    )
+    error = joint_error_mm(out, tracked_joints(test.joints)).mean()
+    assert error < 500.0, f"{name}: mean error {error:.0f} mm (metres and camera coordinates expected)"
+    if hasattr(estimator, "save"):
+        path = estimator.save(Path(folder) / f"{name}.model")
+        loaded = type(estimator).load(path)
+        assert np.allclose(loaded.predict(test), out, atol=1e-4), f"{name}: predictions after save/load differ"
+
+    # bad input on 3 frames: a method that does not need what was taken away runs through them
+    empty = _first_frames(test, 3, "no_depth_in_frame_1.npz")
+    empty.depth_mm = empty.depth_mm.copy()
+    empty.depth_mm[1] = 0
+    none = _first_frames(test, 0, "no_frames.npz")
+    for bad, what in ((empty, "a frame with no depth at all"), (none, "no frames")):
+        result = _unless_refused(lambda seq=bad: estimator.predict(seq), bad.source, f"{name}.predict, {what}")
+        assert result is None, f"{name}.predict: {what} ({bad.source}) raised nothing"
+    for key in DEPTH_EXTRAS:
+        stripped = _first_frames(test, 3, f"without_{key}.npz")
+        setattr(stripped, key, None)
+        what = f"{name}.predict on a sequence without {key}"
+        result = _unless_refused(lambda seq=stripped: estimator.predict(seq), stripped.source, what)
+        if result is not None:  # not needed (colour, say, may still change the estimate): a valid estimate
+            assert result.shape == (3, *shape[1:]) and result.dtype == np.float32, f"{what}: output {result.shape}"
+            assert np.isfinite(result).all(), f"{what}: non-finite output"
+    stripped = _first_frames(train[0], train[0].num_frames, "train_without_joints.npz")
+    stripped.joints = None
+    _unless_refused(lambda: clone(estimator).fit([stripped, *train[1:]]), stripped.source, f"{name}.fit without joints")
 
 
 # ------------------------------------------------------------------------------------------ classifiers

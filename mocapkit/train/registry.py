@@ -45,7 +45,7 @@ from mocapkit.train.config import CONFIG_DIR, _compose, check_override_types, pa
 from mocapkit.train.errors import ConfigError
 
 #: The task packages that register methods (``configs/<task>/method/``).
-TASKS = ("recognition", "gait", "clustering", "refinement", "retrieval", "synthesis", "kinect")
+TASKS = ("recognition", "gait", "clustering", "refinement", "retrieval", "synthesis", "kinect", "depth_tracking")
 
 
 @dataclass(frozen=True)

@@ -48,7 +48,8 @@ Per-key policies (:data:`RUN_POLICY`, :data:`CHECKPOINT_POLICY`, :data:`METHOD_P
     method (root of     by task (:data:`METHOD_RULES`; ``configs/<task>/method/NAME.yaml``, nested targets too):
     a registry entry)   refinement: a ``MotionRefiner`` subclass under ``mocapkit.``; retrieval: a
                         ``RetrievalMethod`` subclass; synthesis: a ``MotionSynthesizer`` subclass; kinect: a
-                        scikit-learn estimator class under ``mocapkit.kinect.``; recognition, gait,
+                        scikit-learn estimator class under ``mocapkit.kinect.``; depth_tracking: a
+                        scikit-learn estimator class under ``mocapkit.depth_tracking.``; recognition, gait,
                         clustering: a scikit-learn estimator class under ``sklearn.`` or ``mocapkit.``, or
                         ``sklearn.pipeline.make_pipeline``
     ==================  =====================================================================
@@ -153,6 +154,7 @@ TASK_PACKAGES = (
     "mocapkit.retrieval.",
     "mocapkit.synthesis.",
     "mocapkit.kinect.",
+    "mocapkit.depth_tracking.",
 )
 LIGHTNING_MODULE = Rule(
     "a LightningModule class of a mocapkit task package or mocapkit.train",
@@ -244,6 +246,11 @@ KINECT = Rule(
     ("mocapkit.kinect.",),
     accepts=_subclass_of("sklearn.base.BaseEstimator"),
 )
+DEPTH_TRACKING = Rule(
+    "a scikit-learn estimator class of mocapkit.depth_tracking",
+    ("mocapkit.depth_tracking.",),
+    accepts=_subclass_of("sklearn.base.BaseEstimator"),
+)
 ESTIMATOR = Rule(
     "a scikit-learn estimator class (sklearn or mocapkit) or sklearn.pipeline.make_pipeline",
     ("sklearn.", "mocapkit."),
@@ -257,6 +264,7 @@ METHOD_RULES: dict[str, Rule] = {
     "retrieval": RETRIEVAL,
     "synthesis": SYNTHESIZER,
     "kinect": KINECT,
+    "depth_tracking": DEPTH_TRACKING,
     "recognition": ESTIMATOR,
     "gait": ESTIMATOR,
     "clustering": ESTIMATOR,

@@ -1,0 +1,1 @@
+"""Full-body tracking from depth video (Lou 2012 ch. 3): the estimator contract (``base``), the model-based tracker, its baselines (the sensor skeleton, that skeleton corrected by the Kinect GP reconstructor, a learned depth → joints regressor), ``mocapkit depth-track`` and the benchmark."""
