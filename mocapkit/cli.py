@@ -925,7 +925,7 @@ def build_parser() -> argparse.ArgumentParser:
         "without it the tracker runs with prior=none",
     )
     dtrack.add_argument(
-        "--method", default="lpca_tracker", help="a depth_tracking method (mocapkit methods); default lpca_tracker"
+        "--method", default="tracker", help="a depth_tracking method (mocapkit methods); default tracker"
     )
     dtrack.add_argument(
         "--set",

@@ -3,7 +3,8 @@
 No depth recording with ground truth is available here, so, as the thesis did for its ablations, every mocap take
 (HDM05 cuts by default) is rendered by a virtual depth camera with a sensor-noise model
 (:func:`~mocapkit.datasets.synthetic.depth.render_depth_sequence`: capsule body, Kinect v1 camera and noise, the
-sensor-style skeleton of the Kinect simulator from the same camera). **The cell's seed is the render seed** (camera
+sensor-style skeleton of the Kinect simulator from the same camera; a take whose performer leaves the view is cut to
+its longest run of frames in view, :func:`in_view`). **The cell's seed is the render seed** (camera
 placement, body girth, depth noise, sensor skeleton).
 
 Protocols are held-out performers: protocol ``mm`` fits on the other performers' sequences and scores ``mm``'s.
@@ -38,6 +39,40 @@ def motion_class(path: Path) -> str:
     stem = Path(path).stem
     match = re.match(r"HDM_[a-z]{2}_(.+?)_\d+_\d+$", stem)
     return match.group(1) if match else re.sub(r"[_-]?\d+$", "", stem)
+
+
+def in_view(sequence):
+    """``sequence`` cut to its longest run of frames with some depth (a performer who walks out of the camera's
+    view or range leaves empty frames, which no estimator takes); ``metadata["in_view"]`` records the frames kept."""
+    from dataclasses import replace
+
+    seen = sequence.depth_mm.reshape(sequence.num_frames, -1).any(axis=1)
+    if seen.all() or not seen.any():
+        return sequence
+    length, first, start = 0, 0, None
+    for t, ok in enumerate([*seen.tolist(), False]):
+        if ok and start is None:
+            start = t
+        elif not ok and start is not None:
+            if t - start > length:  # the first of equally long runs
+                length, first = t - start, start
+            start = None
+    cut = slice(first, first + length)
+
+    def part(array):
+        return None if array is None else array[cut]
+
+    metadata = {**sequence.metadata, "in_view": [first, first + length]}
+    return replace(
+        sequence,
+        depth_mm=sequence.depth_mm[cut],
+        colour=part(sequence.colour),
+        parts=part(sequence.parts),
+        joints=part(sequence.joints),
+        sensor_joints=part(sequence.sensor_joints),
+        sensor_state=part(sequence.sensor_state),
+        metadata=metadata,
+    )
 
 
 class DepthTrackingBenchmark(Benchmark):
@@ -122,7 +157,7 @@ class DepthTrackingBenchmark(Benchmark):
             from mocapkit.datasets.synthetic.kinect_noise import file_seed
 
             path = self.files[index]
-            self._sequences[key] = render_depth_sequence(
+            sequence = render_depth_sequence(
                 self.joints()[index],
                 self.fps,
                 camera=self.camera,
@@ -130,6 +165,7 @@ class DepthTrackingBenchmark(Benchmark):
                 seed=file_seed(seed, path),
                 source=str(path),
             )
+            self._sequences[key] = in_view(sequence)
         return self._sequences[key]
 
     def data(self, indices: np.ndarray, seed: int = 0) -> list:
@@ -333,4 +369,4 @@ def _mean_sd(values, digits: int) -> str:
     return f"{np.mean(values):.{digits}f} ± {np.std(values, ddof=1):.{digits}f}"
 
 
-__all__ = ["DepthTrackingBenchmark", "motion_class"]
+__all__ = ["DepthTrackingBenchmark", "in_view", "motion_class"]

@@ -3,7 +3,7 @@
 ``track_depth_files(inputs, prior, out=DIR)``
     every depth sequence of ``inputs`` (``.npz`` files and folders of PNGs,
     :func:`~mocapkit.datasets.formats.depth_images.read_depth_sequence`; a folder of sequences is expanded) is
-    tracked by a ``depth_tracking`` method of the registry (default ``lpca_tracker``,
+    tracked by a ``depth_tracking`` method of the registry (default ``tracker``,
     :class:`~mocapkit.depth_tracking.tracker.DepthTracker`; ``--set`` Hydra overrides of its parameters) whose
     motion prior is built from the mocap files of ``prior`` (any format ``read_motion`` reads, folders
     recursively, each turned into the 16 :data:`~mocapkit.depth_tracking.base.TRACKED_JOINTS` at 30 fps). Without
@@ -50,7 +50,7 @@ from mocapkit.depth_tracking.base import TRACKED_JOINTS, DepthInputError, check_
 
 #: The registry task whose methods ``depth-track`` runs.
 TASK = "depth_tracking"
-DEFAULT_METHOD = "lpca_tracker"
+DEFAULT_METHOD = "tracker"
 #: Frame rate of the prior's mocap takes: the camera's, which the LPCA prior's successors assume.
 PRIOR_FPS = 30.0
 FORMATS = ("c3d", "bvh")
@@ -487,6 +487,10 @@ def track_depth_files(
     if "progress" in params and "progress" not in given:
         tracker.set_params(progress=bool(progress))
     if prior_paths:
+        if params.get("prior") == "none":
+            if "prior" in given:
+                raise DepthTrackError("--prior MOCAP ... builds a motion prior, but --set prior=none turns it off")
+            tracker.set_params(prior="lpca")  # the registry's default tracks without a prior until one is given
         clips, used, skipped_prior = prior_clips(prior_paths, skip_bad=skip_bad, progress=progress)
         prior_info = {
             "files": [str(p) for p in used],

@@ -52,6 +52,10 @@ from mocapkit.depth_tracking.lpca import LocalPCAPrior, LocalSubspace
 FAR = 10.0
 PRIORS = ("lpca", "none")
 SURFACE_COSTS = ("depth", "point")
+#: What the start and the sensor term use: the sensor's skeleton, or that skeleton corrected by the Kinect GP.
+ANCHORS = ("sensor", "sensor_gp")
+#: The sensor joints the start's inverse kinematics fits: the thesis's five (head, wrists, ankles), or all 16.
+INIT_JOINT_SETS = ("five", "all")
 #: Metres of cost per pixel of offset added to the depth-only surface cost, so ties go to the nearest pixel.
 TIE_BREAK = 1e-4
 SKELETONS = ("sensor", "ground_truth", "template")
@@ -67,6 +71,8 @@ class _Frame:
     colour: torch.Tensor | None  # [H, W, 3] float 0–255
     edge_pixels: torch.Tensor  # long [M, 2] (v, u)
     edge_points: torch.Tensor  # [M, 3]
+    sensor: torch.Tensor | None = None  # [16, 3] the sensor's joints, when the sequence has them
+    sensor_weight: torch.Tensor | None = None  # [16] their weights (by tracking state)
 
 
 def _unproject(depth: torch.Tensor, k: CameraIntrinsics) -> torch.Tensor:
@@ -147,19 +153,38 @@ class DepthTracker(BaseEstimator):
         subsample: rendered points kept every ``subsample`` pixels in each direction (4).
         colour_weight: weight of the colour difference in the surface search (1e-4; 0 or ``use_colour=False``: depth
             only).
+        surface_cost: ``"depth"`` (the thesis: the least ``|Δdepth|``, ties to the nearest pixel) or ``"point"``
+            (the least 3-D distance).
         use_colour, use_edges: the thesis's ablations (Fig. 3.6a).
         prior: ``"lpca"`` (the database of ``fit``) or ``"none"``.
         neighbours, successors, energy: LPCA's K, w and kept energy (50, 3, 0.95).
         edge_weight, prior_weight, smooth_weight: λ1, λ2, λ3 (10, 0.001, 1e-5).
+        constant_velocity: start each frame's iterations at ``q_t + (q_t − q_{t−1})`` instead of ``q_t`` (ours).
+        damping: Levenberg–Marquardt damping, ``A + damping · diag(A)`` (ours; 0: the thesis's plain Gauss–Newton,
+            which overshoots along directions the data barely constrain).
+        sensor_weight: weight of the sensor skeleton's joints as a soft target (ours; per joint × 1 tracked, 0.5
+            inferred, 0 not tracked; 0: not used, the thesis).
+        anchor: the skeleton the start and the sensor term use: ``"sensor"`` (as the sequence has it) or
+            ``"sensor_gp"`` (corrected by the Kinect GP of Zhou ch. 5, fitted in :meth:`fit` on the training
+            sequences' sensor and ground-truth joints; ours).
+        anchor_corrector: the GP's parameters over the registry's ``kinect/gp`` (None: as registered).
         iterations, tolerance: Gauss–Newton iterations per frame at most (10) and the ``‖Δq‖`` that stops them.
+        init_iterations, init_reach: the first frame's depth step: its iterations, and how many times wider its
+            outlier distances start (shrinking to the normal ones over its first half).
+        init_joints: the sensor joints the start's inverse kinematics fits: ``"five"`` (head, wrists, ankles: the
+            thesis) or ``"all"`` 16.
         max_surface_distance, max_edge_distance: outlier rejection of correspondences (metres).
         canny_low, canny_high: Canny hysteresis thresholds on the smoothed depth gradient (metres).
-        skeleton: where bone lengths come from: ``"sensor"`` or ``"ground_truth"``.
-        start: the first frame's pose: ``"sensor"`` (IK on 5 sensor joints + a depth step) or ``"ground_truth"``.
+        skeleton: where bone lengths come from: ``"sensor"`` (the anchor's, median over the take), ``"ground_truth"`` (the thesis's known performer) or
+            ``"template"`` (a 1.7 m body); :meth:`predict`'s ``performer`` overrides it.
+        start: the first frame's pose: ``"sensor"`` (IK on sensor joints, then a depth step), ``"ground_truth"``
+            (the thesis's synthetic protocol) or ``"standing"`` (the rest pose facing the camera at the depth's
+            median point, then a depth step).
         device: ``"cpu"``, ``"cuda"``...; ``"auto"``: CUDA where there is one.
         progress: a tqdm bar per sequence.
 
-    Attributes (after ``fit``): ``prior_`` (:class:`LocalPCAPrior` or None), ``database_frames_``.
+    Attributes (after ``fit``): ``prior_`` (:class:`LocalPCAPrior` or None), ``database_frames_``,
+    ``anchor_model_`` (the fitted GP anchor or None).
     """
 
     def __init__(
@@ -171,7 +196,7 @@ class DepthTracker(BaseEstimator):
         surface_cost: str = "depth",
         use_colour: bool = True,
         use_edges: bool = True,
-        prior: str = "lpca",
+        prior: str = "none",
         neighbours: int = 50,
         successors: int = 3,
         energy: float = 0.95,
@@ -179,11 +204,17 @@ class DepthTracker(BaseEstimator):
         prior_weight: float = 1e-3,
         smooth_weight: float = 1e-5,
         constant_velocity: bool = False,
-        damping: float = 0.0,
+        damping: float = 0.1,
+        sensor_weight: float = 10.0,
+        anchor: str = "sensor",
+        anchor_corrector: dict | None = None,
         iterations: int = 10,
+        init_iterations: int = 30,
+        init_reach: float = 3.0,
+        init_joints: str = "all",
         tolerance: float = 1e-3,
-        max_surface_distance: float = 0.1,
-        max_edge_distance: float = 0.1,
+        max_surface_distance: float = 0.05,
+        max_edge_distance: float = 0.05,
         canny_low: float = 0.08,
         canny_high: float = 0.16,
         skeleton: str = "sensor",
@@ -207,7 +238,13 @@ class DepthTracker(BaseEstimator):
         self.smooth_weight = smooth_weight
         self.constant_velocity = constant_velocity
         self.damping = damping
+        self.sensor_weight = sensor_weight
+        self.anchor = anchor
+        self.anchor_corrector = anchor_corrector
         self.iterations = iterations
+        self.init_iterations = init_iterations
+        self.init_reach = init_reach
+        self.init_joints = init_joints
         self.tolerance = tolerance
         self.max_surface_distance = max_surface_distance
         self.max_edge_distance = max_edge_distance
@@ -225,6 +262,8 @@ class DepthTracker(BaseEstimator):
             ("prior", PRIORS),
             ("skeleton", SKELETONS),
             ("start", STARTS),
+            ("init_joints", INIT_JOINT_SETS),
+            ("anchor", ANCHORS),
         ):
             if getattr(self, name) not in choices:
                 raise ValueError(f"DepthTracker: {name} must be one of {list(choices)}, got {getattr(self, name)!r}")
@@ -232,19 +271,21 @@ class DepthTracker(BaseEstimator):
             value = getattr(self, name)
             if not isinstance(value, (int, np.integer)) or value < 1 or value % 2 == 0:
                 raise ValueError(f"DepthTracker: {name} must be an odd number of pixels ≥ 1, got {value!r}")
-        for name in ("subsample", "iterations", "neighbours", "successors"):
+        for name in ("subsample", "iterations", "init_iterations", "neighbours", "successors"):
             value = getattr(self, name)
             if not isinstance(value, (int, np.integer)) or value < 1:
                 raise ValueError(f"DepthTracker: {name} must be an integer ≥ 1, got {value!r}")
         for name in (
             "colour_weight",
             "damping",
+            "sensor_weight",
             "edge_weight",
             "prior_weight",
             "smooth_weight",
             "tolerance",
             "max_surface_distance",
             "max_edge_distance",
+            "init_reach",
             "canny_low",
             "canny_high",
         ):
@@ -260,19 +301,35 @@ class DepthTracker(BaseEstimator):
         return torch.device(self.device)
 
     def fit(self, sequences: list[DepthSequence]) -> DepthTracker:
-        """Build the motion-prior database from the ground-truth ``joints`` of training sequences (nothing else of
-        them is used)."""
+        """Build the motion-prior database from the ground-truth ``joints`` of training sequences and, with
+        ``anchor="sensor_gp"``, fit the GP correction of their sensor skeletons."""
         clips = []
         for seq in sequences:
             if seq.joints is None:
                 raise DepthInputError(f"{seq.source or 'depth sequence'}: fit needs the sequence's joints")
             clips.append(tracked_joints(seq.joints))
-        return self.fit_mocap(clips)
+        self._fit_database(clips)
+        if self.anchor == "sensor_gp":
+            from mocapkit.depth_tracking.baselines import SensorSkeletonGP
+
+            self.anchor_model_ = SensorSkeletonGP(self.anchor_corrector).fit(sequences)
+        return self
 
     def fit_mocap(self, clips: list[np.ndarray]) -> DepthTracker:
         """Build the prior database from mocap takes: each ``[T, 16, 3]`` (metres, any frame; 30 fps, the
-        camera's rate, is what the successors assume) of :data:`~mocapkit.depth_tracking.base.TRACKED_JOINTS`."""
+        camera's rate, is what the successors assume) of :data:`~mocapkit.depth_tracking.base.TRACKED_JOINTS`.
+        The GP anchor needs depth sequences (:meth:`fit`)."""
         self._check_params()
+        if self.anchor == "sensor_gp":
+            raise ValueError(
+                "DepthTracker: anchor=sensor_gp learns from depth sequences with sensor and ground-truth joints "
+                "(fit), not from mocap alone; use anchor=sensor"
+            )
+        return self._fit_database(clips)
+
+    def _fit_database(self, clips: list[np.ndarray]) -> DepthTracker:
+        self._check_params()
+        self.anchor_model_ = None
         poses, takes = [], []
         if self.prior == "lpca":
             if len(clips) == 0:
@@ -303,15 +360,21 @@ class DepthTracker(BaseEstimator):
         check_sequence(sequence, tuple(needs))
         device = self._device()
         dtype = torch.float32
+        anchor = None  # the sensor's joints, GP-corrected with anchor=sensor_gp
+        if self.anchor_model_ is not None:
+            anchor = self.anchor_model_.predict(sequence)
+        elif sequence.sensor_joints is not None:
+            anchor = tracked_joints(sequence.sensor_joints)
         if performer is not None:
             skeleton = bm.skeleton_from_joints(performer)
         elif self.skeleton == "template":
             skeleton = bm.template_skeleton()
+        elif self.skeleton == "ground_truth":
+            skeleton = bm.skeleton_from_joints(tracked_joints(sequence.joints))
         else:
-            source = sequence.joints if self.skeleton == "ground_truth" else sequence.sensor_joints
-            skeleton = bm.skeleton_from_joints(tracked_joints(source))
+            skeleton = bm.skeleton_from_joints(anchor)
         offsets, radii = skeleton.tensors(device, dtype)
-        state = _TrackState(self, sequence.intrinsics, offsets, radii, device, dtype)
+        state = _TrackState(self, sequence.intrinsics, offsets, radii, device, dtype, anchor)
         out = np.zeros((sequence.num_frames, len(bm.TRACKED_JOINTS), 3), dtype=np.float32)
         frames = range(sequence.num_frames)
         if self.progress:
@@ -325,7 +388,7 @@ class DepthTracker(BaseEstimator):
             frame = state.observe(sequence, t)
             if q is None:
                 q = state.initial_pose(sequence)
-                q = state.track(frame, q, None, previous_frame=None, use_colour=False, use_prior=False)
+                q = state.track(frame, q, None, previous_frame=None, use_colour=False, use_prior=False, first=True)
             else:
                 subspace = self.prior_.subspace(q.double()) if self.prior_ is not None else None
                 start = q + (q - q_before) if self.constant_velocity and q_before is not None else q
@@ -352,8 +415,9 @@ def database_poses(clip: np.ndarray, iterations: int = 40) -> np.ndarray:
 class _TrackState:
     """What tracking one sequence needs on the device: the camera, the body, the window offsets."""
 
-    def __init__(self, tracker: DepthTracker, intrinsics: CameraIntrinsics, offsets, radii, device, dtype):
+    def __init__(self, tracker: DepthTracker, intrinsics: CameraIntrinsics, offsets, radii, device, dtype, anchor=None):
         self.p = tracker
+        self.anchor = anchor  # [T, 16, 3] the sensor's joints (GP-corrected with anchor=sensor_gp), or None
         self.k = intrinsics
         self.offsets, self.radii = offsets, radii
         self.device, self.dtype = device, dtype
@@ -377,7 +441,16 @@ class _TrackState:
             pixels, edge_points, _ = _edges(filled, _unproject(filled, self.k), self.p.canny_low, self.p.canny_high)
         else:
             pixels, edge_points = torch.zeros((0, 2), dtype=torch.long), torch.zeros((0, 3))
-        return _Frame(depth, points, colour, pixels.to(self.device), edge_points.to(self.device, self.dtype))
+        sensor = weights = None
+        if self.p.sensor_weight > 0 and self.anchor is not None:
+            sensor = torch.as_tensor(self.anchor[t], device=self.device, dtype=self.dtype)
+            weights = torch.ones(len(bm.TRACKED_JOINTS), device=self.device, dtype=self.dtype)
+            if sequence.sensor_state is not None:  # tracked 1, inferred 0.5, not tracked 0
+                state = tracked_joints(sequence.sensor_state[t][:, None])[:, 0].astype(np.float32)
+                weights = torch.as_tensor(state / 2.0, device=self.device, dtype=self.dtype)
+        return _Frame(
+            depth, points, colour, pixels.to(self.device), edge_points.to(self.device, self.dtype), sensor, weights
+        )
 
     # --------------------------------------------------------------------------------------- initialisation
     def initial_pose(self, sequence: DepthSequence) -> torch.Tensor:
@@ -394,12 +467,13 @@ class _TrackState:
             weights = None
             prior_weight = 0.0
         else:
-            target = torch.as_tensor(
-                tracked_joints(sequence.sensor_joints[:1]), device=self.device, dtype=torch.float64
-            )
-            weights = torch.zeros(len(bm.TRACKED_JOINTS), dtype=torch.float64, device=self.device)
-            weights[list(bm.INIT_JOINTS)] = 1.0
-            prior_weight = 1e-3
+            target = torch.as_tensor(self.anchor[:1], device=self.device, dtype=torch.float64)
+            if self.p.init_joints == "five":
+                weights = torch.zeros(len(bm.TRACKED_JOINTS), dtype=torch.float64, device=self.device)
+                weights[list(bm.INIT_JOINTS)] = 1.0
+                prior_weight = 1e-3
+            else:
+                weights, prior_weight = None, 1e-4
         q0 = torch.zeros(1, bm.NUM_DOF, dtype=torch.float64, device=self.device)
         q0[:, :6] = torch.as_tensor(bm.root_pose(target.cpu().numpy()), device=self.device)
         q = bm.fit_pose(
@@ -417,7 +491,11 @@ class _TrackState:
         use_colour: bool,
         use_prior: bool = True,
         q_start: torch.Tensor | None = None,
+        first: bool = False,
     ) -> torch.Tensor:
+        """Gauss–Newton on one frame from ``q_start`` (default ``q_prev``). ``first``: the initialisation step, which
+        starts farther from the truth: ``init_iterations`` iterations whose outlier distances shrink from
+        ``init_reach`` times the normal ones to the normal ones over the first half."""
         p = self.p
         q = (q_prev if q_start is None else q_start).clone()
         colour_ref = None
@@ -429,8 +507,12 @@ class _TrackState:
             and previous_frame.colour is not None
         ):
             colour_ref = (previous_frame.colour, q_prev)
-        for _ in range(p.iterations):
-            bone_s, local_s, target_s, bone_e, local_e, target_e = self.correspondences(frame, q, colour_ref)
+        iterations = p.init_iterations if first else p.iterations
+        for i in range(iterations):
+            reach = 1.0
+            if first:
+                reach = max(1.0, p.init_reach ** (1 - 2 * i / max(iterations, 1)))
+            bone_s, local_s, target_s, bone_e, local_e, target_e = self.correspondences(frame, q, colour_ref, reach)
             bone = torch.cat([bone_s, bone_e])
             local = torch.cat([local_s, local_e])
             target = torch.cat([target_s, target_e])
@@ -448,6 +530,12 @@ class _TrackState:
                 jw = (jac * weight[:, None, None]).reshape(-1, bm.NUM_DOF).double()
                 a += jw.T @ jac.reshape(-1, bm.NUM_DOF).double()
                 b += jw.T @ residual.reshape(-1).double()
+            if frame.sensor is not None:  # the sensor-skeleton anchor (ours): keeps the fit from drifting away
+                joints, _, d_joints, _ = bm.forward_kinematics_jacobian(q[None], self.offsets)
+                jac_s = d_joints[0].permute(1, 2, 0).reshape(-1, bm.NUM_DOF).double()  # [48, 34]
+                w_s = (p.sensor_weight * frame.sensor_weight).repeat_interleave(3).double()
+                a += jac_s.T @ (w_s[:, None] * jac_s)
+                b += jac_s.T @ (w_s * (frame.sensor - joints[0]).reshape(-1).double())
             if subspace is not None and use_prior:
                 a_prior, b_prior = subspace.normal_equations(q.double())
                 a += p.prior_weight * a_prior
@@ -467,7 +555,7 @@ class _TrackState:
         box = capsule_box(a, b, r, self.k)
         return raycast_capsules(a, b, r, self.k, stride=stride, box=box), joints, rotations
 
-    def correspondences(self, frame: _Frame, q: torch.Tensor, colour_ref):
+    def correspondences(self, frame: _Frame, q: torch.Tensor, colour_ref, reach: float = 1.0):
         p, k = self.p, self.k
         h, w = k.height, k.width
         hits, joints, rotations = self.render(q, p.subsample)
@@ -495,7 +583,9 @@ class _TrackState:
         best = cost.argmin(dim=1)
         rows = torch.arange(len(best), device=self.device)
         bv, bu = wv[rows, best], wu[rows, best]
-        keep = (frame.depth[bv, bu] > 0) & ((frame.depth[bv, bu] - rendered[:, 2]).abs() <= p.max_surface_distance)
+        keep = (frame.depth[bv, bu] > 0) & (
+            (frame.depth[bv, bu] - rendered[:, 2]).abs() <= reach * p.max_surface_distance
+        )
         surface = (bone[keep], local[keep], frame.points[bv[keep], bu[keep]])
         if not p.use_edges or len(frame.edge_pixels) == 0:
             empty_l = torch.zeros((0, 3), device=self.device, dtype=self.dtype)
@@ -519,7 +609,7 @@ class _TrackState:
         distance = (r_points[candidate.clamp_min(0)] - frame.edge_points[:, None]).norm(dim=-1)
         distance = torch.where(candidate >= 0, distance, torch.full_like(distance, float("inf")))
         nearest, which = distance.min(dim=1)
-        keep = nearest <= p.max_edge_distance
+        keep = nearest <= reach * p.max_edge_distance
         chosen = candidate[torch.arange(len(which), device=self.device), which][keep]
         src = r_source[chosen]
         e_bone = capsule[src[:, 0], src[:, 1]]

@@ -9,7 +9,7 @@ floor with the right hand), Kinect v1 depth rendered with sensor noise (``render
 seed per take and seed); frames ``--occlude-start`` … +6 lose every depth pixel of the left arm (upper arm, forearm,
 hand: the rendered part labels), as if something the sensor does not see covered it. Databases (ground-truth joints
 of the *other* performers, full takes at 30 fps): ``one-motion`` = their ``depositFloorR`` takes; ``mixed`` =
-every take of theirs (11 motion classes). The tracker is the registry's default (``lpca_tracker``) with
+every take of theirs (11 motion classes). The tracker is the registry's default (``tracker``) with
 ``prior=none`` or ``lpca``. Reported per variant, mean ± sd over seeds: the mean error of the 16 joints and of the
 left-arm joints during the occlusion and over the whole take (mm), and a per-frame plot.
 Results: docs/results/depth-tracking.md#occlusion.
@@ -32,7 +32,7 @@ def main(argv=None) -> None:
     from mocapkit.datasets.synthetic.depth import render_depth_sequence
     from mocapkit.datasets.synthetic.kinect_noise import file_seed, kinect20_from_motion
     from mocapkit.depth_tracking.base import TRACKED_JOINTS, joint_error_mm, tracked_joints
-    from mocapkit.depth_tracking.benchmark import motion_class
+    from mocapkit.depth_tracking.benchmark import in_view, motion_class
     from mocapkit.evaluation.plots import pyplot, save_figure
     from mocapkit.train.registry import build_method
 
@@ -62,7 +62,7 @@ def main(argv=None) -> None:
     print({k: (0 if v is None else sum(len(c) for c in v)) for k, v in databases.items()}, "database frames")
     trackers = {}  # one fit per database: the inverse kinematics of every database take
     for name, clips_ in databases.items():
-        tracker = build_method("depth_tracking", "lpca_tracker", [f"prior={'none' if clips_ is None else 'lpca'}"])
+        tracker = build_method("depth_tracking", "tracker", [f"prior={'none' if clips_ is None else 'lpca'}"])
         trackers[name] = tracker.fit([]) if clips_ is None else tracker.fit_mocap(clips_)
     occluded = np.arange(args.occlude_start, args.occlude_start + 7)
     arm = [TRACKED_JOINTS.index(j) for j in LEFT_ARM_JOINTS]
@@ -71,15 +71,13 @@ def main(argv=None) -> None:
     for seed in args.seeds:
         for path in test_files:
             positions = kinect20_from_motion(read_motion(path), fps=30.0)[: args.frames]
-            seq = render_depth_sequence(positions, 30.0, seed=file_seed(seed, path), source=str(path))
+            seq = in_view(render_depth_sequence(positions, 30.0, seed=file_seed(seed, path), source=str(path)))
             hide = np.isin(seq.parts, [seq.part_names.index(p) + 1 for p in LEFT_ARM_PARTS])
             hide[np.setdiff1d(np.arange(seq.num_frames), occluded)] = False
             seq.depth_mm[hide] = 0
             truth = tracked_joints(seq.joints)
             for name, clips_ in databases.items():
-                tracker = build_method(
-                    "depth_tracking", "lpca_tracker", [f"prior={'none' if clips_ is None else 'lpca'}"]
-                )
+                tracker = build_method("depth_tracking", "tracker", [f"prior={'none' if clips_ is None else 'lpca'}"])
                 tracker = tracker.fit([]) if clips_ is None else tracker.fit_mocap(clips_)
                 estimate = tracker.predict(seq)
                 error = joint_error_mm(estimate, truth)

@@ -14,7 +14,13 @@ TASK = "depth_tracking"
 #: config's): 2 Gauss–Newton iterations and a 5-neighbour prior; 3 steps of a narrow CNN on small crops; 2 Adam
 #: steps of a GP with 10 inducing points.
 FAST = {
-    "lpca_tracker": ["iterations=2", "neighbours=5"],
+    "tracker": ["iterations=2", "init_iterations=2", "neighbours=5"],
+    "lou_thesis": ["iterations=2", "neighbours=5"],
+    "tracker_gp": [
+        "iterations=2",
+        "init_iterations=2",
+        "anchor_corrector={gp_iterations: 2, n_inducing: 10, max_train_frames: 200}",
+    ],
     "cnn_regressor": ["steps=3", "batch_size=4", "crop_size=32", "network={width: 4, blocks: 2, hidden: 16}"],
     "sensor_gp": ["corrector={gp_iterations: 2, n_inducing: 10, max_train_frames: 200}"],
 }

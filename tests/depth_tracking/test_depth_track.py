@@ -97,7 +97,8 @@ def test_track_writes_c3d_picture_and_report(data, tmp_path):
     saved = json.loads((out / "report.json").read_text())
     (entry,) = saved["files"]
     assert entry["frames"] == FRAMES and entry["seconds"] > 0 and entry["frames_per_s"] > 0
-    assert entry["method"] == "lpca_tracker" and entry["parameters"]["iterations"] == 2
+    assert entry["method"] == "tracker" and entry["parameters"]["iterations"] == 2
+    assert entry["parameters"]["prior"] == "lpca"  # --prior turns the registry default's prior=none into LPCA
     assert entry["picture"] == str(picture) and entry["coordinates"].startswith("world")
     errors = entry["joint_error_mm"]
     assert 0 < errors["tracker"] < 400 and 0 < errors["sensor"] < 400
@@ -110,7 +111,7 @@ def test_cli_writes_bvh_and_prints_a_summary(data, tmp_path, capsys):
     argv = ["depth-track", str(data["seq"]), "--out", str(out), "--prior", str(data["prior"]), "--set", *FAST]
     assert main([*argv, "--format", "bvh", "--pictures", "0", "--quiet"]) == 0
     text = capsys.readouterr().out
-    assert "tracked 1 file(s) with lpca_tracker" in text and "frames/s" in text and "error vs truth" in text
+    assert "tracked 1 file(s) with tracker" in text and "frames/s" in text and "error vs truth" in text
     motion = read_motion(out / "squat.bvh")
     assert motion.joint_names == TRACKED_JOINTS and motion.parents == tracked_parents()
     assert motion.num_frames == FRAMES and motion.fps == pytest.approx(30.0)

@@ -190,3 +190,16 @@ def test_errors_name_the_problem(made_up):
     no_sensor.sensor_joints = None
     with pytest.raises(DepthInputError, match="sensor_joints"):
         DepthTracker(prior="none").fit([]).predict(no_sensor)
+
+
+def test_benchmark_cuts_a_take_to_its_frames_in_view(made_up):
+    from mocapkit.depth_tracking.benchmark import in_view, motion_class
+
+    q, skeleton = made_up
+    seq = _sequence(q[:6], skeleton)
+    seq.depth_mm[[0, 3]] = 0  # out of view at the start and in the middle: runs 1–2 and 4–5, the first kept
+    cut = in_view(seq)
+    assert cut.num_frames == 2 and cut.metadata["in_view"] == [1, 3]
+    assert np.array_equal(cut.joints, seq.joints[1:3]) and np.array_equal(cut.sensor_joints, seq.sensor_joints[1:3])
+    assert in_view(_sequence(q[:3], skeleton)).num_frames == 3
+    assert motion_class("HDM_bd_grabHighR_001_120.amc") == "grabHighR" and motion_class("02_05.amc") == "02"
