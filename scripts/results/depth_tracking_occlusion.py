@@ -7,12 +7,13 @@ tracked with no prior, with an LPCA prior from a one-motion database and from a 
 Data: the held-out performer's bending takes (HDM05 ``depositFloorR``: bending down to put something on the
 floor with the right hand), Kinect v1 depth rendered with sensor noise (``render_depth_sequence``, the render
 seed per take and seed); frames ``--occlude-start`` … +6 lose every depth pixel of the left arm (upper arm, forearm,
-hand: the rendered part labels), as if something the sensor does not see covered it. Databases (ground-truth joints
+hand: the rendered part labels), as if something the sensor does not see covered it, and the sensor skeleton's
+left elbow, wrist and hand are NOT_TRACKED there (so the tracker's sensor term gives them no weight). Databases (ground-truth joints
 of the *other* performers, full takes at 30 fps): ``one-motion`` = their ``depositFloorR`` takes; ``mixed`` =
 every take of theirs (11 motion classes). The tracker is the registry's default (``tracker``) with
 ``prior=none`` or ``lpca``. Reported per variant, mean ± sd over seeds: the mean error of the 16 joints and of the
 left-arm joints during the occlusion and over the whole take (mm), and a per-frame plot.
-Results: docs/results/depth-tracking.md#occlusion.
+Results: docs/results/depth_tracking.md#occlusion.
 """
 
 from __future__ import annotations
@@ -75,6 +76,9 @@ def main(argv=None) -> None:
             hide = np.isin(seq.parts, [seq.part_names.index(p) + 1 for p in LEFT_ARM_PARTS])
             hide[np.setdiff1d(np.arange(seq.num_frames), occluded)] = False
             seq.depth_mm[hide] = 0
+            # the sensor's skeleton loses the arm too: its joints count as not tracked (weight 0 in the tracker)
+            arm20 = [seq.joint_names.index(j) for j in (*LEFT_ARM_JOINTS, "l_hand")]
+            seq.sensor_state[np.ix_(occluded, arm20)] = 0
             truth = tracked_joints(seq.joints)
             for name, clips_ in databases.items():
                 tracker = build_method("depth_tracking", "tracker", [f"prior={'none' if clips_ is None else 'lpca'}"])
