@@ -19,17 +19,24 @@ over the 34 DOF of :mod:`mocapkit.depth_tracking.body_model`:
 - **smoothness**: ``λ3 ‖q − q_t‖²`` (also Levenberg damping of DOF no data constrains).
 
 Jacobians ``∂f(a_i; q)/∂q`` are exact and analytic (:func:`~mocapkit.depth_tracking.body_model.
-body_points_jacobian`, the chain rule down the bone tree; ~10× faster than ``torch.func.jacfwd``, which the tests
-compare them with), and everything is PyTorch, so it runs on the tensors' device. Iterations stop when ``‖Δq‖ < tolerance`` or after ``iterations``.
+body_points_jacobian`, the chain rule down the bone tree; 8× faster than ``torch.func.jacfwd``, which the tests
+compare them with), and everything is PyTorch, so it runs on the tensors' device. Iterations stop when
+``‖Δq‖ < tolerance`` or after ``iterations``.
 
 Where the thesis is silent (digest §4 item 14), ours: correspondences farther than ``max_surface_distance``
 (depth) or ``max_edge_distance`` (3-D) are dropped as outliers; the Canny thresholds are on the depth gradient in
-metres after Gaussian smoothing; colour weights as above. **Initialisation** (§2.4): ``"sensor"`` (what a user
-has): the rest pose placed on the sensor skeleton's HipCenter, turned by its hips and spine, then inverse kinematics
-on 5 sensor joints (head, wrists, ankles), then one tracking step on frame 0 with depth and edges, no colour;
-``"ground_truth"``: the first ground-truth frame (the thesis's synthetic protocol). **Skeleton** (the thesis
-assumes the performer's is known): bone lengths from the sensor skeleton (``"sensor"``: medians over the take) or
-from the ground truth (``"ground_truth"``, the thesis's assumption).
+metres after Gaussian smoothing; colour weights as above. **Start** (§2.4): ``"sensor"`` (what a user has): the
+rest pose placed on the sensor skeleton's HipCenter, turned by its hips and spine, inverse kinematics on the sensor
+joints (``init_joints``: all 16 by default, the thesis's 5 — head, wrists, ankles — in ``lou_thesis``), then a
+depth step on frame 0 without colour; ``"ground_truth"``: the first ground-truth frame (the thesis's synthetic
+protocol); ``"standing"``: the rest pose facing the camera. **Skeleton** (the thesis assumes the performer's is
+known): bone lengths from the sensor skeleton, the ground truth or a template, or a mocap take of the performer
+(:meth:`DepthTracker.predict`'s ``performer``).
+
+**Beyond the thesis** (the registry's ``tracker``; docs/decisions.md#depth-tracker-defaults): Levenberg–Marquardt
+damping, 5 cm outlier distances, a wider first step, and the sensor's skeleton (optionally corrected by the Kinect
+GP, ``anchor``) as a soft target of weight ``sensor_weight``. Without them the printed method loses the body on
+rendered noisy depth; its settings are the registry's ``lou_thesis``.
 """
 
 from __future__ import annotations
@@ -175,7 +182,8 @@ class DepthTracker(BaseEstimator):
             thesis) or ``"all"`` 16.
         max_surface_distance, max_edge_distance: outlier rejection of correspondences (metres).
         canny_low, canny_high: Canny hysteresis thresholds on the smoothed depth gradient (metres).
-        skeleton: where bone lengths come from: ``"sensor"`` (the anchor's, median over the take), ``"ground_truth"`` (the thesis's known performer) or
+        skeleton: where bone lengths come from: ``"sensor"`` (the anchor's, median over the take),
+            ``"ground_truth"`` (the thesis's known performer) or
             ``"template"`` (a 1.7 m body); :meth:`predict`'s ``performer`` overrides it.
         start: the first frame's pose: ``"sensor"`` (IK on sensor joints, then a depth step), ``"ground_truth"``
             (the thesis's synthetic protocol) or ``"standing"`` (the rest pose facing the camera at the depth's
