@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from mocapkit.depth_tracking.base import TRACKED_JOINTS, joint_error_mm, tracked_joints
-from mocapkit.evaluation.compare.base import Benchmark, ComparisonError, Split
+from mocapkit.evaluation.compare.base import Benchmark, ComparisonError, Split, mean_sd
 
 HEADLINE = ["error_mm", "reduction", "frames_per_s"]
 
@@ -209,11 +209,10 @@ class DepthTrackingBenchmark(Benchmark):
         start = time.perf_counter()
         predicted = [fitted.predict(s) for s in sequences]
         seconds = time.perf_counter() - start
-        errors = [joint_error_mm(p, tracked_joints(s.joints)) for p, s in zip(predicted, sequences)]
-        sensor = [joint_error_mm(tracked_joints(s.sensor_joints), tracked_joints(s.joints)) for s in sequences]
-        per_joint = np.concatenate(
-            [1000 * np.linalg.norm(p - tracked_joints(s.joints), axis=-1) for p, s in zip(predicted, sequences)]
-        ).mean(axis=0)
+        truth = [tracked_joints(s.joints) for s in sequences]
+        errors = [joint_error_mm(p, t) for p, t in zip(predicted, truth)]
+        sensor = [joint_error_mm(tracked_joints(s.sensor_joints), t) for s, t in zip(sequences, truth)]
+        per_joint = np.concatenate([1000 * np.linalg.norm(p - t, axis=-1) for p, t in zip(predicted, truth)]).mean(0)
         frames = int(sum(len(e) for e in errors))
         by_class: dict[str, list[float]] = {}
         for k, e in zip(test, errors):
@@ -294,8 +293,8 @@ class DepthTrackingBenchmark(Benchmark):
                 speeds += [c["metrics"]["frames_per_s"] for c in seed_cells]
             reduction = [100 * (1 - e / s) for e, s in zip(errors, sensors)]
             lines.append(
-                f"| {mine[0]['label']} | {_mean_sd(errors, 1)} | {_mean_sd(sensors, 1)} | "
-                f"{_mean_sd(reduction, 1)} % | {np.median(speeds):,.1f} |"
+                f"| {mine[0]['label']} | {mean_sd(errors, 1)} | {mean_sd(sensors, 1)} | "
+                f"{mean_sd(reduction, 1)} % | {np.median(speeds):,.1f} |"
             )
         classes = sorted({k for c in cells for k in c["detail"]["per_class_mm"]})
         lines += [
@@ -360,13 +359,6 @@ class DepthTrackingBenchmark(Benchmark):
         ax.grid(alpha=0.3)
         out.append(save_figure(fig, Path(out_dir) / "per_frame_error.png"))
         return out
-
-
-def _mean_sd(values, digits: int) -> str:
-    values = [float(v) for v in values]
-    if len(values) == 1:
-        return f"{values[0]:.{digits}f}"
-    return f"{np.mean(values):.{digits}f} ± {np.std(values, ddof=1):.{digits}f}"
 
 
 __all__ = ["DepthTrackingBenchmark", "in_view", "motion_class"]

@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mocapkit.evaluation.compare.base import Benchmark, ComparisonError, Split
+from mocapkit.evaluation.compare.base import Benchmark, ComparisonError, Split, mean_sd
 from mocapkit.kinect.metrics import joint_error_cm
 
 HEADLINE = ["error_cm", "reduction", "frames_per_s"]
@@ -365,8 +365,8 @@ class KinectReconstructionBenchmark(Benchmark):
             reduction = [1.0 - e / r for e, r in zip(errors, raws)]
             label = mine[0]["label"]
             lines.append(
-                f"| {label} | {_mean_sd(errors, 2)} | {_mean_sd(raws, 2)} | "
-                f"{_mean_sd([100 * r for r in reduction], 1)} % | {np.median(speeds):,.0f} |"
+                f"| {label} | {mean_sd(errors, 2)} | {mean_sd(raws, 2)} | "
+                f"{mean_sd([100 * r for r in reduction], 1)} % | {np.median(speeds):,.0f} |"
             )
         return lines + [""]
 
@@ -424,10 +424,3 @@ def _per_joint_plot(cells: list, title: str, path: Path) -> Path:
     ax.legend(fontsize=7, ncol=2)
     ax.grid(alpha=0.3)
     return save_figure(fig, path)
-
-
-def _mean_sd(values, digits: int) -> str:
-    values = [float(v) for v in values]
-    if len(values) == 1:
-        return f"{values[0]:.{digits}f}"
-    return f"{np.mean(values):.{digits}f} ± {np.std(values, ddof=1):.{digits}f}"

@@ -51,6 +51,15 @@ class Split:
         }
 
 
+def mean_sd(values, digits: int) -> str:
+    """``"41.7 ± 5.4"``: mean ± sample sd of ``values`` with ``digits`` decimals (the value alone for one), for the
+    benchmarks' tables of means over seeds."""
+    values = [float(v) for v in values]
+    if len(values) == 1:
+        return f"{values[0]:.{digits}f}"
+    return f"{np.mean(values):.{digits}f} ± {np.std(values, ddof=1):.{digits}f}"
+
+
 def indices_sha1(indices) -> str:
     """SHA-1 of sorted int64 sample indices: equal for two methods exactly when they scored the same samples."""
     return hashlib.sha1(np.sort(np.asarray(indices, dtype=np.int64)).tobytes()).hexdigest()
