@@ -16,10 +16,18 @@ The library is real HDM05 clips (``../shared/data/hdm05_cuts11``, 232 clips) rep
   inner product; HNSW, approximate); query = the FAISS search of one query (k = 10, median over 200) plus, as its
   own column, encoding the query clip.
 
-Each size prints DTW / embedding latency as a ratio, in the same run. A PNG of latency against size goes beside
-the results (``--plot``).
+A DTW row may carry parameters after a colon (``dtw_world_frame:prefilter=100,n_reference=128``). A row with
+``prefilter`` (the two-stage search: a FAISS prefilter on fixed-length descriptors, then DTW on the ``K`` it returns)
+also reports **recall@10 against the same method's exact search** (every clip ranked, ``--recall-queries`` queries)
+and the memory of what it keeps (the database's feature sequences, the reference statistics and the FAISS index).
+
+Each size prints DTW / embedding latency as a ratio, in the same run (without ``--onnx``, the DTW rows alone, the
+prefiltered one against the same method's exact search). A PNG of latency against size goes beside the results
+(``--plot``).
 
     OMP_NUM_THREADS=1 .venv/bin/python bench/bench_retrieval.py --onnx checkpoints/retrieval_supcon/fold_bd/model.onnx
+    OMP_NUM_THREADS=1 .venv/bin/python bench/bench_retrieval.py --sizes 1000,10000 \
+        --dtw-methods "dtw_world_frame:n_reference=128;dtw_world_frame:n_reference=128,prefilter=100" --plot ""
 """
 
 from __future__ import annotations
@@ -71,14 +79,18 @@ def median_ms(fn, repeats: int) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--data", default=str(DEFAULT_DATA))
-    parser.add_argument("--onnx", required=True, help="an exported retrieval encoder (mocapkit export)")
+    parser.add_argument(
+        "--onnx", default=None, help="an exported retrieval encoder (mocapkit export); none: DTW rows only"
+    )
     parser.add_argument("--sizes", default="1000,10000,100000,1000000")
     parser.add_argument("--dtw-max", type=int, default=10000, help="largest library DTW is measured on")
     parser.add_argument(
         "--dtw-methods",
-        default="dtw_relational,dtw_mutual_proximity",
-        help="DTW rows: retrieval method names of the registry (mocapkit methods retrieval)",
+        default="dtw_relational;dtw_world_frame",
+        help="DTW rows, separated by ';': retrieval method names of the registry (mocapkit methods retrieval), "
+        "each with optional parameters after ':' (name:key=value,key=value)",
     )
+    parser.add_argument("--recall-queries", type=int, default=20, help="queries scored against exact search")
     parser.add_argument("--encode", type=int, default=5000, help="augmented clips actually encoded")
     parser.add_argument("--hnsw-max", type=int, default=1000000)
     parser.add_argument("--plot", default=str(ROOT / "docs" / "img" / "retrieval_latency.png"))
@@ -87,8 +99,6 @@ def main() -> None:
     import faiss
 
     from mocapkit.datasets.mocap.folders import list_clips, read_clips
-    from mocapkit.retrieval.embedding import EmbeddingRetrieval
-    from mocapkit.retrieval.index import make_method
 
     faiss.omp_set_num_threads(1)
     sizes = [int(s) for s in args.sizes.split(",")]
@@ -100,7 +110,17 @@ def main() -> None:
     queries = augmented(real, len(real) + 50, seed=99)[len(real) :]  # 50 augmented clips, not indexed
 
     rows = []
-    # ---------------------------------------------------------------- embedding
+    query_encode_ms = 0.0
+    if args.onnx:
+        query_encode_ms = embedding_rows(args, real, queries, sizes, rows)
+    dtw_rows(args, real, queries, sizes, rows, query_encode_ms)
+    report(args, rows, query_encode_ms)
+
+
+def embedding_rows(args, real, queries, sizes, rows) -> float:
+    """The embedding's flat and HNSW rows; returns the query encoding time (ms)."""
+    from mocapkit.retrieval.embedding import EmbeddingRetrieval
+
     method = EmbeddingRetrieval(onnx=args.onnx)
     encode_n = min(args.encode, max(sizes))
     library = augmented(real, encode_n, seed=0)
@@ -154,31 +174,78 @@ def main() -> None:
                 f" + encode query {query_encode_ms:.2f} ms" + (f", recall@10 vs exact {recall:.3f}" if recall else ""),
                 flush=True,
             )
-    # ---------------------------------------------------------------- DTW
-    for name in args.dtw_methods.split(","):
+    return query_encode_ms
+
+
+def method_bytes(method) -> int:
+    """Bytes of what a fitted method keeps (its state's arrays, the FAISS index serialised among them)."""
+    return int(sum(np.asarray(v).nbytes for v in method._state().values()))
+
+
+def dtw_rows(args, real, queries, sizes, rows, query_encode_ms: float) -> None:
+    """One row per DTW method and size: build, query p50 / p95, memory; recall@10 against exact search for a
+    prefiltered row."""
+    from mocapkit.retrieval.base import top_k
+    from mocapkit.retrieval.index import make_method
+
+    for spec in args.dtw_methods.split(";"):
+        name, _, params = spec.partition(":")
+        overrides = [p for p in params.split(",") if p]
         for size in [s for s in sizes if s <= args.dtw_max]:
-            dtw = make_method(name)
+            dtw = make_method(name, overrides)
             lib = augmented(real, size, seed=0)
             start = time.perf_counter()
             dtw.fit(lib)
             build_s = time.perf_counter() - start
-            repeats = 5 if size <= 1000 else 2
-            query_ms = median_ms(lambda i, dtw=dtw: dtw.search([queries[i]], 10), repeats)
-            rows.append({"size": size, "method": name, "build_s": build_s, "query_ms": query_ms})
-            flat = next(r for r in rows if r["size"] == size and r["method"] == "embedding/flat")
-            ratio = query_ms / (flat["query_ms"] + query_encode_ms)
+            repeats = min(len(queries), 20 if size <= 1000 or dtw.prefilter else 2)
+            times = []
+            for i in range(repeats):
+                start = time.perf_counter()
+                dtw.search([queries[i]], 10)
+                times.append(1000 * (time.perf_counter() - start))
+            recall = None
+            if dtw.prefilter:
+                n = min(args.recall_queries, len(queries))
+                exact = top_k(dtw.distances(queries[:n]), 10)[0]
+                found = dtw.search(queries[:n], 10)[0]
+                recall = float(np.mean([len(set(a) & set(b)) / 10 for a, b in zip(exact, found)]))
+            row = {
+                "size": size,
+                "method": spec,
+                "build_s": build_s,
+                "query_ms": float(np.median(times)),
+                "query_p95_ms": float(np.percentile(times, 95)),
+                "memory_mb": method_bytes(dtw) / 2**20,
+                "recall@10": recall,
+            }
+            rows.append(row)
+            flat = next((r for r in rows if r["size"] == size and r["method"] == "embedding/flat"), None)
+            ratio = (
+                f" = {row['query_ms'] / (flat['query_ms'] + query_encode_ms):,.0f}x the embedding flat index"
+                if flat
+                else ""
+            )
             print(
-                f"size {size:>8}: {name} build {build_s:8.2f} s, query {query_ms:9.1f} ms "
-                f"= {ratio:,.0f}x the embedding flat index (search + query encoding)",
+                f"size {size:>8}: {spec} build {build_s:8.2f} s, query p50 {row['query_ms']:9.1f} ms, "
+                f"p95 {row['query_p95_ms']:9.1f} ms, {row['memory_mb']:.0f} MB"
+                + (f", recall@10 vs exact {recall:.3f}" if recall is not None else "")
+                + ratio,
                 flush=True,
             )
 
-    print("\n| library size | method | build (s) | query (ms) | recall@10 |")
-    print("|---:|---|---:|---:|---:|")
+
+def report(args, rows, query_encode_ms: float) -> None:
+    print("\n| library size | method | build (s) | query p50 (ms) | query p95 (ms) | memory (MB) | recall@10 |")
+    print("|---:|---|---:|---:|---:|---:|---:|")
     for r in rows:
         recall = "" if r.get("recall@10") is None else f"{r['recall@10']:.3f}"
-        print(f"| {r['size']:,} | {r['method']} | {r['build_s']:.2f} | {r['query_ms']:.3f} | {recall} |")
-    print(f"\nquery encoding (normalise + ONNX encoder, one clip): {query_encode_ms:.2f} ms")
+        p95 = "" if r.get("query_p95_ms") is None else f"{r['query_p95_ms']:.1f}"
+        memory = "" if r.get("memory_mb") is None else f"{r['memory_mb']:.0f}"
+        print(
+            f"| {r['size']:,} | {r['method']} | {r['build_s']:.2f} | {r['query_ms']:.3f} | {p95} | {memory} | {recall} |"
+        )
+    if args.onnx:
+        print(f"\nquery encoding (normalise + ONNX encoder, one clip): {query_encode_ms:.2f} ms")
     if args.plot:
         from mocapkit.evaluation.plots import pyplot, save_figure
 

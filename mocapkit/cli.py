@@ -713,7 +713,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--method",
         default=None,
         help="a retrieval method (mocapkit methods retrieval; default: the registry's, "
-        "dtw_mutual_proximity, the recommended label-free method)",
+        "dtw_world_frame, the recommended label-free method)",
     )
     index.add_argument(
         "--set",

@@ -46,12 +46,15 @@ order, so that a database may mix formats and a query need not share the databas
    ``"clip"`` turns the whole clip by its mean hip-line heading (keeps turning within the clip); ``"none"``
    keeps it.
 
-Output units are metres of the template body (about 1.7 m tall).
+Output units are metres of the template body (about 1.7 m tall). :func:`landmark_track` returns, beside the
+landmarks, what steps 5 and 6 take away: the body's heading in the file's frame and the pelvis's path through it,
+scaled to the template body (what a retrieval feature needs to tell a walk to the left from a walk to the right).
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import numpy as np
 
@@ -92,6 +95,8 @@ TEMPLATE_BONES: dict[str, float] = {
 HEADINGS = ("frame", "clip", "none")
 #: Landmark indices used by the features: hips (heading), and the pelvis (origin).
 L_HIP, R_HIP, PELVIS = LANDMARK_NAMES.index("l_hip"), LANDMARK_NAMES.index("r_hip"), 0
+#: (hip, knee, ankle) landmark indices of each leg: the body's scale for the pelvis path of :func:`landmark_track`.
+LEGS = tuple(tuple(LANDMARK_NAMES.index(f"{side}_{j}") for j in ("hip", "knee", "ankle")) for side in "lr")
 
 
 class SkeletonInputError(ValueError):
@@ -339,9 +344,21 @@ def face_forward(positions: np.ndarray, heading: str = "frame") -> np.ndarray:
     return turn_about_up(positions, angle, along="-x")
 
 
-def normalised_landmarks(motion, fps: float = 30.0, heading: str = "frame", min_frames: int = 2) -> np.ndarray:
-    """float32 ``[frames, 20, 3]``: ``motion``'s landmarks resampled, gap-filled, y-up, retargeted, pelvis at the
-    origin and turned by ``heading`` (the module docstring gives each step).
+class LandmarkTrack(NamedTuple):
+    """One clip's normalised landmarks and the frame they were taken out of (:func:`landmark_track`)."""
+
+    #: float32 ``[T, 20, 3]``: :func:`normalised_landmarks` (pelvis-centred, turned by the ``heading`` option).
+    landmarks: np.ndarray
+    #: float64 ``[T]`` radians: the hip line's heading in the file's (y-up) frame, ``along="-x"``, per frame,
+    #: whatever the ``heading`` option (turning ``landmarks`` back by it gives the unturned posture).
+    heading: np.ndarray
+    #: float64 ``[T, 3]`` metres of the template body: the pelvis in the file's y-up frame, scaled by the template's
+    #: leg length over the clip's (hip → knee → ankle, median over frames), so that strides compare across bodies.
+    pelvis: np.ndarray
+
+
+def landmark_track(motion, fps: float = 30.0, heading: str = "frame", min_frames: int = 2) -> LandmarkTrack:
+    """:func:`normalised_landmarks` of ``motion`` with the heading and the pelvis path that steps 5 and 6 remove.
 
     Raises:
         SkeletonInputError: no body landmarks, no observed pelvis, non-finite observed values, or fewer than
@@ -366,8 +383,30 @@ def normalised_landmarks(motion, fps: float = 30.0, heading: str = "frame", min_
         raise SkeletonInputError(f"{_label(motion)}: the pelvis landmark is never observed")
     if not np.isfinite(positions[observed]).all():
         raise SkeletonInputError(f"{_label(motion)}: non-finite observed positions")
-    p = _fill_gaps(positions, observed)
-    p = to_y_up(p, motion.up_axis)
-    p = retarget(p)
+    world = to_y_up(_fill_gaps(positions, observed), motion.up_axis)
+    leg = np.mean(
+        [
+            np.median(
+                np.linalg.norm(world[:, knee] - world[:, hip], axis=-1)
+                + np.linalg.norm(world[:, ankle] - world[:, knee], axis=-1)
+            )
+            for hip, knee, ankle in LEGS
+        ]
+    )
+    template_leg = TEMPLATE_BONES["l_knee"] + TEMPLATE_BONES["l_ankle"]
+    pelvis = world[:, PELVIS] * (template_leg / max(float(leg), 1e-3))
+    p = retarget(world)
     p = p - p[:, PELVIS : PELVIS + 1]
-    return face_forward(p, heading).astype(np.float32)
+    angle = hip_line_heading(p, L_HIP, R_HIP, along="-x")
+    return LandmarkTrack(face_forward(p, heading).astype(np.float32), angle.astype(np.float64), pelvis)
+
+
+def normalised_landmarks(motion, fps: float = 30.0, heading: str = "frame", min_frames: int = 2) -> np.ndarray:
+    """float32 ``[frames, 20, 3]``: ``motion``'s landmarks resampled, gap-filled, y-up, retargeted, pelvis at the
+    origin and turned by ``heading`` (the module docstring gives each step).
+
+    Raises:
+        SkeletonInputError: no body landmarks, no observed pelvis, non-finite observed values, or fewer than
+            ``min_frames`` frames after resampling (each names the file).
+    """
+    return landmark_track(motion, fps=fps, heading=heading, min_frames=min_frames).landmarks

@@ -7,7 +7,18 @@ query's frame sequence and each database clip's, on per-frame features of the no
 
 - ``"positions"``: the 20 landmarks' coordinates, ``[T, 60]`` metres (Zhou 2014 §1.7 normalisation);
 - ``"relational"``: the soft relational pose features of :func:`~mocapkit.retrieval.features.relational_features`
-  (Müller & Röder style: which hand is raised, which knee bent, ...), ``[T, F]`` in ``[0, 1]``.
+  (Müller & Röder style: which hand is raised, which knee bent, ...), ``[T, F]`` in ``[0, 1]``;
+- ``"world_positions"``: the same landmarks not turned, ``[T, 60]`` metres: the posture as the file's frame sees it
+  (which way the body faces);
+- ``"world_velocity"``: the pelvis's velocity in the file's frame, ``[T, 3]`` metres of the template body per second
+  (smoothed over :data:`VELOCITY_SMOOTHING` frames): where the body goes (a walk to the left, a walk back).
+
+The two **world** features mean something only when the library's clips share one frame, as takes of one studio
+set-up or one camera do; across takes that face every way (HDM05's performers) they only add noise. With
+``world_frame="auto"`` (the default) ``fit`` keeps them only when the database's clips start facing alike: the
+mean resultant length ``R`` of each clip's heading over its first half second is at least
+:data:`WORLD_MIN_CONCENTRATION` (``heading_concentration_``; ``features_`` lists the features used). ``"on"``
+always keeps them, ``"off"`` never.
 
 Given several features (``features=["positions", "relational"]``), each one's DTW distance is divided by its
 **scale**, learned at ``fit``, and the quotients are summed, so that metres and relational units weigh alike: with
@@ -22,6 +33,14 @@ clips are not pushed down the list only for their length (the sum under the squa
 ``hubness="mutual_proximity"`` re-ranks the distances by :func:`~mocapkit.retrieval.hubness.mutual_proximity`
 (no labels, no parameter), which discounts clips near to every query.
 
+**Prefiltered search** (``prefilter=K``, for large libraries): :meth:`DTWRetrieval.search` first takes each
+query's ``K`` nearest clips by Euclidean distance between fixed-length descriptors — every feature's frames
+resampled to :data:`PREFILTER_FRAMES` frames, divided by the feature's scale, side by side, projected on their
+first :data:`PREFILTER_DIMS` principal axes — from a FAISS index (:mod:`mocapkit.retrieval.ann`: exact below
+20,000 clips, HNSW from there), then ranks only those ``K`` by the method's own distance. With mutual proximity
+the query's statistics come from its distances to :data:`QUERY_REFERENCE` of the reference clips (an unbiased
+sample where exact search uses the whole database). :meth:`distances` stays exact.
+
 ``fit`` keeps the database's feature sequences; with several features or mutual proximity it also computes the
 DTW distances from every database clip to a reference subset of at most ``n_reference`` database clips (all of
 them on libraries of up to ``n_reference`` clips), for the scales and the statistics, and keeps them, so that
@@ -35,7 +54,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from mocapkit.motion.geometry import SkeletonInputError
+from mocapkit.motion.geometry import (
+    L_HIP,
+    R_HIP,
+    LandmarkTrack,
+    SkeletonInputError,
+    hip_line_heading,
+    landmark_track,
+    turn_about_up,
+)
+from mocapkit.retrieval import ann
 from mocapkit.retrieval.base import RetrievalMethod, motion_list, ragged_from_state, ragged_to_state
 from mocapkit.retrieval.hubness import METHODS as HUBNESS_METHODS
 from mocapkit.retrieval.hubness import (
@@ -44,21 +72,58 @@ from mocapkit.retrieval.hubness import (
     reference_indices,
 )
 
-FEATURES = ("positions", "relational")
+FEATURES = ("positions", "relational", "world_positions", "world_velocity")
+#: The features that read the file's frame (kept or dropped by ``world_frame``).
+WORLD_FEATURES = ("world_positions", "world_velocity")
+WORLD_FRAMES = ("auto", "on", "off")
+#: ``world_frame="auto"`` keeps the world features when the database clips' starting headings have at least this
+#: mean resultant length (a circular spread of about 48°). Set before the selection run; there, HDM05's performers
+#: gave 0.24, Bandai's styles 0.89 and MSR Action3D's subjects 0.97 (docs/decisions.md#retrieval-default-world-frame).
+WORLD_MIN_CONCENTRATION = 0.7
+#: Frames (at ``fps``) of the moving average over the pelvis path before its velocity is taken.
+VELOCITY_SMOOTHING = 5
 SCALINGS = ("dtw", "frames")
+#: ``prefilter``'s descriptor: frames each feature is resampled to, and principal axes kept.
+PREFILTER_FRAMES, PREFILTER_DIMS = 16, 128
+#: Reference clips a prefiltered query's mutual-proximity statistics are taken against.
+QUERY_REFERENCE = 64
 #: Queries per dtaidistance call in :meth:`DTWRetrieval._feature_distances`.
 QUERY_BLOCK = 256
 
 
-def frame_features(sequence: np.ndarray, features: str, fps: float) -> np.ndarray:
-    """float64 ``[T, d]`` per-frame features of a normalised landmark sequence ``[T, 20, 3]``."""
+def frame_features(track: LandmarkTrack, features: str, fps: float) -> np.ndarray:
+    """float64 ``[T, d]`` per-frame features (the module docstring) of one clip's :class:`LandmarkTrack`, whose
+    ``landmarks`` are turned per frame (``heading="frame"``) or not, as the method's ``heading`` says."""
+    landmarks = track.landmarks
     if features == "positions":
-        return sequence.reshape(len(sequence), -1).astype(np.float64)
+        return landmarks.reshape(len(landmarks), -1).astype(np.float64)
     if features == "relational":
         from mocapkit.retrieval.features import relational_features
 
-        return np.asarray(relational_features(sequence, fps=fps, soft=True), dtype=np.float64)
+        return np.asarray(relational_features(landmarks, fps=fps, soft=True), dtype=np.float64)
+    if features == "world_positions":
+        # the landmarks were turned by -(this frame's heading) unless heading="none"; the heading of the turned
+        # posture is what is left of it, so turning back by the difference undoes any of the three options
+        left = hip_line_heading(landmarks.astype(np.float64), L_HIP, R_HIP, along="-x")
+        world = turn_about_up(landmarks.astype(np.float64), left - track.heading, along="-x")
+        return world.reshape(len(world), -1)
+    if features == "world_velocity":
+        from scipy.ndimage import uniform_filter1d
+
+        path = uniform_filter1d(np.asarray(track.pelvis, np.float64), VELOCITY_SMOOTHING, axis=0, mode="nearest")
+        return np.gradient(path, axis=0) * float(fps) if len(path) > 1 else np.zeros_like(path)
     raise ValueError(f"features must be one of {FEATURES}, got {features!r}")
+
+
+def heading_concentration(tracks: list[LandmarkTrack], fps: float, seconds: float = 0.5) -> float:
+    """The mean resultant length (0: every way, 1: all alike) of the clips' headings over their first ``seconds``
+    (each clip's circular mean): whether a library's clips share a frame in which facing means something."""
+    starts = []
+    for track in tracks:
+        first = np.asarray(track.heading[: max(1, int(round(seconds * fps)))], dtype=np.float64)
+        starts.append(np.arctan2(np.sin(first).mean(), np.cos(first).mean()))
+    starts = np.asarray(starts)
+    return float(np.hypot(np.cos(starts).mean(), np.sin(starts).mean())) if len(starts) else 0.0
 
 
 def frame_moments(sequences: list[np.ndarray]) -> np.ndarray:
@@ -86,6 +151,13 @@ class DTWRetrieval(RetrievalMethod):
         scaling: ``"dtw"`` or ``"frames"``, how several features' scales are learned (module docstring).
         fps, heading: the normalisation (:func:`~mocapkit.motion.geometry.normalised_landmarks`).
         parallel: let dtaidistance use OpenMP threads.
+        world_frame: ``"auto"``, ``"on"`` or ``"off"``: whether the world features among ``features`` are used
+            (module docstring).
+        prefilter: None (``search`` ranks every clip) or ``K``: ``search`` ranks only the ``K`` clips nearest by
+            descriptor (module docstring); ``prefilter_index``: ``"auto"``, ``"flat"`` or ``"hnsw"`` for them.
+
+    Learned: ``features_`` (the features used), ``heading_concentration_``, ``scales_`` and, with several
+    features or mutual proximity, the reference distances and statistics.
     """
 
     def __init__(
@@ -99,6 +171,9 @@ class DTWRetrieval(RetrievalMethod):
         heading: str = "frame",
         parallel: bool = True,
         scaling: str = "dtw",
+        world_frame: str = "auto",
+        prefilter: int | None = None,
+        prefilter_index: str = "auto",
     ):
         self.features = features
         self.window = window
@@ -109,6 +184,9 @@ class DTWRetrieval(RetrievalMethod):
         self.fps = fps
         self.heading = heading
         self.parallel = parallel
+        self.world_frame = world_frame
+        self.prefilter = prefilter
+        self.prefilter_index = prefilter_index
 
     @property
     def feature_names(self) -> list[str]:
@@ -119,19 +197,47 @@ class DTWRetrieval(RetrievalMethod):
         return names
 
     # ------------------------------------------------------------------ the contract
+    def sequences(self, motions, what: str = "input") -> list[LandmarkTrack]:
+        """Each motion's :class:`~mocapkit.motion.geometry.LandmarkTrack` (the normalised landmarks with the
+        heading and pelvis path the world features read); checks as the base class's."""
+        return [
+            landmark_track(motion, fps=self.fps, heading=self.heading, min_frames=self.min_frames)
+            for motion in motion_list(motions, what)
+        ]
+
     def _encode_sequences(self, sequences):
         return {
             name: [np.ascontiguousarray(frame_features(s, name, self.fps)) for s in sequences]
-            for name in self.feature_names
+            for name in self.features_
         }
+
+    def _choose_features(self, sequences) -> list[str]:
+        """The features used (``features_``): the world features dropped by ``world_frame`` (module docstring)."""
+        names = self.feature_names
+        if self.world_frame not in WORLD_FRAMES:
+            raise ValueError(f"world_frame must be one of {WORLD_FRAMES}, got {self.world_frame!r}")
+        self.heading_concentration_ = heading_concentration(sequences, float(self.fps))
+        keep_world = self.world_frame == "on" or (
+            self.world_frame == "auto" and self.heading_concentration_ >= WORLD_MIN_CONCENTRATION
+        )
+        chosen = [n for n in names if keep_world or n not in WORLD_FEATURES]
+        if not chosen:
+            raise ValueError(
+                f"{type(self).__name__}: features {names} are all world features and world_frame="
+                f"{self.world_frame!r} drops them (the database's heading concentration is "
+                f"{self.heading_concentration_:.2f}, below {WORLD_MIN_CONCENTRATION}); add a frame-free feature "
+                "such as positions, or set world_frame=on"
+            )
+        return chosen
 
     def _fit_sequences(self, sequences, y):
         if self.hubness is not None and self.hubness not in HUBNESS_METHODS:
             raise ValueError(f"hubness must be None or one of {HUBNESS_METHODS}, got {self.hubness!r}")
         if self.scaling not in SCALINGS:
             raise ValueError(f"scaling must be one of {SCALINGS}, got {self.scaling!r}")
+        self.features_ = self._choose_features(sequences)
         database = self._encode_sequences(sequences)
-        names = self.feature_names
+        names = self.features_
         self.scales_ = np.ones(len(names))
         if self._frame_scaled:
             self.frame_moments_ = {n: frame_moments(database[n]) for n in names}
@@ -148,22 +254,111 @@ class DTWRetrieval(RetrievalMethod):
         self._set_reference(reference, raw)
         return database
 
+    def fit(self, motions, y=None) -> DTWRetrieval:
+        super().fit(motions, y)
+        self._build_prefilter(learn_axes=True)
+        return self
+
+    def add(self, motions) -> DTWRetrieval:
+        super().add(motions)
+        self._build_prefilter(learn_axes=False)  # the axes learned at fit, as the scales
+        return self
+
+    # ------------------------------------------------------------------ prefiltered search
+    def _descriptors(self, encoded: dict[str, list[np.ndarray]]) -> np.ndarray:
+        """float32 ``[n, d]``: each clip's features resampled to :data:`PREFILTER_FRAMES` frames, divided by their
+        scales and by ``sqrt(frames)`` (so that Euclidean distances weigh the features as the summed DTW does)."""
+        from mocapkit.retrieval.embedding import resample_frames
+
+        names = self.features_
+        rows = [
+            np.concatenate(
+                [resample_frames(encoded[n][i], PREFILTER_FRAMES).ravel() / s for n, s in zip(names, self.scales_)]
+            )
+            for i in range(len(encoded[names[0]]))
+        ]
+        return np.asarray(rows, dtype=np.float32) / np.sqrt(PREFILTER_FRAMES)
+
+    def _build_prefilter(self, learn_axes: bool) -> None:
+        """With ``prefilter``: the principal axes of the database's descriptors (``prefilter_mean_``,
+        ``prefilter_axes_``; learned from at most 4,096 clips when ``learn_axes``) and the FAISS index of their
+        projections (``prefilter_index_``, of kind ``prefilter_kind_``); a no-op otherwise."""
+        if self.prefilter is None:
+            return
+        if int(self.prefilter) < 1:
+            raise ValueError(f"prefilter must be None or a positive number of clips, got {self.prefilter!r}")
+        x = self._descriptors(self.database_)
+        if learn_axes:
+            sample = x[reference_indices(len(x), 4096)] if len(x) > 1 else x
+            self.prefilter_mean_ = sample.mean(axis=0)
+            _, _, vt = np.linalg.svd(sample - self.prefilter_mean_, full_matrices=False)
+            self.prefilter_axes_ = np.ascontiguousarray(vt[:PREFILTER_DIMS].T, dtype=np.float32)  # [d, dims]
+        self.prefilter_kind_ = ann.resolved_kind(self.prefilter_index, len(x))
+        self.prefilter_index_ = ann.build(self._project(x), self.prefilter_kind_, metric="l2")
+
+    def _project(self, descriptors: np.ndarray) -> np.ndarray:
+        return (descriptors - self.prefilter_mean_) @ self.prefilter_axes_
+
+    def search(self, queries, k: int = 10) -> tuple[np.ndarray, np.ndarray]:
+        """The ``k`` nearest database clips per query, nearest first; with ``prefilter`` among each query's
+        ``max(prefilter, k)`` descriptor neighbours only (module docstring), else exactly."""
+        self._check_fitted()
+        n = int(self.n_database_)
+        k = n if k <= 0 or k > n else int(k)
+        if self.prefilter is None or max(int(self.prefilter), k) >= n:
+            return super().search(queries, k)
+        encoded = self.encode(queries)
+        names = self.features_
+        candidates = ann.search(
+            self.prefilter_index_,
+            self.prefilter_kind_,
+            self._project(self._descriptors(encoded)),
+            max(int(self.prefilter), k),
+        )
+        query_reference = None
+        if self.hubness is not None:
+            query_reference = self.reference_[reference_indices(len(self.reference_), QUERY_REFERENCE)]
+        indices, distances = [], []
+        for i, row in enumerate(candidates):
+            row = row[row >= 0]
+            one = {nm: [encoded[nm][i]] for nm in names}
+            d = sum(
+                self._feature_distances(one[nm], [self.database_[nm][j] for j in row]) / s
+                for nm, s in zip(names, self.scales_)
+            )
+            if self.hubness is not None:
+                to_reference = sum(
+                    self._feature_distances(one[nm], [self.database_[nm][j] for j in query_reference]) / s
+                    for nm, s in zip(names, self.scales_)
+                )
+                d = mutual_proximity(
+                    d,
+                    self.database_mean_[row],
+                    self.database_std_[row],
+                    to_reference.mean(axis=1),
+                    to_reference.std(axis=1),
+                )
+            order = np.lexsort((row, d[0]))[:k]
+            indices.append(row[order])
+            distances.append(d[0][order])
+        return np.asarray(indices, dtype=np.int64), np.asarray(distances, dtype=np.float64)
+
     @property
     def _frame_scaled(self) -> bool:
         """Whether several features are scaled by their frames' spread (``scaling="frames"``)."""
-        return len(self.feature_names) > 1 and self.scaling == "frames"
+        return len(self.features_) > 1 and self.scaling == "frames"
 
     @property
     def _needs_reference(self) -> bool:
         """Whether the distances need DTW statistics of the database (scales by DTW, or hubness)."""
-        return (len(self.feature_names) > 1 and not self._frame_scaled) or self.hubness is not None
+        return (len(self.features_) > 1 and not self._frame_scaled) or self.hubness is not None
 
     def _set_reference(self, reference: np.ndarray, raw: dict[str, np.ndarray]) -> None:
         """The reference clips, their raw distances ``[n_database, n_reference]`` per feature, and what is learned
         from them: the scales (median off-diagonal distance per feature) and the mutual-proximity statistics."""
         self.reference_ = np.asarray(reference, dtype=np.int64)
         self.reference_distances_ = raw
-        names = self.feature_names
+        names = self.features_
         off_diagonal = np.ones(raw[names[0]].shape, dtype=bool)
         off_diagonal[self.reference_, np.arange(len(self.reference_))] = False
         if len(names) > 1 and not self._frame_scaled:
@@ -178,7 +373,7 @@ class DTWRetrieval(RetrievalMethod):
         statistics are exactly those of ``fit`` on the union; beyond that the reference clips and the scales are
         kept, and only the new clips' statistics (against the same reference clips) are computed."""
         new = self._encode_sequences(sequences)
-        names = self.feature_names
+        names = self.features_
         n_old = self.n_database_
         union = {n: list(self.database_[n]) + new[n] for n in names}
         n_total = n_old + len(sequences)
@@ -206,7 +401,7 @@ class DTWRetrieval(RetrievalMethod):
         self.database_ = union
 
     def _distances(self, queries, database) -> np.ndarray:
-        names = self.feature_names
+        names = self.features_
         d = sum(self._feature_distances(queries[n], database[n]) / s for n, s in zip(names, self.scales_))
         if self.hubness is not None:
             d = mutual_proximity(d, self.database_mean_, self.database_std_)
@@ -216,7 +411,7 @@ class DTWRetrieval(RetrievalMethod):
         """float64 ``[T, d]`` per clip of an encoding (``database_`` or :meth:`encode`'s): each feature's frames
         divided by its scale, side by side, so that frame distances weigh the features as the summed DTW distances
         do (what :mod:`mocapkit.retrieval.subsequence` searches inside takes)."""
-        names = self.feature_names
+        names = self.features_
         return [
             np.hstack([np.asarray(encoded[n][i], dtype=np.float64) / s for n, s in zip(names, self.scales_)])
             for i in range(len(encoded[names[0]]))
@@ -258,8 +453,12 @@ class DTWRetrieval(RetrievalMethod):
 
     # ------------------------------------------------------------------ persistence
     def _state(self) -> dict[str, np.ndarray]:
-        state = {"scales": self.scales_}
-        for name in self.feature_names:
+        state = {
+            "scales": self.scales_,
+            "features": np.array(self.features_),
+            "heading_concentration": np.array(self.heading_concentration_, dtype=np.float64),
+        }
+        for name in self.features_:
             state.update(ragged_to_state(f"database_{name}", self.database_[name]))
         if self._frame_scaled:
             state.update({f"frame_moments_{n}": m for n, m in self.frame_moments_.items()})
@@ -268,22 +467,32 @@ class DTWRetrieval(RetrievalMethod):
             state.update({f"reference_distances_{n}": d for n, d in self.reference_distances_.items()})
         if self.hubness is not None:
             state.update(database_mean=self.database_mean_, database_std=self.database_std_)
+        if self.prefilter is not None:
+            state.update(prefilter_mean=self.prefilter_mean_, prefilter_axes=self.prefilter_axes_)
+            state["prefilter_index"] = ann.serialise(self.prefilter_index_)
         return state
 
     def _set_state(self, state: dict[str, np.ndarray]) -> None:
-        self.database_ = {name: ragged_from_state(f"database_{name}", state) for name in self.feature_names}
+        self.features_ = [str(n) for n in state["features"]]
+        self.heading_concentration_ = float(state["heading_concentration"])
+        self.database_ = {name: ragged_from_state(f"database_{name}", state) for name in self.features_}
         self.scales_ = np.asarray(state["scales"], dtype=np.float64)
         if self._frame_scaled:
-            self.frame_moments_ = {n: np.asarray(state[f"frame_moments_{n}"], np.float64) for n in self.feature_names}
+            self.frame_moments_ = {n: np.asarray(state[f"frame_moments_{n}"], np.float64) for n in self.features_}
         if self._needs_reference:
             self.reference_ = np.asarray(state["reference"], dtype=np.int64)
             self.reference_distances_ = {
-                n: np.asarray(state[f"reference_distances_{n}"], dtype=np.float64) for n in self.feature_names
+                n: np.asarray(state[f"reference_distances_{n}"], dtype=np.float64) for n in self.features_
             }
         if self.hubness is not None:
             self.database_mean_ = np.asarray(state["database_mean"], dtype=np.float64)
             self.database_std_ = np.asarray(state["database_std"], dtype=np.float64)
-        self.n_database_ = len(self.database_[self.feature_names[0]])
+        self.n_database_ = len(self.database_[self.features_[0]])
+        if self.prefilter is not None:
+            self.prefilter_mean_ = np.asarray(state["prefilter_mean"], dtype=np.float32)
+            self.prefilter_axes_ = np.asarray(state["prefilter_axes"], dtype=np.float32)
+            self.prefilter_index_ = ann.deserialise(state["prefilter_index"])
+            self.prefilter_kind_ = "hnsw" if "HNSW" in type(self.prefilter_index_).__name__ else "flat"
 
 
 def root_centred_joints(motion, fps: float | None = 30.0, min_frames: int = 2) -> np.ndarray:
@@ -339,6 +548,9 @@ class PlainDTWRetrieval(DTWRetrieval):
     hubness = None
     n_reference = 512
     scaling = "dtw"
+    world_frame = "off"
+    prefilter = None
+    prefilter_index = "auto"
 
     def __init__(
         self,
@@ -369,3 +581,10 @@ class PlainDTWRetrieval(DTWRetrieval):
                 )
             out.append(seq)
         return out
+
+    def _choose_features(self, sequences) -> list[str]:
+        self.heading_concentration_ = float("nan")  # the joints as the file gives them: no heading is read
+        return ["positions"]
+
+    def _encode_sequences(self, sequences):
+        return {"positions": [np.ascontiguousarray(s.reshape(len(s), -1), dtype=np.float64) for s in sequences]}

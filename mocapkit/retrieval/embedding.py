@@ -13,7 +13,7 @@ Every motion becomes :func:`~mocapkit.motion.geometry.normalised_landmarks` (``f
 ``frames`` frames by :func:`resample_frames` (the function the training data module uses). The database's
 embeddings go into a FAISS index (``index``): ``"flat"`` (``IndexFlatIP``: exact), ``"hnsw"``
 (``IndexHNSWFlat`` with inner product: approximate, for large libraries) or ``"auto"`` (the default: flat below
-``AUTO_HNSW_MIN_CLIPS`` clips, HNSW from there; ``index_kind_`` says which); :meth:`EmbeddingRetrieval.search`
+:data:`~mocapkit.retrieval.ann.AUTO_HNSW_MIN_CLIPS` clips, HNSW from there; ``index_kind_`` says which); :meth:`EmbeddingRetrieval.search`
 answers from it, and the returned distances are recomputed exactly (float64) for the returned clips.
 
 The state (``_state``) is the embeddings, the model's SHA-1 (``model_sha1_``: of the checkpoint or ONNX file;
@@ -32,16 +32,9 @@ from pathlib import Path
 import numpy as np
 
 from mocapkit.motion.container import Motion
+from mocapkit.retrieval import ann
+from mocapkit.retrieval.ann import INDEXES
 from mocapkit.retrieval.base import RetrievalMethod, file_sha1, top_k
-
-INDEXES = ("auto", "flat", "hnsw")
-#: ``index="auto"`` builds HNSW for libraries of at least this many clips, an exact flat index below: exact search
-#: grows with the library (bench/RESULTS.md#retrieval-latency: 2.2 ms a query at 10^5 clips, HNSW 0.13 ms at
-#: recall@10 1.0),
-#: and below ~10^4 clips it stays under half a millisecond, without HNSW's build time and approximation.
-AUTO_HNSW_MIN_CLIPS = 20_000
-#: HNSW graph degree and build / search breadth (FAISS parameters).
-HNSW_M, HNSW_EF_CONSTRUCTION, HNSW_EF_SEARCH = 32, 80, 64
 
 
 def resample_frames(sequence: np.ndarray, frames: int) -> np.ndarray:
@@ -68,7 +61,7 @@ class EmbeddingRetrieval(RetrievalMethod):
         onnx: an exported encoder (``mocapkit export``); onnxruntime + numpy only. Give ``checkpoint`` or ``onnx``.
         frames: frames every clip is resampled to; None: the model's training ``frames``.
         index: ``"flat"`` (exact inner product), ``"hnsw"`` (approximate, large libraries) or ``"auto"`` (HNSW
-            from ``AUTO_HNSW_MIN_CLIPS`` clips, flat below).
+            from :data:`~mocapkit.retrieval.ann.AUTO_HNSW_MIN_CLIPS` clips, flat below).
         fps, heading: of :func:`~mocapkit.motion.geometry.normalised_landmarks` (the model's training values are
             expected; another value warns).
         batch_size: clips per forward pass.
@@ -280,9 +273,7 @@ class EmbeddingRetrieval(RetrievalMethod):
         if self.index_kind_ == "hnsw" and k == n:  # every clip: exact (a graph search need not reach them all)
             found = top_k(self._distances(q, self.database_), k)[0]
         else:
-            if self.index_kind_ == "hnsw":
-                self.index_.hnsw.efSearch = max(HNSW_EF_SEARCH, 2 * k)
-            found = self.index_.search(q, k)[1].astype(np.int64)
+            found = ann.search(self.index_, self.index_kind_, q, k)
         exact = None
         for row in np.flatnonzero((found < 0).any(axis=1)):  # HNSW could not reach k clips: answer exactly
             exact = self._distances(q, self.database_) if exact is None else exact
@@ -292,25 +283,10 @@ class EmbeddingRetrieval(RetrievalMethod):
         return np.take_along_axis(found, order, axis=1), np.take_along_axis(d, order, axis=1)
 
     # ------------------------------------------------------------------ index and state
-    def _resolved_index(self, n: int) -> str:
-        """``"flat"`` or ``"hnsw"``: ``index``, with ``"auto"`` decided by the library's size ``n``."""
-        if self.index != "auto":
-            return self.index
-        return "hnsw" if n >= AUTO_HNSW_MIN_CLIPS else "flat"
-
     def _build_index(self) -> None:
         """``index_`` over ``database_``, of the kind ``index`` resolves to for its size (``index_kind_``)."""
-        import faiss
-
-        x = np.ascontiguousarray(self.database_, dtype=np.float32)
-        self.index_kind_ = self._resolved_index(len(x))
-        if self.index_kind_ == "hnsw":
-            index = faiss.IndexHNSWFlat(x.shape[1], HNSW_M, faiss.METRIC_INNER_PRODUCT)
-            index.hnsw.efConstruction = HNSW_EF_CONSTRUCTION
-        else:
-            index = faiss.IndexFlatIP(x.shape[1])
-        index.add(x)
-        self.index_ = index
+        self.index_kind_ = ann.resolved_kind(self.index, len(self.database_))
+        self.index_ = ann.build(self.database_, self.index_kind_, metric="inner_product")
 
     def _state(self) -> dict[str, np.ndarray]:
         self._check_fitted()
@@ -320,14 +296,10 @@ class EmbeddingRetrieval(RetrievalMethod):
             "frames": np.array([self.frames_], dtype=np.int64),
         }
         if self.index_kind_ == "hnsw":
-            import faiss
-
-            state["hnsw_index"] = faiss.serialize_index(self.index_)
+            state["hnsw_index"] = ann.serialise(self.index_)
         return state
 
     def _set_state(self, state: dict[str, np.ndarray]) -> None:
-        import faiss
-
         if self.index not in INDEXES:
             raise ValueError(f"EmbeddingRetrieval: index={self.index!r}, one of {list(INDEXES)}")
         for name in ("_predict", "model_info_", "checkpoint_used_"):
@@ -340,7 +312,7 @@ class EmbeddingRetrieval(RetrievalMethod):
         self.frames_ = int(np.asarray(state["frames"]).reshape(-1)[0])
         if self.index in ("auto", "hnsw") and "hnsw_index" in state:  # a saved graph is used as it was built
             self.index_kind_ = "hnsw"
-            self.index_ = faiss.deserialize_index(np.asarray(state["hnsw_index"], dtype=np.uint8))
+            self.index_ = ann.deserialise(state["hnsw_index"])
         else:
             self._build_index()
 

@@ -55,17 +55,25 @@ def database_statistics(database_to_reference: np.ndarray, reference: np.ndarray
     return np.nanmean(d, axis=1), np.nanstd(d, axis=1)
 
 
-def mutual_proximity(distances: np.ndarray, database_mean: np.ndarray, database_std: np.ndarray) -> np.ndarray:
+def mutual_proximity(
+    distances: np.ndarray,
+    database_mean: np.ndarray,
+    database_std: np.ndarray,
+    query_mean: np.ndarray | None = None,
+    query_std: np.ndarray | None = None,
+) -> np.ndarray:
     """float64 ``[n_queries, n_database]``: ``−log MP`` of query-to-database distances (see the module docstring).
 
     Args:
         distances: ``[n_queries, n_database]`` raw distances (smaller = nearer).
         database_mean, database_std: ``[n_database]`` from :func:`database_statistics`.
+        query_mean, query_std: ``[n_queries]``, each query's statistics when ``distances`` holds only some of the
+            database (a prefiltered search); None: taken from the rows of ``distances``.
     """
     d = np.asarray(distances, dtype=np.float64)
     tiny = np.finfo(np.float64).tiny
-    query_mean = d.mean(axis=1, keepdims=True)
-    query_std = np.maximum(d.std(axis=1, keepdims=True), tiny)
+    query_mean = d.mean(axis=1, keepdims=True) if query_mean is None else np.asarray(query_mean).reshape(-1, 1)
+    query_std = np.maximum(d.std(axis=1, keepdims=True) if query_std is None else np.reshape(query_std, (-1, 1)), tiny)
     log_beyond_query = norm.logsf(d, loc=query_mean, scale=query_std)
     log_beyond_database = norm.logsf(
         d, loc=np.asarray(database_mean)[None, :], scale=np.maximum(np.asarray(database_std), tiny)[None, :]

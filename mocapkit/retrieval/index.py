@@ -47,8 +47,9 @@ from mocapkit.retrieval.base import file_sha1
 
 FORMAT = "mocapkit-retrieval-index"
 #: 2: DTW indexes keep one database per feature (and mutual-proximity statistics); 3: and the raw distances to
-#: their reference clips, which ``--add`` extends.
-VERSION = 3
+#: their reference clips, which ``--add`` extends; 4: and the features used (``world_frame``) with the heading
+#: concentration that chose them.
+VERSION = 4
 
 
 class RetrievalIndexError(ValueError):
@@ -283,7 +284,7 @@ class MotionIndex:
         if not isinstance(estimator, DTWRetrieval):
             raise RetrievalIndexError(
                 f"--within needs an index of a DTW method (dtw_takes for long takes, the default "
-                f"dtw_mutual_proximity, dtw_positions, dtw_plain); this index was built with {self.method_name}"
+                f"dtw_world_frame, dtw_positions, dtw_plain); this index was built with {self.method_name}"
             )
         takes = estimator.scaled_frames(estimator.database_)
         own = {str(Path(p).resolve()): i for i, p in enumerate(self.paths)}

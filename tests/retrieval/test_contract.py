@@ -29,6 +29,7 @@ FAST = {
     "udfs": [*FEATURES, "views=[gpf]"],  # UDFS eigen-solves D x D 20 times: HOD alone is 3,192-d
     "amfs": FEATURES,
     "dtw_mutual_proximity": ["n_reference=4"],
+    "dtw_world_frame": ["n_reference=4"],
     "tsr_stpm": ["n_atoms=16", "n_nonzero=2", "ksvd_iter=2"],
     "tsr_stpm_thesis": ["n_atoms=16", "n_nonzero=4", "ksvd_iter=2"],
 }

@@ -75,7 +75,9 @@ def test_plain_dtw_fills_gaps():
 
 
 # ------------------------------------------------------------------------------------------ add
-@pytest.mark.parametrize("method", ["dtw_plain", "dtw_positions", "dtw_mutual_proximity", "dtw_takes"])
+@pytest.mark.parametrize(
+    "method", ["dtw_plain", "dtw_positions", "dtw_mutual_proximity", "dtw_world_frame", "dtw_takes"]
+)
 def test_an_appended_index_ranks_as_one_built_on_the_union(folder, tmp_path, method):
     first, second, union = _split(folder, tmp_path)
     build_index(first, tmp_path / "grown", method=method, quiet=True)
@@ -129,9 +131,9 @@ def test_add_skips_duplicates_reports_bad_files_and_refuses_others(folder, tmp_p
     with pytest.raises(RetrievalIndexError, match=r"window: index None, asked 0.1"):
         add_to_index(out, second, overrides=["window=0.1"], quiet=True)
     # an index of another format version: refused naming both versions
-    manifest["version"] = 2
+    manifest["version"] = 3
     (out / "manifest.json").write_text(json.dumps(manifest))
-    with pytest.raises(RetrievalIndexError, match=r"version 2, expected 'mocapkit-retrieval-index' version 3"):
+    with pytest.raises(RetrievalIndexError, match=r"version 3, expected 'mocapkit-retrieval-index' version 4"):
         add_to_index(out, second, quiet=True)
 
 
@@ -143,6 +145,7 @@ def test_every_method_appends_or_refuses(name, folder):
 
     fast = {
         "dtw_mutual_proximity": ["n_reference=4"],
+        "dtw_world_frame": ["n_reference=4"],
         "tsr_stpm": ["n_atoms=16", "n_nonzero=2", "ksvd_iter=2"],
         "tsr_stpm_thesis": ["n_atoms=16", "n_nonzero=4", "ksvd_iter=2"],
     }.get(name, [] if name.startswith("dtw") else ["n_words=8", "n_features=20", "n_neighbors=2"])

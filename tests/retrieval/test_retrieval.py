@@ -300,7 +300,7 @@ def test_index_takes_the_folder_positionally_and_set_overrides(hdm05_folder, tmp
     capsys.readouterr()
     assert cli(["index", str(hdm05_folder), "--out", str(tmp_path / "x"), "--set", "nope=1"]) == 2
     err = capsys.readouterr().err
-    assert "no parameter 'nope'" in err and "dtw_mutual_proximity" in err and "hubness" in err  # the default
+    assert "no parameter 'nope'" in err and "dtw_world_frame" in err and "hubness" in err  # the default
     assert cli(["index", str(hdm05_folder), "--src", str(hdm05_folder), "--out", str(tmp_path / "y")]) == 2
     assert "give SRC once" in capsys.readouterr().err
 
@@ -344,7 +344,7 @@ def test_index_bad_files_empty_folders_and_foreign_skeletons(hdm05_folder, tmp_p
 
 def test_index_round_trip_gives_the_same_ranking(hdm05_folder, tmp_path):
     index = build_index(hdm05_folder, tmp_path / "idx", quiet=True)  # the recommended default
-    assert index.method_name == "dtw_mutual_proximity"
+    assert index.method_name == "dtw_world_frame"
     query = min((hdm05_folder / "mm").glob("*.amc"))
     before = index.search([str(query)], k=0)
     after = search_index(tmp_path / "idx", [str(query)], k=0)

@@ -299,18 +299,18 @@ def test_faiss_search_agrees_with_brute_force_and_the_state_round_trips(onnx_fil
 
 
 def test_auto_index_is_flat_for_small_libraries_and_hnsw_for_large_ones(onnx_file, motions, monkeypatch):
-    from mocapkit.retrieval import embedding
+    from mocapkit.retrieval import ann
 
     small = EmbeddingRetrieval(onnx=str(onnx_file)).fit(motions[:8])
     assert small.index == "auto" and small.index_kind_ == "flat" and "hnsw_index" not in small._state()
-    monkeypatch.setattr(embedding, "AUTO_HNSW_MIN_CLIPS", 8)
+    monkeypatch.setattr(ann, "AUTO_HNSW_MIN_CLIPS", 8)
     large = EmbeddingRetrieval(onnx=str(onnx_file)).fit(motions[:8])
     assert large.index_kind_ == "hnsw" and "hnsw_index" in large._state()
     assert np.array_equal(large.search(motions[8:], k=3)[0], small.search(motions[8:], k=3)[0])
     again = EmbeddingRetrieval(onnx=str(onnx_file))
     again._set_state(large._state())
     assert again.index_kind_ == "hnsw"
-    monkeypatch.setattr(embedding, "AUTO_HNSW_MIN_CLIPS", 9)
+    monkeypatch.setattr(ann, "AUTO_HNSW_MIN_CLIPS", 9)
     again._set_state(large._state())
     assert again.index_kind_ == "hnsw"  # a saved HNSW graph is used as it was built
 

@@ -45,7 +45,7 @@ def test_every_task_registers_methods_with_a_description():
 
 
 def test_defaults_are_registered_names():
-    assert default_method("retrieval") == "dtw_mutual_proximity"
+    assert default_method("retrieval") == "dtw_world_frame"
     assert default_method("synthesis") == "slfm" and default_method("kinect") == "bigru_steady"
     assert default_method("refinement") == "linear" and default_method("gait") is None
     for task in TASKS:

@@ -1,0 +1,74 @@
+"""DTW's prefiltered search (``prefilter=K``): a FAISS prefilter on fixed-length descriptors, then the method's own
+distance on the ``K`` clips it returns."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mocapkit.datasets import read_motion
+from mocapkit.retrieval import MotionIndex, build_index, search_index
+from mocapkit.retrieval.base import top_k
+from mocapkit.retrieval.dtw import DTWRetrieval
+from tests.shared_data import synthetic_hdm05_folder
+
+
+@pytest.fixture(scope="module")
+def clips(tmp_path_factory) -> tuple[Path, list]:
+    """3 classes × 2 actors × 3 takes, HDM05 layout; the folder and its 18 motions."""
+    folder = synthetic_hdm05_folder(
+        tmp_path_factory, ("walk2StepsLstart", "hopBothLegs1hops", "squat1Reps"), clips_per_actor=3, max_frames=160
+    )
+    return folder, [read_motion(p) for p in sorted(folder.glob("*/*.amc"))]
+
+
+@pytest.mark.parametrize("hubness", [None, "mutual_proximity"])
+def test_a_prefilter_as_large_as_the_library_is_exact_search(clips, hubness):
+    _, motions = clips
+    exact = DTWRetrieval(features=["positions", "relational"], hubness=hubness).fit(motions[:12])
+    wide = DTWRetrieval(features=["positions", "relational"], hubness=hubness, prefilter=12).fit(motions[:12])
+    a, b = exact.search(motions[12:], 5), wide.search(motions[12:], 5)
+    np.testing.assert_array_equal(a[0], b[0])
+    np.testing.assert_allclose(a[1], b[1])
+
+
+def test_prefiltered_search_ranks_its_candidates_by_exact_dtw(clips):
+    """Without mutual proximity the distances returned are the exact ones of the clips returned, in order; every
+    database clip finds itself first; the prefilter returns the clips its descriptors put nearest."""
+    _, motions = clips
+    method = DTWRetrieval(features=["positions", "relational"], prefilter=4).fit(motions)
+    found, d = method.search(motions, 3)
+    exact = method.distances(motions)
+    np.testing.assert_allclose(d, np.take_along_axis(exact, found, axis=1), rtol=1e-12)
+    assert (found[:, 0] == np.arange(len(motions))).all()
+    assert (np.diff(d, axis=1) >= 0).all()
+    descriptors = method._project(method._descriptors(method.encode(motions[:1])))
+    nearest = top_k(((method._project(method._descriptors(method.database_)) - descriptors) ** 2).sum(1)[None], 4)[0]
+    assert set(found[0]) <= set(nearest[0])
+
+
+def test_mutual_proximity_on_candidates_keeps_most_of_the_exact_top_five(clips):
+    _, motions = clips
+    method = DTWRetrieval(features=["positions", "relational"], hubness="mutual_proximity", prefilter=8)
+    method.fit(motions[:14])
+    exact = top_k(method.distances(motions[14:]), 5)[0]
+    found = method.search(motions[14:], 5)[0]
+    assert np.mean([len(set(a) & set(b)) / 5 for a, b in zip(exact, found)]) >= 0.8
+
+
+def test_an_index_keeps_its_prefilter_and_adds_to_it(clips, tmp_path):
+    folder, motions = clips
+    out = tmp_path / "idx"
+    index = build_index(folder / "bd", out, method="dtw_world_frame", overrides=["prefilter=3"], quiet=True)
+    query = str(min((folder / "mm").glob("*squat*.amc")))
+    before = index.search([query], k=3)
+    after = search_index(out, [query], k=3)
+    assert [r["path"] for r in before[0]["results"]] == [r["path"] for r in after[0]["results"]]
+    loaded = MotionIndex.load(out)
+    assert loaded.method.prefilter == 3 and loaded.method.prefilter_kind_ == "flat"
+    loaded.method.add([read_motion(query)])  # the added clip is in the prefilter's index: it finds itself
+    assert loaded.method.search([read_motion(query)], 1)[0][0, 0] == loaded.method.n_database_ - 1
+    with pytest.raises(ValueError, match="prefilter must be None or a positive number"):
+        DTWRetrieval(prefilter=0).fit(motions[:4])

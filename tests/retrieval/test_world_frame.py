@@ -1,0 +1,74 @@
+"""DTW's world-frame features: the unturned posture and the pelvis velocity, and the gate that keeps them only for
+libraries whose clips share one frame (``world_frame="auto"``)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from mocapkit.motion.geometry import TEMPLATE_BONES, landmark_track, normalised_landmarks
+from mocapkit.retrieval.dtw import WORLD_MIN_CONCENTRATION, DTWRetrieval, frame_features, heading_concentration
+from tests.retrieval.test_retrieval import _walker
+
+
+def _turned(motion, yaw: float, velocity=(0.0, 0.0, 0.0)):
+    """``motion`` turned by ``yaw`` radians about +y and moving at ``velocity`` (m/s, applied after the turn)."""
+    c, s = np.cos(yaw), np.sin(yaw)
+    p = motion.positions.copy()
+    x, z = p[..., 0].copy(), p[..., 2].copy()
+    p[..., 0], p[..., 2] = c * x + s * z, -s * x + c * z
+    t = np.arange(motion.num_frames)[:, None, None] / motion.fps
+    return replace(motion, positions=p + t * np.asarray(velocity, dtype=float))
+
+
+@pytest.mark.parametrize("heading", ["frame", "clip", "none"])
+def test_world_positions_are_the_unturned_landmarks_whatever_the_heading(heading):
+    motion = _turned(_walker(seed=1), 1.1)
+    track = landmark_track(motion, heading=heading)
+    np.testing.assert_array_equal(track.landmarks, normalised_landmarks(motion, heading=heading))
+    expected = normalised_landmarks(motion, heading="none").reshape(motion.num_frames, -1)
+    np.testing.assert_allclose(frame_features(track, "world_positions", 30.0), expected, atol=1e-5)
+
+
+def test_world_velocity_is_the_pelvis_velocity_scaled_to_the_template_leg():
+    """The walker's legs are about the template's 0.83 m (0.42 + 0.41): 1.5 m/s along x reads as about 1.5 m/s; the
+    same walk by a body twice as big reads as half as fast (strides compare across bodies)."""
+    assert TEMPLATE_BONES["l_knee"] + TEMPLATE_BONES["l_ankle"] == pytest.approx(0.83)
+    walker = _walker(seed=2)
+    velocity = frame_features(landmark_track(_turned(walker, 0.0, (1.5, 0, 0))), "world_velocity", 30.0)
+    np.testing.assert_allclose(velocity[5:-5], [[1.5, 0.0, 0.0]] * (len(velocity) - 10), atol=0.05)
+    giant = replace(walker, positions=walker.positions * 2)
+    slow = frame_features(landmark_track(_turned(giant, 0.0, (1.5, 0, 0))), "world_velocity", 30.0)
+    np.testing.assert_allclose(slow[5:-5, 0], velocity[5:-5, 0] / 2, atol=0.02)
+
+
+def test_the_gate_keeps_world_features_only_for_clips_that_face_alike():
+    aligned = [_turned(_walker(seed=i), 0.1 * i) for i in range(6)]
+    spread = [_turned(_walker(seed=i), 2 * np.pi * i / 6) for i in range(6)]
+    features = ["positions", "world_positions", "world_velocity"]
+    tracks = DTWRetrieval().sequences(spread)
+    assert heading_concentration(tracks, 30.0) < 0.05 < WORLD_MIN_CONCENTRATION
+    assert DTWRetrieval(features=features).fit(aligned).features_ == features
+    assert DTWRetrieval(features=features).fit(spread).features_ == ["positions"]
+    assert DTWRetrieval(features=features, world_frame="on").fit(spread).features_ == features
+    assert DTWRetrieval(features=features, world_frame="off").fit(aligned).features_ == ["positions"]
+    with pytest.raises(ValueError, match="all world features.*concentration is 0.0"):
+        DTWRetrieval(features=["world_velocity"]).fit(spread)
+    with pytest.raises(ValueError, match="world_frame must be one of"):
+        DTWRetrieval(features=features, world_frame="maybe").fit(aligned)
+
+
+def test_in_a_shared_frame_a_walk_to_the_left_finds_walks_to_the_left():
+    """One studio: walkers facing +z walk sideways to the left (+x) or to the right. Per-frame-turned positions
+    cannot tell them apart (the same posture); the default's world terms can."""
+    left = [_turned(_walker(seed=i), 0.05 * i, (1.0, 0, 0)) for i in range(4)]
+    right = [_turned(_walker(seed=10 + i), -0.05 * i, (-1.0, 0, 0)) for i in range(4)]
+    query = _turned(_walker(seed=99), 0.02, (1.0, 0, 0))
+    default = DTWRetrieval(
+        features=["positions", "relational", "world_positions", "world_velocity"], hubness="mutual_proximity"
+    ).fit(left + right)
+    assert "world_velocity" in default.features_
+    order = np.argsort(default.distances([query])[0])
+    assert set(order[:4]) == {0, 1, 2, 3}
