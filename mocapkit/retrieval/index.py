@@ -83,7 +83,9 @@ def _jsonable(value):
     if isinstance(value, dict):
         return {str(k): _jsonable(v) for k, v in value.items()}
     if isinstance(value, (np.generic,)):
-        return value.item()
+        value = value.item()
+    if isinstance(value, float) and not np.isfinite(value):
+        return None  # JSON has no NaN
     if isinstance(value, Path):
         return str(value)
     return value
@@ -140,6 +142,9 @@ class MotionIndex:
             "method": self.method_name,
             "target": f"{type(self.method).__module__}.{type(self.method).__qualname__}",
             "params": _jsonable(self.method.get_params(deep=False)),
+            "learned": _jsonable(
+                {k: getattr(self.method, k) for k in ("features_", "heading_concentration_") if hasattr(self.method, k)}
+            ),
             "model_sha1": self.model_sha1,
             "landmarks": self.landmarks,
             "src": self.src,
@@ -352,6 +357,12 @@ def build_index(
     start = time.perf_counter()
     estimator.fit(motions)
     _progress(f"fitted {name} on {len(motions)} clips in {time.perf_counter() - start:.1f} s", quiet)
+    if hasattr(estimator, "heading_concentration_") and np.isfinite(estimator.heading_concentration_):
+        _progress(
+            f"features {', '.join(estimator.features_)} (the clips' starting headings: concentration "
+            f"{estimator.heading_concentration_:.2f}; world_frame={estimator.world_frame})",
+            quiet,
+        )
     common = set.intersection(*landmark_sets)
     from mocapkit.motion.layouts import LANDMARK_NAMES
 

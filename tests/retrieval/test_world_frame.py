@@ -72,3 +72,21 @@ def test_in_a_shared_frame_a_walk_to_the_left_finds_walks_to_the_left():
     assert "world_velocity" in default.features_
     order = np.argsort(default.distances([query])[0])
     assert set(order[:4]) == {0, 1, 2, 3}
+
+
+def test_an_index_says_which_features_its_library_chose(tmp_path, capsys):
+    """``mocapkit index`` prints the features used and the heading concentration, and the manifest keeps them."""
+    import json
+
+    from mocapkit.datasets import write_motion
+    from mocapkit.retrieval import build_index
+
+    src = tmp_path / "src"
+    src.mkdir()
+    for i in range(4):
+        write_motion(src / f"walk_{i}.c3d", _turned(_walker(seed=i), 0.05 * i, (1.0, 0, 0)))
+    build_index(src, tmp_path / "idx", overrides=["n_reference=4"])
+    err = capsys.readouterr().err
+    assert "features positions, relational, world_positions, world_velocity" in err and "concentration 1.00" in err
+    learned = json.loads((tmp_path / "idx" / "manifest.json").read_text())["learned"]
+    assert learned["features_"][-1] == "world_velocity" and learned["heading_concentration_"] > 0.99
