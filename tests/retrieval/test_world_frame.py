@@ -74,19 +74,19 @@ def test_in_a_shared_frame_a_walk_to_the_left_finds_walks_to_the_left():
     assert set(order[:4]) == {0, 1, 2, 3}
 
 
-def test_an_index_says_which_features_its_library_chose(tmp_path, capsys):
+def test_an_index_says_which_features_its_library_chose(tmp_path_factory, capsys):
     """``mocapkit index`` prints the features used and the heading concentration, and the manifest keeps them."""
     import json
 
-    from mocapkit.datasets import write_motion
     from mocapkit.retrieval import build_index
+    from tests.shared_data import synthetic_hdm05_folder
 
-    src = tmp_path / "src"
-    src.mkdir()
-    for i in range(4):
-        write_motion(src / f"walk_{i}.c3d", _turned(_walker(seed=i), 0.05 * i, (1.0, 0, 0)))
-    build_index(src, tmp_path / "idx", overrides=["n_reference=4"])
+    src = synthetic_hdm05_folder(tmp_path_factory, ("walk2StepsLstart", "squat1Reps"), clips_per_actor=1)
+    out = tmp_path_factory.mktemp("index")
+    index = build_index(src, out, overrides=["n_reference=4"])
+    method = index.method
     err = capsys.readouterr().err
-    assert "features positions, relational, world_positions, world_velocity" in err and "concentration 1.00" in err
-    learned = json.loads((tmp_path / "idx" / "manifest.json").read_text())["learned"]
-    assert learned["features_"][-1] == "world_velocity" and learned["heading_concentration_"] > 0.99
+    assert f"features {', '.join(method.features_)} (the clips' starting headings: concentration" in err
+    assert f"concentration {method.heading_concentration_:.2f}; world_frame=auto" in err
+    learned = json.loads((out / "manifest.json").read_text())["learned"]
+    assert learned == {"features_": method.features_, "heading_concentration_": method.heading_concentration_}
