@@ -353,7 +353,8 @@ class LandmarkTrack(NamedTuple):
     #: whatever the ``heading`` option (turning ``landmarks`` back by it gives the unturned posture).
     heading: np.ndarray
     #: float64 ``[T, 3]`` metres of the template body: the pelvis in the file's y-up frame, scaled by the template's
-    #: leg length over the clip's (hip → knee → ankle, median over frames), so that strides compare across bodies.
+    #: leg length over the clip's (hip → knee → ankle, median over frames), so that strides compare across bodies
+    #: (unscaled when the clip's legs are under a quarter of the template's: no knees or ankles to measure).
     pelvis: np.ndarray
 
 
@@ -394,7 +395,9 @@ def landmark_track(motion, fps: float = 30.0, heading: str = "frame", min_frames
         ]
     )
     template_leg = TEMPLATE_BONES["l_knee"] + TEMPLATE_BONES["l_ankle"]
-    pelvis = world[:, PELVIS] * (template_leg / max(float(leg), 1e-3))
+    # a leg shorter than a quarter of the template's is a skeleton without knees or ankles (filled from their
+    # parents), not a small body: its path stays in the file's metres
+    pelvis = world[:, PELVIS] * (template_leg / float(leg) if leg > template_leg / 4 else 1.0)
     p = retarget(world)
     p = p - p[:, PELVIS : PELVIS + 1]
     angle = hip_line_heading(p, L_HIP, R_HIP, along="-x")
