@@ -11,10 +11,11 @@ vector and ranks the database by cosine similarity (distance ``1 − cos``):
 
 Every motion becomes :func:`~mocapkit.motion.geometry.normalised_landmarks` (``fps``, ``heading``), then
 ``frames`` frames by :func:`resample_frames` (the function the training data module uses). The database's
-embeddings go into a FAISS index (``index``): ``"flat"`` (``IndexFlatIP``: exact), ``"hnsw"``
-(``IndexHNSWFlat`` with inner product: approximate, for large libraries) or ``"auto"`` (the default: flat below
-:data:`~mocapkit.retrieval.ann.AUTO_HNSW_MIN_CLIPS` clips, HNSW from there; ``index_kind_`` says which); :meth:`EmbeddingRetrieval.search`
-answers from it, and the returned distances are recomputed exactly (float64) for the returned clips.
+embeddings go into a FAISS index (``index``; :mod:`mocapkit.retrieval.ann`): ``"flat"`` (``IndexFlatIP``:
+exact), ``"hnsw"`` (``IndexHNSWFlat`` with inner product: approximate, for large libraries) or ``"auto"`` (the
+default: flat below :data:`~mocapkit.retrieval.ann.AUTO_HNSW_MIN_CLIPS` clips, HNSW from there; ``index_kind_``
+says which); :meth:`EmbeddingRetrieval.search` answers from it, and the returned distances are recomputed exactly
+(float64) for the returned clips.
 
 The state (``_state``) is the embeddings, the model's SHA-1 (``model_sha1_``: of the checkpoint or ONNX file;
 an index refuses a model file with another digest) and, for HNSW, the serialised FAISS index.
