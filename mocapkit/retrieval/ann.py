@@ -20,6 +20,19 @@ INDEXES = ("auto", "flat", "hnsw")
 METRICS = ("inner_product", "l2")
 
 
+def _faiss():
+    """The ``faiss`` module, with ``ezc3d`` loaded before it: both are SWIG builds, and when faiss's loads first
+    ezc3d's overloads of ``std::vector`` arguments no longer resolve (writing a C3D file then raises ``TypeError``
+    in ``Parameter_set``); loaded in this order both work."""
+    try:
+        import ezc3d  # noqa: F401
+    except ImportError:  # C3D writing is not installed: nothing to protect
+        pass
+    import faiss
+
+    return faiss
+
+
 def resolved_kind(index: str, n: int) -> str:
     """``"flat"`` or ``"hnsw"``: ``index``, with ``"auto"`` decided by the library's size ``n``."""
     if index not in INDEXES:
@@ -31,7 +44,7 @@ def resolved_kind(index: str, n: int) -> str:
 
 def build(vectors: np.ndarray, kind: str, metric: str = "inner_product"):
     """A FAISS index of ``kind`` (``"flat"`` or ``"hnsw"``) over float32 ``vectors`` ``[n, d]``."""
-    import faiss
+    faiss = _faiss()
 
     if metric not in METRICS:
         raise ValueError(f"metric must be one of {METRICS}, got {metric!r}")
@@ -58,12 +71,8 @@ def search(index, kind: str, queries: np.ndarray, k: int) -> np.ndarray:
 
 def serialise(index) -> np.ndarray:
     """uint8 bytes of a FAISS index (for a method's ``_state``, read back with :func:`deserialise`)."""
-    import faiss
-
-    return faiss.serialize_index(index)
+    return _faiss().serialize_index(index)
 
 
 def deserialise(data: np.ndarray):
-    import faiss
-
-    return faiss.deserialize_index(np.asarray(data, dtype=np.uint8))
+    return _faiss().deserialize_index(np.asarray(data, dtype=np.uint8))

@@ -72,3 +72,28 @@ def test_an_index_keeps_its_prefilter_and_adds_to_it(clips, tmp_path):
     assert loaded.method.search([read_motion(query)], 1)[0][0, 0] == loaded.method.n_database_ - 1
     with pytest.raises(ValueError, match="prefilter must be None or a positive number"):
         DTWRetrieval(prefilter=0).fit(motions[:4])
+
+
+def test_a_c3d_file_is_written_after_a_faiss_index_was_built(tmp_path):
+    """faiss and ezc3d are both SWIG builds; faiss loaded first broke ezc3d's writer (TypeError in Parameter_set).
+    In a fresh process: build a FAISS index through mocapkit, then write a C3D file."""
+    import subprocess
+    import sys
+
+    code = (
+        "import numpy as np\n"
+        "from mocapkit.retrieval import ann\n"
+        "ann.build(np.eye(4, dtype=np.float32), 'flat', metric='l2')\n"
+        "from mocapkit.motion.container import Motion\n"
+        "from mocapkit.datasets import write_motion, read_motion\n"
+        "m = Motion(np.random.default_rng(0).normal(size=(10, 3, 3)), ['A', 'B', 'C'], 100.0, name='m')\n"
+        f"write_motion({str(tmp_path / 'm.c3d')!r}, m)\n"
+        f"assert read_motion({str(tmp_path / 'm.c3d')!r}).num_frames == 10\n"
+    )
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr[-2000:]
+    # faiss imported directly, first: the writer names the file and the cure instead of ezc3d's overload list
+    direct = code.replace("from mocapkit.retrieval import ann\n", "import faiss\nfrom mocapkit.retrieval import ann\n")
+    result = subprocess.run([sys.executable, "-c", direct], capture_output=True, text=True, timeout=120)
+    assert result.returncode != 0 and "m.c3d: ezc3d could not write the file" in result.stderr
+    assert "import ezc3d first" in result.stderr

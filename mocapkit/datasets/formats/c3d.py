@@ -857,4 +857,10 @@ def write_c3d(path: str | os.PathLike, motion: Motion, units: str = "mm", restor
     from mocapkit.io_atomic import atomic_path
 
     with atomic_path(path, suffix=".c3d") as tmp:  # ezc3d appends ".c3d" to other names
-        c3d.write(str(tmp))
+        try:
+            c3d.write(str(tmp))
+        except TypeError as exc:  # ezc3d's SWIG overloads, broken by another SWIG module (faiss) loaded first
+            raise RuntimeError(
+                f"{path}: ezc3d could not write the file ({exc.args[0].splitlines()[0]}); this happens when faiss "
+                "was imported before ezc3d in this process: import ezc3d first (mocapkit.retrieval.ann does)"
+            ) from exc
