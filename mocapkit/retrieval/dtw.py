@@ -420,7 +420,7 @@ class DTWRetrieval(RetrievalMethod):
     def _feature_distances(self, queries: list[np.ndarray], database: list[np.ndarray]) -> np.ndarray:
         """float64 ``[n_queries, n_database]`` DTW distances of one feature's sequences.
 
-        Queries go to dtaidistance in blocks of :data:`QUERY_BLOCK` (its matrix is ``(queries + database)²``), with
+        Queries go to dtaidistance in blocks of :data:`QUERY_BLOCK` (the distances of a block come back compact), with
         a progress bar on a terminal when there are several blocks (``fit`` with mutual proximity on a large library
         runs minutes: every clip against the reference clips).
         """
@@ -436,14 +436,16 @@ class DTWRetrieval(RetrievalMethod):
         for start in tqdm(starts, desc="DTW", unit="block", disable=None if len(starts) > 1 else True, leave=False):
             chunk = list(queries[start : start + QUERY_BLOCK])
             nq = len(chunk)
-            full = dtw_ndim.distance_matrix_fast(
+            # compact: only the block's nq x n_database distances, row by row (the full form is an
+            # (nq + n_database)^2 matrix: 75 GB at 10^5 clips)
+            block = dtw_ndim.distance_matrix_fast(
                 chunk + list(database),
                 window=window,
                 block=((0, nq), (nq, nq + len(database))),
-                compact=False,
+                compact=True,
                 parallel=bool(self.parallel),
             )
-            blocks.append(np.asarray(full[:nq, nq:], dtype=np.float64))
+            blocks.append(np.asarray(block, dtype=np.float64).reshape(nq, len(database)))
         d = np.concatenate(blocks, axis=0) if blocks else np.zeros((0, len(database)))
         if self.length_normalised:
             lq = np.array([len(s) for s in queries], dtype=np.float64)
