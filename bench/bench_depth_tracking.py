@@ -21,16 +21,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
-
-
-def _best(fn, repeat: int = 5) -> float:
-    fn()
-    times = []
-    for _ in range(repeat):
-        start = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - start)
-    return min(times)
+from timing import best_of  # bench/timing.py, beside this script
 
 
 def main(argv=None) -> None:
@@ -55,8 +46,14 @@ def main(argv=None) -> None:
     q[3] = np.pi
     bone = torch.randint(0, bm.NUM_BONES, (800,))
     local = torch.randn(800, 3) * 0.05
-    analytic = _best(lambda: bm.body_points_jacobian(q, offsets, bone, local))
-    autodiff = _best(lambda: torch.func.jacfwd(lambda x: bm.body_points(x, offsets, bone, local))(q))
+    best = best_of(  # interleaved rounds; the first is the warm-up the minimum leaves out
+        {
+            "analytic": lambda: bm.body_points_jacobian(q, offsets, bone, local),
+            "autodiff": lambda: torch.func.jacfwd(lambda x: bm.body_points(x, offsets, bone, local))(q),
+        },
+        repeat=6,
+    )
+    analytic, autodiff = best["analytic"], best["autodiff"]
     print("| Jacobian of 800 points | ms | ratio |\n|---|---:|---:|")
     print(f"| `torch.func.jacfwd` (reference) | {1000 * autodiff:.1f} | 1.00 |")
     print(f"| analytic (`body_points_jacobian`) | {1000 * analytic:.1f} | {autodiff / analytic:.1f}× |")
@@ -91,8 +88,8 @@ def main(argv=None) -> None:
         "all correspondences of one iteration": lambda: state.correspondences(frame, pose, None),
     }
     print("\n| part of one iteration | ms |\n|---|---:|")
-    for name, fn in parts.items():
-        print(f"| {name} | {1000 * _best(fn):.1f} |")
+    for name, seconds in best_of(parts, repeat=6).items():
+        print(f"| {name} | {1000 * seconds:.1f} |")
 
 
 if __name__ == "__main__":
