@@ -43,6 +43,8 @@ from mocapkit.motion.layouts import (
 
 #: Planes as (horizontal axis, vertical axis) over (x, y, z); vertical axes grow upwards.
 PLANES = {"xy": (0, 1), "zy": (2, 1), "xz": (0, 2)}
+#: The same planes as (column, row) picks of :meth:`EnergyImage.histogram`'s columns (of x, z) and rows (of y, z).
+PLANE_COLUMNS_ROWS = ((0, 0), (1, 0), (0, 1))
 #: Where the image is centred on body 0's reference joint (:class:`EnergyImage` ``origin``): name → locator.
 ORIGINS = {"median": body0_origin, "first": body0_first, "start": body0_start}
 
@@ -158,44 +160,55 @@ class EnergyImage(nn.Module):
             out = out / length.view(-1, 1, 1, 1, 1)
         return out
 
-    def points(self, coords: torch.Tensor) -> torch.Tensor:
-        """Joints plus points sampled along the bones: ``[N, M, T, J, 3]`` → ``[N, M, T, P, 3]``."""
+    def points(self, axes: torch.Tensor) -> torch.Tensor:
+        """Joints plus points sampled along the bones, axis-major: ``[..., 3, J]`` → ``[..., 3, P]``
+        (``P = J + bones × bone_samples``; the bone points ordered bone by bone)."""
         if self.bone_samples == 0:
-            return coords
-        child = coords[:, :, :, self.bone_child, :]  # [N, M, T, nb, 3]
-        parent = coords[:, :, :, self.bone_parent, :]
-        f = self.bone_fractions.view(1, 1, 1, 1, -1, 1)
-        along = parent.unsqueeze(4) + (child - parent).unsqueeze(4) * f  # [N, M, T, nb, K, 3]
-        along = along.flatten(3, 4)
-        return torch.cat((coords, along), dim=3)
+            return axes
+        child = axes[..., self.bone_child]  # [..., 3, nb]
+        parent = axes[..., self.bone_parent]
+        along = parent.unsqueeze(-1) + (child - parent).unsqueeze(-1) * self.bone_fractions  # [..., 3, nb, K]
+        return torch.cat((axes, along.flatten(-2)), dim=-1)
 
-    def splat(self, horizontal: torch.Tensor, vertical: torch.Tensor, weight: torch.Tensor) -> torch.Tensor:
-        """Weighted 2-D histogram. ``horizontal``, ``vertical``, ``weight``: ``[N, P]`` → ``[N, size, size]``.
+    def histogram(self, axes: torch.Tensor, weight: torch.Tensor, sample: torch.Tensor, n: int) -> torch.Tensor:
+        """The three planes' weighted 2-D histograms of points, in one scatter.
 
-        Each point adds its weight to the nearest pixel (``splat="nearest"``) or
-        to its four neighbours with bilinear shares (``splat="bilinear"``);
-        points outside the grid are dropped. The histogram has a 2-pixel border, cut off at the end: a point's
-        corner column clamped to ``[-2, size]`` puts every share that falls outside the grid into the border, so
-        no corner needs its own bounds test or clamp: the four corners are the offsets 0, 1, W and W+1 of one index.
+        ``axes`` ``[R, 3, P]``: the x, y, z of the ``P`` points of ``R`` body-frames; ``weight`` ``[R]``: each
+        body-frame's weight; ``sample`` ``[R]``: the batch sample it belongs to. Returns ``[n, 3, size, size]``.
+
+        Each point adds its weight to the nearest pixel (``splat="nearest"``) or to its four neighbours with
+        bilinear shares (``splat="bilinear"``); points outside the grid are dropped. The histogram has a 2-pixel
+        border, cut off at the end: a point's corner column clamped to ``[-2, size]`` puts every share that falls
+        outside the grid into the border, so no corner needs its own bounds test or clamp: the four corners are
+        the offsets 0, 1, W and W+1 of one index.
         """
-        size = self.size
+        size, extent = self.size, self.extent
         wide = size + 4  # the bordered grid's side
-        to_pixels = size / (2 * self.extent)
-        u = (horizontal + self.extent) * to_pixels - 0.5  # column; pixel centres at integers
-        v = (self.extent - vertical) * to_pixels - 0.5  # row 0 is the top
-        hist = torch.zeros(u.shape[0], wide * wide, dtype=u.dtype, device=u.device)
-        if self.splat_mode == "nearest":
-            u0, v0 = torch.floor(u + 0.5), torch.floor(v + 0.5)
-            base = ((v0.clamp(-2, size) + 2) * wide + (u0.clamp(-2, size) + 2)).long()
-            return hist.scatter_add_(1, base, weight + torch.zeros_like(u)).view(-1, wide, wide)[:, 2:-2, 2:-2]
-        u0, v0 = torch.floor(u), torch.floor(v)
-        fu, fv = u - u0, v - v0
-        base = ((v0.clamp(-2, size) + 2) * wide + (u0.clamp(-2, size) + 2)).long()
-        hist.scatter_add_(1, base, weight * (1 - fu) * (1 - fv))
-        hist.scatter_add_(1, base + 1, weight * fu * (1 - fv))
-        hist.scatter_add_(1, base + wide, weight * (1 - fu) * fv)
-        hist.scatter_add_(1, base + wide + 1, weight * fu * fv)
-        return hist.view(-1, wide, wide)[:, 2:-2, 2:-2]
+        to_pixels = size / (2 * extent)
+        # x and z are horizontal axes (of the xy, xz and zy planes), y and z vertical ones: pixel centres at
+        # integers, row 0 at the top
+        u = (axes[:, 0::2] + extent) * to_pixels - 0.5  # [R, 2, P]: column of x, of z
+        v = (extent - axes[:, 1:]) * to_pixels - 0.5  # [R, 2, P]: row of y, of z
+        shift = 0.5 if self.splat_mode == "nearest" else 0.0
+        u0, v0 = torch.floor(u + shift), torch.floor(v + shift)
+        column = u0.clamp(-2, size) + 2
+        row = (v0.clamp(-2, size) + 2) * wide
+        first = (sample * (3 * wide * wide)).view(-1, 1)  # [R, 1]: where the sample's three planes start
+        w = weight.view(-1, 1)
+        cells, shares = [], []
+        for plane, (a, b) in enumerate(PLANE_COLUMNS_ROWS):
+            cell = (row[:, b] + column[:, a]).long() + (first + plane * wide * wide)  # [R, P]
+            if self.splat_mode == "nearest":
+                cells.append(cell)
+                shares.append(w.expand_as(cell))
+                continue
+            fu, fv = u[:, a] - u0[:, a], v[:, b] - v0[:, b]
+            w_left, w_right = w * (1 - fu), w * fu
+            cells += [cell, cell + 1, cell + wide, cell + (wide + 1)]
+            shares += [w_left * (1 - fv), w_right * (1 - fv), w_left * fv, w_right * fv]
+        hist = torch.zeros(n * 3 * wide * wide, dtype=axes.dtype, device=axes.device)
+        hist = hist.scatter_add(0, torch.cat([c.flatten() for c in cells]), torch.cat([s.flatten() for s in shares]))
+        return hist.view(n, 3, wide, wide)[:, :, 2:-2, 2:-2]
 
     def smooth(self, image: torch.Tensor) -> torch.Tensor:
         """Separable Gaussian blur with ``smoothing`` pixels of standard deviation (identity when 0)."""
@@ -212,17 +225,19 @@ class EnergyImage(nn.Module):
             raise ValueError(f"expected skeletons [N, M, T, {self.layout.num_joints}, 3], got {list(skeletons.shape)}")
         skeletons = skeletons.float()
         present = skeletons.abs().sum(dim=(-1, -2)) > 0  # [N, M, T]
-        coords = self.points(self.normalize(skeletons, present))  # [N, M, T, P, 3]
-        n, m, t, p, _ = coords.shape
+        coords = self.normalize(skeletons, present)  # [N, M, T, J, 3]
+        n, m, t = present.shape
         frame_present = present.any(dim=1).to(coords.dtype)  # [N, T]
-        weight = present.to(coords.dtype) / frame_present.sum(1).clamp(min=1.0).view(-1, 1, 1)
+        weight = present.to(coords.dtype) / frame_present.sum(1).clamp(min=1.0).view(-1, 1, 1)  # [N, M, T]
         if self.temporal_weighting == "linear":
-            ramp = torch.arange(1, t + 1, device=coords.device, dtype=coords.dtype) / t
-            weight = weight * ramp
-        weight = weight.unsqueeze(-1).expand(n, m, t, p).reshape(n, -1)  # [N, M*T*P]
-        flat = coords.reshape(n, -1, 3)
-        axes = flat.transpose(1, 2).contiguous()  # [N, 3, M*T*P]: each axis contiguous
-        planes = [self.splat(axes[:, a], axes[:, b], weight) for a, b in PLANES.values()]
-        image = self.smooth(torch.stack(planes, dim=1))  # [N, 3, H, W]
+            weight = weight * (torch.arange(1, t + 1, device=coords.device, dtype=coords.dtype) / t)
+        sample = torch.arange(n, device=coords.device).view(-1, 1, 1).expand(n, m, t)
+        rows, weight, sample = coords.flatten(0, 2), weight.flatten(), sample.flatten()  # one row per body-frame
+        if not torch.onnx.is_in_onnx_export():
+            # absent bodies and padding frames weigh 0: leave them out (most of an NTU batch); an exported graph
+            # keeps every row, so that its shapes do not depend on the data
+            kept = present.flatten().nonzero().squeeze(1)
+            rows, weight, sample = rows.index_select(0, kept), weight[kept], sample[kept]
+        image = self.smooth(self.histogram(self.points(rows.transpose(1, 2)), weight, sample, n))  # [N, 3, H, W]
         peak = image.amax(dim=(2, 3), keepdim=True)
         return image / peak.clamp(min=1e-8)

@@ -58,10 +58,10 @@ def test_nearest_splat_is_an_exact_time_averaged_histogram():
     assert image.shape == (1, 3, 32, 32)
     # With nearest binning and a static pose every frame hits the same pixels, so the
     # normalised histogram's peak pixel holds the largest number of coincident joints.
-    raw = energy.splat(
-        *[energy.normalize(x, x.abs().sum((-1, -2)) > 0)[0, 0, 0, :, a][None] for a in (0, 1)], torch.full((1, 25), 1.0)
-    )
-    assert raw.sum() == pytest.approx(25.0)
+    axes = energy.normalize(x, x.abs().sum((-1, -2)) > 0)[0, 0, :1].transpose(1, 2)  # first frame, [1, 3, 25]
+    raw = energy.histogram(axes, torch.ones(1), torch.zeros(1, dtype=torch.long), 1)
+    assert raw.shape == (1, 3, 32, 32)
+    assert raw.sum((2, 3)).tolist() == [[25.0, 25.0, 25.0]]  # every joint in one pixel of each plane
     assert image.amax() == pytest.approx(1.0)
 
 

@@ -127,19 +127,21 @@ def test_energy_image_takes_a_layout_name():
     torch.testing.assert_close(named(x), reference_energy_image.EnergyImage(layout=get_layout("msr20"))(x))
 
 
-def test_energy_image_splat_gradient_matches():
-    """Bilinear splatting is differentiable in the coordinates; the gradient is today's."""
-    new, old = energy_image.EnergyImage(size=16, extent=1.0), reference_energy_image.EnergyImage(size=16, extent=1.0)
-    h = (torch.rand(2, 200) * 2.4 - 1.2).requires_grad_()
-    v = (torch.rand(2, 200) * 2.4 - 1.2).requires_grad_()
-    w = torch.rand(2, 200)
-    target = torch.rand(2, 16, 16)
-    (new.splat(h, v, w) * target).sum().backward()
-    gh, gv = h.grad.clone(), v.grad.clone()
-    h.grad, v.grad = None, None
-    (old.splat(h, v, w) * target).sum().backward()
-    torch.testing.assert_close(gh, h.grad, rtol=1e-6, atol=1e-7)
-    torch.testing.assert_close(gv, v.grad, rtol=1e-6, atol=1e-7)
+def test_energy_image_gradient_matches():
+    """Bilinear splatting is differentiable in the coordinates; the gradient with respect to the skeletons is
+    today's, absent bodies and padding frames (left out of the new histogram) included."""
+    x = example_skeletons(3, 20)
+    x[1, :, 15:] = 0.0  # padding frames
+    x[2, 1] = 0.0  # an absent second body
+    target = torch.rand(3, 3, 16, 16)
+    options = {"size": 16, "extent": 1.5, "bone_samples": 1, "temporal_weighting": "linear", "align": True}
+    grads = []
+    for module in (energy_image.EnergyImage(**options), reference_energy_image.EnergyImage(**options)):
+        skeletons = x.clone().requires_grad_()
+        (module(skeletons) * target).sum().backward()
+        grads.append(skeletons.grad)
+    assert grads[0].abs().sum() > 0
+    torch.testing.assert_close(grads[0], grads[1], rtol=1e-5, atol=1e-6)
 
 
 def test_the_channels_last_classifier_matches_and_loads_contiguous_weights():
