@@ -1,5 +1,8 @@
-"""Augmentation of skeleton sequences (torch, one sample at a time): random views for training,
-fixed views for testing.
+"""Augmentation of skeleton sequences (torch): random crops and views for training, fixed views for testing.
+
+Training augmentation has two halves: the temporal crop, one sample at a time where samples are read (their
+lengths differ), and the change of view, on whole padded batches (one batched product; the skeleton data
+modules apply it after the batch reached its device: :meth:`SkeletonAugment.change_view`).
 
 Absent bodies and frames are stored as zeros, so every transform here keeps
 zeros as zeros. Random numbers come from torch's global generator, which
@@ -27,21 +30,31 @@ def crop_length(frames: int, fraction: float, min_frames: int) -> int:
 def transform_about_centroid(skeleton: torch.Tensor, matrix: torch.Tensor) -> torch.Tensor:
     """``skeleton`` ``[M, T, J, 3]`` mapped by the 3 × 3 ``matrix`` about the centroid of its present (non-zero)
     joints; absent joints stay zeros."""
-    present = skeleton.abs().sum(-1, keepdim=True) > 0  # [M, T, J, 1]
-    if not present.any():
-        return skeleton
-    center = (skeleton * present).sum((0, 1, 2)) / present.sum()
-    moved = (skeleton - center) @ matrix.to(skeleton).T + center
-    return torch.where(present, moved, skeleton)
+    return transform_about_centroids(skeleton[None], matrix.to(skeleton)[None])[0]
 
 
 def rotation_matrix(axis: int, angle: float) -> torch.Tensor:
     """The 3 × 3 rotation by ``angle`` radians about coordinate axis ``axis`` (0 = x, 1 = y, 2 = z)."""
-    c, s = math.cos(angle), math.sin(angle)
+    return rotation_matrices(axis, torch.tensor([float(angle)], dtype=torch.float64))[0]
+
+
+def rotation_matrices(axis: int, angles: torch.Tensor) -> torch.Tensor:
+    """Rotations by ``angles`` ``[B]`` radians about coordinate axis ``axis``: ``[B, 3, 3]``."""
+    c, s = torch.cos(angles), torch.sin(angles)
     i, j = [(1, 2), (2, 0), (0, 1)][axis]
-    rot = torch.eye(3)
-    rot[i, i], rot[i, j], rot[j, i], rot[j, j] = c, -s, s, c
+    rot = torch.eye(3).repeat(len(angles), 1, 1)
+    rot[:, i, i], rot[:, i, j], rot[:, j, i], rot[:, j, j] = c, -s, s, c
     return rot
+
+
+def transform_about_centroids(skeletons: torch.Tensor, matrices: torch.Tensor) -> torch.Tensor:
+    """Each sample of ``skeletons`` ``[B, M, T, J, 3]`` mapped by its own ``matrices`` ``[B, 3, 3]`` about the
+    centroid of its present (non-zero) joints; absent joints stay zeros."""
+    present = skeletons.abs().sum(-1, keepdim=True) > 0  # [B, M, T, J, 1]
+    count = present.sum((1, 2, 3)).clamp(min=1)  # [B, 1]
+    center = ((skeletons * present).sum((1, 2, 3)) / count).view(-1, 1, 1, 1, 3)
+    moved = ((skeletons - center).flatten(1, 3) @ matrices.transpose(1, 2)).view_as(skeletons) + center
+    return torch.where(present, moved, skeletons)
 
 
 def rotate_about_vertical(skeleton: torch.Tensor, angle: float) -> torch.Tensor:
@@ -96,25 +109,42 @@ class SkeletonAugment:
         self.scale = float(scale)
 
     def __call__(self, skeleton: torch.Tensor) -> torch.Tensor:
-        """``[M, T, J, 3]`` → ``[M, T', J, 3]`` with ``T' <= T``."""
+        """One sample, cropped and seen from a random view: ``[M, T, J, 3]`` → ``[M, T', J, 3]``, ``T' <= T``."""
+        return self.change_view(self.crop_frames(skeleton)[None])[0]
+
+    @property
+    def changes_view(self) -> bool:
+        """Whether :meth:`change_view` does anything (a rotation, tilt or scale is configured)."""
+        return self.rotate_deg > 0 or self.tilt_deg > 0 or self.scale > 0
+
+    def crop_frames(self, skeleton: torch.Tensor) -> torch.Tensor:
+        """The random temporal crop of one sample: ``[M, T, J, 3]`` → ``[M, T', J, 3]``, ``T' <= T``."""
         t = skeleton.shape[1]
         lo, hi = self.crop
         if lo < 1.0 and t > self.min_frames:
             keep = crop_length(t, lo + (hi - lo) * float(torch.rand(())), self.min_frames)
             skeleton = temporal_crop(skeleton, keep, int(torch.randint(0, t - keep + 1, ())))
-        if self.rotate_deg > 0:
-            angle = math.radians(self.rotate_deg) * (2 * float(torch.rand(())) - 1)
-            skeleton = rotate_about_vertical(skeleton, angle)
-        if self.tilt_deg > 0 or self.scale > 0:
-            matrix = torch.eye(3)
-            if self.tilt_deg > 0:
-                for axis in (0, 2):
-                    angle = math.radians(self.tilt_deg) * (2 * float(torch.rand(())) - 1)
-                    matrix = rotation_matrix(axis, angle) @ matrix
-            if self.scale > 0:
-                matrix = torch.diag(1 + self.scale * (2 * torch.rand(3) - 1)) @ matrix
-            skeleton = transform_about_centroid(skeleton, matrix)
         return skeleton
+
+    def change_view(self, skeletons: torch.Tensor) -> torch.Tensor:
+        """A random view per sample of a padded batch ``[B, M, T, J, 3]`` (same shape), on its device.
+
+        Each sample gets its own matrix: the vertical rotation, then the tilts about x and z, then the scale,
+        all about the centroid of the sample's present joints (each keeps that centroid, so one product
+        about it is the sequence of them); padding and absent bodies stay zeros.
+        """
+        if not self.changes_view:
+            return skeletons
+        b, device = skeletons.shape[0], skeletons.device
+        matrix = torch.eye(3).expand(b, 3, 3)
+        if self.rotate_deg > 0:
+            matrix = rotation_matrices(1, math.radians(self.rotate_deg) * (2 * torch.rand(b) - 1)) @ matrix
+        if self.tilt_deg > 0:
+            for axis in (0, 2):
+                matrix = rotation_matrices(axis, math.radians(self.tilt_deg) * (2 * torch.rand(b) - 1)) @ matrix
+        if self.scale > 0:
+            matrix = torch.diag_embed(1 + self.scale * (2 * torch.rand(b, 3) - 1)) @ matrix
+        return transform_about_centroids(skeletons, matrix.to(device=device, dtype=skeletons.dtype))
 
 
 class TestTimeViews:

@@ -123,8 +123,8 @@ class SequenceDataset(Dataset):
         i = int(self.indices[k])
         seq = self.sequences[i]
         seq = seq[torch.from_numpy(uniform_frame_indices(seq.shape[0], self.max_frames))].unsqueeze(0)
-        if self.augment is not None:
-            seq = self.augment(seq)
+        if self.augment is not None:  # the view changes on the whole batch (SkeletonDataModule)
+            seq = self.augment.crop_frames(seq)
         return {"skeleton": seq, "label": int(self.labels[i]), "index": i, "subject": int(self.subjects[i])}
 
 
@@ -181,6 +181,19 @@ class SkeletonDataModule(SplitDataModule):
                 self.augment if part == "train" else None,
             )
         return self._parts[part]
+
+    def augment_batch(self, batch: dict) -> dict:
+        """A training batch seen from random views, one per sample (the datasets only crop:
+        :class:`~mocapkit.datasets.augment.SkeletonAugment`); unchanged without augmentation."""
+        if self.augment is not None:
+            batch["skeletons"] = self.augment.change_view(batch["skeletons"])
+        return batch
+
+    def on_after_batch_transfer(self, batch: dict, dataloader_idx: int) -> dict:
+        """Lightning's hook: training batches get :meth:`augment_batch` here, whole batches on their device."""
+        if self.trainer is not None and self.trainer.training:
+            return self.augment_batch(batch)
+        return batch
 
     def views_dataloader(self, part: str, views: TestTimeViews) -> DataLoader:
         """An unshuffled loader over the ``"val"`` or ``"test"`` part in which every sample appears as

@@ -118,3 +118,43 @@ def test_missing_root_is_named(tmp_path):
         NTUDataModule(None)
     with pytest.raises(FileNotFoundError, match="nowhere"):
         NTUDataModule(str(tmp_path / "nowhere"))
+
+
+def test_view_change_on_a_batch_gives_each_sample_its_own_rigid_view():
+    """``change_view`` turns every sample of a padded batch about its own centroid by its own angle: heights and
+    distances are kept, padding and absent bodies stay zeros, and the samples do not share one angle."""
+    torch.manual_seed(3)
+    x = torch.randn(6, 2, 30, 25, 3) + torch.tensor([0.3, 1.0, 3.0])
+    x[:, 1] = 0.0  # second bodies absent
+    x[2, 0, 20:] = 0.0  # a shorter sample, padded
+    out = SkeletonAugment(rotate_deg=90).change_view(x)
+    assert out.shape == x.shape and (out[:, 1] == 0).all() and (out[2, 0, 20:] == 0).all()
+    assert torch.allclose(out[..., 1], x[..., 1], atol=1e-5)  # a rotation about the vertical
+    angles = []
+    for b in range(6):
+        present = x[b, 0].abs().sum(-1) > 0
+        a, c = x[b, 0][present], out[b, 0][present]
+        exact = "donot_use_mm_for_euclid_dist"
+        assert torch.allclose(torch.cdist(a, a, compute_mode=exact), torch.cdist(c, c, compute_mode=exact), atol=1e-4)
+        assert torch.allclose(a.mean(0), c.mean(0), atol=1e-5)  # about the sample's own centroid
+        da, dc = a[1] - a.mean(0), c[1] - c.mean(0)
+        angles.append(math.atan2(dc[2], dc[0]) - math.atan2(da[2], da[0]))
+    assert max(angles) - min(angles) > 0.1
+    assert SkeletonAugment(crop=(0.5, 0.5)).change_view(x) is x  # nothing to change: the same batch
+
+
+def test_training_batches_get_their_views_in_the_trainer_hook(cache):
+    """The data set only crops; the data module's batch hook turns training batches, not validation ones."""
+    from types import SimpleNamespace
+
+    dm = NTUDataModule(str(cache), split="ntu60_xsub", batch_size=4, augment={"rotate_deg": 45.0})
+    dm.setup("fit")
+    torch.manual_seed(0)
+    batch = next(iter(dm.train_dataloader()))
+    plain = {k: v.clone() for k, v in batch.items()}
+    dm.trainer = SimpleNamespace(training=False)
+    assert torch.equal(dm.on_after_batch_transfer(batch, 0)["skeletons"], plain["skeletons"])
+    dm.trainer = SimpleNamespace(training=True)
+    turned = dm.on_after_batch_transfer(batch, 0)["skeletons"]
+    assert not torch.allclose(turned, plain["skeletons"], atol=1e-3)
+    assert torch.allclose(turned[..., 1], plain["skeletons"][..., 1], atol=1e-5)

@@ -40,8 +40,8 @@ class SkeletonDataset(Dataset):
         positions = self.cache.positions(i)
         positions = positions[:, uniform_frame_indices(positions.shape[1], self.max_frames)]
         skeleton = torch.from_numpy(np.ascontiguousarray(positions, dtype=np.float32))
-        if self.augment is not None:
-            skeleton = self.augment(skeleton)
+        if self.augment is not None:  # the view changes on the whole batch (SkeletonDataModule)
+            skeleton = self.augment.crop_frames(skeleton)
         return {
             "skeleton": skeleton,
             "label": int(self.cache.labels[i]),
