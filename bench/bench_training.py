@@ -81,7 +81,7 @@ class Case:
     build: object
     note: str = ""
     today: object = None  # build() of today's implementation, same weights; None: not rewritten
-    loop: object = None  # build() → (step_fn, dataloader) for the data-loading table
+    loop: object = None  # build() → (step_fn, dataloader, batch augmentation) for the data-loading table
     extra: dict = field(default_factory=dict)
 
 
@@ -207,11 +207,13 @@ def _lightning_step(experiment: str, overrides=(), batches: int = 1):
             out = m.training_step(b, 0)
             return out["loss"] if isinstance(out, dict) else out
 
-        return _optimizer_step(module, loss_fn, optimizer), datamodule.train_dataloader()
+        # the skeleton data modules change the view of whole batches in the Trainer's batch hook
+        augment = getattr(datamodule, "augment_batch", lambda batch: batch)
+        return _optimizer_step(module, loss_fn, optimizer), datamodule.train_dataloader(), augment
 
     def build():
-        step, loader = parts()
-        taken = list(itertools.islice(iter(loader), batches))
+        step, loader, augment = parts()
+        taken = [augment(batch) for batch in itertools.islice(iter(loader), batches)]
         return step, taken, _batch_size(taken[0])
 
     return build, parts
@@ -326,15 +328,15 @@ def measure_compiled(case: Case, steps: int) -> dict:
 
 
 def measure_loop(case: Case, steps: int, precision: str) -> dict:
-    step, loader = case.loop()
-    batches = list(itertools.islice(iter(loader), steps))
+    step, loader, augment = case.loop()
+    batches = [augment(batch) for batch in itertools.islice(iter(loader), steps)]
     size = sum(_batch_size(b) for b in batches) / len(batches)
     alone = time_steps(step, batches, precision, len(batches))
     start = time.perf_counter()
     done = 0
     while done < steps:
         for batch in loader:
-            step(batch, precision)
+            step(augment(batch), precision)
             done += 1
             if done == steps:
                 break
@@ -359,6 +361,9 @@ def main() -> None:
         "--compile", action="store_true", help="only torch.compile against eager for the chosen skeleton networks"
     )
     args = parser.parse_args()
+    from mocapkit.train.allocator import keep_freed_memory
+
+    keep_freed_memory()  # as the mocapkit command does
     warnings.filterwarnings("ignore")
     import logging
 
