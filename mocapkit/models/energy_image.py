@@ -43,8 +43,8 @@ from mocapkit.motion.layouts import (
 
 #: Planes as (horizontal axis, vertical axis) over (x, y, z); vertical axes grow upwards.
 PLANES = {"xy": (0, 1), "zy": (2, 1), "xz": (0, 2)}
-#: The same planes as (column, row) picks of :meth:`EnergyImage.histogram`'s columns (of x, z) and rows (of y, z).
-PLANE_COLUMNS_ROWS = ((0, 0), (1, 0), (0, 1))
+#: The planes' horizontal and vertical axes as index lists (:meth:`EnergyImage.histogram`).
+PLANE_COLUMNS, PLANE_ROWS = [h for h, _ in PLANES.values()], [v for _, v in PLANES.values()]
 #: Where the image is centred on body 0's reference joint (:class:`EnergyImage` ``origin``): name → locator.
 ORIGINS = {"median": body0_origin, "first": body0_first, "start": body0_start}
 
@@ -185,29 +185,26 @@ class EnergyImage(nn.Module):
         size, extent = self.size, self.extent
         wide = size + 4  # the bordered grid's side
         to_pixels = size / (2 * extent)
-        # x and z are horizontal axes (of the xy, xz and zy planes), y and z vertical ones: pixel centres at
-        # integers, row 0 at the top
-        u = (axes[:, 0::2] + extent) * to_pixels - 0.5  # [R, 2, P]: column of x, of z
-        v = (extent - axes[:, 1:]) * to_pixels - 0.5  # [R, 2, P]: row of y, of z
+        # each plane's column and row coordinate of every point, pixel centres at integers, row 0 at the top
+        u = (axes[:, PLANE_COLUMNS] + extent) * to_pixels - 0.5  # [R, 3, P]
+        v = (extent - axes[:, PLANE_ROWS]) * to_pixels - 0.5
         shift = 0.5 if self.splat_mode == "nearest" else 0.0
         u0, v0 = torch.floor(u + shift), torch.floor(v + shift)
-        column = u0.clamp(-2, size) + 2
-        row = (v0.clamp(-2, size) + 2) * wide
-        first = (sample * (3 * wide * wide)).view(-1, 1)  # [R, 1]: where the sample's three planes start
-        w = weight.view(-1, 1)
-        cells, shares = [], []
-        for plane, (a, b) in enumerate(PLANE_COLUMNS_ROWS):
-            cell = (row[:, b] + column[:, a]).long() + (first + plane * wide * wide)  # [R, P]
-            if self.splat_mode == "nearest":
-                cells.append(cell)
-                shares.append(w.expand_as(cell))
-                continue
-            fu, fv = u[:, a] - u0[:, a], v[:, b] - v0[:, b]
-            w_left, w_right = w * (1 - fu), w * fu
-            cells += [cell, cell + 1, cell + wide, cell + (wide + 1)]
-            shares += [w_left * (1 - fv), w_right * (1 - fv), w_left * fv, w_right * fv]
+        plane_start = torch.arange(3, device=axes.device).view(1, 3, 1) * (wide * wide)
+        sample_start = (sample * (3 * wide * wide)).view(-1, 1, 1)
+        cell = ((v0.clamp(-2, size) + 2) * wide + (u0.clamp(-2, size) + 2)).long() + (sample_start + plane_start)
+        w = weight.view(-1, 1, 1)
+        if self.splat_mode == "nearest":
+            index, share = cell, w.expand_as(u)
+        else:  # the four corners as leading axes (top/bottom, left/right): broadcast, no gathering copies
+            fu, fv = u - u0, v - v0
+            across = torch.stack((w * (1 - fu), w * fu))  # [2, R, 3, P]
+            down = torch.stack((1 - fv, fv))
+            share = across * down.unsqueeze(1)  # [2, 2, R, 3, P]
+            corner = torch.tensor([[0, 1], [wide, wide + 1]], device=axes.device).view(2, 2, 1, 1, 1)
+            index = cell + corner
         hist = torch.zeros(n * 3 * wide * wide, dtype=axes.dtype, device=axes.device)
-        hist = hist.scatter_add(0, torch.cat([c.flatten() for c in cells]), torch.cat([s.flatten() for s in shares]))
+        hist = hist.scatter_add(0, index.flatten(), share.flatten())
         return hist.view(n, 3, wide, wide)[:, :, 2:-2, 2:-2]
 
     def smooth(self, image: torch.Tensor) -> torch.Tensor:
