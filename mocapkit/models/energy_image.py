@@ -43,7 +43,7 @@ from mocapkit.motion.layouts import (
 
 #: Planes as (horizontal axis, vertical axis) over (x, y, z); vertical axes grow upwards.
 PLANES = {"xy": (0, 1), "zy": (2, 1), "xz": (0, 2)}
-#: The planes' horizontal and vertical axes as index lists (:meth:`EnergyImage.histogram`).
+#: The planes' horizontal and vertical axes as index lists (:meth:`EnergyImage.splat`).
 PLANE_COLUMNS, PLANE_ROWS = [h for h, _ in PLANES.values()], [v for _, v in PLANES.values()]
 #: Where the image is centred on body 0's reference joint (:class:`EnergyImage` ``origin``): name → locator.
 ORIGINS = {"median": body0_origin, "first": body0_first, "start": body0_start}
@@ -73,6 +73,10 @@ class EnergyImage(nn.Module):
             SpineBase → SpineShoulder on NTU-25).
         hips: ``(left, right)`` joints used by ``align`` (default: the hip landmarks).
     """
+
+    #: Body-frames splatted per :meth:`splat` call (512 was the fastest of 128-2048 and all at once, on the demo's
+    #: training and validation batches).
+    ROWS_PER_BLOCK = 512
 
     def __init__(
         self,
@@ -170,17 +174,18 @@ class EnergyImage(nn.Module):
         along = parent.unsqueeze(-1) + (child - parent).unsqueeze(-1) * self.bone_fractions  # [..., 3, nb, K]
         return torch.cat((axes, along.flatten(-2)), dim=-1)
 
-    def histogram(self, axes: torch.Tensor, weight: torch.Tensor, sample: torch.Tensor, n: int) -> torch.Tensor:
-        """The three planes' weighted 2-D histograms of points, in one scatter.
+    def splat(self, bordered: torch.Tensor, axes: torch.Tensor, weight: torch.Tensor, sample: torch.Tensor) -> None:
+        """Add points to the three planes' weighted 2-D histograms, in one scatter.
 
-        ``axes`` ``[R, 3, P]``: the x, y, z of the ``P`` points of ``R`` body-frames; ``weight`` ``[R]``: each
-        body-frame's weight; ``sample`` ``[R]``: the batch sample it belongs to. Returns ``[n, 3, size, size]``.
+        ``bordered`` ``[N * 3 * W * W]``: the histograms with a 2-pixel border (``W = size + 4``), flat, added to in
+        place; ``axes`` ``[R, 3, P]``: the x, y, z of the ``P`` points of ``R`` body-frames; ``weight`` ``[R]``: each
+        body-frame's weight; ``sample`` ``[R]``: the batch sample it belongs to.
 
         Each point adds its weight to the nearest pixel (``splat="nearest"``) or to its four neighbours with
-        bilinear shares (``splat="bilinear"``); points outside the grid are dropped. The histogram has a 2-pixel
-        border, cut off at the end: a point's corner column clamped to ``[-2, size]`` puts every share that falls
-        outside the grid into the border, so no corner needs its own bounds test or clamp: the four corners are
-        the offsets 0, 1, W and W+1 of one index.
+        bilinear shares (``splat="bilinear"``); points outside the grid are dropped. A point's corner column
+        clamped to ``[-2, size]`` puts every share that falls outside the grid into the border (cut off by the
+        caller), so no corner needs its own bounds test or clamp: the four corners are the offsets 0, 1, W and
+        W+1 of one index.
         """
         size, extent = self.size, self.extent
         wide = size + 4  # the bordered grid's side
@@ -203,9 +208,7 @@ class EnergyImage(nn.Module):
             share = across * down.unsqueeze(1)  # [2, 2, R, 3, P]
             corner = torch.tensor([[0, 1], [wide, wide + 1]], device=axes.device).view(2, 2, 1, 1, 1)
             index = cell + corner
-        hist = torch.zeros(n * 3 * wide * wide, dtype=axes.dtype, device=axes.device)
-        hist = hist.scatter_add(0, index.flatten(), share.flatten())
-        return hist.view(n, 3, wide, wide)[:, :, 2:-2, 2:-2]
+        bordered.scatter_add_(0, index.flatten(), share.flatten())
 
     def smooth(self, image: torch.Tensor) -> torch.Tensor:
         """Separable Gaussian blur with ``smoothing`` pixels of standard deviation (identity when 0)."""
@@ -230,11 +233,20 @@ class EnergyImage(nn.Module):
             weight = weight * (torch.arange(1, t + 1, device=coords.device, dtype=coords.dtype) / t)
         sample = torch.arange(n, device=coords.device).view(-1, 1, 1).expand(n, m, t)
         rows, weight, sample = coords.flatten(0, 2), weight.flatten(), sample.flatten()  # one row per body-frame
-        if not torch.onnx.is_in_onnx_export():
-            # absent bodies and padding frames weigh 0: leave them out (most of an NTU batch); an exported graph
-            # keeps every row, so that its shapes do not depend on the data
+        if torch.onnx.is_in_onnx_export():  # every row at once: the graph's shapes must not depend on the data
+            blocks = [slice(None)]
+        else:
+            # absent bodies and padding frames weigh 0: leave them out (most of an NTU batch), and splat the rest
+            # in blocks, so that the corners' indices and shares stay small (cache-sized, and below the size that
+            # glibc maps and unmaps afresh for every call)
             kept = present.flatten().nonzero().squeeze(1)
             rows, weight, sample = rows.index_select(0, kept), weight[kept], sample[kept]
-        image = self.smooth(self.histogram(self.points(rows.transpose(1, 2)), weight, sample, n))  # [N, 3, H, W]
+            blocks = [slice(start, start + self.ROWS_PER_BLOCK) for start in range(0, len(kept), self.ROWS_PER_BLOCK)]
+        wide = self.size + 4
+        bordered = torch.zeros(n * 3 * wide * wide, dtype=rows.dtype, device=rows.device)
+        for block in blocks:
+            self.splat(bordered, self.points(rows[block].transpose(1, 2)), weight[block], sample[block])
+        hist = bordered.view(n, 3, wide, wide)[:, :, 2:-2, 2:-2]
+        image = self.smooth(hist)  # [N, 3, H, W]
         peak = image.amax(dim=(2, 3), keepdim=True)
         return image / peak.clamp(min=1e-8)

@@ -1,8 +1,7 @@
 """The fast graph convolution and energy image compute what the implementations before them computed.
 
 The references are the modules as they were before the rewrite, kept verbatim in ``tests/models/reference_*.py``:
-from the same weights the new modules give the same outputs and gradients (to float rounding; the energy image
-bit for bit), and a state_dict of one loads into the other, so checkpoints keep loading.
+from the same weights the new modules give the same outputs and gradients (to float rounding), and a state_dict of one loads into the other, so checkpoints keep loading.
 """
 
 from __future__ import annotations
@@ -109,12 +108,12 @@ def test_a_graph_convolution_on_its_own_matches_the_einsum_form():
     ],
 )
 def test_energy_image_is_todays_image(options):
-    x = example_skeletons(5, 40)
+    x = example_skeletons(8, 40)  # 640 body-frames: more than one block of the new module
     x[2, :, 10:14] = 0.0  # absent frames inside a sequence
     x[3, 0, :, :, 0] += 5.0  # far off to the side
     new = energy_image.EnergyImage(**options)
     old = reference_energy_image.EnergyImage(**options)
-    torch.testing.assert_close(new(x), old(x), rtol=0, atol=1e-7)
+    torch.testing.assert_close(new(x), old(x), rtol=1e-6, atol=1e-6)  # images in [0, 1]: the sums' order differs
     torch.testing.assert_close(reference_energy_image.reference_like(new)(x), old(x), rtol=0, atol=0)
 
 
