@@ -1,7 +1,8 @@
 """The fast graph convolution and energy image compute what the implementations before them computed.
 
 The references are the modules as they were before the rewrite, kept verbatim in ``tests/models/reference_*.py``:
-from the same weights the new modules give the same outputs and gradients (to float rounding), and a state_dict of one loads into the other, so checkpoints keep loading.
+from the same weights the new modules give the same outputs and gradients (to float rounding), and a state_dict of
+one loads into the other, so checkpoints keep loading.
 """
 
 from __future__ import annotations
