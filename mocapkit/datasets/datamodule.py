@@ -29,6 +29,16 @@ from mocapkit.datasets.augment import SkeletonAugment, TestTimeViews
 from mocapkit.motion.frames import uniform_frame_indices
 
 
+def data_loader(datamodule: L.LightningDataModule, dataset: Dataset, **options) -> DataLoader:
+    """``DataLoader(dataset, **options)`` with what every data module here shares: ``datamodule.num_workers``
+    worker processes, kept from one epoch to the next, and pinned memory when the data module's Trainer runs on a
+    CUDA device (the copy of a batch to the device then overlaps the step)."""
+    trainer = datamodule.trainer  # None outside a Trainer
+    on_gpu = trainer is not None and trainer.strategy.root_device.type == "cuda"
+    workers = datamodule.num_workers
+    return DataLoader(dataset, num_workers=workers, persistent_workers=workers > 0, pin_memory=on_gpu, **options)
+
+
 class SplitDataModule(L.LightningDataModule):
     """Loaders over ``dataset(part)`` for ``part`` in train / val / test, batched with ``collate_fn``."""
 
@@ -56,14 +66,12 @@ class SplitDataModule(L.LightningDataModule):
         }
 
     def _loader(self, part: str, shuffle: bool) -> DataLoader:
-        return DataLoader(
+        return data_loader(
+            self,
             self.dataset(part),
             batch_size=self.batch_size if part == "train" else self.eval_batch_size,
             shuffle=shuffle,
-            num_workers=self.num_workers,
             collate_fn=self.collate_fn,
-            persistent_workers=self.num_workers > 0,
-            drop_last=False,
         )
 
     def train_dataloader(self) -> DataLoader:
@@ -198,13 +206,8 @@ class SkeletonDataModule(SplitDataModule):
     def views_dataloader(self, part: str, views: TestTimeViews) -> DataLoader:
         """An unshuffled loader over the ``"val"`` or ``"test"`` part in which every sample appears as
         ``len(views)`` consecutive items (:class:`ViewDataset`), for test-time augmentation."""
-        return DataLoader(
-            ViewDataset(self.dataset(part), views),
-            batch_size=self.eval_batch_size,
-            shuffle=False,
-            num_workers=self.num_workers,
-            collate_fn=self.collate_fn,
-            drop_last=False,
+        return data_loader(
+            self, ViewDataset(self.dataset(part), views), batch_size=self.eval_batch_size, collate_fn=self.collate_fn
         )
 
     def _set_loading(

@@ -28,6 +28,7 @@ import numpy as np
 import torch
 from torch.utils.data import DataLoader, Dataset
 
+from mocapkit.datasets.datamodule import data_loader
 from mocapkit.datasets.mocap.folders import (
     MocapFolderError,
     held_out_groups,
@@ -296,12 +297,8 @@ class MocapRefinementDataModule(L.LightningDataModule):
         return self._datasets[part]
 
     def _loader(self, part: str) -> DataLoader:
-        return DataLoader(
-            self.dataset(part),
-            batch_size=self.batch_size if part == "train" else self.eval_batch_size,
-            shuffle=False,
-            num_workers=self.num_workers,
-            persistent_workers=self.num_workers > 0,
+        return data_loader(
+            self, self.dataset(part), batch_size=self.batch_size if part == "train" else self.eval_batch_size
         )
 
     def train_dataloader(self) -> DataLoader:

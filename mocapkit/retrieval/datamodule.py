@@ -47,6 +47,7 @@ import numpy as np
 import torch
 from torch.utils.data import DataLoader, Dataset
 
+from mocapkit.datasets.datamodule import data_loader
 from mocapkit.datasets.mocap.folders import MocapFolderError, held_out_groups
 from mocapkit.motion.geometry import normalised_landmarks
 from mocapkit.motion.layouts import LANDMARK_NAMES
@@ -338,13 +339,12 @@ class RetrievalDataModule(L.LightningDataModule):
 
     def _loader(self, part: str) -> DataLoader:
         train = part == "train"
-        return DataLoader(
+        return data_loader(
+            self,
             self.dataset(part),
             batch_size=self.batch_size if train else self.eval_batch_size,
             shuffle=train,
             drop_last=train and len(self.dataset(part)) > self.batch_size,
-            num_workers=self.num_workers,
-            persistent_workers=self.num_workers > 0,
         )
 
     def train_dataloader(self) -> DataLoader:

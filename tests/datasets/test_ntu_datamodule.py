@@ -158,3 +158,16 @@ def test_training_batches_get_their_views_in_the_trainer_hook(cache):
     turned = dm.on_after_batch_transfer(batch, 0)["skeletons"]
     assert not torch.allclose(turned, plain["skeletons"], atol=1e-3)
     assert torch.allclose(turned[..., 1], plain["skeletons"][..., 1], atol=1e-5)
+
+
+def test_loaders_pin_memory_only_for_a_cuda_trainer(cache):
+    """Every data module's loaders come from ``data_loader``: persistent workers, and pinned batches when the
+    Trainer runs on a CUDA device."""
+    from types import SimpleNamespace
+
+    dm = NTUDataModule(str(cache), split="ntu60_xsub", num_workers=0)
+    dm.setup("fit")
+    assert not dm.train_dataloader().pin_memory  # outside a Trainer
+    for device, pinned in (("cpu", False), ("cuda", True)):
+        dm.trainer = SimpleNamespace(strategy=SimpleNamespace(root_device=torch.device(device)), training=False)
+        assert dm.train_dataloader().pin_memory is pinned and dm.val_dataloader().pin_memory is pinned

@@ -38,7 +38,7 @@ from mocapkit.datasets.casia_b.splits import (
     protocol_split,
     sequence_validation_split,
 )
-from mocapkit.datasets.datamodule import SplitDataModule
+from mocapkit.datasets.datamodule import SplitDataModule, data_loader
 from mocapkit.datasets.formats.casia_b import CONDITIONS, VIEWS
 
 
@@ -356,13 +356,7 @@ class GaitDataModule(SplitDataModule):
                 "use data.subjects_per_batch=null under DDP"
             )
         sampler = SubjectBatchSampler(self.subject_labels[self.train_idx], self.batch_size, self.subjects_per_batch)
-        return DataLoader(
-            self.dataset("train"),
-            batch_sampler=sampler,
-            num_workers=self.num_workers,
-            collate_fn=self.collate_fn,
-            persistent_workers=self.num_workers > 0,
-        )
+        return data_loader(self, self.dataset("train"), batch_sampler=sampler, collate_fn=self.collate_fn)
 
     def predict_dataloader(self) -> DataLoader:
         """The test part (what ``trainer.predict`` embeds for the gallery/probe evaluation)."""
