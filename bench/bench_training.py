@@ -18,11 +18,8 @@ For each network: FLOPs per sample of one optimiser step (forward + backward, co
   (MSR Action3D, HDM05; the demo's NTU-format cache when ``.demo/ntu_cache`` exists) timed together with the
   step, against the step alone on the same batches; ``loop / step`` near 1 means the loop is not data-bound.
 
-Usage: ``python bench/bench_training.py [--models stgcn energy_vgg_cpu ...] [--quick] [--steps 3]
-[--system-malloc]``; ``--list`` names the networks. Like the ``mocapkit`` command, the bench keeps freed memory
-in the process (:mod:`mocapkit.train.allocator`); ``--system-malloc`` measures with glibc's defaults instead (a
-separate process: the setting cannot be undone). Timings are ratios within the run: on a shared machine, compare
-columns, not runs.
+Usage: ``python bench/bench_training.py [--models stgcn energy_vgg_cpu ...] [--quick] [--steps 3]``;
+``--list`` names the networks. Timings are ratios within the run: on a shared machine, compare columns, not runs.
 """
 
 from __future__ import annotations
@@ -363,15 +360,7 @@ def main() -> None:
     parser.add_argument(
         "--compile", action="store_true", help="only torch.compile against eager for the chosen skeleton networks"
     )
-    parser.add_argument(
-        "--system-malloc",
-        action="store_true",
-        help="keep glibc's own malloc thresholds (the mocapkit command raises them: mocapkit.train.allocator)",
-    )
     args = parser.parse_args()
-    from mocapkit.train.allocator import keep_freed_memory
-
-    kept = False if args.system_malloc else keep_freed_memory()  # as the mocapkit command does
     warnings.filterwarnings("ignore")
     import logging
 
@@ -385,8 +374,7 @@ def main() -> None:
     print(
         f"# training throughput, CPU ({platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
         f"torch {torch.__version__}, {torch.get_num_threads()} threads, "
-        f"capability {torch.backends.cpu.get_cpu_capability()}); {steps} timed steps after a warm-up; "
-        f"malloc: {'freed memory kept (mocapkit.train.allocator)' if kept else 'glibc defaults'}"
+        f"capability {torch.backends.cpu.get_cpu_capability()}); {steps} timed steps after a warm-up"
     )
     peaks = {"32-true": matmul_peak(torch.float32), "bf16-mixed": matmul_peak(torch.bfloat16)}
     print(

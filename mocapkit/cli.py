@@ -995,9 +995,6 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    from mocapkit.train.allocator import keep_freed_memory
-
-    keep_freed_memory()  # every command allocates tensors of the same sizes over and over
     global _DEBUG
     _DEBUG = False
     while argv and argv[0] == "--debug":  # the global flag, before the command
