@@ -11,9 +11,9 @@ For each network: FLOPs per sample of one optimiser step (forward + backward, co
   the refiners, the Kinect corrector, the retrieval encoder and the CVAE run their own LightningModule's
   ``training_step`` on a real batch of their experiment's data module (HDM05 cuts, ``../shared/data``).
 * **Today vs now**: the graph network and the energy-image CNN are also measured with the implementation before
-  the fast rewrite (``tests/models/reference_*.py``, the equivalence tests' references) loaded with the same
-  weights and the same batch, their steps alternating with the new ones, so "now / today" is a ratio from one run
-  under the same load.
+  the fast rewrite (``tests/models/reference_*.py``, the equivalence tests' references), and the gait CNN with
+  torch's ``LocalResponseNorm``, loaded with the same weights and the same batch, their steps alternating with the
+  new ones, so "now / today" is a ratio from one run under the same load.
 * **Loop with data loading** (table 2): the experiment's own ``train_dataloader`` over real cached data
   (MSR Action3D, HDM05; the demo's NTU-format cache when ``.demo/ntu_cache`` exists) timed together with the
   step, against the step alone on the same batches; ``loop / step`` near 1 means the loop is not data-bound.
@@ -144,15 +144,22 @@ def _reference_energy(cfg_model, model):
     return model
 
 
-def _gait_cnn(batch: int = 32):
+def _gait_cnn(batch: int = 32, torch_lrn: bool = False):
+    """The multi-task gait CNN on random GEIs; ``torch_lrn``: with torch's LocalResponseNorm (today's), same
+    weights (the LRN has none)."""
+
     def build():
         from hydra.utils import instantiate
 
+        from mocapkit.models.gait_cnn import ChannelWindowLRN
         from mocapkit.train.config import compose_config
 
         cfg = compose_config(["model=gait_cnn"])
         torch.manual_seed(0)
         model = instantiate(cfg.model, num_subjects=74).train()
+        for name, m in model.trunk.named_children():
+            if torch_lrn and isinstance(m, ChannelWindowLRN):
+                setattr(model.trunk, name, torch.nn.LocalResponseNorm(m.size, alpha=m.alpha, beta=m.beta, k=m.k))
         optimizer = torch.optim.AdamW(model.parameters(), lr=1e-3)
         h, w = model.input_size
         geis = torch.rand(batch, 1, h, w)
@@ -243,7 +250,12 @@ def cases() -> list[Case]:
             today=_skeleton_classifier("energy_vgg_cpu", 32, reference=_reference_energy),
         ),
         Case("energy_vgg16", _skeleton_classifier("energy_vgg16", 2), "thesis VGG16, 224 px, batch 2"),
-        Case("gait_cnn", _gait_cnn(32), "multi-task gait CNN, 124×124 GEIs, batch 32"),
+        Case(
+            "gait_cnn",
+            _gait_cnn(32),
+            "multi-task gait CNN, 124×124 GEIs, batch 32",
+            today=_gait_cnn(32, torch_lrn=True),
+        ),
     ]
     for name, experiment, note, extra in (
         ("refine_bigru", "refine_bigru", "HDM05 windows of 240 frames, batch 16", hdm),

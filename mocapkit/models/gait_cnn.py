@@ -23,6 +23,7 @@ from __future__ import annotations
 from collections import OrderedDict
 
 import torch
+import torch.nn.functional as F
 from torch import nn
 
 #: The tasks a head can be built for, in output order.
@@ -31,6 +32,31 @@ TASKS: tuple[str, ...] = ("subject", "view", "condition")
 CONV_STAGES: tuple[tuple[str, int, int], ...] = (("c1", 24, 11), ("c2", 32, 6), ("c3", 40, 5))
 #: AlexNet's local response normalisation constants (Krizhevsky et al. 2012), our choice.
 LRN_SIZE, LRN_ALPHA, LRN_BETA, LRN_K = 5, 1e-4, 0.75, 2.0
+
+
+class ChannelWindowLRN(nn.LocalResponseNorm):
+    """:class:`torch.nn.LocalResponseNorm` on ``[B, C, H, W]`` with the sum over each channel window taken by one
+    1×1 convolution with a fixed band of weights (``1 / size`` where the input channel lies in the output
+    channel's window), where torch pads and runs a 3-D average pool: the same values to float rounding, 2.4–3.2×
+    faster forward and backward on CPU (tests/models/test_gait_cnn.py; bench/RESULTS.md, *Training throughput*).
+    Under autocast the window sum and the power run in float32, as torch's average pool does.
+    """
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        if x.dim() != 4:
+            return super().forward(x)
+        channel = torch.arange(x.shape[1], device=x.device)
+        offset = channel.view(1, -1) - channel.view(-1, 1)  # [out, in]: input channel - output channel
+        band = ((offset >= -(self.size // 2)) & (offset <= (self.size - 1) // 2)).float() / self.size
+        squares = x * x
+        if torch.is_autocast_enabled(x.device.type):
+            with torch.autocast(x.device.type, enabled=False):
+                return x / self._denominator(squares.float(), band)
+        return x / self._denominator(squares, band.to(x.dtype))
+
+    def _denominator(self, squares: torch.Tensor, band: torch.Tensor) -> torch.Tensor:
+        window_mean = F.conv2d(squares, band[:, :, None, None])
+        return (window_mean * self.alpha + self.k).pow(self.beta)
 
 
 class MultiTaskGaitCNN(nn.Module):
@@ -83,7 +109,7 @@ class MultiTaskGaitCNN(nn.Module):
         for k, (name, channels, kernel) in enumerate(CONV_STAGES, start=1):
             layers[name] = nn.Conv2d(in_channels, channels, kernel, stride=1, padding=0)
             layers[f"relu{k}"] = nn.ReLU(inplace=True)
-            layers[f"lrn{k}"] = nn.LocalResponseNorm(LRN_SIZE, alpha=LRN_ALPHA, beta=LRN_BETA, k=LRN_K)
+            layers[f"lrn{k}"] = ChannelWindowLRN(LRN_SIZE, alpha=LRN_ALPHA, beta=LRN_BETA, k=LRN_K)
             layers[f"pool{k}"] = nn.MaxPool2d(2)
             in_channels = channels
         self.trunk = nn.Sequential(layers)

@@ -6,7 +6,7 @@ import pytest
 import torch
 from torch import nn
 
-from mocapkit.models.gait_cnn import MultiTaskGaitCNN, multitask_gait_cnn
+from mocapkit.models.gait_cnn import ChannelWindowLRN, MultiTaskGaitCNN, multitask_gait_cnn
 
 #: Thesis Table 6.1 at 124×124: (layer, channels, spatial size).
 TABLE_6_1 = [("c1", 24, 114), ("pool1", 24, 57), ("c2", 32, 52), ("pool2", 32, 26), ("c3", 40, 22), ("pool3", 40, 11)]
@@ -43,7 +43,8 @@ def test_trunk_and_heads_match_table_6_1_at_124x124():
         if isinstance(m, nn.MaxPool2d):
             assert m.kernel_size == 2 and m.stride == 2, name
     # conv -> ReLU -> LRN -> pool, three times
-    assert [type(m).__name__ for m in model.trunk] == ["Conv2d", "ReLU", "LocalResponseNorm", "MaxPool2d"] * 3
+    kinds = (nn.Conv2d, nn.ReLU, nn.LocalResponseNorm, nn.MaxPool2d) * 3
+    assert len(model.trunk) == 12 and all(isinstance(m, kind) for m, kind in zip(model.trunk, kinds))
     assert model.flat_features == 40 * 11 * 11
     assert shapes["shared_fc"] == (2, 512)
     expected_heads = {"subject": 124, "view": 11, "condition": 3}
@@ -57,6 +58,44 @@ def test_lrn_uses_alexnet_constants():
     assert len(lrns) == 3
     for lrn in lrns:
         assert (lrn.size, lrn.alpha, lrn.beta, lrn.k) == (5, 1e-4, 0.75, 2.0)
+
+
+@pytest.mark.parametrize("size", [5, 4, 1])
+def test_channel_window_lrn_is_torchs_lrn(size):
+    """The band-convolution LRN gives torch's values and gradients (float32), and under bf16 autocast torch's
+    float32 window sums to bfloat16 rounding."""
+    torch.manual_seed(size)
+    x = (torch.randn(3, 9, 7, 6) * 3).requires_grad_()
+    ours = ChannelWindowLRN(size, alpha=1e-2, beta=0.75, k=2.0)
+    torchs = nn.LocalResponseNorm(size, alpha=1e-2, beta=0.75, k=2.0)
+    target = torch.randn(3, 9, 7, 6)
+    grads = []
+    for module in (ours, torchs):
+        out = module(x)
+        (out * target).sum().backward()
+        grads.append((out.detach(), x.grad.clone()))
+        x.grad = None
+    torch.testing.assert_close(grads[0][0], grads[1][0], rtol=1e-6, atol=1e-6)
+    torch.testing.assert_close(grads[0][1], grads[1][1], rtol=1e-5, atol=1e-6)
+    with torch.autocast("cpu", dtype=torch.bfloat16):
+        a, b = ours(x.to(torch.bfloat16)), torchs(x.to(torch.bfloat16))
+    assert a.dtype == b.dtype == torch.float32  # the window sums in float32, as torch's average pool
+    torch.testing.assert_close(a, b, rtol=1e-6, atol=1e-6)
+
+
+def test_the_network_with_torchs_lrn_gives_the_same_outputs():
+    """Swapping torch's LRN back in (no parameters: the same state dict) changes nothing but the speed."""
+    torch.manual_seed(0)
+    model = MultiTaskGaitCNN(num_subjects=7, input_size=(64, 44)).eval()
+    plain = MultiTaskGaitCNN(num_subjects=7, input_size=(64, 44)).eval()
+    for name, m in plain.trunk.named_children():
+        if isinstance(m, ChannelWindowLRN):
+            setattr(plain.trunk, name, nn.LocalResponseNorm(m.size, alpha=m.alpha, beta=m.beta, k=m.k))
+    plain.load_state_dict(model.state_dict())
+    x = torch.rand(4, 1, 64, 44)
+    with torch.no_grad():
+        for task, out in model(x).items():
+            torch.testing.assert_close(out, plain(x)[task], rtol=1e-5, atol=1e-6)
 
 
 def test_outputs_and_embedding():
