@@ -4,9 +4,9 @@ Training augmentation has two halves: the temporal crop, one sample at a time wh
 lengths differ), and the change of view, on whole padded batches (one batched product; the skeleton data
 modules apply it after the batch reached its device: :meth:`SkeletonAugment.change_view`).
 
-Absent bodies and frames are stored as zeros, so every transform here keeps
-zeros as zeros. Random numbers come from torch's global generator, which
-Lightning seeds per data-loader worker (``seed_everything(workers=True)``).
+Absent bodies and frames are stored as zeros, so every transform here keeps zeros as zeros. Random numbers come
+from torch's global generator: the crops' in the data-loader workers, which Lightning seeds one by one
+(``seed_everything(workers=True)``), the views' in the training process, which ``seed_everything`` seeds.
 """
 
 from __future__ import annotations
