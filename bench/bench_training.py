@@ -148,7 +148,7 @@ def _gait_cnn(batch: int = 32, torch_lrn: bool = False):
     """The multi-task gait CNN on random GEIs; ``torch_lrn``: with torch's LocalResponseNorm (today's), same
     weights (the LRN has none)."""
 
-    def build():
+    def build(compiled: bool = False):
         from hydra.utils import instantiate
 
         from mocapkit.models.gait_cnn import ChannelWindowLRN
@@ -162,6 +162,8 @@ def _gait_cnn(batch: int = 32, torch_lrn: bool = False):
                 setattr(model.trunk, name, torch.nn.LocalResponseNorm(m.size, alpha=m.alpha, beta=m.beta, k=m.k))
         optimizer = torch.optim.AdamW(model.parameters(), lr=1e-3)
         h, w = model.input_size
+        if compiled:
+            model = torch.compile(model)
         geis = torch.rand(batch, 1, h, w)
         labels = {"subject": torch.randint(0, 74, (batch,)), "view": torch.randint(0, 11, (batch,))}
         labels["condition"] = torch.randint(0, 3, (batch,))
@@ -370,7 +372,7 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="1 timed step, the loop table on 4 batches")
     parser.add_argument("--list", action="store_true", help="print the network names and exit")
     parser.add_argument(
-        "--compile", action="store_true", help="only torch.compile against eager for the chosen skeleton networks"
+        "--compile", action="store_true", help="only torch.compile against eager for the chosen rewritten networks"
     )
     args = parser.parse_args()
     warnings.filterwarnings("ignore")
@@ -398,7 +400,7 @@ def main() -> None:
         print("| network | precision | eager samples/s | compiled samples/s | compiled / eager | compile time (s) |")
         print("|---|---|---:|---:|---:|---:|")
         for case in chosen:
-            if case.today is None:  # the skeleton classifiers only
+            if case.today is None:  # the rewritten networks only
                 continue
             for precision, (eager, compiled, seconds) in measure_compiled(case, steps).items():
                 print(
