@@ -157,19 +157,6 @@ def top_k(distances: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
     return order.astype(np.int64), np.take_along_axis(d, order, axis=1)
 
 
-def ragged_to_state(prefix: str, arrays: list[np.ndarray]) -> dict[str, np.ndarray]:
-    """A list of arrays with one ragged first axis as ``{prefix_data, prefix_offsets}`` (for ``_state``)."""
-    lengths = np.array([len(a) for a in arrays], dtype=np.int64)
-    data = np.concatenate(arrays, axis=0) if arrays else np.zeros((0,))
-    return {f"{prefix}_data": data, f"{prefix}_offsets": np.concatenate([[0], np.cumsum(lengths)])}
-
-
-def ragged_from_state(prefix: str, state: dict[str, np.ndarray]) -> list[np.ndarray]:
-    """The inverse of :func:`ragged_to_state`."""
-    data, offsets = state[f"{prefix}_data"], state[f"{prefix}_offsets"]
-    return [data[offsets[i] : offsets[i + 1]] for i in range(len(offsets) - 1)]
-
-
 def file_sha1(path: str | os.PathLike) -> str:
     """The hex SHA-1 of a file's bytes (which model an index or an embedding method was built with)."""
     digest = hashlib.sha1()

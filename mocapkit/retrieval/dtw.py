@@ -64,7 +64,8 @@ from mocapkit.motion.geometry import (
     turn_about_up,
 )
 from mocapkit.retrieval import ann
-from mocapkit.retrieval.base import RetrievalMethod, motion_list, ragged_from_state, ragged_to_state
+from mocapkit.retrieval.base import RetrievalMethod, motion_list
+from mocapkit.retrieval.frames import RaggedFrames, candidate_dtw
 from mocapkit.retrieval.hubness import METHODS as HUBNESS_METHODS
 from mocapkit.retrieval.hubness import (
     database_statistics,
@@ -87,8 +88,11 @@ SCALINGS = ("dtw", "frames")
 PREFILTER_FRAMES, PREFILTER_DIMS = 16, 128
 #: Reference clips a prefiltered query's mutual-proximity statistics are taken against.
 QUERY_REFERENCE = 64
-#: Queries per dtaidistance call in :meth:`DTWRetrieval._feature_distances`.
+#: Queries per dtaidistance call in :meth:`DTWRetrieval._feature_distances` (with a band).
 QUERY_BLOCK = 256
+#: Database frames per matrix product in :meth:`DTWRetrieval._feature_distances` (without a band): a query of 100
+#: frames against them makes a 26 MB cost table.
+CHUNK_FRAMES = 32_768
 
 
 def frame_features(track: LandmarkTrack, features: str, fps: float) -> np.ndarray:
@@ -126,11 +130,15 @@ def heading_concentration(tracks: list[LandmarkTrack], fps: float, seconds: floa
     return float(np.hypot(np.cos(starts).mean(), np.sin(starts).mean())) if len(starts) else 0.0
 
 
-def frame_moments(sequences: list[np.ndarray]) -> np.ndarray:
+def frame_moments(sequences: list[np.ndarray] | RaggedFrames) -> np.ndarray:
     """float64 ``[2 + d]``: the frame count, the sum of the squared frame norms and the sum of the frames of
     ``sequences`` (each ``[T, d]``): what :func:`moments_scale` needs, and additive over libraries."""
-    x = np.concatenate([np.asarray(s, dtype=np.float64) for s in sequences])
-    return np.concatenate([[len(x), float((x**2).sum())], x.sum(axis=0)])
+    store = sequences if isinstance(sequences, RaggedFrames) else RaggedFrames.from_list(sequences)
+    moments = np.zeros(2 + store.dim)
+    for start in range(0, len(store.data), CHUNK_FRAMES):  # in float64 a chunk at a time (a memory map is large)
+        x = np.asarray(store.data[start : start + CHUNK_FRAMES], dtype=np.float64)
+        moments += np.concatenate([[len(x), float((x**2).sum())], x.sum(axis=0)])
+    return moments
 
 
 def moments_scale(moments: np.ndarray) -> float:
@@ -236,7 +244,7 @@ class DTWRetrieval(RetrievalMethod):
         if self.scaling not in SCALINGS:
             raise ValueError(f"scaling must be one of {SCALINGS}, got {self.scaling!r}")
         self.features_ = self._choose_features(sequences)
-        database = self._encode_sequences(sequences)
+        database = {n: RaggedFrames.from_list(frames) for n, frames in self._encode_sequences(sequences).items()}
         names = self.features_
         self.scales_ = np.ones(len(names))
         if self._frame_scaled:
@@ -250,7 +258,7 @@ class DTWRetrieval(RetrievalMethod):
                 f"{type(self).__name__}: several features or mutual proximity need a database of "
                 f"at least 2 clips, got {len(sequences)}"
             )
-        raw = {n: self._feature_distances(database[n], [database[n][i] for i in reference]) for n in names}
+        raw = {n: self._feature_distances(database[n], database[n].subset(reference)) for n in names}
         self._set_reference(reference, raw)
         return database
 
@@ -323,12 +331,12 @@ class DTWRetrieval(RetrievalMethod):
             row = row[row >= 0]
             one = {nm: [encoded[nm][i]] for nm in names}
             d = sum(
-                self._feature_distances(one[nm], [self.database_[nm][j] for j in row]) / s
+                self._feature_distances(one[nm], self.database_[nm].subset(row)) / s
                 for nm, s in zip(names, self.scales_)
             )
             if self.hubness is not None:
                 to_reference = sum(
-                    self._feature_distances(one[nm], [self.database_[nm][j] for j in query_reference]) / s
+                    self._feature_distances(one[nm], self.database_[nm].subset(query_reference)) / s
                     for nm, s in zip(names, self.scales_)
                 )
                 d = mutual_proximity(
@@ -375,7 +383,7 @@ class DTWRetrieval(RetrievalMethod):
         new = self._encode_sequences(sequences)
         names = self.features_
         n_old = self.n_database_
-        union = {n: list(self.database_[n]) + new[n] for n in names}
+        union = {n: self.database_[n].extend(new[n]) for n in names}
         n_total = n_old + len(sequences)
         exact = not self._needs_reference or (n_total <= int(self.n_reference) and len(self.reference_) == n_old)
         if self._frame_scaled:  # the moments of the union's frames: the scales fit on the union would learn
@@ -392,7 +400,7 @@ class DTWRetrieval(RetrievalMethod):
                     raw[n] = np.vstack([old, cross])
                 self._set_reference(np.arange(n_total, dtype=np.int64), raw)
             else:
-                rows = {n: self._feature_distances(new[n], [union[n][i] for i in self.reference_]) for n in names}
+                rows = {n: self._feature_distances(new[n], union[n].subset(self.reference_)) for n in names}
                 if self.hubness is not None:  # the new clips are not reference clips: no self-distance to leave out
                     combined = sum(rows[n] / s for n, s in zip(names, self.scales_))
                     self.database_mean_ = np.concatenate([self.database_mean_, combined.mean(axis=1)])
@@ -417,24 +425,66 @@ class DTWRetrieval(RetrievalMethod):
             for i in range(len(encoded[names[0]]))
         ]
 
-    def _feature_distances(self, queries: list[np.ndarray], database: list[np.ndarray]) -> np.ndarray:
+    def _feature_distances(
+        self, queries: list[np.ndarray] | RaggedFrames, database: list[np.ndarray] | RaggedFrames
+    ) -> np.ndarray:
         """float64 ``[n_queries, n_database]`` DTW distances of one feature's sequences.
 
-        Queries go to dtaidistance in blocks of :data:`QUERY_BLOCK` (the distances of a block come back compact), with
-        a progress bar on a terminal when there are several blocks (``fit`` with mutual proximity on a large library
-        runs minutes: every clip against the reference clips).
+        Without a band (``window=None``) by :func:`~mocapkit.retrieval.frames.candidate_dtw`: the database in chunks
+        of :data:`CHUNK_FRAMES` frames, every query against a chunk (one matrix product each; queries spread over
+        the CPU's threads when ``parallel``). With a band by dtaidistance, queries in blocks of :data:`QUERY_BLOCK`
+        (the distances of a block come back compact). A progress bar shows on a terminal when the work is large
+        (``fit`` with mutual proximity on a large library runs minutes: every clip against the reference clips).
         """
+        store = database if isinstance(database, RaggedFrames) else RaggedFrames.from_list(database)
+        if self.window is None:
+            d = self._unbanded_distances(queries, store)  # (a RaggedFrames of queries is read one clip at a time)
+        else:
+            d = self._banded_distances(list(queries), list(store))
+        if self.length_normalised:
+            lq = queries.lengths if isinstance(queries, RaggedFrames) else np.array([len(s) for s in queries])
+            lq = lq.astype(np.float64)
+            d = d / np.sqrt(lq[:, None] + store.lengths[None, :].astype(np.float64))
+        return d
+
+    def _unbanded_distances(self, queries: list[np.ndarray] | RaggedFrames, store: RaggedFrames) -> np.ndarray:
+        import os
+        from concurrent.futures import ThreadPoolExecutor
+
+        from tqdm import tqdm
+
+        d = np.zeros((len(queries), len(store)))
+        chunks = store.chunks(CHUNK_FRAMES)
+        threads = (os.cpu_count() or 1) if self.parallel and len(queries) > 1 else 1
+        work = len(queries) * len(chunks)
+        with (
+            ThreadPoolExecutor(threads) as pool,
+            tqdm(
+                total=work, desc="DTW", unit="query", disable=None if work > QUERY_BLOCK else True, leave=False
+            ) as bar,
+        ):
+            for first, end in chunks:
+                # the chunk's frames in float64 once for all queries (the products' precision: frames.candidate_dtw)
+                frames = np.asarray(store.data[store.offsets[first] : store.offsets[end]], dtype=np.float64)
+                norms, lengths = (frames * frames).sum(axis=1), store.lengths[first:end]
+
+                def one(i, frames=frames, norms=norms, lengths=lengths, first=first, end=end):
+                    d[i, first:end] = candidate_dtw(queries[i], frames, lengths, frame_norms=norms)
+
+                for _ in pool.map(one, range(len(queries))):
+                    bar.update()
+        return d
+
+    def _banded_distances(self, queries: list[np.ndarray], database: list[np.ndarray]) -> np.ndarray:
         from dtaidistance import dtw_ndim
         from tqdm import tqdm
 
-        window = None
-        if self.window is not None:
-            longest = max(len(s) for s in (*queries, *database))
-            window = max(1, int(np.ceil(float(self.window) * longest)))
+        longest = max(len(s) for s in (*queries, *database))
+        window = max(1, int(np.ceil(float(self.window) * longest)))
         starts = range(0, len(queries), QUERY_BLOCK)
         blocks = []
         for start in tqdm(starts, desc="DTW", unit="block", disable=None if len(starts) > 1 else True, leave=False):
-            chunk = list(queries[start : start + QUERY_BLOCK])
+            chunk = [np.ascontiguousarray(s, dtype=np.float64) for s in queries[start : start + QUERY_BLOCK]]
             nq = len(chunk)
             # compact: only the block's nq x n_database distances, row by row (the full form is an
             # (nq + n_database)^2 matrix: 75 GB at 10^5 clips)
@@ -446,12 +496,7 @@ class DTWRetrieval(RetrievalMethod):
                 parallel=bool(self.parallel),
             )
             blocks.append(np.asarray(block, dtype=np.float64).reshape(nq, len(database)))
-        d = np.concatenate(blocks, axis=0) if blocks else np.zeros((0, len(database)))
-        if self.length_normalised:
-            lq = np.array([len(s) for s in queries], dtype=np.float64)
-            ldb = np.array([len(s) for s in database], dtype=np.float64)
-            d = d / np.sqrt(lq[:, None] + ldb[None, :])
-        return d
+        return np.concatenate(blocks, axis=0) if blocks else np.zeros((0, len(database)))
 
     # ------------------------------------------------------------------ persistence
     def _state(self) -> dict[str, np.ndarray]:
@@ -461,7 +506,7 @@ class DTWRetrieval(RetrievalMethod):
             "heading_concentration": np.array(self.heading_concentration_, dtype=np.float64),
         }
         for name in self.features_:
-            state.update(ragged_to_state(f"database_{name}", self.database_[name]))
+            state.update(self.database_[name].to_state(f"database_{name}"))
         if self._frame_scaled:
             state.update({f"frame_moments_{n}": m for n, m in self.frame_moments_.items()})
         if self._needs_reference:
@@ -477,7 +522,7 @@ class DTWRetrieval(RetrievalMethod):
     def _set_state(self, state: dict[str, np.ndarray]) -> None:
         self.features_ = [str(n) for n in state["features"]]
         self.heading_concentration_ = float(state["heading_concentration"])
-        self.database_ = {name: ragged_from_state(f"database_{name}", state) for name in self.features_}
+        self.database_ = {name: RaggedFrames.from_state(f"database_{name}", state) for name in self.features_}
         self.scales_ = np.asarray(state["scales"], dtype=np.float64)
         if self._frame_scaled:
             self.frame_moments_ = {n: np.asarray(state[f"frame_moments_{n}"], np.float64) for n in self.features_}

@@ -7,6 +7,9 @@ An index is a **folder**::
                     and each file skipped with ``--skip-bad`` (and why)
     state.npz       the fitted method: learned parameters and the database encodings as plain arrays
                     (``allow_pickle=False``: loading an index runs no code from it)
+    *_frames.npy    per-frame database features (DTW methods, one file per feature, listed in the manifest):
+                    each its own ``.npy``, opened memory-mapped, so a large library's frames stay on disk and a
+                    search reads only the clips it compares against
 
 :func:`build_index` reads every file under ``src`` that :func:`~mocapkit.datasets.read_motion` reads
 (recursively), fits the method on them (the whole folder is the database) and writes the folder;
@@ -48,8 +51,10 @@ from mocapkit.retrieval.base import file_sha1
 FORMAT = "mocapkit-retrieval-index"
 #: 2: DTW indexes keep one database per feature (and mutual-proximity statistics); 3: and the raw distances to
 #: their reference clips, which ``--add`` extends; 4: and the features used (``world_frame``) with the heading
-#: concentration that chose them.
-VERSION = 4
+#: concentration that chose them; 5: the per-frame features in their own ``*_frames.npy`` files, memory-mapped.
+VERSION = 5
+#: State arrays whose key ends so are written as ``KEY.npy`` beside ``state.npz`` and loaded memory-mapped.
+FRAMES_SUFFIX = "_frames"
 
 
 class RetrievalIndexError(ValueError):
@@ -134,8 +139,15 @@ class MotionIndex:
             raise RetrievalIndexError(f"--out {out}: exists and is not a folder (an index is a folder)")
         out.mkdir(parents=True, exist_ok=True)
         state = self.method._state()
+        frames = {k: v for k, v in state.items() if k.endswith(FRAMES_SUFFIX)}
+        for key, array in frames.items():
+            with atomic_path(out / f"{key}.npy") as tmp, open(tmp, "wb") as handle:
+                np.save(handle, np.asarray(array), allow_pickle=False)
+        for stale in out.glob(f"*{FRAMES_SUFFIX}.npy"):  # another method's or feature's, from an earlier build
+            if stale.stem not in frames:
+                stale.unlink()
         with atomic_path(out / "state.npz") as tmp, open(tmp, "wb") as handle:
-            np.savez(handle, **state)
+            np.savez(handle, **{k: v for k, v in state.items() if k not in frames})
         manifest = {
             "format": FORMAT,
             "version": VERSION,
@@ -146,6 +158,7 @@ class MotionIndex:
                 {k: getattr(self.method, k) for k in ("features_", "heading_concentration_") if hasattr(self.method, k)}
             ),
             "model_sha1": self.model_sha1,
+            "frames": sorted(frames),
             "landmarks": self.landmarks,
             "src": self.src,
             "n_files": len(self.files),
@@ -184,7 +197,15 @@ class MotionIndex:
         except (ConfigError, TypeError) as exc:
             raise RetrievalIndexError(f"{manifest_path}: method {name!r}: {exc}") from exc
         with np.load(path / "state.npz", allow_pickle=False) as data:
-            method._set_state({k: data[k] for k in data.files})
+            state = {k: data[k] for k in data.files}
+        for key in manifest.get("frames", []):
+            try:
+                state[key] = np.load(path / f"{key}.npy", mmap_mode="r", allow_pickle=False)
+            except (OSError, ValueError) as exc:
+                raise RetrievalIndexError(
+                    f"{path / f'{key}.npy'}: cannot be read ({exc}); build the index again"
+                ) from exc
+        method._set_state(state)
         return cls(
             name,
             method,

@@ -14,7 +14,7 @@ from mocapkit.cli import main as cli
 from mocapkit.motion.container import Motion
 from mocapkit.retrieval import MotionIndex, RetrievalIndexError, SkeletonInputError, build_index
 from mocapkit.retrieval.dtw import PlainDTWRetrieval, root_centred_joints
-from mocapkit.retrieval.index import add_to_index
+from mocapkit.retrieval.index import VERSION, add_to_index
 from mocapkit.train.registry import build_method, method_names
 from tests.shared_data import synthetic_hdm05_folder
 
@@ -92,6 +92,23 @@ def test_an_appended_index_ranks_as_one_built_on_the_union(folder, tmp_path, met
         np.testing.assert_allclose([d for _, d in a], [d for _, d in b], rtol=1e-9, atol=1e-12)
 
 
+def test_a_dtw_index_keeps_its_frames_on_disk_memory_mapped(folder, tmp_path):
+    """Each feature's frames are their own .npy file, opened memory-mapped; the loaded index ranks as the one built,
+    and --add rewrites the files (no other feature's file left behind)."""
+    first, second, _ = _split(folder, tmp_path)
+    built = build_index(first, tmp_path / "idx", method="dtw_mutual_proximity", quiet=True)
+    files = sorted(p.name for p in (tmp_path / "idx").glob("*.npy"))
+    assert files == ["database_positions_frames.npy", "database_relational_frames.npy"]
+    loaded = MotionIndex.load(tmp_path / "idx")
+    assert all(isinstance(store.data, np.memmap) for store in loaded.method.database_.values())
+    query = min((second / "mm").glob("*squat*.amc"))
+    assert _ranking(loaded, query) == _ranking(built, query)
+    np.save(tmp_path / "idx" / "database_world_velocity_frames.npy", np.zeros((2, 3)))  # a stale file
+    grown, _ = add_to_index(tmp_path / "idx", second, quiet=True)
+    assert sorted(p.name for p in (tmp_path / "idx").glob("*.npy")) == files
+    assert len(MotionIndex.load(tmp_path / "idx").method.database_["positions"]) == 12
+
+
 def test_adding_beyond_the_reference_clips_keeps_them(folder, tmp_path):
     """Past ``n_reference`` clips the reference clips and scales stay; the new clips get their own statistics."""
     first, second, _ = _split(folder, tmp_path)
@@ -133,7 +150,7 @@ def test_add_skips_duplicates_reports_bad_files_and_refuses_others(folder, tmp_p
     # an index of another format version: refused naming both versions
     manifest["version"] = 3
     (out / "manifest.json").write_text(json.dumps(manifest))
-    with pytest.raises(RetrievalIndexError, match=r"version 3, expected 'mocapkit-retrieval-index' version 4"):
+    with pytest.raises(RetrievalIndexError, match=rf"version 3, expected 'mocapkit-retrieval-index' version {VERSION}"):
         add_to_index(out, second, quiet=True)
 
 

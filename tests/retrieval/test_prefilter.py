@@ -41,7 +41,8 @@ def test_prefiltered_search_ranks_its_candidates_by_exact_dtw(clips):
     method = DTWRetrieval(features=["positions", "relational"], prefilter=4).fit(motions)
     found, d = method.search(motions, 3)
     exact = method.distances(motions)
-    np.testing.assert_allclose(d, np.take_along_axis(exact, found, axis=1), rtol=1e-12)
+    # the frame costs come from matrix products summed in another order: a clip's distance to itself is rounding
+    np.testing.assert_allclose(d, np.take_along_axis(exact, found, axis=1), rtol=1e-9, atol=1e-6)
     assert (found[:, 0] == np.arange(len(motions))).all()
     assert (np.diff(d, axis=1) >= 0).all()
     descriptors = method._project(method._descriptors(method.encode(motions[:1])))

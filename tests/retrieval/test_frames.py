@@ -1,0 +1,77 @@
+"""RaggedFrames (clips' frames end to end) and candidate_dtw (one query against many clips) against dtaidistance."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from dtaidistance import dtw_ndim
+
+from mocapkit.retrieval.dtw import DTWRetrieval
+from mocapkit.retrieval.frames import RaggedFrames, candidate_dtw
+
+
+def clips(rng, n, d=5, longest=30):
+    return [rng.normal(size=(int(rng.integers(1, longest)), d)) for _ in range(n)]
+
+
+def test_candidate_dtw_is_dtaidistances_unconstrained_dtw():
+    rng = np.random.default_rng(0)
+    database = clips(rng, 40)
+    store = RaggedFrames.from_list(database)
+    for query in clips(rng, 5) + [rng.normal(size=(1, 5))]:  # one-frame query and candidates among them
+        picked = store.subset(rng.permutation(len(store))[:25])
+        got = candidate_dtw(query, picked.data, picked.lengths)
+        expected = [dtw_ndim.distance(query, picked[k]) for k in range(len(picked))]
+        np.testing.assert_allclose(got, expected, rtol=1e-9, atol=1e-6)
+
+
+def test_candidate_dtw_rejects_mismatched_input():
+    q = np.zeros((4, 3))
+    with pytest.raises(ValueError, match="lengths summing"):
+        candidate_dtw(q, np.zeros((6, 3)), np.array([2, 3]))
+    with pytest.raises(ValueError, match=r"query \(4, 3\)"):
+        candidate_dtw(q, np.zeros((6, 2)), np.array([6]))
+    with pytest.raises(ValueError, match="at least one frame"):
+        candidate_dtw(q, np.zeros((6, 3)), np.array([6, 0]))
+    assert candidate_dtw(q, np.zeros((0, 3)), np.zeros(0, int)).shape == (0,)
+
+
+def test_ragged_frames_keeps_every_clip_through_subset_extend_chunks_and_state():
+    rng = np.random.default_rng(1)
+    arrays = clips(rng, 12)
+    store = RaggedFrames.from_list(arrays)
+    assert len(store) == 12 and store.data.dtype == np.float32 and store.dim == 5
+    for i, a in enumerate(arrays):
+        np.testing.assert_allclose(store[i], a, rtol=1e-6)
+        assert store[i].dtype == np.float64 and store[i].flags.c_contiguous
+    picked = store.subset([7, 2, 7])
+    np.testing.assert_array_equal(picked.lengths, [len(arrays[7]), len(arrays[2]), len(arrays[7])])
+    np.testing.assert_array_equal(picked[1], store[2])
+    grown = store.extend(arrays[:3])
+    assert len(grown) == 15 and len(store) == 12
+    np.testing.assert_array_equal(grown[13], store[1])
+    chunks = store.chunks(40)
+    assert chunks[0][0] == 0 and chunks[-1][1] == 12
+    assert all(a < b for a, b in chunks) and all(b == c for (_, b), (c, _) in zip(chunks, chunks[1:]))
+    for a, b in chunks:  # at most 40 frames, unless one clip alone is longer
+        assert store.offsets[b] - store.offsets[a] <= 40 or b == a + 1
+    back = RaggedFrames.from_state("x", store.to_state("x"))
+    np.testing.assert_array_equal(back.data, store.data)
+    with pytest.raises(ValueError, match="offsets"):
+        RaggedFrames(np.zeros((5, 2), np.float32), np.array([0, 3]))
+
+
+def test_dtw_distances_without_a_band_equal_dtaidistance_across_chunks(monkeypatch):
+    """The unbanded path (matrix products, database in chunks, queries on threads) gives dtaidistance's values,
+    length-normalised, whatever the chunk size."""
+    import mocapkit.retrieval.dtw as dtw_module
+
+    rng = np.random.default_rng(2)
+    queries, database = clips(rng, 6), clips(rng, 9)
+    method = DTWRetrieval(parallel=True)
+    whole = method._feature_distances(queries, database)
+    monkeypatch.setattr(dtw_module, "CHUNK_FRAMES", 7)
+    chunked = method._feature_distances(queries, RaggedFrames.from_list(database))
+    np.testing.assert_allclose(chunked, whole, rtol=1e-9, atol=1e-6)
+    expected = np.array([[dtw_ndim.distance(q, x) / np.sqrt(len(q) + len(x)) for x in database] for q in queries])
+    np.testing.assert_allclose(whole, expected, rtol=1e-6, atol=1e-6)
