@@ -27,7 +27,9 @@ prefiltered one against the same method's exact search). A PNG of latency agains
 
     OMP_NUM_THREADS=1 .venv/bin/python bench/bench_retrieval.py --onnx checkpoints/retrieval_supcon/fold_bd/model.onnx
     OMP_NUM_THREADS=1 .venv/bin/python bench/bench_retrieval.py --sizes 1000,10000 \
-        --dtw-methods "dtw_world_frame:n_reference=128;dtw_world_frame:n_reference=128,prefilter=100" --plot ""
+        --dtw-methods "dtw_world_frame:n_reference=128;dtw_world_frame:n_reference=128,prefilter=100;dtw_large" --plot ""
+    OMP_NUM_THREADS=1 .venv/bin/python bench/bench_retrieval.py --sizes 100000 --dtw-max 100000 --kernel-clips 0 \
+        --dtw-methods dtw_large --prefilter-grid 100,300,600,1000 --plot ""
 """
 
 from __future__ import annotations
@@ -94,6 +96,17 @@ def main() -> None:
     parser.add_argument("--encode", type=int, default=5000, help="augmented clips actually encoded")
     parser.add_argument("--hnsw-max", type=int, default=1000000)
     parser.add_argument("--plot", default=str(ROOT / "docs" / "img" / "retrieval_latency.png"))
+    parser.add_argument(
+        "--prefilter-grid",
+        default="",
+        help="for each prefiltered row, also search the fitted method with these candidate counts (e.g. 100,300,600)",
+    )
+    parser.add_argument(
+        "--kernel-clips",
+        type=int,
+        default=2000,
+        help="clips for the DTW kernel comparison (mocapkit's against dtaidistance's, one query); 0: skip it",
+    )
     args = parser.parse_args()
 
     import faiss
@@ -110,11 +123,54 @@ def main() -> None:
     queries = augmented(real, len(real) + 50, seed=99)[len(real) :]  # 50 augmented clips, not indexed
 
     rows = []
+    if args.kernel_clips:
+        kernel_rows(args, real, queries)
     query_encode_ms = 0.0
     if args.onnx:
         query_encode_ms = embedding_rows(args, real, queries, sizes, rows)
     dtw_rows(args, real, queries, sizes, rows, query_encode_ms)
     report(args, rows, query_encode_ms)
+
+
+def kernel_rows(args, real, queries) -> None:
+    """Exact DTW of one query (of median duration) against ``--kernel-clips`` clips, per feature: dtaidistance's C
+    (the reference, one thread) against :class:`~mocapkit.retrieval.frames.CandidateCosts` (matrix products + compiled programme), the
+    same sequences, in one run; medians of 5 alternating repeats, and the largest relative difference."""
+    from dtaidistance import dtw_ndim
+
+    from mocapkit.retrieval.dtw import DTWRetrieval
+    from mocapkit.retrieval.frames import CandidateCosts, RaggedFrames
+
+    method = DTWRetrieval(features=["positions", "relational"], world_frame="off").fit(real[:2])
+    library = augmented(real, args.kernel_clips, seed=0)
+    lengths = [m.num_frames / m.fps for m in queries]
+    typical = queries[int(np.argsort(lengths)[len(lengths) // 2])]  # the query of median duration
+    encoded, query = method.encode(library), method.encode([typical])
+    for name in method.features_:
+        store = RaggedFrames.from_list(encoded[name])
+        sequences = list(store)  # the float32-rounded frames, in float64: both see the same numbers
+        q = query[name][0]
+        times = {"dtaidistance": [], "mocapkit": []}
+        for _ in range(5):
+            start = time.perf_counter()
+            reference = np.asarray(
+                dtw_ndim.distance_matrix_fast(
+                    [q] + sequences, block=((0, 1), (1, len(sequences) + 1)), compact=True, parallel=False
+                )
+            )
+            times["dtaidistance"].append(1000 * (time.perf_counter() - start))
+            start = time.perf_counter()
+            ours = CandidateCosts(q, store).distances()
+            times["mocapkit"].append(1000 * (time.perf_counter() - start))
+        a, b = np.median(times["dtaidistance"]), np.median(times["mocapkit"])
+        worst = float(np.max(np.abs(ours - reference) / np.maximum(reference, 1e-12)))
+        frames = int(store.lengths.sum())
+        print(
+            f"DTW kernel, {name} ({store.dim} dims), one query ({len(q)} frames) against {len(store)} clips "
+            f"({frames} frames): dtaidistance {a:.1f} ms, mocapkit {b:.1f} ms = {a / b:.1f}x faster; largest "
+            f"relative difference {worst:.1e}",
+            flush=True,
+        )
 
 
 def embedding_rows(args, real, queries, sizes, rows) -> float:
@@ -209,6 +265,8 @@ def dtw_rows(args, real, queries, sizes, rows, query_encode_ms: float) -> None:
                 exact = top_k(dtw.distances(queries[:n]), 10)[0]
                 found = dtw.search(queries[:n], 10)[0]
                 recall = float(np.mean([len(set(a) & set(b)) / 10 for a, b in zip(exact, found)]))
+                for candidates in [int(c) for c in args.prefilter_grid.split(",") if c]:
+                    grid_row(dtw, candidates, queries[:n], exact, size)
             row = {
                 "size": size,
                 "method": spec,
@@ -232,6 +290,26 @@ def dtw_rows(args, real, queries, sizes, rows, query_encode_ms: float) -> None:
                 + ratio,
                 flush=True,
             )
+
+
+def grid_row(dtw, candidates: int, queries, exact: np.ndarray, size: int) -> None:
+    """The same fitted method searched with ``prefilter=candidates``: query p50 / p95 and recall@10 against
+    ``exact`` (``--prefilter-grid``: the candidates of ``dtw_large``, docs/decisions.md)."""
+    kept = dtw.prefilter
+    dtw.prefilter = candidates
+    times = []
+    for query in queries:
+        start = time.perf_counter()
+        dtw.search([query], 10)
+        times.append(1000 * (time.perf_counter() - start))
+    found = dtw.search(queries, 10)[0]
+    dtw.prefilter = kept
+    recall = float(np.mean([len(set(a) & set(b)) / 10 for a, b in zip(exact, found)]))
+    print(
+        f"size {size:>8}:   prefilter={candidates}: query p50 {np.median(times):.1f} ms, p95 "
+        f"{np.percentile(times, 95):.1f} ms, recall@10 vs exact {recall:.3f}",
+        flush=True,
+    )
 
 
 def report(args, rows, query_encode_ms: float) -> None:

@@ -23,7 +23,8 @@
     mocapkit refine IN OUT --method RUN/best.ckpt | --onnx FILE [--set KEY=VALUE ...] [--repair-outliers]
                     [--screen-outliers [METRES]]
     mocapkit index --src DIR --out INDEX [--method NAME] [--set KEY=VALUE ...] [--ckpt PATH] [--skip-bad]
-    mocapkit index --src DIR --out INDEX --add [--skip-bad]      (append to an index without rebuilding it)
+                   [--workers N]
+    mocapkit index --src DIR --out INDEX --add [--skip-bad] [--workers N]   (append without rebuilding)
     mocapkit search --index INDEX QUERY [QUERY ...] [-k K] [--json] [--within]
     mocapkit synthesize INPUT [INPUT ...] --out DIR [--type SUBSTRING] [--variants N] [--frames F] [--seed S]
                         [--window SECONDS] [--method NAME] [--no-footskate] [--set KEY=VALUE ...]
@@ -278,6 +279,7 @@ def cmd_index(args: argparse.Namespace) -> None:
             overrides=tuple(args.set),
             ckpt=args.ckpt,
             skip_bad=args.skip_bad,
+            workers=args.workers,
         )
         print(
             f"[mocapkit] added {len(report['added'])} files to {args.out} ({len(index.files)} now, "
@@ -293,6 +295,7 @@ def cmd_index(args: argparse.Namespace) -> None:
         overrides=tuple(args.set),
         ckpt=args.ckpt,
         skip_bad=args.skip_bad,
+        workers=args.workers,
     )
     print(
         f"[mocapkit] indexed {len(index.files)} files with {index.method_name} into {args.out}"
@@ -728,6 +731,9 @@ def build_parser() -> argparse.ArgumentParser:
         dest="skip_bad",
         action="store_true",
         help="skip files that cannot be read or used (each is reported)",
+    )
+    index.add_argument(
+        "--workers", type=int, default=1, help="processes that read the files and normalise their skeletons"
     )
     index.add_argument(
         "--add",

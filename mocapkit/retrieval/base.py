@@ -14,6 +14,9 @@ attributes ending in ``_``, ``NotFittedError`` before ``fit``):
     :meth:`distances`, an embedding method answers from an approximate-nearest-neighbour index.
 ``encode(motions)``
     the method's representation of clips (what ``fit`` stores for the database), for inspection and reuse.
+``fit_sequences(sequences, y=None)`` / ``add_sequences(sequences)``
+    the same from what :meth:`~RetrievalMethod.sequences` returned for the motions (the index computes them in
+    worker processes).
 ``add(motions) -> self``
     append clips to the fitted database without fitting again (``mocapkit index --add``): they are encoded with
     what ``fit`` learned and take the database indices ``n_database_`` onwards, in order. A method with nothing
@@ -71,7 +74,11 @@ class RetrievalMethod(BaseEstimator):
 
     # ------------------------------------------------------------------ public contract
     def fit(self, motions: Sequence[Motion], y=None) -> RetrievalMethod:
-        sequences = self.sequences(motions, what="database")
+        return self.fit_sequences(self.sequences(motions, what="database"), y)
+
+    def fit_sequences(self, sequences: list, y=None) -> RetrievalMethod:
+        """:meth:`fit` from what :meth:`sequences` returned for the database motions (computed elsewhere: the index
+        reads and normalises files in worker processes)."""
         if not self.label_free:
             if y is None:
                 raise ValueError(f"{type(self).__name__} is supervised: fit(motions, y) needs one label per motion")
@@ -90,7 +97,11 @@ class RetrievalMethod(BaseEstimator):
             NotImplementedError: the method cannot append to its database (fit it on the union instead).
         """
         self._check_fitted()
-        sequences = self.sequences(motions, what="added")
+        return self.add_sequences(self.sequences(motions, what="added"))
+
+    def add_sequences(self, sequences: list) -> RetrievalMethod:
+        """:meth:`add` from what :meth:`sequences` returned for the new motions."""
+        self._check_fitted()
         self._add_sequences(sequences)
         self.n_database_ += len(sequences)
         return self

@@ -1,7 +1,8 @@
 """Dynamic time warping retrieval: the baseline a user would otherwise reach for, and our label-free default.
 
-:class:`DTWRetrieval` ranks the database by the multivariate DTW distance (dtaidistance's C implementation,
-``dtw_ndim.distance_matrix_fast``: squared Euclidean inner distance, the square root of the warped sum) between a
+:class:`DTWRetrieval` ranks the database by the multivariate DTW distance (squared Euclidean inner distance, the
+square root of the warped sum: dtaidistance's ``dtw_ndim.distance``; without a band computed by
+:class:`~mocapkit.retrieval.frames.CandidateCosts`, 6-7x faster, with one by dtaidistance's C) between a
 query's frame sequence and each database clip's, on per-frame features of the normalised landmarks
 (:func:`~mocapkit.motion.geometry.normalised_landmarks`, 30 fps by default):
 
@@ -37,11 +38,15 @@ clips are not pushed down the list only for their length (the sum under the squa
 query's ``K`` nearest clips by Euclidean distance between fixed-length descriptors — every feature's frames
 resampled to :data:`PREFILTER_FRAMES` frames, divided by the feature's scale, side by side, projected on their
 first :data:`PREFILTER_DIMS` principal axes — from a FAISS index (:mod:`mocapkit.retrieval.ann`: exact below
-20,000 clips, HNSW from there), then ranks only those ``K`` by the method's own distance. With mutual proximity
-the query's statistics come from its distances to :data:`QUERY_REFERENCE` of the reference clips (an unbiased
-sample where exact search uses the whole database). :meth:`distances` stays exact.
+20,000 clips, HNSW from there), then ranks only those ``K`` by the method's own distance. DTW runs on them in the
+order of their lower bounds (:meth:`~mocapkit.retrieval.frames.CandidateCosts.lower_bounds`, summed and re-ranked
+as the distances are) and stops when the next bound passes the ``k``-th distance found: the ranking is that of DTW
+on all ``K``. With mutual proximity the query's statistics come from its distances to :data:`QUERY_REFERENCE` of
+the reference clips (an unbiased sample where exact search uses the whole database). :meth:`distances` stays
+exact. ``dtw_large`` (the registry) is the default's features set up for large libraries this way.
 
-``fit`` keeps the database's feature sequences; with several features or mutual proximity it also computes the
+``fit`` keeps the database's feature sequences (:class:`~mocapkit.retrieval.frames.RaggedFrames`, float32; an
+index opens them memory-mapped); with several features or mutual proximity it also computes the
 DTW distances from every database clip to a reference subset of at most ``n_reference`` database clips (all of
 them on libraries of up to ``n_reference`` clips), for the scales and the statistics, and keeps them, so that
 :meth:`~mocapkit.retrieval.base.RetrievalMethod.add` appends clips without recomputing the old ones' distances.
@@ -65,7 +70,7 @@ from mocapkit.motion.geometry import (
 )
 from mocapkit.retrieval import ann
 from mocapkit.retrieval.base import RetrievalMethod, motion_list
-from mocapkit.retrieval.frames import RaggedFrames, candidate_dtw
+from mocapkit.retrieval.frames import CandidateCosts, RaggedFrames, candidate_dtw
 from mocapkit.retrieval.hubness import METHODS as HUBNESS_METHODS
 from mocapkit.retrieval.hubness import (
     database_statistics,
@@ -88,6 +93,9 @@ SCALINGS = ("dtw", "frames")
 PREFILTER_FRAMES, PREFILTER_DIMS = 16, 128
 #: Reference clips a prefiltered query's mutual-proximity statistics are taken against.
 QUERY_REFERENCE = 64
+#: Candidates of a prefiltered search whose exact DTW is computed at once, in their lower bounds' order
+#: (:meth:`DTWRetrieval._rank_candidates`).
+PRUNE_BATCH = 32
 #: Queries per dtaidistance call in :meth:`DTWRetrieval._feature_distances` (with a band).
 QUERY_BLOCK = 256
 #: Database frames per matrix product in :meth:`DTWRetrieval._feature_distances` (without a band): a query of 100
@@ -158,7 +166,8 @@ class DTWRetrieval(RetrievalMethod):
         n_reference: the most database clips the scales and the mutual-proximity statistics are taken against.
         scaling: ``"dtw"`` or ``"frames"``, how several features' scales are learned (module docstring).
         fps, heading: the normalisation (:func:`~mocapkit.motion.geometry.normalised_landmarks`).
-        parallel: let dtaidistance use OpenMP threads.
+        parallel: compute the distances of several queries (``fit``'s reference distances, exact search of many
+            queries) on every CPU thread.
         world_frame: ``"auto"``, ``"on"`` or ``"off"``: whether the world features among ``features`` are used
             (module docstring).
         prefilter: None (``search`` ranks every clip) or ``K``: ``search`` ranks only the ``K`` clips nearest by
@@ -262,13 +271,13 @@ class DTWRetrieval(RetrievalMethod):
         self._set_reference(reference, raw)
         return database
 
-    def fit(self, motions, y=None) -> DTWRetrieval:
-        super().fit(motions, y)
+    def fit_sequences(self, sequences, y=None) -> DTWRetrieval:
+        super().fit_sequences(sequences, y)
         self._build_prefilter(learn_axes=True)
         return self
 
-    def add(self, motions) -> DTWRetrieval:
-        super().add(motions)
+    def add_sequences(self, sequences) -> DTWRetrieval:
+        super().add_sequences(sequences)
         self._build_prefilter(learn_axes=False)  # the axes learned at fit, as the scales
         return self
 
@@ -323,33 +332,61 @@ class DTWRetrieval(RetrievalMethod):
             self._project(self._descriptors(encoded)),
             max(int(self.prefilter), k),
         )
-        query_reference = None
-        if self.hubness is not None:
-            query_reference = self.reference_[reference_indices(len(self.reference_), QUERY_REFERENCE)]
         indices, distances = [], []
         for i, row in enumerate(candidates):
-            row = row[row >= 0]
-            one = {nm: [encoded[nm][i]] for nm in names}
-            d = sum(
-                self._feature_distances(one[nm], self.database_[nm].subset(row)) / s
-                for nm, s in zip(names, self.scales_)
-            )
-            if self.hubness is not None:
-                to_reference = sum(
-                    self._feature_distances(one[nm], self.database_[nm].subset(query_reference)) / s
-                    for nm, s in zip(names, self.scales_)
-                )
-                d = mutual_proximity(
-                    d,
-                    self.database_mean_[row],
-                    self.database_std_[row],
-                    to_reference.mean(axis=1),
-                    to_reference.std(axis=1),
-                )
-            order = np.lexsort((row, d[0]))[:k]
-            indices.append(row[order])
-            distances.append(d[0][order])
+            found, d = self._rank_candidates({nm: encoded[nm][i] for nm in names}, row[row >= 0], k)
+            indices.append(found)
+            distances.append(d)
         return np.asarray(indices, dtype=np.int64), np.asarray(distances, dtype=np.float64)
+
+    def _rank_candidates(self, query: dict[str, np.ndarray], row: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """The ``k`` nearest of the database clips ``row`` to one encoded query, by the method's distance, nearest
+        first; DTW runs only on the candidates whose lower bound (summed as the distances are, and re-ranked by the
+        same mutual proximity) is below the ``k``-th best distance found so far, in the bounds' order, a batch of
+        :data:`PRUNE_BATCH` at a time."""
+        names = self.features_
+        lengths = self.database_[names[0]].lengths[row].astype(np.float64)
+        length_scale = np.ones(len(row))
+        if self.length_normalised:
+            length_scale = 1.0 / np.sqrt(len(query[names[0]]) + lengths)
+        costs = [CandidateCosts(query[nm], self.database_[nm].subset(row)) for nm in names]
+        bounds = sum(c.lower_bounds() / s for c, s in zip(costs, self.scales_)) * length_scale
+        ranked = self._candidate_ranking(query, row)
+        bounds = ranked(bounds, np.arange(len(row)))
+        found = np.full(len(row), np.inf)
+        order = np.argsort(bounds, kind="stable")
+        for start in range(0, len(order), PRUNE_BATCH):
+            kth = np.partition(found, k - 1)[k - 1] if k <= len(found) else np.inf
+            if bounds[order[start]] > kth:  # every candidate left is bounded beyond the k-th found: none can enter
+                break
+            batch = order[start : start + PRUNE_BATCH]
+            if self.window is None:
+                raw = [c.distances(batch) for c in costs]
+            else:  # the band's DTW is dtaidistance's; the unbanded bounds bound it too (a band only removes paths)
+                raw = [
+                    self._banded_distances([query[nm]], list(self.database_[nm].subset(row[batch])))[0] for nm in names
+                ]
+            d = sum(r / s for r, s in zip(raw, self.scales_)) * length_scale[batch]
+            found[batch] = ranked(d, batch)
+        top = np.lexsort((row, found))[:k]
+        return row[top], found[top]
+
+    def _candidate_ranking(self, query: dict[str, np.ndarray], row: np.ndarray):
+        """``ranked(d, which)``: the method's distance from raw summed distances ``d`` to the candidates
+        ``row[which]`` (mutual proximity, with the query's statistics from :data:`QUERY_REFERENCE` reference clips,
+        or nothing). Increasing in ``d`` for each candidate, so it keeps a lower bound a lower bound."""
+        if self.hubness is None:
+            return lambda d, which: d
+        names = self.features_
+        reference = self.reference_[reference_indices(len(self.reference_), QUERY_REFERENCE)]
+        to_reference = sum(
+            self._feature_distances([query[nm]], self.database_[nm].subset(reference)) / s
+            for nm, s in zip(names, self.scales_)
+        )[0]
+        mean, std = to_reference.mean(), to_reference.std()
+        return lambda d, which: mutual_proximity(
+            d[None], self.database_mean_[row[which]], self.database_std_[row[which]], [mean], [std]
+        )[0]
 
     @property
     def _frame_scaled(self) -> bool:
@@ -464,12 +501,12 @@ class DTWRetrieval(RetrievalMethod):
             ) as bar,
         ):
             for first, end in chunks:
-                # the chunk's frames in float64 once for all queries (the products' precision: frames.candidate_dtw)
-                frames = np.asarray(store.data[store.offsets[first] : store.offsets[end]], dtype=np.float64)
-                norms, lengths = (frames * frames).sum(axis=1), store.lengths[first:end]
+                # read once for all queries (a memory map reads from disk)
+                frames = np.asarray(store.data[store.offsets[first] : store.offsets[end]], dtype=np.float32)
+                chunk = RaggedFrames(frames, store.offsets[first : end + 1] - store.offsets[first])
 
-                def one(i, frames=frames, norms=norms, lengths=lengths, first=first, end=end):
-                    d[i, first:end] = candidate_dtw(queries[i], frames, lengths, frame_norms=norms)
+                def one(i, chunk=chunk, first=first, end=end):
+                    d[i, first:end] = candidate_dtw(queries[i], chunk)
 
                 for _ in pool.map(one, range(len(queries))):
                     bar.update()
@@ -615,8 +652,8 @@ class PlainDTWRetrieval(DTWRetrieval):
         """Root-centred joints ``[T, J, 3]`` of every motion; every one must have the database's ``J`` joints."""
         out = []
         joints = None
-        if hasattr(self, "database_") and self.database_["positions"]:
-            joints = self.database_["positions"][0].shape[1] // 3
+        if hasattr(self, "database_") and len(self.database_["positions"]):
+            joints = self.database_["positions"].dim // 3
         for motion in motion_list(motions, what):
             seq = root_centred_joints(motion, fps=self.fps, min_frames=self.min_frames)
             joints = seq.shape[1] if joints is None else joints
@@ -628,6 +665,29 @@ class PlainDTWRetrieval(DTWRetrieval):
                 )
             out.append(seq)
         return out
+
+    def _fit_sequences(self, sequences, y):
+        self._check_joints(sequences)
+        return super()._fit_sequences(sequences, y)
+
+    def _add_sequences(self, sequences) -> None:
+        self._check_joints(sequences, self.database_["positions"].dim // 3)
+        super()._add_sequences(sequences)
+
+    @staticmethod
+    def _check_joints(sequences, joints: int | None = None) -> None:
+        """Every sequence has ``joints`` joints (None: the first one's), for sequences computed one file at a time
+        (the index's workers): a ``SkeletonInputError`` otherwise, its ``clip`` the position of the first that
+        differs (the index names the file)."""
+        for i, seq in enumerate(sequences):
+            joints = seq.shape[1] if joints is None else joints
+            if seq.shape[1] != joints:
+                error = SkeletonInputError(
+                    f"clip {i}: {seq.shape[1]} joints, the database clips have {joints}; plain DTW compares joint by "
+                    "joint (use a landmark method such as dtw_positions to mix skeletons)"
+                )
+                error.clip = i
+                raise error
 
     def _choose_features(self, sequences) -> list[str]:
         self.heading_concentration_ = float("nan")  # the joints as the file gives them: no heading is read

@@ -180,9 +180,21 @@ class EmbeddingRetrieval(RetrievalMethod):
             )
         return match[0]
 
-    def _load_model(self, groups: list[str] | None = None, sha1: str | None = None) -> None:
+    def _load_model(self, groups: list[str] | None = None, sha1: str | None = None, fresh: bool = False) -> None:
         """Load the model of the params: the ONNX file, the only checkpoint, the run of a list whose file has digest
-        ``sha1`` (a restored state) or whose held-out groups are those absent from ``groups`` (``fit``)."""
+        ``sha1`` (a restored state) or whose held-out groups are those absent from ``groups`` (``fit``); ``fresh``
+        first forgets an earlier model and index (a new fit)."""
+        if fresh:
+            for name in (
+                "_predict",
+                "model_sha1_",
+                "index_",
+                "index_kind_",
+                "frames_",
+                "model_info_",
+                "checkpoint_used_",
+            ):
+                self.__dict__.pop(name, None)
         paths = [self._matching_model(sha1)] if sha1 is not None else self._model_paths()
         if self.onnx is not None:
             self._load_onnx(paths[0])
@@ -232,16 +244,21 @@ class EmbeddingRetrieval(RetrievalMethod):
     def fit(self, motions: Sequence[Motion], y=None) -> EmbeddingRetrieval:
         """Load the model (with a list of runs: the one that held out the groups absent from ``motions``), encode
         the database and build the FAISS index."""
-        if self.index not in INDEXES:
-            raise ValueError(f"EmbeddingRetrieval: index={self.index!r}, one of {list(INDEXES)}")
         items = [motions] if isinstance(motions, Motion) else list(motions)
         groups = sorted(
             {str(m.metadata["group"]) for m in items if isinstance(m, Motion) and m.metadata.get("group") is not None}
         )
-        for name in ("_predict", "model_sha1_", "index_", "index_kind_", "frames_", "model_info_", "checkpoint_used_"):
-            self.__dict__.pop(name, None)
-        self._load_model(groups=groups)
-        super().fit(items, y)
+        self._load_model(groups=groups, fresh=True)
+        return super().fit(items, y)
+
+    def fit_sequences(self, sequences, y=None) -> EmbeddingRetrieval:
+        """:meth:`fit` from the database's landmark sequences; the model is the one :meth:`fit` loaded, else (called
+        directly: the groups are unknown) the one ``checkpoint`` or ``onnx`` names without groups."""
+        if self.index not in INDEXES:
+            raise ValueError(f"EmbeddingRetrieval: index={self.index!r}, one of {list(INDEXES)}")
+        if not hasattr(self, "_predict"):
+            self._load_model(groups=[], fresh=True)
+        super().fit_sequences(sequences, y)
         self._build_index()
         return self
 

@@ -41,6 +41,7 @@ import os
 import sys
 import time
 from collections.abc import Sequence
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -346,11 +347,13 @@ def build_index(
     ckpt: str | os.PathLike | None = None,
     skip_bad: bool = False,
     quiet: bool = False,
+    workers: int = 1,
 ) -> MotionIndex:
     """Index every motion file under ``src`` (see the module docstring); written to ``out`` when given.
 
     ``method`` is a registry name (None: the registry's default), ``overrides`` its ``--set`` Hydra overrides,
-    ``ckpt`` the trained model of ``embedding`` (:func:`make_method`).
+    ``ckpt`` the trained model of ``embedding`` (:func:`make_method`); ``workers`` processes read the files and
+    normalise their skeletons (:func:`_read_files`).
 
     Raises:
         RetrievalIndexError: no motion file under ``src``; a file that cannot be read or used (named) unless
@@ -372,12 +375,13 @@ def build_index(
             ".skeleton, MSR *_skeleton3D.txt, recursively)"
         )
     _progress(f"indexing {len(paths)} files under {src} with {name}", quiet)
-    motions, files, skipped, landmark_sets = _read_files(paths, estimator, skip_bad, quiet)
-    if not motions:
+    sequences, files, skipped, landmark_sets = _read_files(paths, estimator, skip_bad, quiet, workers)
+    if not sequences:
         raise RetrievalIndexError(f"--src {src}: none of the {len(paths)} motion files could be indexed")
     start = time.perf_counter()
-    estimator.fit(motions)
-    _progress(f"fitted {name} on {len(motions)} clips in {time.perf_counter() - start:.1f} s", quiet)
+    with _naming_clips(files):
+        estimator.fit_sequences(sequences)
+    _progress(f"fitted {name} on {len(sequences)} clips in {time.perf_counter() - start:.1f} s", quiet)
     if hasattr(estimator, "heading_concentration_") and np.isfinite(estimator.heading_concentration_):
         _progress(
             f"features {', '.join(estimator.features_)} (the clips' starting headings: concentration "
@@ -397,42 +401,86 @@ def build_index(
     return index
 
 
-def _read_files(paths: list[Path], estimator, skip_bad: bool, quiet: bool):
-    """Read and check each file for ``estimator``: ``(motions, file entries, skipped entries, landmark sets)``.
+def _read_files(paths: list[Path], estimator, skip_bad: bool, quiet: bool, workers: int = 1):
+    """Read each file and compute ``estimator``'s sequences of it (the normalised skeleton; the checks the method
+    makes: landmarks, length): ``(sequences, file entries, skipped entries, landmark sets)``, in the files' order.
+
+    With ``workers > 1`` the files go to that many processes (each with an unfitted copy of the method: an added
+    file's skeleton is then checked against the index's when the clips are added, not file by file).
 
     Raises:
         RetrievalIndexError: a file that cannot be read or used (named), unless ``skip_bad``.
     """
+    from functools import partial
+
+    if int(workers) < 1:
+        raise RetrievalIndexError(f"--workers {workers}: must be at least 1")
+    if int(workers) == 1:
+        results = map(partial(_read_one, estimator=estimator), paths)
+        return _collect(paths, results, skip_bad, quiet)
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    from sklearn.base import clone
+
+    # spawned, not forked: the parent may hold OpenMP threads (FAISS, BLAS), which a forked child cannot use
+    context = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(int(workers), mp_context=context) as pool:
+        chunk = max(1, min(64, len(paths) // (4 * int(workers))))
+        results = pool.map(partial(_read_one, estimator=clone(estimator)), paths, chunksize=chunk)
+        return _collect(paths, results, skip_bad, quiet)
+
+
+def _read_one(path: Path, estimator):
+    """``(sequence, file entry, landmark names)`` of one file, or ``(None, why, message)`` when it cannot be used
+    (run in the index's worker processes: returns the failure rather than raising it)."""
     from mocapkit.motion.layouts import find_landmarks
 
-    motions, files, skipped, landmark_sets = [], [], [], []
-    for n, path in enumerate(paths, 1):
-        try:
-            motion = _read(path)
-            estimator.sequences([motion], what="indexed")  # the checks the method makes (landmarks, length)
-        except Exception as exc:
-            why = f"{type(exc).__name__}: {exc}"
+    try:
+        motion = _read(path)
+        (sequence,) = estimator.sequences([motion], what="indexed")
+    except Exception as exc:
+        why = f"{type(exc).__name__}: {exc}"
+        return None, why, str(exc) if str(path) in str(exc) else f"{path}: {why}"
+    entry = {
+        "path": str(path.resolve()),
+        "frames": motion.num_frames,
+        "fps": motion.fps,
+        "skeleton": motion.layout_name or f"{motion.num_joints} joints",
+    }
+    return sequence, entry, set(find_landmarks(motion.joint_names, motion.layout_name))
+
+
+def _collect(paths: list[Path], results, skip_bad: bool, quiet: bool):
+    """:func:`_read_files`'s lists from :func:`_read_one`'s results, failures skipped (``skip_bad``) or raised."""
+    sequences, files, skipped, landmark_sets = [], [], [], []
+    for n, (path, (sequence, entry, landmarks)) in enumerate(zip(paths, results), 1):
+        if sequence is None:
+            why, message = entry, landmarks
             if not skip_bad:
-                message = str(exc) if str(path) in str(exc) else f"{path}: {why}"
-                raise RetrievalIndexError(
-                    f"cannot index {message} (--skip-bad skips such files and reports them)"
-                ) from exc
+                raise RetrievalIndexError(f"cannot index {message} (--skip-bad skips such files and reports them)")
             skipped.append({"path": str(path.resolve()), "why": why})
             _progress(f"skipped {path}: {why}", quiet)
             continue
-        motions.append(motion)
-        landmark_sets.append(set(find_landmarks(motion.joint_names, motion.layout_name)))
-        files.append(
-            {
-                "path": str(path.resolve()),
-                "frames": motion.num_frames,
-                "fps": motion.fps,
-                "skeleton": motion.layout_name or f"{motion.num_joints} joints",
-            }
-        )
+        sequences.append(sequence)
+        files.append(entry)
+        landmark_sets.append(landmarks)
         if n % 100 == 0 or n == len(paths):
             _progress(f"read {n}/{len(paths)} files", quiet)
-    return motions, files, skipped, landmark_sets
+    return sequences, files, skipped, landmark_sets
+
+
+@contextmanager
+def _naming_clips(files: list[dict]):
+    """Turns a method's error about clip ``i`` (its ``clip``, set by checks made over the whole database, as plain
+    DTW's joint count) into a ``RetrievalIndexError`` naming ``files[i]``."""
+    try:
+        yield
+    except ValueError as exc:
+        clip = getattr(exc, "clip", None)
+        if clip is None or not 0 <= clip < len(files):
+            raise
+        raise RetrievalIndexError(f"cannot index {files[clip]['path']}: {exc}") from exc
 
 
 def add_to_index(
@@ -443,6 +491,7 @@ def add_to_index(
     ckpt: str | os.PathLike | None = None,
     skip_bad: bool = False,
     quiet: bool = False,
+    workers: int = 1,
 ) -> tuple[MotionIndex, dict]:
     """Append the motion files under ``src`` (a folder, searched recursively, or a list of files and folders) to
     the index folder ``index`` without fitting it again, and rewrite the folder.
@@ -512,17 +561,18 @@ def add_to_index(
         _progress(f"nothing to add: all {len(paths)} files are in the index already", quiet)
         return loaded, report
     _progress(f"adding {len(fresh)} files to {index} ({name}, {len(loaded.files)} clips)", quiet)
-    motions, files, skipped, landmark_sets = _read_files(fresh, loaded.method, skip_bad, quiet)
+    sequences, files, skipped, landmark_sets = _read_files(fresh, loaded.method, skip_bad, quiet, workers)
     report["skipped"] = skipped
-    if motions:
+    if sequences:
         start = time.perf_counter()
         try:
-            loaded.method.add(motions)
+            with _naming_clips(files):
+                loaded.method.add_sequences(sequences)
         except NotImplementedError as exc:
             raise RetrievalIndexError(
                 f"--index {index}: {exc}; build the index again over all the files (mocapkit index --src DIR)"
             ) from exc
-        _progress(f"added {len(motions)} clips in {time.perf_counter() - start:.1f} s", quiet)
+        _progress(f"added {len(sequences)} clips in {time.perf_counter() - start:.1f} s", quiet)
         common = set(loaded.landmarks).intersection(*landmark_sets)
         loaded.landmarks = [lm for lm in LANDMARK_NAMES if lm in common]
         loaded.files = loaded.files + files

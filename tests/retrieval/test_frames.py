@@ -1,4 +1,4 @@
-"""RaggedFrames (clips' frames end to end) and candidate_dtw (one query against many clips) against dtaidistance."""
+"""RaggedFrames (clips' frames end to end) and CandidateCosts (one query against many clips) against dtaidistance."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import pytest
 from dtaidistance import dtw_ndim
 
 from mocapkit.retrieval.dtw import DTWRetrieval
-from mocapkit.retrieval.frames import RaggedFrames, candidate_dtw
+from mocapkit.retrieval.frames import CandidateCosts, RaggedFrames, candidate_dtw
 
 
 def clips(rng, n, d=5, longest=30):
@@ -20,20 +20,23 @@ def test_candidate_dtw_is_dtaidistances_unconstrained_dtw():
     store = RaggedFrames.from_list(database)
     for query in clips(rng, 5) + [rng.normal(size=(1, 5))]:  # one-frame query and candidates among them
         picked = store.subset(rng.permutation(len(store))[:25])
-        got = candidate_dtw(query, picked.data, picked.lengths)
+        costs = CandidateCosts(query, picked)
+        got = costs.distances()
         expected = [dtw_ndim.distance(query, picked[k]) for k in range(len(picked))]
-        np.testing.assert_allclose(got, expected, rtol=1e-9, atol=1e-6)
+        np.testing.assert_allclose(got, expected, rtol=1e-6, atol=1e-6)
+        np.testing.assert_allclose(candidate_dtw(query, picked), got)
+        np.testing.assert_allclose(costs.distances([3, 0]), got[[3, 0]])
+        bounds = costs.lower_bounds()
+        assert (bounds <= got + 1e-9).all() and (bounds > 0.3 * got).all()  # a bound, and not a trivial one
 
 
-def test_candidate_dtw_rejects_mismatched_input():
+def test_candidate_costs_reject_mismatched_input():
     q = np.zeros((4, 3))
-    with pytest.raises(ValueError, match="lengths summing"):
-        candidate_dtw(q, np.zeros((6, 3)), np.array([2, 3]))
-    with pytest.raises(ValueError, match=r"query \(4, 3\)"):
-        candidate_dtw(q, np.zeros((6, 2)), np.array([6]))
+    with pytest.raises(ValueError, match=r"\[T >= 1, 2\].*got \(4, 3\)"):
+        CandidateCosts(q, RaggedFrames(np.zeros((6, 2), np.float32), np.array([0, 6])))
     with pytest.raises(ValueError, match="at least one frame"):
-        candidate_dtw(q, np.zeros((6, 3)), np.array([6, 0]))
-    assert candidate_dtw(q, np.zeros((0, 3)), np.zeros(0, int)).shape == (0,)
+        CandidateCosts(q, RaggedFrames(np.zeros((6, 3), np.float32), np.array([0, 6, 6])))
+    assert candidate_dtw(q, RaggedFrames.from_list([], dim=3)).shape == (0,)
 
 
 def test_ragged_frames_keeps_every_clip_through_subset_extend_chunks_and_state():
@@ -72,6 +75,6 @@ def test_dtw_distances_without_a_band_equal_dtaidistance_across_chunks(monkeypat
     whole = method._feature_distances(queries, database)
     monkeypatch.setattr(dtw_module, "CHUNK_FRAMES", 7)
     chunked = method._feature_distances(queries, RaggedFrames.from_list(database))
-    np.testing.assert_allclose(chunked, whole, rtol=1e-9, atol=1e-6)
+    np.testing.assert_allclose(chunked, whole, rtol=1e-6, atol=1e-6)
     expected = np.array([[dtw_ndim.distance(q, x) / np.sqrt(len(q) + len(x)) for x in database] for q in queries])
     np.testing.assert_allclose(whole, expected, rtol=1e-6, atol=1e-6)

@@ -42,7 +42,7 @@ def test_prefiltered_search_ranks_its_candidates_by_exact_dtw(clips):
     found, d = method.search(motions, 3)
     exact = method.distances(motions)
     # the frame costs come from matrix products summed in another order: a clip's distance to itself is rounding
-    np.testing.assert_allclose(d, np.take_along_axis(exact, found, axis=1), rtol=1e-9, atol=1e-6)
+    np.testing.assert_allclose(d, np.take_along_axis(exact, found, axis=1), rtol=1e-6, atol=1e-6)
     assert (found[:, 0] == np.arange(len(motions))).all()
     assert (np.diff(d, axis=1) >= 0).all()
     descriptors = method._project(method._descriptors(method.encode(motions[:1])))
@@ -98,3 +98,37 @@ def test_a_c3d_file_is_written_after_a_faiss_index_was_built(tmp_path):
     result = subprocess.run([sys.executable, "-c", direct], capture_output=True, text=True, timeout=120)
     assert result.returncode != 0 and "m.c3d: ezc3d could not write the file" in result.stderr
     assert "import ezc3d first" in result.stderr
+
+
+@pytest.mark.parametrize("hubness", [None, "mutual_proximity"])
+def test_lower_bound_pruning_ranks_candidates_as_computing_every_distance(clips, hubness, monkeypatch):
+    """DTW on the candidates in their lower bounds' order, stopping when the next bound passes the k-th distance
+    found, returns the ranking that DTW on every candidate gives (exact search's, without mutual proximity), having
+    computed fewer distances."""
+    import mocapkit.retrieval.dtw as dtw_module
+    from mocapkit.retrieval.frames import CandidateCosts
+
+    _, motions = clips
+    method = DTWRetrieval(features=["positions", "relational"], hubness=hubness, prefilter=4).fit(motions[:14])
+    encoded = method.encode(motions[14:15])
+    query = {name: encoded[name][0] for name in method.features_}
+    everything = np.arange(14)
+    monkeypatch.setattr(dtw_module, "PRUNE_BATCH", 100)
+    full = method._rank_candidates(query, everything, 5)
+    computed = []
+    distances = CandidateCosts.distances
+
+    def counted(self, which=None):  # the candidates' DTW (not the query's, to mutual proximity's reference clips)
+        computed.append(0 if which is None else len(which))
+        return distances(self, which)
+
+    monkeypatch.setattr(CandidateCosts, "distances", counted)
+    monkeypatch.setattr(dtw_module, "PRUNE_BATCH", 1)
+    pruned = method._rank_candidates(query, everything, 5)
+    np.testing.assert_array_equal(pruned[0], full[0])
+    np.testing.assert_allclose(pruned[1], full[1])
+    assert 5 <= sum(computed) / len(method.features_) < 14
+    if hubness is None:
+        exact = top_k(method.distances(motions[14:15]), 5)
+        np.testing.assert_array_equal(pruned[0], exact[0][0])
+        np.testing.assert_allclose(pruned[1], exact[1][0], rtol=1e-6, atol=1e-6)
