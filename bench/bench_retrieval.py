@@ -293,21 +293,26 @@ def dtw_rows(args, real, queries, sizes, rows, query_encode_ms: float) -> None:
 
 
 def grid_row(dtw, candidates: int, queries, exact: np.ndarray, size: int) -> None:
-    """The same fitted method searched with ``prefilter=candidates``: query p50 / p95 and recall@10 against
-    ``exact`` (``--prefilter-grid``: the candidates of ``dtw_large``, docs/decisions.md)."""
-    kept = dtw.prefilter
+    """The same fitted method searched with ``prefilter=candidates``: query p50 / p95 with a query's features on
+    one thread and on their own threads (``parallel``, alternating), and recall@10 against ``exact``
+    (``--prefilter-grid``: the candidates of ``dtw_large``, docs/decisions.md)."""
+    kept = dtw.prefilter, dtw.parallel
     dtw.prefilter = candidates
-    times = []
+    times = {False: [], True: []}
     for query in queries:
-        start = time.perf_counter()
-        dtw.search([query], 10)
-        times.append(1000 * (time.perf_counter() - start))
+        for parallel in (False, True):
+            dtw.parallel = parallel
+            start = time.perf_counter()
+            dtw.search([query], 10)
+            times[parallel].append(1000 * (time.perf_counter() - start))
     found = dtw.search(queries, 10)[0]
-    dtw.prefilter = kept
+    dtw.prefilter, dtw.parallel = kept
     recall = float(np.mean([len(set(a) & set(b)) / 10 for a, b in zip(exact, found)]))
+    one, each = times[False], times[True]
     print(
-        f"size {size:>8}:   prefilter={candidates}: query p50 {np.median(times):.1f} ms, p95 "
-        f"{np.percentile(times, 95):.1f} ms, recall@10 vs exact {recall:.3f}",
+        f"size {size:>8}:   prefilter={candidates}: query p50 {np.median(one):.1f} ms, p95 {np.percentile(one, 95):.1f}"
+        f" ms on one thread; p50 {np.median(each):.1f} ms, p95 {np.percentile(each, 95):.1f} ms with a thread a "
+        f"feature; recall@10 vs exact {recall:.3f}",
         flush=True,
     )
 

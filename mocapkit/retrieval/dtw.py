@@ -2,7 +2,7 @@
 
 :class:`DTWRetrieval` ranks the database by the multivariate DTW distance (squared Euclidean inner distance, the
 square root of the warped sum: dtaidistance's ``dtw_ndim.distance``; without a band computed by
-:class:`~mocapkit.retrieval.frames.CandidateCosts`, 6-7x faster, with one by dtaidistance's C) between a
+:class:`~mocapkit.retrieval.frames.CandidateCosts`, about 6x faster, with one by dtaidistance's C) between a
 query's frame sequence and each database clip's, on per-frame features of the normalised landmarks
 (:func:`~mocapkit.motion.geometry.normalised_landmarks`, 30 fps by default):
 
@@ -41,9 +41,9 @@ first :data:`PREFILTER_DIMS` principal axes — from a FAISS index (:mod:`mocapk
 20,000 clips, HNSW from there), then ranks only those ``K`` by the method's own distance. DTW runs on them in the
 order of their lower bounds (:meth:`~mocapkit.retrieval.frames.CandidateCosts.lower_bounds`, summed and re-ranked
 as the distances are) and stops when the next bound passes the ``k``-th distance found: the ranking is that of DTW
-on all ``K``. With mutual proximity the query's statistics come from its distances to :data:`QUERY_REFERENCE` of
-the reference clips (an unbiased sample where exact search uses the whole database). :meth:`distances` stays
-exact. ``dtw_large`` (the registry) is the default's features set up for large libraries this way.
+on all ``K``. With mutual proximity the query's statistics come from its distances to the reference clips, in
+exact search as in a prefiltered one (and as each database clip's do), so that both rank alike. ``dtw_large`` (the
+registry) is the default set up for large libraries this way.
 
 ``fit`` keeps the database's feature sequences (:class:`~mocapkit.retrieval.frames.RaggedFrames`, float32; an
 index opens them memory-mapped); with several features or mutual proximity it also computes the
@@ -91,8 +91,6 @@ VELOCITY_SMOOTHING = 5
 SCALINGS = ("dtw", "frames")
 #: ``prefilter``'s descriptor: frames each feature is resampled to, and principal axes kept.
 PREFILTER_FRAMES, PREFILTER_DIMS = 16, 128
-#: Reference clips a prefiltered query's mutual-proximity statistics are taken against.
-QUERY_REFERENCE = 64
 #: Candidates of a prefiltered search whose exact DTW is computed at once, in their lower bounds' order
 #: (:meth:`DTWRetrieval._rank_candidates`).
 PRUNE_BATCH = 32
@@ -332,26 +330,35 @@ class DTWRetrieval(RetrievalMethod):
             self._project(self._descriptors(encoded)),
             max(int(self.prefilter), k),
         )
+        import os
+        from concurrent.futures import ThreadPoolExecutor
+
         indices, distances = [], []
-        for i, row in enumerate(candidates):
-            found, d = self._rank_candidates({nm: encoded[nm][i] for nm in names}, row[row >= 0], k)
-            indices.append(found)
-            distances.append(d)
+        # a query's features on their own threads (matrix products and the compiled programme release the GIL)
+        threads = min(len(names), os.cpu_count() or 1) if self.parallel else 1
+        with ThreadPoolExecutor(threads) as pool:
+            for i, row in enumerate(candidates):
+                query = {nm: encoded[nm][i] for nm in names}
+                found, d = self._rank_candidates(query, row[row >= 0], k, pool.map)
+                indices.append(found)
+                distances.append(d)
         return np.asarray(indices, dtype=np.int64), np.asarray(distances, dtype=np.float64)
 
-    def _rank_candidates(self, query: dict[str, np.ndarray], row: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    def _rank_candidates(
+        self, query: dict[str, np.ndarray], row: np.ndarray, k: int, each=map
+    ) -> tuple[np.ndarray, np.ndarray]:
         """The ``k`` nearest of the database clips ``row`` to one encoded query, by the method's distance, nearest
         first; DTW runs only on the candidates whose lower bound (summed as the distances are, and re-ranked by the
         same mutual proximity) is below the ``k``-th best distance found so far, in the bounds' order, a batch of
-        :data:`PRUNE_BATCH` at a time."""
+        :data:`PRUNE_BATCH` at a time. ``each`` maps over the features (a thread pool's ``map``: one a thread)."""
         names = self.features_
         lengths = self.database_[names[0]].lengths[row].astype(np.float64)
         length_scale = np.ones(len(row))
         if self.length_normalised:
             length_scale = 1.0 / np.sqrt(len(query[names[0]]) + lengths)
-        costs = [CandidateCosts(query[nm], self.database_[nm].subset(row)) for nm in names]
-        bounds = sum(c.lower_bounds() / s for c, s in zip(costs, self.scales_)) * length_scale
-        ranked = self._candidate_ranking(query, row)
+        costs = list(each(lambda nm: CandidateCosts(query[nm], self.database_[nm].subset(row)), names))
+        bounds = sum(b / s for b, s in zip(each(CandidateCosts.lower_bounds, costs), self.scales_)) * length_scale
+        ranked = self._candidate_ranking(query, row, each)
         bounds = ranked(bounds, np.arange(len(row)))
         found = np.full(len(row), np.inf)
         order = np.argsort(bounds, kind="stable")
@@ -361,7 +368,7 @@ class DTWRetrieval(RetrievalMethod):
                 break
             batch = order[start : start + PRUNE_BATCH]
             if self.window is None:
-                raw = [c.distances(batch) for c in costs]
+                raw = list(each(lambda c, batch=batch: c.distances(batch), costs))
             else:  # the band's DTW is dtaidistance's; the unbanded bounds bound it too (a band only removes paths)
                 raw = [
                     self._banded_distances([query[nm]], list(self.database_[nm].subset(row[batch])))[0] for nm in names
@@ -371,18 +378,17 @@ class DTWRetrieval(RetrievalMethod):
         top = np.lexsort((row, found))[:k]
         return row[top], found[top]
 
-    def _candidate_ranking(self, query: dict[str, np.ndarray], row: np.ndarray):
+    def _candidate_ranking(self, query: dict[str, np.ndarray], row: np.ndarray, each=map):
         """``ranked(d, which)``: the method's distance from raw summed distances ``d`` to the candidates
-        ``row[which]`` (mutual proximity, with the query's statistics from :data:`QUERY_REFERENCE` reference clips,
-        or nothing). Increasing in ``d`` for each candidate, so it keeps a lower bound a lower bound."""
+        ``row[which]`` (mutual proximity, with the query's statistics from the reference clips, or nothing).
+        Increasing in ``d`` for each candidate, so it keeps a lower bound a lower bound."""
         if self.hubness is None:
             return lambda d, which: d
         names = self.features_
-        reference = self.reference_[reference_indices(len(self.reference_), QUERY_REFERENCE)]
-        to_reference = sum(
-            self._feature_distances([query[nm]], self.database_[nm].subset(reference)) / s
-            for nm, s in zip(names, self.scales_)
-        )[0]
+        each_feature = each(
+            lambda nm: self._feature_distances([query[nm]], self.database_[nm].subset(self.reference_))[0], names
+        )
+        to_reference = sum(d / s for d, s in zip(each_feature, self.scales_))
         mean, std = to_reference.mean(), to_reference.std()
         return lambda d, which: mutual_proximity(
             d[None], self.database_mean_[row[which]], self.database_std_[row[which]], [mean], [std]
@@ -449,7 +455,12 @@ class DTWRetrieval(RetrievalMethod):
         names = self.features_
         d = sum(self._feature_distances(queries[n], database[n]) / s for n, s in zip(names, self.scales_))
         if self.hubness is not None:
-            d = mutual_proximity(d, self.database_mean_, self.database_std_)
+            # the queries' statistics from their distances to the reference clips, as the database clips' are (the
+            # whole library when it has at most n_reference clips): what a prefiltered search can compute too
+            to_reference = d[:, self.reference_]
+            d = mutual_proximity(
+                d, self.database_mean_, self.database_std_, to_reference.mean(axis=1), to_reference.std(axis=1)
+            )
         return d
 
     def scaled_frames(self, encoded: dict[str, list[np.ndarray]]) -> list[np.ndarray]:

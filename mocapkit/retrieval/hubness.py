@@ -14,7 +14,8 @@ a normal distribution with its own mean and standard deviation,
 A hub, near to everyone, has a small mean ``D_x``, so being near it is not unusual and is discounted. It needs no
 labels and no parameter; its only state is the mean and standard deviation of each database clip's distances to
 the database (to a reference subset of at most ``n_reference`` clips on large libraries), computed at ``fit``.
-The query's own statistics come from its row of distances to the whole database.
+The query's own statistics come from its distances to the same reference clips (the DTW methods: the whole
+database when it has at most ``n_reference`` clips), so that a search that ranks only some clips computes them too.
 
 Chosen for the label-free retrieval default on training groups only (the rule, its outcome and the validation
 table: docs/decisions.md#retrieval-default-mutual-proximity).
