@@ -108,6 +108,9 @@ def test_a_dtw_index_keeps_its_frames_on_disk_memory_mapped(folder, tmp_path):
     grown, _ = add_to_index(tmp_path / "idx", second, quiet=True)
     assert sorted(p.name for p in (tmp_path / "idx").glob("*.npy")) == files
     assert len(MotionIndex.load(tmp_path / "idx").method.database_["positions"]) == 12
+    (tmp_path / "idx" / "database_positions_frames.npy").write_bytes(b"not an array")  # damaged: named
+    with pytest.raises(RetrievalIndexError, match=r"database_positions_frames\.npy: cannot be read"):
+        MotionIndex.load(tmp_path / "idx")
 
 
 def test_adding_beyond_the_reference_clips_keeps_them(folder, tmp_path):
