@@ -81,7 +81,9 @@ def test_set_errors_name_the_key(setting, message):
 
 
 def test_unknown_names_list_the_known_ones():
-    with pytest.raises(ConfigError, match="unknown retrieval method 'nope'; known: amfs, dtw_mutual_proximity"):
+    with pytest.raises(
+        ConfigError, match="unknown retrieval method 'nope'; known: amfs, dtw_large, dtw_mutual_proximity"
+    ):
         build_method("retrieval", "nope")
     with pytest.raises(ConfigError, match="unknown task 'dance'"):
         method_names("dance")
