@@ -61,6 +61,20 @@ def build(vectors: np.ndarray, kind: str, metric: str = "inner_product"):
     return index
 
 
+def extend(index, kind: str, vectors: np.ndarray, requested: str) -> tuple[object, str]:
+    """``(index, kind)``: ``index`` (of ``kind``) with float32 ``vectors`` ``[n, d]`` added, in place, and its kind;
+    when ``requested`` (``"auto"``) resolves to another kind for the new size, a new index of that kind over the
+    old vectors (read back from the index) and the new ones, so that a library grown past
+    :data:`AUTO_HNSW_MIN_CLIPS` clips by additions is searched as one built at that size."""
+    x = np.ascontiguousarray(vectors, dtype=np.float32)
+    wanted = resolved_kind(requested, index.ntotal + len(x))
+    if wanted == kind:
+        index.add(x)
+        return index, kind
+    metric = "inner_product" if index.metric_type == _faiss().METRIC_INNER_PRODUCT else "l2"
+    return build(np.vstack([index.reconstruct_n(0, index.ntotal), x]), wanted, metric), wanted
+
+
 def search(index, kind: str, queries: np.ndarray, k: int) -> np.ndarray:
     """int64 ``[n_queries, k]`` database indices from ``index`` (−1 where HNSW reached fewer than ``k``); HNSW
     searches at least ``k`` wide (a DTW prefilter asks for hundreds, whose last few matter little: ``2k`` cost it

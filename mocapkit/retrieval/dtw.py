@@ -57,6 +57,9 @@ skeleton as the file gives it, root-centred, resampled to ``fps`` (no landmarks,
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
+
 import numpy as np
 
 from mocapkit.motion.geometry import (
@@ -271,12 +274,28 @@ class DTWRetrieval(RetrievalMethod):
 
     def fit_sequences(self, sequences, y=None) -> DTWRetrieval:
         super().fit_sequences(sequences, y)
-        self._build_prefilter(learn_axes=True)
+        self._build_prefilter()
         return self
 
     def add_sequences(self, sequences) -> DTWRetrieval:
+        n_old = self.n_database_
         super().add_sequences(sequences)
-        self._build_prefilter(learn_axes=False)  # the axes learned at fit, as the scales
+        if self.prefilter is not None:  # the new clips' descriptors on the axes learned at fit, as the scales
+            names = self.features_
+            new = {n: self.database_[n].subset(np.arange(n_old, self.n_database_)) for n in names}
+            self.prefilter_index_, self.prefilter_kind_ = ann.extend(
+                self.prefilter_index_, self.prefilter_kind_, self._project(self._descriptors(new)), self.prefilter_index
+            )
+        return self
+
+    def store_frames(self, folder: str | os.PathLike) -> DTWRetrieval:
+        """Keep the database's frames in ``.npy`` files in ``folder`` (``database_{feature}_frames.npy``, the names
+        :class:`~mocapkit.retrieval.index.MotionIndex` saves them under), memory-mapped, instead of in memory: clips
+        added afterwards are appended to those files. How a library larger than memory is built: fit on a first
+        part, store the frames, add the rest in parts (docs/scaling.md#a-million-clips)."""
+        self._check_fitted()
+        Path(folder).mkdir(parents=True, exist_ok=True)
+        self.database_ = {n: self.database_[n].save(Path(folder) / f"database_{n}_frames.npy") for n in self.features_}
         return self
 
     # ------------------------------------------------------------------ prefiltered search
@@ -294,20 +313,20 @@ class DTWRetrieval(RetrievalMethod):
         ]
         return np.asarray(rows, dtype=np.float32) / np.sqrt(PREFILTER_FRAMES)
 
-    def _build_prefilter(self, learn_axes: bool) -> None:
+    def _build_prefilter(self) -> None:
         """With ``prefilter``: the principal axes of the database's descriptors (``prefilter_mean_``,
         ``prefilter_axes_``; learned from at most 4,096 clips when ``learn_axes``) and the FAISS index of their
-        projections (``prefilter_index_``, of kind ``prefilter_kind_``); a no-op otherwise."""
+        projections (``prefilter_index_``, of kind ``prefilter_kind_``); a no-op otherwise. Added clips join the
+        index without rebuilding it (:meth:`add_sequences`)."""
         if self.prefilter is None:
             return
         if int(self.prefilter) < 1:
             raise ValueError(f"prefilter must be None or a positive number of clips, got {self.prefilter!r}")
         x = self._descriptors(self.database_)
-        if learn_axes:
-            sample = x[reference_indices(len(x), 4096)] if len(x) > 1 else x
-            self.prefilter_mean_ = sample.mean(axis=0)
-            _, _, vt = np.linalg.svd(sample - self.prefilter_mean_, full_matrices=False)
-            self.prefilter_axes_ = np.ascontiguousarray(vt[:PREFILTER_DIMS].T, dtype=np.float32)  # [d, dims]
+        sample = x[reference_indices(len(x), 4096)] if len(x) > 1 else x
+        self.prefilter_mean_ = sample.mean(axis=0)
+        _, _, vt = np.linalg.svd(sample - self.prefilter_mean_, full_matrices=False)
+        self.prefilter_axes_ = np.ascontiguousarray(vt[:PREFILTER_DIMS].T, dtype=np.float32)  # [d, dims]
         self.prefilter_kind_ = ann.resolved_kind(self.prefilter_index, len(x))
         self.prefilter_index_ = ann.build(self._project(x), self.prefilter_kind_, metric="l2")
 
@@ -406,10 +425,13 @@ class DTWRetrieval(RetrievalMethod):
 
     def _set_reference(self, reference: np.ndarray, raw: dict[str, np.ndarray]) -> None:
         """The reference clips, their raw distances ``[n_database, n_reference]`` per feature, and what is learned
-        from them: the scales (median off-diagonal distance per feature) and the mutual-proximity statistics."""
+        from them: the scales (median off-diagonal distance per feature) and the mutual-proximity statistics. The
+        distances are kept (``reference_distances_``) only while every clip is a reference clip, for an added clip
+        to extend them exactly; beyond, they would cost 2 GB at 10^6 clips and are never read again (None)."""
         self.reference_ = np.asarray(reference, dtype=np.int64)
-        self.reference_distances_ = raw
         names = self.features_
+        every_clip = len(self.reference_) == raw[names[0]].shape[0]
+        self.reference_distances_ = raw if every_clip else None
         off_diagonal = np.ones(raw[names[0]].shape, dtype=bool)
         off_diagonal[self.reference_, np.arange(len(self.reference_))] = False
         if len(names) > 1 and not self._frame_scaled:
@@ -428,7 +450,9 @@ class DTWRetrieval(RetrievalMethod):
         n_old = self.n_database_
         union = {n: self.database_[n].extend(new[n]) for n in names}
         n_total = n_old + len(sequences)
-        exact = not self._needs_reference or (n_total <= int(self.n_reference) and len(self.reference_) == n_old)
+        exact = not self._needs_reference or (
+            n_total <= int(self.n_reference) and self.reference_distances_ is not None
+        )
         if self._frame_scaled:  # the moments of the union's frames: the scales fit on the union would learn
             self.frame_moments_ = {n: self.frame_moments_[n] + frame_moments(new[n]) for n in names}
             if exact:  # (past n_reference clips with mutual proximity the scales are kept, as its statistics are)
@@ -448,7 +472,7 @@ class DTWRetrieval(RetrievalMethod):
                     combined = sum(rows[n] / s for n, s in zip(names, self.scales_))
                     self.database_mean_ = np.concatenate([self.database_mean_, combined.mean(axis=1)])
                     self.database_std_ = np.concatenate([self.database_std_, combined.std(axis=1)])
-                self.reference_distances_ = {n: np.vstack([self.reference_distances_[n], rows[n]]) for n in names}
+                self.reference_distances_ = None
         self.database_ = union
 
     def _distances(self, queries, database) -> np.ndarray:
@@ -559,7 +583,8 @@ class DTWRetrieval(RetrievalMethod):
             state.update({f"frame_moments_{n}": m for n, m in self.frame_moments_.items()})
         if self._needs_reference:
             state["reference"] = self.reference_
-            state.update({f"reference_distances_{n}": d for n, d in self.reference_distances_.items()})
+            if self.reference_distances_ is not None:
+                state.update({f"reference_distances_{n}": d for n, d in self.reference_distances_.items()})
         if self.hubness is not None:
             state.update(database_mean=self.database_mean_, database_std=self.database_std_)
         if self.prefilter is not None:
@@ -576,9 +601,11 @@ class DTWRetrieval(RetrievalMethod):
             self.frame_moments_ = {n: np.asarray(state[f"frame_moments_{n}"], np.float64) for n in self.features_}
         if self._needs_reference:
             self.reference_ = np.asarray(state["reference"], dtype=np.int64)
-            self.reference_distances_ = {
-                n: np.asarray(state[f"reference_distances_{n}"], dtype=np.float64) for n in self.features_
-            }
+            self.reference_distances_ = (
+                {n: np.asarray(state[f"reference_distances_{n}"], dtype=np.float64) for n in self.features_}
+                if f"reference_distances_{self.features_[0]}" in state
+                else None
+            )
         if self.hubness is not None:
             self.database_mean_ = np.asarray(state["database_mean"], dtype=np.float64)
             self.database_std_ = np.asarray(state["database_std"], dtype=np.float64)

@@ -276,10 +276,11 @@ class EmbeddingRetrieval(RetrievalMethod):
         return 1.0 - np.asarray(queries, np.float64) @ np.asarray(database, np.float64).T
 
     def _add_sequences(self, sequences: list[np.ndarray]) -> None:
-        """Append the new clips' embeddings and build the FAISS index again over the whole database (the kind
-        ``index`` resolves to for the new size)."""
+        """Append the new clips' embeddings and add them to the FAISS index (rebuilt only when ``index`` resolves
+        to another kind for the new size)."""
+        n_old = len(self.database_)
         super()._add_sequences(sequences)
-        self._build_index()
+        self.index_, self.index_kind_ = ann.extend(self.index_, self.index_kind_, self.database_[n_old:], self.index)
 
     def search(self, queries: Sequence[Motion], k: int = 10) -> tuple[np.ndarray, np.ndarray]:
         """The ``k`` nearest database clips of each query from the FAISS index (``k <= 0`` or above the size: all),

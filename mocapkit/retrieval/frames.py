@@ -4,7 +4,8 @@
 array ``data [sum T_i, d]`` with ``offsets [n + 1]`` (clip ``i`` is ``data[offsets[i]:offsets[i + 1]]``). One array
 instead of ``n`` small ones halves the memory of float64 lists, gathers candidates with one fancy index, and can be a
 memory map: :mod:`mocapkit.retrieval.index` saves it as its own ``.npy`` file and opens it memory-mapped, so the
-frames of a large library stay on disk and only the clips a query compares against are read.
+frames of a large library stay on disk and only the clips a query compares against are read. A writable map grows
+in place (:meth:`RaggedFrames.extend`): clips added to a large library write only their own frames.
 
 :class:`CandidateCosts` holds the frame-to-frame costs of one query against ``K`` clips, from matrix products
 (BLAS, float32, in blocks that stay in cache); from them it reads every clip's lower bound in one pass and the DTW
@@ -16,6 +17,7 @@ Euclidean frame costs, the square root of the cheapest warping path's sum, no ba
 
 from __future__ import annotations
 
+import os
 from collections.abc import Sequence
 
 import numpy as np
@@ -71,10 +73,20 @@ class RaggedFrames:
         return np.diff(self.offsets)
 
     def extend(self, arrays: Sequence[np.ndarray]) -> RaggedFrames:
-        """A new store with ``arrays`` appended (in memory, even when this one is a memory map)."""
+        """A new store with ``arrays`` appended: in memory, or, when this store is a writable memory map of a
+        ``.npy`` file (:meth:`save`, :func:`open_frames` with ``writable``), appended to that file in place, so that
+        only the new frames are written and none is held in memory."""
         new = RaggedFrames.from_list(arrays, dim=self.dim)
-        data = np.concatenate([np.asarray(self.data), new.data], axis=0)
-        return RaggedFrames(data, np.concatenate([self.offsets, self.offsets[-1] + new.offsets[1:]]))
+        offsets = np.concatenate([self.offsets, self.offsets[-1] + new.offsets[1:]])
+        if isinstance(self.data, np.memmap) and self.data.mode == "r+":
+            return RaggedFrames(_append_npy(self.data.filename, int(self.offsets[-1]), new.data), offsets)
+        return RaggedFrames(np.concatenate([np.asarray(self.data), new.data], axis=0), offsets)
+
+    def save(self, path: str | os.PathLike) -> RaggedFrames:
+        """Write the frames to the ``.npy`` file ``path`` and return the store on that file, memory-mapped and
+        writable: :meth:`extend` then appends to it in place (how a library too large for memory is built)."""
+        np.save(path, np.asarray(self.data, dtype=np.float32), allow_pickle=False)
+        return RaggedFrames(open_frames(path, len(self.data), writable=True), self.offsets)
 
     def subset(self, indices: np.ndarray) -> RaggedFrames:
         """The clips ``indices``, in that order, as a new in-memory store (one fancy index of the frames)."""
@@ -105,6 +117,49 @@ class RaggedFrames:
     def from_state(cls, prefix: str, state: dict[str, np.ndarray]) -> RaggedFrames:
         """The inverse of :meth:`to_state`; a memory-mapped ``data`` stays memory-mapped."""
         return cls(state[f"{prefix}_frames"], state[f"{prefix}_offsets"])
+
+
+def open_frames(path: str | os.PathLike, rows: int | None = None, writable: bool = False) -> np.memmap:
+    """The first ``rows`` frames (None: all) of the float32 ``[frames, d]`` ``.npy`` file ``path``, memory-mapped
+    (read-only, or writable for :meth:`RaggedFrames.extend` to append to). Frames beyond ``rows`` (an append
+    interrupted before its index was saved) are not part of the store, and the next append writes over them.
+
+    Raises:
+        ValueError: naming ``path``: not a float32 ``[frames, d]`` array, or fewer than ``rows`` frames.
+    """
+    data = np.load(path, mmap_mode="r+" if writable else "r", allow_pickle=False)
+    rows = len(data) if rows is None else int(rows)
+    if data.dtype != np.float32 or data.ndim != 2 or len(data) < rows:
+        raise ValueError(
+            f"{path}: expected float32 frames [at least {rows}, d], found {data.dtype} {data.shape} (a damaged or "
+            "truncated file)"
+        )
+    return data if len(data) == rows else data[:rows]
+
+
+def _append_npy(path: str | os.PathLike, rows: int, new: np.ndarray) -> np.memmap:
+    """``path``'s first ``rows`` frames followed by ``new`` (float32 ``[n, d]``), written in place: the file is cut
+    after its first ``rows`` frames, ``new`` appended, and only then the header's frame count rewritten (numpy
+    leaves room in a ``.npy`` header for that count to grow), so an interrupted append leaves ``rows`` valid frames.
+    Returns the file's frames memory-mapped, writable."""
+    fmt = np.lib.format
+    with open(path, "r+b") as handle:
+        version = fmt.read_magic(handle)
+        read_header = fmt.read_array_header_1_0 if version == (1, 0) else fmt.read_array_header_2_0
+        shape, fortran, dtype = read_header(handle)
+        start = handle.tell()
+        if fortran or dtype != np.float32 or len(shape) != 2 or shape[1] != new.shape[1] or shape[0] < rows:
+            raise ValueError(f"{path}: cannot append [{len(new)}, {new.shape[1]}] float32 frames to {dtype} {shape}")
+        handle.truncate(start + rows * shape[1] * 4)
+        handle.seek(0, os.SEEK_END)
+        handle.write(np.ascontiguousarray(new, dtype=np.float32).tobytes())
+        handle.flush()
+        handle.seek(0)
+        header = {"descr": fmt.dtype_to_descr(dtype), "fortran_order": False, "shape": (rows + len(new), shape[1])}
+        (fmt.write_array_header_1_0 if version == (1, 0) else fmt.write_array_header_2_0)(handle, header)
+        if handle.tell() != start:  # numpy's header padding did not hold the new count: the file is not usable
+            raise ValueError(f"{path}: the .npy header changed size when its frame count grew")
+    return open_frames(path, rows + len(new), writable=True)
 
 
 class CandidateCosts:

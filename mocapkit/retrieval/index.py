@@ -9,7 +9,7 @@ An index is a **folder**::
                     (``allow_pickle=False``: loading an index runs no code from it)
     *_frames.npy    per-frame database features (DTW methods, one file per feature, listed in the manifest):
                     each its own ``.npy``, opened memory-mapped, so a large library's frames stay on disk and a
-                    search reads only the clips it compares against
+                    search reads only the clips it compares against; ``--add`` appends to them in place
 
 :func:`build_index` reads every file under ``src`` that :func:`~mocapkit.datasets.read_motion` reads
 (recursively), fits the method on them (the whole folder is the database) and writes the folder;
@@ -25,8 +25,8 @@ name is read from the index.
 segments ``(file, start s, end s, distance)`` by subsequence DTW (:mod:`mocapkit.retrieval.subsequence`).
 :func:`add_to_index` (``mocapkit index --add``) appends the files under another folder, or given one by one, to an
 existing index without fitting it again (:meth:`~mocapkit.retrieval.base.RetrievalMethod.add`): the manifest's
-method and parameters are used, a file already indexed (same resolved path) is skipped with a message, and the
-folder is rewritten in place.
+method and parameters are used, a file already indexed (same resolved path) is skipped with a message, the new
+clips' frames are appended to the ``*_frames.npy`` files and the other files are rewritten.
 
 Refusals, each naming both sides: a query method (or model) other than the index's, a query whose skeleton lacks
 landmarks every indexed clip has, a query shorter than the method can encode, ``--add`` with another method,
@@ -54,8 +54,14 @@ FORMAT = "mocapkit-retrieval-index"
 #: their reference clips, which ``--add`` extends; 4: and the features used (``world_frame``) with the heading
 #: concentration that chose them; 5: the per-frame features in their own ``*_frames.npy`` files, memory-mapped.
 VERSION = 5
-#: State arrays whose key ends so are written as ``KEY.npy`` beside ``state.npz`` and loaded memory-mapped.
-FRAMES_SUFFIX = "_frames"
+#: State arrays whose key ends so are written as ``KEY.npy`` beside ``state.npz`` and loaded memory-mapped (a
+#: :class:`~mocapkit.retrieval.frames.RaggedFrames` store's frames; its ``KEY`` ending ``_offsets`` says how many
+#: of the file's frames it holds).
+FRAMES_SUFFIX, OFFSETS_SUFFIX = "_frames", "_offsets"
+#: A DTW index of more files than this is built in parts of this many (:func:`build_index`), so that only one
+#: part's motions and features are in memory: the method is fitted on the first, spread over the library, its
+#: frames written to the output folder, and the others are added, their frames appended to those files.
+PART_FILES = 50_000
 
 
 class RetrievalIndexError(ValueError):
@@ -142,7 +148,11 @@ class MotionIndex:
         state = self.method._state()
         frames = {k: v for k, v in state.items() if k.endswith(FRAMES_SUFFIX)}
         for key, array in frames.items():
-            with atomic_path(out / f"{key}.npy") as tmp, open(tmp, "wb") as handle:
+            target = out / f"{key}.npy"
+            if isinstance(array, np.memmap) and target.exists() and Path(array.filename).samefile(target):
+                array.flush()  # the frames are that file's (loaded from it, or appended to it in place)
+                continue
+            with atomic_path(target) as tmp, open(tmp, "wb") as handle:
                 np.save(handle, np.asarray(array), allow_pickle=False)
         for stale in out.glob(f"*{FRAMES_SUFFIX}.npy"):  # another method's or feature's, from an earlier build
             if stale.stem not in frames:
@@ -171,7 +181,12 @@ class MotionIndex:
         return out
 
     @classmethod
-    def load(cls, path: str | os.PathLike) -> MotionIndex:
+    def load(cls, path: str | os.PathLike, writable: bool = False) -> MotionIndex:
+        """The index in the folder ``path``; ``writable``: its frame files are opened for clips added to the
+        method to be appended to them in place (what :func:`add_to_index` does before saving to the same folder).
+        """
+        from mocapkit.retrieval.frames import open_frames
+
         path = Path(path)
         manifest_path = path / "manifest.json"
         if not manifest_path.is_file():
@@ -200,8 +215,10 @@ class MotionIndex:
         with np.load(path / "state.npz", allow_pickle=False) as data:
             state = {k: data[k] for k in data.files}
         for key in manifest.get("frames", []):
+            offsets = state.get(key[: -len(FRAMES_SUFFIX)] + OFFSETS_SUFFIX)
             try:
-                state[key] = np.load(path / f"{key}.npy", mmap_mode="r", allow_pickle=False)
+                rows = int(offsets[-1]) if offsets is not None and len(offsets) else None
+                state[key] = open_frames(path / f"{key}.npy", rows, writable=writable)
             except (OSError, ValueError) as exc:
                 raise RetrievalIndexError(
                     f"{path / f'{key}.npy'}: cannot be read ({exc}); build the index again"
@@ -353,7 +370,8 @@ def build_index(
 
     ``method`` is a registry name (None: the registry's default), ``overrides`` its ``--set`` Hydra overrides,
     ``ckpt`` the trained model of ``embedding`` (:func:`make_method`); ``workers`` processes read the files and
-    normalise their skeletons (:func:`_read_files`).
+    normalise their skeletons (:func:`_read_files`). A DTW method over more than :data:`PART_FILES` files is built in
+    parts (:func:`_parts`), its frames written to ``out`` as they come.
 
     Raises:
         RetrievalIndexError: no motion file under ``src``; a file that cannot be read or used (named) unless
@@ -375,13 +393,24 @@ def build_index(
             ".skeleton, MSR *_skeleton3D.txt, recursively)"
         )
     _progress(f"indexing {len(paths)} files under {src} with {name}", quiet)
-    sequences, files, skipped, landmark_sets = _read_files(paths, estimator, skip_bad, quiet, workers)
+    in_parts = len(paths) > PART_FILES and out is not None and hasattr(estimator, "store_frames")
+    parts = _parts(paths) if in_parts else [paths]
+    sequences, files, skipped, landmark_sets = _read_files(parts[0], estimator, skip_bad, quiet, workers)
     if not sequences:
-        raise RetrievalIndexError(f"--src {src}: none of the {len(paths)} motion files could be indexed")
+        raise RetrievalIndexError(f"--src {src}: none of the {len(parts[0])} motion files could be indexed")
     start = time.perf_counter()
     with _naming_clips(files):
         estimator.fit_sequences(sequences)
     _progress(f"fitted {name} on {len(sequences)} clips in {time.perf_counter() - start:.1f} s", quiet)
+    if in_parts:  # the frames to the output folder, then the other parts added to them
+        Path(out).mkdir(parents=True, exist_ok=True)
+        estimator.store_frames(out)
+        for part in parts[1:]:
+            sequences, more_files, more_skipped, more_landmarks = _read_files(part, estimator, skip_bad, quiet, workers)
+            with _naming_clips(more_files):
+                estimator.add_sequences(sequences)
+            files, skipped, landmark_sets = files + more_files, skipped + more_skipped, landmark_sets + more_landmarks
+            _progress(f"added: {len(files)} clips in {time.perf_counter() - start:.1f} s", quiet)
     if hasattr(estimator, "heading_concentration_") and np.isfinite(estimator.heading_concentration_):
         _progress(
             f"features {', '.join(estimator.features_)} (the clips' starting headings: concentration "
@@ -399,6 +428,15 @@ def build_index(
         index.save(out)
         _progress(f"wrote {out} ({len(files)} clips, {len(skipped)} skipped)", quiet)
     return index
+
+
+def _parts(paths: list[Path]) -> list[list[Path]]:
+    """A library of more than :data:`PART_FILES` files in parts of that many: the first evenly spaced over the
+    library (what the method is fitted on: its reference clips, scales and descriptor axes), then the others in
+    order, added to it."""
+    first = set(np.linspace(0, len(paths) - 1, PART_FILES).round().astype(int).tolist())
+    rest = [p for i, p in enumerate(paths) if i not in first]
+    return [[paths[i] for i in sorted(first)]] + [rest[i : i + PART_FILES] for i in range(0, len(rest), PART_FILES)]
 
 
 def _read_files(paths: list[Path], estimator, skip_bad: bool, quiet: bool, workers: int = 1):
@@ -510,7 +548,7 @@ def add_to_index(
     from mocapkit.datasets.formats.motion_io import find_motion_files
     from mocapkit.motion.layouts import LANDMARK_NAMES
 
-    loaded = MotionIndex.load(index)
+    loaded = MotionIndex.load(index, writable=True)
     name = loaded.method_name
     if method is not None and method != name:
         raise RetrievalIndexError(

@@ -78,3 +78,39 @@ def test_dtw_distances_without_a_band_equal_dtaidistance_across_chunks(monkeypat
     np.testing.assert_allclose(chunked, whole, rtol=1e-6, atol=1e-6)
     expected = np.array([[dtw_ndim.distance(q, x) / np.sqrt(len(q) + len(x)) for x in database] for q in queries])
     np.testing.assert_allclose(whole, expected, rtol=1e-6, atol=1e-6)
+
+
+def test_a_saved_store_grows_in_place_and_an_interrupted_append_is_overwritten(tmp_path):
+    """:meth:`RaggedFrames.save` returns the store on its .npy file; ``extend`` then appends to that file (the same
+    file, its first frames untouched) and the result reads back with ``np.load``. Frames past a store's count (an
+    append whose index was never saved) are ignored on opening and written over by the next append."""
+    from mocapkit.retrieval.frames import open_frames
+
+    rng = np.random.default_rng(2)
+    arrays = clips(rng, 6)
+    path = tmp_path / "x_frames.npy"
+    store = RaggedFrames.from_list(arrays).save(path)
+    assert isinstance(store.data, np.memmap) and store.data.mode == "r+"
+    inode, before = path.stat().st_ino, path.read_bytes()
+    grown = store.extend(arrays[:4])
+    after = path.read_bytes()
+    header = len(before) - store.data.nbytes
+    assert path.stat().st_ino == inode and after[header : len(before)] == before[header:]  # in place, frames kept
+    assert isinstance(grown.data, np.memmap) and len(grown) == 10
+    on_disk = np.load(path)
+    assert on_disk.shape == (grown.offsets[-1], 5)
+    np.testing.assert_array_equal(on_disk, np.concatenate([a.astype(np.float32) for a in arrays + arrays[:4]]))
+    # an append interrupted after writing its frames: the 6-clip store does not see them, and appends over them
+    reopened = RaggedFrames(open_frames(path, int(store.offsets[-1]), writable=True), store.offsets)
+    assert len(reopened.data) == store.offsets[-1]
+    again = reopened.extend(arrays[5:])
+    np.testing.assert_array_equal(np.load(path), np.concatenate([a.astype(np.float32) for a in arrays + arrays[5:]]))
+    np.testing.assert_array_equal(again[6], again[5])
+    # a read-only map grows in memory, leaving the file as it is
+    frozen = RaggedFrames(open_frames(path), again.offsets)
+    assert not isinstance(frozen.extend(arrays[:1]).data, np.memmap) and np.load(path).shape[0] == again.offsets[-1]
+    np.save(tmp_path / "bad.npy", np.zeros((3, 5)))  # float64: not frames
+    with pytest.raises(ValueError, match=r"bad\.npy: expected float32 frames"):
+        open_frames(tmp_path / "bad.npy")
+    with pytest.raises(ValueError, match=r"x_frames\.npy: expected float32 frames \[at least 999"):
+        open_frames(path, 999)

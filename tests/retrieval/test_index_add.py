@@ -95,7 +95,8 @@ def test_an_appended_index_ranks_as_one_built_on_the_union(folder, tmp_path, met
 
 def test_a_dtw_index_keeps_its_frames_on_disk_memory_mapped(folder, tmp_path):
     """Each feature's frames are their own .npy file, opened memory-mapped; the loaded index ranks as the one built,
-    and --add rewrites the files (no other feature's file left behind)."""
+    and --add appends to the files in place (the same files, their first frames untouched; no other feature's file
+    left behind)."""
     first, second, _ = _split(folder, tmp_path)
     built = build_index(first, tmp_path / "idx", method="dtw_mutual_proximity", quiet=True)
     files = sorted(p.name for p in (tmp_path / "idx").glob("*.npy"))
@@ -105,8 +106,14 @@ def test_a_dtw_index_keeps_its_frames_on_disk_memory_mapped(folder, tmp_path):
     query = min((second / "mm").glob("*squat*.amc"))
     assert _ranking(loaded, query) == _ranking(built, query)
     np.save(tmp_path / "idx" / "database_world_velocity_frames.npy", np.zeros((2, 3)))  # a stale file
+    frames_file = tmp_path / "idx" / "database_positions_frames.npy"
+    inode, before = frames_file.stat().st_ino, frames_file.read_bytes()
+    del loaded  # (its read-only map of the file)
     grown, _ = add_to_index(tmp_path / "idx", second, quiet=True)
     assert sorted(p.name for p in (tmp_path / "idx").glob("*.npy")) == files
+    header = 128  # numpy's .npy header for these arrays
+    assert frames_file.stat().st_ino == inode and frames_file.read_bytes()[header : len(before)] == before[header:]
+    assert _ranking(grown, query) == _ranking(MotionIndex.load(tmp_path / "idx"), query)
     assert len(MotionIndex.load(tmp_path / "idx").method.database_["positions"]) == 12
     (tmp_path / "idx" / "database_positions_frames.npy").write_bytes(b"not an array")  # damaged: named
     with pytest.raises(RetrievalIndexError, match=r"database_positions_frames\.npy: cannot be read"):
@@ -120,6 +127,10 @@ def test_adding_beyond_the_reference_clips_keeps_them(folder, tmp_path):
     scales, reference = index.method.scales_.copy(), index.method.reference_.copy()
     grown, _ = add_to_index(tmp_path / "idx", second, quiet=True)
     assert np.array_equal(grown.method.reference_, reference) and np.array_equal(grown.method.scales_, scales)
+    # the distances to the reference clips are kept only while every clip is one (they would not be read again)
+    assert grown.method.reference_distances_ is None and not any(
+        key.startswith("reference_distances") for key in grown.method._state()
+    )
     assert len(grown.method.database_mean_) == 12 and np.isfinite(grown.method.database_std_).all()
     query = min((second / "mm").glob("*hop*.amc"))
     top = _ranking(grown, query)[0][0]
@@ -216,3 +227,49 @@ def test_plain_dtw_names_the_file_of_another_skeleton_when_files_are_read_apart(
     write_motion(mixed / "few.c3d", fewer)
     with pytest.raises(RetrievalIndexError, match=r"few\.c3d: clip \d+: 5 joints"):
         build_index(mixed, method="dtw_plain", quiet=True, workers=2)
+
+
+def test_a_library_built_in_parts_with_its_frames_on_disk_ranks_as_one_built_in_memory(folder, tmp_path):
+    """``store_frames`` then ``add`` (how bench_retrieval builds 10^6 clips): the frames go to .npy files that grow
+    in place, and the search (prefiltered, mutual proximity past ``n_reference``) ranks as the same fit and add in
+    memory; an index saved into that folder keeps the files as they are."""
+    from mocapkit.datasets import read_motion
+
+    motions = [read_motion(p) for p in sorted(folder.glob("*/*.amc"))]
+    overrides = ["prefilter=5", "n_reference=4"]
+    on_disk = build_method("retrieval", "dtw_large", overrides).fit(motions[:6]).store_frames(tmp_path / "parts")
+    in_memory = build_method("retrieval", "dtw_large", overrides).fit(motions[:6])
+    for part in (motions[6:9], motions[9:]):
+        on_disk.add(part)
+        in_memory.add(part)
+    assert all(isinstance(store.data, np.memmap) for store in on_disk.database_.values())
+    assert sorted(p.name for p in (tmp_path / "parts").iterdir()) == [
+        "database_positions_frames.npy",
+        "database_relational_frames.npy",
+    ]
+    a, b = on_disk.search(motions, 4), in_memory.search(motions, 4)
+    np.testing.assert_array_equal(a[0], b[0])
+    np.testing.assert_allclose(a[1], b[1])
+    inode = (tmp_path / "parts" / "database_positions_frames.npy").stat().st_ino
+    MotionIndex("dtw_large", on_disk, [{"path": str(i)} for i in range(12)], [], []).save(tmp_path / "parts")
+    assert (tmp_path / "parts" / "database_positions_frames.npy").stat().st_ino == inode
+    loaded = MotionIndex.load(tmp_path / "parts").method
+    np.testing.assert_array_equal(loaded.search(motions, 4)[0], a[0])
+
+
+def test_a_large_library_is_indexed_in_parts_with_every_file(folder, tmp_path, monkeypatch):
+    """Past ``PART_FILES`` files a DTW index is fitted on a part spread over the library and the other parts are
+    added, their frames appended to the output folder's files: every file is indexed once, and a method with
+    nothing to learn ranks as when built in one go."""
+    from mocapkit.retrieval import index as index_module
+
+    whole = build_index(folder, method="dtw_plain", quiet=True)
+    monkeypatch.setattr(index_module, "PART_FILES", 5)
+    parts = build_index(folder, tmp_path / "idx", method="dtw_plain", quiet=True)
+    assert sorted(parts.paths) == sorted(whole.paths) and len(set(parts.paths)) == 12
+    assert isinstance(parts.method.database_["positions"].data, np.memmap)
+    query = min((folder / "mm").glob("*squat*.amc"))
+    assert _ranking(MotionIndex.load(tmp_path / "idx"), query) == _ranking(whole, query)
+    large = build_index(folder, tmp_path / "large", method="dtw_large", overrides=["n_reference=4"], quiet=True)
+    assert len(large.files) == 12 and len(large.method.database_mean_) == 12
+    assert [r["path"] for r in large.search([str(query)], k=1)[0]["results"]] != [str(query.resolve())]

@@ -133,3 +133,25 @@ def test_lower_bound_pruning_ranks_candidates_as_computing_every_distance(clips,
     exact = top_k(method.distances(motions[14:15]), 5)
     np.testing.assert_array_equal(pruned[0], exact[0][0])
     np.testing.assert_allclose(pruned[1], exact[1][0], rtol=1e-6, atol=1e-6)
+
+
+def test_a_library_grown_past_the_hnsw_size_by_additions_is_searched_by_hnsw(clips, monkeypatch):
+    """Added clips join the prefilter's FAISS index without a rebuild; when the library grows past
+    ``AUTO_HNSW_MIN_CLIPS`` the flat index becomes HNSW over every clip, as a fit at that size builds."""
+    from mocapkit.retrieval import ann
+
+    _, motions = clips
+    monkeypatch.setattr(ann, "AUTO_HNSW_MIN_CLIPS", 10)
+    grown = DTWRetrieval(features=["positions", "relational"], prefilter=4).fit(motions[:6])
+    assert grown.prefilter_kind_ == "flat"
+    grown.add(motions[6:9])
+    assert grown.prefilter_kind_ == "flat" and grown.prefilter_index_.ntotal == 9
+    grown.add(motions[9:])
+    assert grown.prefilter_kind_ == "hnsw" and grown.prefilter_index_.ntotal == 18
+    whole = DTWRetrieval(features=["positions", "relational"], prefilter=4).fit(motions[:6])
+    whole.add(motions[6:])  # one addition past the size: the same vectors, in the same order
+    np.testing.assert_array_equal(
+        grown.prefilter_index_.reconstruct_n(0, 18), whole.prefilter_index_.reconstruct_n(0, 18)
+    )
+    found = grown.search(motions, 1)[0]
+    assert (found[:, 0] == np.arange(len(motions))).all()  # every clip, old or added, finds itself
