@@ -50,7 +50,9 @@ def features(motions) -> list[np.ndarray]:
     """The raw per-frame features an index of ``dtw_takes`` stores, side by side: ``[T, 60 + F]`` (positions,
     then relational features); :func:`scaled` divides them by the scales the index learns."""
     method = build_method("retrieval", "dtw_takes")
-    encoded = method._encode_sequences(method.sequences(motions))
+    sequences = method.sequences(motions)
+    method.features_ = method._choose_features(sequences)  # what fit learns first (positions, relational here)
+    encoded = method._encode_sequences(sequences)
     if FEATURES == "positions":
         return encoded["positions"]
     if FEATURES == "relational":
