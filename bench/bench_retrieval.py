@@ -35,9 +35,11 @@ prefiltered one against the same method's exact search). A PNG of latency agains
 from __future__ import annotations
 
 import argparse
+import gc
 import os
 import platform
 import sys
+import tempfile
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -51,9 +53,15 @@ DEFAULT_DATA = ROOT.parent / "shared" / "data" / "hdm05_cuts11"
 
 def augmented(motions, count: int, seed: int = 0):
     """``count`` clips: the real ones first, then copies time-scaled, cropped and jittered (seeded)."""
+    return list(augmented_clips(motions, count, seed))
+
+
+def augmented_clips(motions, count: int, seed: int = 0):
+    """:func:`augmented`'s clips one at a time (a library larger than memory is built from them in parts)."""
     rng = np.random.default_rng(seed)
-    out = list(motions[:count])
-    while len(out) < count:
+    yield from motions[:count]
+    made = min(count, len(motions))
+    while made < count:
         m = motions[int(rng.integers(len(motions)))]
         speed = rng.uniform(0.8, 1.25)
         fps = m.fps * speed
@@ -63,10 +71,8 @@ def augmented(motions, count: int, seed: int = 0):
         positions = m.positions[a : max(b, a + 8)] + rng.normal(
             scale=0.01, size=(max(b, a + 8) - a,) + m.positions.shape[1:]
         )
-        out.append(
-            replace(m, positions=positions.astype(np.float32), missing=None, fps=fps, name=f"{m.name}~{len(out)}")
-        )
-    return out
+        yield replace(m, positions=positions.astype(np.float32), missing=None, fps=fps, name=f"{m.name}~{made}")
+        made += 1
 
 
 def median_ms(fn, repeats: int) -> float:
@@ -93,6 +99,13 @@ def main() -> None:
         "each with optional parameters after ':' (name:key=value,key=value)",
     )
     parser.add_argument("--recall-queries", type=int, default=20, help="queries scored against exact search")
+    parser.add_argument(
+        "--chunk",
+        type=int,
+        default=100000,
+        help="DTW libraries larger than this are built in parts of this many clips, their frames in files",
+    )
+    parser.add_argument("--frames-dir", default=None, help="where those files go (default: the system's temp folder)")
     parser.add_argument("--encode", type=int, default=5000, help="augmented clips actually encoded")
     parser.add_argument("--hnsw-max", type=int, default=1000000)
     parser.add_argument("--plot", default=str(ROOT / "docs" / "img" / "retrieval_latency.png"))
@@ -233,9 +246,46 @@ def embedding_rows(args, real, queries, sizes, rows) -> float:
     return query_encode_ms
 
 
-def method_bytes(method) -> int:
-    """Bytes of what a fitted method keeps (its state's arrays, the FAISS index serialised among them)."""
-    return int(sum(np.asarray(v).nbytes for v in method._state().values()))
+def method_bytes(method) -> tuple[int, int]:
+    """``(in memory, on disk)``: bytes of what a fitted method keeps (its state's arrays, the FAISS index serialised
+    among them), those memory-mapped from files apart (a search reads only its candidates' frames from them)."""
+    arrays = method._state().values()
+    return (
+        int(sum(np.asarray(v).nbytes for v in arrays if not isinstance(v, np.memmap))),
+        int(sum(v.nbytes for v in arrays if isinstance(v, np.memmap))),
+    )
+
+
+def private_memory_mb() -> float:
+    """This process's resident memory not backed by files (``RssAnon``; memory-mapped frames read from disk are
+    the kernel's page cache, given back under pressure), MB; NaN where /proc is absent."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("RssAnon:"):
+                return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    return float("nan")
+
+
+def build_streamed(dtw, real, size: int, chunk: int, folder: str) -> None:
+    """Fit ``dtw`` on the first ``chunk`` clips of the augmented library, move its frames to ``.npy`` files in
+    ``folder`` (``store_frames``) and add the rest ``chunk`` clips at a time: no more than ``chunk`` clips' motions
+    and features are in memory at once."""
+    from itertools import islice
+
+    clips = augmented_clips(real, size, seed=0)
+    start = time.perf_counter()
+    dtw.fit(list(islice(clips, chunk)))
+    dtw.store_frames(folder)
+    while batch := list(islice(clips, chunk)):
+        dtw.add(batch)
+        del batch  # before the next part is made: one part's motions in memory at a time
+        print(
+            f"  built {dtw.n_database_:,} / {size:,} clips in {time.perf_counter() - start:.0f} s "
+            f"({private_memory_mb():.0f} MB private)",
+            flush=True,
+        )
 
 
 def dtw_rows(args, real, queries, sizes, rows, query_encode_ms: float) -> None:
@@ -249,16 +299,21 @@ def dtw_rows(args, real, queries, sizes, rows, query_encode_ms: float) -> None:
         overrides = [p for p in params.split(",") if p]
         for size in [s for s in sizes if s <= args.dtw_max]:
             dtw = make_method(name, overrides)
-            lib = augmented(real, size, seed=0)
             start = time.perf_counter()
-            dtw.fit(lib)
+            if size > args.chunk:
+                folder = tempfile.mkdtemp(prefix="bench_retrieval_", dir=args.frames_dir)
+                build_streamed(dtw, real, size, args.chunk, folder)
+            else:
+                dtw.fit(augmented(real, size, seed=0))
             build_s = time.perf_counter() - start
+            gc.collect()
             repeats = min(len(queries), 20 if size <= 1000 or dtw.prefilter else 2)
             times = []
             for i in range(repeats):
                 start = time.perf_counter()
                 dtw.search([queries[i]], 10)
                 times.append(1000 * (time.perf_counter() - start))
+            private_mb = private_memory_mb()
             recall = None
             if dtw.prefilter:
                 n = min(args.recall_queries, len(queries))
@@ -267,13 +322,16 @@ def dtw_rows(args, real, queries, sizes, rows, query_encode_ms: float) -> None:
                 recall = float(np.mean([len(set(a) & set(b)) / 10 for a, b in zip(exact, found)]))
                 for candidates in [int(c) for c in args.prefilter_grid.split(",") if c]:
                     grid_row(dtw, candidates, queries[:n], exact, size)
+            in_memory, on_disk = method_bytes(dtw)
             row = {
                 "size": size,
                 "method": spec,
                 "build_s": build_s,
                 "query_ms": float(np.median(times)),
                 "query_p95_ms": float(np.percentile(times, 95)),
-                "memory_mb": method_bytes(dtw) / 2**20,
+                "memory_mb": in_memory / 2**20,
+                "disk_mb": on_disk / 2**20,
+                "process_mb": private_mb,
                 "recall@10": recall,
             }
             rows.append(row)
@@ -285,7 +343,8 @@ def dtw_rows(args, real, queries, sizes, rows, query_encode_ms: float) -> None:
             )
             print(
                 f"size {size:>8}: {spec} build {build_s:8.2f} s, query p50 {row['query_ms']:9.1f} ms, "
-                f"p95 {row['query_p95_ms']:9.1f} ms, {row['memory_mb']:.0f} MB"
+                f"p95 {row['query_p95_ms']:9.1f} ms, {row['memory_mb']:.0f} MB in memory + {row['disk_mb']:.0f} MB "
+                f"memory-mapped (process {private_mb:.0f} MB private after the timed queries)"
                 + (f", recall@10 vs exact {recall:.3f}" if recall is not None else "")
                 + ratio,
                 flush=True,
@@ -318,14 +377,24 @@ def grid_row(dtw, candidates: int, queries, exact: np.ndarray, size: int) -> Non
 
 
 def report(args, rows, query_encode_ms: float) -> None:
-    print("\n| library size | method | build (s) | query p50 (ms) | query p95 (ms) | memory (MB) | recall@10 |")
-    print("|---:|---|---:|---:|---:|---:|---:|")
+    print(
+        "\n| library size | method | build (s) | query p50 (ms) | query p95 (ms) | memory (MB) | memory-mapped (MB) "
+        "| process private (MB) | recall@10 |"
+    )
+    print("|---:|---|---:|---:|---:|---:|---:|---:|---:|")
     for r in rows:
-        recall = "" if r.get("recall@10") is None else f"{r['recall@10']:.3f}"
-        p95 = "" if r.get("query_p95_ms") is None else f"{r['query_p95_ms']:.1f}"
-        memory = "" if r.get("memory_mb") is None else f"{r['memory_mb']:.0f}"
+        cells = [
+            "" if r.get(key) is None else f"{r[key]:{spec}}"
+            for key, spec in [
+                ("query_p95_ms", ".1f"),
+                ("memory_mb", ".0f"),
+                ("disk_mb", ".0f"),
+                ("process_mb", ".0f"),
+                ("recall@10", ".3f"),
+            ]
+        ]
         print(
-            f"| {r['size']:,} | {r['method']} | {r['build_s']:.2f} | {r['query_ms']:.3f} | {p95} | {memory} | {recall} |"
+            f"| {r['size']:,} | {r['method']} | {r['build_s']:.2f} | {r['query_ms']:.3f} | " + " | ".join(cells) + " |"
         )
     if args.onnx:
         print(f"\nquery encoding (normalise + ONNX encoder, one clip): {query_encode_ms:.2f} ms")
