@@ -38,7 +38,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.signal import detrend, medfilt
 
 #: OpenGait's GEI size (height, width).
 OPENGAIT_SIZE = (64, 44)
@@ -249,6 +248,8 @@ def period_from_signal(
 
     Returns None when the signal is too short for a lag of ``min_cycle + 1`` or no candidate passes.
     """
+    from scipy.signal import detrend, medfilt  # here: scipy.signal takes half a second to import, every command
+
     x = np.asarray(signal, dtype=np.float64)
     if x.ndim != 1:
         raise ValueError(f"signal must be 1-D, got shape {x.shape}")
