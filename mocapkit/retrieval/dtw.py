@@ -315,7 +315,7 @@ class DTWRetrieval(RetrievalMethod):
 
     def _build_prefilter(self) -> None:
         """With ``prefilter``: the principal axes of the database's descriptors (``prefilter_mean_``,
-        ``prefilter_axes_``; learned from at most 4,096 clips when ``learn_axes``) and the FAISS index of their
+        ``prefilter_axes_``; learned from at most 4,096 clips at fit) and the FAISS index of their
         projections (``prefilter_index_``, of kind ``prefilter_kind_``); a no-op otherwise. Added clips join the
         index without rebuilding it (:meth:`add_sequences`)."""
         if self.prefilter is None:

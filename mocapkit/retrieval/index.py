@@ -404,6 +404,9 @@ def build_index(
     _progress(f"fitted {name} on {len(sequences)} clips in {time.perf_counter() - start:.1f} s", quiet)
     if in_parts:  # the frames to the output folder, then the other parts added to them
         Path(out).mkdir(parents=True, exist_ok=True)
+        # the frame files are written in place from here: an index already in the folder stops being one until
+        # this one is saved, rather than being read with another index's frames
+        (Path(out) / "manifest.json").unlink(missing_ok=True)
         estimator.store_frames(out)
         for part in parts[1:]:
             sequences, more_files, more_skipped, more_landmarks = _read_files(part, estimator, skip_bad, quiet, workers)
