@@ -278,14 +278,19 @@ class DTWRetrieval(RetrievalMethod):
         return self
 
     def add_sequences(self, sequences) -> DTWRetrieval:
-        n_old = self.n_database_
+        n_old, scales = self.n_database_, self.scales_.copy()
         super().add_sequences(sequences)
-        if self.prefilter is not None:  # the new clips' descriptors on the axes learned at fit, as the scales
-            names = self.features_
-            new = {n: self.database_[n].subset(np.arange(n_old, self.n_database_)) for n in names}
+        if self.prefilter is None:
+            return self
+        if np.array_equal(scales, self.scales_):  # the indexed descriptors still hold: the new clips' join them
+            new = {n: self.database_[n].subset(np.arange(n_old, self.n_database_)) for n in self.features_}
             self.prefilter_index_, self.prefilter_kind_ = ann.extend(
                 self.prefilter_index_, self.prefilter_kind_, self._project(self._descriptors(new)), self.prefilter_index
             )
+        else:  # the scales follow the clips (a library of at most n_reference clips): every descriptor again
+            x = self._descriptors(self.database_)
+            self.prefilter_kind_ = ann.resolved_kind(self.prefilter_index, len(x))
+            self.prefilter_index_ = ann.build(self._project(x), self.prefilter_kind_, metric="l2")
         return self
 
     def store_frames(self, folder: str | os.PathLike) -> DTWRetrieval:

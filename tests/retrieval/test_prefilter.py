@@ -136,22 +136,37 @@ def test_lower_bound_pruning_ranks_candidates_as_computing_every_distance(clips,
 
 
 def test_a_library_grown_past_the_hnsw_size_by_additions_is_searched_by_hnsw(clips, monkeypatch):
-    """Added clips join the prefilter's FAISS index without a rebuild; when the library grows past
-    ``AUTO_HNSW_MIN_CLIPS`` the flat index becomes HNSW over every clip, as a fit at that size builds."""
+    """Added clips join the prefilter's FAISS index without a rebuild once the scales are fixed (past
+    ``n_reference`` clips with mutual proximity); when the library grows past ``AUTO_HNSW_MIN_CLIPS`` the flat index
+    becomes HNSW over every clip. While the scales still follow the clips, every descriptor is indexed again."""
     from mocapkit.retrieval import ann
 
     _, motions = clips
     monkeypatch.setattr(ann, "AUTO_HNSW_MIN_CLIPS", 10)
-    grown = DTWRetrieval(features=["positions", "relational"], prefilter=4).fit(motions[:6])
+    params = {"features": ["positions", "relational"], "hubness": "mutual_proximity", "n_reference": 4}
+    grown = DTWRetrieval(**params, prefilter=4).fit(motions[:6])
+    index = grown.prefilter_index_
     assert grown.prefilter_kind_ == "flat"
     grown.add(motions[6:9])
-    assert grown.prefilter_kind_ == "flat" and grown.prefilter_index_.ntotal == 9
+    assert grown.prefilter_index_ is index and grown.prefilter_index_.ntotal == 9  # the same index, grown
     grown.add(motions[9:])
     assert grown.prefilter_kind_ == "hnsw" and grown.prefilter_index_.ntotal == 18
-    whole = DTWRetrieval(features=["positions", "relational"], prefilter=4).fit(motions[:6])
+    whole = DTWRetrieval(**params, prefilter=4).fit(motions[:6])
     whole.add(motions[6:])  # one addition past the size: the same vectors, in the same order
-    np.testing.assert_array_equal(
-        grown.prefilter_index_.reconstruct_n(0, 18), whole.prefilter_index_.reconstruct_n(0, 18)
+    np.testing.assert_allclose(
+        grown.prefilter_index_.reconstruct_n(0, 18), whole.prefilter_index_.reconstruct_n(0, 18), rtol=1e-6, atol=1e-6
     )
     found = grown.search(motions, 1)[0]
     assert (found[:, 0] == np.arange(len(motions))).all()  # every clip, old or added, finds itself
+    # frame scales without mutual proximity follow the union: the index holds every clip's descriptor at today's
+    small = DTWRetrieval(features=["positions", "relational"], prefilter=4).fit(motions[:6])
+    small.add(motions[6:9])
+    assert not np.array_equal(
+        small.scales_, DTWRetrieval(features=["positions", "relational"]).fit(motions[:6]).scales_
+    )
+    np.testing.assert_allclose(
+        small.prefilter_index_.reconstruct_n(0, 9),
+        small._project(small._descriptors(small.database_)),
+        rtol=1e-5,
+        atol=1e-6,
+    )
