@@ -1,26 +1,15 @@
 """scripts/results/retrieval_within.py: long takes built from clips with known boundaries, and the score of search
 inside them; a clip of the takes, given as the query, is found where it was put."""
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 
 from mocapkit.datasets import read_motion
+from tests.scripts import load_script
 from tests.shared_data import synthetic_hdm05_folder
-
-SCRIPT = Path(__file__).resolve().parents[2] / "scripts" / "results" / "retrieval_within.py"
-
-
-def load_script():
-    spec = importlib.util.spec_from_file_location("retrieval_within", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def test_a_clip_of_the_takes_finds_itself_where_it_was_spliced(tmp_path_factory):
-    script = load_script()
+    script = load_script("scripts/results/retrieval_within.py")
     folder = synthetic_hdm05_folder(tmp_path_factory, ("walk2StepsLstart", "squat1Reps"), max_frames=160)
     paths = sorted(folder.glob("*/*.amc"))
     clips = script.features([read_motion(p) for p in paths])

@@ -1,25 +1,19 @@
 """scripts/selection/select_on_training_subjects.py: every fold trains on the other training subjects and scores the held-out
 one; the benchmark's test subjects appear nowhere; runs already scored are reused."""
 
-import importlib.util
 import json
 import subprocess
 from pathlib import Path
 
 import pytest
 
-SCRIPT = Path(__file__).resolve().parents[2] / "scripts" / "selection" / "select_on_training_subjects.py"
+from tests.scripts import load_script
 
-
-def load_script():
-    spec = importlib.util.spec_from_file_location("select_on_training_subjects", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+SCRIPT = "scripts/selection/select_on_training_subjects.py"
 
 
 def test_folds_hold_out_each_training_subject_and_reuse_scored_runs(tmp_path, monkeypatch):
-    script = load_script()
+    script = load_script(SCRIPT)
     calls = []
 
     def fake_run(cmd, check, stdout, stderr):
@@ -71,7 +65,7 @@ def test_folds_hold_out_each_training_subject_and_reuse_scored_runs(tmp_path, mo
 def test_outer_folds_never_see_their_test_performer_and_pick_the_fewest_wrong(tmp_path, monkeypatch):
     """--outer: one selection per held-out performer, on the other performers only; several seeds are summed; a
     candidate naming another experiment trains it; auto scores best.ckpt only where the run wrote one."""
-    script = load_script()
+    script = load_script(SCRIPT)
     calls = []
     wrong = {"recipe": {"bd": 1, "bk": 3, "dg": 0, "mm": 1}, "ens": {"bd": 0, "bk": 1, "dg": 2, "mm": 0}}
 
@@ -140,7 +134,7 @@ def test_outer_folds_never_see_their_test_performer_and_pick_the_fewest_wrong(tm
 
 
 def test_candidate_needs_a_name():
-    script = load_script()
+    script = load_script(SCRIPT)
     assert script.parse_candidate("x=a=1 b=2") == ("x", ["a=1", "b=2"])
     assert script.parse_candidate("x=") == ("x", [])
     with pytest.raises(Exception, match="NAME=OVERRIDES"):
