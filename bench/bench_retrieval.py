@@ -38,6 +38,7 @@ import argparse
 import gc
 import os
 import platform
+import shutil
 import sys
 import tempfile
 import time
@@ -271,7 +272,7 @@ def private_memory_mb() -> float:
 def build_streamed(dtw, real, size: int, chunk: int, folder: str) -> None:
     """Fit ``dtw`` on the first ``chunk`` clips of the augmented library, move its frames to ``.npy`` files in
     ``folder`` (``store_frames``) and add the rest ``chunk`` clips at a time: no more than ``chunk`` clips' motions
-    and features are in memory at once."""
+    and features are in memory at once. Making the augmented clips is part of the time."""
     from itertools import islice
 
     clips = augmented_clips(real, size, seed=0)
@@ -299,13 +300,16 @@ def dtw_rows(args, real, queries, sizes, rows, query_encode_ms: float) -> None:
         overrides = [p for p in params.split(",") if p]
         for size in [s for s in sizes if s <= args.dtw_max]:
             dtw = make_method(name, overrides)
+            streamed = size > args.chunk
+            lib = None if streamed else augmented(real, size, seed=0)  # (a streamed build augments as it goes)
+            folder = tempfile.mkdtemp(prefix="bench_retrieval_", dir=args.frames_dir) if streamed else None
             start = time.perf_counter()
-            if size > args.chunk:
-                folder = tempfile.mkdtemp(prefix="bench_retrieval_", dir=args.frames_dir)
+            if streamed:
                 build_streamed(dtw, real, size, args.chunk, folder)
             else:
-                dtw.fit(augmented(real, size, seed=0))
+                dtw.fit(lib)
             build_s = time.perf_counter() - start
+            del lib
             gc.collect()
             repeats = min(len(queries), 20 if size <= 1000 or dtw.prefilter else 2)
             times = []
@@ -323,6 +327,9 @@ def dtw_rows(args, real, queries, sizes, rows, query_encode_ms: float) -> None:
                 for candidates in [int(c) for c in args.prefilter_grid.split(",") if c]:
                     grid_row(dtw, candidates, queries[:n], exact, size)
             in_memory, on_disk = method_bytes(dtw)
+            if folder is not None:
+                del dtw  # (its memory maps of the files)
+                shutil.rmtree(folder)
             row = {
                 "size": size,
                 "method": spec,

@@ -410,8 +410,9 @@ def build_index(
         estimator.store_frames(out)
         for part in parts[1:]:
             sequences, more_files, more_skipped, more_landmarks = _read_files(part, estimator, skip_bad, quiet, workers)
-            with _naming_clips(more_files):
-                estimator.add_sequences(sequences)
+            if sequences:  # (a part whose every file was skipped adds nothing)
+                with _naming_clips(more_files):
+                    estimator.add_sequences(sequences)
             files, skipped, landmark_sets = files + more_files, skipped + more_skipped, landmark_sets + more_landmarks
             _progress(f"added: {len(files)} clips in {time.perf_counter() - start:.1f} s", quiet)
     if hasattr(estimator, "heading_concentration_") and np.isfinite(estimator.heading_concentration_):
