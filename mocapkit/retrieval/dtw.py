@@ -288,9 +288,7 @@ class DTWRetrieval(RetrievalMethod):
                 self.prefilter_index_, self.prefilter_kind_, self._project(self._descriptors(new)), self.prefilter_index
             )
         else:  # the scales follow the clips (a library of at most n_reference clips): every descriptor again
-            x = self._descriptors(self.database_)
-            self.prefilter_kind_ = ann.resolved_kind(self.prefilter_index, len(x))
-            self.prefilter_index_ = ann.build(self._project(x), self.prefilter_kind_, metric="l2")
+            self._index_descriptors(self._descriptors(self.database_))
         return self
 
     def store_frames(self, folder: str | os.PathLike) -> DTWRetrieval:
@@ -332,8 +330,13 @@ class DTWRetrieval(RetrievalMethod):
         self.prefilter_mean_ = sample.mean(axis=0)
         _, _, vt = np.linalg.svd(sample - self.prefilter_mean_, full_matrices=False)
         self.prefilter_axes_ = np.ascontiguousarray(vt[:PREFILTER_DIMS].T, dtype=np.float32)  # [d, dims]
-        self.prefilter_kind_ = ann.resolved_kind(self.prefilter_index, len(x))
-        self.prefilter_index_ = ann.build(self._project(x), self.prefilter_kind_, metric="l2")
+        self._index_descriptors(x)
+
+    def _index_descriptors(self, descriptors: np.ndarray) -> None:
+        """``prefilter_index_`` (of the kind ``prefilter_index`` resolves to for their number) over every database
+        clip's ``descriptors``, projected on the learned axes."""
+        self.prefilter_kind_ = ann.resolved_kind(self.prefilter_index, len(descriptors))
+        self.prefilter_index_ = ann.build(self._project(descriptors), self.prefilter_kind_, metric="l2")
 
     def _project(self, descriptors: np.ndarray) -> np.ndarray:
         return (descriptors - self.prefilter_mean_) @ self.prefilter_axes_
