@@ -58,6 +58,7 @@ skeleton as the file gives it, root-centred, resampled to ``fps`` (no landmarks,
 from __future__ import annotations
 
 import os
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -357,9 +358,6 @@ class DTWRetrieval(RetrievalMethod):
             self._project(self._descriptors(encoded)),
             max(int(self.prefilter), k),
         )
-        import os
-        from concurrent.futures import ThreadPoolExecutor
-
         indices, distances = [], []
         # a query's features on their own threads (matrix products and the compiled programme release the GIL)
         threads = min(len(names), os.cpu_count() or 1) if self.parallel else 1
@@ -528,9 +526,6 @@ class DTWRetrieval(RetrievalMethod):
         return d
 
     def _unbanded_distances(self, queries: list[np.ndarray] | RaggedFrames, store: RaggedFrames) -> np.ndarray:
-        import os
-        from concurrent.futures import ThreadPoolExecutor
-
         from tqdm import tqdm
 
         d = np.zeros((len(queries), len(store)))
