@@ -118,6 +118,55 @@ def test_energy_image_is_todays_image(options):
     torch.testing.assert_close(reference_energy_image.reference_like(new)(x), old(x), rtol=0, atol=0)
 
 
+@pytest.mark.parametrize(
+    "options",
+    [
+        {},
+        {"splat": "nearest", "bone_samples": 3},
+        {"size": 24, "extent": 0.8, "temporal_weighting": "linear"},  # most points fall off the grid
+        {"layout": "msr20", "bone_samples": 2, "align": True},
+    ],
+)
+def test_the_compiled_splat_is_the_tensor_splat(options):
+    """Data needing no gradient takes the compiled loop; skeletons that need one take the tensor operations (also
+    what ONNX exports): the same image either way."""
+    joints = 20 if options.get("layout") == "msr20" else 25
+    x = example_skeletons(8, 40, joints=joints)
+    x[2, :, 10:14] = 0.0  # absent frames inside a sequence
+    x[5, 1] = 0.0  # an absent second body
+    energy = energy_image.EnergyImage(**options)
+    compiled = energy(x)
+    tensor = energy(x.clone().requires_grad_()).detach()
+    assert compiled.amax() > 0
+    torch.testing.assert_close(compiled, tensor, rtol=1e-6, atol=1e-6)
+
+
+def test_the_compiled_splat_gives_the_same_image_on_any_number_of_threads(monkeypatch):
+    x = example_skeletons(6, 30)
+    x[1, :, 5:] = 0.0  # a short sample: the parts are cut at sample boundaries, not evenly
+    energy = energy_image.EnergyImage(bone_samples=2, temporal_weighting="linear")
+    monkeypatch.setattr(energy, "ROWS_PER_THREAD", 16)  # several parts even for this small batch
+    threads = torch.get_num_threads()
+    try:
+        images = []
+        for n in (1, 3, 4):
+            torch.set_num_threads(n)
+            images.append(energy(x))
+    finally:
+        torch.set_num_threads(threads)
+    torch.testing.assert_close(images[1], images[0], rtol=0, atol=0)
+    torch.testing.assert_close(images[2], images[0], rtol=0, atol=0)
+    torch.testing.assert_close(images[0], energy(x.clone().requires_grad_()).detach(), rtol=1e-6, atol=1e-6)
+
+
+def test_the_compiled_splat_refuses_points_that_are_not_finite():
+    """(A NaN makes its body-frame absent, as in the tensor path; an infinite coordinate reaches the splat.)"""
+    x = example_skeletons(2, 10)
+    x[1, 0, 3, 7, 2] = float("inf")
+    with pytest.raises(ValueError, match="not finite"):
+        energy_image.EnergyImage(bone_samples=1, align=False, scale=False)(x)
+
+
 def test_energy_image_takes_a_layout_name():
     """``model.energy.layout`` is ``${data.layout}``, a name (experiment=msr3d_energy_vgg)."""
     from mocapkit.motion.layouts import get_layout
