@@ -192,6 +192,8 @@ def train(cfg: DictConfig) -> Path:
             "training and validation both need samples (data.val_fraction=0: no validation)"
         )
     module = build(cfg.module, **datamodule.label_spaces())
+    if cfg.get("compile"):  # in place: the state_dict keeps its names, so checkpoints load into an uncompiled network
+        module.model.compile()
     callbacks = [build(node) for node in (cfg.get("callbacks") or {}).values() if node]
     if not validate:  # nothing to monitor: the run's checkpoint is last.ckpt
         callbacks = [c for c in callbacks if not (isinstance(c, ModelCheckpoint) and c.monitor)]
