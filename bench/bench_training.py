@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 import itertools
 import os
 import platform
@@ -144,9 +145,16 @@ def _reference_energy(cfg_model, model):
     return model
 
 
+def _contiguous_gait_forward(model, geis):
+    """The gait CNN's forward as it was before the channels-last trunk (today's): every tensor contiguous."""
+    embedding = torch.relu(model.shared_fc(model.trunk(geis).flatten(1)))
+    out = {task: head(model.dropout(embedding)) for task, head in model.heads.items()}
+    return {**out, "embedding": embedding}
+
+
 def _gait_cnn(batch: int = 32, torch_lrn: bool = False):
-    """The multi-task gait CNN on random GEIs; ``torch_lrn``: with torch's LocalResponseNorm (today's), same
-    weights (the LRN has none)."""
+    """The multi-task gait CNN on random GEIs; ``torch_lrn``: today's network, with torch's LocalResponseNorm and the
+    contiguous layout, same weights (the LRN has none)."""
 
     def build(compiled: bool = False):
         from hydra.utils import instantiate
@@ -160,6 +168,9 @@ def _gait_cnn(batch: int = 32, torch_lrn: bool = False):
         for name, m in model.trunk.named_children():
             if torch_lrn and isinstance(m, ChannelWindowLRN):
                 setattr(model.trunk, name, torch.nn.LocalResponseNorm(m.size, alpha=m.alpha, beta=m.beta, k=m.k))
+        if torch_lrn:
+            model.trunk.to(memory_format=torch.contiguous_format)
+            model.forward = functools.partial(_contiguous_gait_forward, model)
         optimizer = torch.optim.AdamW(model.parameters(), lr=1e-3)
         h, w = model.input_size
         if compiled:

@@ -98,6 +98,32 @@ def test_the_network_with_torchs_lrn_gives_the_same_outputs():
             torch.testing.assert_close(out, plain(x)[task], rtol=1e-5, atol=1e-6)
 
 
+def test_the_channels_last_trunk_matches_and_loads_contiguous_weights():
+    """The trunk runs channels-last; a contiguous copy of the same weights (a checkpoint written before) loads into it
+    and gives the same outputs and gradients as the network run in the contiguous layout."""
+    torch.manual_seed(0)
+    model = MultiTaskGaitCNN(num_subjects=7, input_size=(64, 44))
+    assert all(
+        m.weight.is_contiguous(memory_format=torch.channels_last) and not m.weight.is_contiguous()
+        for m in model.trunk
+        if isinstance(m, nn.Conv2d) and m.in_channels > 1
+    )
+    plain_state = {k: v.contiguous() for k, v in model.state_dict().items()}
+    contiguous = MultiTaskGaitCNN(num_subjects=7, input_size=(64, 44))
+    contiguous.load_state_dict(plain_state)
+    contiguous.trunk.to(memory_format=torch.contiguous_format)  # the layout before
+    model.load_state_dict(plain_state)  # a checkpoint of contiguous weights loads
+    x, y = torch.rand(4, 1, 64, 44), torch.tensor([0, 3, 6, 1])
+    model.eval(), contiguous.eval()  # no dropout: the same function
+    out, ref = model(x), contiguous(x.contiguous())
+    for task in out:
+        torch.testing.assert_close(out[task], ref[task], rtol=1e-4, atol=1e-5)  # other conv kernels: rounding
+    torch.nn.functional.cross_entropy(out["subject"], y).backward()
+    torch.nn.functional.cross_entropy(ref["subject"], y).backward()
+    for (name, p), (_, q) in zip(model.named_parameters(), contiguous.named_parameters()):
+        torch.testing.assert_close(p.grad, q.grad, rtol=1e-3, atol=1e-5, msg=lambda m, name=name: f"{name}: {m}")
+
+
 def test_outputs_and_embedding():
     torch.manual_seed(0)
     model = multitask_gait_cnn(num_subjects=7, input_size=[64, 44], tasks=["subject", "view", "condition"]).eval()
