@@ -25,8 +25,8 @@ over the batch, differentiable with bilinear splatting, and exports to ONNX
 (ScatterElements with add), so a deployed model takes raw skeletons.
 
 Skeletons on the CPU that need no gradient (training and evaluation data) take a compiled path instead: one
-numba loop over the points (:func:`_splat_rows`) adds the same shares to the same pixels, about three times
-faster than the ~20 tensor operations of the vectorised form. Both paths give the same image to float rounding
+numba loop over the points (:func:`_splat_rows`) adds the same shares to the same pixels, 2.4–3× faster than the
+~20 tensor operations of the vectorised form (whole image, demo batches of 32 and 64). Both paths give the same image to float rounding
 (``tests/models/test_fast_equivalence.py``).
 """
 
@@ -86,7 +86,7 @@ class EnergyImage(nn.Module):
     #: Body-frames splatted per :meth:`splat` call (512 was the fastest of 128-2048 and all at once, on the demo's
     #: training and validation batches).
     ROWS_PER_BLOCK = 512
-    #: Body-frames per thread of the compiled splat, at least (fewer: one thread; a thread costs ~0.1 ms to start).
+    #: Body-frames per thread of the compiled splat, at least (a smaller batch is splatted on one thread).
     ROWS_PER_THREAD = 512
 
     def __init__(

@@ -421,7 +421,7 @@ def write_skeleton(path: str | os.PathLike, seq: SkeletonSequence, newline: str 
 
 def _format_rows(values: np.ndarray, fmt: str) -> list[str]:
     """Each row of ``values`` ``[n, k]`` printed with ``fmt`` (k fields): one ``%`` over all rows, then split
-    (a third of the time of one ``%`` per row)."""
+    (0.6× the time of one ``%`` per row)."""
     if len(values) == 0:
         return []
     return ((fmt + "\n") * len(values) % tuple(values.ravel().tolist())).split("\n")[:-1]
