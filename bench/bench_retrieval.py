@@ -21,6 +21,10 @@ A DTW row may carry parameters after a colon (``dtw_world_frame:prefilter=100,n_
 also reports **recall@10 against the same method's exact search** (every clip ranked, ``--recall-queries`` queries)
 and the memory of what it keeps (the database's feature sequences, the reference statistics and the FAISS index).
 
+``--fresh-query`` also saves each DTW row's fitted method as an index folder (``mocapkit index``'s format) and times
+the same queries in a **new process that loads it** (what ``mocapkit search`` does): query p50 / p95 on a first and
+a second pass, and that process's memory (private, file-backed, peak), without what building left behind.
+
 Each size prints DTW / embedding latency as a ratio, in the same run (without ``--onnx``, the DTW rows alone, the
 prefiltered one against the same method's exact search). A PNG of latency against size goes beside the results
 (``--plot``).
@@ -30,6 +34,8 @@ prefiltered one against the same method's exact search). A PNG of latency agains
         --dtw-methods "dtw_world_frame:n_reference=128;dtw_world_frame:n_reference=128,prefilter=100;dtw_large" --plot ""
     OMP_NUM_THREADS=1 .venv/bin/python bench/bench_retrieval.py --sizes 100000 --dtw-max 100000 --kernel-clips 0 \
         --dtw-methods dtw_large --prefilter-grid 100,300,600,1000 --plot ""
+    OMP_NUM_THREADS=1 .venv/bin/python bench/bench_retrieval.py --sizes 100000 --dtw-max 100000 --kernel-clips 0 \
+        --dtw-methods dtw_large --chunk 50000 --fresh-query --plot ""
 """
 
 from __future__ import annotations
@@ -121,7 +127,16 @@ def main() -> None:
         default=2000,
         help="clips for the DTW kernel comparison (mocapkit's against dtaidistance's, one query); 0: skip it",
     )
+    parser.add_argument(
+        "--fresh-query",
+        action="store_true",
+        help="also time each DTW row's queries in a new process that loads the row's index from disk",
+    )
+    parser.add_argument("--query-index", default=None, help=argparse.SUPPRESS)  # the new process's own mode
     args = parser.parse_args()
+    if args.query_index:
+        query_saved_index(args.query_index)
+        return
 
     import faiss
 
@@ -257,16 +272,71 @@ def method_bytes(method) -> tuple[int, int]:
     )
 
 
-def private_memory_mb() -> float:
+def private_memory_mb(field: str = "RssAnon") -> float:
     """This process's resident memory not backed by files (``RssAnon``; memory-mapped frames read from disk are
-    the kernel's page cache, given back under pressure), MB; NaN where /proc is absent."""
+    the kernel's page cache, given back under pressure), or another memory line of ``/proc/self/status``
+    (``RssFile``, ``VmHWM``: the peak), MB; NaN where /proc is absent."""
     try:
         for line in Path("/proc/self/status").read_text().splitlines():
-            if line.startswith("RssAnon:"):
+            if line.startswith(f"{field}:"):
                 return int(line.split()[1]) / 1024
     except OSError:
         pass
     return float("nan")
+
+
+def fresh_query(dtw, spec: str, queries, folder: str) -> dict:
+    """Save ``dtw`` as an index in ``folder`` (frames already there stay where they are) and time ``queries`` in a
+    new process that loads it (:func:`query_saved_index`); its JSON report."""
+    import json
+    import pickle
+    import subprocess
+
+    from mocapkit.retrieval.index import MotionIndex
+
+    name = spec.partition(":")[0]
+    files = [{"path": f"clip{i}"} for i in range(dtw.n_database_)]
+    MotionIndex(name, dtw, files, landmarks=[], skipped=[]).save(folder)
+    with open(Path(folder) / "bench_queries.pkl", "wb") as handle:
+        pickle.dump(list(queries), handle)
+    done = subprocess.run(
+        [sys.executable, __file__, "--query-index", folder], capture_output=True, text=True, check=True
+    )
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def query_saved_index(folder: str) -> None:
+    """The new process of :func:`fresh_query`: load the index, search each query twice (a first pass, then a second
+    with whatever the first left in the page cache), print one JSON line."""
+    import json
+    import pickle
+
+    import faiss
+
+    from mocapkit.retrieval.index import MotionIndex
+
+    faiss.omp_set_num_threads(1)
+    with open(Path(folder) / "bench_queries.pkl", "rb") as handle:
+        queries = pickle.load(handle)
+    start = time.perf_counter()
+    method = MotionIndex.load(folder).method
+    load_s = time.perf_counter() - start
+    loaded_mb = private_memory_mb()
+    passes = []
+    for _ in range(2):
+        times = []
+        for query in queries:
+            start = time.perf_counter()
+            method.search([query], 10)
+            times.append(1000 * (time.perf_counter() - start))
+        passes.append(times)
+    report = {"load_s": load_s, "private_after_load_mb": loaded_mb}
+    for label, times in zip(("first", "second"), passes):
+        report[f"{label}_p50_ms"], report[f"{label}_p95_ms"] = float(np.median(times)), float(np.percentile(times, 95))
+    report.update(
+        private_mb=private_memory_mb(), file_backed_mb=private_memory_mb("RssFile"), peak_mb=private_memory_mb("VmHWM")
+    )
+    print(json.dumps(report))
 
 
 def build_streamed(dtw, real, size: int, chunk: int, folder: str) -> None:
@@ -327,6 +397,18 @@ def dtw_rows(args, real, queries, sizes, rows, query_encode_ms: float) -> None:
                 for candidates in [int(c) for c in args.prefilter_grid.split(",") if c]:
                     grid_row(dtw, candidates, queries[:n], exact, size)
             in_memory, on_disk = method_bytes(dtw)
+            fresh = None
+            if args.fresh_query:
+                folder = folder or tempfile.mkdtemp(prefix="bench_retrieval_", dir=args.frames_dir)
+                fresh = fresh_query(dtw, spec, queries[: min(len(queries), 20)], folder)
+                print(
+                    f"size {size:>8}:   {spec} in a new process loading the index ({fresh['load_s']:.1f} s): "
+                    f"query p50 {fresh['first_p50_ms']:.1f} ms (p95 {fresh['first_p95_ms']:.1f}) on a first pass, "
+                    f"{fresh['second_p50_ms']:.1f} ms (p95 {fresh['second_p95_ms']:.1f}) on a second; memory "
+                    f"{fresh['private_mb']:.0f} MB private ({fresh['private_after_load_mb']:.0f} MB after loading), "
+                    f"{fresh['file_backed_mb']:.0f} MB of mapped files resident, peak {fresh['peak_mb']:.0f} MB",
+                    flush=True,
+                )
             if folder is not None:
                 del dtw  # (its memory maps of the files)
                 shutil.rmtree(folder)
@@ -340,6 +422,7 @@ def dtw_rows(args, real, queries, sizes, rows, query_encode_ms: float) -> None:
                 "disk_mb": on_disk / 2**20,
                 "process_mb": private_mb,
                 "recall@10": recall,
+                "fresh": fresh,
             }
             rows.append(row)
             flat = next((r for r in rows if r["size"] == size and r["method"] == "embedding/flat"), None)
