@@ -33,7 +33,6 @@ numba loop over the points (:func:`_splat_rows`) adds the same shares to the sam
 from __future__ import annotations
 
 import math
-from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import torch
@@ -86,8 +85,6 @@ class EnergyImage(nn.Module):
     #: Body-frames splatted per :meth:`splat` call (512 was the fastest of 128-2048 and all at once, on the demo's
     #: training and validation batches).
     ROWS_PER_BLOCK = 512
-    #: Body-frames per thread of the compiled splat, at least (a smaller batch is splatted on one thread).
-    ROWS_PER_THREAD = 512
 
     def __init__(
         self,
@@ -269,48 +266,31 @@ class EnergyImage(nn.Module):
 
     def _splat_compiled(self, rows: torch.Tensor, weight: torch.Tensor, sample: torch.Tensor, n: int) -> torch.Tensor:
         """:meth:`splat` of every point of ``rows`` ``[R, J, 3]`` (with the bone points) by :func:`_splat_rows`:
-        the histograms ``[n, 3, size, size]`` (float32, CPU, no gradient).
-
-        The rows are cut at sample boundaries into one part per torch thread (the loop releases the GIL): each
-        part adds to its own samples' histograms only, in the order a single loop would, so the image does not
-        depend on the number of threads."""
+        the histograms ``[n, 3, size, size]`` (float32, CPU, no gradient). One thread: split over two, the loop
+        ran 1.8x faster on its own but the whole image at most 1.1x (2 cores; torch's threads, just used by the
+        steps before it, likely still spin on the other)."""
         wide = self.size + 4
         bordered = np.zeros(n * 3 * wide * wide, dtype=np.float32)
-        rows_np = rows.detach().to(torch.float32).contiguous().numpy()
-        weight_np = weight.detach().to(torch.float32).contiguous().numpy()
-        sample_np = sample.contiguous().numpy()  # non-decreasing: rows are ordered sample by sample
-
-        def splat_part(part: slice) -> int:
-            return _splat_rows(
-                bordered,
-                rows_np[part],
-                weight_np[part],
-                sample_np[part],
-                self.bone_child.numpy(),
-                self.bone_parent.numpy(),
-                self.bone_fractions.numpy(),
-                _COLUMN_AXES,
-                _ROW_AXES,
-                self.size,
-                self.extent,
-                self.splat_mode == "nearest",
-            )
-
-        parts = min(torch.get_num_threads(), len(rows_np) // self.ROWS_PER_THREAD)
-        if parts > 1:
-            cuts = [len(rows_np) * k // parts for k in range(parts + 1)]
-            starts = np.searchsorted(sample_np, sample_np[cuts[1:-1]])  # moved back to the first row of a sample
-            bounds = [0, *starts.tolist(), len(rows_np)]
-            with ThreadPoolExecutor(parts) as pool:
-                bad = sum(pool.map(splat_part, [slice(a, b) for a, b in zip(bounds, bounds[1:])]))
-        else:
-            bad = splat_part(slice(None))
+        bad = _splat_rows(
+            bordered,
+            rows.detach().to(torch.float32).contiguous().numpy(),
+            weight.detach().to(torch.float32).contiguous().numpy(),
+            sample.contiguous().numpy(),
+            self.bone_child.numpy(),
+            self.bone_parent.numpy(),
+            self.bone_fractions.numpy(),
+            _COLUMN_AXES,
+            _ROW_AXES,
+            self.size,
+            self.extent,
+            self.splat_mode == "nearest",
+        )
         if bad:
             raise ValueError(f"energy image: {bad} skeleton points are not finite (NaN or infinite coordinates)")
         return torch.from_numpy(bordered).view(n, 3, wide, wide)[:, :, 2:-2, 2:-2]
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def _splat_rows(  # pragma: no cover - compiled by numba
     bordered, rows, weight, sample, bone_child, bone_parent, fractions, column_axes, row_axes, size, extent, nearest
 ):

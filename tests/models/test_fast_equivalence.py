@@ -141,24 +141,6 @@ def test_the_compiled_splat_is_the_tensor_splat(options):
     torch.testing.assert_close(compiled, tensor, rtol=1e-6, atol=1e-6)
 
 
-def test_the_compiled_splat_gives_the_same_image_on_any_number_of_threads(monkeypatch):
-    x = example_skeletons(6, 30)
-    x[1, :, 5:] = 0.0  # a short sample: the parts are cut at sample boundaries, not evenly
-    energy = energy_image.EnergyImage(bone_samples=2, temporal_weighting="linear")
-    monkeypatch.setattr(energy, "ROWS_PER_THREAD", 16)  # several parts even for this small batch
-    threads = torch.get_num_threads()
-    try:
-        images = []
-        for n in (1, 3, 4):
-            torch.set_num_threads(n)
-            images.append(energy(x))
-    finally:
-        torch.set_num_threads(threads)
-    torch.testing.assert_close(images[1], images[0], rtol=0, atol=0)
-    torch.testing.assert_close(images[2], images[0], rtol=0, atol=0)
-    torch.testing.assert_close(images[0], energy(x.clone().requires_grad_()).detach(), rtol=1e-6, atol=1e-6)
-
-
 def test_the_compiled_splat_refuses_points_that_are_not_finite():
     """(A NaN makes its body-frame absent, as in the tensor path; an infinite coordinate reaches the splat.)"""
     x = example_skeletons(2, 10)
