@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import functools
 import itertools
 import os
 import platform
@@ -145,13 +144,6 @@ def _reference_energy(cfg_model, model):
     return model
 
 
-def _contiguous_gait_forward(model, geis):
-    """The gait CNN's forward as it was before the channels-last trunk (today's): every tensor contiguous."""
-    embedding = torch.relu(model.shared_fc(model.trunk(geis).flatten(1)))
-    out = {task: head(model.dropout(embedding)) for task, head in model.heads.items()}
-    return {**out, "embedding": embedding}
-
-
 def _gait_cnn(batch: int = 32, torch_lrn: bool = False):
     """The multi-task gait CNN on random GEIs; ``torch_lrn``: today's network, with torch's LocalResponseNorm and the
     contiguous layout, same weights (the LRN has none)."""
@@ -169,8 +161,7 @@ def _gait_cnn(batch: int = 32, torch_lrn: bool = False):
             if torch_lrn and isinstance(m, ChannelWindowLRN):
                 setattr(model.trunk, name, torch.nn.LocalResponseNorm(m.size, alpha=m.alpha, beta=m.beta, k=m.k))
         if torch_lrn:
-            model.trunk.to(memory_format=torch.contiguous_format)
-            model.forward = functools.partial(_contiguous_gait_forward, model)
+            model = reference("gait_cnn").make_contiguous(model)
         optimizer = torch.optim.AdamW(model.parameters(), lr=1e-3)
         h, w = model.input_size
         if compiled:

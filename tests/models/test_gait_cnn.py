@@ -7,6 +7,7 @@ import torch
 from torch import nn
 
 from mocapkit.models.gait_cnn import ChannelWindowLRN, MultiTaskGaitCNN, multitask_gait_cnn
+from tests.models import reference_gait_cnn
 
 #: Thesis Table 6.1 at 124×124: (layer, channels, spatial size).
 TABLE_6_1 = [("c1", 24, 114), ("pool1", 24, 57), ("c2", 32, 52), ("pool2", 32, 26), ("c3", 40, 22), ("pool3", 40, 11)]
@@ -111,14 +112,11 @@ def test_the_channels_last_trunk_matches_and_loads_contiguous_weights():
     plain_state = {k: v.contiguous() for k, v in model.state_dict().items()}
     contiguous = MultiTaskGaitCNN(num_subjects=7, input_size=(64, 44))
     contiguous.load_state_dict(plain_state)
-    contiguous.trunk.to(memory_format=torch.contiguous_format)  # the layout before
+    contiguous = reference_gait_cnn.make_contiguous(contiguous)  # the layout before
     model.load_state_dict(plain_state)  # a checkpoint of contiguous weights loads
     x, y = torch.rand(4, 1, 64, 44), torch.tensor([0, 3, 6, 1])
     model.eval(), contiguous.eval()  # no dropout: the same function
-    out = model(x)
-    # the forward before: contiguous weights and a contiguous input all the way
-    embedding = torch.relu(contiguous.shared_fc(contiguous.trunk(x).flatten(1)))
-    ref = {task: head(embedding) for task, head in contiguous.heads.items()} | {"embedding": embedding}
+    out, ref = model(x), contiguous(x)
     assert set(ref) == set(out)
     for task in out:
         torch.testing.assert_close(out[task], ref[task], rtol=1e-4, atol=1e-5)  # other conv kernels: rounding

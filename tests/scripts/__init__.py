@@ -1,4 +1,5 @@
-"""Tests of the product scripts under ``scripts/`` (not a package: :func:`load_script` imports one by its path)."""
+"""Tests of the product scripts under ``scripts/`` and of the benchmarks' own modes (neither is a package:
+:func:`load_script` imports one by its path)."""
 
 import importlib.util
 from pathlib import Path
