@@ -272,7 +272,7 @@ def method_bytes(method) -> tuple[int, int]:
     )
 
 
-def private_memory_mb(field: str = "RssAnon") -> float:
+def process_memory_mb(field: str = "RssAnon") -> float:
     """This process's resident memory not backed by files (``RssAnon``; memory-mapped frames read from disk are
     the kernel's page cache, given back under pressure), or another memory line of ``/proc/self/status``
     (``RssFile``, ``VmHWM``: the peak), MB; NaN where /proc is absent."""
@@ -321,7 +321,7 @@ def query_saved_index(folder: str) -> None:
     start = time.perf_counter()
     method = MotionIndex.load(folder).method
     load_s = time.perf_counter() - start
-    loaded_mb = private_memory_mb()
+    loaded_mb = process_memory_mb()
     passes = []
     for _ in range(2):
         times = []
@@ -334,7 +334,7 @@ def query_saved_index(folder: str) -> None:
     for label, times in zip(("first", "second"), passes):
         report[f"{label}_p50_ms"], report[f"{label}_p95_ms"] = float(np.median(times)), float(np.percentile(times, 95))
     report.update(
-        private_mb=private_memory_mb(), file_backed_mb=private_memory_mb("RssFile"), peak_mb=private_memory_mb("VmHWM")
+        private_mb=process_memory_mb(), file_backed_mb=process_memory_mb("RssFile"), peak_mb=process_memory_mb("VmHWM")
     )
     print(json.dumps(report))
 
@@ -354,7 +354,7 @@ def build_streamed(dtw, real, size: int, chunk: int, folder: str) -> None:
         del batch  # before the next part is made: one part's motions in memory at a time
         print(
             f"  built {dtw.n_database_:,} / {size:,} clips in {time.perf_counter() - start:.0f} s "
-            f"({private_memory_mb():.0f} MB private)",
+            f"({process_memory_mb():.0f} MB private)",
             flush=True,
         )
 
@@ -387,7 +387,7 @@ def dtw_rows(args, real, queries, sizes, rows, query_encode_ms: float) -> None:
                 start = time.perf_counter()
                 dtw.search([queries[i]], 10)
                 times.append(1000 * (time.perf_counter() - start))
-            private_mb = private_memory_mb()
+            private_mb = process_memory_mb()
             recall = None
             if dtw.prefilter:
                 n = min(args.recall_queries, len(queries))
