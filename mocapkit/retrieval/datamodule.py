@@ -22,6 +22,13 @@ to ``frames``, a rotation about the vertical (±``rotation_deg``), a scale (``sc
 landmark (``jitter`` metres). There is no left/right mirroring: HDM05's classes have sides. Each training clip
 appears ``repeats`` times per epoch.
 
+What the second view shows (``positives``), without labels either way:
+
+- ``same_clip``: the same clip (SimCLR's two views);
+- ``dtw_neighbours``: the clip or one of its ``neighbours`` nearest training clips by DTW, drawn uniformly at each
+  access (:func:`dtw_neighbours`). The embedding then learns DTW's neighbourhoods, not only the augmentations:
+  a distillation of the label-free DTW search into an encoder that FAISS searches in milliseconds.
+
 Validation and test items are the clips as they are (no augmentation), each flagged as a *query* or a *database*
 clip, so that one loader gives a retrieval task:
 
@@ -52,11 +59,14 @@ from mocapkit.datasets.mocap.folders import MocapFolderError, held_out_groups
 from mocapkit.motion.geometry import normalised_landmarks
 from mocapkit.motion.layouts import LANDMARK_NAMES
 from mocapkit.retrieval.embedding import resample_frames
+from mocapkit.retrieval.frames import RaggedFrames, candidate_dtw
 
 DATASETS = ("hdm05", "bandai", "msr")
 #: Labels each data set offers (``class`` is the first one's alias).
 LABELS = {"hdm05": ("class",), "bandai": ("content", "style"), "msr": ("action",)}
 AUGMENT_KEYS = ("crop", "rotation_deg", "scale", "jitter")
+#: ``data.positives``: what the second view of a training clip shows (module docstring).
+POSITIVES = ("same_clip", "dtw_neighbours")
 
 
 @dataclass
@@ -124,8 +134,26 @@ def augment(
     return x.astype(np.float32)
 
 
+def dtw_neighbours(clips: list[Clip], k: int) -> np.ndarray:
+    """int64 ``[n, k]``: each clip's ``k`` nearest other clips (nearest first) by DTW on its normalised landmarks
+    flattened to ``[T, 60]``, each distance divided by ``sqrt(T_a + T_b)``: ``dtw_positions``' distance. Labels
+    are never read. ``O(n^2)`` DTW: about a second for HDM05's 200 clips."""
+    n = len(clips)
+    if not 1 <= int(k) < n:
+        raise ValueError(f"data.neighbours={k}: between 1 and the training clips less one ({n - 1})")
+    frames = RaggedFrames.from_list([c.landmarks.reshape(len(c.landmarks), -1) for c in clips])
+    lengths = frames.lengths.astype(np.float64)
+    distances = np.empty((n, n))
+    for i in range(n):
+        distances[i] = candidate_dtw(frames[i], frames) / np.sqrt(lengths[i] + lengths)
+    np.fill_diagonal(distances, np.inf)
+    return np.argsort(distances, axis=1, kind="stable")[:, : int(k)]
+
+
 class TwoViews(Dataset):
-    """Training clips, ``repeats`` times each, as two freshly augmented views."""
+    """Training clips, ``repeats`` times each, as two freshly augmented views: of the clip itself, or the second
+    of the clip or one of its ``partners`` (``[n, k]`` clip indices, e.g. :func:`dtw_neighbours`), drawn
+    uniformly."""
 
     def __init__(
         self,
@@ -136,10 +164,12 @@ class TwoViews(Dataset):
         repeats: int = 1,
         seed: int = 0,
         augmentation: dict | None = None,
+        partners: np.ndarray | None = None,
     ):
         self.clips, self.labels, self.groups = clips, labels, groups
         self.frames, self.repeats, self.seed, self.calls = frames, max(1, int(repeats)), seed, 0
         self.augmentation = dict(augmentation or {})
+        self.partners = partners
 
     def __len__(self) -> int:
         return len(self.clips) * self.repeats
@@ -148,10 +178,11 @@ class TwoViews(Dataset):
         self.calls += 1
         rng = np.random.default_rng([self.seed, self.calls, index])
         i = index % len(self.clips)
-        sequence = self.clips[i].landmarks
+        first = augment(self.clips[i].landmarks, self.frames, rng, **self.augmentation)
+        j = i if self.partners is None else int(rng.choice(np.append(self.partners[i], i)))
         return {
-            "landmarks": torch.from_numpy(augment(sequence, self.frames, rng, **self.augmentation)),
-            "view2": torch.from_numpy(augment(sequence, self.frames, rng, **self.augmentation)),
+            "landmarks": torch.from_numpy(first),
+            "view2": torch.from_numpy(augment(self.clips[j].landmarks, self.frames, rng, **self.augmentation)),
             "label": torch.tensor(self.labels[i]),
             "group": torch.tensor(self.groups[i]),
             "index": torch.tensor(i),
@@ -206,6 +237,8 @@ class RetrievalDataModule(L.LightningDataModule):
         frames: frames per item (every clip is resampled to it). fps, heading: of
             :func:`~mocapkit.motion.geometry.normalised_landmarks`.
         repeats: times each training clip is drawn per epoch (a fresh augmentation each time).
+        positives: ``"same_clip"`` or ``"dtw_neighbours"`` (the second view's clip; module docstring).
+        neighbours: with ``dtw_neighbours``, how many nearest training clips may give the second view.
         augmentation: ``crop`` [min, max] fraction, ``rotation_deg``, ``scale`` [min, max], ``jitter`` (metres).
         batch_size, eval_batch_size, num_workers: the loaders'.
         split_seed: seed of the validation draw. seed: the run's seed (``mocapkit train`` passes it): augmentations.
@@ -224,6 +257,8 @@ class RetrievalDataModule(L.LightningDataModule):
         fps: float = 30.0,
         heading: str = "frame",
         repeats: int = 1,
+        positives: str = "same_clip",
+        neighbours: int = 5,
         augmentation: dict | None = None,
         batch_size: int = 64,
         eval_batch_size: int = 128,
@@ -237,6 +272,9 @@ class RetrievalDataModule(L.LightningDataModule):
             raise ValueError(f"data.frames={frames}: at least 8")
         if not 0.0 < float(val_fraction) < 1.0:
             raise ValueError(f"data.val_fraction={val_fraction}: a fraction in (0, 1)")
+        if positives not in POSITIVES:
+            raise ValueError(f"data.positives={positives!r}: one of {list(POSITIVES)}")
+        self.positives, self.neighbours = positives, int(neighbours)
         self.augmentation = dict(augmentation or {})
         if set(self.augmentation) - set(AUGMENT_KEYS):
             raise ValueError(
@@ -288,6 +326,8 @@ class RetrievalDataModule(L.LightningDataModule):
                 "frames": self.frames,
                 "fps": self.fps,
                 "heading": self.heading,
+                "positives": self.positives,
+                "neighbours": self.neighbours if self.positives == "dtw_neighbours" else None,
                 "landmark_names": list(LANDMARK_NAMES),
             },
         }
@@ -328,9 +368,20 @@ class RetrievalDataModule(L.LightningDataModule):
     def dataset(self, part: str) -> Dataset:
         if not hasattr(self, "_datasets"):
             labels, groups = self._arrays(self.train_clips)
+            partners = None
+            if self.positives == "dtw_neighbours":
+                print(f"[mocapkit] DTW neighbours of {len(self.train_clips)} training clips", flush=True)
+                partners = dtw_neighbours(self.train_clips, self.neighbours)
             self._datasets = {
                 "train": TwoViews(
-                    self.train_clips, labels, groups, self.frames, self.repeats, self.seed, self.augmentation
+                    self.train_clips,
+                    labels,
+                    groups,
+                    self.frames,
+                    self.repeats,
+                    self.seed,
+                    self.augmentation,
+                    partners,
                 ),
                 "val": self._retrieval(self.val_clips, self.train_clips),
                 "test": self._retrieval(self.test_clips, [*self.train_clips, *self.val_clips]),
@@ -363,6 +414,7 @@ __all__ = [
     "RetrievalDataModule",
     "TwoViews",
     "augment",
+    "dtw_neighbours",
     "read_labelled_clips",
     "stratified_split",
 ]

@@ -158,6 +158,60 @@ def test_datamodule_holds_out_groups_and_stratifies_validation():
     assert RetrievalDataModule(clips=_clips()).groups["test"] == ["a"]  # null: the first group
 
 
+def _movement(family: int, length: int, phase: float) -> np.ndarray:
+    """``[length, 20, 3]``: every landmark follows family ``family``'s curve (a sine of 1, 2 or 3 cycles per clip)
+    started at ``phase``; clips of one family differ in length and phase, so only a warping compares them well."""
+    t = np.linspace(0.0, 1.0, length)[:, None, None]
+    offsets = np.linspace(0.0, 1.0, 60).reshape(1, 20, 3)
+    return np.sin(2 * np.pi * (family + 1) * t + phase + offsets).astype(np.float32)
+
+
+def test_dtw_neighbours_are_the_nearest_clips_by_dtw_and_never_the_clip_itself():
+    from mocapkit.retrieval.datamodule import Clip, dtw_neighbours
+
+    rng = np.random.default_rng(0)
+    families = np.repeat([0, 1, 2], 4)
+    clips = [
+        Clip(_movement(f, int(rng.integers(20, 50)), rng.uniform(0, 0.3)), "?", "g", str(i))
+        for i, f in enumerate(families)
+    ]
+    neighbours = dtw_neighbours(clips, 3)
+    assert neighbours.shape == (12, 3)
+    assert not np.any(neighbours == np.arange(12)[:, None])
+    assert np.all(families[neighbours] == families[:, None])  # the 3 other clips of its family, labels unread
+    with pytest.raises(ValueError, match="data.neighbours=12"):
+        dtw_neighbours(clips, 12)
+
+
+def test_dtw_neighbour_positives_draw_the_second_view_from_the_clip_or_its_neighbours():
+    from mocapkit.retrieval.datamodule import Clip, RetrievalDataModule
+
+    # each clip a constant value, so a view (no augmentation) says which clip it came from
+    clips = [
+        Clip(np.full((int(10 + 3 * i), 20, 3), float(i), np.float32), "xy"[i % 2], "ab"[i // 8], str(i))
+        for i in range(16)
+    ]
+    still = {"crop": [1.0, 1.0], "rotation_deg": 0.0, "scale": [1.0, 1.0], "jitter": 0.0}
+    dm = RetrievalDataModule(
+        clips=clips, test_groups=["b"], frames=8, positives="dtw_neighbours", neighbours=2, augmentation=still
+    )
+    values = [float(c.landmarks[0, 0, 0]) for c in dm.train_clips]
+    train = dm.dataset("train")
+    assert dm.label_spaces()["source"]["positives"] == "dtw_neighbours"
+    seen = set()
+    for _ in range(20):
+        for i in range(len(train)):
+            item = train[i]
+            first, second = float(item["landmarks"][0, 0, 0]), float(item["view2"][0, 0, 0])
+            assert first == values[i]
+            j = values.index(second)
+            assert j == i or j in train.partners[i]
+            seen.add(j == i)
+    assert seen == {True, False}  # both the clip itself and its neighbours give second views
+    with pytest.raises(ValueError, match="data.positives='labels'"):
+        RetrievalDataModule(clips=clips, positives="labels")
+
+
 def test_retrieval_scores_by_hand():
     from mocapkit.retrieval.module import retrieval_loss, retrieval_scores
 
