@@ -13,6 +13,9 @@ dataset     label (``label``)                    group (held out by ``test_group
 ``bandai``  ``content`` (= ``class``) or         no actor is known: the **style** when the label is the
             ``style``                            content, the **content** when the label is the style
 ``msr``     ``action`` (= ``class``)             the subject (``"1"`` ... ``"10"``)
+``folder``  ``class``: the file's sub-folder     ``library``, one group: nothing is held out unless
+            under ``root`` (``.`` at the top)    asked; a user's own library, any readable format, to
+                                                 train a self-supervised embedding on what it will index
 ==========  ===================================  =====================================================
 
 Every clip becomes ``frames`` frames by :func:`~mocapkit.retrieval.embedding.resample_frames` (what
@@ -61,9 +64,9 @@ from mocapkit.motion.layouts import LANDMARK_NAMES
 from mocapkit.retrieval.embedding import resample_frames
 from mocapkit.retrieval.frames import RaggedFrames, candidate_dtw
 
-DATASETS = ("hdm05", "bandai", "msr")
+DATASETS = ("hdm05", "bandai", "msr", "folder")
 #: Labels each data set offers (``class`` is the first one's alias).
-LABELS = {"hdm05": ("class",), "bandai": ("content", "style"), "msr": ("action",)}
+LABELS = {"hdm05": ("class",), "bandai": ("content", "style"), "msr": ("action",), "folder": ("folder",)}
 AUGMENT_KEYS = ("crop", "rotation_deg", "scale", "jitter")
 #: ``data.positives``: what the second view of a training clip shows (module docstring).
 POSITIVES = ("same_clip", "dtw_neighbours")
@@ -96,6 +99,8 @@ def read_labelled_clips(
             Clip(normalised_landmarks(m, fps=fps, heading=heading), ACTION_NAMES[int(a) - 1], str(int(s)), name)
             for m, a, s, name in zip(data.motions, data.actions, data.subjects, data.names)
         ]
+    if dataset == "folder":
+        return read_folder_clips(root, fps, heading)
     from mocapkit.datasets.mocap.folders import list_clips, read_clips
 
     clips = list_clips(dataset, root)
@@ -108,6 +113,37 @@ def read_labelled_clips(
             out.append(Clip(landmarks, clip["group"], clip["class"], clip["name"]))
         else:
             out.append(Clip(landmarks, clip["class"], clip["group"], clip["name"]))
+    return out
+
+
+def read_folder_clips(root: str, fps: float = 30.0, heading: str = "frame") -> list[Clip]:
+    """Every motion file under ``root`` (any format :func:`~mocapkit.datasets.formats.motion_io.read_motion` reads,
+    skeletons mixed) as a :class:`Clip`: label = its sub-folder under ``root`` (``"."`` at the top), group
+    ``"library"``.
+
+    Raises:
+        MocapFolderError: no such folder, no motion file in it, or a file that does not read (names the file).
+    """
+    from pathlib import Path
+
+    from mocapkit.datasets.formats.motion_io import find_motion_files, read_motion
+
+    folder = Path(root)
+    if not folder.is_dir():
+        raise MocapFolderError(f"data.root={str(root)!r} is not a folder")
+    paths = find_motion_files(folder)
+    if not paths:
+        raise MocapFolderError(f"data.root={str(root)!r}: no motion file under it (BVH, ASF/AMC, C3D, Kinect)")
+    print(f"[mocapkit] reading {len(paths)} motion files under {root}", flush=True)
+    out = []
+    for n, path in enumerate(paths, 1):
+        try:
+            landmarks = normalised_landmarks(read_motion(path), fps=fps, heading=heading)
+        except Exception as exc:
+            raise MocapFolderError(f"cannot read {path}: {exc}") from exc
+        out.append(Clip(landmarks, path.parent.relative_to(folder).as_posix(), "library", path.stem))
+        if n % 50 == 0 or n == len(paths):
+            print(f"[mocapkit] read {n}/{len(paths)} files", flush=True)
     return out
 
 
@@ -229,7 +265,7 @@ class RetrievalDataModule(L.LightningDataModule):
     """Labelled clips for the motion embeddings; see the module docstring.
 
     Args:
-        dataset: ``"hdm05"``, ``"bandai"`` or ``"msr"``. root: its folder.
+        dataset: ``"hdm05"``, ``"bandai"``, ``"msr"`` or ``"folder"`` (any library). root: its folder.
         label: ``"class"`` (each data set's own class), Bandai ``"content"`` or ``"style"``, MSR ``"action"``.
         test_groups: groups (performers) held out for testing; None: the first group in sorted order; ``[]``: none.
         train_groups: groups to train on; None: every group not held out.
@@ -299,6 +335,8 @@ class RetrievalDataModule(L.LightningDataModule):
         if not clips:
             raise ValueError("no clip")
         groups = sorted({c.group for c in clips})
+        if dataset == "folder" and test_groups is None:  # a user's library: the embedding indexes what it trains on
+            test_groups = []
         train, test = held_out_groups(groups, test_groups, train_groups, dataset, root)
         self.groups = {"train": train, "test": test, "all": groups}
         train_clips = [c for c in clips if c.group in train]
@@ -415,6 +453,7 @@ __all__ = [
     "TwoViews",
     "augment",
     "dtw_neighbours",
+    "read_folder_clips",
     "read_labelled_clips",
     "stratified_split",
 ]

@@ -1,7 +1,8 @@
 """Retrieval by a learned motion embedding: a trained encoder, cosine similarity and a FAISS index.
 
 :class:`EmbeddingRetrieval` encodes every clip with a network trained by ``mocapkit train
-experiment=retrieval_supcon`` (or ``retrieval_simclr``; :mod:`mocapkit.retrieval.module`) into a unit-norm
+experiment=retrieval_supcon`` (or, without labels, ``retrieval_dtw_neighbours`` or ``retrieval_simclr``;
+:mod:`mocapkit.retrieval.module`) into a unit-norm
 vector and ranks the database by cosine similarity (distance ``1 − cos``):
 
 - ``checkpoint="RUN/best.ckpt"``: the run's network in PyTorch; a list of runs: ``fit`` picks the run whose held-out
@@ -122,7 +123,8 @@ class EmbeddingRetrieval(RetrievalMethod):
         if "mocapkit_embedding" not in meta:
             raise ValueError(
                 f"{path}: not a mocapkit embedding export (no mocapkit_embedding metadata); export one with"
-                " `mocapkit export ckpt_path=RUN/best.ckpt` of a retrieval_supcon / retrieval_simclr run"
+                " `mocapkit export ckpt_path=RUN/best.ckpt` of a retrieval embedding run (experiment=retrieval_supcon,"
+                " retrieval_dtw_neighbours or retrieval_simclr)"
             )
         self.model_info_ = json.loads(meta["mocapkit_embedding"])
         self._predict = lambda x: session.run(["embedding"], {"landmarks": x})[0]

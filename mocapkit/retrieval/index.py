@@ -82,7 +82,8 @@ def make_method(name: str, overrides: Sequence[str] = (), ckpt: str | os.PathLik
 
     overrides = list(overrides)
     if ckpt is not None:
-        if "checkpoint" not in method_config("retrieval", name):
+        # keys(): ``in`` on an OmegaConf node is False for a key whose value is missing (``???``), as embedding's is
+        if "checkpoint" not in method_config("retrieval", name).keys():
             raise RetrievalIndexError(f"--ckpt is for --method embedding; {name} needs no trained model")
         path = str(Path(ckpt).resolve()).replace("\\", "\\\\").replace("'", "\\'")
         overrides += ["checkpoint=null", f"onnx='{path}'"] if str(ckpt).endswith(".onnx") else [f"checkpoint='{path}'"]

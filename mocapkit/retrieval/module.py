@@ -1,12 +1,13 @@
 """Lightning module of the learned motion embeddings (:mod:`mocapkit.models.motion_encoder`) for retrieval.
 
 Training batches come from :class:`~mocapkit.retrieval.datamodule.RetrievalDataModule` (two
-augmented views of each clip and its label). Both views go through the encoder; the loss (``loss``) is
+augmented views of each clip, or of the clip and one of its DTW neighbours with ``data.positives=dtw_neighbours``,
+and its label). Both views go through the encoder; the loss (``loss``) is
 
 - ``supcon``: the supervised contrastive loss (Khosla et al., "Supervised contrastive learning", NeurIPS 2020,
   eq. 2, ``L_out``): every other view of the same class is a positive of an anchor;
 - ``simclr``: NT-Xent (Chen et al., "A simple framework for contrastive learning of visual representations",
-  ICML 2020): the other view of the same clip is the only positive; labels are never used.
+  ICML 2020): the other view of the same item is the only positive; labels are never used.
 
 Both are :func:`~mocapkit.train.losses.contrastive_loss` (SimCLR is SupCon with each clip its own class), at ``temperature`` (0.1).
 

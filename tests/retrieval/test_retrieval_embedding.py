@@ -394,3 +394,46 @@ def test_a_list_of_runs_picks_the_one_that_held_out_the_absent_groups(run, motio
     assert EmbeddingRetrieval(checkpoint=runs).fit(mm).checkpoint_used_ == str(other)
     with pytest.raises(ValueError, match="held out exactly"):
         EmbeddingRetrieval(checkpoint=runs).fit(motions)
+
+
+def test_a_users_folder_trains_a_self_supervised_embedding_that_indexes_it(hdm05_folder, tmp_path, capsys):
+    """A library without labels: every motion file under a folder trains the DTW-neighbour embedding
+    (``data.dataset=folder``, nothing held out), which is exported and indexes that folder through the CLI."""
+    from mocapkit.cli import main as cli
+    from mocapkit.deploy.export import export_checkpoint
+    from mocapkit.retrieval.datamodule import RetrievalDataModule
+    from mocapkit.retrieval.index import RetrievalIndexError, make_method
+    from mocapkit.train.checkpoints import load_checkpoint
+    from mocapkit.train.config import compose_config
+    from mocapkit.train.training import train
+
+    dm = RetrievalDataModule(dataset="folder", root=str(hdm05_folder))
+    assert dm.groups == {"train": ["library"], "test": [], "all": ["library"]} and not dm.test_clips
+    assert {c.label for c in dm.train_clips} == {"bd", "mm"}  # the sub-folders
+    cfg = compose_config(
+        [
+            "experiment=retrieval_dtw_neighbours",
+            "data.dataset=folder",
+            f"data.root={hdm05_folder}",
+            "data.neighbours=2",
+            f"output_root={tmp_path}",
+            "run_name=library",
+            *TINY,
+        ]
+    )
+    run = Path(train(cfg))
+    source = load_checkpoint(run / "best.ckpt")["hyper_parameters"]["source"]
+    assert source["dataset"] == "folder" and source["positives"] == "dtw_neighbours" and source["neighbours"] == 2
+    export_checkpoint(run / "best.ckpt")
+    index = tmp_path / "library.index"
+    args = ["index", "--src", str(hdm05_folder), "--out", str(index), "--method", "embedding"]
+    assert cli([*args, "--ckpt", str(run / "model.onnx")]) == 0
+    query = min((hdm05_folder / "bd").glob("*.amc"))
+    capsys.readouterr()
+    assert cli(["search", "--index", str(index), str(query), "-k", "3", "--json"]) == 0
+    hits = json.loads(capsys.readouterr().out)[0]["results"]
+    assert len(hits) == 3 and str(query.resolve()) not in {h["path"] for h in hits}
+    with pytest.raises(RetrievalIndexError, match="--ckpt is for --method embedding; dtw_positions"):
+        make_method("dtw_positions", ckpt=run / "model.onnx")
+    with pytest.raises(ValueError, match="no motion file"):
+        RetrievalDataModule(dataset="folder", root=str(tmp_path / "library.index"))
