@@ -2,6 +2,7 @@
 
     OMP_NUM_THREADS=1 python scripts/results/retrieval_self_supervised.py \
         [--experiments retrieval_simclr,retrieval_dtw_neighbours] [--seeds 0,1,2] [--jobs 2] [--json OUT.json]
+        [--set KEY=VALUE ... --tag NAME]      # an ablation: Hydra overrides for every run, its runs named by the tag
 
 For each experiment (``configs/experiment/NAME.yaml``), seed and fold of the four retrieval cells, one
 ``mocapkit train`` run on the fold's database groups, then ``mocapkit eval`` of its ``best.ckpt``: the fold's
@@ -13,7 +14,7 @@ held-out groups' clips as queries against every database clip (the folds of ``mo
 - ``msr``: subjects 2 4 6 8 10 against 1 3 5 7 9.
 
 A cell's mAP and P@1 pool every query of its folds (each fold's figure weighted by its query count); reported as
-mean ± sd over the seeds. Runs go to ``checkpoints/<experiment>/ss_<cell>_<fold>_s<seed>``; a run whose
+mean ± sd over the seeds. Runs go to ``checkpoints/<experiment>/ss_<cell>_<fold>_s<seed>[_<tag>]``; a run whose
 ``eval/metrics.json`` exists is not trained again (delete it to retrain). ``--jobs`` runs go side by side, one
 thread each. Results: docs/results/retrieval.md#trained-embeddings.
 """
@@ -56,9 +57,12 @@ def folds(cell: str) -> list[tuple[str, list[str], list[str]]]:
     return [(f"fold{i}", groups[i::3], data) for i in range(3)]
 
 
-def run(experiment: str, cell: str, fold: str, held: list[str], data: list[str], seed: int) -> dict:
-    """Train (unless done) and evaluate one run; its ``metrics.json``."""
-    name = f"ss_{cell}_{fold}_s{seed}"
+def run(
+    experiment: str, cell: str, fold: str, held: list[str], data: list[str], seed: int, extra=(), tag: str = ""
+) -> dict:
+    """Train (unless done) and evaluate one run (``extra``: more overrides, ``tag``: its name's suffix); its
+    ``metrics.json``."""
+    name = f"ss_{cell}_{fold}_s{seed}" + (f"_{tag}" if tag else "")
     run_dir = Path("checkpoints") / experiment / name
     metrics = run_dir / "eval" / "metrics.json"
     if not metrics.exists():
@@ -69,7 +73,16 @@ def run(experiment: str, cell: str, fold: str, held: list[str], data: list[str],
         log.parent.mkdir(parents=True, exist_ok=True)
         start = time.perf_counter()
         with open(log, "w") as out:
-            train = [*cli, "train", f"experiment={experiment}", *data, groups, f"run_name={name}", f"seed={seed}"]
+            train = [
+                *cli,
+                "train",
+                f"experiment={experiment}",
+                *data,
+                groups,
+                f"run_name={name}",
+                f"seed={seed}",
+                *extra,
+            ]
             subprocess.run(train, check=True, stdout=out, stderr=subprocess.STDOUT, env=env)
             subprocess.run(
                 [*cli, "eval", f"ckpt_path={run_dir / 'best.ckpt'}"],
@@ -89,7 +102,11 @@ def main() -> None:
     parser.add_argument("--seeds", default="0,1,2")
     parser.add_argument("--jobs", type=int, default=2, help="runs side by side")
     parser.add_argument("--json", default=None, help="write the results here")
+    parser.add_argument("--set", action="append", default=[], help="a Hydra override for every run (repeatable)")
+    parser.add_argument("--tag", default="", help="suffix of the runs' names (required with --set)")
     args = parser.parse_args()
+    if args.set and not args.tag:
+        parser.error("--set needs --tag: the runs of an ablation must not take the names of the plain runs")
     experiments, cells = args.experiments.split(","), args.cells.split(",")
     seeds = [int(s) for s in args.seeds.split(",")]
     unknown = set(cells) - set(CELLS)
@@ -98,7 +115,7 @@ def main() -> None:
     jobs = [(e, c, f, held, data, s) for e in experiments for c in cells for f, held, data in folds(c) for s in seeds]
     print(f"{len(jobs)} runs, {args.jobs} at a time", flush=True)
     with ThreadPoolExecutor(max_workers=max(1, args.jobs)) as pool:
-        reports = list(pool.map(lambda job: run(*job), jobs))
+        reports = list(pool.map(lambda job: run(*job, extra=args.set, tag=args.tag), jobs))
     pooled: dict[tuple[str, str, int], list[dict]] = {}
     for (e, c, _, _, _, s), report in zip(jobs, reports):
         pooled.setdefault((e, c, s), []).append(report)
@@ -120,7 +137,7 @@ def main() -> None:
             }
             row = table[f"{e} {c}"]
             print(
-                f"{e:28s} {c:15s} mAP {row['map_mean']:.3f} ± {row['map_sd']:.3f}  "
+                f"{e + (' ' + args.tag if args.tag else ''):28s} {c:15s} mAP {row['map_mean']:.3f} ± {row['map_sd']:.3f}  "
                 f"P@1 {row['p1_mean']:.3f} ± {row['p1_sd']:.3f}",
                 flush=True,
             )

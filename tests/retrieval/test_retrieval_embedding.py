@@ -166,7 +166,8 @@ def _movement(family: int, length: int, phase: float) -> np.ndarray:
     return np.sin(2 * np.pi * (family + 1) * t + phase + offsets).astype(np.float32)
 
 
-def test_dtw_neighbours_are_the_nearest_clips_by_dtw_and_never_the_clip_itself():
+def test_dtw_neighbours_are_the_nearest_clips_by_dtw_and_never_the_clip_itself(monkeypatch):
+    from mocapkit.retrieval import datamodule
     from mocapkit.retrieval.datamodule import Clip, dtw_neighbours
 
     rng = np.random.default_rng(0)
@@ -181,6 +182,9 @@ def test_dtw_neighbours_are_the_nearest_clips_by_dtw_and_never_the_clip_itself()
     assert np.all(families[neighbours] == families[:, None])  # the 3 other clips of its family, labels unread
     with pytest.raises(ValueError, match="data.neighbours=12"):
         dtw_neighbours(clips, 12)
+    # a larger library: each clip's DTW among its nearest clips by descriptor only, the same neighbours here
+    monkeypatch.setattr(datamodule, "NEIGHBOUR_CANDIDATES", 6)
+    assert np.array_equal(dtw_neighbours(clips, 3), neighbours)
 
 
 def test_dtw_neighbour_positives_draw_the_second_view_from_the_clip_or_its_neighbours():
