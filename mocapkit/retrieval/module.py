@@ -20,7 +20,10 @@ contrastive loss of each query over the database clips it is ranked against, :fu
 ``train/loss``. ``best.ckpt`` follows ``val/selection`` = ``val/map − 1e-4 · val/loss``: ``val/map``, with ties
 broken by the lower loss. On HDM05, ``val/map`` reaches 1.0 within a few epochs and stays there (17 validation
 clips of performers the network trains on), and the first epoch at 1.0 generalises worse to a new performer than
-later ones (fold mm: mAP 0.92 against 0.98 at the last epoch): ties must not keep the first.
+later ones (fold mm: mAP 0.92 against 0.98 at the last epoch): ties must not keep the first. A library without
+labels (``data.dataset=folder``, files in one folder: every clip of one label) has nothing to rank by, and its
+loss is lowest where the embedding has collapsed (every clip equally near): ``val/selection`` is then the epoch,
+so ``best.ckpt`` is the last one.
 :func:`evaluate_embedding` is the task's ``mocapkit eval`` (held-out groups; writes ``metrics.json``).
 """
 
@@ -198,7 +201,9 @@ class MotionEmbeddingModule(ConfiguredOptimization, StagedSteps, L.LightningModu
         self.log(f"{stage}/p1", scores["p1"], prog_bar=True, sync_dist=True)
         self.log(f"{stage}/loss", loss, sync_dist=True)
         if stage == "val":
-            self.log("val/selection", scores["map"] - 1e-4 * loss, sync_dist=True)
+            one_label = len(np.unique(out["label"])) == 1
+            selection = float(self.current_epoch) if one_label else scores["map"] - 1e-4 * loss
+            self.log("val/selection", selection, sync_dist=True)
 
     def on_validation_epoch_end(self) -> None:
         self._retrieval_epoch_end("val")

@@ -8,6 +8,7 @@ HDM05's own layout), so it runs without the real data.
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
 import sys
 import textwrap
@@ -414,20 +415,27 @@ def test_a_users_folder_trains_a_self_supervised_embedding_that_indexes_it(hdm05
     dm = RetrievalDataModule(dataset="folder", root=str(hdm05_folder))
     assert dm.groups == {"train": ["library"], "test": [], "all": ["library"]} and not dm.test_clips
     assert {c.label for c in dm.train_clips} == {"bd", "mm"}  # the sub-folders
+    flat = tmp_path / "flat"  # the same files in one folder: no label at all
+    flat.mkdir()
+    for path in hdm05_folder.rglob("*.*"):
+        shutil.copy(path, flat / path.name)
     cfg = compose_config(
         [
             "experiment=retrieval_dtw_neighbours",
             "data.dataset=folder",
-            f"data.root={hdm05_folder}",
+            f"data.root={flat}",
             "data.neighbours=2",
             f"output_root={tmp_path}",
             "run_name=library",
             *TINY,
+            "trainer.max_epochs=2",
         ]
     )
     run = Path(train(cfg))
-    source = load_checkpoint(run / "best.ckpt")["hyper_parameters"]["source"]
+    best = load_checkpoint(run / "best.ckpt")
+    source = best["hyper_parameters"]["source"]
     assert source["dataset"] == "folder" and source["positives"] == "dtw_neighbours" and source["neighbours"] == 2
+    assert best["epoch"] == load_checkpoint(run / "last.ckpt")["epoch"] == 1  # one label: nothing to select by
     export_checkpoint(run / "best.ckpt")
     index = tmp_path / "library.index"
     args = ["index", "--src", str(hdm05_folder), "--out", str(index), "--method", "embedding"]
