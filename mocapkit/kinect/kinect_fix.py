@@ -194,7 +194,7 @@ def train_kinect_model(
         KinectNoiseConfig,
         simulate_pairs,
     )
-    from mocapkit.train.registry import build_method, default_method, method_config
+    from mocapkit.train.registry import build_method, default_method, method_parameters
 
     method = method or default_method("kinect")
     noise = DEFAULT_NOISE if noise is None else noise
@@ -202,7 +202,7 @@ def train_kinect_model(
         config = KinectNoiseConfig.preset(noise)
     except ValueError as exc:
         raise KinectFixError(f"--noise {noise}: {exc}") from None
-    seeded = [f"random_state={int(seed)}"] if "random_state" in method_config("kinect", method) else []
+    seeded = [f"random_state={int(seed)}"] if "random_state" in method_parameters("kinect", method) else []
     model = build_method("kinect", method, [*seeded, *overrides])
     if not hasattr(model, "save"):
         raise KinectFixError(

@@ -78,12 +78,11 @@ def make_method(name: str, overrides: Sequence[str] = (), ckpt: str | os.PathLik
             parameter left unset (``embedding`` without ``--ckpt``).
         RetrievalIndexError: ``ckpt`` for a method that needs no trained model.
     """
-    from mocapkit.train.registry import build_method, method_config
+    from mocapkit.train.registry import build_method, method_parameters
 
     overrides = list(overrides)
     if ckpt is not None:
-        # keys(): ``in`` on an OmegaConf node is False for a key whose value is missing (``???``), as embedding's is
-        if "checkpoint" not in method_config("retrieval", name).keys():
+        if "checkpoint" not in method_parameters("retrieval", name):
             raise RetrievalIndexError(f"--ckpt is for --method embedding; {name} needs no trained model")
         path = str(Path(ckpt).resolve()).replace("\\", "\\\\").replace("'", "\\'")
         overrides += ["checkpoint=null", f"onnx='{path}'"] if str(ckpt).endswith(".onnx") else [f"checkpoint='{path}'"]

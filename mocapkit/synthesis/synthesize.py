@@ -86,11 +86,11 @@ def make_synthesizer(
         ConfigError: an unknown method (the message lists the names), an unknown parameter (named, with the
             method's parameters) or a bad value.
     """
-    from mocapkit.train.registry import build_method, method_config
+    from mocapkit.train.registry import build_method, method_parameters
 
-    node = method_config("synthesis", method)
-    settings = [f"random_state={int(seed)}"] if "random_state" in node else []
-    if "footskate_cleanup" in node:
+    parameters = method_parameters("synthesis", method)
+    settings = [f"random_state={int(seed)}"] if "random_state" in parameters else []
+    if "footskate_cleanup" in parameters:
         settings.append(f"footskate_cleanup={str(bool(footskate_cleanup)).lower()}")
     return build_method("synthesis", method, [*settings, *overrides])
 

@@ -103,6 +103,18 @@ def _target(node) -> str:
     return "?"
 
 
+def _parameter_names(node) -> list[str]:
+    """The parameters of a method's node, required ones (``???``) included: iterating a DictConfig lists them,
+    where ``key in node`` is False for a key whose value is missing."""
+    return [str(k) for k in node if not str(k).startswith("_")]
+
+
+def method_parameters(task: str, name: str) -> list[str]:
+    """The parameter names of the registry's ``name`` (``configs/<task>/method/<name>.yaml``), required ones
+    included; what callers test before passing an optional setting (``random_state``, ``checkpoint``)."""
+    return _parameter_names(method_config(task, name))
+
+
 def method_config(task: str, name: str, overrides: Sequence[str] = ()):
     """The composed node (an OmegaConf DictConfig) of ``configs/<task>/method/<name>.yaml`` with the Hydra
     ``overrides`` (``--set``).
@@ -116,7 +128,7 @@ def method_config(task: str, name: str, overrides: Sequence[str] = ()):
     base = _compose(folder, name, [])
     if not overrides:
         return base
-    keys = [str(k) for k in base if not str(k).startswith("_")]
+    keys = _parameter_names(base)
     what = f"{task} method {name!r} ({_target(base)})"
     for item in overrides:
         if "=" not in item and not item.startswith("~"):
