@@ -51,6 +51,7 @@ Batches are dicts::
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import lightning as L
 import numpy as np
@@ -124,16 +125,12 @@ def read_folder_clips(root: str, fps: float = 30.0, heading: str = "frame") -> l
     Raises:
         MocapFolderError: no such folder, no motion file in it, or a file that does not read (names the file).
     """
-    from pathlib import Path
-
-    from mocapkit.datasets.formats.motion_io import find_motion_files, read_motion
+    from mocapkit.datasets.formats.motion_io import expand_motion_paths, read_motion
 
     folder = Path(root)
     if not folder.is_dir():
         raise MocapFolderError(f"data.root={str(root)!r} is not a folder")
-    paths = find_motion_files(folder)
-    if not paths:
-        raise MocapFolderError(f"data.root={str(root)!r}: no motion file under it (BVH, ASF/AMC, C3D, Kinect)")
+    paths = expand_motion_paths(folder, "data.root", MocapFolderError)
     print(f"[mocapkit] reading {len(paths)} motion files under {root}", flush=True)
     out = []
     for n, path in enumerate(paths, 1):
