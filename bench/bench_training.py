@@ -10,10 +10,15 @@ For each network: FLOPs per sample of one optimiser step (forward + backward, co
   25 joints, batch 32; VGG16 at batch 2) with cross-entropy; the gait CNN reads random GEIs at its default size;
   the refiners, the Kinect corrector, the retrieval encoder and the CVAE run their own LightningModule's
   ``training_step`` on a real batch of their experiment's data module (HDM05 cuts, ``../shared/data``).
+  FLOPs of the GRU networks are counted on today's step (torch's GRU): their recurrence now runs in numba,
+  which the counter does not see.
 * **Today vs now**: the graph network and the energy-image CNN are also measured with the implementation before
-  the fast rewrite (``tests/models/reference_*.py``, the equivalence tests' references), and the gait CNN with
-  torch's ``LocalResponseNorm``, loaded with the same weights and the same batch, their steps alternating with the
-  new ones, so "now / today" is a ratio from one run under the same load.
+  the fast rewrite (``tests/models/reference_*.py``, the equivalence tests' references), the gait CNN with
+  torch's ``LocalResponseNorm``, and the refiners, the Kinect corrector, the retrieval encoder and the CVAE with
+  torch's own GRU, transformer layer, vector norm, ELU, dropout and Adam update (:func:`_torch_own_modules`), loaded
+  with the same weights and the same batch, their steps alternating with the new ones (``--steps`` turns each,
+  a turn at least 0.25 s of steps, the median turn reported), so "now / today" is a ratio from one run under the
+  same load.
 * **Loop with data loading** (table 2): the experiment's own ``train_dataloader`` over real cached data
   (MSR Action3D, HDM05; the demo's NTU-format cache when ``.demo/ntu_cache`` exists) timed together with the
   step, against the step alone on the same batches; ``loop / step`` near 1 means the loop is not data-bound.
@@ -29,6 +34,7 @@ import contextlib
 import itertools
 import os
 import platform
+import statistics
 import sys
 import time
 import warnings
@@ -42,6 +48,7 @@ from torch.utils.flop_counter import FlopCounterMode
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = Path(os.environ.get("MOCAPKIT_SHARED", ROOT.parent / "shared"))
 PRECISIONS = ("32-true", "bf16-mixed")
+ROUND_SECONDS = 0.25  # the shortest turn of steps when today and now alternate
 
 
 def reference(name: str):
@@ -81,6 +88,7 @@ class Case:
     build: object
     note: str = ""
     today: object = None  # build() of today's implementation, same weights; None: not rewritten
+    flops_on_today: bool = False  # count FLOPs on today's step: the new one runs products FlopCounterMode misses
     loop: object = None  # build() → (step_fn, dataloader, batch augmentation) for the data-loading table
     extra: dict = field(default_factory=dict)
 
@@ -230,6 +238,44 @@ def _lightning_step(experiment: str, overrides=(), batches: int = 1):
     return build, parts
 
 
+@contextlib.contextmanager
+def _torch_own_modules():
+    """Today's refiners, Kinect corrector, retrieval encoder and CVAE: torch's own GRU, transformer layer, vector
+    norm, ELU and dropout in place of :mod:`mocapkit.models.gru` and :mod:`mocapkit.models.ops` (looked up at
+    call time, so a patched step runs today's code with the same weights)."""
+    from unittest import mock
+
+    import mocapkit.models.ops as ops
+    import mocapkit.models.refiners as refiners
+    import mocapkit.train.refine_module as refine_module
+
+    with (
+        mock.patch.object(refiners, "gru_forward", lambda gru, x: gru(x)[0]),
+        mock.patch.object(refiners, "encoder_layer_forward", lambda layer, h: layer(h)),
+        mock.patch.object(refine_module, "vector_length", lambda x: torch.linalg.vector_norm(x, dim=-1)),
+        mock.patch.object(ops.ELU, "forward", lambda self, x: F.elu(x)),
+        mock.patch.object(ops.Dropout, "forward", torch.nn.Dropout.forward),
+    ):
+        yield
+
+
+def _lightning_step_today(experiment: str, overrides=()):
+    """:func:`_lightning_step` as it ran before the training-speed work: torch's own modules
+    (:func:`_torch_own_modules`) and the optimiser's for-loop update (``optimizer.fused=false``)."""
+    build, _ = _lightning_step(experiment, [*overrides, "++optimizer.fused=false"])
+
+    def today():
+        step, batches, size = build()
+
+        def old_step(batch, precision):
+            with _torch_own_modules():
+                step(batch, precision)
+
+        return old_step, batches, size
+
+    return today
+
+
 def cases() -> list[Case]:
     msr = [f"data.root={SHARED / 'data' / 'msr_action3d'}"]
     hdm = [f"data.root={SHARED / 'data' / 'hdm05_cuts11'}"]
@@ -269,7 +315,9 @@ def cases() -> list[Case]:
         ("motion_vae", "synthesis_cvae", "CVAE, HDM05 frame triples, batch 256", hdm),
     ):
         build, _ = _lightning_step(experiment, [*extra, *quiet])
-        out.append(Case(name, build, note))
+        today = _lightning_step_today(experiment, [*extra, *quiet])
+        # the GRU's recurrence runs compiled by numba (mocapkit.models.gru): counted on torch's GRU, the same products
+        out.append(Case(name, build, note, today=today, flops_on_today="bigru" in experiment))
     loops = [
         ("loop: msr3d_gcn (MSR Action3D)", "msr3d_gcn", msr),
         ("loop: hdm05_gcn (HDM05)", "hdm05_gcn", hdm),
@@ -309,18 +357,21 @@ def measure(case: Case, steps: int) -> dict:
     peaks = {"32-true": matmul_peak(torch.float32), "bf16-mixed": matmul_peak(torch.bfloat16)}
     row["peaks"] = peaks
     row["batch"] = size
-    flops = count_flops(step, batches[0], "32-true") / size
-    row["gflop_per_sample"] = flops / 1e9
     old_step = case.today()[0] if case.today is not None else None
+    flops = count_flops(old_step if case.flops_on_today else step, batches[0], "32-true") / size
+    row["gflop_per_sample"] = flops / 1e9
     for precision in PRECISIONS:
         if old_step is None:
             seconds = time_steps(step, batches, precision, steps)
-        else:  # today and now alternate step by step, so a change of the machine's load hits both alike
+        else:  # today and now alternate, so a change of the machine's load hits both alike
             step(batches[0], precision), old_step(batches[0], precision)
-            seconds = old_seconds = 0.0
+            # each turn runs the steps of at least ROUND_SECONDS: single steps of a few ms are mostly noise
+            repeats = max(1, round(ROUND_SECONDS / time_steps(old_step, batches, precision, 1, warm=False)))
+            turns, old_turns = [], []
             for _ in range(steps):
-                seconds += time_steps(step, batches, precision, 1, warm=False) / steps
-                old_seconds += time_steps(old_step, batches, precision, 1, warm=False) / steps
+                turns.append(time_steps(step, batches, precision, repeats, warm=False))
+                old_turns.append(time_steps(old_step, batches, precision, repeats, warm=False))
+            seconds, old_seconds = statistics.median(turns), statistics.median(old_turns)  # a disturbed turn drops out
             row[f"today {precision}"] = size / old_seconds
         row[precision] = size / seconds
         row[f"{precision} util"] = flops * size / seconds / peaks[precision]

@@ -10,7 +10,7 @@ export``) or takes an ``.onnx`` file, runs it on real HDM05 takes with onnxrunti
 * kernel time per part of the network — the module that produced each node (``blocks.0``, ``gru``, ``embed``,
   ``normalizer``) or, for the code of the refiner itself (first guess, features), the PyTorch operator — read
   from the node metadata the dynamo exporter writes (the TorchScript exporter's node names carry the module path).
-  The transformer's layers export through a function (``encoder_layer_for_export``), not their modules, so their
+  The transformer's layers export through a function (``encoder_layer_forward``), not their modules, so their
   projections, matrix products and softmax are listed as ``refiner: linear / matmul / softmax``, beside the
   refiner's own small matrix products; their layer norms and feed-forward layers keep their ``blocks.<i>``;
 * the slowest nodes with their input shapes.

@@ -207,7 +207,7 @@ class LearnedKinectCorrector(_ClipCorrector, BaseEstimator):
 
         return MotionRefinementModule(
             model={"_target_": ARCHITECTURES[self.architecture], **dict(self.network or {})},
-            optimizer={"_target_": "torch.optim.Adam", "_partial_": True, "lr": float(self.lr)},
+            optimizer={"_target_": "torch.optim.Adam", "_partial_": True, "lr": float(self.lr), "fused": True},
             skeleton=kinect_skeleton(bone_lengths),
             bone_weight=float(self.bone_weight),
             velocity_weight=float(self.velocity_weight),

@@ -31,6 +31,7 @@ from torch import nn
 
 from mocapkit.features.clips import ClipFeatures
 from mocapkit.models.nmf_layer import NMFLayer
+from mocapkit.models.ops import Dropout
 from mocapkit.motion.layouts import LAYOUTS, SkeletonLayout
 
 
@@ -72,7 +73,7 @@ class ClipNMFBagOfWords(nn.Module):
             encoder_hidden, n_components, n_iter=n_iter, one_step_grad=one_step_grad, graph_reg=graph_reg
         )
         self.temperature = float(temperature)
-        self.dropout = nn.Dropout(dropout)
+        self.dropout = Dropout(dropout)
         self.fc = nn.Linear(n_components, num_classes)
         self.num_classes, self.n_components = num_classes, n_components
 

@@ -19,6 +19,8 @@ import math
 import torch
 from torch import nn
 
+from mocapkit.models.ops import Dropout
+
 
 class DepthPoseCNN(nn.Module):
     """Depth crops ``[B, 1, S, S]`` → joints ``[B, J, 3]`` (metres, relative to the crop's 3-D centre).
@@ -76,7 +78,7 @@ class DepthPoseCNN(nn.Module):
             nn.Flatten(),
             nn.Linear(channels * side * side, hidden),
             nn.ReLU(inplace=True),
-            nn.Dropout(float(dropout)),
+            Dropout(float(dropout)),
             nn.Linear(hidden, 3 * joints),
         )
 

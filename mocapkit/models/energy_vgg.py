@@ -22,6 +22,7 @@ from torchvision.models.vgg import cfgs as VGG_CFGS
 from torchvision.models.vgg import make_layers
 
 from mocapkit.models.energy_image import EnergyImage
+from mocapkit.models.ops import Dropout
 
 #: torchvision layer configurations by architecture name.
 VGG_ARCHS = {"vgg11": "A", "vgg13": "B", "vgg16": "D", "vgg19": "E"}
@@ -58,10 +59,10 @@ class EnergyVGG(nn.Module):
         self.classifier = nn.Sequential(
             nn.Linear(out_channels * pool_size * pool_size, hidden),
             nn.ReLU(inplace=True),
-            nn.Dropout(dropout),
+            Dropout(dropout),
             nn.Linear(hidden, hidden),
             nn.ReLU(inplace=True),
-            nn.Dropout(dropout),
+            Dropout(dropout),
             nn.Linear(hidden, num_classes),
         )
         linears = [m for m in self.classifier if isinstance(m, nn.Linear)]

@@ -27,6 +27,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from mocapkit.models.ops import Dropout
+
 #: The tasks a head can be built for, in output order.
 TASKS: tuple[str, ...] = ("subject", "view", "condition")
 #: Table 6.1's trunk: (name, output channels, kernel size) of each convolution.
@@ -157,13 +159,13 @@ class MultiTaskGaitCNN(nn.Module):
             )
         self.flat_features = channels * height * width
         self.shared_fc = nn.Linear(self.flat_features, self.embedding_dim)
-        self.dropout = nn.Dropout(dropout)
+        self.dropout = Dropout(dropout)
         self.heads = nn.ModuleDict(
             {
                 task: nn.Sequential(
                     nn.Linear(self.embedding_dim, self.head_dim),
                     nn.ReLU(inplace=True),
-                    nn.Dropout(dropout),
+                    Dropout(dropout),
                     nn.Linear(self.head_dim, n),
                 )
                 for task, n in self.num_classes.items()

@@ -30,6 +30,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from mocapkit.models.ops import Dropout
 from mocapkit.models.stgcn import STGCNBlock, spatial_adjacency
 from mocapkit.motion.layouts import (
     LANDMARK_NAMES,
@@ -150,7 +151,7 @@ class TemporalBlock(nn.Module):
         self.bn1 = nn.BatchNorm1d(out_channels)
         self.conv2 = nn.Conv1d(out_channels, out_channels, kernel_size, 1, pad)
         self.bn2 = nn.BatchNorm1d(out_channels)
-        self.dropout = nn.Dropout(dropout)
+        self.dropout = Dropout(dropout)
         if in_channels == out_channels and stride == 1:
             self.residual = nn.Identity()
         else:

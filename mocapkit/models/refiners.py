@@ -46,6 +46,8 @@ import torch
 from torch import nn
 
 from mocapkit.models.body_frame import heading_cos_sin, turn_about_up
+from mocapkit.models.gru import gru_forward
+from mocapkit.models.ops import dropout
 from mocapkit.motion.geometry import horizontal_axes
 
 
@@ -481,22 +483,26 @@ class BiGRURefiner(_Refiner):
         nn.init.zeros_(self.out.bias)
 
     def correction(self, guess: torch.Tensor, observed: torch.Tensor, body: torch.Tensor | None = None) -> torch.Tensor:
-        hidden, _ = self.gru(self.inp(per_joint(self.features(guess, observed, body))))
+        hidden = gru_forward(self.gru, self.inp(per_joint(self.features(guess, observed, body))))
         return coordinate_first(self.out(hidden), self.num_joints)
 
 
-def encoder_layer_for_export(layer: nn.TransformerEncoderLayer, h: torch.Tensor) -> torch.Tensor:
-    """What the pre-norm, batch-first ``layer(h)`` computes in eval mode, written out for ONNX export.
+def encoder_layer_forward(layer: nn.TransformerEncoderLayer, h: torch.Tensor) -> torch.Tensor:
+    """What the pre-norm, batch-first ``layer(h)`` computes, written out: for training and ONNX export.
 
-    ``h`` ``[N, L, dim]`` → ``[N, L, dim]`` with the layer's own weights (no dropout). The exported
-    ``nn.MultiheadAttention`` works sequence-first and reshapes through shape arithmetic (six transposes and about
-    twenty shape operators per layer); here queries, keys and values come from one projection and one permute, the
-    scale goes onto the queries (``[N, heads, L, dim/heads]``) rather than onto the ``L × L`` scores, and the
-    output takes one transpose (bench/RESULTS.md#onnx-runtime-costs).
+    ``h`` ``[N, L, dim]`` → ``[N, L, dim]`` with the layer's own weights and dropout rates (dropout in training
+    mode only, drawn by :func:`mocapkit.models.ops.dropout`). Why not ``layer(h)``: in training torch's attention
+    runs a "safe" softmax (a test of every row for all ``-inf``, a third of the attention's time here) and
+    ``bernoulli_`` dropout (bench/RESULTS.md#training-throughput); the exported ``nn.MultiheadAttention`` works
+    sequence-first and reshapes through shape arithmetic (six transposes and about twenty shape operators per
+    layer). Here queries, keys and values come from one projection and one permute, the scale goes onto the
+    queries (``[N, heads, L, dim/heads]``) rather than onto the ``L × L`` scores, and the output takes one
+    transpose (bench/RESULTS.md#onnx-runtime-costs).
     """
     if not layer.norm_first:
-        raise ValueError("encoder_layer_for_export writes out the pre-norm layer (norm_first=True) only")
+        raise ValueError("encoder_layer_forward writes out the pre-norm layer (norm_first=True) only")
     attention = layer.self_attn
+    training = layer.training
     N, L, dim = h.shape
     heads = attention.num_heads
     x = layer.norm1(h)
@@ -504,9 +510,11 @@ def encoder_layer_for_export(layer: nn.TransformerEncoderLayer, h: torch.Tensor)
     qkv = nn.functional.linear(x.reshape(N * L, dim), attention.in_proj_weight, attention.in_proj_bias)
     q, k, v = qkv.reshape(N, L, 3, heads, dim // heads).permute(2, 0, 3, 1, 4)  # 3 × [N, heads, L, dim/heads]
     scores = torch.matmul(q * (dim // heads) ** -0.5, k.transpose(-2, -1))  # [N, heads, L, L]
-    mixed = torch.matmul(torch.softmax(scores, dim=-1), v).transpose(1, 2).reshape(N * L, dim)
-    h = h + attention.out_proj(mixed).reshape(N, L, dim)
-    return h + layer.linear2(layer.activation(layer.linear1(layer.norm2(h))))
+    weights = dropout(torch.softmax(scores, dim=-1), attention.dropout, training)
+    mixed = torch.matmul(weights, v).transpose(1, 2).reshape(N * L, dim)
+    h = h + dropout(attention.out_proj(mixed).reshape(N, L, dim), layer.dropout1.p, training)
+    hidden = dropout(layer.activation(layer.linear1(layer.norm2(h))), layer.dropout.p, training)
+    return h + dropout(layer.linear2(hidden), layer.dropout2.p, training)
 
 
 def _sinusoid(T: int, dim: int, device, dtype) -> torch.Tensor:
@@ -576,8 +584,9 @@ class MaskedTransformerRefiner(_Refiner):
         tokenised = seen * (FEATURE_SCALE[0] * guess) + (1 - seen) * mask_token  # [B,3,T,J]
         inputs = torch.cat([tokenised, self.features(guess, observed, body)], dim=1)  # [B,10|13,T,J]
         pos = _sinusoid(T, self.dim, guess.device, guess.dtype)  # [T, dim]
-        exporting = torch.onnx.is_in_onnx_export() and not self.training
-        run = encoder_layer_for_export if exporting else (lambda block, h: block(h))
+        # written out in training (faster there) and for export; torch's own fused layer in inference
+        written_out = self.training or torch.onnx.is_in_onnx_export()
+        run = encoder_layer_forward if written_out else (lambda block, h: block(h))
         if self.tokens == "frames":
             h = self.embed(per_joint(inputs)) + pos
             for block in self.blocks:

@@ -35,6 +35,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from mocapkit.models.body_frame import body0_origin, body0_size
+from mocapkit.models.ops import Dropout
 from mocapkit.motion.layouts import LANDMARKS, SkeletonLayout, get_layout
 
 STREAMS = ("joint", "velocity", "bone", "bone_velocity")
@@ -200,7 +201,7 @@ class STGCNBlock(nn.Module):
         else:
             self.tcn = MultiScaleTemporalConv(out_channels, out_channels, stride)
         self.bn2 = nn.BatchNorm2d(out_channels)
-        self.dropout = nn.Dropout(dropout)
+        self.dropout = Dropout(dropout)
         self.stride = stride
         if not residual:
             self.residual = None
@@ -304,7 +305,7 @@ class STGCN(nn.Module):
             )
             c_in = c_out
         self.blocks = nn.ModuleList(blocks)
-        self.head_dropout = nn.Dropout(head_dropout)
+        self.head_dropout = Dropout(head_dropout)
         self.fc = nn.Linear(c_in, num_classes)
         self.num_classes = num_classes
 

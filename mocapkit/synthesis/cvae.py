@@ -368,7 +368,7 @@ def vae_module(
             "hidden": int(hidden),
             "layers": int(layers),
         },
-        optimizer={"_target_": "torch.optim.Adam", "_partial_": True, "lr": float(lr)},
+        optimizer={"_target_": "torch.optim.Adam", "_partial_": True, "lr": float(lr), "fused": True},
         beta=float(beta),
         condition_noise=float(condition_noise),
         frames=data.describe(),

@@ -23,6 +23,7 @@ from hydra.utils import instantiate
 from torch import nn
 from torchmetrics import MeanMetric
 
+from mocapkit.models.ops import vector_length
 from mocapkit.train.optimization import (
     ConfiguredOptimization,
     StagedSteps,
@@ -82,16 +83,16 @@ class MotionRefinementModule(ConfiguredOptimization, StagedSteps, L.LightningMod
         """``(total loss, {name: value}, output positions [B, T, J, 3] in the data's units)``."""
         refined, stats = self.model.normalised_forward(batch["positions"], batch["missing"])
         target = self.model.normalizer(batch["clean"], stats)
-        error = torch.linalg.vector_norm(refined - target, dim=-1)  # [B,T,J]
+        error = vector_length(refined - target)  # [B,T,J]
         corrupted = batch["corrupted"].to(error.dtype)
         clean = (~batch["corrupted"] & ~batch["missing"]).to(error.dtype)
         parts = {
             "corrupted": (error * corrupted).sum() / corrupted.sum().clamp_min(1),
             "clean": (error * clean).sum() / clean.sum().clamp_min(1),
         }
-        bone = lambda x: torch.linalg.vector_norm(x[:, :, self._child] - x[:, :, self._parent], dim=-1)
+        bone = lambda x: vector_length(x[:, :, self._child] - x[:, :, self._parent])
         parts["bone"] = (bone(refined) - bone(target)).abs().mean()
-        parts["velocity"] = torch.linalg.vector_norm(refined.diff(dim=1) - target.diff(dim=1), dim=-1).mean()
+        parts["velocity"] = vector_length(refined.diff(dim=1) - target.diff(dim=1)).mean()
         hp = self.hparams
         total = (
             parts["corrupted"]
@@ -104,7 +105,7 @@ class MotionRefinementModule(ConfiguredOptimization, StagedSteps, L.LightningMod
     def _step(self, batch: dict, stage: str) -> torch.Tensor:
         loss, parts, output = self.losses(batch)
         size = len(batch["positions"])
-        error_cm = 100.0 * torch.linalg.vector_norm(output - batch["clean"], dim=-1)
+        error_cm = 100.0 * vector_length(output - batch["clean"])
         weight = batch["corrupted"].to(error_cm.dtype)
         metric = self.mje[f"{stage}_mje"]
         metric.update(error_cm.detach(), weight)

@@ -20,7 +20,7 @@ from mocapkit.datasets.mocap.folders import MocapFolderError
 from mocapkit.models.refiners import (
     PoseNormalizer,
     cubic_fill,
-    encoder_layer_for_export,
+    encoder_layer_forward,
     refine_bigru,
     refine_transformer,
 )
@@ -810,7 +810,7 @@ def test_onnx_refiner_matches_learned_refiner(tiny_module, tiny_refiner, gappy, 
 
 @pytest.mark.parametrize("name", ["transformer-frames", "transformer-joints"])
 def test_transformer_exports_with_parity(name, tmp_path):
-    """The transformer goes through torch.export with its export-only layer path (encoder_layer_for_export):
+    """The transformer goes through torch.export with its export-only layer path (encoder_layer_forward):
     onnxruntime matches PyTorch on a batch and lengths other than the traced ones (export_refiner checks (3, 40) and
     (1, 20); a mismatch raises ParityError), with a trained-looking correction (the last layer is not zero)."""
     from mocapkit.deploy.refiner_export import export_refiner
@@ -833,9 +833,9 @@ def test_transformer_exports_with_parity(name, tmp_path):
 
 
 @pytest.mark.parametrize("shape", [(2, 17, 16), (5, 3, 16)])
-def test_encoder_layer_for_export_computes_what_the_layer_computes(shape):
-    """The export path of the transformer's layers (one projection, the scale on the queries, 2-D projections)
-    is the pre-norm, batch-first nn.TransformerEncoderLayer in eval mode, with and without PyTorch's fused path."""
+def test_encoder_layer_forward_computes_what_the_layer_computes(shape):
+    """The written-out layer (training and export: one projection, the scale on the queries, 2-D projections) is
+    the pre-norm, batch-first nn.TransformerEncoderLayer in eval mode, with and without PyTorch's fused path."""
     torch.manual_seed(0)
     layer = torch.nn.TransformerEncoderLayer(
         16, 4, 32, 0.1, activation="gelu", batch_first=True, norm_first=True
@@ -845,9 +845,38 @@ def test_encoder_layer_for_export_computes_what_the_layer_computes(shape):
     h = torch.randn(*shape)
     with torch.no_grad():
         fused = layer(h)  # PyTorch's fast path (no grad, eval)
-        mine = encoder_layer_for_export(layer, h)
+        mine = encoder_layer_forward(layer, h)
     torch.testing.assert_close(mine, fused, atol=2e-5, rtol=1e-5)
     torch.testing.assert_close(mine.detach(), layer(h).detach(), atol=2e-5, rtol=1e-5)  # the plain path
+
+
+def test_encoder_layer_forward_trains_as_the_layer_trains():
+    """In training mode without dropout the written-out layer has the layer's values and gradients; with dropout
+    it drops (two calls differ) as torch's layer does (the same mean and spread over draws)."""
+    torch.manual_seed(0)
+    layer = torch.nn.TransformerEncoderLayer(16, 4, 32, 0.0, activation="gelu", batch_first=True, norm_first=True)
+    layer.train()
+    h = torch.randn(3, 11, 16)
+    mine, theirs = encoder_layer_forward(layer, h), layer(h)
+    torch.testing.assert_close(mine, theirs, atol=2e-5, rtol=1e-5)
+    weights = list(layer.parameters())
+    for a, b in zip(
+        torch.autograd.grad(mine.square().sum(), weights), torch.autograd.grad(theirs.square().sum(), weights)
+    ):
+        torch.testing.assert_close(a, b, atol=1e-4, rtol=1e-4)
+    dropping = torch.nn.TransformerEncoderLayer(16, 4, 32, 0.3, activation="gelu", batch_first=True, norm_first=True)
+    dropping.load_state_dict(layer.state_dict())
+    dropping.train()
+    h = torch.randn(8, 16, 16)
+    with torch.no_grad():
+        first, second = encoder_layer_forward(dropping, h), encoder_layer_forward(dropping, h)
+        assert not torch.allclose(first, second)
+        # the same distribution as torch's dropout: over 200 draws the outputs' mean and spread agree
+        mine = torch.stack([encoder_layer_forward(dropping, h) for _ in range(200)])
+        theirs = torch.stack([dropping(h) for _ in range(200)])
+    # (two sets of torch's draws: 0.018 and 0.999 here; without the 1 / (1 - p) scale: 0.09 and 0.51)
+    assert float((mine.mean(0) - theirs.mean(0)).abs().mean()) < 0.03
+    assert abs(float(mine.std(0).mean() / theirs.std(0).mean()) - 1.0) < 0.05
 
 
 def test_first_guess_of_an_unobserved_chain_is_its_nearest_observed_ancestor():
