@@ -169,42 +169,61 @@ def augment(
 
 #: Training clips up to which :func:`dtw_neighbours` compares every pair; beyond, each clip only this many.
 NEIGHBOUR_CANDIDATES = 1000
+#: the validation queries' nearest clips by DTW that ``val/dtw_agreement`` looks for (mocapkit/retrieval/module.py)
+TEACHER_NEIGHBOURS = 5
+
+
+def dtw_nearest(queries: list[Clip], database: list[Clip], k: int, excluded=None) -> np.ndarray:
+    """int64 ``[len(queries), k]``: each query's ``k`` nearest database clips (nearest first) by DTW on the
+    normalised landmarks flattened to ``[T, 60]``, each distance divided by ``sqrt(T_a + T_b)``: ``dtw_positions``'
+    distance. ``excluded(i)``: bool ``[len(database)]``, the clips query ``i`` may not have (itself, its own
+    group); -1 pads a row with fewer candidates. Labels are never read.
+
+    Up to :data:`NEIGHBOUR_CANDIDATES` database clips every pair is compared (0.8 s for HDM05's 153 training clips
+    against themselves, 6.5 s for MSR's 454, one core); beyond, each query is compared with its
+    :data:`NEIGHBOUR_CANDIDATES` nearest database clips by a fixed-length descriptor (16 evenly spaced frames,
+    FAISS), as ``dtw_large`` searches: time linear in the clips."""
+    from mocapkit.retrieval import ann
+
+    flat = lambda clips: RaggedFrames.from_list([c.landmarks.reshape(len(c.landmarks), -1) for c in clips])
+    q_frames, db_frames = flat(queries), flat(database)
+    q_lengths, db_lengths = q_frames.lengths.astype(np.float64), db_frames.lengths.astype(np.float64)
+    nearest = np.full((len(queries), int(k)), -1, dtype=np.int64)
+    every = np.arange(len(database))
+    if len(database) > NEIGHBOUR_CANDIDATES:
+        describe = lambda frames: np.stack([resample_frames(frames[i], 16).ravel() for i in range(len(frames))])
+        index = ann.build(describe(db_frames), "flat", metric="l2")
+        q_descriptors = describe(q_frames)
+    for first in range(0, len(queries), 4096):  # the candidate lists a block of queries at a time
+        block = range(first, min(first + 4096, len(queries)))
+        if len(database) > NEIGHBOUR_CANDIDATES:
+            lists = ann.search(index, "flat", q_descriptors[block.start : block.stop], NEIGHBOUR_CANDIDATES + 1)
+        for i in block:
+            if len(database) <= NEIGHBOUR_CANDIDATES:  # every database clip
+                row, d = every, candidate_dtw(q_frames[i], db_frames) / np.sqrt(q_lengths[i] + db_lengths)
+                if excluded is not None:
+                    d[excluded(i)] = np.inf
+            else:  # the query's candidates by descriptor
+                row = lists[i - first]
+                row = row[row >= 0]
+                if excluded is not None:
+                    row = row[~excluded(i)[row]]
+                d = candidate_dtw(q_frames[i], db_frames.subset(row)) / np.sqrt(q_lengths[i] + db_lengths[row])
+            order = np.argsort(d, kind="stable")[: int(k)]
+            best = row[order[np.isfinite(d[order])]]
+            nearest[i, : len(best)] = best
+    return nearest
 
 
 def dtw_neighbours(clips: list[Clip], k: int) -> np.ndarray:
-    """int64 ``[n, k]``: each clip's ``k`` nearest other clips (nearest first) by DTW on its normalised landmarks
-    flattened to ``[T, 60]``, each distance divided by ``sqrt(T_a + T_b)``: ``dtw_positions``' distance. Labels
-    are never read.
-
-    Up to :data:`NEIGHBOUR_CANDIDATES` clips every pair is compared (0.8 s for HDM05's 153 training clips, 6.5 s
-    for MSR's 454, one core); beyond, each clip is compared with its :data:`NEIGHBOUR_CANDIDATES` nearest clips by
-    a fixed-length descriptor (16 evenly spaced frames, FAISS), as ``dtw_large`` searches: time linear in the
-    clips."""
-    from mocapkit.retrieval import ann
-
+    """int64 ``[n, k]``: each clip's ``k`` nearest other clips (nearest first), :func:`dtw_nearest` of the clips
+    among themselves."""
     n = len(clips)
     if not 1 <= int(k) < min(n, NEIGHBOUR_CANDIDATES + 1):
         raise ValueError(
             f"data.neighbours={k}: between 1 and the training clips less one ({n - 1}), at most {NEIGHBOUR_CANDIDATES}"
         )
-    frames = RaggedFrames.from_list([c.landmarks.reshape(len(c.landmarks), -1) for c in clips])
-    lengths = frames.lengths.astype(np.float64)
-    nearest = np.empty((n, int(k)), dtype=np.int64)
-    if n <= NEIGHBOUR_CANDIDATES:
-        for i in range(n):
-            d = candidate_dtw(frames[i], frames) / np.sqrt(lengths[i] + lengths)
-            d[i] = np.inf
-            nearest[i] = np.argsort(d, kind="stable")[: int(k)]
-        return nearest
-    descriptors = np.stack([resample_frames(frames[i], 16).ravel() for i in range(n)])
-    index = ann.build(descriptors, "flat", metric="l2")
-    for first in range(0, n, 4096):  # the candidate lists a block of clips at a time
-        block = ann.search(index, "flat", descriptors[first : first + 4096], NEIGHBOUR_CANDIDATES + 1)
-        for i, row in enumerate(block, first):
-            row = row[(row >= 0) & (row != i)]
-            d = candidate_dtw(frames[i], frames.subset(row)) / np.sqrt(lengths[i] + lengths[row])
-            nearest[i] = row[np.argsort(d, kind="stable")[: int(k)]]
-    return nearest
+    return dtw_nearest(clips, clips, k, excluded=lambda i: np.arange(n) == i)
 
 
 class TwoViews(Dataset):
@@ -247,10 +266,21 @@ class TwoViews(Dataset):
 
 
 class RetrievalClips(Dataset):
-    """Clips as they are (resampled to ``frames``), each a query or a database clip."""
+    """Clips as they are (resampled to ``frames``), each a query or a database clip; with ``teacher``
+    (int64 ``[n, k]``, a query's nearest clips by DTW as indices of this data set, -1 elsewhere) each item also
+    carries its row, which the module's label-free selection compares with the embedding's nearest clips."""
 
-    def __init__(self, clips: list[Clip], labels: np.ndarray, groups: np.ndarray, query: np.ndarray, frames: int):
+    def __init__(
+        self,
+        clips: list[Clip],
+        labels: np.ndarray,
+        groups: np.ndarray,
+        query: np.ndarray,
+        frames: int,
+        teacher: np.ndarray | None = None,
+    ):
         self.clips, self.labels, self.groups, self.query, self.frames = clips, labels, groups, query, frames
+        self.teacher = teacher
         self._cache: dict[int, torch.Tensor] = {}
 
     def __len__(self) -> int:
@@ -265,6 +295,7 @@ class RetrievalClips(Dataset):
             "group": torch.tensor(self.groups[index]),
             "query": torch.tensor(bool(self.query[index])),
             "index": torch.tensor(index),
+            **({} if self.teacher is None else {"teacher": torch.from_numpy(self.teacher[index])}),
         }
 
 
@@ -418,11 +449,23 @@ class RetrievalDataModule(L.LightningDataModule):
             np.array([self._group_index[c.group] for c in clips], dtype=np.int64),
         )
 
-    def _retrieval(self, queries: list[Clip], database: list[Clip]) -> RetrievalClips:
+    def _retrieval(self, queries: list[Clip], database: list[Clip], teacher: bool = False) -> RetrievalClips:
+        """Queries then database clips; with ``teacher``, each query's :data:`TEACHER_NEIGHBOURS` nearest database
+        clips by DTW among those the module ranks it against (the other groups' where the database has several,
+        as ``val/map`` ranks)."""
         clips = [*queries, *database]
         labels, groups = self._arrays(clips)
         query = np.arange(len(clips)) < len(queries)
-        return RetrievalClips(clips, labels, groups, query, self.frames)
+        rows = None
+        if teacher:
+            q_groups, db_groups = groups[: len(queries)], groups[len(queries) :]
+            cross = len(np.unique(db_groups)) > 1
+            excluded = (lambda i: db_groups == q_groups[i]) if cross else None
+            print(f"[mocapkit] DTW neighbours of {len(queries)} validation clips", flush=True)
+            nearest = dtw_nearest(queries, database, TEACHER_NEIGHBOURS, excluded)
+            rows = np.full((len(clips), TEACHER_NEIGHBOURS), -1, dtype=np.int64)
+            rows[: len(queries)] = np.where(nearest >= 0, nearest + len(queries), -1)
+        return RetrievalClips(clips, labels, groups, query, self.frames, rows)
 
     def dataset(self, part: str) -> Dataset:
         if not hasattr(self, "_datasets"):
@@ -442,7 +485,7 @@ class RetrievalDataModule(L.LightningDataModule):
                     self.augmentation,
                     partners,
                 ),
-                "val": self._retrieval(self.val_clips, self.train_clips),
+                "val": self._retrieval(self.val_clips, self.train_clips, teacher=self.positives == "dtw_neighbours"),
                 "test": self._retrieval(self.test_clips, [*self.train_clips, *self.val_clips]),
             }
         return self._datasets[part]

@@ -45,6 +45,7 @@ from mocapkit.train.optimization import (
 )
 
 LOSSES = ("supcon", "simclr")
+SELECTIONS = ("map", "dtw_agreement")
 
 
 def retrieval_scores(
@@ -74,6 +75,28 @@ def retrieval_scores(
     if not aps:
         return {"map": float("nan"), "p1": float("nan"), "n_queries": 0}
     return {"map": float(np.mean(aps)), "p1": float(np.mean(hits)), "n_queries": len(aps)}
+
+
+def neighbour_agreement(
+    queries: np.ndarray,
+    database: np.ndarray,
+    teacher: np.ndarray,
+    query_groups: np.ndarray | None = None,
+    database_groups: np.ndarray | None = None,
+) -> float:
+    """Mean over queries of the share of each query's ``teacher`` neighbours (database indices ``[Q, k]``, -1 for
+    none) among its ``k`` nearest ``database`` clips by cosine of the unit-norm embeddings (with groups: among the
+    other groups' clips, as :func:`retrieval_scores` ranks). No label is read; NaN without any teacher row."""
+    similarity = queries.astype(np.float64) @ database.astype(np.float64).T
+    if query_groups is not None:
+        similarity[query_groups[:, None] == database_groups[None, :]] = -np.inf
+    shares = []
+    for i, row in enumerate(teacher):
+        row = row[row >= 0]
+        if len(row):
+            nearest = np.argsort(-similarity[i], kind="stable")[: teacher.shape[1]]
+            shares.append(len(np.intersect1d(nearest, row)) / len(row))
+    return float(np.mean(shares)) if shares else float("nan")
 
 
 def retrieval_loss(
@@ -109,6 +132,9 @@ class MotionEmbeddingModule(ConfiguredOptimization, StagedSteps, L.LightningModu
         class_names: the data module's label space. source: how the training data was made (data set, label,
             groups, frames, fps, heading, landmark names), from the data module.
         loss: ``"supcon"`` or ``"simclr"``. temperature: of the softmax (0.1).
+        selection: what ``best.ckpt`` follows (``val/selection``): ``"map"`` (``val/map``, ties by the lower
+            ``val/loss``; the epoch with one label) or ``"dtw_agreement"`` (``val/dtw_agreement``, ties to the later
+            epoch; no label read: needs ``data.positives=dtw_neighbours``).
     """
 
     def __init__(
@@ -120,10 +146,13 @@ class MotionEmbeddingModule(ConfiguredOptimization, StagedSteps, L.LightningModu
         source: dict | None = None,
         loss: str = "supcon",
         temperature: float = 0.1,
+        selection: str = "map",
     ):
         super().__init__()
         if loss not in LOSSES:
             raise ValueError(f"module.loss={loss!r}: one of {list(LOSSES)}")
+        if selection not in SELECTIONS:
+            raise ValueError(f"module.selection={selection!r}: one of {list(SELECTIONS)}")
         if not float(temperature) > 0:
             raise ValueError(f"module.temperature={temperature}: must be positive")
         model, optimizer = as_plain_dict(model), as_plain_dict(optimizer)
@@ -137,6 +166,7 @@ class MotionEmbeddingModule(ConfiguredOptimization, StagedSteps, L.LightningModu
                 "source": as_plain_dict(source or {}),
                 "loss": loss,
                 "temperature": float(temperature),
+                "selection": selection,
             }
         )
         self.model = instantiate(model)
@@ -162,7 +192,10 @@ class MotionEmbeddingModule(ConfiguredOptimization, StagedSteps, L.LightningModu
         z = self.model(batch["landmarks"])
         self._outputs.setdefault(stage, []).append(
             # float32 whatever the training precision: embeddings are ranked (and ONNX exports them) in float32
-            {"z": z.detach().float().cpu(), **{k: batch[k].detach().cpu() for k in ("label", "group", "query")}}
+            {
+                "z": z.detach().float().cpu(),
+                **{k: batch[k].detach().cpu() for k in ("label", "group", "query", "teacher") if k in batch},
+            }
         )
         return None
 
@@ -200,10 +233,27 @@ class MotionEmbeddingModule(ConfiguredOptimization, StagedSteps, L.LightningModu
         self.log(f"{stage}/map", scores["map"], prog_bar=True, sync_dist=True)
         self.log(f"{stage}/p1", scores["p1"], prog_bar=True, sync_dist=True)
         self.log(f"{stage}/loss", loss, sync_dist=True)
+        if "teacher" in out:
+            # the teacher rows index the whole validation set; the ranking indexes its database part
+            teacher = out["teacher"][q]
+            teacher = np.where(teacher >= 0, teacher - int(q.sum()), -1)
+            agreement = neighbour_agreement(out["z"][q], out["z"][d], teacher, qg, dg)
+            self.log(f"{stage}/dtw_agreement", agreement, prog_bar=True, sync_dist=True)
         if stage == "val":
-            one_label = len(np.unique(out["label"])) == 1
-            selection = float(self.current_epoch) if one_label else scores["map"] - 1e-4 * loss
-            self.log("val/selection", selection, sync_dist=True)
+            # every selection the data allows is logged (a second checkpoint callback can follow another one)
+            by = {
+                "map": float(self.current_epoch) if len(np.unique(out["label"])) == 1 else scores["map"] - 1e-4 * loss
+            }
+            if "teacher" in out:
+                by["dtw_agreement"] = agreement + 1e-6 * self.current_epoch  # ties to the later epoch
+            for name, value in by.items():
+                self.log(f"val/selection_by_{name}", value, sync_dist=True)
+            if self.hparams.selection not in by:
+                raise ValueError(
+                    "module.selection=dtw_agreement needs the validation clips' DTW neighbours: "
+                    "data.positives=dtw_neighbours"
+                )
+            self.log("val/selection", by[self.hparams.selection], sync_dist=True)
 
     def on_validation_epoch_end(self) -> None:
         self._retrieval_epoch_end("val")

@@ -3,6 +3,7 @@
     OMP_NUM_THREADS=1 python scripts/results/retrieval_self_supervised.py \
         [--experiments retrieval_simclr,retrieval_dtw_neighbours] [--seeds 0,1,2] [--jobs 2] [--json OUT.json]
         [--set KEY=VALUE ... --tag NAME]      # an ablation: Hydra overrides for every run, its runs named by the tag
+        [--checkpoint last]                   # score another checkpoint of the same runs (default best)
 
 For each experiment (``configs/experiment/NAME.yaml``), seed and fold of the four retrieval cells, one
 ``mocapkit train`` run on the fold's database groups, then ``mocapkit eval`` of its ``best.ckpt``: the fold's
@@ -15,7 +16,7 @@ held-out groups' clips as queries against every database clip (the folds of ``mo
 
 A cell's mAP and P@1 pool every query of its folds (each fold's figure weighted by its query count); reported as
 mean ± sd over the seeds. Runs go to ``checkpoints/<experiment>/ss_<cell>_<fold>_s<seed>[_<tag>]``; a run whose
-``eval/metrics.json`` exists is not trained again (delete it to retrain). ``--jobs`` runs go side by side, one
+``last.ckpt`` exists is not trained again (delete the run folder to retrain). ``--jobs`` runs go side by side, one
 thread each. Results: docs/results/retrieval.md#trained-embeddings.
 """
 
@@ -58,13 +59,22 @@ def folds(cell: str) -> list[tuple[str, list[str], list[str]]]:
 
 
 def run(
-    experiment: str, cell: str, fold: str, held: list[str], data: list[str], seed: int, extra=(), tag: str = ""
+    experiment: str,
+    cell: str,
+    fold: str,
+    held: list[str],
+    data: list[str],
+    seed: int,
+    extra=(),
+    tag: str = "",
+    checkpoint: str = "best",
 ) -> dict:
-    """Train (unless done) and evaluate one run (``extra``: more overrides, ``tag``: its name's suffix); its
-    ``metrics.json``."""
+    """Train (unless done) and evaluate one run (``extra``: more overrides, ``tag``: its name's suffix); the
+    ``metrics.json`` of its ``<checkpoint>.ckpt`` (``eval/``, or ``eval_<checkpoint>/`` for another than best)."""
     name = f"ss_{cell}_{fold}_s{seed}" + (f"_{tag}" if tag else "")
     run_dir = Path("checkpoints") / experiment / name
-    metrics = run_dir / "eval" / "metrics.json"
+    out_dir = run_dir / ("eval" if checkpoint == "best" else f"eval_{checkpoint}")
+    metrics = out_dir / "metrics.json"
     if not metrics.exists():
         cli = [sys.executable, "-m", "mocapkit"]
         groups = "data.test_groups=[" + ",".join(held) + "]"
@@ -72,26 +82,27 @@ def run(
         log = run_dir.parent / f"{name}.log"
         log.parent.mkdir(parents=True, exist_ok=True)
         start = time.perf_counter()
-        with open(log, "w") as out:
-            train = [
-                *cli,
-                "train",
-                f"experiment={experiment}",
-                *data,
-                groups,
-                f"run_name={name}",
-                f"seed={seed}",
-                *extra,
-            ]
-            subprocess.run(train, check=True, stdout=out, stderr=subprocess.STDOUT, env=env)
+        with open(log, "a") as out:
+            if not (run_dir / "last.ckpt").exists():
+                train = [
+                    *cli,
+                    "train",
+                    f"experiment={experiment}",
+                    *data,
+                    groups,
+                    f"run_name={name}",
+                    f"seed={seed}",
+                    *extra,
+                ]
+                subprocess.run(train, check=True, stdout=out, stderr=subprocess.STDOUT, env=env)
             subprocess.run(
-                [*cli, "eval", f"ckpt_path={run_dir / 'best.ckpt'}"],
+                [*cli, "eval", f"ckpt_path={run_dir / f'{checkpoint}.ckpt'}", f"eval.out_dir={out_dir}"],
                 check=True,
                 stdout=out,
                 stderr=subprocess.STDOUT,
                 env=env,
             )
-        print(f"{experiment} {name}: {time.perf_counter() - start:.0f} s", flush=True)
+        print(f"{experiment} {name} {checkpoint}: {time.perf_counter() - start:.0f} s", flush=True)
     return json.loads(metrics.read_text())
 
 
@@ -104,6 +115,9 @@ def main() -> None:
     parser.add_argument("--json", default=None, help="write the results here")
     parser.add_argument("--set", action="append", default=[], help="a Hydra override for every run (repeatable)")
     parser.add_argument("--tag", default="", help="suffix of the runs' names (required with --set)")
+    parser.add_argument(
+        "--checkpoint", default="best", help="the checkpoint of each run to score: best (default), last, or another"
+    )
     args = parser.parse_args()
     if args.set and not args.tag:
         parser.error("--set needs --tag: the runs of an ablation must not take the names of the plain runs")
@@ -115,7 +129,7 @@ def main() -> None:
     jobs = [(e, c, f, held, data, s) for e in experiments for c in cells for f, held, data in folds(c) for s in seeds]
     print(f"{len(jobs)} runs, {args.jobs} at a time", flush=True)
     with ThreadPoolExecutor(max_workers=max(1, args.jobs)) as pool:
-        reports = list(pool.map(lambda job: run(*job, extra=args.set, tag=args.tag), jobs))
+        reports = list(pool.map(lambda job: run(*job, extra=args.set, tag=args.tag, checkpoint=args.checkpoint), jobs))
     pooled: dict[tuple[str, str, int], list[dict]] = {}
     for (e, c, _, _, _, s), report in zip(jobs, reports):
         pooled.setdefault((e, c, s), []).append(report)

@@ -217,6 +217,93 @@ def test_dtw_neighbour_positives_draw_the_second_view_from_the_clip_or_its_neigh
         RetrievalDataModule(clips=clips, positives="labels")
 
 
+def test_validation_clips_carry_their_dtw_neighbours_among_the_other_groups(monkeypatch):
+    """With DTW-neighbour positives each validation query carries its nearest database clips by DTW (indices of
+    the validation set, only other groups' clips, as val/map ranks): what val/dtw_agreement looks for."""
+    from mocapkit.retrieval import datamodule
+    from mocapkit.retrieval.datamodule import Clip, RetrievalDataModule, dtw_nearest
+
+    rng = np.random.default_rng(1)
+    families = np.tile([0, 1, 2], 8)  # 24 clips, 3 families, 4 groups
+    clips = [
+        Clip(_movement(f, int(rng.integers(20, 50)), rng.uniform(0, 0.3)), "xyz"[f], "abcd"[i % 4], str(i))
+        for i, f in enumerate(families)
+    ]
+    dm = RetrievalDataModule(clips=clips, test_groups=["d"], frames=8, val_fraction=0.3, positives="dtw_neighbours")
+    val = dm.dataset("val")
+    n_queries = int(val.query.sum())
+    assert n_queries >= 3
+    for i in range(len(val)):
+        row = val[i]["teacher"].numpy()
+        if not val.query[i]:
+            assert np.all(row == -1)
+            continue
+        assert np.all(row >= n_queries)  # database clips only
+        assert np.all(val.groups[row] != val.groups[i])  # of other groups
+        assert np.all(val.labels[row[:2]] == val.labels[i])  # the nearest: the query's own family (labels unread)
+    same_clip = RetrievalDataModule(clips=clips, test_groups=["d"], frames=8, val_fraction=0.3)
+    assert "teacher" not in same_clip.dataset("val")[0]
+    # beyond NEIGHBOUR_CANDIDATES database clips the candidates come by descriptor: the same neighbours here
+    queries, database = dm.val_clips, dm.train_clips
+    excluded = lambda i: np.array([c.group == queries[i].group for c in database])
+    exact = dtw_nearest(queries, database, 3, excluded)
+    monkeypatch.setattr(datamodule, "NEIGHBOUR_CANDIDATES", 8)
+    assert np.array_equal(dtw_nearest(queries, database, 3, excluded), exact)
+
+
+def test_neighbour_agreement_by_hand():
+    from mocapkit.retrieval.module import neighbour_agreement
+
+    database = np.eye(4)  # clip j's embedding is axis j
+    queries = np.array([[0.9, 0.1, 0.0, 0.0], [0.0, 0.0, 0.6, 0.8]])  # nearest: 0 then 1; 3 then 2
+    teacher = np.array([[0, 2], [3, -1]])
+    # query 0: {0, 1} holds 1 of {0, 2}; query 1: {3, 2} holds 3, its only teacher neighbour
+    assert neighbour_agreement(queries, database, teacher) == pytest.approx((0.5 + 1.0) / 2)
+    groups = np.array([0, 1, 0, 1])
+    # with groups, query 0 (group 1) ranks only clips 0 and 2: both teacher neighbours found
+    assert neighbour_agreement(queries[:1], database, teacher[:1], np.array([1]), groups) == 1.0
+    assert np.isnan(neighbour_agreement(queries, database, np.full((2, 2), -1)))
+
+
+@pytest.mark.parametrize("selection", ["map", "dtw_agreement"])
+def test_the_selection_follows_map_or_the_dtw_agreement(selection, monkeypatch):
+    """val/selection is val/map (ties by the loss) or val/dtw_agreement (ties to the later epoch); both are logged
+    where the validation set carries DTW neighbours, and selecting by agreement without them is refused."""
+    from mocapkit.retrieval.module import MotionEmbeddingModule
+    from mocapkit.train.config import compose_config
+
+    cfg = compose_config(["experiment=retrieval_dtw_neighbours", f"module.selection={selection}"])
+    from omegaconf import OmegaConf
+
+    module = MotionEmbeddingModule(
+        **{k: v for k, v in OmegaConf.to_container(cfg.module, resolve=True).items() if not k.startswith("_")},
+        class_names=["x", "y"],
+    )
+    logged = {}
+    monkeypatch.setattr(module, "log", lambda name, value, **kw: logged.__setitem__(name, float(value)))
+    z = torch.nn.functional.normalize(torch.tensor([[1.0, 0.1], [0.1, 1.0], [1.0, 0.0], [0.0, 1.0], [0.7, 0.7]]), dim=1)
+    batch = {
+        "z": z,
+        "label": torch.tensor([0, 1, 0, 1, 1]),
+        "group": torch.tensor([0, 0, 1, 1, 1]),
+        "query": torch.tensor([True, True, False, False, False]),
+        "teacher": torch.tensor([[2, 4], [4, 3], [-1, -1], [-1, -1], [-1, -1]]),  # validation-set indices
+    }
+    module._outputs["val"] = [batch]
+    module._retrieval_epoch_end("val")
+    # query 0's two nearest database clips: 2 then 4 (both teacher neighbours); query 1's: 3 then 4 (both)
+    assert logged["val/dtw_agreement"] == 1.0
+    assert logged["val/selection"] == logged[f"val/selection_by_{selection}"]
+    assert logged["val/selection_by_map"] == pytest.approx(logged["val/map"] - 1e-4 * logged["val/loss"])
+    del batch["teacher"]
+    module._outputs["val"] = [batch]
+    if selection == "map":
+        module._retrieval_epoch_end("val")
+    else:
+        with pytest.raises(ValueError, match="data.positives=dtw_neighbours"):
+            module._retrieval_epoch_end("val")
+
+
 def test_retrieval_scores_by_hand():
     from mocapkit.retrieval.module import retrieval_loss, retrieval_scores
 
