@@ -49,14 +49,14 @@ def dropout(x: torch.Tensor, p: float, training: bool = True) -> torch.Tensor:
     Each entry is kept with probability ``1 - p'`` and scaled by ``1 / (1 - p')``, ``p'`` being ``p`` rounded to
     1/65536 (0.1 → 0.1000061): the mask compares 16-bit uniform integers of NumPy's PCG64 with ``p' · 65536``,
     four times faster than torch's ``bernoulli_`` on CPU. The generator is seeded from torch's, so
-    ``torch.manual_seed`` (and Lightning's ``seed_everything``) make the draws reproducible. On other devices:
-    torch's own dropout.
+    ``torch.manual_seed`` (and Lightning's ``seed_everything``) make the draws reproducible. On other devices and
+    inside ``torch.compile``: torch's own dropout.
     """
     if not training or p == 0.0:
         return x
     if p >= 1.0:
         return x * 0.0
-    if x.device.type != "cpu":
+    if x.device.type != "cpu" or torch.compiler.is_compiling():  # NumPy would break a compiled graph
         return torch.nn.functional.dropout(x, p, training=True)
     threshold = round(p * 65536)
     seed = int(torch.randint(0, 2**62, (1,)))

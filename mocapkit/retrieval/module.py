@@ -23,7 +23,11 @@ clips of performers the network trains on), and the first epoch at 1.0 generalis
 later ones (fold mm: mAP 0.92 against 0.98 at the last epoch): ties must not keep the first. A library without
 labels (``data.dataset=folder``, files in one folder: every clip of one label) has nothing to rank by, and its
 loss is lowest where the embedding has collapsed (every clip equally near): ``val/selection`` is then the epoch,
-so ``best.ckpt`` is the last one.
+so ``best.ckpt`` is the last one. With ``data.positives=dtw_neighbours`` the validation queries also carry their
+5 nearest database clips by DTW, and ``val/dtw_agreement`` (:func:`neighbour_agreement`) is the share of them the
+embedding finds among its 5 nearest: ``module.selection=dtw_agreement`` selects by it, reading no label (with one
+label, again the last epoch, which scored as well in the runs of docs/decisions.md#label-free-checkpoint-selection).
+Every selection the data allows is logged as ``val/selection_by_<name>``.
 :func:`evaluate_embedding` is the task's ``mocapkit eval`` (held-out groups; writes ``metrics.json``).
 """
 
@@ -133,8 +137,8 @@ class MotionEmbeddingModule(ConfiguredOptimization, StagedSteps, L.LightningModu
             groups, frames, fps, heading, landmark names), from the data module.
         loss: ``"supcon"`` or ``"simclr"``. temperature: of the softmax (0.1).
         selection: what ``best.ckpt`` follows (``val/selection``): ``"map"`` (``val/map``, ties by the lower
-            ``val/loss``; the epoch with one label) or ``"dtw_agreement"`` (``val/dtw_agreement``, ties to the later
-            epoch; no label read: needs ``data.positives=dtw_neighbours``).
+            ``val/loss``) or ``"dtw_agreement"`` (``val/dtw_agreement``, ties to the later epoch; no label read:
+            needs ``data.positives=dtw_neighbours``); with one label either is the epoch.
     """
 
     def __init__(
@@ -241,11 +245,10 @@ class MotionEmbeddingModule(ConfiguredOptimization, StagedSteps, L.LightningModu
             self.log(f"{stage}/dtw_agreement", agreement, prog_bar=True, sync_dist=True)
         if stage == "val":
             # every selection the data allows is logged (a second checkpoint callback can follow another one)
-            by = {
-                "map": float(self.current_epoch) if len(np.unique(out["label"])) == 1 else scores["map"] - 1e-4 * loss
-            }
-            if "teacher" in out:
-                by["dtw_agreement"] = agreement + 1e-6 * self.current_epoch  # ties to the later epoch
+            one_label = len(np.unique(out["label"])) == 1
+            by = {"map": float(self.current_epoch) if one_label else scores["map"] - 1e-4 * loss}
+            if "teacher" in out:  # ties to the later epoch; with one label the epoch itself, as for map
+                by["dtw_agreement"] = float(self.current_epoch) if one_label else agreement + 1e-6 * self.current_epoch
             for name, value in by.items():
                 self.log(f"val/selection_by_{name}", value, sync_dist=True)
             if self.hparams.selection not in by:
