@@ -4,13 +4,14 @@
   ``torch.linalg.vector_norm(x, dim=dim)``. torch's reduction is 15–20× slower on a strided dimension of size 3
   (the coordinates of ``[B, T, J, 3]`` permuted from the channel-first ``[B, 3, T, J]``: 15 ms against 0.7 ms,
   forward and backward, for a batch of 16 windows of 240 frames × 31 joints on one core).
-- :func:`dropout` (and :class:`Dropout`, the module): ``nn.functional.dropout`` in training, its mask on CPU drawn as 16-bit integers by NumPy's
-  PCG64 instead of torch's ``bernoulli_`` (one 32-bit Mersenne-Twister draw per entry): 10 ms against 25 ms for
-  the 3.7 M attention weights of a batch of 16 windows of 240 frames, 4 heads. The same distribution up to ``p``
-  rounded to 1/65536, not the same random numbers.
+- :func:`dropout` (and :class:`Dropout`, the module): ``nn.functional.dropout`` in training, its mask on CPU drawn
+  as 16-bit integers by NumPy's PCG64 instead of torch's ``bernoulli_`` (a 32-bit Mersenne-Twister draw per
+  entry): 10 ms against 25 ms for the 3.7 M attention weights of a batch of 16 windows of 240 frames, 4 heads. The
+  same distribution up to ``p`` rounded to 1/65536, not the same random numbers.
 - :class:`ELU`: ``nn.ELU()`` (α = 1) through ``exp``, which torch vectorises on CPU, instead of ``expm1``, which it
-  does not: 10× faster on the CVAE's ``[256, 256]`` activations; the same values to float32 rounding (``eˣ − 1``
-  loses a few bits of relative precision near 0, about 1e-7 absolute). ONNX export writes ``nn.ELU``'s own operator.
+  does not: 3× faster forward and backward on the CVAE's ``[256, 256]`` activations; the same values to float32
+  rounding (``eˣ − 1`` loses a few bits of relative precision near 0, about 1e-7 absolute). ONNX export writes
+  ``nn.ELU``'s own operator.
 
 Measured in bench/RESULTS.md#training-throughput.
 """
@@ -48,7 +49,7 @@ def dropout(x: torch.Tensor, p: float, training: bool = True) -> torch.Tensor:
 
     Each entry is kept with probability ``1 - p'`` and scaled by ``1 / (1 - p')``, ``p'`` being ``p`` rounded to
     1/65536 (0.1 → 0.1000061): the mask compares 16-bit uniform integers of NumPy's PCG64 with ``p' · 65536``,
-    four times faster than torch's ``bernoulli_`` on CPU. The generator is seeded from torch's, so
+    2.5× faster than torch's ``bernoulli_`` on CPU. The generator is seeded from torch's, so
     ``torch.manual_seed`` (and Lightning's ``seed_everything``) make the draws reproducible. On other devices and
     inside ``torch.compile``: torch's own dropout.
     """
