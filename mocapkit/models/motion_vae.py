@@ -28,7 +28,7 @@ def _mlp(inputs: int, hidden: int, outputs: int, layers: int) -> nn.Sequential:
     sizes = [inputs] + [hidden] * layers
     blocks: list[nn.Module] = []
     for a, b in itertools.pairwise(sizes):
-        blocks += [nn.Linear(a, b), ELU()]  # nn.ELU's maths, 10× faster on CPU
+        blocks += [nn.Linear(a, b), ELU()]  # nn.ELU's maths, 3× faster on CPU
     return nn.Sequential(*blocks, nn.Linear(sizes[-1], outputs))
 
 

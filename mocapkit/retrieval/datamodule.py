@@ -190,16 +190,17 @@ def dtw_nearest(queries: list[Clip], database: list[Clip], k: int, excluded=None
     q_lengths, db_lengths = q_frames.lengths.astype(np.float64), db_frames.lengths.astype(np.float64)
     nearest = np.full((len(queries), int(k)), -1, dtype=np.int64)
     every = np.arange(len(database))
-    if len(database) > NEIGHBOUR_CANDIDATES:
+    large = len(database) > NEIGHBOUR_CANDIDATES
+    if large:
         describe = lambda frames: np.stack([resample_frames(frames[i], 16).ravel() for i in range(len(frames))])
         index = ann.build(describe(db_frames), "flat", metric="l2")
         q_descriptors = describe(q_frames)
     for first in range(0, len(queries), 4096):  # the candidate lists a block of queries at a time
         block = range(first, min(first + 4096, len(queries)))
-        if len(database) > NEIGHBOUR_CANDIDATES:
+        if large:
             lists = ann.search(index, "flat", q_descriptors[block.start : block.stop], NEIGHBOUR_CANDIDATES + 1)
         for i in block:
-            if len(database) <= NEIGHBOUR_CANDIDATES:  # every database clip
+            if not large:  # every database clip
                 row, d = every, candidate_dtw(q_frames[i], db_frames) / np.sqrt(q_lengths[i] + db_lengths)
                 if excluded is not None:
                     d[excluded(i)] = np.inf
