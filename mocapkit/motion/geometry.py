@@ -356,6 +356,9 @@ class LandmarkTrack(NamedTuple):
     #: leg length over the clip's (hip → knee → ankle, median over frames), so that strides compare across bodies
     #: (unscaled when the clip's legs are under a quarter of the template's: no knees or ankles to measure).
     pelvis: np.ndarray
+    #: float32 ``[T, J, 3]`` metres, or None: every joint of the file, root-centred, not turned or retargeted
+    #: (filled by the retrieval methods that compare them, :func:`mocapkit.retrieval.dtw.root_centred_joints`).
+    joints: np.ndarray | None = None
 
 
 def landmark_track(motion, fps: float = 30.0, heading: str = "frame", min_frames: int = 2) -> LandmarkTrack:

@@ -12,9 +12,13 @@ query's frame sequence and each database clip's, on per-frame features of the no
 - ``"world_positions"``: the same landmarks not turned, ``[T, 60]`` metres: the posture as the file's frame sees it
   (which way the body faces);
 - ``"world_velocity"``: the pelvis's velocity in the file's frame, ``[T, 3]`` metres of the template body per second
-  (smoothed over :data:`VELOCITY_SMOOTHING` frames): where the body goes (a walk to the left, a walk back).
+  (smoothed over :data:`VELOCITY_SMOOTHING` frames): where the body goes (a walk to the left, a walk back);
+- ``"joints"``: every joint of the file's skeleton, root-centred, not turned, retargeted or scaled
+  (:func:`root_centred_joints`), ``[T, 3J]`` metres: what plain DTW (:class:`PlainDTWRetrieval`) compares. It needs
+  one skeleton: ``fit`` keeps it only when the database's clips share one joint count, and refuses a query or an
+  added clip of another (:class:`~mocapkit.motion.geometry.SkeletonInputError`, naming both counts).
 
-The two **world** features mean something only when the library's clips share one frame, as takes of one studio
+The three **world** features mean something only when the library's clips share one frame, as takes of one studio
 set-up or one camera do; across takes that face every way (HDM05's performers) they only add noise. With
 ``world_frame="auto"`` (the default) ``fit`` keeps them only when the database's clips start facing alike: the
 mean resultant length ``R`` of each clip's heading over its first half second is at least
@@ -22,7 +26,8 @@ mean resultant length ``R`` of each clip's heading over its first half second is
 always keeps them, ``"off"`` never.
 
 Given several features (``features=["positions", "relational"]``), each one's DTW distance is divided by its
-**scale**, learned at ``fit``, and the quotients are summed, so that metres and relational units weigh alike: with
+**scale**, learned at ``fit``, and the quotients, times the feature's ``weights`` (1 unless given), are summed, so
+that metres and relational units weigh alike: with
 ``scaling="dtw"`` the median DTW distance among database clips; with ``scaling="frames"`` the root-mean-square
 distance of the database's frames to their mean frame (linear in the library's frames, no DTW between clips: for
 libraries of long takes, ``dtw_takes``, whose clip-to-clip DTW would be quadratic in their length).
@@ -82,9 +87,9 @@ from mocapkit.retrieval.hubness import (
     reference_indices,
 )
 
-FEATURES = ("positions", "relational", "world_positions", "world_velocity")
+FEATURES = ("positions", "relational", "world_positions", "world_velocity", "joints")
 #: The features that read the file's frame (kept or dropped by ``world_frame``).
-WORLD_FEATURES = ("world_positions", "world_velocity")
+WORLD_FEATURES = ("world_positions", "world_velocity", "joints")
 WORLD_FRAMES = ("auto", "on", "off")
 #: ``world_frame="auto"`` keeps the world features when the database clips' starting headings have at least this
 #: mean resultant length (a circular spread of about 48°). Set before the selection run; there, HDM05's performers
@@ -126,6 +131,10 @@ def frame_features(track: LandmarkTrack, features: str, fps: float) -> np.ndarra
 
         path = uniform_filter1d(np.asarray(track.pelvis, np.float64), VELOCITY_SMOOTHING, axis=0, mode="nearest")
         return np.gradient(path, axis=0) * float(fps) if len(path) > 1 else np.zeros_like(path)
+    if features == "joints":
+        if track.joints is None:
+            raise ValueError("the joints feature needs the track's root-centred joints (DTWRetrieval.sequences)")
+        return track.joints.reshape(len(track.joints), -1).astype(np.float64)
     raise ValueError(f"features must be one of {FEATURES}, got {features!r}")
 
 
@@ -172,11 +181,13 @@ class DTWRetrieval(RetrievalMethod):
             queries) on every CPU thread.
         world_frame: ``"auto"``, ``"on"`` or ``"off"``: whether the world features among ``features`` are used
             (module docstring).
+        weights: ``{feature: weight}`` for the sum of several features' scaled distances (1 for the others).
         prefilter: None (``search`` ranks every clip) or ``K``: ``search`` ranks only the ``K`` clips nearest by
             descriptor (module docstring); ``prefilter_index``: ``"auto"``, ``"flat"`` or ``"hnsw"`` for them.
 
-    Learned: ``features_`` (the features used), ``heading_concentration_``, ``scales_`` and, with several
-    features or mutual proximity, the reference distances and statistics.
+    Learned: ``features_`` (the features used), ``heading_concentration_``, ``scales_`` (each feature's scale over
+    its weight: what its distance is divided by) and, with several features or mutual proximity, the reference
+    distances and statistics.
     """
 
     def __init__(
@@ -193,6 +204,7 @@ class DTWRetrieval(RetrievalMethod):
         world_frame: str = "auto",
         prefilter: int | None = None,
         prefilter_index: str = "auto",
+        weights: dict[str, float] | None = None,
     ):
         self.features = features
         self.window = window
@@ -206,6 +218,7 @@ class DTWRetrieval(RetrievalMethod):
         self.world_frame = world_frame
         self.prefilter = prefilter
         self.prefilter_index = prefilter_index
+        self.weights = weights
 
     @property
     def feature_names(self) -> list[str]:
@@ -218,11 +231,21 @@ class DTWRetrieval(RetrievalMethod):
     # ------------------------------------------------------------------ the contract
     def sequences(self, motions, what: str = "input") -> list[LandmarkTrack]:
         """Each motion's :class:`~mocapkit.motion.geometry.LandmarkTrack` (the normalised landmarks with the
-        heading and pelvis path the world features read); checks as the base class's."""
-        return [
-            landmark_track(motion, fps=self.fps, heading=self.heading, min_frames=self.min_frames)
-            for motion in motion_list(motions, what)
-        ]
+        heading and pelvis path the world features read, and the root-centred joints when ``joints`` is asked
+        for); checks as the base class's, and a fitted method that compares joints refuses another skeleton."""
+        tracks = []
+        with_joints = "joints" in self.feature_names
+        joints = self.database_["joints"].dim // 3 if "joints" in getattr(self, "database_", {}) else None
+        for motion in motion_list(motions, what):
+            track = landmark_track(motion, fps=self.fps, heading=self.heading, min_frames=self.min_frames)
+            if with_joints:
+                track = track._replace(joints=root_centred_joints(motion, fps=self.fps, min_frames=self.min_frames))
+                if joints is not None and track.joints.shape[1] != joints:
+                    raise SkeletonInputError(
+                        f"{motion.source or motion.name or 'motion'}: {_skeleton_mismatch(track.joints.shape[1], joints)}"
+                    )
+            tracks.append(track)
+        return tracks
 
     def _encode_sequences(self, sequences):
         return {
@@ -240,6 +263,14 @@ class DTWRetrieval(RetrievalMethod):
             self.world_frame == "auto" and self.heading_concentration_ >= WORLD_MIN_CONCENTRATION
         )
         chosen = [n for n in names if keep_world or n not in WORLD_FEATURES]
+        counts = sorted({s.joints.shape[1] for s in sequences}) if "joints" in chosen else []
+        if len(counts) > 1:  # joint by joint needs one skeleton
+            if self.world_frame == "on":
+                raise ValueError(
+                    f"{type(self).__name__}: the joints feature compares joint by joint, and the database's clips have "
+                    f"{counts} joints; index one skeleton, or set world_frame=auto to leave it out"
+                )
+            chosen.remove("joints")
         if not chosen:
             raise ValueError(
                 f"{type(self).__name__}: features {names} are all world features and world_frame="
@@ -248,6 +279,17 @@ class DTWRetrieval(RetrievalMethod):
                 "such as positions, or set world_frame=on"
             )
         return chosen
+
+    def _weighted(self, scales) -> np.ndarray:
+        """``scales`` (one per feature of ``features_``) divided by the features' ``weights``."""
+        weights = dict(self.weights or {})
+        unknown = sorted(set(weights) - set(self.feature_names))
+        if unknown:
+            raise ValueError(f"weights: {unknown} are not among the features {self.feature_names}")
+        bad = {n: w for n, w in weights.items() if not (np.isfinite(float(w)) and float(w) > 0)}
+        if bad:
+            raise ValueError(f"weights must be positive numbers, got {bad}")
+        return np.asarray(scales, dtype=np.float64) / np.array([float(weights.get(n, 1.0)) for n in self.features_])
 
     def _fit_sequences(self, sequences, y):
         if self.hubness is not None and self.hubness not in HUBNESS_METHODS:
@@ -260,7 +302,7 @@ class DTWRetrieval(RetrievalMethod):
         self.scales_ = np.ones(len(names))
         if self._frame_scaled:
             self.frame_moments_ = {n: frame_moments(database[n]) for n in names}
-            self.scales_ = np.array([moments_scale(self.frame_moments_[n]) for n in names])
+            self.scales_ = self._weighted([moments_scale(self.frame_moments_[n]) for n in names])
         if not self._needs_reference:
             return database
         reference = reference_indices(len(sequences), int(self.n_reference))
@@ -441,7 +483,7 @@ class DTWRetrieval(RetrievalMethod):
         off_diagonal = np.ones(raw[names[0]].shape, dtype=bool)
         off_diagonal[self.reference_, np.arange(len(self.reference_))] = False
         if len(names) > 1 and not self._frame_scaled:
-            self.scales_ = np.array([np.median(raw[n][off_diagonal]) for n in names])
+            self.scales_ = self._weighted([np.median(raw[n][off_diagonal]) for n in names])
         if self.hubness is not None:
             combined = sum(raw[n] / s for n, s in zip(names, self.scales_))
             self.database_mean_, self.database_std_ = database_statistics(combined, self.reference_)
@@ -451,6 +493,13 @@ class DTWRetrieval(RetrievalMethod):
         clip stays a reference clip and the new clips' distances to all clips are added, so the scales and
         statistics are exactly those of ``fit`` on the union; beyond that the reference clips and the scales are
         kept, and only the new clips' statistics (against the same reference clips) are computed."""
+        if "joints" in self.features_:  # sequences made one file at a time (the index's workers) are checked here
+            joints = self.database_["joints"].dim // 3
+            for i, track in enumerate(sequences):
+                if track.joints.shape[1] != joints:
+                    error = SkeletonInputError(f"clip {i}: {_skeleton_mismatch(track.joints.shape[1], joints)}")
+                    error.clip = i
+                    raise error
         new = self._encode_sequences(sequences)
         names = self.features_
         n_old = self.n_database_
@@ -462,7 +511,7 @@ class DTWRetrieval(RetrievalMethod):
         if self._frame_scaled:  # the moments of the union's frames: the scales fit on the union would learn
             self.frame_moments_ = {n: self.frame_moments_[n] + frame_moments(new[n]) for n in names}
             if exact:  # (past n_reference clips with mutual proximity the scales are kept, as its statistics are)
-                self.scales_ = np.array([moments_scale(self.frame_moments_[n]) for n in names])
+                self.scales_ = self._weighted([moments_scale(self.frame_moments_[n]) for n in names])
         if self._needs_reference:
             if exact:
                 raw = {}
@@ -620,6 +669,13 @@ class DTWRetrieval(RetrievalMethod):
             self.prefilter_kind_ = "hnsw" if "HNSW" in type(self.prefilter_index_).__name__ else "flat"
 
 
+def _skeleton_mismatch(joints: int, database: int) -> str:
+    return (
+        f"{joints} joints, the database clips have {database}; the joints feature compares joint by joint (index "
+        "with world_frame=off, or a landmark method such as dtw_positions, to mix skeletons)"
+    )
+
+
 def root_centred_joints(motion, fps: float | None = 30.0, min_frames: int = 2) -> np.ndarray:
     """float32 ``[frames, joints, 3]`` metres: every joint of ``motion`` as the file gives it, resampled to ``fps``
     (None: as it is), gaps filled by linear interpolation in time (a joint never observed takes the root's
@@ -674,6 +730,7 @@ class PlainDTWRetrieval(DTWRetrieval):
     n_reference = 512
     scaling = "dtw"
     world_frame = "off"
+    weights = None
     prefilter = None
     prefilter_index = "auto"
 

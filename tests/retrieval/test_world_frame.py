@@ -1,5 +1,5 @@
-"""DTW's world-frame features: the unturned posture and the pelvis velocity, and the gate that keeps them only for
-libraries whose clips share one frame (``world_frame="auto"``)."""
+"""DTW's world-frame features: the unturned posture, the pelvis velocity and the root-centred joints, and the gate
+that keeps them only for libraries whose clips share one frame (``world_frame="auto"``)."""
 
 from __future__ import annotations
 
@@ -90,3 +90,61 @@ def test_an_index_says_which_features_its_library_chose(tmp_path_factory, capsys
     assert f"concentration {method.heading_concentration_:.2f}; world_frame=auto" in err
     learned = json.loads((out / "manifest.json").read_text())["learned"]
     assert learned == {"features_": method.features_, "heading_concentration_": method.heading_concentration_}
+
+
+# ------------------------------------------------------------------------------------------ joints
+def _fewer_joints(motion):
+    """``motion`` without its last joint (a right toe): another skeleton with the same landmarks."""
+    from mocapkit.motion.container import Motion
+
+    return Motion(
+        motion.positions[:, :-1], list(motion.joint_names[:-1]), motion.fps, parents=motion.parents[:-1], name="toeless"
+    )
+
+
+def test_the_joints_feature_is_plain_dtw():
+    """``features="joints"`` compares what plain DTW compares: the same distances, and not turned."""
+    from mocapkit.retrieval.dtw import PlainDTWRetrieval
+
+    library = [_turned(_walker(seed=i), 0.3 * i, (0.5 * i, 0, 0)) for i in range(5)]
+    queries = [_turned(_walker(seed=20), 0.2), _turned(_walker(seed=21), 1.0, (1.0, 0, 0))]
+    joints = DTWRetrieval(features="joints", world_frame="on", parallel=False).fit(library)
+    plain = PlainDTWRetrieval(parallel=False).fit(library)
+    np.testing.assert_allclose(joints.distances(queries), plain.distances(queries), rtol=1e-6)
+    assert joints.distances([_turned(library[0], np.pi / 2)])[0, 0] > 0.1  # a turned clip is another clip here
+
+
+def test_weights_divide_the_scales():
+    library = [_turned(_walker(seed=i), 0.05 * i, (0.3 * i, 0, 0)) for i in range(6)]
+    features = ["positions", "world_velocity", "joints"]
+    plain = DTWRetrieval(features=features, parallel=False).fit(library)
+    half = DTWRetrieval(features=features, weights={"joints": 0.5}, parallel=False).fit(library)
+    assert half.features_ == features
+    np.testing.assert_allclose(half.scales_, plain.scales_ * [1.0, 1.0, 2.0])
+    with pytest.raises(ValueError, match=r"weights: \['hands'\] are not among the features"):
+        DTWRetrieval(features=features, weights={"hands": 2.0}).fit(library)
+    with pytest.raises(ValueError, match="weights must be positive numbers"):
+        DTWRetrieval(features=features, weights={"joints": 0.0}).fit(library)
+
+
+def test_the_joints_feature_needs_one_skeleton():
+    """Mixed skeletons in the library: ``auto`` leaves the joints out, ``on`` refuses; a fitted library refuses a
+    query or an added clip of another skeleton, naming the file and both joint counts."""
+    from mocapkit.motion.geometry import SkeletonInputError
+
+    library = [_turned(_walker(seed=i), 0.05 * i) for i in range(4)]
+    other = _fewer_joints(_walker(seed=9))
+    features = ["positions", "joints"]
+    assert DTWRetrieval(features=features).fit([*library, other]).features_ == ["positions"]
+    with pytest.raises(ValueError, match=r"the database's clips have \[21, 22\] joints"):
+        DTWRetrieval(features=features, world_frame="on").fit([*library, other])
+    method = DTWRetrieval(features=features).fit(library)
+    assert method.features_ == features
+    with pytest.raises(SkeletonInputError, match="toeless: 21 joints, the database clips have 22"):
+        method.distances([other])
+    with pytest.raises(SkeletonInputError, match="toeless: 21 joints, the database clips have 22"):
+        method.add([other])
+    assert method.n_database_ == 4
+    sequences = DTWRetrieval(features=features).sequences([other])  # made apart, as the index's workers make them
+    with pytest.raises(SkeletonInputError, match="clip 0: 21 joints"):
+        method.add_sequences(sequences)

@@ -1,0 +1,80 @@
+"""Selection of the `mocapkit index` default's last term, on training groups only: whether plain DTW's frames (every
+joint of the file, root-centred, not turned) join the default's summed distance, at which weight, and when.
+
+Candidates (rule: docs/decisions.md#retrieval-default-plain-joints): ``D`` = the default chosen before
+(positions + relational + ``world_positions`` + ``world_velocity``, the world terms gated by the starting headings'
+concentration, :data:`~mocapkit.retrieval.dtw.WORLD_MIN_CONCENTRATION`), and ``D`` + ``plain`` at weight 0.25, 0.5
+or 1, gated with the world terms, or at 0.25 or 0.5 always on. Each feature's DTW distance is divided by its median
+among the database clips (and by 1 / weight), summed, and re-ranked by mutual proximity, as
+``select_retrieval_world_frame.py`` scores its candidates, with the same validation (every fold's database groups,
+each inner group querying the others; the test queries are never read). The choice: the largest worst-cell margin
+over plain DTW alone; margins within 0.005 tie, broken by the higher mean over the four cells; a candidate
+replaces ``D`` only if its worst-cell margin exceeds ``D``'s by more than 0.005.
+
+Usage (from the repository root; about 3 min on 2 cores, most of it the DTW matrices)::
+
+    OMP_NUM_THREADS=2 python scripts/selection/select_retrieval_plain_joints.py [--out checkpoints/select_retrieval_plain_joints]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import select_retrieval_world_frame as world  # noqa: E402
+from select_retrieval_hubness import CELLS  # noqa: E402
+
+DEFAULT = [("positions", 1.0), ("relational", 1.0), ("world_positions", 1.0), ("world_velocity", 1.0)]
+
+
+def candidates():
+    """``(name, terms, plain gated)``: the default, then the default plus plain DTW's distance."""
+    yield "D (the default before)", DEFAULT, True
+    for weight in (0.25, 0.5, 1.0):
+        yield f"D + plain*{weight} gated", [*DEFAULT, ("plain", weight)], True
+    for weight in (0.25, 0.5):
+        yield f"D + plain*{weight} always", [*DEFAULT, ("plain", weight)], False
+
+
+def score(dataset: str, protocol: str, data, terms, plain_gated: bool) -> float:
+    """Validation mAP of ``terms``, the world terms gated (and the plain term with them when ``plain_gated``)."""
+    gated_terms = world.WORLD_TERMS + (("plain",) if plain_gated else ())
+    saved, world.WORLD_TERMS = world.WORLD_TERMS, gated_terms
+    try:
+        return world.score(dataset, protocol, data, terms, gated=True)
+    finally:
+        world.WORLD_TERMS = saved
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--out", default="checkpoints/select_retrieval_plain_joints")
+    args = parser.parse_args()
+    data = {ds: world.matrices(ds) for ds in ("hdm05", "bandai", "msr")}
+    plain = [world.score(ds, p, data[ds], "plain", False) for ds, p in CELLS]
+    header = "candidate | " + " | ".join(f"{ds} {p}" for ds, p in CELLS) + " | worst margin | mean"
+    lines = [header, "plain DTW | " + " | ".join(f"{x:.3f}" for x in plain) + " | | " + f"{np.mean(plain):.4f}"]
+    print("\n".join(lines), flush=True)
+    rows = []
+    for name, terms, plain_gated in candidates():
+        s = [score(ds, p, data[ds], terms, plain_gated) for ds, p in CELLS]
+        margin = min(a - b for a, b in zip(s, plain))
+        rows.append((name, margin, float(np.mean(s))))
+        lines.append(f"{name} | " + " | ".join(f"{x:.3f}" for x in s) + f" | {margin:+.3f} | {np.mean(s):.4f}")
+        print(lines[-1], flush=True)
+    best = max(margin for _, margin, _ in rows)
+    winner = max((r for r in rows if r[1] >= best - 0.005), key=lambda r: r[2])
+    if winner[1] <= rows[0][1] + 0.005:
+        winner = rows[0]
+    lines.append(f"choice: {winner[0]} (worst margin {winner[1]:+.3f}, mean {winner[2]:.4f})")
+    print(lines[-1])
+    Path(args.out).mkdir(parents=True, exist_ok=True)
+    (Path(args.out) / "validation.txt").write_text("\n".join(lines) + "\n")
+
+
+if __name__ == "__main__":
+    main()
