@@ -13,6 +13,9 @@ query's frame sequence and each database clip's, on per-frame features of the no
   (which way the body faces);
 - ``"world_velocity"``: the pelvis's velocity in the file's frame, ``[T, 3]`` metres of the template body per second
   (smoothed over :data:`VELOCITY_SMOOTHING` frames): where the body goes (a walk to the left, a walk back);
+- ``"speeds"``: each landmark's speed in the body's frame (the norm of the velocity of the normalised landmarks,
+  smoothed over :data:`VELOCITY_SMOOTHING` frames), ``[T, 20]`` metres of the template body per second: how
+  vigorously each limb moves, whichever way the body faces;
 - ``"joints"``: every joint of the file's skeleton, root-centred, not turned, retargeted or scaled
   (:func:`root_centred_joints`), ``[T, 3J]`` metres: what plain DTW (:class:`PlainDTWRetrieval`) compares. It needs
   one skeleton: ``fit`` keeps it only when the database's clips share one joint count, and refuses a query or an
@@ -87,7 +90,7 @@ from mocapkit.retrieval.hubness import (
     reference_indices,
 )
 
-FEATURES = ("positions", "relational", "world_positions", "world_velocity", "joints")
+FEATURES = ("positions", "relational", "world_positions", "world_velocity", "speeds", "joints")
 #: The features that read the file's frame (kept or dropped by ``world_frame``).
 WORLD_FEATURES = ("world_positions", "world_velocity", "joints")
 WORLD_FRAMES = ("auto", "on", "off")
@@ -95,7 +98,7 @@ WORLD_FRAMES = ("auto", "on", "off")
 #: mean resultant length (a circular spread of about 48°). Set before the selection run; there, HDM05's performers
 #: gave 0.24, Bandai's styles 0.89 and MSR Action3D's subjects 0.97 (docs/decisions.md#retrieval-default-world-frame).
 WORLD_MIN_CONCENTRATION = 0.7
-#: Frames (at ``fps``) of the moving average over the pelvis path before its velocity is taken.
+#: Frames (at ``fps``) of the moving average over the pelvis path (and the landmarks) before a velocity is taken.
 VELOCITY_SMOOTHING = 5
 SCALINGS = ("dtw", "frames")
 #: ``prefilter``'s descriptor: frames each feature is resampled to, and principal axes kept.
@@ -131,6 +134,13 @@ def frame_features(track: LandmarkTrack, features: str, fps: float) -> np.ndarra
 
         path = uniform_filter1d(np.asarray(track.pelvis, np.float64), VELOCITY_SMOOTHING, axis=0, mode="nearest")
         return np.gradient(path, axis=0) * float(fps) if len(path) > 1 else np.zeros_like(path)
+    if features == "speeds":
+        from scipy.ndimage import uniform_filter1d
+
+        if len(landmarks) < 2:
+            return np.zeros(landmarks.shape[:2])
+        smooth = uniform_filter1d(landmarks.astype(np.float64), VELOCITY_SMOOTHING, axis=0, mode="nearest")
+        return np.linalg.norm(np.gradient(smooth, axis=0), axis=-1) * float(fps)
     if features == "joints":
         if track.joints is None:
             raise ValueError("the joints feature needs the track's root-centred joints (DTWRetrieval.sequences)")

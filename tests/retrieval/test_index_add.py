@@ -246,6 +246,7 @@ def test_a_library_built_in_parts_with_its_frames_on_disk_ranks_as_one_built_in_
     assert sorted(p.name for p in (tmp_path / "parts").iterdir()) == [
         "database_positions_frames.npy",
         "database_relational_frames.npy",
+        "database_speeds_frames.npy",
     ]
     a, b = on_disk.search(motions, 4), in_memory.search(motions, 4)
     np.testing.assert_array_equal(a[0], b[0])

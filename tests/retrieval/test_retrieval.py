@@ -250,6 +250,26 @@ def test_dtw_with_two_features_scales_and_sums_them():
     assert not np.allclose(hub.distances([query]), both.distances([query]))
 
 
+def test_landmark_speeds_read_no_frame_path_or_heading():
+    """``speeds``: each landmark's speed in the body's frame, [T, 20] m/s. The same movement turned and walking
+    sideways has the same speeds; a still pose has none; the swinging hands move at about their swing's speed."""
+    from dataclasses import replace
+
+    from mocapkit.motion.geometry import landmark_track
+    from mocapkit.retrieval.dtw import frame_features
+    from tests.retrieval.test_world_frame import _turned
+
+    walker = _walker(frames=120, seed=3)
+    speeds = frame_features(landmark_track(walker), "speeds", 30.0)
+    assert speeds.shape == (120, 20) and (speeds >= 0).all()
+    moved = frame_features(landmark_track(_turned(walker, 1.2, (1.0, 0.0, 0.5))), "speeds", 30.0)
+    np.testing.assert_allclose(moved, speeds, atol=0.02)
+    still = replace(walker, positions=np.repeat(walker.positions[:1], 120, axis=0))
+    np.testing.assert_allclose(frame_features(landmark_track(still), "speeds", 30.0), 0.0, atol=1e-6)
+    # the hands swing 0.1 m (their chain adds up to 0.2-0.3 m) at 1 Hz: peak speeds of 0.6-2 m/s, not 0
+    assert 0.3 < speeds[10:-10].max() < 3.0
+
+
 # ------------------------------------------------------------------------------------------ index / search
 def test_index_and_search_cli(hdm05_folder, tmp_path, capsys):
     out = tmp_path / "index"
