@@ -273,6 +273,8 @@ class DTWRetrieval(RetrievalMethod):
             self.world_frame == "auto" and self.heading_concentration_ >= WORLD_MIN_CONCENTRATION
         )
         chosen = [n for n in names if keep_world or n not in WORLD_FEATURES]
+        if "joints" in chosen and any(s.joints is None for s in sequences):
+            raise ValueError(f"{type(self).__name__}: the joints feature needs tracks made by its own sequences()")
         counts = sorted({s.joints.shape[1] for s in sequences}) if "joints" in chosen else []
         if len(counts) > 1:  # joint by joint needs one skeleton
             if self.world_frame == "on":
@@ -307,6 +309,7 @@ class DTWRetrieval(RetrievalMethod):
         if self.scaling not in SCALINGS:
             raise ValueError(f"scaling must be one of {SCALINGS}, got {self.scaling!r}")
         self.features_ = self._choose_features(sequences)
+        self._weighted(np.ones(len(self.features_)))  # refuses bad weights whether or not they are used
         database = {n: RaggedFrames.from_list(frames) for n, frames in self._encode_sequences(sequences).items()}
         names = self.features_
         self.scales_ = np.ones(len(names))

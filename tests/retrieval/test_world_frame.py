@@ -125,6 +125,8 @@ def test_weights_divide_the_scales():
         DTWRetrieval(features=features, weights={"hands": 2.0}).fit(library)
     with pytest.raises(ValueError, match="weights must be positive numbers"):
         DTWRetrieval(features=features, weights={"joints": 0.0}).fit(library)
+    with pytest.raises(ValueError, match="weights must be positive numbers"):  # checked with one feature too
+        DTWRetrieval(features="positions", weights={"positions": float("nan")}).fit(library)
 
 
 def test_the_joints_feature_needs_one_skeleton():
