@@ -31,7 +31,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from select_retrieval_hubness import CELLS, inner_folds, mp  # noqa: E402
-from select_retrieval_world_frame import matrices  # noqa: E402
+from select_retrieval_world_frame import choose, margin_row, matrices  # noqa: E402
 
 from mocapkit.retrieval.dtw import (  # noqa: E402
     WORLD_FEATURES,
@@ -91,22 +91,15 @@ def main() -> None:
         ("frames scales, no re-ranking", "frames", False, True),
         ("dtw scales, no re-ranking", "dtw", False, True),
     ]
-    header = "candidate | " + " | ".join(f"{ds} {p}" for ds, p in CELLS) + " | worst margin | mean"
-    lines, plain, scored = [header], None, []
+    lines = ["candidate | " + " | ".join(f"{ds} {p}" for ds, p in CELLS) + " | worst margin | mean"]
+    plain, scored = None, []
     for name, scaling, rerank, candidate in rows:
         s = [score(ds, p, data[ds], frames[ds], scaling, rerank) for ds, p in CELLS]
         plain = s if plain is None else plain
-        margin = min(a - b for a, b in zip(s, plain))
-        lines.append(f"{name} | " + " | ".join(f"{x:.3f}" for x in s) + f" | {margin:+.3f} | {np.mean(s):.4f}")
-        print(lines[-1], flush=True)
+        row = margin_row(lines, name, s, plain)
         if candidate:
-            scored.append((name, margin, float(np.mean(s))))
-    best = max(margin for _, margin, _ in scored)
-    winner = max((r for r in scored if r[1] >= best - 0.005), key=lambda r: r[2])
-    lines.append(f"choice: {winner[0]} (worst margin {winner[1]:+.3f}, mean {winner[2]:.4f})")
-    print(lines[-1])
-    Path(args.out).mkdir(parents=True, exist_ok=True)
-    (Path(args.out) / "validation.txt").write_text("\n".join(lines) + "\n")
+            scored.append(row)
+    choose(lines, scored, args.out)
 
 
 if __name__ == "__main__":

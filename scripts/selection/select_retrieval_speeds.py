@@ -56,24 +56,12 @@ def main() -> None:
     args = parser.parse_args()
     data = {ds: with_speeds(ds) for ds in ("hdm05", "bandai", "msr")}
     plain = [world.score(ds, p, data[ds], "plain", False) for ds, p in CELLS]
-    header = "candidate | " + " | ".join(f"{ds} {p}" for ds, p in CELLS) + " | worst margin | mean"
-    lines = [header, "plain DTW | " + " | ".join(f"{x:.3f}" for x in plain) + " | | " + f"{np.mean(plain):.4f}"]
-    print("\n".join(lines), flush=True)
-    rows = []
-    for name, terms in candidates():
-        s = [score(ds, p, data[ds], terms, plain_gated=True) for ds, p in CELLS]
-        margin = min(a - b for a, b in zip(s, plain))
-        rows.append((name, margin, float(np.mean(s))))
-        lines.append(f"{name} | " + " | ".join(f"{x:.3f}" for x in s) + f" | {margin:+.3f} | {np.mean(s):.4f}")
-        print(lines[-1], flush=True)
-    best = max(margin for _, margin, _ in rows)
-    winner = max((r for r in rows if r[1] >= best - 0.005), key=lambda r: r[2])
-    if winner[1] <= rows[0][1] + 0.005:
-        winner = rows[0]
-    lines.append(f"choice: {winner[0]} (worst margin {winner[1]:+.3f}, mean {winner[2]:.4f})")
-    print(lines[-1])
-    Path(args.out).mkdir(parents=True, exist_ok=True)
-    (Path(args.out) / "validation.txt").write_text("\n".join(lines) + "\n")
+    lines = world.margin_table(plain)
+    rows = [
+        world.margin_row(lines, name, [score(ds, p, data[ds], terms, plain_gated=True) for ds, p in CELLS], plain)
+        for name, terms in candidates()
+    ]
+    world.choose(lines, rows, args.out, incumbent=rows[0])
 
 
 if __name__ == "__main__":
