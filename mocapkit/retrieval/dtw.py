@@ -244,7 +244,10 @@ class DTWRetrieval(RetrievalMethod):
         heading and pelvis path the world features read, and the root-centred joints when ``joints`` is asked
         for); checks as the base class's, and a fitted method that compares joints refuses another skeleton."""
         tracks = []
-        with_joints = "joints" in self.feature_names
+        # a fitted method computes the joints only where its features use them (a query of a library that left them
+        # out needs none); a database being fitted, where they are asked for
+        used = self.feature_names if what == "database" or not hasattr(self, "features_") else self.features_
+        with_joints = "joints" in used
         joints = self.database_["joints"].dim // 3 if "joints" in getattr(self, "database_", {}) else None
         for motion in motion_list(motions, what):
             track = landmark_track(motion, fps=self.fps, heading=self.heading, min_frames=self.min_frames)
