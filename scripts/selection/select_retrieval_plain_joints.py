@@ -41,11 +41,7 @@ def candidates():
 def score(dataset: str, protocol: str, data, terms, plain_gated: bool) -> float:
     """Validation mAP of ``terms``, the world terms gated (and the plain term with them when ``plain_gated``)."""
     gated_terms = world.WORLD_TERMS + (("plain",) if plain_gated else ())
-    saved, world.WORLD_TERMS = world.WORLD_TERMS, gated_terms
-    try:
-        return world.score(dataset, protocol, data, terms, gated=True)
-    finally:
-        world.WORLD_TERMS = saved
+    return world.score(dataset, protocol, data, terms, gated=True, world_terms=gated_terms)
 
 
 def main() -> None:

@@ -10,7 +10,7 @@ others; the test queries are never read). The choice: the largest worst-cell mar
 within 0.005 tie, broken by the higher mean over the four cells; a candidate replaces ``DJ`` only if its worst-cell
 margin exceeds ``DJ``'s by more than 0.005.
 
-Usage (from the repository root; about 4 min on 2 cores, most of it the DTW matrices)::
+Usage (from the repository root; about 3 min on 2 cores, most of it the DTW matrices)::
 
     OMP_NUM_THREADS=2 python scripts/selection/select_retrieval_speeds.py [--out checkpoints/select_retrieval_speeds]
 """

@@ -79,8 +79,9 @@ def matrices(dataset: str):
     return d, tracks, bench
 
 
-def score(dataset, protocol, data, terms, gated: bool) -> float:
-    """Validation mAP of the weighted sum ``terms`` (``[(feature, weight)]``; ``plain``: plain DTW alone)."""
+def score(dataset, protocol, data, terms, gated: bool, world_terms=WORLD_TERMS) -> float:
+    """Validation mAP of the weighted sum ``terms`` (``[(feature, weight)]``; ``plain``: plain DTW alone); with
+    ``gated``, the ``world_terms`` among them are dropped where the database clips do not start facing alike."""
     d, tracks, bench = data
     fields = bench.fields
     per_fold = []
@@ -92,7 +93,7 @@ def score(dataset, protocol, data, terms, gated: bool) -> float:
             else:
                 use = terms
                 if gated and heading_concentration([tracks[i] for i in db], 30.0) < WORLD_MIN_CONCENTRATION:
-                    use = [(n, w) for n, w in terms if n not in WORLD_TERMS]
+                    use = [(n, w) for n, w in terms if n not in world_terms]
                 off = ~np.eye(len(db), dtype=bool)
                 dq = dd = 0
                 for name, weight in use:
