@@ -114,3 +114,31 @@ def test_a_saved_store_grows_in_place_and_an_interrupted_append_is_overwritten(t
         open_frames(tmp_path / "bad.npy")
     with pytest.raises(ValueError, match=r"x_frames\.npy: expected float32 frames \[at least 999"):
         open_frames(path, 999)
+
+
+def test_the_pages_prefetched_for_a_gather_cover_each_clip_of_a_memory_mapped_store(tmp_path):
+    """A memory-mapped store's gather first asks the kernel for each clip's pages (``prefetch``): the ranges
+    :func:`mapped_pages` gives start on page boundaries of the map and hold the clip's bytes, for a ``.npy`` file
+    (frames after its header) and for a map cut short (``open_frames`` with fewer rows than the file); the gather
+    returns the same frames as in memory."""
+    import mmap
+
+    from mocapkit.retrieval.frames import mapped_pages, open_frames
+
+    rng = np.random.default_rng(4)
+    arrays = clips(rng, 40)
+    path = tmp_path / "x_frames.npy"
+    in_memory = RaggedFrames.from_list(arrays)
+    np.save(path, in_memory.data)
+    for data in (open_frames(path), open_frames(path, int(in_memory.offsets[30]))):
+        store = RaggedFrames(data, in_memory.offsets[: 31 if len(data) < len(in_memory.data) else None])
+        picked = rng.permutation(len(store))[:12]
+        ranges = mapped_pages(store.data, store.offsets[picked], store.lengths[picked])
+        mapped = bytes(store.data._mmap)
+        assert len(ranges) == len(picked)
+        for (offset, length), clip in zip(ranges, picked):
+            assert offset % mmap.PAGESIZE == 0 and offset + length <= len(mapped)
+            wanted = np.ascontiguousarray(in_memory.data[store.offsets[clip] : store.offsets[clip + 1]]).tobytes()
+            assert mapped[offset : offset + length].endswith(wanted)  # the range ends where the clip's frames end
+        np.testing.assert_array_equal(store.subset(picked).data, in_memory.subset(picked).data)
+    assert mapped_pages(in_memory.data[:0], np.zeros(0, np.int64), np.zeros(0, np.int64)) == []
