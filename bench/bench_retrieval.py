@@ -22,7 +22,8 @@ also reports **recall@10 against the same method's exact search** (every clip ra
 also over the real clips behind the exact top 10, as the order among one clip's near copies is noise) and the memory of what it keeps (the database's feature sequences, the reference statistics and the FAISS index).
 
 ``--cold`` drops a row's frame files (a library built in parts, ``--chunk``) from the page cache before each timed
-query: each query reads its candidates' frames from the disk, the state of a library larger than memory.
+query: each query reads its candidates' frames from the disk, the state of a library larger than memory. The same
+queries then run cold with and without the prefetch of their candidates' pages, alternating (the reference).
 
 ``--fresh-query`` also saves each DTW row's fitted method as an index folder (``mocapkit index``'s format) and times
 the same queries in a **new process that loads it** (what ``mocapkit search`` does): query p50 / p95 on a first and
@@ -314,6 +315,31 @@ def evict_frames(method) -> None:
             os.close(descriptor)
 
 
+def cold_reference(dtw, queries, size: int) -> None:
+    """``--cold``'s reference in the same run: each query searched cold with the gather's prefetch
+    (:func:`mocapkit.retrieval.frames.prefetch`) and cold without it (every page fault waits for its own read),
+    alternating; prints both medians and their ratio."""
+    from unittest import mock
+
+    from mocapkit.retrieval import frames
+
+    times = {True: [], False: []}
+    for i, query in enumerate(queries):
+        for prefetched in (True, False) if i % 2 else (False, True):
+            with mock.patch.object(frames, "prefetch", frames.prefetch if prefetched else lambda *args: None):
+                evict_frames(dtw)
+                start = time.perf_counter()
+                dtw.search([query], 10)
+                times[prefetched].append(1000 * (time.perf_counter() - start))
+    with_, without = np.median(times[True]), np.median(times[False])
+    print(
+        f"size {size:>8}:   cold queries, alternating: p50 {with_:.1f} ms (p95 {np.percentile(times[True], 95):.1f}) "
+        f"with the prefetch, {without:.1f} ms (p95 {np.percentile(times[False], 95):.1f}) without: "
+        f"{without / with_:.1f}x",
+        flush=True,
+    )
+
+
 def fresh_query(dtw, spec: str, queries, folder: str, cold: bool = False) -> dict:
     """Save ``dtw`` as an index in ``folder`` (frames already there stay where they are) and time ``queries`` in a
     new process that loads it (:func:`query_saved_index`); its JSON report."""
@@ -445,6 +471,8 @@ def dtw_rows(args, real, queries, sizes, rows, query_encode_ms: float) -> None:
                 dtw.search([queries[i]], 10)
                 times.append(1000 * (time.perf_counter() - start))
             private_mb = process_memory_mb()
+            if args.cold and streamed:
+                cold_reference(dtw, queries[:repeats], size)
             recall = motions_recall = None
             if dtw.prefilter:
                 n = min(args.recall_queries, len(queries))

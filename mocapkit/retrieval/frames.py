@@ -159,10 +159,11 @@ def mapped_pages(data: np.memmap, starts: np.ndarray, lengths: np.ndarray) -> li
 
 def prefetch(data: np.memmap, starts: np.ndarray, lengths: np.ndarray) -> None:
     """Ask the kernel to read the clips' frames (``starts``, ``lengths`` in frames) of the memory-mapped ``data``
-    from disk now, all at once (``madvise(MADV_WILLNEED)`` on each clip's pages), before they are gathered. Without
-    it each page fault of the gather waits for its own read, with the device's read-ahead around it (8 MB here): on
-    a library larger than memory, 900 clips' frames took 2 s to gather cold against 0.03-0.1 s (docs/scaling.md#a-million-clips).
-    A clip already in the page cache costs a system call (~2 microseconds)."""
+    from disk now, all at once (``madvise(MADV_WILLNEED)`` on each clip's pages), before they are gathered: the disk
+    serves them together. Without it each page fault of the gather waits for its own read (and the device's
+    read-ahead around it): a query of a library larger than memory then spends most of its time waiting
+    (docs/scaling.md#a-million-clips; the same-run reference in ``bench/bench_retrieval.py --cold``). A clip already
+    in the page cache costs a system call of about 2 microseconds."""
     if not hasattr(mmap, "MADV_WILLNEED"):  # (not on every platform)
         return
     mapping = data._mmap
