@@ -19,7 +19,8 @@ The library is real HDM05 clips (``../shared/data/hdm05_cuts11``, 232 clips) rep
 A DTW row may carry parameters after a colon (``dtw_world_frame:prefilter=100,n_reference=128``). A row with
 ``prefilter`` (the two-stage search: a FAISS prefilter on fixed-length descriptors, then DTW on the ``K`` it returns)
 also reports **recall@10 against the same method's exact search** (every clip ranked, ``--recall-queries`` queries;
-also over the real clips behind the exact top 10, as the order among one clip's near copies is noise) and the memory of what it keeps (the database's feature sequences, the reference statistics and the FAISS index).
+also over the real clips behind the exact top 10, as the order among one clip's near copies is noise) and the
+memory of what it keeps (the database's feature sequences, the reference statistics and the FAISS index).
 
 ``--cold`` drops a row's frame files (a library built in parts, ``--chunk``) from the page cache before each timed
 query: each query reads its candidates' frames from the disk, the state of a library larger than memory. The same

@@ -167,8 +167,11 @@ def prefetch(data: np.memmap, starts: np.ndarray, lengths: np.ndarray) -> None:
     if not hasattr(mmap, "MADV_WILLNEED"):  # (not on every platform)
         return
     mapping = data._mmap
-    for offset, length in mapped_pages(data, starts, lengths):
-        mapping.madvise(mmap.MADV_WILLNEED, offset, length)
+    try:
+        for offset, length in mapped_pages(data, starts, lengths):
+            mapping.madvise(mmap.MADV_WILLNEED, offset, length)
+    except OSError:  # advice only: a file system that refuses it leaves the gather to read as it would have
+        return
 
 
 def _append_npy(path: str | os.PathLike, rows: int, new: np.ndarray) -> np.memmap:
