@@ -298,9 +298,9 @@ class MotionIndex:
         return out
 
     def search_within(self, queries, k: int = 10, method: str | None = None, **options) -> list:
-        """Find each query inside the indexed files (long takes): subsequence DTW with a prefilter on windowed
-        descriptors (:func:`~mocapkit.retrieval.subsequence.search_within`) on the per-frame features the index's
-        DTW method stores, each divided by its scale (:meth:`~mocapkit.retrieval.dtw.DTWRetrieval.scaled_frames`).
+        """Find each query inside the indexed files (long takes): subsequence DTW over every frame
+        (:func:`~mocapkit.retrieval.subsequence.search_within`) on the per-frame features the index's DTW method
+        stores, each divided by its scale (:meth:`~mocapkit.retrieval.dtw.DTWRetrieval.scaled_frames`).
 
         Args:
             queries: file paths or ``(name, Motion)`` pairs, as :meth:`search`.

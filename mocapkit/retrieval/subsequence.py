@@ -1,21 +1,23 @@
 """Search inside long takes: where in these takes does something like the query happen (``mocapkit search --within``).
 
-A query clip ``Q`` (``[m, d]`` per-frame features) is looked for in each take ``X`` (``[n, d]``, same features) in
-two stages:
+A query clip ``Q`` (``[m, d]`` per-frame features) is looked for in each take ``X`` (``[n, d]``, same features) by
+**subsequence DTW** (open begin and end on the take's side) in one pass over every frame of the take
+(:func:`subsequence_profile`): for every end frame ``j``, the cheapest warping path of the whole query onto a
+segment of ``X`` ending at ``j``, its squared cost and the frame where it begins (carried along the dynamic
+programme, as SPRING does; Sakurai et al. 2007). Frame costs are squared Euclidean distances from matrix products
+(BLAS, in blocks of columns); the programme is compiled with numba and keeps two columns, so memory does not grow
+with the take.
 
-1. **prefilter on windowed descriptors**: every window of ``m`` frames of every take, every ``stride`` frames
-   (``m / 4`` by default), becomes a descriptor: its frames at ``points`` evenly spaced times (``[points, d]``,
-   flattened). Windows are ranked by the Euclidean distance of their descriptor to the query's; after suppressing
-   windows that overlap a better one by more than half, the best ``candidates`` windows (over all takes) go on.
-   This is a handful of array operations per take whatever its length;
-2. **subsequence DTW** (open begin and end; dtaidistance's C ``warping_paths_fast`` with ``psi`` relaxation on the
-   take's side) on each candidate window widened by ``m / 2`` frames each side: the best end frame whose matched
-   segment lasts between ``min_length`` and ``max_length`` times the query, the start by backtracking the warping
-   path. The distance is that of :class:`~mocapkit.retrieval.dtw.DTWRetrieval` (the square root of the warped sum
-   of squared frame distances), divided by ``sqrt(m + segment length)`` as its ``length_normalised`` does.
+Every end frame's segment is scored by the distance of :class:`~mocapkit.retrieval.dtw.DTWRetrieval` (the square
+root of the warped sum of squared frame distances) divided by ``sqrt(m + segment length)``, as its
+``length_normalised`` does; segments shorter than ``min_length`` or longer than ``max_length`` times the query are
+dropped, and an end frame is a candidate when its distance is the smallest within a quarter of the query's length
+either side. Candidates that overlap a better one (intersection over union above ``overlap``) are dropped; the
+``k`` best are returned as :class:`Match` ``(take, start, end, distance)``, frames ``[start, end)``.
 
-Matches that overlap a better one (intersection over union above ``overlap``) are dropped; the ``k`` best are
-returned as :class:`Match` ``(take, start, end, distance)``, frames ``[start, end)``.
+The cost is ``m * n * d`` per take: about 0.1-0.2 s per query per hour of takes on one core of this project's
+machine (docs/results/retrieval.md#search-inside-long-takes). There is no prefilter: at that speed one would save
+little and would miss matches (docs/decisions.md#within-search-features).
 
 The features are those of the index's DTW method (its stored per-frame positions, ``[T, 60]`` normalised
 landmarks for ``dtw_positions`` and the default, every joint for ``dtw_plain``), so an index built once answers
@@ -28,6 +30,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
+from scipy.ndimage import minimum_filter1d
+
+#: Columns of frame costs computed per matrix product (``[m, BLOCK]`` float64).
+BLOCK = 4096
 
 
 @dataclass(frozen=True)
@@ -38,19 +45,6 @@ class Match:
     start: int
     end: int
     distance: float
-
-
-def window_descriptors(x: np.ndarray, length: int, stride: int, points: int) -> tuple[np.ndarray, np.ndarray]:
-    """``(starts int64 [W], descriptors float64 [W, points * d])``: every window ``[s, s + length)`` of ``x``
-    (``[n, d]``) with ``s`` a multiple of ``stride`` (and the last window flush with the end), sampled at ``points``
-    evenly spaced frames. A take shorter than ``length`` gives one window, the whole take."""
-    n = len(x)
-    length = min(int(length), n)
-    starts = np.arange(0, n - length + 1, max(1, int(stride)), dtype=np.int64)
-    if starts[-1] != n - length:
-        starts = np.append(starts, n - length)
-    offsets = np.round(np.linspace(0, length - 1, int(points))).astype(np.int64)
-    return starts, x[starts[:, None] + offsets[None, :]].reshape(len(starts), -1).astype(np.float64)
 
 
 def segment_iou(a: tuple[int, int], b: tuple[int, int]) -> float:
@@ -73,73 +67,81 @@ def _suppress(order: np.ndarray, intervals: list[tuple[int, int, int]], overlap:
     return kept
 
 
-def best_subsequence(
-    query: np.ndarray, series: np.ndarray, min_length: int, max_length: int, penalty: float = 0.0
-) -> tuple[int, int, float] | None:
-    """``(start, end, distance)`` of the best match of all of ``query`` (``[m, d]``) to a segment
-    ``series[start:end]`` (``[n, d]``) lasting ``min_length`` to ``max_length`` frames, by subsequence DTW (open
-    begin and end); distance as :class:`~mocapkit.retrieval.dtw.DTWRetrieval` with ``length_normalised``. None
-    when no segment has an allowed length. ``penalty`` is added to the squared cost of every non-diagonal step
-    (dtaidistance's ``penalty``), in units of the query's mean squared frame distance to its mean frame."""
-    from dtaidistance import dtw_ndim
+@njit(cache=True, nogil=True)
+def _subsequence_columns(costs, first, cost, start, out_cost, out_start):  # pragma: no cover - compiled by numba
+    """Advance the subsequence DTW over the columns of ``costs`` (``[m, w]`` frame costs of the query against
+    series frames ``first .. first + w - 1``). ``cost`` / ``start`` (``[m]``) hold the previous column's
+    accumulated costs and path starts and are updated in place; ``out_cost`` / ``out_start`` (``[w]``) receive the
+    last query frame's. Steps are tried diagonal first, then along the series frame, then along the query frame."""
+    m, w = costs.shape
+    column = np.empty(m)
+    column_start = np.empty(m, dtype=np.int64)
+    for c in range(w):
+        column[0] = costs[0, c]  # open begin: the query may start at any series frame
+        column_start[0] = first + c
+        for i in range(1, m):
+            best, begin = cost[i - 1], start[i - 1]
+            if column[i - 1] < best:
+                best, begin = column[i - 1], column_start[i - 1]
+            if cost[i] < best:
+                best, begin = cost[i], start[i]
+            column[i] = costs[i, c] + best
+            column_start[i] = begin
+        out_cost[c] = column[m - 1]
+        out_start[c] = column_start[m - 1]
+        cost[:] = column
+        start[:] = column_start
 
-    m, n = len(query), len(series)
+
+def subsequence_profile(query: np.ndarray, series: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(cost float64 [n], start int64 [n])``: for every frame ``j`` of ``series`` (``[n, d]``), the squared cost
+    of the cheapest warping path of all of ``query`` (``[m, d]``) onto a segment ``series[start[j]:j + 1]``
+    (squared Euclidean frame costs summed along the path; open begin and end)."""
     q = np.ascontiguousarray(query, dtype=np.float64)
     x = np.ascontiguousarray(series, dtype=np.float64)
-    scale = float(((q - q.mean(axis=0)) ** 2).sum(axis=1).mean()) if penalty else 0.0
-    _, paths = dtw_ndim.warping_paths_fast(
-        q, x, psi=(0, 0, n, n), penalty=penalty * scale, compact=False, psi_neg=False, keep_int_repr=True
-    )
-    last = paths[m, 1:]  # squared cost of the whole query ending at each series frame
-    for end in np.argsort(last, kind="stable")[: max(8, n // 4)]:
-        if not np.isfinite(last[end]) or end + 1 < min_length:
-            continue
-        start = _backtrack_start(paths, int(end))
-        length = int(end) + 1 - start
-        if min_length <= length <= max_length:
-            return start, int(end) + 1, float(np.sqrt(last[end]) / np.sqrt(m + length))
-    return None
+    m, n = len(q), len(x)
+    cost, start = np.full(m, np.inf), np.zeros(m, dtype=np.int64)
+    out_cost, out_start = np.empty(n), np.empty(n, dtype=np.int64)
+    q_norms = (q * q).sum(axis=1)[:, None]
+    for first in range(0, n, BLOCK):
+        block = x[first : first + BLOCK]
+        costs = q_norms + (block * block).sum(axis=1)[None, :] - 2.0 * (q @ block.T)
+        np.maximum(costs, 0.0, out=costs)  # rounding of the expansion can dip below 0
+        last = first + len(block)
+        _subsequence_columns(costs, first, cost, start, out_cost[first:last], out_start[first:last])
+    return out_cost, out_start
 
 
-def _backtrack_start(paths: np.ndarray, end: int) -> int:
-    """The series frame where the optimal warping path ending at query's last frame and series frame ``end``
-    begins (``paths`` is dtaidistance's ``[m + 1, n + 1]`` accumulated-cost matrix)."""
-    i, j = paths.shape[0] - 1, end + 1
-    while i > 1:
-        steps = (paths[i - 1, j - 1], paths[i - 1, j], paths[i, j - 1]) if j > 1 else (np.inf, paths[i - 1, j], np.inf)
-        step = int(np.argmin(steps))
-        if step == 0:
-            i, j = i - 1, j - 1
-        elif step == 1:
-            i -= 1
-        else:
-            j -= 1
-    return j - 1
+def subsequence_candidates(
+    query: np.ndarray, series: np.ndarray, min_length: int, max_length: int, radius: int
+) -> list[tuple[int, int, float]]:
+    """``(start, end, distance)`` of every end frame of ``series`` whose segment (:func:`subsequence_profile`) lasts
+    ``min_length`` to ``max_length`` frames and whose distance (module docstring) is the smallest within ``radius``
+    end frames either side."""
+    cost, start = subsequence_profile(query, series)
+    end = np.arange(1, len(series) + 1)
+    length = end - start
+    distance = np.sqrt(cost / (len(query) + length))
+    distance[(length < min_length) | (length > max_length)] = np.inf
+    local = np.isfinite(distance) & (distance <= minimum_filter1d(distance, 2 * radius + 1, mode="nearest"))
+    return [(int(start[j]), int(end[j]), float(distance[j])) for j in np.flatnonzero(local)]
 
 
 def search_within(
     query: np.ndarray,
     takes: list[np.ndarray],
     k: int = 10,
-    candidates: int | None = None,
-    stride: float = 0.25,
-    points: int = 8,
     min_length: float = 0.5,
     max_length: float = 2.0,
     overlap: float = 0.5,
-    penalty: float = 0.0,
 ) -> list[Match]:
     """The ``k`` best non-overlapping matches of ``query`` (``[m, d]``) inside ``takes`` (each ``[n, d]``, the same
     features), best first (the module docstring).
 
     Args:
         k: matches returned (``k <= 0``: every candidate's).
-        candidates: windows passed from the prefilter to DTW (None: ``max(4 k, 20)``).
-        stride: window step, a fraction of the query's length.
-        points: frames per window descriptor.
         min_length, max_length: a match lasts this many times the query's frames, at least / at most.
-        overlap: matches (and prefilter windows) overlapping a better one by more IoU than this are dropped.
-        penalty: cost of a non-diagonal warping step (:func:`best_subsequence`).
+        overlap: matches overlapping a better one by more IoU than this are dropped.
     """
     query = np.asarray(query, dtype=np.float64)
     m = len(query)
@@ -150,31 +152,28 @@ def search_within(
     dims = {t.shape[1] for t in takes}
     if dims != {query.shape[1]}:
         raise ValueError(f"the query has {query.shape[1]} features per frame, the takes {sorted(dims)}")
-    wanted = max(4 * k, 20) if candidates is None else int(candidates)
-    step = max(1, int(round(stride * m)))
-    q_desc = window_descriptors(query, m, m, points)[1][0]
-    intervals, scores = [], []
-    for t, take in enumerate(takes):
-        starts, desc = window_descriptors(take, m, step, points)
-        d = np.sqrt(((desc - q_desc) ** 2).sum(axis=1))
-        width = min(m, len(take))
-        intervals += [(t, int(s), int(s) + width) for s in starts]
-        scores.append(d)
-    scores = np.concatenate(scores)
-    chosen = _suppress(np.argsort(scores, kind="stable"), intervals, 0.5, wanted)
+    # a NaN would spread through the dynamic programme and hide every later match of its take
+    if not np.isfinite(query).all():
+        raise ValueError("the query's features hold NaN or infinite values")
+    bad = [t for t, take in enumerate(takes) if not np.isfinite(take).all()]
+    if bad:
+        raise ValueError(f"the features of take(s) {bad[:10]} hold NaN or infinite values")
     lo_len, hi_len = max(2, int(np.floor(min_length * m))), int(np.ceil(max_length * m))
+    radius = max(1, m // 4)
     matches: list[Match] = []
-    for i in chosen:
-        t, start, end = intervals[i]
-        take = takes[t]
-        a, b = max(0, start - m // 2), min(len(take), end + m // 2)
-        found = best_subsequence(query, take[a:b], lo_len, hi_len, penalty)
-        if found is not None:
-            matches.append(Match(t, a + found[0], a + found[1], found[2]))
+    for t, take in enumerate(takes):
+        for start, end, distance in subsequence_candidates(query, take, lo_len, hi_len, radius):
+            matches.append(Match(t, start, end, distance))
     order = np.argsort([mt.distance for mt in matches], kind="stable")
-    kept = _suppress(order, [(mt.take, mt.start, mt.end) for mt in matches], overlap, len(matches))
-    out = [matches[i] for i in kept]
-    return out if k <= 0 else out[: int(k)]
+    keep = len(matches) if k <= 0 else int(k)
+    kept = _suppress(order, [(mt.take, mt.start, mt.end) for mt in matches], overlap, keep)
+    return [matches[i] for i in kept]
 
 
-__all__ = ["Match", "best_subsequence", "search_within", "segment_iou", "window_descriptors"]
+__all__ = [
+    "Match",
+    "search_within",
+    "segment_iou",
+    "subsequence_candidates",
+    "subsequence_profile",
+]

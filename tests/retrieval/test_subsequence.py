@@ -1,4 +1,4 @@
-"""Search inside long takes: subsequence DTW behind a windowed prefilter, and ``mocapkit search --within``."""
+"""Search inside long takes: subsequence DTW over every frame, and ``mocapkit search --within``."""
 
 from __future__ import annotations
 
@@ -10,7 +10,12 @@ import pytest
 
 from mocapkit.cli import main as cli
 from mocapkit.retrieval import RetrievalIndexError, build_index
-from mocapkit.retrieval.subsequence import best_subsequence, search_within, segment_iou, window_descriptors
+from mocapkit.retrieval.subsequence import (
+    search_within,
+    segment_iou,
+    subsequence_candidates,
+    subsequence_profile,
+)
 from tests.shared_data import synthetic_hdm05_folder
 
 
@@ -24,24 +29,39 @@ def _walk(frames: int, seed: int) -> np.ndarray:
     return np.random.default_rng(seed).normal(scale=0.3, size=(frames, 3)).cumsum(axis=0) * 0.05
 
 
-def test_windows_and_iou():
-    x = np.arange(23, dtype=float)[:, None]
-    starts, desc = window_descriptors(x, 10, 4, 3)
-    assert starts.tolist() == [0, 4, 8, 12, 13]  # the last window flush with the end
-    assert desc.shape == (5, 3) and desc[1].tolist() == [4.0, 8.0, 13.0]
-    assert window_descriptors(x[:5], 10, 4, 3)[0].tolist() == [0]  # shorter than a window: the whole take
+def test_segment_iou():
     assert segment_iou((0, 10), (5, 15)) == pytest.approx(5 / 15)
     assert segment_iou((0, 10), (10, 20)) == 0.0
+    assert segment_iou((3, 3), (3, 3)) == 0.0  # empty intervals overlap nothing
+
+
+def test_subsequence_profile_is_dtaidistance_open_ended_dtw(monkeypatch):
+    """Every end frame's cost equals dtaidistance's subsequence DTW (psi relaxation on the series' both ends), and
+    its start is where that cheapest path begins; blocks of columns give the same profile as one block."""
+    from dtaidistance import dtw_ndim
+
+    rng = np.random.default_rng(0)
+    query, series = rng.normal(size=(17, 3)), rng.normal(size=(90, 3))
+    cost, start = subsequence_profile(query, series)
+    _, paths = dtw_ndim.warping_paths_fast(query, series, psi=(0, 0, 90, 90), compact=False, psi_neg=False)
+    np.testing.assert_allclose(cost, paths[17, 1:] ** 2, rtol=1e-9)
+    for end in (20, 55, 89):  # the path's start: a brute-force minimum over the segments ending at `end`
+        segments = [dtw_ndim.distance(query, series[s : end + 1]) ** 2 for s in range(end + 1)]
+        assert cost[end] == pytest.approx(min(segments), rel=1e-9)
+        assert segments[start[end]] == pytest.approx(cost[end], rel=1e-9)
+    monkeypatch.setattr("mocapkit.retrieval.subsequence.BLOCK", 7)
+    blocked = subsequence_profile(query, series)
+    np.testing.assert_allclose(blocked[0], cost, rtol=1e-9)
+    assert np.array_equal(blocked[1], start)
 
 
 def test_subsequence_dtw_finds_a_time_warped_copy():
     take = _walk(400, 0)
     take[150:240] = _shape(90)  # the 60-frame query, played 1.5 times slower
-    start, end, distance = best_subsequence(_shape(60), take, 30, 120)
+    start, end, distance = min(subsequence_candidates(_shape(60), take, 30, 120, 15), key=lambda c: c[2])
     assert abs(start - 150) <= 2 and abs(end - 240) <= 2 and distance < 0.05
-    # the length limits hold: a copy longer than max_length is not returned as one segment
-    found = best_subsequence(_shape(60), take, 30, 70)
-    assert found is None or found[1] - found[0] <= 70
+    # the length limits hold: no candidate segment is longer than max_length
+    assert all(30 <= e - s <= 70 for s, e, _ in subsequence_candidates(_shape(60), take, 30, 70, 15))
 
 
 def test_search_within_ranks_planted_copies_over_takes():
@@ -58,6 +78,12 @@ def test_search_within_ranks_planted_copies_over_takes():
     assert hits == set(truth)
     with pytest.raises(ValueError, match="the query has 3 features per frame, the takes \\[4\\]"):
         search_within(_shape(60), [np.zeros((100, 4))])
+    broken = [take.copy() for take in takes]
+    broken[2][50] = np.nan
+    with pytest.raises(ValueError, match="take\\(s\\) \\[2\\] hold NaN"):
+        search_within(_shape(60), broken)
+    with pytest.raises(ValueError, match="the query's features hold NaN"):
+        search_within(np.full((60, 3), np.nan), takes)
 
 
 @pytest.fixture(scope="module")
