@@ -98,13 +98,12 @@ def subsequence_profile(query: np.ndarray, series: np.ndarray) -> tuple[np.ndarr
     of the cheapest warping path of all of ``query`` (``[m, d]``) onto a segment ``series[start[j]:j + 1]``
     (squared Euclidean frame costs summed along the path; open begin and end)."""
     q = np.ascontiguousarray(query, dtype=np.float64)
-    x = np.ascontiguousarray(series, dtype=np.float64)
-    m, n = len(q), len(x)
+    m, n = len(q), len(series)
     cost, start = np.full(m, np.inf), np.zeros(m, dtype=np.int64)
     out_cost, out_start = np.empty(n), np.empty(n, dtype=np.int64)
     q_norms = (q * q).sum(axis=1)[:, None]
     for first in range(0, n, BLOCK):
-        block = x[first : first + BLOCK]
+        block = np.asarray(series[first : first + BLOCK], dtype=np.float64)  # a block at a time: no copy of the take
         costs = q_norms + (block * block).sum(axis=1)[None, :] - 2.0 * (q @ block.T)
         np.maximum(costs, 0.0, out=costs)  # rounding of the expansion can dip below 0
         last = first + len(block)
