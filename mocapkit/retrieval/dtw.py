@@ -469,7 +469,7 @@ class DTWRetrieval(RetrievalMethod):
             return lambda d, which: d
         names = self.features_
         each_feature = each(
-            lambda nm: self._feature_distances([query[nm]], self.database_[nm].subset(self.reference_))[0], names
+            lambda nm: self._feature_distances([query[nm]], self.database_[nm].kept_subset(self.reference_))[0], names
         )
         to_reference = sum(d / s for d, s in zip(each_feature, self.scales_))
         mean, std = to_reference.mean(), to_reference.std()

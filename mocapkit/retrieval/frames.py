@@ -101,6 +101,15 @@ class RaggedFrames:
         rows = np.repeat(starts - (ends - lengths), lengths) + np.arange(int(ends[-1]) if len(ends) else 0)
         return RaggedFrames(np.asarray(self.data[rows], dtype=np.float32), np.concatenate([[0], ends]))
 
+    def kept_subset(self, indices: np.ndarray) -> RaggedFrames:
+        """:meth:`subset` of ``indices``, gathered on the first call and kept with this store: for clips every query
+        reads (mutual proximity's reference clips). Gathered again when called with another array object; the
+        array must not change in place."""
+        kept = getattr(self, "_kept", None)
+        if kept is None or kept[0] is not indices:
+            kept = self._kept = (indices, self.subset(indices))
+        return kept[1]
+
     def chunks(self, max_frames: int) -> list[tuple[int, int]]:
         """``(first, end)`` clip ranges in order, each of at most ``max_frames`` frames (or one longer clip)."""
         out, first = [], 0
@@ -232,14 +241,14 @@ class CandidateCosts:
         mean = q.mean(axis=0)
         centred = (q - mean).astype(np.float32)
         query_norms = (centred * centred).sum(axis=1)
+        minus_twice = -2.0 * centred.T  # the -2 of the expansion inside the product: exact, a power of two
         mean = mean.astype(np.float32)
         self.costs = np.empty((len(candidates.data), len(q)), dtype=np.float32)
         for first, end in candidates.chunks(self.BLOCK_FRAMES):
             a, b = candidates.offsets[first], candidates.offsets[end]
             c = np.asarray(candidates.data[a:b], dtype=np.float32) - mean
             block = self.costs[a:b]
-            np.matmul(c, centred.T, out=block)
-            block *= -2.0
+            np.matmul(c, minus_twice, out=block)
             block += query_norms[None, :]
             block += np.einsum("ij,ij->i", c, c)[:, None]
             np.maximum(block, 0.0, out=block)  # rounding can leave a near-zero cost slightly negative

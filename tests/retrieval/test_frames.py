@@ -50,6 +50,11 @@ def test_ragged_frames_keeps_every_clip_through_subset_extend_chunks_and_state()
     picked = store.subset([7, 2, 7])
     np.testing.assert_array_equal(picked.lengths, [len(arrays[7]), len(arrays[2]), len(arrays[7])])
     np.testing.assert_array_equal(picked[1], store[2])
+    reference = np.array([7, 2, 7])  # a subset every query reads: gathered once per index array
+    kept = store.kept_subset(reference)
+    np.testing.assert_array_equal(kept.data, picked.data)
+    assert store.kept_subset(reference) is kept and store.kept_subset(np.array([2])) is not kept
+    np.testing.assert_array_equal(store.kept_subset(np.array([2])).data, store.subset([2]).data)
     grown = store.extend(arrays[:3])
     assert len(grown) == 15 and len(store) == 12
     np.testing.assert_array_equal(grown[13], store[1])
