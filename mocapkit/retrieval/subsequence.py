@@ -32,9 +32,12 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 from scipy.ndimage import minimum_filter1d
+from tqdm import tqdm
 
 #: Columns of frame costs computed per matrix product (``[m, BLOCK]`` float64).
 BLOCK = 4096
+#: Frames searched above which a progress bar shows on a terminal (ten hours at 30 fps: a few seconds a query).
+PROGRESS_FRAMES = 10 * 3600 * 30
 
 
 @dataclass(frozen=True)
@@ -160,9 +163,13 @@ def search_within(
     lo_len, hi_len = max(2, int(np.floor(min_length * m))), int(np.ceil(max_length * m))
     radius = max(1, m // 4)
     matches: list[Match] = []
-    for t, take in enumerate(takes):
-        for start, end, distance in subsequence_candidates(query, take, lo_len, hi_len, radius):
-            matches.append(Match(t, start, end, distance))
+    frames = sum(len(take) for take in takes)
+    quiet = True if frames <= PROGRESS_FRAMES else None  # (None: tqdm shows the bar on a terminal only)
+    with tqdm(total=frames, desc="search --within", unit="frame", unit_scale=True, disable=quiet, leave=False) as bar:
+        for t, take in enumerate(takes):
+            for start, end, distance in subsequence_candidates(query, take, lo_len, hi_len, radius):
+                matches.append(Match(t, start, end, distance))
+            bar.update(len(take))
     order = np.argsort([mt.distance for mt in matches], kind="stable")
     keep = len(matches) if k <= 0 else int(k)
     kept = _suppress(order, [(mt.take, mt.start, mt.end) for mt in matches], overlap, keep)

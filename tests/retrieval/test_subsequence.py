@@ -64,7 +64,7 @@ def test_subsequence_dtw_finds_a_time_warped_copy():
     assert all(30 <= e - s <= 70 for s, e, _ in subsequence_candidates(_shape(60), take, 30, 70, 15))
 
 
-def test_search_within_ranks_planted_copies_over_takes():
+def test_search_within_ranks_planted_copies_over_takes(monkeypatch):
     takes = [_walk(3000, 1), _walk(2000, 2), _walk(2500, 3)]
     truth = [(0, 700, 760), (2, 1900, 1980), (1, 100, 150)]  # same speed, slower, faster
     for t, s, e in truth:
@@ -76,6 +76,8 @@ def test_search_within_ranks_planted_copies_over_takes():
         (t, s, e) for t, s, e in truth for m in matches if m.take == t and segment_iou((m.start, m.end), (s, e)) >= 0.5
     }
     assert hits == set(truth)
+    monkeypatch.setattr("mocapkit.retrieval.subsequence.PROGRESS_FRAMES", 0)  # the progress bar's path (a terminal's)
+    assert search_within(_shape(60), takes, k=3) == matches
     with pytest.raises(ValueError, match="the query has 3 features per frame, the takes \\[4\\]"):
         search_within(_shape(60), [np.zeros((100, 4))])
     broken = [take.copy() for take in takes]
