@@ -71,11 +71,12 @@ def _suppress(order: np.ndarray, intervals: list[tuple[int, int, int]], overlap:
 
 
 @njit(cache=True, nogil=True)
-def _subsequence_columns(costs, first, cost, start, out_cost, out_start):  # pragma: no cover - compiled by numba
+def _subsequence_columns(costs, first, previous, previous_start, out_cost, out_start):  # pragma: no cover - numba
     """Advance the subsequence DTW over the columns of ``costs`` (``[m, w]`` frame costs of the query against
-    series frames ``first .. first + w - 1``). ``cost`` / ``start`` (``[m]``) hold the previous column's
+    series frames ``first .. first + w - 1``). ``previous`` / ``previous_start`` (``[m]``) hold the column before's
     accumulated costs and path starts and are updated in place; ``out_cost`` / ``out_start`` (``[w]``) receive the
-    last query frame's. Steps are tried diagonal first, then along the series frame, then along the query frame."""
+    last query frame's. A cell is reached from the diagonal, from the previous query frame at the same series frame,
+    or from the previous series frame at the same query frame; ties go to the first of these."""
     m, w = costs.shape
     column = np.empty(m)
     column_start = np.empty(m, dtype=np.int64)
@@ -83,17 +84,17 @@ def _subsequence_columns(costs, first, cost, start, out_cost, out_start):  # pra
         column[0] = costs[0, c]  # open begin: the query may start at any series frame
         column_start[0] = first + c
         for i in range(1, m):
-            best, begin = cost[i - 1], start[i - 1]
+            best, begin = previous[i - 1], previous_start[i - 1]
             if column[i - 1] < best:
                 best, begin = column[i - 1], column_start[i - 1]
-            if cost[i] < best:
-                best, begin = cost[i], start[i]
+            if previous[i] < best:
+                best, begin = previous[i], previous_start[i]
             column[i] = costs[i, c] + best
             column_start[i] = begin
         out_cost[c] = column[m - 1]
         out_start[c] = column_start[m - 1]
-        cost[:] = column
-        start[:] = column_start
+        previous[:] = column
+        previous_start[:] = column_start
 
 
 def subsequence_profile(query: np.ndarray, series: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -102,7 +103,7 @@ def subsequence_profile(query: np.ndarray, series: np.ndarray) -> tuple[np.ndarr
     (squared Euclidean frame costs summed along the path; open begin and end)."""
     q = np.ascontiguousarray(query, dtype=np.float64)
     m, n = len(q), len(series)
-    cost, start = np.full(m, np.inf), np.zeros(m, dtype=np.int64)
+    previous, previous_start = np.full(m, np.inf), np.zeros(m, dtype=np.int64)  # before the first frame: no path
     out_cost, out_start = np.empty(n), np.empty(n, dtype=np.int64)
     q_norms = (q * q).sum(axis=1)[:, None]
     for first in range(0, n, BLOCK):
@@ -110,7 +111,7 @@ def subsequence_profile(query: np.ndarray, series: np.ndarray) -> tuple[np.ndarr
         costs = q_norms + (block * block).sum(axis=1)[None, :] - 2.0 * (q @ block.T)
         np.maximum(costs, 0.0, out=costs)  # rounding of the expansion can dip below 0
         last = first + len(block)
-        _subsequence_columns(costs, first, cost, start, out_cost[first:last], out_start[first:last])
+        _subsequence_columns(costs, first, previous, previous_start, out_cost[first:last], out_start[first:last])
     return out_cost, out_start
 
 
